@@ -1,0 +1,59 @@
+"""The interface every calibrator implements.
+
+A calibrator is a procedure that talks to a :class:`odomgym.experiments.Lab`: it performs the
+experiments it needs (with the calibration it wants active while driving), measures what a
+person would measure, and returns corrected odometry parameters as a
+:class:`odomgym.odometry.Calibration`. Because labs serve simulated and recorded runs alike, the
+same calibrator object calibrates a simulated robot and a real robot's recorded session.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from odomgym.experiments import Experiment, Lab
+from odomgym.odometry import Calibration
+
+__all__ = ["CalibrationResult", "Calibrator"]
+
+
+@dataclass
+class CalibrationResult:
+    """What a calibrator found.
+
+    Attributes:
+        calibration: the corrected parameters, absolute (relative to the uncalibrated robot).
+        estimates: the method's intermediate quantities (α, β [rad], R [m], E_d, E_b, …), named
+            as in the method's paper, for reports and tests.
+        runs_used: runs the method performed.
+        distance_used: distance travelled [m].
+        notes: anything a user should know (e.g. "second compensation advised").
+    """
+
+    calibration: Calibration
+    estimates: dict[str, float] = field(default_factory=dict)
+    runs_used: int = 0
+    distance_used: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+
+class Calibrator(ABC):
+    """Base class of calibration methods.
+
+    Subclasses set ``name`` (the command-line name), ``reference`` (the paper) and implement
+    :meth:`experiments` (what they will ask for, for budgeting and documentation) and
+    :meth:`calibrate`.
+    """
+
+    name: ClassVar[str]
+    reference: ClassVar[str]
+
+    @abstractmethod
+    def experiments(self) -> list[Experiment]:
+        """The experiments one call of :meth:`calibrate` performs, in order."""
+
+    @abstractmethod
+    def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
+        """Run the method in ``lab``, starting from ``initial`` (default: uncalibrated)."""

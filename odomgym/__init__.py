@@ -1,0 +1,1 @@
+"""odomgym: wheel-odometry (dead-reckoning) research on a pymunk differential-drive simulator."""

@@ -1,0 +1,77 @@
+"""Error types and validation helpers shared by every spec loader.
+
+Why a module of its own: a user who mistypes a TOML field should be told *which* field, in
+*which* file and on *which* line — not receive a traceback from deep inside numpy or pymunk.
+Every loader raises :class:`SpecError` (a ``ValueError``), whose message carries that context.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+
+class SpecError(ValueError):
+    """A robot, floor, calibration or data specification is invalid.
+
+    The message names the field and, where the value came from a file, the file and line.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None, source: str | None = None):
+        self.field = field
+        self.source = source
+        prefix = f"{source}: " if source else ""
+        super().__init__(prefix + message)
+
+
+def locate_key(path: Path, key: str) -> str:
+    """Return ``"file:line"`` for the first line of ``path`` that assigns ``key``.
+
+    TOML parsers report syntax errors with line numbers but not semantic ones (a negative
+    wheelbase parses fine), so semantic errors find their line by a textual search.
+    """
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError:
+        return str(path)
+    leaf = key.split(".")[-1]
+    pattern = re.compile(rf"^\s*{re.escape(leaf)}\s*=")
+    for number, line in enumerate(lines, start=1):
+        if pattern.match(line):
+            return f"{path}:{number}"
+    return str(path)
+
+
+def require_positive(name: str, value: object, *, source: str | None = None) -> float:
+    """Return ``value`` as a finite float > 0, or raise :class:`SpecError` naming ``name``."""
+    number = require_finite(name, value, source=source)
+    if number <= 0.0:
+        raise SpecError(f"{name} must be > 0, got {number!r}", field=name, source=source)
+    return number
+
+
+def require_finite(name: str, value: object, *, source: str | None = None) -> float:
+    """Return ``value`` as a finite float, or raise :class:`SpecError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise SpecError(
+            f"{name} must be a number, got {type(value).__name__} {value!r}",
+            field=name,
+            source=source,
+        )
+    number = float(value)
+    if not math.isfinite(number):
+        raise SpecError(f"{name} must be finite, got {number!r}", field=name, source=source)
+    return number
+
+
+def require_range(
+    name: str, value: object, low: float, high: float, *, source: str | None = None
+) -> float:
+    """Return ``value`` as a float in the closed interval [low, high], or raise."""
+    number = require_finite(name, value, source=source)
+    if not low <= number <= high:
+        raise SpecError(
+            f"{name} must lie in [{low}, {high}], got {number!r}", field=name, source=source
+        )
+    return number

@@ -1,0 +1,345 @@
+"""Floor specifications: friction, cable bumps, low-friction patches and roughness.
+
+The floor is where non-systematic odometry errors come from (seed 000 §2.1, seed 002 §3.1):
+
+* **friction** μ limits the force each wheel can pass to the ground, so slip emerges when a
+  manoeuvre asks for more (hard acceleration, fast turns, low μ);
+* **cable bumps** make a wheel rotate more than it advances horizontally — computed here from the
+  geometry of a rigid wheel rolling over a rigid cylinder (seed 002 Fig. 4, Table I);
+* **patches** of lower friction (a wet or polished spot);
+* **roughness** k [m^½]: each wheel's true ground travel differs from its rim travel by zero-mean
+  white noise of variance k²·|d| (Chong & Kleeman, seed 004 Eq. 4).
+
+Coordinates are the world frame [m] in which every env starts its robot at the origin, heading
+along +x.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.errors import SpecError, locate_key, require_finite, require_positive, require_range
+from odomgym.io import atomic_write_text
+
+__all__ = [
+    "FLOORS",
+    "CableBump",
+    "FloorSpec",
+    "FrictionPatch",
+    "bump_extra_rotation",
+    "cable_advance",
+    "load_floor",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CableBump:
+    """A straight cable of circular cross-section lying on the floor.
+
+    Attributes:
+        x, y: centre of the cable [m].
+        angle: direction of the cable's axis from +x [rad].
+        diameter: cable diameter [m] (seed 002 §6 uses a 10 mm cable).
+        length: cable length [m]; a short cable lies under one wheel only.
+    """
+
+    x: float
+    y: float
+    angle: float = math.pi / 2
+    diameter: float = 0.010
+    length: float = 0.3
+
+    def __post_init__(self) -> None:
+        require_finite("x", self.x)
+        require_finite("y", self.y)
+        require_finite("angle", self.angle)
+        require_positive("diameter", self.diameter)
+        require_positive("length", self.length)
+
+
+@dataclass(frozen=True)
+class FrictionPatch:
+    """An axis-aligned rectangle of different friction [m]; μ is dimensionless."""
+
+    x_min: float
+    y_min: float
+    x_max: float
+    y_max: float
+    friction: float
+
+    def __post_init__(self) -> None:
+        for name in ("x_min", "y_min", "x_max", "y_max"):
+            require_finite(name, getattr(self, name))
+        require_positive("friction", self.friction)
+        if self.x_max <= self.x_min or self.y_max <= self.y_min:
+            raise SpecError("patch must have x_max > x_min and y_max > y_min", field="patch")
+
+
+@dataclass(frozen=True)
+class FloorSpec:
+    """The floor a robot drives on.
+
+    Attributes:
+        friction: Coulomb friction coefficient μ between drive wheels and floor [-]
+            (0.8 ≈ rubber on dry concrete).
+        bumps: cables lying on the floor.
+        patches: rectangles with their own friction coefficient.
+        roughness: k [m^½] of seed 004 Eq. 4; per-wheel ground-travel noise variance k²·|d|.
+        name: a label.
+    """
+
+    friction: float = 0.8
+    bumps: tuple[CableBump, ...] = field(default_factory=tuple)
+    patches: tuple[FrictionPatch, ...] = field(default_factory=tuple)
+    roughness: float = 0.0
+    name: str = "floor"
+
+    def __post_init__(self) -> None:
+        require_positive("friction", self.friction)
+        require_range("roughness", self.roughness, 0.0, 1.0)
+        object.__setattr__(self, "bumps", tuple(self.bumps))
+        object.__setattr__(self, "patches", tuple(self.patches))
+
+    # ------------------------------------------------------------------ vectorised queries
+    def friction_at(self, x: FloatArray, y: FloatArray) -> FloatArray:
+        """Friction coefficient at the points (x, y) [m]; the last patch listed wins."""
+        mu = np.full(np.shape(x), self.friction)
+        for patch in self.patches:
+            inside = (x >= patch.x_min) & (x <= patch.x_max) & (y >= patch.y_min) & (y <= patch.y_max)
+            mu[inside] = patch.friction
+        return mu
+
+    def bump_arrays(self) -> tuple[FloatArray, ...]:
+        """Cable centres, unit axes, normals, half-lengths and radii as arrays of shape (M,)."""
+        if not self.bumps:
+            empty = np.zeros(0)
+            return empty, empty, empty, empty, empty, empty, empty
+        cx = np.array([b.x for b in self.bumps])
+        cy = np.array([b.y for b in self.bumps])
+        angle = np.array([b.angle for b in self.bumps])
+        return (
+            cx,
+            cy,
+            np.cos(angle),
+            np.sin(angle),
+            np.array([0.5 * b.length for b in self.bumps]),
+            np.array([0.5 * b.diameter for b in self.bumps]),
+            angle,
+        )
+
+    # ------------------------------------------------------------------ TOML
+    def to_dict(self) -> dict[str, Any]:
+        """A TOML-ready dict."""
+        return {
+            "name": self.name,
+            "friction": self.friction,
+            "roughness": self.roughness,
+            "bumps": [dataclasses.asdict(b) for b in self.bumps],
+            "patches": [dataclasses.asdict(p) for p in self.patches],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, path: Path | None = None) -> FloorSpec:
+        """Build from a mapping (parsed TOML); errors name the field, file and line."""
+        table = dict(data.get("floor", data))
+
+        def where(key: str) -> str | None:
+            return locate_key(path, key) if path else None
+
+        known = {"name", "friction", "roughness", "bumps", "patches"}
+        for key in table:
+            if key not in known:
+                raise SpecError(
+                    f"unknown floor field {key!r}; known: {', '.join(sorted(known))}",
+                    field=key,
+                    source=where(key),
+                )
+        kwargs: dict[str, Any] = {}
+        if "name" in table:
+            kwargs["name"] = str(table["name"])
+        if "friction" in table:
+            kwargs["friction"] = require_positive("friction", table["friction"], source=where("friction"))
+        if "roughness" in table:
+            kwargs["roughness"] = require_range(
+                "roughness", table["roughness"], 0.0, 1.0, source=where("roughness")
+            )
+        kwargs["bumps"] = tuple(
+            _build_item(CableBump, f"bumps[{i}]", item, path)
+            for i, item in enumerate(_list_of_tables(table.get("bumps", []), "bumps", path))
+        )
+        kwargs["patches"] = tuple(
+            _build_item(FrictionPatch, f"patches[{i}]", item, path)
+            for i, item in enumerate(_list_of_tables(table.get("patches", []), "patches", path))
+        )
+        return cls(**kwargs)
+
+    def save(self, path: str | Path) -> None:
+        """Write the floor as TOML, atomically."""
+        import tomli_w
+
+        atomic_write_text(Path(path), tomli_w.dumps({"floor": self.to_dict()}))
+
+    def with_friction(self, friction: float) -> FloorSpec:
+        """A copy with another base friction coefficient."""
+        return dataclasses.replace(self, friction=friction)
+
+
+def _list_of_tables(value: object, name: str, path: Path | None) -> Sequence[Mapping[str, Any]]:
+    if not isinstance(value, list) or not all(isinstance(v, Mapping) for v in value):
+        raise SpecError(
+            f"{name} must be an array of tables ([[floor.{name}]])",
+            field=name,
+            source=locate_key(path, name) if path else None,
+        )
+    return value
+
+
+def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path | None) -> Any:
+    names = {f.name for f in dataclasses.fields(kind)}
+    for key in item:
+        if key not in names:
+            raise SpecError(
+                f"unknown field {key!r} in {label}; known: {', '.join(sorted(names))}",
+                field=f"{label}.{key}",
+                source=locate_key(path, key) if path else None,
+            )
+    try:
+        return kind(**item)
+    except TypeError as exc:
+        raise SpecError(f"{label}: {exc}", field=label, source=str(path) if path else None) from None
+    except SpecError as exc:
+        key = exc.field or label
+        raise SpecError(
+            f"{label}.{exc}",
+            field=f"{label}.{key}",
+            source=locate_key(path, key) if path else None,
+        ) from None
+
+
+# ---------------------------------------------------------------------- bump geometry
+def _profile(radius_wheel: float | FloatArray, radius_cable: float | FloatArray) -> tuple[Any, Any, Any]:
+    big_r = radius_wheel + radius_cable
+    half_width = 2.0 * np.sqrt(radius_wheel * radius_cable)  # centre offset at first contact
+    psi0 = np.arcsin(half_width / big_r)
+    return big_r, half_width, psi0
+
+
+def bump_extra_rotation(wheel_radius: float, cable_diameter: float) -> float:
+    """Rim travel minus horizontal advance for one full crossing of a cable [m].
+
+    A rigid wheel of radius r meets a rigid cylinder of radius ρ when their centres are
+    w = 2·√(r·ρ) apart horizontally; from there the wheel centre moves on a circle of radius
+    R = r + ρ around the cable axis, rolling without slip, so the wheel turns through an arc of
+    R·2ψ₀ (ψ₀ = asin(w/R)) while advancing 2w. The excess R·2ψ₀ − 2w is what the encoder
+    over-reports (seed 002 Eq. 1 uses the chord approximation of the same picture; LabMate,
+    r = 75 mm, 10 mm cable: 3.42 mm, versus the paper's 2.63 mm estimate).
+    """
+    big_r, half_width, psi0 = _profile(wheel_radius, 0.5 * cable_diameter)
+    return float(2.0 * big_r * psi0 - 2.0 * half_width)
+
+
+def cable_advance(
+    offset: FloatArray, rim_travel: FloatArray, wheel_radius: FloatArray, cable_radius: FloatArray
+) -> FloatArray:
+    """Horizontal advance of a wheel centre across a cable, for a given rim travel [m].
+
+    ``offset`` is the signed horizontal distance of the wheel centre from the cable axis
+    (perpendicular to the axis) at the start of the step, ``rim_travel`` the signed rim travel
+    in the same direction. The map from horizontal position x to accumulated rim travel s(x) is
+    x on the flat, −w + R·(asin(x/R) + ψ₀) over the cable, and x + 2Rψ₀ − 2w beyond it; the
+    advance is s⁻¹(s(x₀) + Δs) − x₀, exact for any step size and either direction of travel.
+    All arguments broadcast.
+    """
+    big_r, half_width, psi0 = _profile(wheel_radius, cable_radius)
+    excess = 2.0 * big_r * psi0 - 2.0 * half_width
+    x0 = np.asarray(offset, dtype=float)
+    ratio = np.clip(x0 / big_r, -1.0, 1.0)
+    s0 = np.where(
+        x0 <= -half_width,
+        x0,
+        np.where(x0 >= half_width, x0 + excess, -half_width + big_r * (np.arcsin(ratio) + psi0)),
+    )
+    s1 = s0 + rim_travel
+    s_top = half_width + excess  # s at x = +w
+    angle = np.clip((s1 + half_width) / big_r - psi0, -psi0, psi0)
+    x1 = np.where(
+        s1 <= -half_width,
+        s1,
+        np.where(s1 >= s_top, s1 - excess, big_r * np.sin(angle)),
+    )
+    return np.asarray(x1 - x0, dtype=float)
+
+
+def load_floor(spec: str | Path) -> FloorSpec:
+    """Return a named floor (``smooth``, ``bumpy``, ``slippery``) or load a floor TOML file."""
+    text = str(spec)
+    if text in FLOORS:
+        return FLOORS[text]
+    path = Path(text)
+    if path.suffix != ".toml" and not path.exists():
+        raise SpecError(
+            f"unknown floor {text!r}; floors: {', '.join(sorted(FLOORS))}, or a .toml file",
+            field="floor",
+        )
+    try:
+        raw = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SpecError(f"cannot read floor file: {exc.strerror}", source=str(path)) from None
+    try:
+        data = tomllib.loads(raw)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
+    return FloorSpec.from_dict(data, path=path)
+
+
+def _bumpy_floor() -> FloorSpec:
+    """Cables strewn over the 4×4 m squares of both directions, a fixed layout.
+
+    One 10 mm cable, 0.3 m long (under one wheel at a time), across every leg of the cw and
+    ccw squares, placed at deterministic pseudo-random positions so the floor is a fixed fact
+    and not a random draw.
+    """
+    rng = np.random.default_rng(1994)
+    bumps: list[CableBump] = []
+    side = 4.0
+    # Leg segments of the ccw (+y) and cw (−y) squares, as (start, end) points.
+    corners_ccw = [(0.0, 0.0), (side, 0.0), (side, side), (0.0, side)]
+    corners_cw = [(0.0, 0.0), (side, 0.0), (side, -side), (0.0, -side)]
+    for corners in (corners_ccw, corners_cw):
+        for k in range(4):
+            (x0, y0), (x1, y1) = corners[k], corners[(k + 1) % 4]
+            heading = math.atan2(y1 - y0, x1 - x0)
+            for _ in range(2):
+                t = rng.uniform(0.2, 0.8)
+                side_sign = rng.choice([-1.0, 1.0])
+                # Offset sideways so the cable lies under one wheel only (± 0.15 m from the path).
+                ox, oy = -math.sin(heading) * 0.15 * side_sign, math.cos(heading) * 0.15 * side_sign
+                bumps.append(
+                    CableBump(
+                        x=x0 + t * (x1 - x0) + ox,
+                        y=y0 + t * (y1 - y0) + oy,
+                        angle=heading + math.pi / 2,
+                        diameter=0.010,
+                        length=0.12,
+                    )
+                )
+    return FloorSpec(friction=0.8, bumps=tuple(bumps), name="bumpy")
+
+
+FLOORS: dict[str, FloorSpec] = {
+    "smooth": FloorSpec(friction=0.8, name="smooth"),
+    "bumpy": _bumpy_floor(),
+    "slippery": FloorSpec(friction=0.2, name="slippery"),
+    "rough": FloorSpec(friction=0.8, roughness=0.002, name="rough"),
+}

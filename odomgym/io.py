@@ -1,0 +1,40 @@
+"""Atomic file output: a reader never sees a half-written file.
+
+Every file odomgym writes (TOML specs, JSON reports, plots, CSV tables) goes through these
+helpers: the content is written to a temporary file in the target's directory and renamed over
+the target, which POSIX guarantees is atomic on one filesystem.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_writer"]
+
+
+def atomic_writer(path: Path, write: Callable[[Path], None]) -> None:
+    """Call ``write(tmp_path)`` and rename ``tmp_path`` over ``path`` only if it succeeded."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    atomic_writer(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    atomic_writer(path, lambda tmp: tmp.write_bytes(data))

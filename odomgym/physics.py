@@ -1,0 +1,382 @@
+"""The physics World: differential-drive robots as pymunk rigid bodies with friction-limited wheels.
+
+One :class:`World` holds a *batch* of N robots in one pymunk space (they do not interact); the
+single-robot envs are a batch of one. Every per-wheel computation is a numpy operation over the
+whole batch, and body state crosses the Python/Chipmunk boundary through ``pymunk.batch`` once
+per step in each direction, because per-body Python attribute access — not Chipmunk — dominates
+the cost of a step (measured in ``benchmarks/bench_speed.py``).
+
+Model, per robot (top-down, no gravity in the plane):
+
+* **Chassis** — a dynamic body of the robot's mass and yaw inertia, its origin at the axle
+  midpoint (the odometry reference point).
+* **Wheel–floor contact** — the pymunk ``tank.py`` idiom: each drive wheel is a pivot joint
+  between the chassis (at the wheel's contact point, ±b_true/2 to the side) and a per-wheel
+  kinematic "ground" body that moves with the velocity the contact point *would* have if the
+  wheel rolled without slipping. ``max_bias = 0`` makes the joint act on velocities only, and
+  ``max_force = μ·N`` caps the force it may apply at Coulomb friction, isotropically (a friction
+  circle). When a manoeuvre asks for more force than μ·N — hard acceleration, a fast turn, low
+  μ — the joint saturates and the wheel slips: slip *emerges*, nothing scripts it.
+* **Wheel drive** — each wheel's angular rate follows its command through a velocity controller
+  with an acceleration limit (a stiff motor: the rate does not depend on the ground force).
+  The rim travels ``ω·r_true`` per second; the encoder counts the true wheel rotation,
+  quantised to whole counts.
+* **Floor** — the ground body's velocity is the rim velocity corrected by the floor: over a
+  cable the horizontal advance follows the rigid-wheel-over-cylinder geometry
+  (:func:`odomgym.floor.cable_advance`), on a rough floor it carries white noise of variance
+  k²·|d| (seed 004 Eq. 4), and friction patches change μ.
+
+Units: metres, radians, seconds, kilograms, newtons. Wheel index 0 is the left wheel, 1 the right.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pymunk
+import pymunk.batch as pbatch
+from numpy.typing import NDArray
+
+from odomgym.floor import FloorSpec, cable_advance
+from odomgym.robot import RobotSpec
+
+__all__ = ["GRAVITY", "World"]
+
+GRAVITY = 9.81  # m/s²
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+_STATE_FIELDS = (
+    pbatch.BodyFields.POSITION
+    | pbatch.BodyFields.ANGLE
+    | pbatch.BodyFields.VELOCITY
+    | pbatch.BodyFields.ANGULAR_VELOCITY
+)
+_BATCH_IO_MIN_ROBOTS = 4  # below this, per-body attribute access is cheaper (measured)
+
+
+class World:
+    """N differential-drive robots on one floor, stepped together.
+
+    Args:
+        robots: one :class:`RobotSpec` per robot (a single spec for a batch of one).
+        floor: the floor all robots share.
+        dt: control period [s]: commands are held and encoders sampled once per ``dt``.
+            Default 0.05 s, the 20 Hz odometry rate of the OptiOdom robot whose measured logs
+            ship in ``shared/data/optiodom-diff`` (the CLAPPER sampled at 40 ms, seed 002 §3.1).
+        substeps: physics steps per control period (each of ``dt/substeps`` seconds).
+        iterations: Chipmunk solver iterations; the two wheel joints of one chassis are coupled
+            and converge within a few iterations when no wheel slips.
+        rng: source of floor-roughness noise; required when ``floor.roughness > 0``.
+        track_slip: accumulate each wheel's slip distance in ``slip`` (costs ~5 µs a step).
+
+    State arrays (read them, do not write them; shapes use N robots):
+        ``pose`` (N, 3) true x, y [m], θ [rad] of the axle midpoint;
+        ``velocity`` (N, 3) true ẋ, ẏ [m/s], θ̇ [rad/s];
+        ``wheel_rate`` (N, 2) wheel angular rates [rad/s];
+        ``wheel_angle`` (N, 2) accumulated wheel rotation [rad];
+        ``counts`` (N, 2) encoder counts (int64, quantised true rotation);
+        ``slip`` (N, 2) accumulated |rim travel − ground travel| of each wheel [m];
+        ``time`` simulated time [s].
+    """
+
+    def __init__(
+        self,
+        robots: RobotSpec | Sequence[RobotSpec],
+        floor: FloorSpec | None = None,
+        *,
+        dt: float = 0.05,
+        substeps: int = 1,
+        iterations: int = 20,
+        rng: np.random.Generator | None = None,
+        track_slip: bool = False,
+    ) -> None:
+        specs = [robots] if isinstance(robots, RobotSpec) else list(robots)
+        if not specs:
+            raise ValueError("World needs at least one robot")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        if substeps < 1:
+            raise ValueError(f"substeps must be >= 1, got {substeps!r}")
+        self.robots: tuple[RobotSpec, ...] = tuple(specs)
+        self.floor = floor if floor is not None else FloorSpec()
+        if self.floor.roughness > 0 and rng is None:
+            raise ValueError("a rough floor needs rng=np.random.Generator for its noise")
+        self.rng = rng
+        self.dt = float(dt)
+        self.substeps = int(substeps)
+        self.iterations = int(iterations)
+        self.n = len(specs)
+
+        # Per-robot parameters as arrays, shape (N,) or (N, 2) for [left, right].
+        self.true_radius = np.array(
+            [[0.5 * s.true_left_diameter, 0.5 * s.true_right_diameter] for s in specs]
+        )
+        self.nominal_radius = np.array([0.5 * s.wheel_diameter for s in specs])
+        self.half_track = np.array([0.5 * s.true_wheelbase for s in specs])
+        self.ticks_per_rad = np.array([s.ticks_per_rev / (2.0 * np.pi) for s in specs])[:, None]
+        self.max_rate = np.array([s.max_wheel_speed for s in specs]) / self.nominal_radius
+        self.max_rate_step = (
+            np.array([s.max_wheel_accel for s in specs]) / self.nominal_radius * self.dt / substeps
+        )
+        self._lateral = np.stack([self.half_track, -self.half_track], axis=1)  # (N, 2) [m]
+        self.normal_force = np.array(
+            [0.5 * s.mass * GRAVITY * s.drive_load_fraction for s in specs]
+        )
+        self._rate_limit = self.max_rate[:, None]
+        self._neg_rate_limit = -self._rate_limit
+        self._rate_step = self.max_rate_step[:, None]
+        self._neg_rate_step = -self._rate_step
+        self._h = self.dt / self.substeps
+        self.track_slip = track_slip
+        cx, cy, ax, ay, half_len, radius, _ = self.floor.bump_arrays()
+        self._bump_centre = cx + 1j * cy  # (M,) complex positions [m]
+        self._bump_axis = ax + 1j * ay  # (M,) unit axis directions
+        self._bump_half_len = half_len
+        self._bump_radius = radius
+        self._has_bumps = cx.size > 0
+        self._has_patches = bool(self.floor.patches)
+        self._rough = self.floor.roughness > 0.0
+        self._modifies_ground = self._has_bumps or self._has_patches or self._rough
+
+        self._build_space()
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+    def _build_space(self) -> None:
+        space = pymunk.Space()
+        space.iterations = self.iterations
+        space.gravity = (0.0, 0.0)
+        self.space = space
+        self._chassis: list[pymunk.Body] = []
+        self._ground: list[pymunk.Body] = []  # [2i] left, [2i+1] right
+        self._joints: list[pymunk.PivotJoint] = []
+        for spec, half in zip(self.robots, self.half_track, strict=True):
+            chassis = pymunk.Body(spec.mass, spec.moment_of_inertia)
+            space.add(chassis)
+            self._chassis.append(chassis)
+            for side in (+1.0, -1.0):  # left wheel at +y (body frame), right at −y
+                ground = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+                space.add(ground)
+                joint = pymunk.PivotJoint(chassis, ground, (0.0, side * half), (0.0, 0.0))
+                joint.max_bias = 0.0  # velocity-level only: friction, not a spring
+                joint.collide_bodies = False
+                space.add(joint)
+                self._ground.append(ground)
+                self._joints.append(joint)
+        self._friction = np.full((self.n, 2), np.nan)
+        self._set_friction(np.full((self.n, 2), self.floor.friction))
+        self._use_batch_io = self.n >= _BATCH_IO_MIN_ROBOTS
+        self._buffer: pbatch.Buffer | None = None
+        if self._use_batch_io:
+            self._index_bodies()
+
+    def _index_bodies(self) -> None:
+        """Map pymunk's body iteration order onto chassis and ground-body indices."""
+        buffer = pbatch.Buffer()
+        pbatch.get_space_bodies(self.space, pbatch.BodyFields.BODY_ID, buffer)
+        ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp)
+        position = {int(body_id): k for k, body_id in enumerate(ids)}
+        self._chassis_rows = np.array([position[b.id] for b in self._chassis])
+        self._ground_rows = np.array([position[b.id] for b in self._ground]).reshape(self.n, 2)
+        self._velocity_out = np.zeros((len(ids), 2))
+        self._out_buffer = pbatch.Buffer()
+        self._buffer = pbatch.Buffer()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        for key in ("_buffer", "_out_buffer"):
+            state.pop(key, None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._buffer = None
+        if self._use_batch_io:
+            self._out_buffer = pbatch.Buffer()
+            self._buffer = pbatch.Buffer()
+
+    # ------------------------------------------------------------------ reset
+    def reset(
+        self, poses: FloatArray | None = None, indices: NDArray[np.intp] | None = None
+    ) -> None:
+        """Place robots at rest at ``poses`` (K, 3) [m, m, rad] (default: the origin).
+
+        ``indices`` selects which robots (default: all). Wheel rates, angles, encoder counts and
+        accumulated slip of those robots restart from zero.
+        """
+        if indices is None:
+            indices = np.arange(self.n)
+            self.time = 0.0
+            self.pose = np.zeros((self.n, 3))
+            self.velocity = np.zeros((self.n, 3))
+            self.wheel_rate = np.zeros((self.n, 2))
+            self.wheel_angle = np.zeros((self.n, 2))
+            self.counts = np.zeros((self.n, 2), dtype=np.int64)
+            self.slip = np.zeros((self.n, 2))
+        indices = np.asarray(indices, dtype=np.intp)
+        targets = np.zeros((len(indices), 3)) if poses is None else np.asarray(poses, dtype=float)
+        if targets.shape != (len(indices), 3) or not np.all(np.isfinite(targets)):
+            raise ValueError(f"poses must be a finite array of shape ({len(indices)}, 3)")
+        for row, i in enumerate(indices):
+            chassis = self._chassis[i]
+            chassis.position = (float(targets[row, 0]), float(targets[row, 1]))
+            chassis.angle = float(targets[row, 2])
+            chassis.velocity = (0.0, 0.0)
+            chassis.angular_velocity = 0.0
+            for ground in self._ground[2 * i : 2 * i + 2]:
+                ground.position = chassis.position
+                ground.velocity = (0.0, 0.0)
+        self.pose[indices] = targets
+        self.velocity[indices] = 0.0
+        self.wheel_rate[indices] = 0.0
+        self.wheel_angle[indices] = 0.0
+        self.counts[indices] = 0
+        self.slip[indices] = 0.0
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, wheel_rate_cmd: FloatArray) -> None:
+        """Advance one control period with commanded wheel rates (N, 2) [rad/s].
+
+        Commands beyond the robot's ``max_wheel_speed`` are clipped to it; a non-finite command
+        raises ValueError (the envs check their actions before they get here).
+        """
+        command = np.asarray(wheel_rate_cmd, dtype=np.float64)
+        if command.shape != (self.n, 2):
+            command = command.reshape(self.n, 2)
+        if not math.isfinite(command.sum()):
+            raise ValueError("wheel rate commands must be finite")
+        command = np.minimum(np.maximum(command, self._neg_rate_limit), self._rate_limit)
+        h = self._h
+        for _ in range(self.substeps):
+            self._substep(command, h)
+        self.counts = np.floor(self.wheel_angle * self.ticks_per_rad).astype(np.int64)
+        self.time += self.dt
+
+    def _substep(self, command: FloatArray, h: float) -> None:
+        # Wheel velocity controller: the rate moves toward the command by at most a_max·h/r_n.
+        rate_old = self.wheel_rate
+        delta = np.minimum(np.maximum(command - rate_old, self._neg_rate_step), self._rate_step)
+        self.wheel_rate = rate_old + delta
+        # Constant angular acceleration within the substep: mean rate is the trapezoid average.
+        mean_rate = rate_old + 0.5 * delta
+        self.wheel_angle = self.wheel_angle + mean_rate * h
+        rim_speed = mean_rate * self.true_radius  # (N, 2) mean rim speed [m/s]
+
+        # Chipmunk integrates positions at the *start* of its step with the velocities of the
+        # previous one, so ``self.pose`` (= raw pose + v·h) is exactly the configuration at which
+        # this step's contact velocities are solved.
+        theta = self.pose[:, 2:3]
+        cos_t, sin_t = np.cos(theta), np.sin(theta)
+        ground_vx, ground_vy = rim_speed * cos_t, rim_speed * sin_t  # no-slip contact velocity
+        if self._modifies_ground:
+            ground_vx, ground_vy = self._floor_effects(cos_t, sin_t, rim_speed, ground_vx, ground_vy, h)
+        self._write_ground_velocity(ground_vx, ground_vy)
+        self.space.step(h)
+        self._read_state(h)
+        if self.track_slip:
+            # Contact point velocity v + ω × r = v − ω·l·(cos θ, sin θ) against its ground body's.
+            vx, vy, omega_l = self.velocity[:, 0:1], self.velocity[:, 1:2], self.velocity[:, 2:3] * self._lateral
+            slip = np.hypot(vx - omega_l * cos_t - ground_vx, vy - omega_l * sin_t - ground_vy)
+            self.slip = self.slip + slip * h
+
+    def _floor_effects(
+        self,
+        cos_t: FloatArray,
+        sin_t: FloatArray,
+        rim_speed: FloatArray,
+        ground_vx: FloatArray,
+        ground_vy: FloatArray,
+        h: float,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Cables, friction patches and roughness acting on the no-slip ground velocity."""
+        heading = cos_t + 1j * sin_t  # (N, 1)
+        ground_v = ground_vx + 1j * ground_vy
+        contact = (self.pose[:, 0:1] + 1j * self.pose[:, 1:2]) + 1j * self._lateral * heading
+        if self._has_bumps:
+            ground_v = self._apply_bumps(contact, heading, rim_speed * h, ground_v, h)
+        if self._has_patches:
+            self._set_friction(self.floor.friction_at(contact.real, contact.imag))
+        if self._rough:
+            assert self.rng is not None
+            travel = np.abs(rim_speed) * h
+            noise = self.floor.roughness * np.sqrt(travel) * self.rng.standard_normal(travel.shape)
+            ground_v = ground_v + (noise / h) * heading
+        return ground_v.real, ground_v.imag
+
+    def _apply_bumps(
+        self,
+        contact: NDArray[np.complex128],
+        heading: NDArray[np.complex128],
+        rim_travel: FloatArray,
+        ground_v: NDArray[np.complex128],
+        h: float,
+    ) -> NDArray[np.complex128]:
+        """Reduce each wheel's horizontal advance across any cable it is rolling over."""
+        rel = contact[:, :, None] - self._bump_centre  # (N, 2, M)
+        along = (rel * np.conj(self._bump_axis)).real
+        on_cable = np.abs(along) <= self._bump_half_len
+        if not on_cable.any():
+            return ground_v
+        normal = 1j * self._bump_axis
+        offset = (rel * np.conj(normal)).real
+        travel_n = rim_travel[:, :, None] * (heading[:, :, None] * np.conj(normal)).real
+        advance = cable_advance(offset, travel_n, self.true_radius[:, :, None], self._bump_radius)
+        deficit = np.where(on_cable, travel_n - advance, 0.0)  # (N, 2, M) [m]
+        return np.asarray(ground_v - np.sum(deficit * normal, axis=2) / h)
+
+    def _set_friction(self, mu: FloatArray) -> None:
+        changed = np.argwhere(mu != self._friction)
+        for i, side in changed:
+            self._joints[2 * i + side].max_force = float(mu[i, side] * self.normal_force[i])
+        self._friction = mu
+
+    def _write_ground_velocity(self, ground_vx: FloatArray, ground_vy: FloatArray) -> None:
+        if self._use_batch_io:
+            out = self._velocity_out
+            out[self._chassis_rows] = self.velocity[:, :2]
+            out[self._ground_rows, 0] = ground_vx
+            out[self._ground_rows, 1] = ground_vy
+            self._out_buffer.set_float_buf(out.ravel())
+            pbatch.set_space_bodies(self.space, pbatch.BodyFields.VELOCITY, self._out_buffer)
+        else:
+            for ground, vx, vy in zip(
+                self._ground, ground_vx.ravel().tolist(), ground_vy.ravel().tolist(), strict=True
+            ):
+                ground.velocity = (vx, vy)
+
+    def _read_state(self, h: float) -> None:
+        """Read chassis states; ``pose`` is the raw pose advanced by v·h (see ``_substep``)."""
+        if self._use_batch_io:
+            assert self._buffer is not None
+            self._buffer.clear()
+            pbatch.get_space_bodies(self.space, _STATE_FIELDS, self._buffer)
+            data = np.frombuffer(self._buffer.float_buf(), dtype=np.float64).reshape(-1, 6)
+            rows = data[self._chassis_rows]
+            velocity = rows[:, 3:6].copy()
+            pose = rows[:, 0:3] + velocity * h
+        else:
+            poses, velocities = [], []
+            for body in self._chassis:
+                px, py = body.position
+                vx, vy = body.velocity
+                omega = body.angular_velocity
+                poses.append((px + vx * h, py + vy * h, body.angle + omega * h))
+                velocities.append((vx, vy, omega))
+            pose = np.array(poses)
+            velocity = np.array(velocities)
+        self.pose = pose
+        self.velocity = velocity
+
+    # ------------------------------------------------------------------ diagnostics
+    def contact_forces(self) -> FloatArray:
+        """Magnitude of the last friction impulse of each wheel divided by the step [N], (N, 2)."""
+        h = self.dt / self.substeps
+        return np.array([j.impulse / h for j in self._joints]).reshape(self.n, 2)
+
+    def friction_limits(self) -> FloatArray:
+        """Current friction force limit μ·N of each wheel [N], (N, 2)."""
+        return self._friction * self.normal_force[:, None]

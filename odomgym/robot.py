@@ -1,0 +1,325 @@
+"""Robot specifications: what the odometry *believes* versus what the hardware *is*.
+
+A differential-drive robot's dead-reckoning drifts because its nominal parameters (the ones
+programmed into the odometry) differ from the true, physical ones. Borenstein & Feng
+(UMBmark TR, seed 000, §2.3 and §6) name the dominant systematic errors:
+
+* ``E_d = D_R / D_L`` — the ratio of the true right and left effective wheel diameters;
+* ``E_b = b_actual / b_nominal`` — the wheelbase error;
+* ``E_s = D_a / D_nominal`` — the scaling error of the mean diameter (seed 001).
+
+:class:`RobotSpec` keeps the nominal parameters and the true ones side by side. The physics uses
+the true values; :class:`odomgym.odometry.Odometry` sees only the nominal ones (plus whatever
+:class:`odomgym.odometry.Calibration` a calibrator found).
+
+All lengths are metres, masses kilograms, speeds m/s, accelerations m/s².
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from odomgym.errors import SpecError, locate_key, require_positive, require_range
+from odomgym.io import atomic_write_text
+
+__all__ = ["PRESETS", "RobotSpec", "load_robot"]
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """A differential-drive robot: nominal (believed) and true (hidden) parameters.
+
+    Only ``wheel_diameter``, ``wheelbase`` and ``ticks_per_rev`` are required; every true
+    parameter defaults to its nominal value (an ideal robot), and the chassis defaults scale
+    with the wheelbase.
+
+    Attributes:
+        wheel_diameter: nominal wheel diameter D_n [m] the odometry uses.
+        wheelbase: nominal wheelbase b_n [m], distance between the wheel contact points.
+        ticks_per_rev: encoder counts per wheel revolution [counts] (may be fractional, e.g. a
+            64-count motor encoder behind a 43.7:1 gear gives 2796.8).
+        true_left_diameter: true effective left wheel diameter D_L [m].
+        true_right_diameter: true effective right wheel diameter D_R [m].
+        true_wheelbase: true effective wheelbase b_actual [m].
+        mass: chassis mass [kg].
+        chassis_length: chassis length along the direction of travel [m].
+        chassis_width: chassis width [m].
+        drive_load_fraction: share of the weight carried by the two drive wheels [-]; the rest
+            rests on ideal (frictionless) casters. Sets each wheel's normal force and so its
+            friction limit μ·N.
+        max_wheel_speed: largest wheel rim speed the motor controller will command [m/s].
+        max_wheel_accel: acceleration limit of each wheel's velocity controller [m/s²]. A hard
+            controller (large value) asks for more force than friction gives, so wheels slip.
+        name: a label for tables and plots.
+        source: where the numbers come from (free text, for provenance).
+    """
+
+    wheel_diameter: float
+    wheelbase: float
+    ticks_per_rev: float
+    true_left_diameter: float = None  # type: ignore[assignment]  # None → derived default
+    true_right_diameter: float = None  # type: ignore[assignment]  # None → derived default
+    true_wheelbase: float = None  # type: ignore[assignment]  # None → derived default
+    mass: float = None  # type: ignore[assignment]  # None → derived default
+    chassis_length: float = None  # type: ignore[assignment]  # None → derived default
+    chassis_width: float = None  # type: ignore[assignment]  # None → derived default
+    drive_load_fraction: float = 0.9
+    max_wheel_speed: float = 0.5
+    max_wheel_accel: float = 0.5
+    name: str = "robot"
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        # Fill derived defaults so every instance is fully specified after construction.
+        fill: dict[str, float] = {}
+        if self.true_left_diameter is None:
+            fill["true_left_diameter"] = self.wheel_diameter
+        if self.true_right_diameter is None:
+            fill["true_right_diameter"] = self.wheel_diameter
+        if self.true_wheelbase is None:
+            fill["true_wheelbase"] = self.wheelbase
+        if self.chassis_length is None:
+            fill["chassis_length"] = 1.3 * float(self.wheelbase)
+        if self.chassis_width is None:
+            fill["chassis_width"] = 1.3 * float(self.wheelbase)
+        if self.mass is None:
+            # ~ 60 kg/m² of footprint: a light indoor robot when nothing better is known.
+            fill["mass"] = 60.0 * (1.3 * float(self.wheelbase)) ** 2
+        for key, value in fill.items():
+            object.__setattr__(self, key, value)
+        self.validate()
+
+    # ------------------------------------------------------------------ validation
+    def validate(self, source: str | None = None) -> None:
+        """Raise :class:`SpecError` naming the first invalid field."""
+        for name in (
+            "wheel_diameter",
+            "wheelbase",
+            "ticks_per_rev",
+            "true_left_diameter",
+            "true_right_diameter",
+            "true_wheelbase",
+            "mass",
+            "chassis_length",
+            "chassis_width",
+            "max_wheel_speed",
+            "max_wheel_accel",
+        ):
+            require_positive(name, getattr(self, name), source=source)
+        require_range("drive_load_fraction", self.drive_load_fraction, 1e-3, 1.0, source=source)
+        if self.chassis_width < 0.5 * self.true_wheelbase:
+            raise SpecError(
+                "chassis_width must be at least half the wheelbase, got "
+                f"{self.chassis_width} < {0.5 * self.true_wheelbase}",
+                field="chassis_width",
+                source=source,
+            )
+
+    # ------------------------------------------------------------------ systematic errors
+    @property
+    def e_d(self) -> float:
+        """E_d = D_R / D_L, the wheel-diameter ratio (seed 000 Eq. 6.24) [-]."""
+        return float(self.true_right_diameter) / float(self.true_left_diameter)
+
+    @property
+    def e_b(self) -> float:
+        """E_b = b_actual / b_nominal, the wheelbase error (seed 000 Eq. 6.29) [-]."""
+        return float(self.true_wheelbase) / self.wheelbase
+
+    @property
+    def e_s(self) -> float:
+        """E_s = D_a / D_n, the scaling error of the mean wheel diameter (seed 001) [-]."""
+        mean = 0.5 * (float(self.true_left_diameter) + float(self.true_right_diameter))
+        return mean / self.wheel_diameter
+
+    def with_errors(
+        self, e_d: float | None = None, e_b: float | None = None, e_s: float | None = None
+    ) -> RobotSpec:
+        """Return a copy whose true parameters carry the given systematic errors.
+
+        Unspecified errors keep their current values. The split of the mean diameter
+        D_a = E_s·D_n into D_L and D_R follows seed 000 Eqs. 6.31–6.32:
+        D_L = 2/(E_d + 1)·D_a, D_R = 2/(1/E_d + 1)·D_a.
+        """
+        ed = self.e_d if e_d is None else require_positive("e_d", e_d)
+        eb = self.e_b if e_b is None else require_positive("e_b", e_b)
+        es = self.e_s if e_s is None else require_positive("e_s", e_s)
+        mean = es * self.wheel_diameter
+        return dataclasses.replace(
+            self,
+            true_left_diameter=2.0 / (ed + 1.0) * mean,
+            true_right_diameter=2.0 / (1.0 / ed + 1.0) * mean,
+            true_wheelbase=eb * self.wheelbase,
+        )
+
+    def ideal(self) -> RobotSpec:
+        """Return a copy whose true parameters equal the nominal ones (no systematic error)."""
+        return self.with_errors(1.0, 1.0, 1.0)
+
+    # ------------------------------------------------------------------ derived physics
+    @property
+    def moment_of_inertia(self) -> float:
+        """Chassis yaw moment of inertia [kg·m²], a uniform box m·(l² + w²)/12."""
+        length = float(self.chassis_length)
+        width = float(self.chassis_width)
+        return float(self.mass) * (length**2 + width**2) / 12.0
+
+    @property
+    def metres_per_tick(self) -> float:
+        """Nominal travel of one encoder count, π·D_n / counts_per_rev [m]."""
+        return math.pi * self.wheel_diameter / self.ticks_per_rev
+
+    # ------------------------------------------------------------------ TOML
+    def to_dict(self) -> dict[str, Any]:
+        """All fields as a plain dict (TOML-ready; ``None`` never occurs after construction)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, path: Path | None = None) -> RobotSpec:
+        """Build from a mapping (e.g. parsed TOML), with errors naming field, file and line.
+
+        Accepts either a flat table or one under ``[robot]``; ``e_d``/``e_b``/``e_s`` may be
+        given instead of the true diameters and wheelbase.
+        """
+        table = dict(data.get("robot", data))
+        errors = {k: table.pop(k) for k in ("e_d", "e_b", "e_s") if k in table}
+        known = {f.name for f in dataclasses.fields(cls)}
+        for key in table:
+            if key not in known:
+                where = locate_key(path, key) if path else None
+                raise SpecError(
+                    f"unknown robot field {key!r}; known fields: {', '.join(sorted(known))}",
+                    field=key,
+                    source=where,
+                )
+        for required in ("wheel_diameter", "wheelbase", "ticks_per_rev"):
+            if required not in table:
+                raise SpecError(
+                    f"missing required field {required!r}",
+                    field=required,
+                    source=str(path) if path else None,
+                )
+        for key, value in table.items():
+            if key in ("name", "source"):
+                if not isinstance(value, str):
+                    where = locate_key(path, key) if path else None
+                    raise SpecError(f"{key} must be a string", field=key, source=where)
+                continue
+            where = locate_key(path, key) if path else None
+            if key == "drive_load_fraction":
+                require_range(key, value, 1e-3, 1.0, source=where)
+            else:
+                require_positive(key, value, source=where)
+        for key, value in errors.items():
+            require_positive(key, value, source=locate_key(path, key) if path else None)
+        try:
+            spec = cls(**table)
+        except SpecError as exc:
+            raise SpecError(
+                str(exc), field=exc.field, source=str(path) if path else None
+            ) from None
+        if errors:
+            spec = spec.with_errors(errors.get("e_d"), errors.get("e_b"), errors.get("e_s"))
+        return spec
+
+    def save(self, path: str | Path) -> None:
+        """Write the spec as TOML, atomically (temp file, then rename)."""
+        import tomli_w
+
+        atomic_write_text(Path(path), tomli_w.dumps({"robot": self.to_dict()}))
+
+
+def load_robot(spec: str | Path) -> RobotSpec:
+    """Return the preset called ``spec``, or load a robot TOML file.
+
+    Raises :class:`SpecError` for an unknown preset, an unreadable file, malformed TOML (with
+    its line) or an invalid field (with its line).
+    """
+    text = str(spec)
+    if text in PRESETS:
+        return PRESETS[text]
+    path = Path(text)
+    if not path.suffix == ".toml" and not path.exists():
+        raise SpecError(
+            f"unknown robot preset {text!r}; presets: {', '.join(sorted(PRESETS))}, "
+            "or give a path to a .toml file",
+            field="robot",
+        )
+    try:
+        raw = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SpecError(f"cannot read robot file: {exc.strerror}", source=str(path)) from None
+    try:
+        data = tomllib.loads(raw)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
+    return RobotSpec.from_dict(data, path=path)
+
+
+# Presets. Nominal values are what the robot's designers programmed; the true values are the
+# *calibrated* ones each paper reports, so a preset carries a realistic systematic error.
+PRESETS: dict[str, RobotSpec] = {
+    "labmate": RobotSpec(
+        name="labmate",
+        wheel_diameter=0.150,  # wheel radius 75 mm: seed 002 Table I, seed 000 §6.3
+        wheelbase=0.340,  # b = 340.00 mm nominal: seed 000 Fig. 6.5
+        ticks_per_rev=2048.0,  # not given in the seeds; a 512-line quadrature encoder (assumed)
+        true_wheelbase=0.33617,  # b = 336.17 mm after UMBmark calibration: seed 000 Fig. 6.5
+        true_left_diameter=0.150 * 2.0 / (1.00084 + 1.0),  # D_R/D_L = 1.00084: seed 000 Fig. 6.5
+        true_right_diameter=0.150 * 2.0 / (1.0 / 1.00084 + 1.0),
+        mass=70.0,  # assumed: a TRC LabMate base with payload, ~70 kg
+        chassis_length=0.76,  # assumed: LabMate footprint ≈ 0.76 × 0.76 m
+        chassis_width=0.76,
+        max_wheel_speed=1.0,
+        max_wheel_accel=0.5,
+        source="seed 000 §6.3 and Fig. 6.5, seed 002 Table I; mass, footprint, encoder assumed",
+    ),
+    "navbot": RobotSpec(
+        name="navbot",
+        wheel_diameter=0.032,  # D = 32 mm: seed 001
+        wheelbase=0.078,  # b = 78 mm: seed 001
+        ticks_per_rev=909.0,  # 909 ticks/rev: seed 001
+        mass=0.6,  # assumed: a small hobby robot
+        chassis_length=0.12,
+        chassis_width=0.10,
+        max_wheel_speed=0.3,
+        max_wheel_accel=0.5,
+        source="seed 001 (b, D, ticks); mass and footprint assumed",
+    ),
+    "monash": RobotSpec(
+        name="monash",
+        wheel_diameter=2 * 0.06890,  # left wheel radius 0.06890 m before calibration: seed 004 Table 8
+        wheelbase=0.37100,  # B = 0.37100 m before calibration: seed 004 Table 8
+        ticks_per_rev=4096.0,  # not given in seed 004 (assumed)
+        true_left_diameter=2 * 0.068662,  # after calibration: seed 004 Table 8
+        true_right_diameter=2 * 0.068871,
+        true_wheelbase=0.36898,
+        mass=20.0,  # assumed
+        chassis_length=0.45,
+        chassis_width=0.45,
+        max_wheel_speed=0.5,
+        max_wheel_accel=0.5,
+        source="Chong & Kleeman, seed 004 Table 8 (before/after calibration); mass assumed",
+    ),
+    "optiodom": RobotSpec(
+        name="optiodom",
+        wheel_diameter=0.084,  # shared/data/optiodom-diff README
+        wheelbase=0.200,
+        ticks_per_rev=64 * 43.7,  # 64 counts/motor rev × 43.7 gear = 2796.8 counts/wheel rev
+        true_wheelbase=0.200628,  # OptiOdom's own calibration, square session 230620202042
+        true_right_diameter=0.083714,  # published_results.csv
+        true_left_diameter=0.083780,
+        mass=3.0,  # assumed
+        chassis_length=0.26,
+        chassis_width=0.26,
+        max_wheel_speed=0.4,
+        max_wheel_accel=0.5,
+        source="optiodom-diff README and published_results.csv (optiodom, 230620202042)",
+    ),
+}

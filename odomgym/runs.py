@@ -1,0 +1,127 @@
+"""One record for one experiment run, simulated or measured: :class:`Run`.
+
+Calibrators, metrics and the diagnose workflow never care whether a run came from the simulator
+or from a robot with motion capture: both are a time series of cumulative encoder counts and
+ground-truth poses. Odometry is *recomputed* from the counts (:func:`replay_odometry`) with
+whatever nominal parameters and calibration the caller chooses, which is how a calibration is
+evaluated on runs it did not produce.
+
+Frames: ground-truth poses are in the frame of whatever measured them (the simulator's world
+frame, or a motion-capture frame). :func:`return_error` expresses errors in the *start frame*
+(origin at the first ground-truth pose, +x along its heading), the frame of the UMBmark
+equations (seed 000 §6.1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.odometry import Calibration, wrap_angle
+from odomgym.robot import RobotSpec
+
+__all__ = ["Direction", "Run", "replay_odometry", "return_error", "to_start_frame"]
+
+FloatArray = NDArray[np.float64]
+Direction = Literal["cw", "ccw"]
+
+
+@dataclass
+class Run:
+    """A run: samples of time, cumulative encoder counts and ground-truth pose.
+
+    Attributes:
+        kind: what was driven: ``"square"``, ``"straight"``, ``"spin"`` or ``"free"``.
+        time: sample times (T,) [s].
+        counts: cumulative encoder counts (T, 2), columns [left, right], starting at 0.
+        true_pose: ground-truth poses (T, 3): x, y [m], θ [rad] (unwrapped).
+        direction: ``"cw"``/``"ccw"`` for squares and spins, ``None`` otherwise.
+        side: square side L or straight-run length D [m] (0 when not applicable).
+        source: where the run came from (file path, or ``"sim"``), for error messages.
+        meta: free-form extra information (seed, robot name, session, …).
+    """
+
+    kind: str
+    time: FloatArray
+    counts: NDArray[np.int64]
+    true_pose: FloatArray
+    direction: Direction | None = None
+    side: float = 0.0
+    source: str = "sim"
+    meta: dict[str, object] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = len(self.time)
+        if self.counts.shape != (t, 2) or self.true_pose.shape != (t, 3):
+            raise ValueError(
+                f"{self.source}: run arrays disagree in length: time {self.time.shape}, "
+                f"counts {self.counts.shape}, true_pose {self.true_pose.shape}"
+            )
+        if t < 2:
+            raise ValueError(f"{self.source}: a run needs at least two samples, got {t}")
+
+    @property
+    def distance(self) -> float:
+        """Ground-truth path length [m] (sum of sample-to-sample displacements)."""
+        steps = np.diff(self.true_pose[:, :2], axis=0)
+        return float(np.sum(np.hypot(steps[:, 0], steps[:, 1])))
+
+
+def replay_odometry(
+    run: Run, robot: RobotSpec, calibration: Calibration | None = None
+) -> FloatArray:
+    """Dead-reckon ``run``'s encoder counts with ``robot``'s nominal parameters (T, 3).
+
+    The odometry starts at the first ground-truth pose (the OptiOdom convention), so the
+    result is directly comparable with ``run.true_pose``. Same equations as
+    :class:`odomgym.odometry.Odometry`, vectorised over the samples.
+    """
+    cal = calibration if calibration is not None else Calibration()
+    per_tick = robot.metres_per_tick * cal.distance_scale
+    increments = np.diff(run.counts, axis=0).astype(float)
+    left = increments[:, 0] * (cal.c_left * per_tick)
+    right = increments[:, 1] * (cal.c_right * per_tick)
+    ds = 0.5 * (left + right)
+    dtheta = (right - left) / (cal.wheelbase_scale * robot.wheelbase)
+    x0, y0, th0 = run.true_pose[0]
+    theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
+    mid = theta[:-1] + 0.5 * dtheta  # midpoint integration, as odomgym.odometry.Odometry
+    poses = np.empty_like(run.true_pose)
+    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * np.cos(mid))])
+    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * np.sin(mid))])
+    poses[:, 2] = theta
+    return poses
+
+
+def to_start_frame(run: Run, points: FloatArray) -> FloatArray:
+    """Express world-frame poses (K, 3) in the run's start frame (first true pose at origin)."""
+    x0, y0, th0 = run.true_pose[0]
+    c, s = np.cos(th0), np.sin(th0)
+    dx, dy = points[:, 0] - x0, points[:, 1] - y0
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, points[:, 2] - th0], axis=1)
+
+
+def return_error(
+    run: Run,
+    robot: RobotSpec,
+    calibration: Calibration | None = None,
+    *,
+    frame: Literal["start", "world"] = "start",
+) -> FloatArray:
+    """UMBmark return error ε = true − odometry at the end of the run (3,).
+
+    With ``frame="start"`` (default), ε_x, ε_y [m] are in the frame whose origin is the first
+    true pose and whose +x axis is the starting heading — the frame of the UMBmark equations
+    (seed 000 §6.1). ``frame="world"`` keeps the ground-truth frame (the OptiOdom authors'
+    convention: errors in the motion-capture frame). ε_θ [rad] is wrapped to [−π, π).
+    """
+    odom = replay_odometry(run, robot, calibration)
+    ends = np.stack([run.true_pose[-1], odom[-1]])
+    if frame == "start":
+        ends = to_start_frame(run, ends)
+    error = ends[0] - ends[1]
+    error[2] = float(wrap_angle(error[2]))
+    return error
