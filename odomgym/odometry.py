@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym._jit import kernel
 from odomgym.errors import SpecError, locate_key, require_positive
 from odomgym.io import atomic_write_text
 from odomgym.robot import RobotSpec
@@ -213,12 +214,6 @@ class Odometry:
             axis=1,
         )
         self._wheelbase = np.array([c.wheelbase_scale for c in cal]) * self._nominal_wheelbase
-        inv_b = 1.0 / self._wheelbase
-        # Per robot, [Δs_L, Δs_R] @ mix = [Δs, Δθ].
-        self._mix = np.stack(
-            [np.stack([np.full(self.n, 0.5), -inv_b], axis=1), np.stack([np.full(self.n, 0.5), inv_b], axis=1)],
-            axis=1,
-        )
 
     def reset(
         self, poses: FloatArray | None = None, indices: NDArray[np.intp] | None = None
@@ -234,21 +229,47 @@ class Odometry:
         self.wheel_speed[indices] = 0.0
 
     def update(self, counts: NDArray[np.int64], dt: float) -> FloatArray:
-        """Integrate the increment from the last cumulative ``counts`` (N, 2); returns the pose.
+        """Integrate the increment from the last cumulative ``counts`` (N, 2); returns ``pose``.
 
-        ``dt`` [s] only serves the wheel-speed estimate ``wheel_speed`` (N, 2) [m/s]. The
-        caller must not modify ``counts`` afterwards (it is kept, not copied).
+        ``pose`` and ``wheel_speed`` (N, 2) [m/s] are updated in place; copy them to keep a
+        history. ``dt`` [s] only serves the wheel-speed estimate.
         """
-        travel = (counts - self.last_counts) * self._travel_per_tick  # (N, 2) [m]
-        self.last_counts = counts
-        self.wheel_speed = travel * (1.0 / dt)
-        # [Δs, Δθ] per robot in one call: Δs = (Δs_L + Δs_R)/2, Δθ = (Δs_R − Δs_L)/b.
-        ds_dtheta = np.einsum("ij,ijk->ik", travel, self._mix) if self.n > 1 else travel @ self._mix[0]
-        theta = self.pose[:, 2]
-        mid = theta + 0.5 * ds_dtheta[:, 1]
-        ds = ds_dtheta[:, 0]
-        self.pose = self.pose + np.stack([ds * np.cos(mid), ds * np.sin(mid), ds_dtheta[:, 1]], axis=1)
+        _integrate(
+            counts,
+            self.last_counts,
+            self._travel_per_tick,
+            self._wheelbase,
+            1.0 / dt,
+            self.pose,
+            self.wheel_speed,
+        )
         return self.pose
+
+
+@kernel
+def _integrate(
+    counts: NDArray[np.int64],
+    last_counts: NDArray[np.int64],
+    travel_per_tick: FloatArray,
+    wheelbase: FloatArray,
+    inv_dt: float,
+    pose: FloatArray,
+    wheel_speed: FloatArray,
+) -> None:
+    """Midpoint dead reckoning of one sampling period, in place (module docstring equations)."""
+    for i in range(counts.shape[0]):
+        left = (counts[i, 0] - last_counts[i, 0]) * travel_per_tick[i, 0]
+        right = (counts[i, 1] - last_counts[i, 1]) * travel_per_tick[i, 1]
+        last_counts[i, 0] = counts[i, 0]
+        last_counts[i, 1] = counts[i, 1]
+        wheel_speed[i, 0] = left * inv_dt
+        wheel_speed[i, 1] = right * inv_dt
+        ds = 0.5 * (left + right)
+        dtheta = (right - left) / wheelbase[i]
+        mid = pose[i, 2] + 0.5 * dtheta
+        pose[i, 0] += ds * math.cos(mid)
+        pose[i, 1] += ds * math.sin(mid)
+        pose[i, 2] += dtheta
 
 
 def wrap_angle(angle: Any) -> Any:

@@ -40,6 +40,7 @@ import pymunk
 import pymunk.batch as pbatch
 from numpy.typing import NDArray
 
+from odomgym._jit import kernel
 from odomgym.floor import FloorSpec, cable_advance
 from odomgym.robot import RobotSpec
 
@@ -117,7 +118,7 @@ class World:
         )
         self.nominal_radius = np.array([0.5 * s.wheel_diameter for s in specs])
         self.half_track = np.array([0.5 * s.true_wheelbase for s in specs])
-        self.ticks_per_rad = np.array([s.ticks_per_rev / (2.0 * np.pi) for s in specs])[:, None]
+        self.ticks_per_rad = np.array([s.ticks_per_rev / (2.0 * np.pi) for s in specs])
         self.max_rate = np.array([s.max_wheel_speed for s in specs]) / self.nominal_radius
         self.max_rate_step = (
             np.array([s.max_wheel_accel for s in specs]) / self.nominal_radius * self.dt / substeps
@@ -126,10 +127,6 @@ class World:
         self.normal_force = np.array(
             [0.5 * s.mass * GRAVITY * s.drive_load_fraction for s in specs]
         )
-        self._rate_limit = self.max_rate[:, None]
-        self._neg_rate_limit = -self._rate_limit
-        self._rate_step = self.max_rate_step[:, None]
-        self._neg_rate_step = -self._rate_step
         self._h = self.dt / self.substeps
         self.track_slip = track_slip
         cx, cy, ax, ay, half_len, radius, _ = self.floor.bump_arrays()
@@ -217,6 +214,8 @@ class World:
             self.wheel_angle = np.zeros((self.n, 2))
             self.counts = np.zeros((self.n, 2), dtype=np.int64)
             self.slip = np.zeros((self.n, 2))
+            self._rim_speed = np.zeros((self.n, 2))
+            self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
         indices = np.asarray(indices, dtype=np.intp)
         targets = np.zeros((len(indices), 3)) if poses is None else np.asarray(poses, dtype=float)
         if targets.shape != (len(indices), 3) or not np.all(np.isfinite(targets)):
@@ -232,6 +231,7 @@ class World:
                 ground.velocity = (0.0, 0.0)
         self.pose[indices] = targets
         self.velocity[indices] = 0.0
+        self._ground_v[indices] = 0.0
         self.wheel_rate[indices] = 0.0
         self.wheel_angle[indices] = 0.0
         self.counts[indices] = 0
@@ -247,55 +247,53 @@ class World:
         command = np.asarray(wheel_rate_cmd, dtype=np.float64)
         if command.shape != (self.n, 2):
             command = command.reshape(self.n, 2)
-        if not math.isfinite(command.sum()):
-            raise ValueError("wheel rate commands must be finite")
-        command = np.minimum(np.maximum(command, self._neg_rate_limit), self._rate_limit)
         h = self._h
         for _ in range(self.substeps):
-            self._substep(command, h)
-        self.counts = np.floor(self.wheel_angle * self.ticks_per_rad).astype(np.int64)
+            if not _drive_wheels(
+                command,
+                self.max_rate,
+                self.max_rate_step,
+                self.true_radius,
+                self.ticks_per_rad,
+                self.pose,
+                h,
+                self.wheel_rate,
+                self.wheel_angle,
+                self.counts,
+                self._rim_speed,
+                self._ground_v,
+            ):
+                raise ValueError("wheel rate commands must be finite")
+            if self._modifies_ground:
+                self._floor_effects(h)
+            self._write_ground_velocity()
+            self.space.step(h)
+            self._read_state(h)
+            if self.track_slip:
+                self._accumulate_slip(h)
         self.time += self.dt
 
-    def _substep(self, command: FloatArray, h: float) -> None:
-        # Wheel velocity controller: the rate moves toward the command by at most a_max·h/r_n.
-        rate_old = self.wheel_rate
-        delta = np.minimum(np.maximum(command - rate_old, self._neg_rate_step), self._rate_step)
-        self.wheel_rate = rate_old + delta
-        # Constant angular acceleration within the substep: mean rate is the trapezoid average.
-        mean_rate = rate_old + 0.5 * delta
-        self.wheel_angle = self.wheel_angle + mean_rate * h
-        rim_speed = mean_rate * self.true_radius  # (N, 2) mean rim speed [m/s]
+    def _accumulate_slip(self, h: float) -> None:
+        """Contact point velocity v + ω × r = v − ω·l·(cos θ, sin θ) against its ground body's.
 
-        # Chipmunk integrates positions at the *start* of its step with the velocities of the
-        # previous one, so ``self.pose`` (= raw pose + v·h) is exactly the configuration at which
-        # this step's contact velocities are solved.
-        theta = self.pose[:, 2:3]
+        Uses the heading at which the step was solved (pose − ω·h), like the ground velocity.
+        """
+        theta = self.pose[:, 2:3] - self.velocity[:, 2:3] * h
         cos_t, sin_t = np.cos(theta), np.sin(theta)
-        ground_vx, ground_vy = rim_speed * cos_t, rim_speed * sin_t  # no-slip contact velocity
-        if self._modifies_ground:
-            ground_vx, ground_vy = self._floor_effects(cos_t, sin_t, rim_speed, ground_vx, ground_vy, h)
-        self._write_ground_velocity(ground_vx, ground_vy)
-        self.space.step(h)
-        self._read_state(h)
-        if self.track_slip:
-            # Contact point velocity v + ω × r = v − ω·l·(cos θ, sin θ) against its ground body's.
-            vx, vy, omega_l = self.velocity[:, 0:1], self.velocity[:, 1:2], self.velocity[:, 2:3] * self._lateral
-            slip = np.hypot(vx - omega_l * cos_t - ground_vx, vy - omega_l * sin_t - ground_vy)
-            self.slip = self.slip + slip * h
+        omega_l = self.velocity[:, 2:3] * self._lateral
+        slip = np.hypot(
+            self.velocity[:, 0:1] - omega_l * cos_t - self._ground_v[:, :, 0],
+            self.velocity[:, 1:2] - omega_l * sin_t - self._ground_v[:, :, 1],
+        )
+        self.slip += slip * h
 
-    def _floor_effects(
-        self,
-        cos_t: FloatArray,
-        sin_t: FloatArray,
-        rim_speed: FloatArray,
-        ground_vx: FloatArray,
-        ground_vy: FloatArray,
-        h: float,
-    ) -> tuple[FloatArray, FloatArray]:
+    def _floor_effects(self, h: float) -> None:
         """Cables, friction patches and roughness acting on the no-slip ground velocity."""
-        heading = cos_t + 1j * sin_t  # (N, 1)
-        ground_v = ground_vx + 1j * ground_vy
+        theta = self.pose[:, 2:3]
+        heading = np.cos(theta) + 1j * np.sin(theta)  # (N, 1)
+        ground_v = self._ground_v[:, :, 0] + 1j * self._ground_v[:, :, 1]
         contact = (self.pose[:, 0:1] + 1j * self.pose[:, 1:2]) + 1j * self._lateral * heading
+        rim_speed = self._rim_speed
         if self._has_bumps:
             ground_v = self._apply_bumps(contact, heading, rim_speed * h, ground_v, h)
         if self._has_patches:
@@ -305,7 +303,8 @@ class World:
             travel = np.abs(rim_speed) * h
             noise = self.floor.roughness * np.sqrt(travel) * self.rng.standard_normal(travel.shape)
             ground_v = ground_v + (noise / h) * heading
-        return ground_v.real, ground_v.imag
+        self._ground_v[:, :, 0] = ground_v.real
+        self._ground_v[:, :, 1] = ground_v.imag
 
     def _apply_bumps(
         self,
@@ -334,42 +333,42 @@ class World:
             self._joints[2 * i + side].max_force = float(mu[i, side] * self.normal_force[i])
         self._friction = mu
 
-    def _write_ground_velocity(self, ground_vx: FloatArray, ground_vy: FloatArray) -> None:
+    def _write_ground_velocity(self) -> None:
+        ground_v = self._ground_v
         if self._use_batch_io:
             out = self._velocity_out
             out[self._chassis_rows] = self.velocity[:, :2]
-            out[self._ground_rows, 0] = ground_vx
-            out[self._ground_rows, 1] = ground_vy
+            out[self._ground_rows.ravel()] = ground_v.reshape(-1, 2)
             self._out_buffer.set_float_buf(out.ravel())
             pbatch.set_space_bodies(self.space, pbatch.BodyFields.VELOCITY, self._out_buffer)
         else:
-            for ground, vx, vy in zip(
-                self._ground, ground_vx.ravel().tolist(), ground_vy.ravel().tolist(), strict=True
-            ):
-                ground.velocity = (vx, vy)
+            for ground, velocity in zip(self._ground, ground_v.reshape(-1, 2).tolist(), strict=True):
+                ground.velocity = velocity
 
     def _read_state(self, h: float) -> None:
-        """Read chassis states; ``pose`` is the raw pose advanced by v·h (see ``_substep``)."""
+        """Read chassis states into ``pose``/``velocity`` in place.
+
+        ``pose`` is the raw Chipmunk pose advanced by v·h: Chipmunk integrates positions at the
+        *start* of its next step with the velocities just solved, so this is where the motion of
+        this step (already counted by the encoders) puts the robot, and the configuration at
+        which the next step's contact velocities will be solved.
+        """
+        pose, velocity = self.pose, self.velocity
         if self._use_batch_io:
             assert self._buffer is not None
             self._buffer.clear()
             pbatch.get_space_bodies(self.space, _STATE_FIELDS, self._buffer)
             data = np.frombuffer(self._buffer.float_buf(), dtype=np.float64).reshape(-1, 6)
             rows = data[self._chassis_rows]
-            velocity = rows[:, 3:6].copy()
-            pose = rows[:, 0:3] + velocity * h
+            velocity[:] = rows[:, 3:6]
+            pose[:] = rows[:, 0:3] + velocity * h
         else:
-            poses, velocities = [], []
-            for body in self._chassis:
+            for i, body in enumerate(self._chassis):
                 px, py = body.position
                 vx, vy = body.velocity
                 omega = body.angular_velocity
-                poses.append((px + vx * h, py + vy * h, body.angle + omega * h))
-                velocities.append((vx, vy, omega))
-            pose = np.array(poses)
-            velocity = np.array(velocities)
-        self.pose = pose
-        self.velocity = velocity
+                pose[i] = (px + vx * h, py + vy * h, body.angle + omega * h)
+                velocity[i] = (vx, vy, omega)
 
     # ------------------------------------------------------------------ diagnostics
     def contact_forces(self) -> FloatArray:
@@ -380,3 +379,50 @@ class World:
     def friction_limits(self) -> FloatArray:
         """Current friction force limit μ·N of each wheel [N], (N, 2)."""
         return self._friction * self.normal_force[:, None]
+
+
+@kernel
+def _drive_wheels(
+    command: FloatArray,
+    max_rate: FloatArray,
+    max_rate_step: FloatArray,
+    true_radius: FloatArray,
+    ticks_per_rad: FloatArray,
+    pose: FloatArray,
+    h: float,
+    rate: FloatArray,
+    angle: FloatArray,
+    counts: IntArray,
+    rim_speed: FloatArray,
+    ground_v: FloatArray,
+) -> bool:
+    """Wheel velocity controllers, encoders and no-slip contact velocities of one substep.
+
+    Per wheel: clip the command to ±max_rate, move the rate toward it by at most max_rate_step
+    (the acceleration limit), rotate by the trapezoid mean rate × h, count ticks (floor of the
+    true rotation), and set the ground velocity to the mean rim speed along the heading at which
+    Chipmunk will solve this step. In-place on ``rate``, ``angle``, ``counts``, ``rim_speed``,
+    ``ground_v``; returns False (touching nothing) if any command is not finite.
+    """
+    n = command.shape[0]
+    for i in range(n):
+        if not (math.isfinite(command[i, 0]) and math.isfinite(command[i, 1])):
+            return False
+    for i in range(n):
+        cos_t = math.cos(pose[i, 2])
+        sin_t = math.sin(pose[i, 2])
+        limit = max_rate[i]
+        step = max_rate_step[i]
+        for w in range(2):
+            target = min(max(command[i, w], -limit), limit)
+            old = rate[i, w]
+            delta = min(max(target - old, -step), step)
+            rate[i, w] = old + delta
+            mean = old + 0.5 * delta  # constant acceleration within the substep
+            angle[i, w] += mean * h
+            counts[i, w] = math.floor(angle[i, w] * ticks_per_rad[i])
+            speed = mean * true_radius[i, w]
+            rim_speed[i, w] = speed
+            ground_v[i, w, 0] = speed * cos_t
+            ground_v[i, w, 1] = speed * sin_t
+    return True

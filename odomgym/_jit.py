@@ -1,0 +1,25 @@
+"""Ahead-of-loop compilation of the per-step kernels with numba.
+
+Why: a control step of one robot is a few dozen arithmetic operations; as numpy calls on
+arrays of one row each would cost ~0.8 µs of dispatch, more than the physics itself
+(``benchmarks/bench_speed.py`` measures it). The kernels are therefore written as plain loops
+over the robots and compiled with numba, which makes a batch of one and a batch of 256 equally
+cheap per robot. Set ``NUMBA_DISABLE_JIT=1`` to run the very same source as ordinary Python
+(slower, identical semantics), e.g. to step through it in a debugger.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import numba
+
+__all__ = ["kernel"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def kernel(function: F) -> F:
+    """Compile ``function`` in nopython mode, cached on disk, IEEE-exact (no fastmath)."""
+    return numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")(function)  # type: ignore[no-any-return]

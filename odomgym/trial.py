@@ -1,0 +1,158 @@
+"""A trial: a batch of robots driving routes by odometry — World + Odometry + RouteProgress.
+
+This is the one place where the physics, the dead reckoning and the route meet. The Gymnasium
+envs (single and vector) wrap a trial and add spaces, rewards and rendering; the simulated lab
+(:class:`odomgym.lab.SimLab`) drives a trial with the reference driver to produce runs. So the
+env a policy is trained in and the experiments a calibrator runs are the same code.
+
+Observation layout (one row per robot, ``float32``), in the odometry frame:
+
+====  =====================  ==========================================================  =========
+idx   name                   meaning                                                     unit
+====  =====================  ==========================================================  =========
+0     ``remaining``          distance left on a drive, or heading left to turn           m / rad
+1     ``cross``              lateral offset from the drive's line (left +)               m
+2     ``heading_error``      target heading − odometry heading, wrapped                  rad
+3     ``wheel_speed_left``   left wheel speed from the encoders / max wheel speed        -
+4     ``wheel_speed_right``  right wheel speed from the encoders / max wheel speed       -
+5     ``is_turn``            1 during an in-place turn, 0 on a drive                     -
+6     ``direction``          +1 driving forwards, −1 backwards                           -
+7     ``route_fraction``     share of the route completed                                -
+====  =====================  ==========================================================  =========
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.floor import FloorSpec
+from odomgym.odometry import Calibration, Odometry, wrap_angle
+from odomgym.paths import Route, RouteProgress
+from odomgym.physics import World
+from odomgym.robot import RobotSpec
+
+__all__ = ["OBSERVATION_NAMES", "Trial"]
+
+FloatArray = NDArray[np.float64]
+
+OBSERVATION_NAMES = (
+    "remaining",
+    "cross",
+    "heading_error",
+    "wheel_speed_left",
+    "wheel_speed_right",
+    "is_turn",
+    "direction",
+    "route_fraction",
+)
+
+
+class Trial:
+    """N robots on one floor, each following its route by its own odometry.
+
+    Args:
+        robots: one spec per robot.
+        floor: the shared floor.
+        routes: one route per robot, or one for all.
+        calibration: odometry calibration, one for all or one per robot.
+        dt: control period [s]; substeps: physics steps per control period.
+        rng: floor-roughness noise source (required on rough floors).
+        track_slip: accumulate per-wheel slip in ``world.slip``.
+    """
+
+    def __init__(
+        self,
+        robots: RobotSpec | Sequence[RobotSpec],
+        floor: FloorSpec,
+        routes: Route | Sequence[Route],
+        *,
+        calibration: Calibration | Sequence[Calibration] | None = None,
+        dt: float = 0.05,
+        substeps: int = 1,
+        rng: np.random.Generator | None = None,
+        track_slip: bool = False,
+    ) -> None:
+        specs = [robots] if isinstance(robots, RobotSpec) else list(robots)
+        self.n = len(specs)
+        self.robots = tuple(specs)
+        self.world = World(specs, floor, dt=dt, substeps=substeps, rng=rng, track_slip=track_slip)
+        self.odometry = Odometry(specs, calibration)
+        route_list = [routes] * self.n if isinstance(routes, Route) else list(routes)
+        if len(route_list) != self.n:
+            raise ValueError(f"need one route per robot ({self.n}), got {len(route_list)}")
+        # Tolerances above one encoder count, so every robot can arrive (see RouteProgress).
+        per_tick = np.array([s.metres_per_tick for s in specs])
+        wheelbase = np.array([s.wheelbase for s in specs])
+        self.progress = RouteProgress(
+            route_list,
+            position_tolerance=np.maximum(0.002, 2.0 * per_tick),
+            heading_tolerance=np.maximum(0.0005, 1.5 * per_tick / wheelbase),
+            stop_speed=np.maximum(0.005, 1.5 * per_tick / dt),
+        )
+        self._max_speed = np.array([s.max_wheel_speed for s in specs])
+        self._action_to_rate = (self._max_speed / self.world.nominal_radius)[:, None]
+        self._refresh(advance=False)
+
+    @property
+    def dt(self) -> float:
+        """Control period [s]."""
+        return self.world.dt
+
+    def reset(
+        self,
+        indices: NDArray[np.intp] | None = None,
+        routes: Sequence[Route] | None = None,
+    ) -> None:
+        """Put robots (all, or ``indices``) back at the origin, at rest, at the route start."""
+        self.world.reset(indices=indices)
+        self.odometry.reset(indices=indices)
+        if routes is not None:
+            self.progress.set_routes(list(routes), indices)
+        else:
+            keep = self.progress.routes
+            chosen = np.arange(self.n) if indices is None else np.asarray(indices)
+            self.progress.set_routes([keep[i] for i in chosen], chosen)
+        self._refresh(advance=False)
+
+    def step(self, actions: FloatArray) -> NDArray[np.bool_]:
+        """Apply wheel-speed actions (N, 2) in [−1, 1] for one control period.
+
+        Returns the robots that completed a segment this step.
+        """
+        self.world.step(actions * self._action_to_rate)
+        self.odometry.update(self.world.counts, self.world.dt)
+        return self._refresh(advance=True)
+
+    def _refresh(self, advance: bool) -> NDArray[np.bool_]:
+        return self.progress.update(
+            self.odometry.pose, self.odometry.wheel_speed, self._max_speed, advance
+        )
+
+    # ------------------------------------------------------------------ views
+    def observation(self) -> NDArray[np.float32]:
+        """The observation rows (N, 8); see the module docstring for the layout."""
+        return self.progress.state.astype(np.float32)
+
+    @property
+    def done(self) -> NDArray[np.bool_]:
+        """Robots whose odometry says they completed their route and stopped."""
+        return self.progress.done
+
+    @property
+    def true_pose(self) -> FloatArray:
+        """Ground-truth poses (N, 3) [m, m, rad]."""
+        return self.world.pose
+
+    @property
+    def odom_pose(self) -> FloatArray:
+        """Odometry poses (N, 3) [m, m, rad]."""
+        return self.odometry.pose
+
+    def pose_error(self) -> FloatArray:
+        """True − odometry (N, 3), heading wrapped to [−π, π) [m, m, rad]."""
+        error = self.world.pose - self.odometry.pose
+        error[:, 2] = wrap_angle(error[:, 2])
+        return error
