@@ -1,1 +1,68 @@
-"""odomgym: wheel-odometry (dead-reckoning) research on a pymunk differential-drive simulator."""
+"""odomgym: wheel-odometry (dead-reckoning) research on a pymunk differential-drive simulator.
+
+Importing ``odomgym`` registers the Gymnasium environments (string entry points, so no env
+module is imported until ``gymnasium.make`` needs it):
+
+* ``UMBmarkSquare-v0`` — the UMBmark bi-directional square (Borenstein & Feng 1994);
+* ``StraightLine-v0`` — straight runs, optionally out and back (Borenstein's CLAPPER paper).
+
+The core API: :class:`~odomgym.robot.RobotSpec`, :class:`~odomgym.floor.FloorSpec`,
+:class:`~odomgym.physics.World`, :class:`~odomgym.odometry.Odometry`,
+:class:`~odomgym.odometry.Calibration`, :class:`~odomgym.trial.Trial`,
+:class:`~odomgym.drivers.ReferenceDriver`, :class:`~odomgym.lab.SimLab`.
+"""
+
+from __future__ import annotations
+
+from odomgym.floor import FLOORS, CableBump, FloorSpec, FrictionPatch, load_floor
+from odomgym.odometry import Calibration, Odometry, load_calibration
+from odomgym.robot import PRESETS, RobotSpec, load_robot
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "FLOORS",
+    "PRESETS",
+    "CableBump",
+    "Calibration",
+    "FloorSpec",
+    "FrictionPatch",
+    "Odometry",
+    "RobotSpec",
+    "__version__",
+    "load_calibration",
+    "load_floor",
+    "load_robot",
+    "register_envs",
+]
+
+_ENVS = {
+    "UMBmarkSquare-v0": (
+        "odomgym.envs.umbmark:UMBmarkSquareEnv",
+        "odomgym.envs.vector:make_square_vector_env",
+        6000,
+    ),
+    "StraightLine-v0": (
+        "odomgym.envs.straight:StraightLineEnv",
+        "odomgym.envs.vector:make_straight_vector_env",
+        4000,
+    ),
+}
+
+
+def register_envs() -> None:
+    """Register odomgym's envs with Gymnasium; safe to call more than once."""
+    import gymnasium
+
+    for env_id, (entry_point, vector_entry_point, max_steps) in _ENVS.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point=entry_point,
+            max_episode_steps=max_steps,
+            vector_entry_point=vector_entry_point,
+        )
+
+
+register_envs()

@@ -256,7 +256,11 @@ def _route_update(
             k = index[i]
             finished = k >= count[i]
             s = min(k, count[i] - 1)
-            error = (heading[i, s] - pose[i, 2] + math.pi) % two_pi - math.pi
+            # Turns count the rotation left unwrapped (a 360° spin must not look finished at
+            # the start); drives hold a heading, so their error is wrapped to [−π, π).
+            error = heading[i, s] - pose[i, 2]
+            if not is_turn[i, s]:
+                error = (error + math.pi) % two_pi - math.pi
             rel_x = pose[i, 0] - start[i, s, 0]
             rel_y = pose[i, 1] - start[i, s, 1]
             travelled = rel_x * unit[i, s, 0] + rel_y * unit[i, s, 1]

@@ -1,0 +1,225 @@
+"""The thin shared base of odomgym's route-following envs.
+
+An env assembles a :class:`odomgym.trial.Trial` (physics + odometry + route) and defines only
+what makes it a task: which route, the observation and action spaces, the reward and the end of
+an episode. Everything physical lives in the core (``odomgym.physics``); everything the robot
+believes lives in ``odomgym.odometry``.
+
+Reward (all episodes, per step; each term is reported in ``info["reward_terms"]``):
+
+===============  =======================================================================
+term             value
+===============  =======================================================================
+``progress``     ``progress_weight`` × share of the route completed this step, by odometry
+``time``         −``time_weight`` per step
+``completion``   +``completion_weight`` on the step the odometry says the route is done
+===============  =======================================================================
+
+The robot can only know where it is through its odometry, so progress is measured by odometry;
+the truth is reported in ``info`` for evaluation, never rewarded.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.floor import FloorSpec, load_floor
+from odomgym.odometry import Calibration, load_calibration
+from odomgym.paths import Route
+from odomgym.robot import RobotSpec, load_robot
+from odomgym.trial import OBSERVATION_NAMES, Trial
+
+__all__ = ["RewardWeights", "RouteEnv", "action_space", "observation_space", "validate_actions"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the reward terms (see the module docstring)."""
+
+    progress: float = 1.0
+    time: float = 0.001
+    completion: float = 1.0
+
+
+def observation_space(shape: tuple[int, ...] = (len(OBSERVATION_NAMES),)) -> gym.spaces.Box:
+    """Observation space of the layout in :mod:`odomgym.trial` (per-entry bounds)."""
+    # Finite bounds (RL libraries normalise with them): routes are far shorter than 1 km, and a
+    # wheel cannot turn at ten times its speed limit.
+    per_row_low = np.array([-1e3, -1e3, -np.pi, -10.0, -10.0, 0.0, -1.0, 0.0], np.float32)
+    per_row_high = np.array([1e3, 1e3, np.pi, 10.0, 10.0, 1.0, 1.0, 1.0], np.float32)
+    low = np.broadcast_to(per_row_low, shape).copy()
+    high = np.broadcast_to(per_row_high, shape).copy()
+    return gym.spaces.Box(low, high, dtype=np.float32)
+
+
+def action_space(shape: tuple[int, ...] = (2,)) -> gym.spaces.Box:
+    """Wheel speed commands [left, right] as fractions of the robot's ``max_wheel_speed``."""
+    return gym.spaces.Box(-1.0, 1.0, shape=shape, dtype=np.float32)
+
+
+def validate_actions(action: Any, shape: tuple[int, ...]) -> FloatArray:
+    """Check and clip actions: NaN/inf or a wrong shape raise ValueError; values outside
+    [−1, 1] are clipped (the documented rule: a motor controller saturates)."""
+    array = np.asarray(action, dtype=np.float64)
+    if array.shape != shape:
+        raise ValueError(f"action must have shape {shape}, got {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"action must be finite, got {array.tolist()}")
+    return np.clip(array, -1.0, 1.0)
+
+
+def resolve_specs(
+    robot: RobotSpec | str,
+    floor: FloorSpec | str,
+    calibration: Calibration | str | None,
+) -> tuple[RobotSpec, FloorSpec, Calibration]:
+    """Accept specs or their names/paths (presets, ``.toml`` files)."""
+    robot_spec = load_robot(robot) if isinstance(robot, str) else robot
+    floor_spec = load_floor(floor) if isinstance(floor, str) else floor
+    if calibration is None:
+        cal = Calibration()
+    elif isinstance(calibration, str):
+        cal = load_calibration(calibration)
+    else:
+        cal = calibration
+    return robot_spec, floor_spec, cal
+
+
+class RouteEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """Base of the single-robot envs: a robot follows a route by its own odometry.
+
+    Subclasses implement :meth:`_route` (which route an episode drives). See
+    :class:`odomgym.envs.umbmark.UMBmarkSquareEnv` for the full documentation of spaces,
+    reward, ``info`` and episode end.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
+
+    def __init__(
+        self,
+        robot: RobotSpec | str = "labmate",
+        floor: FloorSpec | str = "smooth",
+        calibration: Calibration | str | None = None,
+        *,
+        dt: float = 0.05,
+        reward_weights: RewardWeights | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        self.robot, self.floor, self.calibration = resolve_specs(robot, floor, calibration)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        self.dt = float(dt)
+        self.render_mode = render_mode
+        self.weights = reward_weights or RewardWeights()
+        self.observation_space = observation_space()
+        self.action_space = action_space()
+        self._trial: Trial | None = None
+        self._fraction = 0.0
+        self._renderer: Any = None
+        self._history: list[tuple[float, float, float, float, float, float]] = []
+
+    # ------------------------------------------------------------------ to implement
+    def _route(self, options: dict[str, Any]) -> Route:
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        super().reset(seed=seed)
+        route = self._route(dict(options or {}))
+        # A fresh World each episode: the same seed then gives the same trajectory whatever
+        # ran before (Chipmunk keeps solver warm-start state inside its joints).
+        self._trial = Trial(
+            self.robot,
+            self.floor,
+            route,
+            calibration=self.calibration,
+            dt=self.dt,
+            rng=self.np_random,
+        )
+        self.route = route
+        self._fraction = 0.0
+        self._history = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
+        if self.render_mode == "human":
+            self.render()
+        return self._trial.observation()[0], self._info(self._trial, {}, False)
+
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        trial = self._require_trial()
+        if trial.done[0]:
+            raise RuntimeError("the episode has terminated; call reset() first")
+        trial.step(validate_actions(action, (2,)).reshape(1, 2))
+        obs = trial.observation()[0]
+        fraction = float(obs[7])
+        terminated = bool(trial.done[0])
+        terms = {
+            "progress": self.weights.progress * (fraction - self._fraction),
+            "time": -self.weights.time,
+            "completion": self.weights.completion if terminated else 0.0,
+        }
+        self._fraction = fraction
+        if self.render_mode is not None:
+            t, o = trial.true_pose[0], trial.odom_pose[0]
+            self._history.append((t[0], t[1], t[2], o[0], o[1], o[2]))
+            if self.render_mode == "human":
+                self.render()
+        return obs, float(sum(terms.values())), terminated, False, self._info(trial, terms, terminated)
+
+    def _info(self, trial: Trial, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
+        error = trial.pose_error()[0]
+        info: dict[str, Any] = {
+            "odom_pose": trial.odom_pose[0].copy(),
+            "true_pose": trial.true_pose[0].copy(),
+            "pose_error": error,
+            "encoder_counts": trial.world.counts[0].copy(),
+            "segment": int(trial.progress.index[0]),
+            "time": trial.world.time,
+            "reward_terms": terms,
+        }
+        if terminated:
+            # The robot started at the origin heading +x, so the world frame is the UMBmark
+            # start frame: ε = true − odometry (seed 000 §6.1).
+            info["return_error"] = error.copy()
+        return info
+
+    def _require_trial(self) -> Trial:
+        if self._trial is None:
+            raise RuntimeError("call reset() before step()")
+        return self._trial
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> NDArray[np.uint8] | None:
+        """Top-down view: floor bumps, the route, the true path (blue), the odometry path
+        (orange), the robot at its true pose and a ghost at its odometry pose."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
+            return None
+        from odomgym.envs.render import TopDownRenderer
+
+        if self._renderer is None:
+            self._renderer = TopDownRenderer(self.robot, self.floor, self.render_mode)
+        return self._renderer.draw(self.route, self._history)  # type: ignore[no-any-return]
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None  # pygame surfaces do not pickle; re-created on demand
+        return state
