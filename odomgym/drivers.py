@@ -30,7 +30,8 @@ class ReferenceDriver:
     Args:
         robot: the robot (its *nominal* wheelbase, speed and acceleration limits are used).
         cruise_speed: speed on straight legs [m/s] (UMBmark: 0.2 m/s).
-        turn_wheel_speed: wheel rim speed during in-place turns [m/s] (UMBmark: ≈ 0.2 m/s).
+        turn_wheel_speed: wheel rim speed during in-place turns [m/s]; default: the cruise
+            speed (UMBmark: ≈ ±0.2 m/s at 0.2 m/s on the legs, seed 000 §6.3).
         accel_fraction: fraction of the robot's wheel acceleration limit used for planning
             the stops, so the velocity controller can always follow [-].
         approach_gain: final-approach gain [1/s]: speed = gain × remaining distance, so the
@@ -43,7 +44,7 @@ class ReferenceDriver:
         robot: RobotSpec,
         *,
         cruise_speed: float = 0.2,
-        turn_wheel_speed: float = 0.2,
+        turn_wheel_speed: float | None = None,
         accel_fraction: float = 0.5,
         approach_gain: float = 2.0,
         heading_gain: float = 2.0,
@@ -56,7 +57,8 @@ class ReferenceDriver:
             )
         self.robot = robot
         self.cruise_speed = cruise_speed
-        self.turn_wheel_speed = min(turn_wheel_speed, robot.max_wheel_speed)
+        turn = cruise_speed if turn_wheel_speed is None else turn_wheel_speed
+        self.turn_wheel_speed = min(turn, robot.max_wheel_speed)
         self.accel = accel_fraction * robot.max_wheel_accel
         self.approach_gain = approach_gain
         self.heading_gain = heading_gain

@@ -63,9 +63,7 @@ class EvaluationMeasures:
         }
 
 
-def pose_errors(
-    run: Run, robot: RobotSpec, calibration: Calibration | None = None
-) -> FloatArray:
+def pose_errors(run: Run, robot: RobotSpec, calibration: Calibration | None = None) -> FloatArray:
     """Ground truth − odometry at every sample of ``run`` (T, 3), in the ground-truth frame.
 
     The odometry is :func:`odomgym.runs.replay_odometry` (started at the first ground-truth

@@ -243,7 +243,7 @@ def bump_extra_rotation(wheel_radius: float, cable_diameter: float) -> float:
     R = r + ρ around the cable axis, rolling without slip, so the wheel turns through an arc of
     R·2ψ₀ (ψ₀ = asin(w/R)) while advancing 2w. The excess R·2ψ₀ − 2w is what the encoder
     over-reports (seed 002 Eq. 1 uses the chord approximation of the same picture; LabMate,
-    r = 75 mm, 10 mm cable: 3.42 mm, versus the paper's 2.63 mm estimate).
+    r = 75 mm, 10 mm cable: 3.40 mm (0.57° of heading on b = 340 mm), versus the paper's 2.63 mm estimate).
     """
     big_r, half_width, psi0 = _profile(wheel_radius, 0.5 * cable_diameter)
     return float(2.0 * big_r * psi0 - 2.0 * half_width)

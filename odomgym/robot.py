@@ -277,8 +277,9 @@ PRESETS: dict[str, RobotSpec] = {
         chassis_length=0.76,  # assumed: LabMate footprint ≈ 0.76 × 0.76 m
         chassis_width=0.76,
         max_wheel_speed=1.0,
-        max_wheel_accel=0.5,
-        source="seed 000 §6.3 and Fig. 6.5, seed 002 Table I; mass, footprint, encoder assumed",
+        max_wheel_accel=1.0,  # assumed controller limit
+        source="seed 000 §6.3 and Fig. 6.5, seed 002 Table I; mass, footprint, encoder and "
+        "controller limits assumed",
     ),
     "navbot": RobotSpec(
         name="navbot",

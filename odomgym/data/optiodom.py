@@ -214,8 +214,10 @@ class RecordedLab:
         del calibration  # what was recorded cannot be re-driven; see the class docstring
         session = self.session
         held = ", ".join(f"{n} {k}" for k, n in session.holdings().items()) or "no runs"
-        what = experiment.kind if experiment.direction is None else (
-            f"{experiment.direction} {experiment.kind}"
+        what = (
+            experiment.kind
+            if experiment.direction is None
+            else (f"{experiment.direction} {experiment.kind}")
         )
         prefix = f"session {session.name} ({session.directory})"
         if experiment.return_trip:
@@ -332,11 +334,7 @@ def read_session(
         data = _read_run_file(path)
         if windows is not None and check_windows:
             _check_window(path, data, windows[index], meta, index)
-        runs.append(
-            _make_run(
-                data, path, run_kind, direction, kind, side, name, index, windows
-            )
-        )
+        runs.append(_make_run(data, path, run_kind, direction, kind, side, name, index, windows))
     return Session(
         name=name,
         directory=folder,
@@ -507,7 +505,7 @@ def _run_files(folder: Path, name: str, n_runs: int, meta: _Metadata) -> list[Pa
             detail.append("unexpected run " + ", ".join(f"{n:02d}" for n in extra))
         raise SpecError(
             f"metadata says N = {n_runs} runs but the folder {folder} holds "
-            f"{len(numbers)} run files ({'; '.join(detail)})",
+            f"{len(numbers)} run file{'' if len(numbers) == 1 else 's'} ({'; '.join(detail)})",
             field="N",
             source=meta.where("N"),
         )
@@ -525,7 +523,9 @@ def _layout(kind: PathType, n_runs: int, meta: _Metadata) -> list[tuple[str, Dir
                 source=meta.where("N"),
             )
         half = n_runs // 2
-        return [("square", "cw")] * half + [("square", "ccw")] * half
+        cw: tuple[str, Direction | None] = ("square", "cw")
+        ccw: tuple[str, Direction | None] = ("square", "ccw")
+        return [cw] * half + [ccw] * half
     if kind == "ivanjko":
         if n_runs % 3:
             raise SpecError(
@@ -535,7 +535,10 @@ def _layout(kind: PathType, n_runs: int, meta: _Metadata) -> list[tuple[str, Dir
                 source=meta.where("N"),
             )
         third = n_runs // 3
-        return [("straight", None)] * third + [("spin", "cw")] * third + [("spin", "ccw")] * third
+        straight: tuple[str, Direction | None] = ("straight", None)
+        spin_cw: tuple[str, Direction | None] = ("spin", "cw")
+        spin_ccw: tuple[str, Direction | None] = ("spin", "ccw")
+        return [straight] * third + [spin_cw] * third + [spin_ccw] * third
     return [("free", None)] * n_runs
 
 

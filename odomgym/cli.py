@@ -1,0 +1,204 @@
+"""The ``odomgym`` command line: thin — it parses, calls the library, prints and plots.
+
+Commands:
+    ``odomgym run square|straight …``   drive runs in simulation, report return errors.
+
+Every command exits 0 on success, 2 on bad input (with a message naming the field and, where it
+came from a file, the file and line) and never leaves a half-written output file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from odomgym.errors import SpecError
+from odomgym.floor import FloorSpec, load_floor
+from odomgym.lab import simulate_runs
+from odomgym.metrics import summarize_umbmark
+from odomgym.odometry import Calibration, load_calibration, wrap_angle
+from odomgym.paths import Route, square_route, straight_route
+from odomgym.report import format_return_errors, plot_return_errors, to_json
+from odomgym.robot import RobotSpec, load_robot
+
+__all__ = ["main"]
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return value
+
+
+def _add_robot_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--robot",
+        default="labmate",
+        help="robot preset (labmate, navbot, monash, optiodom) or a robot .toml file",
+    )
+    parser.add_argument("--ed", type=_positive, help="true E_d = D_R/D_L to inject")
+    parser.add_argument("--eb", type=_positive, help="true E_b = b_actual/b_nominal to inject")
+    parser.add_argument("--es", type=_positive, help="true E_s = D_mean/D_nominal to inject")
+    parser.add_argument(
+        "--floor", default="smooth", help="smooth, bumpy, slippery, rough, or a floor .toml file"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--calibration", help="calibration .toml used by the odometry")
+
+
+def _robot_from(args: argparse.Namespace) -> RobotSpec:
+    robot = load_robot(args.robot)
+    if args.ed is not None or args.eb is not None or args.es is not None:
+        robot = robot.with_errors(args.ed, args.eb, args.es)
+    return robot
+
+
+def _progress_bar(enabled: bool, total_runs: int) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(
+        total=100 * total_runs,
+        unit="%",
+        desc="simulating",
+        disable=not enabled,
+        leave=False,
+        file=sys.stderr,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}",
+    )
+
+
+def _command_run(args: argparse.Namespace) -> int:
+    robot = _robot_from(args)
+    floor: FloorSpec = load_floor(args.floor)
+    calibration: Calibration = (
+        load_calibration(args.calibration) if args.calibration else Calibration()
+    )
+    rng = np.random.default_rng(args.seed)
+    plans: list[tuple[str, Route]] = []
+    if args.path == "square":
+        directions = ["cw", "ccw"] if args.direction == "both" else [args.direction]
+        plans = [(d, square_route(args.side, d)) for d in directions]
+    else:
+        plans = [("-", straight_route(args.distance, args.return_trip))]
+    show_bar = not args.json and sys.stderr.isatty()
+    bar = _progress_bar(show_bar, len(plans))
+    rows: list[tuple[int, str, np.ndarray]] = []
+    records: list[dict[str, Any]] = []
+    errors_by_direction: dict[str, list[np.ndarray]] = {"cw": [], "ccw": []}
+    number = 0
+    for k, (direction, route) in enumerate(plans):
+
+        def update(fraction: float, offset: int = k) -> None:
+            bar.n = int(100 * (offset + fraction))
+            bar.refresh()
+
+        runs, odom_end = simulate_runs(
+            robot,
+            floor,
+            route,
+            calibration=calibration,
+            rng=rng,
+            repeats=args.runs,
+            kind=args.path,
+            direction=direction if direction != "-" else None,
+            progress=update,
+        )
+        for run, odom in zip(runs, odom_end, strict=True):
+            number += 1
+            error = run.true_pose[-1] - odom
+            error[2] = float(wrap_angle(error[2]))
+            rows.append((number, direction, error))
+            if direction in errors_by_direction:
+                errors_by_direction[direction].append(error)
+            records.append(
+                {
+                    "run": number,
+                    "direction": direction if direction != "-" else None,
+                    "return_error": {"x": error[0], "y": error[1], "theta": error[2]},
+                    "odom_end": odom,
+                    "true_end": run.true_pose[-1],
+                    "duration_s": run.time[-1],
+                }
+            )
+    bar.close()
+    summary = None
+    if errors_by_direction["cw"] and errors_by_direction["ccw"]:
+        summary = summarize_umbmark(
+            np.array(errors_by_direction["cw"]), np.array(errors_by_direction["ccw"])
+        )
+    if args.json:
+        for record in records:
+            print(to_json(record))
+        if summary is not None:
+            print(to_json({"summary": summary.__dict__}))
+    else:
+        print(f"robot {robot.name}: E_d = {robot.e_d:.5f}, E_b = {robot.e_b:.5f}, "
+              f"E_s = {robot.e_s:.5f}; floor {floor.name}; route {plans[0][1].name}")
+        print("return errors (true - odometry, start frame)")
+        print(format_return_errors(rows, summary))
+    if args.plot:
+        cw = np.array(errors_by_direction["cw"]).reshape(-1, 3)
+        ccw = np.array(errors_by_direction["ccw"]).reshape(-1, 3)
+        plot_return_errors(
+            Path(args.plot), [("runs", cw, ccw)], f"{robot.name}: return errors, {floor.name} floor"
+        )
+        if not args.json:
+            print(f"plot written to {args.plot}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every command."""
+    parser = argparse.ArgumentParser(
+        prog="odomgym",
+        description="Wheel-odometry experiments, calibration and benchmarks in simulation.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    run = commands.add_parser("run", help="drive squares or straight runs and report return errors")
+    run.add_argument("path", choices=["square", "straight"])
+    _add_robot_arguments(run)
+    run.add_argument("--direction", choices=["cw", "ccw", "both"], default="both")
+    run.add_argument("--runs", type=_count, default=5, help="runs per direction (default 5)")
+    run.add_argument("--side", type=_positive, default=4.0, help="square side L [m] (default 4)")
+    run.add_argument("--distance", type=_positive, default=10.0, help="straight run [m]")
+    run.add_argument("--return-trip", action="store_true", help="straight: drive back as well")
+    run.add_argument("--json", action="store_true", help="JSON lines instead of a table")
+    run.add_argument("--plot", help="write the return-error scatter (PNG) here")
+    run.set_defaults(handler=_command_run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``odomgym`` command."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Callable[[argparse.Namespace], int] = args.handler
+    try:
+        return handler(args)
+    except SpecError as exc:
+        print(f"odomgym: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,653 @@
+"""Closed-form odometry covariance of Chong & Kleeman (seed 004) and its Monte Carlo check.
+
+Why: an EKF needs the covariance of the odometry pose. The classic incremental model (Eqs. 1–3)
+depends on how a path is cut into steps; Chong & Kleeman instead give each wheel's travel d
+zero-mean white noise of variance k²·|d| (Eq. 4, k in m^½) and sum it over the whole segment,
+which yields closed forms for an arc (Eq. 25), a straight line (Eqs. 26–27) and an in-place
+turn (Eq. 28) that compose exactly, segment by segment (Eq. 23).
+
+Conventions (SI throughout): pose (x [m], y [m], θ [rad]); x forward, y left, θ counter-clockwise;
+the left wheel sits at +B/2, so θ changes by (R − L)/B. This *is* the frame of the paper's Eq. 14,
+so the paper's tables are reproduced without any remapping: L = 3 m, R = 1 m, B = 0.4 m turns
+the robot by −5 rad to (−0.38357, −0.28654). Headings are kept unwrapped; only reports wrap the
+mean heading into [0, 2π), as the tables print it (−5 rad ≡ 1.28319).
+
+Paper errata found while reproducing Tables 1–7 (the code follows the corrected forms):
+  * Eq. 17 lacks the 1/B of the r·cos θ_k terms (Eq. 22 has it);
+  * Eq. 26, element (2,2): the D²/(3B²) term carries cos²θ_k, not sin²θ_k (see Eq. 27);
+  * §5.2 substitutes L → B/2·Δθ, R → −B/2·Δθ; Eq. 14 needs the opposite signs — Eq. 28 itself
+    is right for L = −B/2·Δθ, R = +B/2·Δθ;
+  * the initial heading variances of Tables 3–6 are (2°)² and (5°)² rounded to 0.0012 and
+    0.0076 rad² — only these reproduce the printed theory columns.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from statistics import NormalDist
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from odomgym.errors import require_finite, require_positive
+
+__all__ = [
+    "ClassicInconsistency",
+    "MonteCarloResult",
+    "PoseEstimate",
+    "arc_motion_covariance",
+    "classic_inconsistency",
+    "classic_step",
+    "covariance_report",
+    "end_pose",
+    "format_report",
+    "monte_carlo",
+    "monte_carlo_loop",
+    "motion_covariance",
+    "propagate_path",
+    "propagate_segment",
+    "quadrature_motion_covariance",
+    "start_jacobian",
+    "straight_motion_covariance",
+    "turn_motion_covariance",
+]
+
+FloatArray = NDArray[np.float64]
+
+NEAR_STRAIGHT_RAD = 0.1
+"""Below this |Δθ| [rad] Eq. 25 loses ~ε/Δθ² to cancellation, so quadrature is used instead."""
+
+_CORR_PAIRS = ((0, 2), (1, 2), (0, 1))  # xθ, yθ, xy: the order of the paper's tables
+
+
+# ----------------------------------------------------------------------------- validation
+def _nonnegative(name: str, value: object) -> float:
+    number = require_finite(name, value)
+    if number < 0.0:
+        raise ValueError(f"{name} must be >= 0, got {number!r}")
+    return number
+
+
+def _check_motion(left: float, right: float, wheelbase: float, kl: float, kr: float) -> None:
+    require_finite("left", left)
+    require_finite("right", right)
+    require_positive("wheelbase", wheelbase)
+    _nonnegative("kl", kl)
+    _nonnegative("kr", kr)
+
+
+def _covariance(name: str, value: ArrayLike | None) -> FloatArray:
+    """A finite, symmetric, positive semi-definite 3×3 matrix (zeros for None)."""
+    cov = np.zeros((3, 3)) if value is None else np.array(value, dtype=float)
+    if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"{name} must be a finite 3x3 matrix, got {cov!r}")
+    if not np.allclose(cov, cov.T) or np.linalg.eigvalsh(cov).min() < -1e-12 * max(
+        1.0, float(np.abs(cov).max())
+    ):
+        raise ValueError(f"{name} must be symmetric positive semi-definite, got {cov!r}")
+    return cov
+
+
+# ----------------------------------------------------------------------------- pose estimate
+@dataclass(frozen=True)
+class PoseEstimate:
+    """Mean pose (x [m], y [m], θ [rad], θ unwrapped) and its 3×3 covariance [SI units²]."""
+
+    mean: FloatArray
+    cov: FloatArray
+
+    @property
+    def std(self) -> FloatArray:
+        """Standard deviations (σ_x [m], σ_y [m], σ_θ [rad])."""
+        return np.sqrt(np.diag(self.cov))
+
+    @property
+    def corr(self) -> FloatArray:
+        """Correlation coefficients (xθ, yθ, xy) as fractions; NaN where a σ is zero."""
+        std = self.std
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.array([self.cov[i, j] / (std[i] * std[j]) for i, j in _CORR_PAIRS])
+
+
+def origin(cov: ArrayLike | None = None) -> PoseEstimate:
+    """The paper's start: origin, heading +x, with initial covariance ``cov`` (default 0)."""
+    return PoseEstimate(np.zeros(3), _covariance("init_cov", cov))
+
+
+# ----------------------------------------------------------------------------- one segment
+def end_pose(start: ArrayLike, left: float, right: float, wheelbase: float) -> FloatArray:
+    """End pose after wheel travels ``left``, ``right`` [m] on a constant-curvature arc (Eq. 14).
+
+    Written as chord length D·sinc(Δθ/2) along the mid heading θ₀ + Δθ/2, which equals Eq. 14's
+    r·[sin θ₀ − sin θ_k, cos θ_k − cos θ₀] but stays exact for straight lines (r → ∞).
+    """
+    x0, y0, th0 = (float(v) for v in np.asarray(start, dtype=float))
+    dtheta = (right - left) / wheelbase
+    half = 0.5 * dtheta
+    chord = 0.5 * (left + right) * (math.sin(half) / half if half != 0.0 else 1.0)
+    mid = th0 + half
+    return np.array([x0 + chord * math.cos(mid), y0 + chord * math.sin(mid), th0 + dtheta])
+
+
+def start_jacobian(start: ArrayLike, end: ArrayLike) -> FloatArray:
+    """∂(end pose)/∂(start pose) of one segment, Eq. 21 (= Eq. 16 summed over the arc).
+
+    r(cos θ₀ − cos θ_k) = −(y_k − y₀) and r(sin θ_k − sin θ₀)... = x_k − x₀: a start-heading
+    error swings the whole segment about its start point.
+    """
+    delta = np.asarray(end, dtype=float) - np.asarray(start, dtype=float)
+    return np.array([[1.0, 0.0, -delta[1]], [0.0, 1.0, delta[0]], [0.0, 0.0, 1.0]])
+
+
+def _symmetric(
+    c11: float, c22: float, c33: float, c12: float, c13: float, c23: float
+) -> FloatArray:
+    return np.array([[c11, c12, c13], [c12, c22, c23], [c13, c23, c33]])
+
+
+def arc_motion_covariance(
+    left: float, right: float, wheelbase: float, kl: float, kr: float, heading: float = 0.0
+) -> FloatArray:
+    """Cov(U_k) [m², m·rad, rad²] of a circular arc, Eq. 25 as printed (needs left ≠ right).
+
+    ``heading`` is θ₀ [rad] at the start of the arc; θ_k = θ₀ + (R − L)/B, r = B/2·(L+R)/(L−R)
+    (Eq. 15). Loses about ε/Δθ² relative accuracy as the arc straightens; prefer
+    :func:`motion_covariance`, which switches method there.
+    """
+    _check_motion(left, right, wheelbase, kl, kr)
+    if left == right:
+        raise ValueError("left and right must differ for an arc (use straight_motion_covariance)")
+    b, t0 = wheelbase, heading
+    tk = t0 + (right - left) / b
+    d = left - right
+    r = 0.5 * b * (left + right) / d
+    s = kr**2 * abs(right) + kl**2 * abs(left)  # Σ wheel variances [m²]
+    a = kr**2 * abs(right) * left + kl**2 * right * abs(left)
+    q = kr**2 * left**2 * abs(right) + kl**2 * right**2 * abs(left)
+    g = -b / (4.0 * d**3) * q
+    sin0, sink, cos0, cosk = math.sin(t0), math.sin(tk), math.cos(t0), math.cos(tk)
+    c11 = (
+        -2.0 * r / d**2 * a * (sin0 - sink) * cosk
+        + (r / b * cosk) ** 2 * s
+        + g * (2.0 * (tk - t0) - math.sin(2 * t0) + math.sin(2 * tk))
+    )
+    c22 = (
+        -2.0 * r / d**2 * a * (cosk - cos0) * sink
+        + (r / b * sink) ** 2 * s
+        + g * (2.0 * (tk - t0) + math.sin(2 * t0) - math.sin(2 * tk))
+    )
+    c12 = (
+        -r / d**2 * a * (math.cos(2 * tk) - math.cos(t0 + tk))
+        + 0.5 * (r / b) ** 2 * math.sin(2 * tk) * s
+        + g * (math.cos(2 * t0) - math.cos(2 * tk))
+    )
+    c13 = a / d**2 * (sin0 - sink) - r / b**2 * cosk * s
+    c23 = a / d**2 * (cosk - cos0) - r / b**2 * sink * s
+    return _symmetric(c11, c22, s / b**2, c12, c13, c23)
+
+
+def straight_motion_covariance(
+    distance: float, wheelbase: float, kl: float, kr: float, heading: float = 0.0
+) -> FloatArray:
+    """Cov(U_k) of a straight run of ``distance`` [m] (negative: reverse) at ``heading``, Eq. 26.
+
+    At heading 0 this is Eq. 27: σ_x² ∝ D, σ_y² ∝ D³ and corr(y, θ) = √3/2. Element (2,2) uses
+    cos²θ (the paper prints sin²θ, contradicting its Eq. 27).
+    """
+    _check_motion(distance, distance, wheelbase, kl, kr)
+    b, dd, ad = wheelbase, distance, abs(distance)
+    ksum, kdiff = kl**2 + kr**2, kr**2 - kl**2
+    sn, cs = math.sin(heading), math.cos(heading)
+    c11 = ad * (
+        cs**2 / 4 * ksum - dd / (2 * b) * sn * cs * kdiff + dd**2 / (3 * b**2) * sn**2 * ksum
+    )
+    c22 = ad * (
+        sn**2 / 4 * ksum + dd / (2 * b) * sn * cs * kdiff + dd**2 / (3 * b**2) * cs**2 * ksum
+    )
+    c12 = ad * (
+        (1 / 8 - dd**2 / (6 * b**2)) * math.sin(2 * heading) * ksum
+        + dd / (4 * b) * math.cos(2 * heading) * kdiff
+    )
+    c13 = ad * (cs / (2 * b) * kdiff - dd / (2 * b**2) * sn * ksum)
+    c23 = ad * (sn / (2 * b) * kdiff + dd / (2 * b**2) * cs * ksum)
+    return _symmetric(c11, c22, ad / b**2 * ksum, c12, c13, c23)
+
+
+def turn_motion_covariance(
+    angle: float, wheelbase: float, kl: float, kr: float, heading: float = 0.0
+) -> FloatArray:
+    """Cov(U_k) of a turn on the spot by ``angle`` [rad], Eq. 28 (L = −B·angle/2, R = B·angle/2)."""
+    _check_motion(angle, angle, wheelbase, kl, kr)
+    b, t0, tk = wheelbase, heading, heading + angle
+    ksum, kdiff, sgn = kl**2 + kr**2, kr**2 - kl**2, float(np.sign(angle))
+    c11 = b / 32 * (2 * angle - math.sin(2 * t0) + math.sin(2 * tk)) * ksum * sgn
+    c22 = b / 32 * (2 * angle + math.sin(2 * t0) - math.sin(2 * tk)) * ksum * sgn
+    c12 = b / 32 * (math.cos(2 * t0) - math.cos(2 * tk)) * ksum * sgn
+    c13 = 0.25 * kdiff * (math.sin(tk) - math.sin(t0)) * sgn
+    c23 = 0.25 * kdiff * (math.cos(t0) - math.cos(tk)) * sgn
+    return _symmetric(c11, c22, abs(angle) / (2 * b) * ksum, c12, c13, c23)
+
+
+def quadrature_motion_covariance(
+    left: float,
+    right: float,
+    wheelbase: float,
+    kl: float,
+    kr: float,
+    heading: float = 0.0,
+    nodes: int = 16,
+) -> FloatArray:
+    """Cov(U_k) as the integral that Eq. 25 solves, by Gauss–Legendre quadrature on ``nodes``.
+
+    Eq. 23's sum tends to ∫₀¹ J(s) diag(k_L²|L|, k_R²|R|) J(s)ᵀ ds with J from Eq. 24: wheel noise
+    at arc fraction s moves the pose by half its length along θ(s) and turns the rest of the arc
+    by ∓1/B about that point. The integrand is entire in s, so for |Δθ| ≲ 1 rad 16 nodes are
+    exact to round-off; it is how near-straight arcs are evaluated, and a cross-check of Eqs.
+    25–28 in the tests.
+    """
+    _check_motion(left, right, wheelbase, kl, kr)
+    u, w = np.polynomial.legendre.leggauss(nodes)
+    s, w = 0.5 * (u + 1.0), 0.5 * w
+    dtheta = (right - left) / wheelbase
+    theta = heading + s * dtheta
+    rest = 1.0 - s  # the arc still to go, from s to 1, as chord·(cos, sin)(mid heading)
+    chord = 0.5 * (left + right) * rest * np.sinc(dtheta * rest / (2 * np.pi))
+    mid = heading + 0.5 * dtheta * (1.0 + s)
+    along = np.stack([0.5 * np.cos(theta), 0.5 * np.sin(theta), np.zeros_like(s)])
+    swing = np.stack([chord * np.sin(mid), -chord * np.cos(mid), -np.ones_like(s)]) / wheelbase
+    j_left, j_right = along + swing, along - swing
+    var_l, var_r = kl**2 * abs(left), kr**2 * abs(right)
+    return np.asarray(var_l * (j_left * w) @ j_left.T + var_r * (j_right * w) @ j_right.T)
+
+
+def motion_covariance(
+    left: float, right: float, wheelbase: float, kl: float, kr: float, heading: float = 0.0
+) -> FloatArray:
+    """Cov(U_k) of one constant-curvature segment: Eq. 26, 28, 25 or (near straight) quadrature."""
+    _check_motion(left, right, wheelbase, kl, kr)
+    dtheta = (right - left) / wheelbase
+    if left == right:
+        return straight_motion_covariance(left, wheelbase, kl, kr, heading)
+    if left == -right:
+        return turn_motion_covariance(dtheta, wheelbase, kl, kr, heading)
+    if abs(dtheta) < NEAR_STRAIGHT_RAD:
+        return quadrature_motion_covariance(left, right, wheelbase, kl, kr, heading)
+    return arc_motion_covariance(left, right, wheelbase, kl, kr, heading)
+
+
+def propagate_segment(
+    start: PoseEstimate, left: float, right: float, wheelbase: float, kl: float, kr: float
+) -> PoseEstimate:
+    """Mean and covariance after one segment: Eq. 14, and Eq. 23 = F·Cov(S₀)·Fᵀ + Cov(U_k)."""
+    mean = end_pose(start.mean, left, right, wheelbase)
+    jac = start_jacobian(start.mean, mean)
+    motion = motion_covariance(left, right, wheelbase, kl, kr, float(start.mean[2]))
+    return PoseEstimate(mean, jac @ start.cov @ jac.T + motion)
+
+
+def propagate_path(
+    segments: Sequence[tuple[float, float]],
+    wheelbase: float,
+    kl: float,
+    kr: float,
+    start: PoseEstimate | None = None,
+) -> PoseEstimate:
+    """Compose segments (left [m], right [m]) from ``start`` (default: origin, zero covariance).
+
+    Because Eq. 25 is the k → ∞ limit of incremental propagation, cutting an arc into pieces
+    leaves the result unchanged — the consistency the classic model lacks.
+    """
+    estimate = origin() if start is None else start
+    for left, right in segments:
+        estimate = propagate_segment(estimate, left, right, wheelbase, kl, kr)
+    return estimate
+
+
+# ----------------------------------------------------------------------------- classic model
+def classic_step(
+    start: PoseEstimate,
+    distance: float,
+    rotation: float,
+    var_distance: float,
+    var_rotation: float,
+) -> PoseEstimate:
+    """Classic model, Eqs. 1–3: rotate by α [rad], then translate D [m], with independent errors.
+
+    ``var_distance`` σ_D² [m²] and ``var_rotation`` σ_α² [rad²] are per step, which is the flaw:
+    nothing ties them to the distance, so results depend on how the path is cut.
+    """
+    x, y, th = (float(v) for v in start.mean)
+    heading = th + rotation
+    c, s = math.cos(heading), math.sin(heading)
+    mean = np.array([x + distance * c, y + distance * s, heading])
+    grad_s = np.array([[1.0, 0.0, -distance * s], [0.0, 1.0, distance * c], [0.0, 0.0, 1.0]])
+    grad_u = np.array([[c, -distance * s], [s, distance * c], [0.0, 1.0]])
+    cov_u = np.diag([var_distance, var_rotation])
+    return PoseEstimate(mean, grad_s @ start.cov @ grad_s.T + grad_u @ cov_u @ grad_u.T)
+
+
+@dataclass(frozen=True)
+class ClassicInconsistency:
+    """Covariances of one straight run of 2D versus two runs of D, under both models (§1)."""
+
+    classic_one: FloatArray
+    classic_two: FloatArray
+    new_one: FloatArray
+    new_two: FloatArray
+
+
+def classic_inconsistency(
+    distance: float, wheelbase: float, kl: float, kr: float
+) -> ClassicInconsistency:
+    """The paper's §1 example: one step of 2D or two steps of D [m] from an exact start.
+
+    The classic step variances follow the wheel noise of one step of D (σ_D² = (k_L²+k_R²)D/4,
+    σ_α² = (k_L²+k_R²)D/B²) and are doubled for the step of 2D, as the paper sets
+    Cov(u_k0) = 2·Cov(u_k1). The classic model then gives σ_y² = 8D²σ_α² versus 5D²σ_α²; the new
+    model gives the same matrix both ways.
+    """
+    _check_motion(distance, distance, wheelbase, kl, kr)
+    ksum = kl**2 + kr**2
+    var_d, var_a = ksum * abs(distance) / 4, ksum * abs(distance) / wheelbase**2
+    one = classic_step(origin(), 2 * distance, 0.0, 2 * var_d, 2 * var_a)
+    two = classic_step(
+        classic_step(origin(), distance, 0.0, var_d, var_a), distance, 0.0, var_d, var_a
+    )
+    new_one = propagate_path([(2 * distance, 2 * distance)], wheelbase, kl, kr)
+    new_two = propagate_path([(distance, distance)] * 2, wheelbase, kl, kr)
+    return ClassicInconsistency(one.cov, two.cov, new_one.cov, new_two.cov)
+
+
+# ----------------------------------------------------------------------------- Monte Carlo
+@dataclass(frozen=True)
+class MonteCarloResult:
+    """Sample statistics of simulated end poses, with their standard errors.
+
+    ``mean`` and ``std`` are (x [m], y [m], θ [rad], θ unwrapped); ``corr`` is (xθ, yθ, xy) as
+    fractions. Standard errors use the sample fourth moments, so they stay honest for the
+    non-Gaussian end poses of Table 7: SE(s) = √((m₄ − s⁴)/n)/(2s) (→ s/√(2n), the normal
+    approximation of the χ² interval, for Gaussian data) and, for r, the spread of its influence
+    function uv − r(u² + v²)/2 (→ (1 − r²)/√n), carried to Fisher's z = atanh r.
+    """
+
+    n_runs: int
+    n_partitions: int
+    end_poses: FloatArray
+    mean: FloatArray
+    std: FloatArray
+    corr: FloatArray
+    mean_se: FloatArray
+    std_se: FloatArray
+    corr_z_se: FloatArray
+
+    def intervals(
+        self, confidence: float = 0.95, *, versus_independent_run: bool = False
+    ) -> dict[str, FloatArray]:
+        """Two-sided intervals, arrays (3, 2), keyed "mean", "std", "corr".
+
+        With ``versus_independent_run`` the half-widths grow by √2: the range within which
+        *another* Monte Carlo estimate of the same size (e.g. the paper's) should fall.
+        """
+        if not 0.0 < confidence < 1.0:
+            raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+        z = NormalDist().inv_cdf(0.5 + 0.5 * confidence) * (
+            math.sqrt(2.0) if versus_independent_run else 1.0
+        )
+        fisher = np.arctanh(np.clip(self.corr, -1.0, 1.0))
+        return {
+            "mean": np.stack([self.mean - z * self.mean_se, self.mean + z * self.mean_se], 1),
+            "std": np.stack([self.std - z * self.std_se, self.std + z * self.std_se], 1),
+            "corr": np.tanh(
+                np.stack([fisher - z * self.corr_z_se, fisher + z * self.corr_z_se], 1)
+            ),
+        }
+
+
+def _summarise(poses: FloatArray, n_partitions: int) -> MonteCarloResult:
+    n = poses.shape[0]
+    mean = poses.mean(axis=0)
+    dev = poses - mean
+    m2 = (dev**2).mean(axis=0)
+    var = m2 * n / (n - 1)
+    std = np.sqrt(var)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        std_se = np.sqrt(np.maximum((dev**4).mean(axis=0) - var**2, 0.0) / n) / (2.0 * std)
+        u = dev / np.sqrt(m2)
+        corr, corr_z_se = np.empty(3), np.empty(3)
+        for k, (i, j) in enumerate(_CORR_PAIRS):
+            corr[k] = float(np.mean(u[:, i] * u[:, j]))
+            influence = u[:, i] * u[:, j] - 0.5 * corr[k] * (u[:, i] ** 2 + u[:, j] ** 2)
+            corr_z_se[k] = float(np.std(influence)) / math.sqrt(n) / (1.0 - corr[k] ** 2)
+    return MonteCarloResult(
+        n, n_partitions, poses, mean, std, corr, std / math.sqrt(n), std_se, corr_z_se
+    )
+
+
+def _mc_setup(
+    left: float, right: float, wheelbase: float, kl: float, kr: float,
+    init_cov: ArrayLike | None, n_runs: int, n_partitions: int,
+) -> tuple[FloatArray, float, float, float, float]:  # fmt: skip
+    """Validate; return the initial-pose factor S (S·Sᵀ = init_cov), steps [m] and noise σ [m]."""
+    _check_motion(left, right, wheelbase, kl, kr)
+    if isinstance(n_runs, bool) or not isinstance(n_runs, int) or n_runs < 2:
+        raise ValueError(f"n_runs must be an integer >= 2, got {n_runs!r}")
+    if isinstance(n_partitions, bool) or not isinstance(n_partitions, int) or n_partitions < 1:
+        raise ValueError(f"n_partitions must be an integer >= 1, got {n_partitions!r}")
+    eigval, eigvec = np.linalg.eigh(_covariance("init_cov", init_cov))
+    factor = eigvec * np.sqrt(np.maximum(eigval, 0.0))
+    step_l, step_r = left / n_partitions, right / n_partitions
+    sd_l, sd_r = kl * math.sqrt(abs(step_l)), kr * math.sqrt(abs(step_r))  # Eq. 4 per partition
+    return factor, step_l, step_r, sd_l, sd_r
+
+
+def monte_carlo(
+    left: float,
+    right: float,
+    wheelbase: float,
+    kl: float,
+    kr: float,
+    init_cov: ArrayLike | None = None,
+    n_runs: int = 10_000,
+    n_partitions: int = 1000,
+    *,
+    rng: np.random.Generator,
+    chunk_elements: int = 1 << 15,
+) -> MonteCarloResult:
+    """Simulate the paper's §6.1 experiment, many runs per numpy call.
+
+    Each run draws its start pose from N(0, init_cov) and, per partition of the path, wheel noise
+    N(0, k²·|d|/n_partitions) (Eq. 4); each partition is integrated exactly as an arc: with
+    h = Δθ/2 its displacement is ds·sinc(h)·e^{i(θ_prev + h)}. Headings are accumulated as unit
+    complex numbers (a cumulative product of e^{2ih}), so no trig of large angles is needed.
+    Runs go through in chunks of ~``chunk_elements`` partitions (cache-sized buffers, bounded
+    memory). Run i consumes 3 + 2·n_partitions standard normals in a row, so the result does not
+    depend on the chunking and matches :func:`monte_carlo_loop` for the same generator state.
+    """
+    factor, step_l, step_r, sd_l, sd_r = _mc_setup(
+        left, right, wheelbase, kl, kr, init_cov, n_runs, n_partitions
+    )
+    p, b = n_partitions, wheelbase
+    chunk = max(1, min(n_runs, chunk_elements // p))
+    z = np.empty((chunk, 3 + 2 * p))
+    ds, work, half = np.empty((chunk, p)), np.empty((chunk, p)), np.empty((chunk, p))
+    nonzero = np.empty((chunk, p), dtype=bool)
+    rot, phase = np.empty((chunk, p), dtype=complex), np.empty((chunk, p), dtype=complex)
+    poses = np.empty((n_runs, 3))
+    for first in range(0, n_runs, chunk):
+        m = min(chunk, n_runs - first)
+        zm, dm, wm, hm, rm, pm = (a[:m] for a in (z, ds, work, half, rot, phase))
+        nz = nonzero[:m]
+        rng.standard_normal(out=zm)
+        np.multiply(zm[:, 3 : 3 + p], sd_l / (2 * b), out=dm)  # left noise / 2B
+        np.multiply(zm[:, 3 + p :], sd_r / (2 * b), out=wm)  # right noise / 2B
+        np.subtract(wm, dm, out=hm)
+        hm += (step_r - step_l) / (2 * b)  # h = Δθ/2 = (d_R − d_L)/2B
+        np.add(dm, wm, out=dm)
+        dm *= b
+        dm += 0.5 * (step_l + step_r)  # ds = (d_L + d_R)/2
+        np.sin(hm, out=rm.imag)
+        if -1.5 < hm.min() and hm.max() < 1.5:  # cos h = √(1 − sin²h), cheaper than cos
+            np.multiply(rm.imag, rm.imag, out=wm)
+            np.subtract(1.0, wm, out=wm)
+            np.sqrt(wm, out=rm.real)
+        else:
+            np.cos(hm, out=rm.real)
+        np.not_equal(hm, 0.0, out=nz)
+        np.divide(rm.imag, hm, out=wm, where=nz)
+        if not nz.all():
+            np.copyto(wm, 1.0, where=~nz)  # sinc(0) = 1
+        dm *= wm  # chord length ds·sinc(h)
+        pm[:, 0] = 1.0
+        np.multiply(rm[:, :-1], rm[:, :-1], out=pm[:, 1:])  # e^{2ih} = e^{iΔθ}
+        np.cumprod(pm[:, 1:], axis=1, out=pm[:, 1:])  # e^{iθ_prev}, relative to the start
+        pm *= rm  # e^{i(θ_prev + h)}
+        x0, y0, th0 = (zm[:, :3] @ factor.T).T
+        dx, dy = np.einsum("ij,ij->i", dm, pm.real), np.einsum("ij,ij->i", dm, pm.imag)
+        cos0, sin0 = np.cos(th0), np.sin(th0)
+        poses[first : first + m, 0] = x0 + cos0 * dx - sin0 * dy
+        poses[first : first + m, 1] = y0 + sin0 * dx + cos0 * dy
+        poses[first : first + m, 2] = th0 + 2.0 * hm.sum(axis=1)
+    return _summarise(poses, p)
+
+
+def monte_carlo_loop(
+    left: float,
+    right: float,
+    wheelbase: float,
+    kl: float,
+    kr: float,
+    init_cov: ArrayLike | None = None,
+    n_runs: int = 10_000,
+    n_partitions: int = 1000,
+    *,
+    rng: np.random.Generator,
+) -> MonteCarloResult:
+    """The same simulation as :func:`monte_carlo`, one run and one partition at a time.
+
+    Plain Python, the straightforward way; kept only as the baseline of the speed benchmark and
+    as an independent check of the vectorised integration.
+    """
+    factor, step_l, step_r, sd_l, sd_r = _mc_setup(
+        left, right, wheelbase, kl, kr, init_cov, n_runs, n_partitions
+    )
+    p = n_partitions
+    poses = np.empty((n_runs, 3))
+    for run in range(n_runs):
+        z = rng.standard_normal(3 + 2 * p)
+        x, y, th = (float(v) for v in factor @ z[:3])
+        noise = z.tolist()
+        for i in range(p):
+            d_l = noise[3 + i] * sd_l + step_l
+            d_r = noise[3 + p + i] * sd_r + step_r
+            half = (d_r - d_l) / (2.0 * wheelbase)
+            ds = 0.5 * (d_l + d_r) * (math.sin(half) / half if half != 0.0 else 1.0)
+            x += ds * math.cos(th + half)
+            y += ds * math.sin(th + half)
+            th += 2.0 * half
+        poses[run] = (x, y, th)
+    return _summarise(poses, p)
+
+
+# ----------------------------------------------------------------------------- reports
+def _stats_dict(mean: FloatArray, std: FloatArray, corr: FloatArray) -> dict[str, Any]:
+    def num(value: float) -> float | None:
+        return float(value) if math.isfinite(value) else None
+
+    return {
+        "mean": {"x_m": num(mean[0]), "y_m": num(mean[1]),
+                 "theta_rad": num(mean[2] % (2 * math.pi)), "heading_change_rad": num(mean[2])},
+        "std": {"x_m": num(std[0]), "y_m": num(std[1]), "theta_rad": num(std[2])},
+        "corr": {"x_theta": num(corr[0]), "y_theta": num(corr[1]), "x_y": num(corr[2])},
+    }  # fmt: skip
+
+
+def covariance_report(
+    left: float,
+    right: float,
+    wheelbase: float,
+    kl: float,
+    kr: float,
+    init_std: Sequence[float] = (0.0, 0.0, 0.0),
+    montecarlo_runs: int = 0,
+    partitions: int = 1000,
+    rng: np.random.Generator | int | None = None,
+    confidence: float = 0.95,
+) -> dict[str, Any]:
+    """Theory (and optionally Monte Carlo) for one arc from the origin, as a JSON-ready dict.
+
+    ``init_std`` = (σ_x [m], σ_y [m], σ_θ [rad]) of the start pose (independent). The mean
+    heading ``theta_rad`` is wrapped into [0, 2π) as in the paper's tables; the unwrapped value
+    is ``heading_change_rad``. Correlations are fractions; undefined values are ``None``.
+    ``rng`` may be a Generator or a seed; ``None`` seeds from the OS.
+    """
+    _check_motion(left, right, wheelbase, kl, kr)
+    if len(init_std) != 3:
+        raise ValueError(f"init_std must have 3 entries (x, y, theta), got {init_std!r}")
+    sigma = [_nonnegative(f"init_std[{i}]", v) for i, v in enumerate(init_std)]
+    if isinstance(montecarlo_runs, bool) or not isinstance(montecarlo_runs, int):
+        raise ValueError(f"montecarlo_runs must be an integer, got {montecarlo_runs!r}")
+    if montecarlo_runs != 0 and montecarlo_runs < 2:
+        raise ValueError(f"montecarlo_runs must be 0 or >= 2, got {montecarlo_runs!r}")
+    init_cov = np.diag(np.square(sigma))
+    theory = propagate_segment(origin(init_cov), left, right, wheelbase, kl, kr)
+    report: dict[str, Any] = {
+        "model": "Chong & Kleeman 1997, Eqs. 14, 23, 25-28",
+        "inputs": {"left_m": left, "right_m": right, "wheelbase_m": wheelbase,
+                   "kl_sqrt_m": kl, "kr_sqrt_m": kr, "init_std": sigma},
+        "theory": _stats_dict(theory.mean, theory.std, theory.corr)
+        | {"covariance": theory.cov.tolist()},
+        "simulation": None,
+    }  # fmt: skip
+    if montecarlo_runs:
+        generator = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        mc = monte_carlo(left, right, wheelbase, kl, kr, init_cov, montecarlo_runs, partitions,
+                         rng=generator)  # fmt: skip
+        ci = mc.intervals(confidence)
+        ci["mean"][2] = ci["mean"][2] - (mc.mean[2] - mc.mean[2] % (2 * math.pi))
+        report["simulation"] = _stats_dict(mc.mean, mc.std, mc.corr) | {
+            "runs": montecarlo_runs, "partitions": partitions, "confidence": confidence,
+            "interval": {key: [[float(v) for v in row] for row in value]
+                         for key, value in ci.items()},
+        }  # fmt: skip
+    return report
+
+
+_ROWS = (
+    ("mean x (m)", "mean", "x_m", 1.0),
+    ("mean y (m)", "mean", "y_m", 1.0),
+    ("mean θ (rad)", "mean", "theta_rad", 1.0),
+    ("stddev x (m)", "std", "x_m", 1.0),
+    ("stddev y (m)", "std", "y_m", 1.0),
+    ("stddev θ (rad)", "std", "theta_rad", 1.0),
+    ("corr xθ (%)", "corr", "x_theta", 100.0),
+    ("corr yθ (%)", "corr", "y_theta", 100.0),
+    ("corr xy (%)", "corr", "x_y", 100.0),
+)
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """Text in the layout of the paper's Tables 1–7: theory and simulation columns."""
+
+    def cell(value: float | None, scale: float) -> str:
+        return "—" if value is None else f"{value * scale:.6g}"
+
+    inp, sim = report["inputs"], report["simulation"]
+    lines = [
+        f"L={inp['left_m']:g} m, R={inp['right_m']:g} m, B={inp['wheelbase_m']:g} m, "
+        f"k_L={inp['kl_sqrt_m']:g} m^1/2, k_R={inp['kr_sqrt_m']:g} m^1/2, "
+        "[σx σy σθ]₀=[{:g} m {:g} m {:g} rad]".format(*inp["init_std"]),
+        f"{'':16}{'Theory':>14}"
+        + (f"{'Simul':>14}  {sim['confidence']:.0%} interval" if sim else ""),
+    ]
+    for k, (label, group, key, scale) in enumerate(_ROWS):
+        row = f"{label:16}{cell(report['theory'][group][key], scale):>14}"
+        if sim:
+            low, high = sim["interval"][group][k % 3]
+            row += f"{cell(sim[group][key], scale):>14}  [{low * scale:.6g}, {high * scale:.6g}]"
+        lines.append(row)
+    if sim:
+        lines.append(f"Monte Carlo: {sim['runs']} runs, {sim['partitions']} partitions per path")
+    return "\n".join(lines)

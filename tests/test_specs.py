@@ -1,0 +1,126 @@
+"""Issue #2 must-pass 6 (specs): bad input gives a clear error naming the field, file and line."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from odomgym.errors import SpecError
+from odomgym.floor import FloorSpec, load_floor
+from odomgym.odometry import Calibration, load_calibration
+from odomgym.robot import PRESETS, RobotSpec, load_robot
+
+
+def test_minimal_robot_toml_loads(tmp_path: Path) -> None:
+    path = tmp_path / "robot.toml"
+    path.write_text("wheel_diameter = 0.084\nwheelbase = 0.2\nticks_per_rev = 2796.8\n")
+    robot = load_robot(path)
+    assert robot.wheel_diameter == 0.084
+    assert robot.e_d == 1.0 and robot.e_b == 1.0 and robot.e_s == 1.0
+
+
+def test_robot_toml_round_trip(tmp_path: Path) -> None:
+    robot = PRESETS["labmate"].with_errors(1.003, 0.98, 1.01)
+    path = tmp_path / "lm.toml"
+    robot.save(path)
+    again = load_robot(path)
+    assert again == robot
+    assert again.e_d == pytest.approx(1.003) and again.e_b == pytest.approx(0.98)
+
+
+def test_with_errors_follows_eqs_6_31_6_32() -> None:
+    robot = PRESETS["navbot"].with_errors(1.01, 1.0, 1.02)
+    mean = 1.02 * robot.wheel_diameter
+    assert robot.true_left_diameter == pytest.approx(2 / (1.01 + 1) * mean)
+    assert robot.true_right_diameter == pytest.approx(2 / (1 / 1.01 + 1) * mean)
+    assert robot.e_s == pytest.approx(1.02)
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "line"),
+    [
+        ("wheel_diameter = 0.1\nwheelbase = -0.3\nticks_per_rev = 100\n", "wheelbase", 2),
+        ("wheel_diameter = 0.1\nwheelbase = 0.3\nticks_per_rev = nan\n", "ticks_per_rev", 3),
+        ("wheel_diameter = 0.1\nwheelbase = 0.3\nticks_per_rev = 100\nmass = 0\n", "mass", 4),
+        ("wheel_diameter = 0.1\nwheelbase = 0.3\nticks_per_rev = 100\nwheels = 3\n", "wheels", 4),
+        ("wheel_diameter = 0.1\nwheelbase = 0.3\nticks_per_rev = 100\ne_d = -1\n", "e_d", 4),
+    ],
+)
+def test_bad_robot_field_names_field_file_and_line(
+    tmp_path: Path, text: str, field: str, line: int
+) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(SpecError) as info:
+        load_robot(path)
+    assert info.value.field == field
+    assert f"{path}:{line}" in str(info.value)
+    assert field in str(info.value)
+
+
+def test_missing_required_field(tmp_path: Path) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text("wheel_diameter = 0.1\nwheelbase = 0.3\n")
+    with pytest.raises(SpecError, match="ticks_per_rev"):
+        load_robot(path)
+
+
+def test_malformed_toml_names_file_and_line(tmp_path: Path) -> None:
+    path = tmp_path / "broken.toml"
+    path.write_text("wheel_diameter = 0.1\nwheelbase = = 0.3\n")
+    with pytest.raises(SpecError) as info:
+        load_robot(path)
+    assert str(path) in str(info.value)
+    assert "line 2" in str(info.value)
+
+
+def test_unknown_preset() -> None:
+    with pytest.raises(SpecError, match="unknown robot preset 'lab-mate'.*labmate"):
+        load_robot("lab-mate")
+    with pytest.raises(SpecError, match="unknown floor"):
+        load_floor("icy")
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf])
+def test_non_positive_or_nan_parameters_raise(value: float) -> None:
+    with pytest.raises(SpecError, match="wheelbase"):
+        RobotSpec(wheel_diameter=0.1, wheelbase=value, ticks_per_rev=100)
+    with pytest.raises(SpecError, match="friction"):
+        FloorSpec(friction=value)
+    with pytest.raises(SpecError, match="c_left"):
+        Calibration(c_left=value)
+
+
+def test_floor_toml_with_bumps(tmp_path: Path) -> None:
+    path = tmp_path / "floor.toml"
+    path.write_text(
+        "[floor]\nfriction = 0.6\n\n[[floor.bumps]]\nx = 1.0\ny = -0.17\ndiameter = 0.01\n"
+        "\n[[floor.bumps]]\nx = 2.0\ny = 0.0\ndiameter = -0.01\n"
+    )
+    with pytest.raises(SpecError) as info:
+        load_floor(path)
+    assert "bumps[1]" in str(info.value) and "diameter" in str(info.value)
+    assert f"{path}:" in str(info.value)
+    path.write_text("[floor]\nfriction = 0.6\n\n[[floor.bumps]]\nx = 1.0\ny = -0.17\n")
+    floor = load_floor(path)
+    assert floor.friction == 0.6 and floor.bumps[0].x == 1.0
+    floor.save(tmp_path / "again.toml")
+    assert load_floor(tmp_path / "again.toml") == floor
+
+
+def test_calibration_toml_and_ros2_mapping(tmp_path: Path) -> None:
+    calibration = Calibration.from_errors(e_d=1.002, e_b=0.99, e_s=1.01)
+    path = tmp_path / "calib.toml"
+    calibration.save(path)
+    assert load_calibration(path) == calibration
+    ros = calibration.ros2_parameters()
+    assert ros["wheel_separation_multiplier"] == pytest.approx(0.99)
+    assert ros["right_wheel_radius_multiplier"] / ros["left_wheel_radius_multiplier"] == (
+        pytest.approx(1.002)
+    )
+    path.write_text("[calibration]\nc_left = 1.0\nc_right = -2\n")
+    with pytest.raises(SpecError) as info:
+        load_calibration(path)
+    assert f"{path}:3" in str(info.value)
