@@ -21,6 +21,7 @@ the truth is reported in ``info`` for evaluation, never rewarded.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -70,9 +71,9 @@ def validate_actions(action: Any, shape: tuple[int, ...]) -> FloatArray:
     array = np.asarray(action, dtype=np.float64)
     if array.shape != shape:
         raise ValueError(f"action must have shape {shape}, got {array.shape}")
-    if not np.isfinite(array).all():
+    if not math.isfinite(array.sum()):
         raise ValueError(f"action must be finite, got {array.tolist()}")
-    return np.clip(array, -1.0, 1.0)
+    return np.minimum(np.maximum(array, -1.0), 1.0)
 
 
 def resolve_specs(
@@ -126,6 +127,7 @@ class RouteEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.action_space = action_space()
         self._trial: Trial | None = None
         self._fraction = 0.0
+        self._terminated = False
         self._renderer: Any = None
         self._history: list[tuple[float, float, float, float, float, float]] = []
 
@@ -151,6 +153,7 @@ class RouteEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         self.route = route
         self._fraction = 0.0
+        self._terminated = False
         self._history = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
         if self.render_mode == "human":
             self.render()
@@ -160,12 +163,13 @@ class RouteEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         trial = self._require_trial()
-        if trial.done[0]:
+        if self._terminated:
             raise RuntimeError("the episode has terminated; call reset() first")
         trial.step(validate_actions(action, (2,)).reshape(1, 2))
         obs = trial.observation()[0]
         fraction = float(obs[7])
-        terminated = bool(trial.done[0])
+        terminated = bool(trial.progress.index[0] >= trial.progress.segment_count)
+        self._terminated = terminated
         terms = {
             "progress": self.weights.progress * (fraction - self._fraction),
             "time": -self.weights.time,
@@ -180,10 +184,13 @@ class RouteEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return obs, float(sum(terms.values())), terminated, False, self._info(trial, terms, terminated)
 
     def _info(self, trial: Trial, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
-        error = trial.pose_error()[0]
+        true_pose = trial.true_pose[0].copy()
+        odom_pose = trial.odom_pose[0].copy()
+        error = true_pose - odom_pose
+        error[2] = (error[2] + math.pi) % (2.0 * math.pi) - math.pi
         info: dict[str, Any] = {
-            "odom_pose": trial.odom_pose[0].copy(),
-            "true_pose": trial.true_pose[0].copy(),
+            "odom_pose": odom_pose,
+            "true_pose": true_pose,
             "pose_error": error,
             "encoder_counts": trial.world.counts[0].copy(),
             "segment": int(trial.progress.index[0]),

@@ -87,32 +87,39 @@ def simulate_runs(
     nominal_time = route.wheel_travel(specs[0].wheelbase) / cruise_speed
     limit = max_time if max_time is not None else 20.0 * nominal_time + 60.0
     max_steps = int(math.ceil(limit / dt))
-    times = [0.0]
-    poses = [trial.true_pose.copy()]
-    counts = [trial.world.counts.copy()]
+    capacity = int(2.0 * nominal_time / dt) + 100
+    poses = np.empty((capacity, trial.n, 3))
+    counts = np.empty((capacity, trial.n, 2), dtype=np.int64)
+    poses[0] = trial.true_pose
+    counts[0] = trial.world.counts
     finished_at = np.full(trial.n, -1, dtype=np.int64)
+    done = trial.progress.done
     step = 0
-    while not trial.done.all():
+    act, observe, advance = driver.act, trial.observation, trial.step
+    while not done.all():
         if step >= max_steps:
-            stuck = np.flatnonzero(~trial.done).tolist()
+            stuck = np.flatnonzero(~done).tolist()
             raise RuntimeError(
                 f"robots {stuck} did not finish route {route.name} within {limit:.0f} s of "
                 "simulated time (a slippery floor or an unreachable tolerance?)"
             )
-        trial.step(driver.act(trial.observation()))
+        if advance(act(observe())).any():
+            done = trial.progress.done
+            finished_at[done & (finished_at < 0)] = step + 1
         step += 1
-        times.append(step * dt)
-        poses.append(trial.true_pose.copy())
-        counts.append(trial.world.counts.copy())
-        newly = trial.done & (finished_at < 0)
-        finished_at[newly] = step
+        if step == capacity:  # grow the recording buffers geometrically
+            capacity *= 2
+            poses = np.concatenate([poses, np.empty_like(poses)])
+            counts = np.concatenate([counts, np.empty_like(counts)])
+        poses[step] = trial.true_pose
+        counts[step] = trial.world.counts
         if progress is not None and step % 100 == 0:
             progress(float(trial.progress.state[:, 7].mean()))
     if progress is not None:
         progress(1.0)
-    time_arr = np.asarray(times)
-    pose_arr = np.stack(poses, axis=1)  # (K, T, 3)
-    count_arr = np.stack(counts, axis=1)
+    time_arr = np.arange(step + 1) * dt
+    pose_arr = poses[: step + 1].transpose(1, 0, 2)  # (K, T, 3)
+    count_arr = counts[: step + 1].transpose(1, 0, 2)
     runs = []
     for i in range(trial.n):
         end = int(finished_at[i]) + 1

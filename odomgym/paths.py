@@ -158,6 +158,7 @@ class RouteProgress:
             self._heading = np.zeros(size)
             self._count = np.zeros(self.n, dtype=np.intp)
             self.state = np.zeros((self.n, 8))
+            self._advanced = np.zeros(self.n, dtype=np.bool_)
             self.progress = np.zeros(self.n)
             self._cumulative = np.zeros((self.n, self.segment_count + 1))
             self.index = np.zeros(self.n, dtype=np.intp)
@@ -199,7 +200,8 @@ class RouteProgress:
         :mod:`odomgym.trial` and ``progress`` (N,) — route length done, in segment units (m for
         drives, rad for turns) — and returns which robots moved on.
         """
-        advanced = np.zeros(self.n, dtype=np.bool_)
+        advanced = self._advanced
+        advanced[:] = False
         _route_update(
             odom_pose,
             wheel_speed,
@@ -220,7 +222,7 @@ class RouteProgress:
             self.progress,
             advanced,
         )
-        return advanced
+        return advanced.copy()
 
     @property
     def total(self) -> FloatArray:
