@@ -93,7 +93,7 @@ def resolve_specs(
     return robot_spec, floor_spec, cal
 
 
-class RouteEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
     """Base of the single-robot envs: a robot follows a route by its own odometry.
 
     Subclasses implement :meth:`_route` (which route an episode drives). See

@@ -96,7 +96,7 @@ def _command_run(args: argparse.Namespace) -> int:
     plans: list[tuple[str, Route]] = []
     if args.path == "square":
         directions = ["cw", "ccw"] if args.direction == "both" else [args.direction]
-        plans = [(d, square_route(args.side, d)) for d in directions]
+        plans = [(d, square_route(args.side, "cw" if d == "cw" else "ccw")) for d in directions]
     else:
         plans = [("-", straight_route(args.distance, args.return_trip))]
     show_bar = not args.json and sys.stderr.isatty()

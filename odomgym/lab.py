@@ -96,6 +96,10 @@ def simulate_runs(
     done = trial.progress.done
     step = 0
     act, observe, advance = driver.act, trial.observation, trial.step
+
+    def observe_batch() -> FloatArray:
+        return np.asarray(observe(), dtype=np.float64)
+
     while not done.all():
         if step >= max_steps:
             stuck = np.flatnonzero(~done).tolist()
@@ -103,7 +107,7 @@ def simulate_runs(
                 f"robots {stuck} did not finish route {route.name} within {limit:.0f} s of "
                 "simulated time (a slippery floor or an unreachable tolerance?)"
             )
-        if advance(act(observe())).any():
+        if advance(act(observe_batch())).any():
             done = trial.progress.done
             finished_at[done & (finished_at < 0)] = step + 1
         step += 1
@@ -117,7 +121,7 @@ def simulate_runs(
             progress(float(trial.progress.state[:, 7].mean()))
     if progress is not None:
         progress(1.0)
-    time_arr = np.arange(step + 1) * dt
+    time_arr = np.arange(step + 1, dtype=np.float64) * dt
     pose_arr = poses[: step + 1].transpose(1, 0, 2)  # (K, T, 3)
     count_arr = counts[: step + 1].transpose(1, 0, 2)
     runs = []

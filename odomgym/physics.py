@@ -342,8 +342,8 @@ class World:
             self._out_buffer.set_float_buf(out.ravel())
             pbatch.set_space_bodies(self.space, pbatch.BodyFields.VELOCITY, self._out_buffer)
         else:
-            for ground, velocity in zip(self._ground, ground_v.reshape(-1, 2).tolist(), strict=True):
-                ground.velocity = velocity
+            for ground, (vx, vy) in zip(self._ground, ground_v.reshape(-1, 2).tolist(), strict=True):
+                ground.velocity = (vx, vy)
 
     def _read_state(self, h: float) -> None:
         """Read chassis states into ``pose``/``velocity`` in place.
@@ -378,7 +378,7 @@ class World:
 
     def friction_limits(self) -> FloatArray:
         """Current friction force limit μ·N of each wheel [N], (N, 2)."""
-        return self._friction * self.normal_force[:, None]
+        return np.asarray(self._friction * self.normal_force[:, None])
 
 
 @kernel

@@ -122,6 +122,6 @@ def return_error(
     ends = np.stack([run.true_pose[-1], odom[-1]])
     if frame == "start":
         ends = to_start_frame(run, ends)
-    error = ends[0] - ends[1]
+    error: FloatArray = ends[0] - ends[1]
     error[2] = float(wrap_angle(error[2]))
     return error

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Install odomgym with every extra into a fresh virtual environment, then run the quality gates
+# (ruff lint, ruff format, mypy on the installed package) and the whole test suite.
+#
+#   bash scripts/test.sh            # venv in .venv-test (recreated every time)
+#   VENV=/tmp/v bash scripts/test.sh
+#
+# torch is pinned first because this machine ships a CPU build of 2.13.0 locally; without the
+# pin pip may choose a multi-GB CUDA build to satisfy the `rl` extra's loose range.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV="${VENV:-.venv-test}"
+PYTHON="${PYTHON:-python3}"
+
+rm -rf "$VENV"
+"$PYTHON" -m venv "$VENV"
+"$VENV/bin/python" -m pip install -q --upgrade pip
+"$VENV/bin/python" -m pip install -q torch==2.13.0
+# A regular (non-editable) install: envs/ and baselines/ become odomgym/envs and
+# odomgym/baselines on disk, which is what mypy and the tests then check.
+"$VENV/bin/python" -m pip install -q ".[all]"
+rm -rf build
+
+echo "== ruff check"
+"$VENV/bin/ruff" check .
+echo "== ruff format --check"
+"$VENV/bin/ruff" format --check .
+echo "== mypy (installed package)"
+PACKAGE_DIR="$("$VENV/bin/python" -c 'import odomgym, pathlib; print(pathlib.Path(odomgym.__file__).parent)')"
+"$VENV/bin/mypy" "$PACKAGE_DIR"
+echo "== pytest"
+"$VENV/bin/pytest" -p no:cacheprovider
