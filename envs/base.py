@@ -112,8 +112,15 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         dt: float = 0.05,
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
+        covariance_k: tuple[float, float] | None = None,
     ) -> None:
         self.robot, self.floor, self.calibration = resolve_specs(robot, floor, calibration)
+        if covariance_k is not None:
+            kl, kr = (float(k) for k in covariance_k)
+            if not (math.isfinite(kl) and math.isfinite(kr) and kl >= 0 and kr >= 0):
+                raise ValueError(f"covariance_k must be two finite k >= 0 [m^0.5], got {covariance_k!r}")
+            covariance_k = (kl, kr)
+        self.covariance_k = covariance_k
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
@@ -154,6 +161,7 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         self.route = route
         self._fraction = 0.0
         self._terminated = False
+        self._covariance = np.zeros((3, 3))
         self._history = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
         if self.render_mode == "human":
             self.render()
@@ -165,7 +173,10 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         trial = self._require_trial()
         if self._terminated:
             raise RuntimeError("the episode has terminated; call reset() first")
+        previous_pose = trial.odom_pose[0].copy() if self.covariance_k is not None else None
         trial.step(validate_actions(action, (2,)).reshape(1, 2))
+        if previous_pose is not None:
+            self._propagate_covariance(trial, previous_pose)
         obs = trial.observation()[0]
         fraction = float(obs[7])
         terminated = bool(trial.progress.index[0] >= trial.progress.segment_count)
@@ -183,6 +194,23 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
                 self.render()
         return obs, float(sum(terms.values())), terminated, False, self._info(trial, terms, terminated)
 
+    def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
+        """Chong & Kleeman (seed 004 Eq. 23): carry the odometry covariance through this step's
+        wheel travels as one constant-curvature segment."""
+        from odomgym.covariance import PoseEstimate, propagate_segment
+
+        assert self.covariance_k is not None
+        travel = trial.odometry.wheel_speed[0] * trial.dt
+        wheelbase = self.calibration.wheelbase_scale * self.robot.wheelbase
+        estimate = propagate_segment(
+            PoseEstimate(previous_pose, self._covariance),
+            float(travel[0]),
+            float(travel[1]),
+            wheelbase,
+            *self.covariance_k,
+        )
+        self._covariance = estimate.cov
+
     def _info(self, trial: Trial, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
         true_pose = trial.true_pose[0].copy()
         odom_pose = trial.odom_pose[0].copy()
@@ -197,6 +225,8 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
             "time": trial.world.time,
             "reward_terms": terms,
         }
+        if self.covariance_k is not None:
+            info["odom_covariance"] = self._covariance.copy()
         if terminated:
             # The robot started at the origin heading +x, so the world frame is the UMBmark
             # start frame: ε = true − odometry (seed 000 §6.1).

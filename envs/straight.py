@@ -59,9 +59,16 @@ class StraightLineEnv(RouteEnv):
         dt: float = 0.05,
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
+        covariance_k: tuple[float, float] | None = None,
     ) -> None:
         super().__init__(
-            robot, floor, calibration, dt=dt, reward_weights=reward_weights, render_mode=render_mode
+            robot,
+            floor,
+            calibration,
+            dt=dt,
+            reward_weights=reward_weights,
+            render_mode=render_mode,
+            covariance_k=covariance_k,
         )
         straight_route(distance, return_trip)  # validate now
         self.distance = float(distance)

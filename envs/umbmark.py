@@ -67,7 +67,10 @@ class UMBmarkSquareEnv(RouteEnv):
     (true − odometry, θ wrapped), ``encoder_counts`` (left, right), ``segment``, ``time`` [s],
     ``reward_terms``. At the end: ``return_error`` (ε_x, ε_y [m], ε_θ [rad]) in the UMBmark
     convention (seed 000 §6.1): true − odometry in the start frame (origin at the start, +x the
-    initial heading; cw squares go toward −y).
+    initial heading; cw squares go toward −y). With ``covariance_k=(k_L, k_R)``, also
+    ``odom_covariance``: the 3×3 covariance [m², m·rad, rad²] the Chong & Kleeman model
+    (seed 004 Eqs. 23-28) predicts for the odometry pose, so a 95 % error ellipse can be drawn
+    next to the true error.
 
     ## Arguments
 
@@ -76,7 +79,8 @@ class UMBmarkSquareEnv(RouteEnv):
     path or :class:`~odomgym.floor.FloorSpec`), ``calibration`` (a
     :class:`~odomgym.odometry.Calibration` or its ``.toml`` path), ``side`` [m] (default 4.0),
     ``direction`` (``"cw"``/``"ccw"``; also a ``reset`` option ``{"direction": ...}``), ``dt``
-    [s] (control period, default 0.05), ``reward_weights``, ``render_mode``.
+    [s] (control period, default 0.05), ``reward_weights``, ``render_mode``, ``covariance_k``
+    (k_L, k_R [m^½] of the wheel-noise model, or None).
 
     ## Version History
 
@@ -94,9 +98,16 @@ class UMBmarkSquareEnv(RouteEnv):
         dt: float = 0.05,
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
+        covariance_k: tuple[float, float] | None = None,
     ) -> None:
         super().__init__(
-            robot, floor, calibration, dt=dt, reward_weights=reward_weights, render_mode=render_mode
+            robot,
+            floor,
+            calibration,
+            dt=dt,
+            reward_weights=reward_weights,
+            render_mode=render_mode,
+            covariance_k=covariance_k,
         )
         square_route(side, direction)  # validate now, not at the first reset
         self.side = float(side)
