@@ -1,7 +1,9 @@
 """The ``odomgym`` command line: thin — it parses, calls the library, prints and plots.
 
 Commands:
-    ``odomgym run square|straight …``   drive runs in simulation, report return errors.
+    ``odomgym run square|straight …``   drive runs in simulation, report return errors;
+    ``odomgym calibrate METHOD …``      calibrate (simulated robot or measured session) and
+                                         validate on fresh runs.
 
 Every command exits 0 on success, 2 on bad input (with a message naming the field and, where it
 came from a file, the file and line) and never leaves a half-written output file.
@@ -23,7 +25,14 @@ from odomgym.lab import simulate_runs
 from odomgym.metrics import summarize_umbmark
 from odomgym.odometry import Calibration, load_calibration, wrap_angle
 from odomgym.paths import Route, square_route, straight_route
-from odomgym.report import format_return_errors, plot_return_errors, to_json
+from odomgym.io import atomic_write_text
+from odomgym.report import (
+    format_return_errors,
+    format_session_report,
+    format_simulation_report,
+    plot_return_errors,
+    to_json,
+)
 from odomgym.robot import RobotSpec, load_robot
 
 __all__ = ["main"]
@@ -166,6 +175,85 @@ def _command_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ros2_yaml(calibration: Calibration) -> str:
+    lines = [
+        "# ros2_control diff_drive_controller parameters equivalent to an odomgym calibration.",
+        "# Rename the top-level key to your controller's node name. Mapping (odomgym.odometry):",
+        "#   wheel_separation_multiplier = E_b, {left,right}_wheel_radius_multiplier = c_{L,R}*E_s",
+        "diff_drive_controller:",
+        "  ros__parameters:",
+    ]
+    for key, value in calibration.ros2_parameters().items():
+        lines.append(f"    {key}: {value:.9f}")
+    return "\n".join(lines) + "\n"
+
+
+def _write_calibration_outputs(args: argparse.Namespace, calibration: Calibration) -> None:
+    if args.save:
+        calibration.save(args.save)
+    if args.export == "ros2":
+        atomic_write_text(Path(args.export_path), _ros2_yaml(calibration))
+
+
+def _command_calibrate(args: argparse.Namespace) -> int:
+    from odomgym.baselines import CALIBRATORS
+    from odomgym.baselines.validation import (
+        calibrate_in_simulation,
+        calibrate_on_session,
+        make_calibrator,
+    )
+
+    if args.method not in CALIBRATORS:
+        raise SpecError(
+            f"unknown method {args.method!r}; methods: {', '.join(sorted(CALIBRATORS))}",
+            field="method",
+        )
+    cls = CALIBRATORS[args.method]
+    if args.data:
+        from odomgym.data import read_session
+
+        session = read_session(args.data)
+        calibrator = make_calibrator(
+            cls,
+            side=session.side or None,
+            runs_per_direction=max(1, len(session.select("square", "cw"))) or None,
+            conventions=args.conventions,
+        )
+        report = calibrate_on_session(calibrator, session)
+        _write_calibration_outputs(args, report.result.calibration)
+        if args.json:
+            print(to_json(report.as_dict()))
+        else:
+            print(format_session_report(report))
+        return 0
+    if args.conventions == "optiodom":
+        raise SpecError("--conventions optiodom applies to measured data (--data DIR)", field="conventions")
+    robot = _robot_from(args)
+    floor = load_floor(args.floor)
+    calibrator = make_calibrator(cls, side=args.side, runs_per_direction=args.runs)
+    report_sim = calibrate_in_simulation(
+        calibrator, robot, floor, seed=args.seed, validation_side=args.side, validation_runs=args.runs
+    )
+    _write_calibration_outputs(args, report_sim.result.calibration)
+    if args.plot:
+        plot_return_errors(
+            Path(args.plot),
+            [
+                ("before", report_sim.errors_before["cw"], report_sim.errors_before["ccw"]),
+                ("after", report_sim.errors_after["cw"], report_sim.errors_after["ccw"]),
+            ],
+            f"{args.method} on {robot.name}, {floor.name} floor: "
+            f"{report_sim.improvement:.1f}-fold improvement",
+        )
+    if args.json:
+        print(to_json(report_sim.as_dict()))
+    else:
+        print(format_simulation_report(report_sim, floor.name))
+        if args.plot:
+            print(f"plot written to {args.plot}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command."""
     parser = argparse.ArgumentParser(
@@ -185,6 +273,33 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--json", action="store_true", help="JSON lines instead of a table")
     run.add_argument("--plot", help="write the return-error scatter (PNG) here")
     run.set_defaults(handler=_command_run)
+
+    calibrate = commands.add_parser(
+        "calibrate",
+        help="calibrate a simulated robot (or a measured session) and validate the result",
+        description="Run a calibration method's experiments in simulation on a robot with hidden "
+        "systematic errors, then compare E_max,syst on fresh squares before and after; or, with "
+        "--data, calibrate from a recorded OptiOdom session and report its evaluation measures.",
+    )
+    calibrate.add_argument("method", help="calibration method, e.g. umbmark, jung_chung")
+    _add_robot_arguments(calibrate)
+    calibrate.add_argument("--side", type=_positive, default=4.0, help="square side L [m]")
+    calibrate.add_argument("--runs", type=_count, default=5, help="squares per direction")
+    calibrate.add_argument("--data", help="a recorded OptiOdom session folder instead of simulation")
+    calibrate.add_argument(
+        "--conventions",
+        choices=["umbmark", "optiodom"],
+        default=None,
+        help="optiodom: reproduce the published OptiOdom conventions (with --data)",
+    )
+    calibrate.add_argument("--save", help="write the calibration as TOML here")
+    calibrate.add_argument("--export", choices=["ros2"], help="also export the calibration")
+    calibrate.add_argument(
+        "--export-path", default="diff_drive_controller.yaml", help="where --export writes"
+    )
+    calibrate.add_argument("--json", action="store_true", help="one JSON object instead of a table")
+    calibrate.add_argument("--plot", help="write the before/after return-error scatter (PNG)")
+    calibrate.set_defaults(handler=_command_calibrate)
     return parser
 
 

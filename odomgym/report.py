@@ -17,7 +17,13 @@ from numpy.typing import NDArray
 from odomgym.io import atomic_writer
 from odomgym.metrics import UMBmarkSummary
 
-__all__ = ["format_return_errors", "plot_return_errors", "to_json"]
+__all__ = [
+    "format_return_errors",
+    "format_session_report",
+    "format_simulation_report",
+    "plot_return_errors",
+    "to_json",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -116,3 +122,78 @@ def plot_return_errors(
         atomic_writer(path, write)
     finally:
         plt.close(fig)
+
+
+def format_simulation_report(report: Any, floor_name: str) -> str:
+    """Estimated versus hidden parameters, and E_max,syst before/after on fresh squares.
+
+    ``report`` is an :class:`odomgym.baselines.validation.SimulationReport`.
+    """
+    robot = report.robot
+    cal = report.result.calibration
+    estimated = cal.parameters(robot)
+    true = {
+        "wheelbase": robot.true_wheelbase,
+        "right_diameter": robot.true_right_diameter,
+        "left_diameter": robot.true_left_diameter,
+    }
+    nominal = {
+        "wheelbase": robot.wheelbase,
+        "right_diameter": robot.wheel_diameter,
+        "left_diameter": robot.wheel_diameter,
+    }
+    lines = [
+        f"{report.method} on {robot.name}, {floor_name} floor: {report.result.runs_used} runs, "
+        f"{report.result.distance_used:.1f} m driven, {report.wall_time:.2f} s",
+        "",
+        f"{'parameter':<16}{'nominal':>12}{'estimated':>12}{'true':>12}",
+    ]
+    for key, label in (
+        ("wheelbase", "b [mm]"),
+        ("right_diameter", "D_R [mm]"),
+        ("left_diameter", "D_L [mm]"),
+    ):
+        lines.append(
+            f"{label:<16}{1e3 * nominal[key]:>12.3f}{1e3 * estimated[key]:>12.3f}"
+            f"{1e3 * true[key]:>12.3f}"
+        )
+    for label, est, tru in (
+        ("E_d", cal.e_d, robot.e_d),
+        ("E_b", cal.wheelbase_scale, robot.e_b),
+        ("E_s", cal.distance_scale, robot.e_s),
+    ):
+        lines.append(f"{label:<16}{1.0:>12.5f}{est:>12.5f}{tru:>12.5f}")
+    lines += [
+        "",
+        f"validation on fresh squares ({len(report.errors_before['cw'])} cw + "
+        f"{len(report.errors_before['ccw'])} ccw, true return errors):",
+        f"{'':<22}{'before':>10}{'after':>10}",
+        f"{'E_max,syst [mm]':<22}{1e3 * report.e_max_before:>10.2f}"
+        f"{1e3 * report.e_max_after:>10.2f}   -> {report.improvement:.1f}-fold improvement",
+    ]
+    lines += [f"note: {note}" for note in report.result.notes]
+    return "\n".join(lines)
+
+
+def format_session_report(report: Any) -> str:
+    """Calibrated parameters and the OptiOdom evaluation measures before/after.
+
+    ``report`` is an :class:`odomgym.baselines.validation.SessionReport`.
+    """
+    params = report.result.calibration.parameters(report.robot)
+    before, after = report.before.as_published(), report.after.as_published()
+    lines = [
+        f"{report.method} on session {report.session}",
+        f"b = {params['wheelbase']:.6f} m, D_R = {params['right_diameter']:.6f} m, "
+        f"D_L = {params['left_diameter']:.6f} m",
+        "",
+        f"{'measure':<22}{'before':>12}{'after':>12}",
+        f"{'max position [mm]':<22}{1e3 * before['max_pos']:>12.2f}{1e3 * after['max_pos']:>12.2f}",
+        f"{'max heading [deg]':<22}{before['max_th_deg']:>12.3f}{after['max_th_deg']:>12.3f}",
+        f"{'final position [mm]':<22}{1e3 * before['final_pos']:>12.2f}"
+        f"{1e3 * after['final_pos']:>12.2f}",
+        f"{'final heading [deg]':<22}{before['final_th_deg']:>12.3f}"
+        f"{after['final_th_deg']:>12.3f}",
+    ]
+    lines += [f"note: {note}" for note in report.result.notes]
+    return "\n".join(lines)
