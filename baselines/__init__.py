@@ -10,9 +10,6 @@ from odomgym.baselines.base import CalibrationResult, Calibrator
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.umbmark import UMBmark
 
-CALIBRATORS: dict[str, type[Calibrator]] = {
-    cls.name: cls
-    for cls in (UMBmark, JungChung)
-}
+CALIBRATORS: dict[str, type[Calibrator]] = {cls.name: cls for cls in (UMBmark, JungChung)}
 
 __all__ = ["CALIBRATORS", "CalibrationResult", "Calibrator", "JungChung", "UMBmark"]

@@ -101,7 +101,8 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
     reward, ``info`` and episode end.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
+    # Gymnasium declares ``metadata`` an instance attribute; every env overrides it this way.
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}  # noqa: RUF012
 
     def __init__(
         self,
@@ -118,7 +119,9 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         if covariance_k is not None:
             kl, kr = (float(k) for k in covariance_k)
             if not (math.isfinite(kl) and math.isfinite(kr) and kl >= 0 and kr >= 0):
-                raise ValueError(f"covariance_k must be two finite k >= 0 [m^0.5], got {covariance_k!r}")
+                raise ValueError(
+                    f"covariance_k must be two finite k >= 0 [m^0.5], got {covariance_k!r}"
+                )
             covariance_k = (kl, kr)
         self.covariance_k = covariance_k
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -192,7 +195,13 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
             self._history.append((t[0], t[1], t[2], o[0], o[1], o[2]))
             if self.render_mode == "human":
                 self.render()
-        return obs, float(sum(terms.values())), terminated, False, self._info(trial, terms, terminated)
+        return (
+            obs,
+            float(sum(terms.values())),
+            terminated,
+            False,
+            self._info(trial, terms, terminated),
+        )
 
     def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
         """Chong & Kleeman (seed 004 Eq. 23): carry the odometry covariance through this step's

@@ -19,9 +19,7 @@ from odomgym.robot import RobotSpec
 try:
     import pygame
 except ImportError as exc:  # pragma: no cover - depends on the environment
-    raise ImportError(
-        "rendering needs pygame: pip install 'odomgym[render]'"
-    ) from exc
+    raise ImportError("rendering needs pygame: pip install 'odomgym[render]'") from exc
 
 __all__ = ["TopDownRenderer"]
 
@@ -83,7 +81,10 @@ class TopDownRenderer:
             right, bottom = px(patch.x_max, patch.y_min)
             pygame.draw.rect(surf, PATCH, pygame.Rect(left, top, right - left, bottom - top))
         for bump in self.floor.bumps:
-            dx, dy = 0.5 * bump.length * math.cos(bump.angle), 0.5 * bump.length * math.sin(bump.angle)
+            dx, dy = (
+                0.5 * bump.length * math.cos(bump.angle),
+                0.5 * bump.length * math.sin(bump.angle),
+            )
             pygame.draw.line(
                 surf, BUMP, px(bump.x - dx, bump.y - dy), px(bump.x + dx, bump.y + dy), 3
             )
@@ -105,7 +106,9 @@ class TopDownRenderer:
             return None
         return np.transpose(np.array(pygame.surfarray.pixels3d(surf)), (1, 0, 2)).copy()
 
-    def _robot(self, surf: Any, px: Any, x: float, y: float, theta: float, colour: Any, width: int) -> None:
+    def _robot(
+        self, surf: Any, px: Any, x: float, y: float, theta: float, colour: Any, width: int
+    ) -> None:
         length, width_m = self.robot.chassis_length, self.robot.chassis_width
         c, s = math.cos(theta), math.sin(theta)
         corners = [

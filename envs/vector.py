@@ -17,8 +17,8 @@ from typing import Any, Literal
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
-
 from odomgym.envs.base import RewardWeights, action_space, observation_space, resolve_specs
+
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
 from odomgym.paths import Route, square_route, straight_route
@@ -41,7 +41,8 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         max_episode_steps: truncation limit per sub-env.
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+    # Gymnasium declares ``metadata`` an instance attribute; every env overrides it this way.
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}  # noqa: RUF012
 
     def __init__(
         self,
@@ -99,7 +100,9 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
 
     def step(
         self, actions: NDArray[np.float32]
-    ) -> tuple[NDArray[np.float32], FloatArray, NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
+    ) -> tuple[
+        NDArray[np.float32], FloatArray, NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]
+    ]:
         trial = self._trial
         if trial is None:
             raise RuntimeError("call reset() before step()")

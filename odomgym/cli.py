@@ -21,11 +21,11 @@ import numpy as np
 
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec, load_floor
+from odomgym.io import atomic_write_text
 from odomgym.lab import simulate_runs
 from odomgym.metrics import summarize_umbmark
 from odomgym.odometry import Calibration, load_calibration, wrap_angle
 from odomgym.paths import Route, square_route, straight_route
-from odomgym.io import atomic_write_text
 from odomgym.report import (
     format_return_errors,
     format_session_report,
@@ -160,8 +160,10 @@ def _command_run(args: argparse.Namespace) -> int:
         if summary is not None:
             print(to_json({"summary": summary.__dict__}))
     else:
-        print(f"robot {robot.name}: E_d = {robot.e_d:.5f}, E_b = {robot.e_b:.5f}, "
-              f"E_s = {robot.e_s:.5f}; floor {floor.name}; route {plans[0][1].name}")
+        print(
+            f"robot {robot.name}: E_d = {robot.e_d:.5f}, E_b = {robot.e_b:.5f}, "
+            f"E_s = {robot.e_s:.5f}; floor {floor.name}; route {plans[0][1].name}"
+        )
         print("return errors (true - odometry, start frame)")
         print(format_return_errors(rows, summary))
     if args.plot:
@@ -227,12 +229,19 @@ def _command_calibrate(args: argparse.Namespace) -> int:
             print(format_session_report(report))
         return 0
     if args.conventions == "optiodom":
-        raise SpecError("--conventions optiodom applies to measured data (--data DIR)", field="conventions")
+        raise SpecError(
+            "--conventions optiodom applies to measured data (--data DIR)", field="conventions"
+        )
     robot = _robot_from(args)
     floor = load_floor(args.floor)
     calibrator = make_calibrator(cls, side=args.side, runs_per_direction=args.runs)
     report_sim = calibrate_in_simulation(
-        calibrator, robot, floor, seed=args.seed, validation_side=args.side, validation_runs=args.runs
+        calibrator,
+        robot,
+        floor,
+        seed=args.seed,
+        validation_side=args.side,
+        validation_runs=args.runs,
     )
     _write_calibration_outputs(args, report_sim.result.calibration)
     if args.plot:
@@ -285,7 +294,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_robot_arguments(calibrate)
     calibrate.add_argument("--side", type=_positive, default=4.0, help="square side L [m]")
     calibrate.add_argument("--runs", type=_count, default=5, help="squares per direction")
-    calibrate.add_argument("--data", help="a recorded OptiOdom session folder instead of simulation")
+    calibrate.add_argument(
+        "--data", help="a recorded OptiOdom session folder instead of simulation"
+    )
     calibrate.add_argument(
         "--conventions",
         choices=["umbmark", "optiodom"],

@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomllib
 from numpy.typing import NDArray
 
 from odomgym.errors import SpecError, locate_key, require_finite, require_positive, require_range
@@ -116,7 +116,9 @@ class FloorSpec:
         """Friction coefficient at the points (x, y) [m]; the last patch listed wins."""
         mu = np.full(np.shape(x), self.friction)
         for patch in self.patches:
-            inside = (x >= patch.x_min) & (x <= patch.x_max) & (y >= patch.y_min) & (y <= patch.y_max)
+            inside = (
+                (x >= patch.x_min) & (x <= patch.x_max) & (y >= patch.y_min) & (y <= patch.y_max)
+            )
             mu[inside] = patch.friction
         return mu
 
@@ -169,7 +171,9 @@ class FloorSpec:
         if "name" in table:
             kwargs["name"] = str(table["name"])
         if "friction" in table:
-            kwargs["friction"] = require_positive("friction", table["friction"], source=where("friction"))
+            kwargs["friction"] = require_positive(
+                "friction", table["friction"], source=where("friction")
+            )
         if "roughness" in table:
             kwargs["roughness"] = require_range(
                 "roughness", table["roughness"], 0.0, 1.0, source=where("roughness")
@@ -217,7 +221,9 @@ def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path
     try:
         return kind(**item)
     except TypeError as exc:
-        raise SpecError(f"{label}: {exc}", field=label, source=str(path) if path else None) from None
+        raise SpecError(
+            f"{label}: {exc}", field=label, source=str(path) if path else None
+        ) from None
     except SpecError as exc:
         key = exc.field or label
         raise SpecError(
@@ -228,7 +234,9 @@ def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path
 
 
 # ---------------------------------------------------------------------- bump geometry
-def _profile(radius_wheel: float | FloatArray, radius_cable: float | FloatArray) -> tuple[Any, Any, Any]:
+def _profile(
+    radius_wheel: float | FloatArray, radius_cable: float | FloatArray
+) -> tuple[Any, Any, Any]:
     big_r = radius_wheel + radius_cable
     half_width = 2.0 * np.sqrt(radius_wheel * radius_cable)  # centre offset at first contact
     psi0 = np.arcsin(half_width / big_r)
@@ -243,7 +251,8 @@ def bump_extra_rotation(wheel_radius: float, cable_diameter: float) -> float:
     R = r + ρ around the cable axis, rolling without slip, so the wheel turns through an arc of
     R·2ψ₀ (ψ₀ = asin(w/R)) while advancing 2w. The excess R·2ψ₀ − 2w is what the encoder
     over-reports (seed 002 Eq. 1 uses the chord approximation of the same picture; LabMate,
-    r = 75 mm, 10 mm cable: 3.40 mm (0.57° of heading on b = 340 mm), versus the paper's 2.63 mm estimate).
+    r = 75 mm, 10 mm cable: 3.40 mm (0.57° of heading on b = 340 mm), versus the paper's 2.63
+    mm estimate).
     """
     big_r, half_width, psi0 = _profile(wheel_radius, 0.5 * cable_diameter)
     return float(2.0 * big_r * psi0 - 2.0 * half_width)

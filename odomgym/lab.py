@@ -86,7 +86,7 @@ def simulate_runs(
     driver = ReferenceDriver(specs[0], cruise_speed=cruise_speed)
     nominal_time = route.wheel_travel(specs[0].wheelbase) / cruise_speed
     limit = max_time if max_time is not None else 20.0 * nominal_time + 60.0
-    max_steps = int(math.ceil(limit / dt))
+    max_steps = math.ceil(limit / dt)
     capacity = int(2.0 * nominal_time / dt) + 100
     poses = np.empty((capacity, trial.n, 3))
     counts = np.empty((capacity, trial.n, 2), dtype=np.int64)

@@ -91,7 +91,9 @@ def square_route(side: float = 4.0, direction: Literal["cw", "ccw"] = "cw") -> R
         end = (point[0] + side * math.cos(heading), point[1] + side * math.sin(heading))
         end = (round(end[0], 12), round(end[1], 12))
         segments.append(Segment("drive", point, end, heading))
-        segments.append(Segment("turn", end, end, heading + sign * math.pi / 2, turn=sign * math.pi / 2))
+        segments.append(
+            Segment("turn", end, end, heading + sign * math.pi / 2, turn=sign * math.pi / 2)
+        )
         point = end
         heading += sign * math.pi / 2
     return Route(f"square-{direction}-{side:g}m", tuple(segments))
@@ -190,7 +192,11 @@ class RouteProgress:
         return np.asarray(self.index >= self._count)
 
     def update(
-        self, odom_pose: FloatArray, wheel_speed: FloatArray, max_speed: FloatArray, advance: bool = True
+        self,
+        odom_pose: FloatArray,
+        wheel_speed: FloatArray,
+        max_speed: FloatArray,
+        advance: bool = True,
     ) -> NDArray[np.bool_]:
         """Refresh the route state from the odometry; optionally move on to the next segment.
 
@@ -269,7 +275,9 @@ def _route_update(
             cross = unit[i, s, 0] * rel_y - unit[i, s, 1] * rel_x
             turn = is_turn[i, s]
             # +1 when a drive moves along the heading it holds, −1 when reversing.
-            facing = unit[i, s, 0] * math.cos(heading[i, s]) + unit[i, s, 1] * math.sin(heading[i, s])
+            facing = unit[i, s, 0] * math.cos(heading[i, s]) + unit[i, s, 1] * math.sin(
+                heading[i, s]
+            )
             direction = 1.0 if (turn or facing >= 0.0) else -1.0
             if turn:
                 remaining = error

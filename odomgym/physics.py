@@ -342,7 +342,9 @@ class World:
             self._out_buffer.set_float_buf(out.ravel())
             pbatch.set_space_bodies(self.space, pbatch.BodyFields.VELOCITY, self._out_buffer)
         else:
-            for ground, (vx, vy) in zip(self._ground, ground_v.reshape(-1, 2).tolist(), strict=True):
+            for ground, (vx, vy) in zip(
+                self._ground, ground_v.reshape(-1, 2).tolist(), strict=True
+            ):
                 ground.velocity = (vx, vy)
 
     def _read_state(self, h: float) -> None:

@@ -192,8 +192,7 @@ def format_session_report(report: Any) -> str:
         f"{'max heading [deg]':<22}{before['max_th_deg']:>12.3f}{after['max_th_deg']:>12.3f}",
         f"{'final position [mm]':<22}{1e3 * before['final_pos']:>12.2f}"
         f"{1e3 * after['final_pos']:>12.2f}",
-        f"{'final heading [deg]':<22}{before['final_th_deg']:>12.3f}"
-        f"{after['final_th_deg']:>12.3f}",
+        f"{'final heading [deg]':<22}{before['final_th_deg']:>12.3f}{after['final_th_deg']:>12.3f}",
     ]
     lines += [f"note: {note}" for note in report.result.notes]
     return "\n".join(lines)

@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import tomllib
 
 from odomgym.errors import SpecError, locate_key, require_positive, require_range
 from odomgym.io import atomic_write_text
@@ -221,9 +222,7 @@ class RobotSpec:
         try:
             spec = cls(**table)
         except SpecError as exc:
-            raise SpecError(
-                str(exc), field=exc.field, source=str(path) if path else None
-            ) from None
+            raise SpecError(str(exc), field=exc.field, source=str(path) if path else None) from None
         if errors:
             spec = spec.with_errors(errors.get("e_d"), errors.get("e_b"), errors.get("e_s"))
         return spec
@@ -295,7 +294,8 @@ PRESETS: dict[str, RobotSpec] = {
     ),
     "monash": RobotSpec(
         name="monash",
-        wheel_diameter=2 * 0.06890,  # left wheel radius 0.06890 m before calibration: seed 004 Table 8
+        wheel_diameter=2
+        * 0.06890,  # left wheel radius 0.06890 m before calibration: seed 004 Table 8
         wheelbase=0.37100,  # B = 0.37100 m before calibration: seed 004 Table 8
         ticks_per_rev=4096.0,  # not given in seed 004 (assumed)
         true_left_diameter=2 * 0.068662,  # after calibration: seed 004 Table 8

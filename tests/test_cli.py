@@ -12,7 +12,9 @@ from odomgym.cli import main
 
 def test_run_square_table_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     plot = tmp_path / "scatter.png"
-    code = main(["run", "square", "--robot", "labmate", "--runs", "2", "--side", "2", "--plot", str(plot)])
+    code = main(
+        ["run", "square", "--robot", "labmate", "--runs", "2", "--side", "2", "--plot", str(plot)]
+    )
     out = capsys.readouterr().out
     assert code == 0
     assert "E_max,syst" in out and "centre of gravity cw" in out
@@ -32,12 +34,17 @@ def test_run_json_lines(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_run_straight_with_bumps(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["run", "straight", "--floor", "bumpy", "--runs", "1", "--distance", "4", "--json"]) == 0
+    assert (
+        main(["run", "straight", "--floor", "bumpy", "--runs", "1", "--distance", "4", "--json"])
+        == 0
+    )
     record = json.loads(capsys.readouterr().out.splitlines()[0])
     assert record["direction"] is None
 
 
-def test_bad_inputs_exit_2_with_a_message(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_inputs_exit_2_with_a_message(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["run", "square", "--robot", "no-such-robot"]) == 2
     assert "unknown robot preset" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"

@@ -1,4 +1,5 @@
-"""Issue #2 must-pass 5 and 6 (envs): Gymnasium/SB3 compliance, determinism, pickling, bad actions."""
+"""Issue #2 must-pass 5 and 6 (envs): Gymnasium/SB3 compliance, determinism, pickling,
+bad actions."""
 
 from __future__ import annotations
 
@@ -122,7 +123,9 @@ def test_reference_driver_completes_square_and_reports_return_error(direction: s
     assert terminated and not truncated
     assert np.abs(info["return_error"][:2]).max() < 0.002
     # odometry visited the square's far corner on the correct side
-    assert info["odom_pose"][2] == pytest.approx(-2 * np.pi if direction == "cw" else 2 * np.pi, abs=0.01)
+    assert info["odom_pose"][2] == pytest.approx(
+        -2 * np.pi if direction == "cw" else 2 * np.pi, abs=0.01
+    )
     assert total == pytest.approx(1.0 + 1.0 - 0.001 * (info["time"] / 0.05), abs=1e-3)
     with pytest.raises(RuntimeError, match="reset"):
         env.step(np.zeros(2, dtype=np.float32))

@@ -18,14 +18,17 @@ SIDE = 4.0
 
 
 def _square_errors(robot, direction: str) -> np.ndarray:
-    runs, odom = simulate_runs(robot, FloorSpec(), square_route(SIDE, direction), direction=direction)
+    runs, odom = simulate_runs(
+        robot, FloorSpec(), square_route(SIDE, direction), direction=direction
+    )
     error = runs[0].true_pose[-1] - odom[0]
     return error
 
 
 @pytest.mark.parametrize("direction", ["cw", "ccw"])
 def test_ideal_robot_square_is_exact(direction: str) -> None:
-    """Issue #2 must-pass 1: ideal robot, smooth floor, 0.2 m/s: |true − odometry| < 2 mm, < 0.05°."""
+    """Issue #2 must-pass 1: ideal robot, smooth floor, 0.2 m/s:
+    |true − odometry| < 2 mm and < 0.05°."""
     error = _square_errors(LABMATE.ideal(), direction)
     assert math.hypot(error[0], error[1]) < 0.002
     assert abs(math.degrees(error[2])) < 0.05
@@ -49,7 +52,8 @@ def _first_order_prediction(e_d: float, e_b: float, b: float, side: float) -> di
 
 @pytest.mark.parametrize(("e_d", "e_b"), [(1.002, 1.0), (1.0, 1.01), (0.998, 1.0), (1.0, 0.99)])
 def test_umbmark_first_order_predictions(e_d: float, e_b: float) -> None:
-    """Issue #2 must-pass 2: E_d or E_b alone → return errors within 10 % of seed 000 Eqs. 6.3-6.20."""
+    """Issue #2 must-pass 2: E_d or E_b alone → return errors within 10 % of the first-order
+    predictions of seed 000 Eqs. 6.3-6.20."""
     robot = LABMATE.with_errors(e_d, e_b, 1.0)
     predicted = _first_order_prediction(e_d, e_b, LABMATE.wheelbase, SIDE)
     measured = {}
@@ -88,7 +92,9 @@ def test_cable_geometry_of_seed_002_table_1() -> None:
 def test_single_bump_heading_and_lateral_error() -> None:
     """Issue #2 must-pass 3: one 10 mm cable under one LabMate wheel at 0.5 m/s."""
     bump_x = 0.6
-    floor = FloorSpec(bumps=(CableBump(x=bump_x, y=-0.17, angle=math.pi / 2, diameter=0.010, length=0.12),))
+    floor = FloorSpec(
+        bumps=(CableBump(x=bump_x, y=-0.17, angle=math.pi / 2, diameter=0.010, length=0.12),)
+    )
     robot = LABMATE.ideal()
     after = 10.0
     runs, odom = simulate_runs(

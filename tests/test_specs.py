@@ -77,7 +77,7 @@ def test_malformed_toml_names_file_and_line(tmp_path: Path) -> None:
 
 
 def test_unknown_preset() -> None:
-    with pytest.raises(SpecError, match="unknown robot preset 'lab-mate'.*labmate"):
+    with pytest.raises(SpecError, match=r"unknown robot preset 'lab-mate'.*labmate"):
         load_robot("lab-mate")
     with pytest.raises(SpecError, match="unknown floor"):
         load_floor("icy")

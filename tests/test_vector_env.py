@@ -40,13 +40,13 @@ def test_vector_env_autoresets_next_step() -> None:
     ended = None
     for step in range(2000):
         actions = driver(obs).astype(np.float32)
-        obs, rewards, terminated, truncated, info = envs.step(actions)
+        obs, _rewards, terminated, _truncated, info = envs.step(actions)
         if terminated.any():
             ended = step
             assert "return_error" in info and info["_return_error"].any()
             break
     assert ended is not None
-    obs, rewards, terminated, truncated, _ = envs.step(np.zeros((2, 2), dtype=np.float32))
+    obs, rewards, terminated, _truncated, _ = envs.step(np.zeros((2, 2), dtype=np.float32))
     assert np.all(rewards == 0.0) and not terminated.any()
     assert np.all(obs[:, 7] == 0.0)  # back at the start of the route
 
