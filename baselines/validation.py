@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from odomgym.baselines.base import CalibrationResult, Calibrator
 
+from odomgym.baselines.base import CalibrationResult, Calibrator
 from odomgym.data import RecordedLab, Session
 from odomgym.evaluation import EvaluationMeasures, evaluate
 from odomgym.experiments import SensorAccuracy

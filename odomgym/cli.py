@@ -299,7 +299,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     calibrate.add_argument(
         "--conventions",
-        choices=["umbmark", "optiodom"],
+        choices=["optiodom"],
         default=None,
         help="optiodom: reproduce the published OptiOdom conventions (with --data)",
     )

@@ -78,7 +78,10 @@ class Lab(Protocol):
 
     def perform(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
         """Drive ``experiment`` with ``calibration`` in the odometry; return the runs, their
-        ground truth as the lab's sensor measured it."""
+        ground truth as the lab's sensor measured it.
+
+        A lab that cannot perform an experiment (a recorded session that holds no such runs)
+        raises ``LookupError``, so calibrators can skip an optional phase uniformly."""
         ...
 
     @property

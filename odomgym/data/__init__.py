@@ -6,14 +6,8 @@ far: :func:`read_session` reads one session folder into a :class:`Session`, and
 :class:`odomgym.experiments.Lab` protocol.
 """
 
-from odomgym.data.optiodom import (
-    ExperimentNotRecorded,
-    RecordedLab,
-    Session,
-    SyncWindow,
-    find_sessions,
-    read_session,
-)
+from odomgym.data.lab import ExperimentNotRecorded, RecordedLab
+from odomgym.data.optiodom import Session, SyncWindow, find_sessions, read_session
 
 __all__ = [
     "ExperimentNotRecorded",

@@ -1,0 +1,260 @@
+"""Linear least squares over whole runs (Antonelli, Chiaverini & Fusco 2005).
+
+G. Antonelli, S. Chiaverini, G. Fusco, *A calibration method for odometry of mobile robots based
+on the least-squares technique: theory and experimental validation*, IEEE Trans. Robotics
+21(5):994–1004, 2005. The odometry of a differential-drive robot is *linear* in its parameters
+once they are grouped suitably, so start and end poses of a set of runs, with the encoder
+increments in between, give the parameters by two ordinary least-squares problems:
+
+1. **Heading.** Over a run, with φ_R, φ_L the wheel rotations [rad] (encoder counts × 2π/C):
+
+       θ_end − θ_start = (r_R/b)·Σ Δφ_R − (r_L/b)·Σ Δφ_L
+
+   one row per run, linear in c = (r_R/b, r_L/b) [-]: Φ_θ·c = Δθ, solved by least squares.
+2. **Position.** With c fixed, the heading is known at every sample (θ_j from the partial sums,
+   midpoint μ_j = θ_j + Δθ_j/2 as :mod:`odomgym.odometry`), and the displacement is linear in the
+   wheel radii r = (r_R, r_L) [m]:
+
+       x_end − x_start = Σ_j (r_R·Δφ_R,j + r_L·Δφ_L,j)/2 · cos μ_j
+       y_end − y_start = Σ_j (r_R·Δφ_R,j + r_L·Δφ_L,j)/2 · sin μ_j
+
+   two rows per run: Φ_xy·r = Δp, solved by least squares.
+
+Then b = argmin ‖(r_R, r_L) − b·c‖² = (c·r)/(c·c). The condition numbers of Φ_θ and Φ_xy
+(reported as ``cond_theta`` and ``cond_xy``) say how informative the runs were: closed paths
+(squares) return to their start, so their Δp is nearly zero and carries the *ratio* r_R/r_L but
+hardly the scale; runs that end far from their start (straight runs) fix the scale.
+
+**Frames and units.** Poses are the runs' ground truth in its own frame (x, y [m], θ [rad]
+unwrapped); headings start from the first ground-truth heading. The result is absolute
+(D = 2r, b), independent of the calibration active while driving.
+
+Default experiments: 3 cw and 3 ccw UMBmark squares of 4 m (the heading rows: ±2π of turning
+fixes b relative to the wheels, the legs' drift the ratio r_R/r_L) and 3 straight runs of 3 m
+(the position rows: the distance fixes the scale). Any runs a lab provides will do; Antonelli et
+al. drove a set of varied paths.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.experiments import Experiment, Lab
+from odomgym.odometry import Calibration
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+__all__ = ["LeastSquares", "LeastSquaresFit", "fit_least_squares"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LeastSquaresFit:
+    """The result of :func:`fit_least_squares`.
+
+    Attributes:
+        calibration: the calibration equivalent to the estimated (b, D_R, D_L).
+        c_right, c_left: r_R/b and r_L/b from the heading rows [-].
+        r_right, r_left: wheel radii r_R, r_L from the position rows [m].
+        wheelbase: b [m].
+        cond_theta: condition number of the heading regressor Φ_θ (runs × 2) [-].
+        cond_xy: condition number of the position regressor Φ_xy (2·runs × 2) [-].
+        rms_theta: RMS residual of the heading rows [rad].
+        rms_xy: RMS residual of the position rows [m].
+    """
+
+    calibration: Calibration
+    c_right: float
+    c_left: float
+    r_right: float
+    r_left: float
+    wheelbase: float
+    cond_theta: float
+    cond_xy: float
+    rms_theta: float
+    rms_xy: float
+
+
+def _wheel_rotations(run: Run, robot: RobotSpec) -> FloatArray:
+    """Per-sample wheel rotation increments (T−1, 2) [rad], columns [right, left]."""
+    increments = np.diff(run.counts, axis=0).astype(float)
+    return increments[:, ::-1] * (2.0 * math.pi / robot.ticks_per_rev)
+
+
+def fit_least_squares(runs: Sequence[Run], robot: RobotSpec) -> LeastSquaresFit:
+    """Antonelli et al.'s two least-squares problems on ``runs`` (see the module docstring).
+
+    Raises:
+        ValueError: fewer than two runs, or runs whose regressors are rank-deficient (e.g. only
+            straight runs for the heading rows, only closed paths at one size for the
+            position rows).
+    """
+    if len(runs) < 2:
+        raise ValueError(f"least-squares calibration needs at least two runs, got {len(runs)}")
+    rotations = [_wheel_rotations(run, robot) for run in runs]
+
+    # Step 1: heading rows, Δθ = c_R·Σφ_R − c_L·Σφ_L.
+    phi_theta = np.array([[rot[:, 0].sum(), -rot[:, 1].sum()] for rot in rotations])
+    d_theta = np.array([np.unwrap(run.true_pose[:, 2])[-1] - run.true_pose[0, 2] for run in runs])
+    if np.linalg.matrix_rank(phi_theta) < 2:
+        raise ValueError(
+            "the heading regressor is rank-deficient: the runs need different ratios of "
+            "right to left wheel rotation (e.g. turns in both directions, or turns and "
+            "straight runs)"
+        )
+    c, *_ = np.linalg.lstsq(phi_theta, d_theta, rcond=None)
+    c_right, c_left = float(c[0]), float(c[1])
+
+    # Step 2: position rows with the headings of step 1.
+    rows, targets = [], []
+    for run, rot in zip(runs, rotations, strict=True):
+        dtheta = c_right * rot[:, 0] - c_left * rot[:, 1]
+        theta = run.true_pose[0, 2] + np.cumsum(dtheta) - dtheta
+        mid = theta + 0.5 * dtheta
+        cos_mid, sin_mid = np.cos(mid), np.sin(mid)
+        rows.append([0.5 * rot[:, 0] @ cos_mid, 0.5 * rot[:, 1] @ cos_mid])
+        rows.append([0.5 * rot[:, 0] @ sin_mid, 0.5 * rot[:, 1] @ sin_mid])
+        targets.extend(run.true_pose[-1, :2] - run.true_pose[0, :2])
+    phi_xy = np.array(rows)
+    d_xy = np.array(targets)
+    if np.linalg.matrix_rank(phi_xy) < 2:
+        raise ValueError(
+            "the position regressor is rank-deficient: the runs need to end away from their "
+            "start in different ways (add straight runs)"
+        )
+    r, *_ = np.linalg.lstsq(phi_xy, d_xy, rcond=None)
+    r_right, r_left = float(r[0]), float(r[1])
+    wheelbase = (c_right * r_right + c_left * r_left) / (c_right**2 + c_left**2)
+    if not (r_right > 0.0 and r_left > 0.0 and wheelbase > 0.0):
+        raise ValueError(
+            f"least squares gave non-physical parameters r_R = {r_right}, r_L = {r_left}, "
+            f"b = {wheelbase} [m]: the runs do not determine them"
+        )
+    calibration = Calibration.from_parameters(
+        robot, wheelbase=wheelbase, right_diameter=2.0 * r_right, left_diameter=2.0 * r_left
+    )
+    return LeastSquaresFit(
+        calibration=calibration,
+        c_right=c_right,
+        c_left=c_left,
+        r_right=r_right,
+        r_left=r_left,
+        wheelbase=wheelbase,
+        cond_theta=float(np.linalg.cond(phi_theta)),
+        cond_xy=float(np.linalg.cond(phi_xy)),
+        rms_theta=float(np.sqrt(np.mean((phi_theta @ c - d_theta) ** 2))),
+        rms_xy=float(np.sqrt(np.mean((phi_xy @ r - d_xy) ** 2))),
+    )
+
+
+class LeastSquares(Calibrator):
+    """Antonelli et al.'s least-squares calibration over the runs it performs.
+
+    Args:
+        side: square side L [m].
+        squares_per_direction: cw and ccw squares (0: none; then give spins).
+        straight_runs: straight runs (0: none).
+        straight_distance: their length [m].
+        spins_per_direction: cw and ccw in-place spins of ``spin_angle`` (default 0).
+        spin_angle: spin angle [rad].
+    """
+
+    name: ClassVar[str] = "least_squares"
+    reference: ClassVar[str] = (
+        "G. Antonelli, S. Chiaverini, G. Fusco, A calibration method for odometry of mobile "
+        "robots based on the least-squares technique: theory and experimental validation, "
+        "IEEE Trans. Robotics 21(5):994-1004, 2005"
+    )
+
+    def __init__(
+        self,
+        side: float = 4.0,
+        squares_per_direction: int = 3,
+        *,
+        straight_runs: int = 3,
+        straight_distance: float = 3.0,
+        spins_per_direction: int = 0,
+        spin_angle: float = math.pi,
+    ) -> None:
+        if min(squares_per_direction, straight_runs, spins_per_direction) < 0:
+            raise ValueError("run counts must be >= 0")
+        if not (side > 0.0 and straight_distance > 0.0 and spin_angle > 0.0):
+            raise ValueError(
+                f"need side, straight_distance and spin_angle > 0, got {side}, "
+                f"{straight_distance}, {spin_angle}"
+            )
+        if not (squares_per_direction or spins_per_direction):
+            raise ValueError("need squares or spins: the heading rows need turning")
+        if not straight_runs:
+            raise ValueError("need straight runs: closed paths hardly fix the wheel radii")
+        self.side = side
+        self.squares_per_direction = squares_per_direction
+        self.straight_runs = straight_runs
+        self.straight_distance = straight_distance
+        self.spins_per_direction = spins_per_direction
+        self.spin_angle = spin_angle
+
+    def experiments(self) -> list[Experiment]:
+        """Squares (cw, ccw), spins (cw, ccw) and straight runs, as configured."""
+        out: list[Experiment] = []
+        if self.squares_per_direction:
+            n = self.squares_per_direction
+            out += [
+                Experiment("square", "cw", n, self.side),
+                Experiment("square", "ccw", n, self.side),
+            ]
+        if self.spins_per_direction:
+            n = self.spins_per_direction
+            out += [
+                Experiment("spin", "cw", n, self.spin_angle),
+                Experiment("spin", "ccw", n, self.spin_angle),
+            ]
+        out.append(Experiment("straight", None, self.straight_runs, self.straight_distance))
+        return out
+
+    def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
+        """Perform the experiments with ``initial`` active; estimate (b, D_R, D_L)."""
+        runs0, dist0 = lab.runs_used, lab.distance_used
+        calibration = initial if initial is not None else Calibration()
+        runs: list[Run] = []
+        for experiment in self.experiments():
+            try:
+                runs.extend(lab.perform(experiment, calibration))
+            except LookupError as exc:
+                what = f"{experiment.direction or ''} {experiment.kind}".strip()
+                raise LookupError(
+                    f"least-squares calibration needs {experiment.runs} {what} runs of size "
+                    f"{experiment.size:g} that this lab cannot provide: {exc}"
+                ) from exc
+        fit = fit_least_squares(runs, lab.robot)
+        notes = []
+        if fit.cond_xy > 100.0:
+            notes.append(
+                f"position regressor poorly conditioned (cond = {fit.cond_xy:.0f}): the runs "
+                "say little about the wheel radii"
+            )
+        return CalibrationResult(
+            calibration=fit.calibration,
+            estimates={
+                "r_R/b": fit.c_right,
+                "r_L/b": fit.c_left,
+                "r_R": fit.r_right,
+                "r_L": fit.r_left,
+                "b": fit.wheelbase,
+                "cond_theta": fit.cond_theta,
+                "cond_xy": fit.cond_xy,
+                "rms_theta": fit.rms_theta,
+                "rms_xy": fit.rms_xy,
+            },
+            runs_used=lab.runs_used - runs0,
+            distance_used=lab.distance_used - dist0,
+            notes=notes,
+        )

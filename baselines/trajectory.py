@@ -1,0 +1,367 @@
+"""Trajectory optimisation: fit (b, D_R, D_L) to whole ground-truth trajectories (OptiOdom).
+
+R. B. Sousa, M. R. Petry, A. P. Moreira, P. Costa, *OptiOdom: a Generic Approach for Odometry
+Calibration of Wheeled Mobile Robots*, J. Intell. Robot. Syst. 105:39, 2022
+(github.com/sousarbarb/optiodom). Where UMBmark and its successors read a few numbers off the
+*end* of prescribed manoeuvres, OptiOdom replays the encoder counts of runs of *any* shape with
+candidate parameters and minimises the position error against the ground truth along the whole
+trajectory:
+
+    min over (b, D_R, D_L) of  Σ_runs Σ_k ‖p_odo,k(b, D_R, D_L) − p_gt,k‖²
+
+with p_odo the odometry of :mod:`odomgym.odometry` (midpoint integration, started at the first
+ground-truth pose, as the authors' ``simulateRobot_diff.m``) and k over the samples of each run
+(every sample by default; the authors sample every ``sampleDist`` = 0.5 m of travel, available
+as ``sample_distance``). The authors minimise it with iRprop−; here it is
+:func:`scipy.optimize.least_squares` (trust-region reflective) with the analytic Jacobian of
+:func:`replay_with_jacobian`, which converges in a handful of evaluations.
+
+**Parameters and units.** The fit works on the logarithms of the three effective parameters the
+odometry uses, x = (ln D_L/D_L0, ln D_R/D_R0, ln b/b0), starting at the calibration in place
+(x = 0); D_L, D_R are wheel diameters [m] and b the wheelbase [m]. The result is expressed as an
+absolute :class:`~odomgym.odometry.Calibration` (:meth:`Calibration.from_parameters`).
+
+**Frames.** Residuals are odometry − ground truth positions [m] in the ground-truth frame; the
+odometry starts at the first ground-truth pose, so the first sample's residual is zero and is
+left out. Headings enter only through the positions (as in the paper's cost).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.experiments import Experiment, Lab
+from odomgym.odometry import Calibration
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+__all__ = [
+    "PARAMETER_NAMES",
+    "Trajectory",
+    "TrajectoryFit",
+    "fit_trajectories",
+    "replay_with_jacobian",
+    "sample_indices",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+#: The order of the columns of :func:`replay_with_jacobian`'s Jacobian.
+PARAMETER_NAMES: tuple[str, str, str] = ("left_diameter", "right_diameter", "wheelbase")
+
+
+def replay_with_jacobian(
+    run: Run, robot: RobotSpec, calibration: Calibration | None = None
+) -> tuple[FloatArray, FloatArray]:
+    """Dead-reckon ``run`` like :func:`odomgym.runs.replay_odometry`, with the pose's
+    sensitivity to *relative* changes of the left diameter, right diameter and wheelbase.
+
+    With Δs_L = k_L·N_L, Δs_R = k_R·N_R (k the calibrated travel per count [m]), Δs = (Δs_R +
+    Δs_L)/2, Δθ = (Δs_R − Δs_L)/B and the midpoint heading μ_j = θ_j + Δθ_j/2, the derivatives
+    with respect to x = ln k_L, ln k_R, ln B are cumulative sums over the samples:
+
+        ∂θ_k/∂x = Σ_{j<k} ∂Δθ_j/∂x,      ∂μ_j/∂x = ∂θ_j/∂x + ½·∂Δθ_j/∂x
+        ∂x_k/∂x = Σ_{j<k} (∂Δs_j/∂x·cos μ_j − Δs_j·sin μ_j·∂μ_j/∂x)
+        ∂y_k/∂x = Σ_{j<k} (∂Δs_j/∂x·sin μ_j + Δs_j·cos μ_j·∂μ_j/∂x)
+
+    with ∂(Δs, Δθ)/∂ln k_L = (Δs_L/2, −Δs_L/B), ∂/∂ln k_R = (Δs_R/2, Δs_R/B) and
+    ∂/∂ln B = (0, −Δθ). A relative change of a diameter is a relative change of its k.
+
+    Returns:
+        ``(poses, jacobian)``: poses (T, 3) — x, y [m], θ [rad] — identical to
+        :func:`~odomgym.runs.replay_odometry`; jacobian (T, 3, 3) with
+        ``jacobian[k, i, j]`` = ∂pose_i/∂ln(parameter_j) at sample k, parameters in the order
+        of :data:`PARAMETER_NAMES` ([m] or [rad] per unit relative change).
+    """
+    cal = calibration if calibration is not None else Calibration()
+    per_tick = robot.metres_per_tick * cal.distance_scale
+    increments = np.diff(run.counts, axis=0).astype(float)
+    left = increments[:, 0] * (cal.c_left * per_tick)
+    right = increments[:, 1] * (cal.c_right * per_tick)
+    wheelbase = cal.wheelbase_scale * robot.wheelbase
+    ds = 0.5 * (left + right)
+    dtheta = (right - left) / wheelbase
+    x0, y0, th0 = run.true_pose[0]
+    theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
+    mid = theta[:-1] + 0.5 * dtheta
+    cos_mid, sin_mid = np.cos(mid), np.sin(mid)
+
+    d_ds = np.stack([0.5 * left, 0.5 * right, np.zeros_like(ds)], axis=1)  # (n, 3)
+    d_dtheta = np.stack([-left / wheelbase, right / wheelbase, -dtheta], axis=1)
+    d_theta_before = np.cumsum(d_dtheta, axis=0) - d_dtheta  # ∂θ_j, j = 0..n−1
+    d_mid = d_theta_before + 0.5 * d_dtheta
+    d_x = d_ds * cos_mid[:, None] - (ds * sin_mid)[:, None] * d_mid
+    d_y = d_ds * sin_mid[:, None] + (ds * cos_mid)[:, None] * d_mid
+
+    poses = np.empty_like(run.true_pose)
+    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * cos_mid)])
+    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * sin_mid)])
+    poses[:, 2] = theta
+    jacobian = np.zeros((len(run.time), 3, 3))
+    jacobian[1:, 0] = np.cumsum(d_x, axis=0)
+    jacobian[1:, 1] = np.cumsum(d_y, axis=0)
+    jacobian[1:, 2] = np.cumsum(d_dtheta, axis=0)
+    return poses, jacobian
+
+
+def sample_indices(run: Run, sample_distance: float | None = None) -> IntArray:
+    """The samples of ``run`` whose errors enter the cost (never the first, always the last).
+
+    ``None``: every sample. Otherwise the first sample after each further ``sample_distance``
+    metres of ground-truth travel (the authors' ``sampleDist``), and the last one; a run that
+    turns in place and never travels that far contributes its last sample only.
+    """
+    n = len(run.time)
+    if sample_distance is None:
+        return np.arange(1, n, dtype=np.intp)
+    if not sample_distance > 0.0:
+        raise ValueError(f"sample_distance must be > 0 [m], got {sample_distance}")
+    steps = np.hypot(*np.diff(run.true_pose[:, :2], axis=0).T)
+    travelled = np.concatenate([[0.0], np.cumsum(steps)])
+    marks = np.floor(travelled / sample_distance)
+    picked = np.flatnonzero(np.diff(marks) > 0) + 1
+    return np.unique(np.concatenate([picked, [n - 1]])).astype(np.intp)
+
+
+@dataclass(frozen=True)
+class TrajectoryFit:
+    """The result of :func:`fit_trajectories`.
+
+    Attributes:
+        calibration: the fitted calibration (absolute).
+        parameters: the fitted b, D_R, D_L [m] (keys ``wheelbase``, ``right_diameter``,
+            ``left_diameter``).
+        rms_before, rms_after: RMS position error over the residual samples [m], with the
+            starting and the fitted calibration.
+        relative_std: standard errors of the relative changes of (D_L, D_R, b) [-] from the
+            Gauss–Newton covariance s²·(JᵀJ)⁻¹, s² the residual variance: how well the runs
+            pinned each parameter down (ignores the correlation of successive samples' errors,
+            so optimistic).
+        condition: condition number of the Jacobian at the solution [-].
+        residuals: number of scalar residuals (2 per sample used).
+        evaluations: cost-function evaluations.
+    """
+
+    calibration: Calibration
+    parameters: dict[str, float]
+    rms_before: float
+    rms_after: float
+    relative_std: tuple[float, float, float]
+    condition: float
+    residuals: int
+    evaluations: int
+
+
+def fit_trajectories(
+    runs: Sequence[Run],
+    robot: RobotSpec,
+    initial: Calibration | None = None,
+    *,
+    sample_distance: float | None = None,
+    loss: str = "linear",
+) -> TrajectoryFit:
+    """Fit D_L, D_R and b to the ground-truth trajectories of ``runs`` (Sousa et al. 2022).
+
+    Args:
+        runs: runs of any shape (squares, straight runs, spins, free paths — each must move).
+        robot: the nominal robot (its ``metres_per_tick`` and ``wheelbase``).
+        initial: the starting calibration (default: uncalibrated).
+        sample_distance: use samples every so many metres of travel [m] (the authors: 0.5);
+            ``None`` (default): every sample.
+        loss: :func:`scipy.optimize.least_squares` loss (``"linear"``; ``"soft_l1"`` or
+            ``"huber"`` to down-weight outliers such as slip), with scale 5 mm.
+
+    Raises:
+        ValueError: no runs, or runs too short or motionless to tell the parameters apart
+            (a singular Jacobian).
+    """
+    if not runs:
+        raise ValueError("trajectory optimisation needs at least one run")
+    start = initial if initial is not None else Calibration()
+    base = start.parameters(robot)
+    chosen = [sample_indices(run, sample_distance) for run in runs]
+    truth = np.concatenate([run.true_pose[idx, :2] for run, idx in zip(runs, chosen, strict=True)])
+
+    def calibration_at(x: FloatArray) -> Calibration:
+        return Calibration.from_parameters(
+            robot,
+            wheelbase=base["wheelbase"] * math.exp(x[2]),
+            right_diameter=base["right_diameter"] * math.exp(x[1]),
+            left_diameter=base["left_diameter"] * math.exp(x[0]),
+        )
+
+    cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
+
+    def evaluate(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        key = np.asarray(x, dtype=float).tobytes()
+        if key not in cache:
+            cache.clear()
+            cal = calibration_at(x)
+            poses, jacs = [], []
+            for run, idx in zip(runs, chosen, strict=True):
+                pose, jac = replay_with_jacobian(run, robot, cal)
+                poses.append(pose[idx, :2])
+                jacs.append(jac[idx, :2, :])
+            residual = (np.concatenate(poses) - truth).reshape(-1)
+            cache[key] = (residual, np.concatenate(jacs).reshape(-1, 3))
+        return cache[key]
+
+    x0 = np.zeros(3)
+    r0, j0 = evaluate(x0)
+    if np.linalg.matrix_rank(j0) < 3:
+        raise ValueError(
+            "the runs do not tell D_L, D_R and b apart (singular Jacobian): they need both "
+            "straight travel and turning"
+        )
+    solution = least_squares(
+        lambda x: evaluate(x)[0],
+        x0,
+        jac=lambda x: evaluate(x)[1],
+        method="trf",
+        loss=loss,
+        f_scale=0.005,
+        x_scale=1e-3,
+        xtol=1e-12,
+        ftol=1e-12,
+        gtol=1e-12,
+    )
+    x = np.asarray(solution.x, dtype=float)
+    residual, jac = evaluate(x)
+    dof = max(residual.size - 3, 1)
+    variance = float(residual @ residual) / dof
+    covariance = variance * np.linalg.pinv(jac.T @ jac)
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    calibration = calibration_at(x)
+    return TrajectoryFit(
+        calibration=calibration,
+        parameters=calibration.parameters(robot),
+        rms_before=float(np.sqrt(np.mean(r0.reshape(-1, 2) ** 2) * 2.0)),
+        rms_after=float(np.sqrt(np.mean(residual.reshape(-1, 2) ** 2) * 2.0)),
+        relative_std=(float(std[0]), float(std[1]), float(std[2])),
+        condition=float(np.linalg.cond(jac)),
+        residuals=int(residual.size),
+        evaluations=int(solution.nfev),
+    )
+
+
+class Trajectory(Calibrator):
+    """OptiOdom-style trajectory optimisation (Sousa et al. 2022) over the runs it performs.
+
+    Default experiments: ``runs_per_direction`` cw and as many ccw UMBmark squares of side
+    ``side`` [m]. Squares suffice: the legs' lateral drift fixes D_R/D_L, the corners fix b
+    relative to the mean diameter, and the positions *along* the legs fix the mean diameter —
+    which return errors alone cannot see. ``straight_runs`` adds straight runs of
+    ``straight_distance`` [m] (more scale information; the default 0 keeps the budget of a
+    UMBmark run).
+
+    On a recorded session of other shapes (circles, free paths) call :func:`fit_trajectories`
+    on the session's runs directly: a :class:`~odomgym.experiments.Lab` is asked only for
+    squares, straight runs and spins.
+
+    Args:
+        side: square side L [m].
+        runs_per_direction: squares per direction.
+        straight_runs: additional straight runs (0: none).
+        straight_distance: their length [m].
+        sample_distance: see :func:`fit_trajectories` [m].
+        loss: see :func:`fit_trajectories`.
+    """
+
+    name: ClassVar[str] = "trajectory"
+    reference: ClassVar[str] = (
+        "R. B. Sousa, M. R. Petry, A. P. Moreira, P. Costa, OptiOdom: a Generic Approach for "
+        "Odometry Calibration of Wheeled Mobile Robots, J. Intell. Robot. Syst. 105:39, 2022"
+    )
+
+    def __init__(
+        self,
+        side: float = 4.0,
+        runs_per_direction: int = 3,
+        *,
+        straight_runs: int = 0,
+        straight_distance: float = 3.0,
+        sample_distance: float | None = None,
+        loss: str = "linear",
+    ) -> None:
+        if not side > 0.0 or runs_per_direction < 1:
+            raise ValueError(
+                f"need side > 0 and runs_per_direction >= 1, got {side}, {runs_per_direction}"
+            )
+        if straight_runs < 0 or not straight_distance > 0.0:
+            raise ValueError(
+                f"need straight_runs >= 0 and straight_distance > 0, got {straight_runs}, "
+                f"{straight_distance}"
+            )
+        self.side = side
+        self.runs_per_direction = runs_per_direction
+        self.straight_runs = straight_runs
+        self.straight_distance = straight_distance
+        self.sample_distance = sample_distance
+        self.loss = loss
+
+    def experiments(self) -> list[Experiment]:
+        """The cw and ccw squares, then the optional straight runs."""
+        out = [
+            Experiment("square", "cw", self.runs_per_direction, self.side),
+            Experiment("square", "ccw", self.runs_per_direction, self.side),
+        ]
+        if self.straight_runs:
+            out.append(Experiment("straight", None, self.straight_runs, self.straight_distance))
+        return out
+
+    def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
+        """Perform the experiments with ``initial`` active and fit (b, D_R, D_L) to them."""
+        runs0, dist0 = lab.runs_used, lab.distance_used
+        calibration = initial if initial is not None else Calibration()
+        runs: list[Run] = []
+        for experiment in self.experiments():
+            try:
+                runs.extend(lab.perform(experiment, calibration))
+            except LookupError as exc:
+                raise LookupError(
+                    f"trajectory optimisation cannot run in this lab: it needs "
+                    f"{experiment.runs} {experiment.direction or ''} {experiment.kind} runs "
+                    f"of size {experiment.size:g} ({exc}); for recorded runs of other shapes "
+                    "call fit_trajectories(runs, robot) directly"
+                ) from exc
+        fit = fit_trajectories(
+            runs,
+            lab.robot,
+            calibration,
+            sample_distance=self.sample_distance,
+            loss=self.loss,
+        )
+        estimates = {
+            "b": fit.parameters["wheelbase"],
+            "D_R": fit.parameters["right_diameter"],
+            "D_L": fit.parameters["left_diameter"],
+            "E_d": fit.calibration.e_d,
+            "E_b": fit.calibration.wheelbase_scale,
+            "E_s": fit.calibration.distance_scale,
+            "rms_before": fit.rms_before,
+            "rms_after": fit.rms_after,
+            "std_D_L": fit.relative_std[0] * fit.parameters["left_diameter"],
+            "std_D_R": fit.relative_std[1] * fit.parameters["right_diameter"],
+            "std_b": fit.relative_std[2] * fit.parameters["wheelbase"],
+            "condition": fit.condition,
+            "evaluations": float(fit.evaluations),
+        }
+        return CalibrationResult(
+            calibration=fit.calibration,
+            estimates=estimates,
+            runs_used=lab.runs_used - runs0,
+            distance_used=lab.distance_used - dist0,
+            notes=[
+                f"fitted {fit.residuals} position residuals of {len(runs)} runs: RMS "
+                f"{fit.rms_before * 1e3:.1f} mm → {fit.rms_after * 1e3:.1f} mm"
+            ],
+        )
