@@ -5,7 +5,6 @@ from __future__ import annotations
 from typing import Any, Literal
 
 from odomgym.envs.base import RewardWeights, RouteEnv
-
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
 from odomgym.paths import Route, square_route

@@ -17,8 +17,8 @@ from typing import Any, Literal
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
-from odomgym.envs.base import RewardWeights, action_space, observation_space, resolve_specs
 
+from odomgym.envs.base import RewardWeights, action_space, observation_space, resolve_specs
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
 from odomgym.paths import Route, square_route, straight_route
