@@ -25,12 +25,12 @@ from odomgym.data import RecordedLab, Session
 from odomgym.evaluation import EvaluationMeasures, evaluate
 from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FloorSpec
-from odomgym.lab import SimLab, simulate_runs
+from odomgym.lab import SimLab, random_start_poses, simulate_runs
 from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration, wrap_angle
+from odomgym.odometry import Calibration
 from odomgym.paths import square_route
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
+from odomgym.runs import Run, end_error
 
 __all__ = [
     "SessionReport",
@@ -129,10 +129,16 @@ def validation_errors(
     side: float = 4.0,
     runs: int = 5,
     rng: np.random.Generator | None = None,
+    start_region: float | None = None,
 ) -> dict[str, FloatArray]:
-    """True return errors (true − odometry, start frame) of ``runs`` fresh squares per direction."""
+    """True return errors (true − odometry, start frame) of ``runs`` fresh squares per direction
+    (started at random poses within ``start_region`` if given; see :class:`SimLab`)."""
     errors: dict[str, FloatArray] = {}
     for direction in ("cw", "ccw"):
+        starts = None
+        if start_region is not None:
+            assert rng is not None, "random start poses need an rng"
+            starts = random_start_poses(rng, runs, start_region)
         sim, odom = simulate_runs(
             robot,
             floor,
@@ -141,10 +147,11 @@ def validation_errors(
             rng=rng,
             repeats=runs,
             direction=direction,
+            start_poses=starts,
         )
-        rows = np.array([run.true_pose[-1] - end for run, end in zip(sim, odom, strict=True)])
-        rows[:, 2] = wrap_angle(rows[:, 2])
-        errors[direction] = rows
+        errors[direction] = np.array(
+            [end_error(run, end) for run, end in zip(sim, odom, strict=True)]
+        )
     return errors
 
 
@@ -157,6 +164,7 @@ def calibrate_in_simulation(
     sensor: SensorAccuracy | None = None,
     validation_side: float = 4.0,
     validation_runs: int = 5,
+    start_region: float | None = None,
 ) -> SimulationReport:
     """Calibrate the hidden ``robot`` in simulation and validate on fresh squares.
 
@@ -167,12 +175,18 @@ def calibrate_in_simulation(
     calibration_rng, validation_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2)
     )
-    lab = SimLab(robot, floor, sensor=sensor, rng=calibration_rng)
+    lab = SimLab(robot, floor, sensor=sensor, rng=calibration_rng, start_region=start_region)
     start = time.perf_counter()
     result = calibrator.calibrate(lab)
     wall = time.perf_counter() - start
     before = validation_errors(
-        robot, floor, Calibration(), side=validation_side, runs=validation_runs, rng=validation_rng
+        robot,
+        floor,
+        Calibration(),
+        side=validation_side,
+        runs=validation_runs,
+        rng=validation_rng,
+        start_region=start_region,
     )
     after = validation_errors(
         robot,
@@ -181,6 +195,7 @@ def calibrate_in_simulation(
         side=validation_side,
         runs=validation_runs,
         rng=validation_rng,
+        start_region=start_region,
     )
     return SimulationReport(
         method=calibrator.name,

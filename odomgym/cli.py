@@ -24,7 +24,7 @@ from odomgym.floor import FloorSpec, load_floor
 from odomgym.io import atomic_write_text
 from odomgym.lab import simulate_runs
 from odomgym.metrics import summarize_umbmark
-from odomgym.odometry import Calibration, load_calibration, wrap_angle
+from odomgym.odometry import Calibration, load_calibration
 from odomgym.paths import Route, square_route, straight_route
 from odomgym.report import (
     format_return_errors,
@@ -34,6 +34,7 @@ from odomgym.report import (
     to_json,
 )
 from odomgym.robot import RobotSpec, load_robot
+from odomgym.runs import end_error
 
 __all__ = ["main"]
 
@@ -133,8 +134,7 @@ def _command_run(args: argparse.Namespace) -> int:
         )
         for run, odom in zip(runs, odom_end, strict=True):
             number += 1
-            error = run.true_pose[-1] - odom
-            error[2] = float(wrap_angle(error[2]))
+            error = end_error(run, odom)
             rows.append((number, direction, error))
             if direction in errors_by_direction:
                 errors_by_direction[direction].append(error)

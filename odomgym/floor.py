@@ -18,15 +18,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from odomgym._jit import kernel
 from odomgym.errors import SpecError, locate_key, require_finite, require_positive, require_range
 from odomgym.io import atomic_write_text
 
@@ -194,6 +195,38 @@ class FloorSpec:
 
         atomic_write_text(Path(path), tomli_w.dumps({"floor": self.to_dict()}))
 
+    @classmethod
+    def scattered_cables(
+        cls,
+        rng: np.random.Generator,
+        *,
+        half_size: float = 15.0,
+        per_square_metre: float = 0.5,
+        diameter: float = 0.010,
+        length: float = 0.3,
+        friction: float = 0.8,
+        roughness: float = 0.0,
+        name: str = "scattered-cables",
+    ) -> FloorSpec:
+        """A floor strewn with cables at uniformly random positions and orientations.
+
+        Covers [−half_size, half_size]² [m]. A wheel path crosses on average
+        ``per_square_metre`` · ``length`` · 2/π cables per metre (Buffon), e.g. 0.1 per metre
+        with the defaults. Robots started at random poses on such a floor meet cables at random,
+        which makes bumps a non-systematic error (the fixed ``bumpy`` floor, where every run
+        crosses the same cables, makes them systematic).
+        """
+        require_positive("half_size", half_size)
+        require_positive("per_square_metre", per_square_metre)
+        count = int(round(per_square_metre * (2.0 * half_size) ** 2))
+        xy = rng.uniform(-half_size, half_size, size=(count, 2))
+        angles = rng.uniform(0.0, math.pi, size=count)
+        bumps = tuple(
+            CableBump(x=float(x), y=float(y), angle=float(a), diameter=diameter, length=length)
+            for (x, y), a in zip(xy, angles, strict=True)
+        )
+        return cls(friction=friction, bumps=bumps, roughness=roughness, name=name)
+
     def with_friction(self, friction: float) -> FloorSpec:
         """A copy with another base friction coefficient."""
         return dataclasses.replace(self, friction=friction)
@@ -258,36 +291,132 @@ def bump_extra_rotation(wheel_radius: float, cable_diameter: float) -> float:
     return float(2.0 * big_r * psi0 - 2.0 * half_width)
 
 
-def cable_advance(
-    offset: FloatArray, rim_travel: FloatArray, wheel_radius: FloatArray, cable_radius: FloatArray
-) -> FloatArray:
+@kernel
+def cable_advance_scalar(
+    offset: float, rim_travel: float, wheel_radius: float, cable_radius: float
+) -> float:
     """Horizontal advance of a wheel centre across a cable, for a given rim travel [m].
 
     ``offset`` is the signed horizontal distance of the wheel centre from the cable axis
     (perpendicular to the axis) at the start of the step, ``rim_travel`` the signed rim travel
     in the same direction. The map from horizontal position x to accumulated rim travel s(x) is
-    x on the flat, −w + R·(asin(x/R) + ψ₀) over the cable, and x + 2Rψ₀ − 2w beyond it; the
-    advance is s⁻¹(s(x₀) + Δs) − x₀, exact for any step size and either direction of travel.
-    All arguments broadcast.
+    x on the flat, −w + R·(asin(x/R) + ψ₀) over the cable, and x + 2Rψ₀ − 2w beyond it (R = r + ρ,
+    w = 2√(rρ), ψ₀ = asin(w/R)); the advance is s⁻¹(s(x₀) + Δs) − x₀, exact for any step size
+    and either direction of travel.
     """
-    big_r, half_width, psi0 = _profile(wheel_radius, cable_radius)
+    big_r = wheel_radius + cable_radius
+    half_width = 2.0 * math.sqrt(wheel_radius * cable_radius)
+    psi0 = math.asin(half_width / big_r)
     excess = 2.0 * big_r * psi0 - 2.0 * half_width
-    x0 = np.asarray(offset, dtype=float)
-    ratio = np.clip(x0 / big_r, -1.0, 1.0)
-    s0 = np.where(
-        x0 <= -half_width,
-        x0,
-        np.where(x0 >= half_width, x0 + excess, -half_width + big_r * (np.arcsin(ratio) + psi0)),
-    )
+    x0 = offset
+    if x0 <= -half_width:
+        s0 = x0
+    elif x0 >= half_width:
+        s0 = x0 + excess
+    else:
+        s0 = -half_width + big_r * (math.asin(min(max(x0 / big_r, -1.0), 1.0)) + psi0)
     s1 = s0 + rim_travel
-    s_top = half_width + excess  # s at x = +w
-    angle = np.clip((s1 + half_width) / big_r - psi0, -psi0, psi0)
-    x1 = np.where(
-        s1 <= -half_width,
-        s1,
-        np.where(s1 >= s_top, s1 - excess, big_r * np.sin(angle)),
+    if s1 <= -half_width:
+        x1 = s1
+    elif s1 >= half_width + excess:
+        x1 = s1 - excess
+    else:
+        x1 = big_r * math.sin(min(max((s1 + half_width) / big_r - psi0, -psi0), psi0))
+    return x1 - x0
+
+
+@kernel
+def _cable_advance_many(
+    offset: FloatArray, rim_travel: FloatArray, wheel_radius: FloatArray, cable_radius: FloatArray
+) -> FloatArray:
+    out = np.empty(offset.size)
+    for k in range(offset.size):
+        out[k] = cable_advance_scalar(offset[k], rim_travel[k], wheel_radius[k], cable_radius[k])
+    return out
+
+
+def cable_advance(
+    offset: ArrayLike, rim_travel: ArrayLike, wheel_radius: ArrayLike, cable_radius: ArrayLike
+) -> FloatArray:
+    """:func:`cable_advance_scalar` over broadcast arrays (same units, same result shape)."""
+    arrays = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (offset, rim_travel, wheel_radius, cable_radius))
     )
-    return np.asarray(x1 - x0, dtype=float)
+    shape = arrays[0].shape
+    flat = [np.ascontiguousarray(a).ravel() for a in arrays]
+    return np.asarray(_cable_advance_many(*flat)).reshape(shape)
+
+
+@dataclass(frozen=True)
+class CableGrid:
+    """A uniform grid over the floor listing, per cell, the cables a wheel there may touch.
+
+    Why: a floor can hold thousands of cables, and a wheel meets at most one or two at a time.
+    Each cable is entered in every cell its reach (half its length along the axis; the
+    wheel-cable contact half-width 2√(rρ) plus one step's travel across) overlaps, so a wheel only tests the cables of
+    its own cell. Arrays are CSR-style: cell ``c`` lists ``items[starts[c]:starts[c + 1]]``.
+    """
+
+    cable_x: FloatArray
+    cable_y: FloatArray
+    axis_x: FloatArray
+    axis_y: FloatArray
+    half_length: FloatArray
+    radius: FloatArray
+    origin_x: float
+    origin_y: float
+    cell: float
+    nx: int
+    ny: int
+    starts: NDArray[np.int64]
+    items: NDArray[np.int64]
+
+    @classmethod
+    def build(cls, floor: FloorSpec, max_wheel_radius: float, max_step: float) -> CableGrid:
+        """Index ``floor``'s cables for wheels of radius up to ``max_wheel_radius`` [m] that
+        travel at most ``max_step`` [m] per physics step (a step starting outside a cable's
+        contact zone may end inside it, so the reach includes one step)."""
+        cx, cy, ax, ay, half_len, radius, _ = floor.bump_arrays()
+        if cx.size == 0:
+            empty = np.zeros(0)
+            return cls(
+                empty,
+                empty,
+                empty,
+                empty,
+                empty,
+                empty,
+                0.0,
+                0.0,
+                1.0,
+                0,
+                0,
+                np.zeros(1, dtype=np.int64),
+                np.zeros(0, dtype=np.int64),
+            )
+        reach = 2.0 * np.sqrt(max_wheel_radius * radius) + max_step + 1e-6  # [m]
+        extent_x = np.abs(ax) * half_len + np.abs(ay) * reach
+        extent_y = np.abs(ay) * half_len + np.abs(ax) * reach
+        cell = float(max(0.25, 2.0 * float(np.max(half_len))))
+        origin_x = float(np.min(cx - extent_x)) - cell
+        origin_y = float(np.min(cy - extent_y)) - cell
+        nx = int(math.ceil((float(np.max(cx + extent_x)) - origin_x) / cell)) + 1
+        ny = int(math.ceil((float(np.max(cy + extent_y)) - origin_y) / cell)) + 1
+        buckets: list[list[int]] = [[] for _ in range(nx * ny)]
+        for m in range(cx.size):
+            x_lo = int((cx[m] - extent_x[m] - origin_x) // cell)
+            x_hi = int((cx[m] + extent_x[m] - origin_x) // cell)
+            y_lo = int((cy[m] - extent_y[m] - origin_y) // cell)
+            y_hi = int((cy[m] + extent_y[m] - origin_y) // cell)
+            for gy in range(y_lo, y_hi + 1):
+                for gx in range(x_lo, x_hi + 1):
+                    buckets[gy * nx + gx].append(m)
+        starts = np.zeros(nx * ny + 1, dtype=np.int64)
+        starts[1:] = np.cumsum([len(b) for b in buckets])
+        items = np.array([m for b in buckets for m in b], dtype=np.int64)
+        return cls(
+            cx, cy, ax, ay, half_len, radius, origin_x, origin_y, cell, nx, ny, starts, items
+        )
 
 
 def load_floor(spec: str | Path) -> FloorSpec:

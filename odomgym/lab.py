@@ -28,7 +28,7 @@ from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 from odomgym.trial import Trial
 
-__all__ = ["SimLab", "experiment_route", "simulate_runs"]
+__all__ = ["SimLab", "experiment_route", "measure", "random_start_poses", "simulate_runs"]
 
 FloatArray = NDArray[np.float64]
 
@@ -58,6 +58,7 @@ def simulate_runs(
     kind: str = "square",
     direction: str | None = None,
     progress: Callable[[float], None] | None = None,
+    start_poses: FloatArray | None = None,
 ) -> tuple[list[Run], FloatArray]:
     """Drive ``route`` with the reference driver; return the runs and the robots' own odometry
     end poses (K, 3).
@@ -76,13 +77,19 @@ def simulate_runs(
             route time); raises RuntimeError naming the robots that did not finish.
         kind, direction: labels stored in the runs.
         progress: called with the completed fraction (0..1) now and then, for progress bars.
+        start_poses: where each robot starts on the floor (K, 3) [m, m, rad] (default: the
+            origin). The route is driven in each robot's start frame.
 
     Returns:
-        ``(runs, odometry_end_poses)``. Runs hold the *true* poses; apply a sensor model
-        (:func:`measure`) before showing them to a calibrator.
+        ``(runs, odometry_end_poses)``. Runs hold the *true* poses in the floor's frame; the
+        odometry end poses are in each run's start frame (compare them with
+        :func:`odomgym.runs.end_error`). Apply a sensor model (:func:`measure`) before showing
+        runs to a calibrator.
     """
     specs = [robots] * repeats if isinstance(robots, RobotSpec) else list(robots)
-    trial = Trial(specs, floor, route, calibration=calibration, dt=dt, rng=rng)
+    trial = Trial(
+        specs, floor, route, calibration=calibration, dt=dt, rng=rng, start_poses=start_poses
+    )
     driver = ReferenceDriver(specs[0], cruise_speed=cruise_speed)
     nominal_time = route.wheel_travel(specs[0].wheelbase) / cruise_speed
     limit = max_time if max_time is not None else 20.0 * nominal_time + 60.0
@@ -142,6 +149,17 @@ def simulate_runs(
     return runs, trial.odom_pose.copy()
 
 
+def random_start_poses(
+    rng: np.random.Generator, count: int, region: float | None
+) -> FloatArray | None:
+    """``count`` poses uniform in [−region, region]² [m] × [−π, π) [rad], or None."""
+    if region is None:
+        return None
+    xy = rng.uniform(-region, region, size=(count, 2))
+    heading = rng.uniform(-np.pi, np.pi, size=(count, 1))
+    return np.hstack([xy, heading])
+
+
 def _route_size(route: Route) -> float:
     drives = [s.length for s in route.segments if s.kind == "drive"]
     return drives[0] if drives else route.segments[0].length
@@ -180,8 +198,12 @@ class SimLab:
             true ones stay hidden inside the simulation).
         floor: the lab's floor.
         sensor: accuracy of the ground-truth measurement shown to calibrators.
-        rng: randomness for floor roughness and sensor noise.
+        rng: randomness for floor roughness, sensor noise and start poses.
         cruise_speed: the reference driver's leg speed [m/s].
+        start_region: if given, every run starts at a uniformly random position in
+            [−start_region, start_region]² [m] with a uniformly random heading, so that floor
+            features (cables) are met at random, as in a lab where the robot does not start on
+            the same spot of floor each time; default: every run starts at the origin.
     """
 
     def __init__(
@@ -192,8 +214,10 @@ class SimLab:
         sensor: SensorAccuracy | None = None,
         rng: np.random.Generator | None = None,
         cruise_speed: float = 0.2,
+        start_region: float | None = None,
     ) -> None:
         self._robot = robot
+        self.start_region = start_region
         self.floor = floor if floor is not None else FloorSpec()
         self.sensor = sensor if sensor is not None else SensorAccuracy()
         self.rng = rng if rng is not None else np.random.default_rng(0)
@@ -228,6 +252,7 @@ class SimLab:
             cruise_speed=self.cruise_speed,
             kind=experiment.kind,
             direction=experiment.direction,
+            start_poses=random_start_poses(self.rng, experiment.runs, self.start_region),
         )
         self._runs_used += len(runs)
         self._distance_used += sum(run.distance for run in runs)

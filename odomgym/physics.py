@@ -41,7 +41,7 @@ import pymunk.batch as pbatch
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.floor import FloorSpec, cable_advance
+from odomgym.floor import CableGrid, FloorSpec, cable_advance_scalar
 from odomgym.robot import RobotSpec
 
 __all__ = ["GRAVITY", "World"]
@@ -129,12 +129,9 @@ class World:
         )
         self._h = self.dt / self.substeps
         self.track_slip = track_slip
-        cx, cy, ax, ay, half_len, radius, _ = self.floor.bump_arrays()
-        self._bump_centre = cx + 1j * cy  # (M,) complex positions [m]
-        self._bump_axis = ax + 1j * ay  # (M,) unit axis directions
-        self._bump_half_len = half_len
-        self._bump_radius = radius
-        self._has_bumps = cx.size > 0
+        self._has_bumps = bool(self.floor.bumps)
+        max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
+        self._bump_grid = CableGrid.build(self.floor, float(self.true_radius.max()), 1.5 * max_step)
         self._has_patches = bool(self.floor.patches)
         self._rough = self.floor.roughness > 0.0
         self._modifies_ground = self._has_bumps or self._has_patches or self._rough
@@ -315,17 +312,31 @@ class World:
         h: float,
     ) -> NDArray[np.complex128]:
         """Reduce each wheel's horizontal advance across any cable it is rolling over."""
-        rel = contact[:, :, None] - self._bump_centre  # (N, 2, M)
-        along = (rel * np.conj(self._bump_axis)).real
-        on_cable = np.abs(along) <= self._bump_half_len
-        if not on_cable.any():
-            return ground_v
-        normal = 1j * self._bump_axis
-        offset = (rel * np.conj(normal)).real
-        travel_n = rim_travel[:, :, None] * (heading[:, :, None] * np.conj(normal)).real
-        advance = cable_advance(offset, travel_n, self.true_radius[:, :, None], self._bump_radius)
-        deficit = np.where(on_cable, travel_n - advance, 0.0)  # (N, 2, M) [m]
-        return np.asarray(ground_v - np.sum(deficit * normal, axis=2) / h)
+        deficit = np.zeros((self.n, 2, 2))  # horizontal travel lost to cables, (x, y) [m]
+        grid = self._bump_grid
+        _cable_deficits(
+            np.ascontiguousarray(contact.real),
+            np.ascontiguousarray(contact.imag),
+            np.ascontiguousarray(np.broadcast_to(heading.real, (self.n, 2))),
+            np.ascontiguousarray(np.broadcast_to(heading.imag, (self.n, 2))),
+            np.ascontiguousarray(rim_travel),
+            self.true_radius,
+            grid.cable_x,
+            grid.cable_y,
+            grid.axis_x,
+            grid.axis_y,
+            grid.half_length,
+            grid.radius,
+            grid.origin_x,
+            grid.origin_y,
+            grid.cell,
+            grid.nx,
+            grid.ny,
+            grid.starts,
+            grid.items,
+            deficit,
+        )
+        return np.asarray(ground_v - (deficit[:, :, 0] + 1j * deficit[:, :, 1]) / h)
 
     def _set_friction(self, mu: FloatArray) -> None:
         changed = np.argwhere(mu != self._friction)
@@ -428,3 +439,55 @@ def _drive_wheels(
             ground_v[i, w, 0] = speed * cos_t
             ground_v[i, w, 1] = speed * sin_t
     return True
+
+
+@kernel
+def _cable_deficits(
+    wx: FloatArray,
+    wy: FloatArray,
+    hx: FloatArray,
+    hy: FloatArray,
+    rim_travel: FloatArray,
+    wheel_radius: FloatArray,
+    cable_x: FloatArray,
+    cable_y: FloatArray,
+    axis_x: FloatArray,
+    axis_y: FloatArray,
+    half_length: FloatArray,
+    cable_radius: FloatArray,
+    origin_x: float,
+    origin_y: float,
+    cell: float,
+    nx: int,
+    ny: int,
+    starts: IntArray,
+    items: IntArray,
+    deficit: FloatArray,
+) -> None:
+    """Per wheel, the horizontal travel lost to the cables in its grid cell (N, 2, 2) [m].
+
+    The wheel's rim travel along its heading has a component across each cable (along the
+    cable's normal); :func:`odomgym.floor.cable_advance_scalar` maps it to the horizontal
+    advance, and the difference is removed from the contact's ground velocity.
+    """
+    for i in range(wx.shape[0]):
+        for w in range(2):
+            gx = int(math.floor((wx[i, w] - origin_x) / cell))
+            gy = int(math.floor((wy[i, w] - origin_y) / cell))
+            if gx < 0 or gy < 0 or gx >= nx or gy >= ny:
+                continue
+            c = gy * nx + gx
+            for k in range(starts[c], starts[c + 1]):
+                m = items[k]
+                rel_x = wx[i, w] - cable_x[m]
+                rel_y = wy[i, w] - cable_y[m]
+                if abs(rel_x * axis_x[m] + rel_y * axis_y[m]) > half_length[m]:
+                    continue
+                normal_x, normal_y = -axis_y[m], axis_x[m]
+                offset = rel_x * normal_x + rel_y * normal_y
+                across = rim_travel[i, w] * (hx[i, w] * normal_x + hy[i, w] * normal_y)
+                lost = across - cable_advance_scalar(
+                    offset, across, wheel_radius[i, w], cable_radius[m]
+                )
+                deficit[i, w, 0] += lost * normal_x
+                deficit[i, w, 1] += lost * normal_y

@@ -19,12 +19,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-import tomllib
 
 from odomgym.errors import SpecError, locate_key, require_positive, require_range
 from odomgym.io import atomic_write_text

@@ -23,7 +23,14 @@ from numpy.typing import NDArray
 from odomgym.odometry import Calibration, wrap_angle
 from odomgym.robot import RobotSpec
 
-__all__ = ["Direction", "Run", "replay_odometry", "return_error", "to_start_frame"]
+__all__ = [
+    "Direction",
+    "Run",
+    "end_error",
+    "replay_odometry",
+    "return_error",
+    "to_start_frame",
+]
 
 FloatArray = NDArray[np.float64]
 Direction = Literal["cw", "ccw"]
@@ -123,5 +130,17 @@ def return_error(
     if frame == "start":
         ends = to_start_frame(run, ends)
     error: FloatArray = ends[0] - ends[1]
+    error[2] = float(wrap_angle(error[2]))
+    return error
+
+
+def end_error(run: Run, odometry_end: FloatArray) -> FloatArray:
+    """True − odometry at the end of ``run`` in its start frame (3,), heading wrapped.
+
+    ``odometry_end`` is the robot's own odometry pose, which lives in the start frame (the
+    odometry starts at zero where the robot starts), e.g. as returned by
+    :func:`odomgym.lab.simulate_runs`.
+    """
+    error: FloatArray = to_start_frame(run, run.true_pose[-1:])[0] - np.asarray(odometry_end)
     error[2] = float(wrap_angle(error[2]))
     return error

@@ -74,11 +74,22 @@ class Trial:
         substeps: int = 1,
         rng: np.random.Generator | None = None,
         track_slip: bool = False,
+        start_poses: FloatArray | None = None,
     ) -> None:
         specs = [robots] if isinstance(robots, RobotSpec) else list(robots)
         self.n = len(specs)
         self.robots = tuple(specs)
         self.world = World(specs, floor, dt=dt, substeps=substeps, rng=rng, track_slip=track_slip)
+        # Where each robot starts on the floor (world frame). The odometry and the route live in
+        # each robot's start frame, so the same route can be driven anywhere on a floor.
+        self.start_poses = (
+            np.zeros((self.n, 3)) if start_poses is None else np.array(start_poses, dtype=float)
+        )
+        if self.start_poses.shape != (self.n, 3) or not np.isfinite(self.start_poses).all():
+            raise ValueError(f"start_poses must be a finite array of shape ({self.n}, 3)")
+        self._offset = bool(np.any(self.start_poses != 0.0))
+        if self._offset:
+            self.world.reset(self.start_poses)
         self.odometry = Odometry(specs, calibration)
         route_list = [routes] * self.n if isinstance(routes, Route) else list(routes)
         if len(route_list) != self.n:
@@ -106,8 +117,10 @@ class Trial:
         indices: NDArray[np.intp] | None = None,
         routes: Sequence[Route] | None = None,
     ) -> None:
-        """Put robots (all, or ``indices``) back at the origin, at rest, at the route start."""
-        self.world.reset(indices=indices)
+        """Put robots (all, or ``indices``) back at their start poses, at rest, at the route
+        start."""
+        chosen_rows = np.arange(self.n) if indices is None else np.asarray(indices)
+        self.world.reset(self.start_poses[chosen_rows], indices=indices)
         self.odometry.reset(indices=indices)
         if routes is not None:
             self.progress.set_routes(list(routes), indices)
@@ -151,8 +164,18 @@ class Trial:
         """Odometry poses (N, 3) [m, m, rad]."""
         return self.odometry.pose
 
+    def true_pose_in_start_frame(self) -> FloatArray:
+        """Ground-truth poses (N, 3) in each robot's start frame — the odometry's frame."""
+        if not self._offset:
+            return self.world.pose.copy()
+        start = self.start_poses
+        c, s = np.cos(start[:, 2]), np.sin(start[:, 2])
+        dx = self.world.pose[:, 0] - start[:, 0]
+        dy = self.world.pose[:, 1] - start[:, 1]
+        return np.stack([c * dx + s * dy, -s * dx + c * dy, self.world.pose[:, 2] - start[:, 2]], 1)
+
     def pose_error(self) -> FloatArray:
-        """True − odometry (N, 3), heading wrapped to [−π, π) [m, m, rad]."""
-        error = self.world.pose - self.odometry.pose
+        """True − odometry (N, 3) in the start frame, heading wrapped to [−π, π) [m, m, rad]."""
+        error = self.true_pose_in_start_frame() - self.odometry.pose
         error[:, 2] = wrap_angle(error[:, 2])
         return error
