@@ -39,6 +39,7 @@ __all__ = [
     "calibrate_on_session",
     "make_calibrator",
     "validation_errors",
+    "validation_errors_many",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -121,6 +122,46 @@ class SimulationReport:
         }
 
 
+def validation_errors_many(
+    robot: RobotSpec,
+    floor: FloorSpec,
+    calibrations: Sequence[Calibration],
+    *,
+    side: float = 4.0,
+    runs: int = 5,
+    rng: np.random.Generator | None = None,
+    start_region: float | None = None,
+) -> list[dict[str, FloatArray]]:
+    """True return errors of fresh squares for several calibrations of one robot, simulated in
+    one batch per direction (every calibration drives from the same start poses).
+
+    Returns one dict per calibration: ``"cw"``/``"ccw"`` → (runs, 3) errors (true − odometry,
+    start frame, heading wrapped).
+    """
+    results: list[dict[str, FloatArray]] = [{} for _ in calibrations]
+    count = len(calibrations)
+    for direction in ("cw", "ccw"):
+        starts = None
+        if start_region is not None:
+            assert rng is not None, "random start poses need an rng"
+            one_set = random_start_poses(rng, runs, start_region)
+            assert one_set is not None
+            starts = np.tile(one_set, (count, 1))
+        sim, odom = simulate_runs(
+            [robot] * (runs * count),
+            floor,
+            square_route(side, direction),
+            calibration=[c for c in calibrations for _ in range(runs)],
+            rng=rng,
+            direction=direction,
+            start_poses=starts,
+        )
+        errors = np.array([end_error(run, end) for run, end in zip(sim, odom, strict=True)])
+        for k in range(count):
+            results[k][direction] = errors[k * runs : (k + 1) * runs]
+    return results
+
+
 def validation_errors(
     robot: RobotSpec,
     floor: FloorSpec,
@@ -133,26 +174,9 @@ def validation_errors(
 ) -> dict[str, FloatArray]:
     """True return errors (true − odometry, start frame) of ``runs`` fresh squares per direction
     (started at random poses within ``start_region`` if given; see :class:`SimLab`)."""
-    errors: dict[str, FloatArray] = {}
-    for direction in ("cw", "ccw"):
-        starts = None
-        if start_region is not None:
-            assert rng is not None, "random start poses need an rng"
-            starts = random_start_poses(rng, runs, start_region)
-        sim, odom = simulate_runs(
-            robot,
-            floor,
-            square_route(side, direction),
-            calibration=calibration,
-            rng=rng,
-            repeats=runs,
-            direction=direction,
-            start_poses=starts,
-        )
-        errors[direction] = np.array(
-            [end_error(run, end) for run, end in zip(sim, odom, strict=True)]
-        )
-    return errors
+    return validation_errors_many(
+        robot, floor, [calibration], side=side, runs=runs, rng=rng, start_region=start_region
+    )[0]
 
 
 def calibrate_in_simulation(
@@ -166,7 +190,8 @@ def calibrate_in_simulation(
     validation_runs: int = 5,
     start_region: float | None = None,
 ) -> SimulationReport:
-    """Calibrate the hidden ``robot`` in simulation and validate on fresh squares.
+    """Calibrate the hidden ``robot`` in simulation and validate on fresh squares
+    (``validation_runs = 0`` skips the validation: E_max,syst are then NaN).
 
     Randomness (floor roughness, sensor noise) flows from ``numpy.random.default_rng(seed)``:
     one stream for the calibration experiments, an independent one for validation.
@@ -179,24 +204,21 @@ def calibrate_in_simulation(
     start = time.perf_counter()
     result = calibrator.calibrate(lab)
     wall = time.perf_counter() - start
-    before = validation_errors(
-        robot,
-        floor,
-        Calibration(),
-        side=validation_side,
-        runs=validation_runs,
-        rng=validation_rng,
-        start_region=start_region,
-    )
-    after = validation_errors(
-        robot,
-        floor,
-        result.calibration,
-        side=validation_side,
-        runs=validation_runs,
-        rng=validation_rng,
-        start_region=start_region,
-    )
+    before: dict[str, FloatArray] = {}
+    after: dict[str, FloatArray] = {}
+    e_before = e_after = float("nan")
+    if validation_runs > 0:
+        before, after = validation_errors_many(
+            robot,
+            floor,
+            [Calibration(), result.calibration],
+            side=validation_side,
+            runs=validation_runs,
+            rng=validation_rng,
+            start_region=start_region,
+        )
+        e_before = e_max_syst(before["cw"], before["ccw"])
+        e_after = e_max_syst(after["cw"], after["ccw"])
     return SimulationReport(
         method=calibrator.name,
         robot=robot,
@@ -204,8 +226,8 @@ def calibrate_in_simulation(
         truth=Calibration.from_errors(robot.e_d, robot.e_b, robot.e_s),
         errors_before=before,
         errors_after=after,
-        e_max_before=e_max_syst(before["cw"], before["ccw"]),
-        e_max_after=e_max_syst(after["cw"], after["ccw"]),
+        e_max_before=e_before,
+        e_max_after=e_after,
         wall_time=wall,
     )
 
