@@ -6,6 +6,10 @@ arrays of one row each would cost ~0.8 µs of dispatch, more than the physics it
 over the robots and compiled with numba, which makes a batch of one and a batch of 256 equally
 cheap per robot. Set ``NUMBA_DISABLE_JIT=1`` to run the very same source as ordinary Python
 (slower, identical semantics), e.g. to step through it in a debugger.
+
+Caveat of numba's on-disk cache: it notices edits to a kernel's own module, not to a kernel it
+*calls* in another module. Kernels that call each other therefore live in one module (e.g.
+``odomgym.floor``'s cable geometry).
 """
 
 from __future__ import annotations

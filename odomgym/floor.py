@@ -36,6 +36,7 @@ __all__ = [
     "CableBump",
     "FloorSpec",
     "FrictionPatch",
+    "apply_cable_deficits",
     "bump_extra_rotation",
     "cable_advance",
     "load_floor",
@@ -218,7 +219,7 @@ class FloorSpec:
         """
         require_positive("half_size", half_size)
         require_positive("per_square_metre", per_square_metre)
-        count = int(round(per_square_metre * (2.0 * half_size) ** 2))
+        count = round(per_square_metre * (2.0 * half_size) ** 2)
         xy = rng.uniform(-half_size, half_size, size=(count, 2))
         angles = rng.uniform(0.0, math.pi, size=count)
         bumps = tuple(
@@ -309,6 +310,12 @@ def cable_advance_scalar(
     psi0 = math.asin(half_width / big_r)
     excess = 2.0 * big_r * psi0 - 2.0 * half_width
     x0 = offset
+    # Entirely on the flat (before or beyond the cable): exactly the rim travel, with no
+    # rounding, so testing a distant cable changes nothing.
+    if (x0 <= -half_width and x0 + rim_travel <= -half_width) or (
+        x0 >= half_width and x0 + rim_travel >= half_width
+    ):
+        return rim_travel
     if x0 <= -half_width:
         s0 = x0
     elif x0 >= half_width:
@@ -353,7 +360,8 @@ class CableGrid:
 
     Why: a floor can hold thousands of cables, and a wheel meets at most one or two at a time.
     Each cable is entered in every cell its reach (half its length along the axis; the
-    wheel-cable contact half-width 2√(rρ) plus one step's travel across) overlaps, so a wheel only tests the cables of
+    wheel-cable contact half-width 2√(rρ) plus one step's travel across) overlaps, so a wheel
+    only tests the cables of
     its own cell. Arrays are CSR-style: cell ``c`` lists ``items[starts[c]:starts[c + 1]]``.
     """
 
@@ -400,8 +408,8 @@ class CableGrid:
         cell = float(max(0.25, 2.0 * float(np.max(half_len))))
         origin_x = float(np.min(cx - extent_x)) - cell
         origin_y = float(np.min(cy - extent_y)) - cell
-        nx = int(math.ceil((float(np.max(cx + extent_x)) - origin_x) / cell)) + 1
-        ny = int(math.ceil((float(np.max(cy + extent_y)) - origin_y) / cell)) + 1
+        nx = math.ceil((float(np.max(cx + extent_x)) - origin_x) / cell) + 1
+        ny = math.ceil((float(np.max(cy + extent_y)) - origin_y) / cell) + 1
         buckets: list[list[int]] = [[] for _ in range(nx * ny)]
         for m in range(cx.size):
             x_lo = int((cx[m] - extent_x[m] - origin_x) // cell)
@@ -417,6 +425,61 @@ class CableGrid:
         return cls(
             cx, cy, ax, ay, half_len, radius, origin_x, origin_y, cell, nx, ny, starts, items
         )
+
+
+@kernel
+def apply_cable_deficits(
+    contact: FloatArray,
+    pose: FloatArray,
+    rim_speed: FloatArray,
+    h: float,
+    wheel_radius: FloatArray,
+    cable_x: FloatArray,
+    cable_y: FloatArray,
+    axis_x: FloatArray,
+    axis_y: FloatArray,
+    half_length: FloatArray,
+    cable_radius: FloatArray,
+    origin_x: float,
+    origin_y: float,
+    cell: float,
+    nx: int,
+    ny: int,
+    starts: NDArray[np.int64],
+    items: NDArray[np.int64],
+    ground_v: FloatArray,
+) -> None:
+    """Remove from each wheel's ground velocity the horizontal travel lost to cables.
+
+    The wheel's rim travel along its heading has a component across each cable of its grid
+    cell (along the cable's normal); :func:`odomgym.floor.cable_advance_scalar` maps it to the
+    horizontal advance, and the difference, divided by h, leaves the ground velocity.
+    """
+    for i in range(contact.shape[0]):
+        hx = math.cos(pose[i, 2])
+        hy = math.sin(pose[i, 2])
+        for w in range(2):
+            wx = contact[i, w, 0]
+            wy = contact[i, w, 1]
+            gx = math.floor((wx - origin_x) / cell)
+            gy = math.floor((wy - origin_y) / cell)
+            if gx < 0 or gy < 0 or gx >= nx or gy >= ny:
+                continue
+            c = gy * nx + gx
+            for k in range(starts[c], starts[c + 1]):
+                m = items[k]
+                rel_x = wx - cable_x[m]
+                rel_y = wy - cable_y[m]
+                if abs(rel_x * axis_x[m] + rel_y * axis_y[m]) > half_length[m]:
+                    continue
+                normal_x, normal_y = -axis_y[m], axis_x[m]
+                offset = rel_x * normal_x + rel_y * normal_y
+                across = rim_speed[i, w] * h * (hx * normal_x + hy * normal_y)
+                lost = across - cable_advance_scalar(
+                    offset, across, wheel_radius[i, w], cable_radius[m]
+                )
+                ground_v[i, w, 0] -= lost * normal_x / h
+                ground_v[i, w, 1] -= lost * normal_y / h
 
 
 def load_floor(spec: str | Path) -> FloorSpec:

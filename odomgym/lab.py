@@ -47,16 +47,16 @@ def experiment_route(experiment: Experiment) -> Route:
 def simulate_runs(
     robots: RobotSpec | Sequence[RobotSpec],
     floor: FloorSpec,
-    route: Route,
+    route: Route | Sequence[Route],
     *,
     calibration: Calibration | Sequence[Calibration] | None = None,
-    rng: np.random.Generator | None = None,
+    rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
     repeats: int = 1,
     cruise_speed: float = 0.2,
     dt: float = 0.05,
     max_time: float | None = None,
-    kind: str = "square",
-    direction: str | None = None,
+    kind: str | Sequence[str] = "square",
+    direction: str | Sequence[str | None] | None = None,
     progress: Callable[[float], None] | None = None,
     start_poses: FloatArray | None = None,
 ) -> tuple[list[Run], FloatArray]:
@@ -65,17 +65,17 @@ def simulate_runs(
 
     Args:
         robots: one spec (repeated ``repeats`` times) or a list of specs (a population; all
-            must share the nominal parameters the driver uses, or be driven separately).
+            must share the nominal parameters the driver uses).
         floor: the floor; rough floors draw their noise from ``rng``.
-        route: what to drive.
-        calibration: the odometry calibration active while driving.
-        rng: random source (required on rough floors).
+        route: what to drive: one route for all, or one per robot.
+        calibration: the odometry calibration active while driving (one, or one per robot).
+        rng: random source (required on rough floors): one Generator, or one per robot.
         repeats: copies of a single spec to simulate together.
         cruise_speed: leg speed [m/s] of the reference driver (UMBmark: 0.2).
         dt: control period [s].
         max_time: give up after this much simulated time [s] (default: 20 × the nominal
             route time); raises RuntimeError naming the robots that did not finish.
-        kind, direction: labels stored in the runs.
+        kind, direction: labels stored in the runs (one for all, or one per robot).
         progress: called with the completed fraction (0..1) now and then, for progress bars.
         start_poses: where each robot starts on the floor (K, 3) [m, m, rad] (default: the
             origin). The route is driven in each robot's start frame.
@@ -87,11 +87,21 @@ def simulate_runs(
         runs to a calibrator.
     """
     specs = [robots] * repeats if isinstance(robots, RobotSpec) else list(robots)
+    routes = [route] * len(specs) if isinstance(route, Route) else list(route)
+    kinds = [kind] * len(specs) if isinstance(kind, str) else list(kind)
+    directions = (
+        [direction] * len(specs)
+        if direction is None or isinstance(direction, str)
+        else list(direction)
+    )
+    driven = {(s.wheelbase, s.max_wheel_speed, s.max_wheel_accel) for s in specs}
+    if len(driven) != 1:
+        raise ValueError("robots driven together must share nominal wheelbase, speed and accel")
     trial = Trial(
-        specs, floor, route, calibration=calibration, dt=dt, rng=rng, start_poses=start_poses
+        specs, floor, routes, calibration=calibration, dt=dt, rng=rng, start_poses=start_poses
     )
     driver = ReferenceDriver(specs[0], cruise_speed=cruise_speed)
-    nominal_time = route.wheel_travel(specs[0].wheelbase) / cruise_speed
+    nominal_time = max(r.wheel_travel(specs[0].wheelbase) for r in routes) / cruise_speed
     limit = max_time if max_time is not None else 20.0 * nominal_time + 60.0
     max_steps = math.ceil(limit / dt)
     capacity = int(2.0 * nominal_time / dt) + 100
@@ -110,8 +120,9 @@ def simulate_runs(
     while not done.all():
         if step >= max_steps:
             stuck = np.flatnonzero(~done).tolist()
+            names = sorted({routes[i].name for i in stuck})
             raise RuntimeError(
-                f"robots {stuck} did not finish route {route.name} within {limit:.0f} s of "
+                f"robots {stuck} did not finish {', '.join(names)} within {limit:.0f} s of "
                 "simulated time (a slippery floor or an unreachable tolerance?)"
             )
         if advance(act(observe_batch())).any():
@@ -136,13 +147,13 @@ def simulate_runs(
         end = int(finished_at[i]) + 1
         runs.append(
             Run(
-                kind=kind,
+                kind=kinds[i],
                 time=time_arr[:end].copy(),
                 counts=count_arr[i, :end].copy(),
                 true_pose=pose_arr[i, :end].copy(),
-                direction=direction,  # type: ignore[arg-type]
-                side=_route_size(route),
-                source=f"sim:{route.name}",
+                direction=directions[i],  # type: ignore[arg-type]
+                side=_route_size(routes[i]),
+                source=f"sim:{routes[i].name}",
                 meta={"robot": specs[i].name, "floor": floor.name},
             )
         )

@@ -41,7 +41,7 @@ import pymunk.batch as pbatch
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.floor import CableGrid, FloorSpec, cable_advance_scalar
+from odomgym.floor import CableGrid, FloorSpec, apply_cable_deficits
 from odomgym.robot import RobotSpec
 
 __all__ = ["GRAVITY", "World"]
@@ -56,6 +56,7 @@ _STATE_FIELDS = (
     | pbatch.BodyFields.VELOCITY
     | pbatch.BodyFields.ANGULAR_VELOCITY
 )
+_NOISE_BLOCK = 256  # roughness draws per robot fetched at once
 _BATCH_IO_MIN_ROBOTS = 4  # below this, per-body attribute access is cheaper (measured)
 
 
@@ -71,7 +72,10 @@ class World:
         substeps: physics steps per control period (each of ``dt/substeps`` seconds).
         iterations: Chipmunk solver iterations; the two wheel joints of one chassis are coupled
             and converge within a few iterations when no wheel slips.
-        rng: source of floor-roughness noise; required when ``floor.roughness > 0``.
+        rng: source of floor-roughness noise, required when ``floor.roughness > 0``: one
+            Generator (each robot gets its own child stream, ``rng.spawn``) or one Generator
+            per robot. Per-robot streams make a robot's noise independent of which other robots
+            share its batch.
         track_slip: accumulate each wheel's slip distance in ``slip`` (costs ~5 µs a step).
 
     State arrays (read them, do not write them; shapes use N robots):
@@ -92,7 +96,7 @@ class World:
         dt: float = 0.05,
         substeps: int = 1,
         iterations: int = 20,
-        rng: np.random.Generator | None = None,
+        rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
         track_slip: bool = False,
     ) -> None:
         specs = [robots] if isinstance(robots, RobotSpec) else list(robots)
@@ -106,7 +110,14 @@ class World:
         self.floor = floor if floor is not None else FloorSpec()
         if self.floor.roughness > 0 and rng is None:
             raise ValueError("a rough floor needs rng=np.random.Generator for its noise")
-        self.rng = rng
+        self._noise_streams: list[np.random.Generator] = []
+        if rng is not None and self.floor.roughness > 0:
+            streams = rng.spawn(len(specs)) if isinstance(rng, np.random.Generator) else list(rng)
+            if len(streams) != len(specs):
+                raise ValueError(f"need one noise Generator per robot ({len(specs)})")
+            self._noise_streams = streams
+        self._noise_block = np.zeros((len(specs), _NOISE_BLOCK, 2))
+        self._noise_next = _NOISE_BLOCK  # forces a refill at the first use
         self.dt = float(dt)
         self.substeps = int(substeps)
         self.iterations = int(iterations)
@@ -213,6 +224,8 @@ class World:
             self.slip = np.zeros((self.n, 2))
             self._rim_speed = np.zeros((self.n, 2))
             self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
+            self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
+            self._no_noise = np.zeros((self.n, 2))
         indices = np.asarray(indices, dtype=np.intp)
         targets = np.zeros((len(indices), 3)) if poses is None else np.asarray(poses, dtype=float)
         if targets.shape != (len(indices), 3) or not np.all(np.isfinite(targets)):
@@ -285,58 +298,64 @@ class World:
         self.slip += slip * h
 
     def _floor_effects(self, h: float) -> None:
-        """Cables, friction patches and roughness acting on the no-slip ground velocity."""
-        theta = self.pose[:, 2:3]
-        heading = np.cos(theta) + 1j * np.sin(theta)  # (N, 1)
-        ground_v = self._ground_v[:, :, 0] + 1j * self._ground_v[:, :, 1]
-        contact = (self.pose[:, 0:1] + 1j * self.pose[:, 1:2]) + 1j * self._lateral * heading
-        rim_speed = self._rim_speed
-        if self._has_bumps:
-            ground_v = self._apply_bumps(contact, heading, rim_speed * h, ground_v, h)
-        if self._has_patches:
-            self._set_friction(self.floor.friction_at(contact.real, contact.imag))
-        if self._rough:
-            assert self.rng is not None
-            travel = np.abs(rim_speed) * h
-            noise = self.floor.roughness * np.sqrt(travel) * self.rng.standard_normal(travel.shape)
-            ground_v = ground_v + (noise / h) * heading
-        self._ground_v[:, :, 0] = ground_v.real
-        self._ground_v[:, :, 1] = ground_v.imag
+        """Cables, friction patches and roughness acting on the no-slip ground velocity.
 
-    def _apply_bumps(
-        self,
-        contact: NDArray[np.complex128],
-        heading: NDArray[np.complex128],
-        rim_travel: FloatArray,
-        ground_v: NDArray[np.complex128],
-        h: float,
-    ) -> NDArray[np.complex128]:
-        """Reduce each wheel's horizontal advance across any cable it is rolling over."""
-        deficit = np.zeros((self.n, 2, 2))  # horizontal travel lost to cables, (x, y) [m]
-        grid = self._bump_grid
-        _cable_deficits(
-            np.ascontiguousarray(contact.real),
-            np.ascontiguousarray(contact.imag),
-            np.ascontiguousarray(np.broadcast_to(heading.real, (self.n, 2))),
-            np.ascontiguousarray(np.broadcast_to(heading.imag, (self.n, 2))),
-            np.ascontiguousarray(rim_travel),
-            self.true_radius,
-            grid.cable_x,
-            grid.cable_y,
-            grid.axis_x,
-            grid.axis_y,
-            grid.half_length,
-            grid.radius,
-            grid.origin_x,
-            grid.origin_y,
-            grid.cell,
-            grid.nx,
-            grid.ny,
-            grid.starts,
-            grid.items,
-            deficit,
+        Scalar kernels, not numpy: numpy's vectorised sin/cos and complex products may round
+        differently with the array length (SIMD paths), which would make a robot's trajectory
+        depend on how many robots share its batch.
+        """
+        noise = self._standard_normal() if self._rough else self._no_noise
+        _floor_kernel(
+            self.pose,
+            self._lateral,
+            self._rim_speed,
+            noise,
+            self.floor.roughness,
+            h,
+            self._contact,
+            self._ground_v,
         )
-        return np.asarray(ground_v - (deficit[:, :, 0] + 1j * deficit[:, :, 1]) / h)
+        if self._has_bumps:
+            grid = self._bump_grid
+            apply_cable_deficits(
+                self._contact,
+                self.pose,
+                self._rim_speed,
+                h,
+                self.true_radius,
+                grid.cable_x,
+                grid.cable_y,
+                grid.axis_x,
+                grid.axis_y,
+                grid.half_length,
+                grid.radius,
+                grid.origin_x,
+                grid.origin_y,
+                grid.cell,
+                grid.nx,
+                grid.ny,
+                grid.starts,
+                grid.items,
+                self._ground_v,
+            )
+        if self._has_patches:
+            self._set_friction(
+                self.floor.friction_at(self._contact[:, :, 0], self._contact[:, :, 1])
+            )
+
+    def _standard_normal(self) -> FloatArray:
+        """Next (N, 2) standard normal draws, robot i's from its own stream.
+
+        Drawn in blocks of ``_NOISE_BLOCK`` steps per robot, so the per-step cost does not grow
+        with one Python call per robot.
+        """
+        if self._noise_next == _NOISE_BLOCK:
+            for i, stream in enumerate(self._noise_streams):
+                self._noise_block[i] = stream.standard_normal((_NOISE_BLOCK, 2))
+            self._noise_next = 0
+        draws = self._noise_block[:, self._noise_next, :]
+        self._noise_next += 1
+        return draws
 
     def _set_friction(self, mu: FloatArray) -> None:
         changed = np.argwhere(mu != self._friction)
@@ -442,52 +461,28 @@ def _drive_wheels(
 
 
 @kernel
-def _cable_deficits(
-    wx: FloatArray,
-    wy: FloatArray,
-    hx: FloatArray,
-    hy: FloatArray,
-    rim_travel: FloatArray,
-    wheel_radius: FloatArray,
-    cable_x: FloatArray,
-    cable_y: FloatArray,
-    axis_x: FloatArray,
-    axis_y: FloatArray,
-    half_length: FloatArray,
-    cable_radius: FloatArray,
-    origin_x: float,
-    origin_y: float,
-    cell: float,
-    nx: int,
-    ny: int,
-    starts: IntArray,
-    items: IntArray,
-    deficit: FloatArray,
+def _floor_kernel(
+    pose: FloatArray,
+    lateral: FloatArray,
+    rim_speed: FloatArray,
+    noise: FloatArray,
+    roughness: float,
+    h: float,
+    contact: FloatArray,
+    ground_v: FloatArray,
 ) -> None:
-    """Per wheel, the horizontal travel lost to the cables in its grid cell (N, 2, 2) [m].
+    """Contact points (N, 2, 2) [m] and rough-floor ground velocities, in place.
 
-    The wheel's rim travel along its heading has a component across each cable (along the
-    cable's normal); :func:`odomgym.floor.cable_advance_scalar` maps it to the horizontal
-    advance, and the difference is removed from the contact's ground velocity.
+    Roughness: each wheel's ground travel is its rim travel plus k·√|d|·ξ (seed 004 Eq. 4),
+    i.e. the ground velocity along the heading gains k·√(|v|·h)·ξ / h.
     """
-    for i in range(wx.shape[0]):
+    for i in range(pose.shape[0]):
+        cos_t = math.cos(pose[i, 2])
+        sin_t = math.sin(pose[i, 2])
         for w in range(2):
-            gx = int(math.floor((wx[i, w] - origin_x) / cell))
-            gy = int(math.floor((wy[i, w] - origin_y) / cell))
-            if gx < 0 or gy < 0 or gx >= nx or gy >= ny:
-                continue
-            c = gy * nx + gx
-            for k in range(starts[c], starts[c + 1]):
-                m = items[k]
-                rel_x = wx[i, w] - cable_x[m]
-                rel_y = wy[i, w] - cable_y[m]
-                if abs(rel_x * axis_x[m] + rel_y * axis_y[m]) > half_length[m]:
-                    continue
-                normal_x, normal_y = -axis_y[m], axis_x[m]
-                offset = rel_x * normal_x + rel_y * normal_y
-                across = rim_travel[i, w] * (hx[i, w] * normal_x + hy[i, w] * normal_y)
-                lost = across - cable_advance_scalar(
-                    offset, across, wheel_radius[i, w], cable_radius[m]
-                )
-                deficit[i, w, 0] += lost * normal_x
-                deficit[i, w, 1] += lost * normal_y
+            contact[i, w, 0] = pose[i, 0] - sin_t * lateral[i, w]
+            contact[i, w, 1] = pose[i, 1] + cos_t * lateral[i, w]
+            if roughness > 0.0:
+                extra = roughness * math.sqrt(abs(rim_speed[i, w]) * h) * noise[i, w] / h
+                ground_v[i, w, 0] += extra * cos_t
+                ground_v[i, w, 1] += extra * sin_t

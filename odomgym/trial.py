@@ -72,7 +72,7 @@ class Trial:
         calibration: Calibration | Sequence[Calibration] | None = None,
         dt: float = 0.05,
         substeps: int = 1,
-        rng: np.random.Generator | None = None,
+        rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
         track_slip: bool = False,
         start_poses: FloatArray | None = None,
     ) -> None:

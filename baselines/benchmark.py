@@ -1,0 +1,419 @@
+"""The calibrator benchmark: every method, the same robots, floors and budget, fresh validation.
+
+Which calibration method should a user trust, with how many runs, on which floor? The benchmark
+samples a population of simulated robots with systematic errors drawn uniformly over
+:class:`Population`'s ranges, gives every calibrator the same experiment budget on the same robot
+and floor (same random streams), then validates each result on fresh UMBmark squares it has not
+seen (5 cw + 5 ccw, 4×4 m, true return errors; E_max,syst of seed 000 Eq. 3.3).
+
+Floors (:data:`BENCH_FLOORS`):
+
+* ``smooth`` — a smooth concrete lab floor: roughness k = 0.0004 m^½, which gives the LabMate
+  return-error scatter σ ≈ 25 mm that seed 000 §6.3 reports (a perfectly smooth floor would
+  make every method look 100× better than any real lab allows);
+* ``rough`` — k = 0.002 m^½ (five times rougher);
+* ``bumpy`` — the concrete floor strewn with 10 mm cables (0.5 per m², 0.3 m long) and every run
+  started at a random pose, so cables are met at random (≈ 0.1 crossings per metre per wheel).
+
+Randomness: robot i on floor f draws everything (its errors, sensor noise, start poses, floor
+roughness) from ``SeedSequence([seed, i, f, purpose])``, and every method sees the same streams
+for the same robot and floor; so results do not depend on the backend, the number of jobs, the
+chunking or the order, and the comparison between methods is paired.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.baselines.base import Calibrator
+from odomgym.floor import FLOORS, FloorSpec
+from odomgym.lab import random_start_poses, simulate_runs
+from odomgym.lockstep import run_lockstep
+from odomgym.metrics import e_max_syst
+from odomgym.odometry import Calibration
+from odomgym.paths import square_route
+from odomgym.robot import PRESETS, RobotSpec
+from odomgym.runs import end_error
+
+__all__ = [
+    "BENCH_FLOORS",
+    "METHOD_BUDGETS",
+    "BenchConfig",
+    "Population",
+    "configure",
+    "population",
+    "run_benchmark",
+    "run_chunk",
+    "summarize",
+]
+
+FloatArray = NDArray[np.float64]
+
+BUMPY_START_REGION = 12.0  # [m]: runs start anywhere in a 24 × 24 m area of cable-strewn floor
+
+
+def _smooth(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
+    del rng
+    return FLOORS["concrete"], None
+
+
+def _rough(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
+    del rng
+    return FloorSpec(friction=0.8, roughness=0.002, name="rough"), None
+
+
+def _bumpy(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
+    floor = FloorSpec.scattered_cables(
+        rng,
+        half_size=BUMPY_START_REGION + 6.0,
+        per_square_metre=0.5,
+        roughness=FLOORS["concrete"].roughness,
+        name="bumpy",
+    )
+    return floor, BUMPY_START_REGION
+
+
+BENCH_FLOORS: dict[str, Callable[[np.random.Generator], tuple[FloorSpec, float | None]]] = {
+    "smooth": _smooth,
+    "rough": _rough,
+    "bumpy": _bumpy,
+}
+
+
+@dataclass(frozen=True)
+class Population:
+    """Ranges of the true systematic errors, drawn uniformly and independently [-].
+
+    Defaults: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05], E_s ∈ [0.98, 1.02] on the LabMate.
+    """
+
+    base: str = "labmate"
+    e_d: tuple[float, float] = (0.99, 1.01)
+    e_b: tuple[float, float] = (0.95, 1.05)
+    e_s: tuple[float, float] = (0.98, 1.02)
+
+    def sample(self, rng: np.random.Generator, name: str) -> RobotSpec:
+        """One robot with errors drawn from ``rng``."""
+        robot = PRESETS[self.base].ideal()
+        errors = [rng.uniform(*bounds) for bounds in (self.e_d, self.e_b, self.e_s)]
+        spec = robot.with_errors(*errors)
+        return RobotSpec(**{**spec.to_dict(), "name": name})
+
+
+def _umbmark_budget(runs: int) -> dict[str, Any]:
+    # Seed 001's procedure when the budget allows (2 E_s phases of 3 straight runs + 5 + 5).
+    if runs >= 16:
+        return {"scale_phases": 2, "straight_runs": 3, "runs_per_direction": (runs - 6) // 2}
+    if runs >= 6:
+        return {"scale_phases": 1, "straight_runs": 2, "runs_per_direction": (runs - 2) // 2}
+    return {"scale_phases": 0, "runs_per_direction": max(1, runs // 2)}
+
+
+def _squares_only(runs: int) -> dict[str, Any]:
+    return {"runs_per_direction": max(1, runs // 2)}
+
+
+METHOD_BUDGETS: dict[str, Callable[[int], dict[str, Any]]] = {
+    "umbmark": _umbmark_budget,
+    "jung_chung": _squares_only,
+    "lee": _squares_only,
+}
+"""How each method spends a budget of N runs (constructor keywords). Methods not listed here
+provide ``for_budget(runs)`` themselves or run with their defaults."""
+
+
+def configure(cls: type[Calibrator], runs: int) -> Calibrator:
+    """``cls`` set up to use at most ``runs`` runs."""
+    for_budget = getattr(cls, "for_budget", None)
+    if callable(for_budget):
+        calibrator = for_budget(runs)
+        assert isinstance(calibrator, Calibrator)
+        return calibrator
+    options = METHOD_BUDGETS.get(cls.name, lambda _runs: {})(runs)
+    return cls(**options)
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """What to benchmark.
+
+    Attributes:
+        robots: population size.
+        floors: names in :data:`BENCH_FLOORS`.
+        methods: calibrator names (``odomgym.baselines.CALIBRATORS``).
+        budget: runs each calibrator may perform per robot.
+        seed: master seed.
+        validation_runs: fresh squares per direction used to validate each result.
+        population: the error ranges.
+    """
+
+    robots: int = 100
+    floors: tuple[str, ...] = ("smooth", "rough", "bumpy")
+    methods: tuple[str, ...] = ()
+    budget: int = 16
+    seed: int = 0
+    validation_runs: int = 5
+    population: Population = Population()
+
+    def __post_init__(self) -> None:
+        for floor in self.floors:
+            if floor not in BENCH_FLOORS:
+                raise ValueError(
+                    f"unknown benchmark floor {floor!r}; floors: {', '.join(BENCH_FLOORS)}"
+                )
+        if self.robots < 1 or self.budget < 1 or self.validation_runs < 1:
+            raise ValueError("robots, budget and validation_runs must be >= 1")
+
+
+def _stream(config: BenchConfig, *key: int) -> np.random.Generator:
+    """A Generator determined by the master seed and ``key`` alone (robot, floor, purpose)."""
+    return np.random.default_rng(np.random.SeedSequence([config.seed, *key]))
+
+
+def population(config: BenchConfig) -> list[RobotSpec]:
+    """The benchmark's robots (robot i depends only on the seed and i)."""
+    return [
+        config.population.sample(_stream(config, i, 0, 0), f"robot-{i:03d}")
+        for i in range(config.robots)
+    ]
+
+
+def chunks(count: int, parts: int) -> list[list[int]]:
+    """Split robot indices 0..count-1 into ``parts`` contiguous, nearly equal chunks."""
+    bounds = np.linspace(0, count, max(1, min(parts, count)) + 1).astype(int)
+    return [list(range(bounds[k], bounds[k + 1])) for k in range(len(bounds) - 1)]
+
+
+def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any]]:
+    """Calibrate robots ``indices`` with every method on every floor and validate them.
+
+    All robots of the chunk run in lockstep (:func:`odomgym.lockstep.run_lockstep`): one
+    method at a time, their experiments simulated as one batch.
+    """
+    from odomgym.baselines import CALIBRATORS
+
+    robots_all = population(config)
+    robots = [robots_all[i] for i in indices]
+    rows: list[dict[str, Any]] = []
+    for f, floor_name in enumerate(config.floors):
+        floor_index = list(BENCH_FLOORS).index(floor_name)
+        floor, start_region = BENCH_FLOORS[floor_name](_stream(config, 0, floor_index, 1))
+        calibrations: list[list[Calibration]] = [[] for _ in robots]
+        method_rows: list[list[dict[str, Any]]] = [[] for _ in robots]
+        for method in config.methods:
+            cls = CALIBRATORS[method]
+            start = time.perf_counter()
+            outcomes = run_lockstep(
+                lambda lab, _i, cls=cls: configure(cls, config.budget).calibrate(lab),
+                robots,
+                floor,
+                [_stream(config, i, floor_index, 2) for i in indices],
+                start_region=start_region,
+            )
+            wall = (time.perf_counter() - start) / len(robots)
+            for k, (robot, outcome) in enumerate(zip(robots, outcomes, strict=True)):
+                result = outcome.value
+                calibration = result.calibration if result is not None else Calibration()
+                calibrations[k].append(calibration)
+                method_rows[k].append(
+                    {
+                        "method": method,
+                        "floor": floor_name,
+                        "robot": indices[k],
+                        "true_E_d": robot.e_d,
+                        "true_E_b": robot.e_b,
+                        "true_E_s": robot.e_s,
+                        "est_E_d": calibration.e_d,
+                        "est_E_b": calibration.wheelbase_scale,
+                        "est_E_s": calibration.distance_scale,
+                        "runs_used": result.runs_used if result is not None else 0,
+                        "distance_m": result.distance_used if result is not None else 0.0,
+                        "wall_time_s": wall,
+                        "failed": "" if outcome.error is None else repr(outcome.error),
+                    }
+                )
+        errors = _validate(config, floor, start_region, floor_index, indices, robots, calibrations)
+        for k in range(len(robots)):
+            before = errors[k][0]
+            e_before = e_max_syst(before["cw"], before["ccw"])
+            for row, after in zip(method_rows[k], errors[k][1:], strict=True):
+                e_after = e_max_syst(after["cw"], after["ccw"])
+                row["e_max_before_mm"] = 1e3 * e_before
+                row["e_max_after_mm"] = 1e3 * e_after
+                row["improvement"] = e_before / e_after if e_after > 0 else math.inf
+                for name in ("E_d", "E_b", "E_s"):
+                    row[f"err_{name}"] = row[f"est_{name}"] - row[f"true_{name}"]
+                if indices[k] == 0 and f == 0:
+                    row["scatter"] = {
+                        "before": {d: v.tolist() for d, v in before.items()},
+                        "after": {d: v.tolist() for d, v in after.items()},
+                    }
+            rows.extend(method_rows[k])
+    return rows
+
+
+def _validate(
+    config: BenchConfig,
+    floor: FloorSpec,
+    start_region: float | None,
+    floor_index: int,
+    indices: Sequence[int],
+    robots: Sequence[RobotSpec],
+    calibrations: Sequence[Sequence[Calibration]],
+) -> list[list[dict[str, FloatArray]]]:
+    """Fresh squares for every robot, uncalibrated and with each method's calibration, from
+    the same start poses; all robots and calibrations simulated together per direction.
+
+    Returns ``errors[k][c][direction]`` (runs, 3) for robot k and calibration c (0: none).
+    """
+    runs = config.validation_runs
+    out: list[list[dict[str, FloatArray]]] = [
+        [{} for _ in range(len(calibrations[k]) + 1)] for k in range(len(robots))
+    ]
+    for d, direction in enumerate(("cw", "ccw")):
+        specs: list[RobotSpec] = []
+        cals: list[Calibration] = []
+        streams: list[np.random.Generator] = []
+        starts: list[FloatArray] = []
+        slots: list[tuple[int, int]] = []
+        for k, (i, robot) in enumerate(zip(indices, robots, strict=True)):
+            rng = _stream(config, i, floor_index, 3 + d)
+            poses = random_start_poses(rng, runs, start_region)
+            for c, calibration in enumerate([Calibration(), *calibrations[k]]):
+                for r in range(runs):
+                    specs.append(robot)
+                    cals.append(calibration)
+                    starts.append(np.zeros(3) if poses is None else poses[r])
+                    slots.append((k, c))
+                # The same floor noise for every calibration of this robot: a paired comparison.
+                seeds = np.random.SeedSequence([config.seed, i, floor_index, 5 + d]).spawn(runs)
+                streams.extend(np.random.default_rng(seed) for seed in seeds)
+        sim, odom = simulate_runs(
+            specs,
+            floor,
+            square_route(4.0, direction),
+            calibration=cals,
+            rng=streams,
+            direction=direction,
+            start_poses=np.array(starts),
+        )
+        errors = np.array([end_error(run, end) for run, end in zip(sim, odom, strict=True)])
+        for (k, c), start_row in zip(slots[::runs], range(0, len(slots), runs), strict=True):
+            out[k][c][direction] = errors[start_row : start_row + runs]
+    return out
+
+
+def run_benchmark(
+    config: BenchConfig,
+    *,
+    jobs: int = 1,
+    backend: str = "local",
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run the benchmark; rows do not depend on ``jobs`` or ``backend``.
+
+    ``backend="local"`` uses ``jobs`` worker processes (1: this process); ``"ray"`` submits
+    the chunks as Ray tasks (``ray.init`` must have been called, or a local Ray is started
+    with ``jobs`` CPUs).
+    """
+    # One chunk per worker: the larger a lockstep batch, the cheaper each robot.
+    parts = chunks(config.robots, max(1, jobs))
+    rows: list[dict[str, Any]] = []
+    done = 0
+    if backend == "ray":
+        rows = _run_ray(config, parts, jobs, progress)
+    elif jobs <= 1:
+        for part in parts:
+            rows.extend(run_chunk(config, part))
+            done += len(part)
+            if progress is not None:
+                progress(done, config.robots)
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            futures = {pool.submit(run_chunk, config, part): part for part in parts}
+            for future in as_completed(futures):
+                rows.extend(future.result())
+                done += len(futures[future])
+                if progress is not None:
+                    progress(done, config.robots)
+    rows.sort(
+        key=lambda r: (
+            config.floors.index(r["floor"]),
+            r["robot"],
+            config.methods.index(r["method"]),
+        )
+    )
+    return rows
+
+
+def _run_ray(
+    config: BenchConfig,
+    parts: list[list[int]],
+    jobs: int,
+    progress: Callable[[int, int], None] | None,
+) -> list[dict[str, Any]]:
+    try:
+        import ray
+    except ImportError as exc:
+        raise RuntimeError("--backend ray needs Ray: pip install 'odomgym[distributed]'") from exc
+    if not ray.is_initialized():
+        ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
+    remote = ray.remote(num_cpus=1)(run_chunk)
+    pending = {remote.remote(config, part): len(part) for part in parts}
+    rows: list[dict[str, Any]] = []
+    done = 0
+    while pending:
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        for ref in ready:
+            rows.extend(ray.get(ref))
+            done += pending.pop(ref)
+            if progress is not None:
+                progress(done, config.robots)
+    return rows
+
+
+def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per method and floor: median and quartiles of the improvement, parameter errors,
+    distance, wall time and failures."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault((row["method"], row["floor"]), []).append(row)
+    summary = []
+    for (method, floor), group in groups.items():
+        improvement = np.array([r["improvement"] for r in group])
+        q25, q50, q75 = np.percentile(improvement, [25, 50, 75])
+
+        def median_abs(key: str, group: list[dict[str, Any]] = group) -> float:
+            return float(np.median([abs(r[key]) for r in group]))
+
+        summary.append(
+            {
+                "method": method,
+                "floor": floor,
+                "robots": len(group),
+                "improvement_median": float(q50),
+                "improvement_q25": float(q25),
+                "improvement_q75": float(q75),
+                "e_max_after_median_mm": float(np.median([r["e_max_after_mm"] for r in group])),
+                "abs_err_E_d_median": median_abs("err_E_d"),
+                "abs_err_E_b_median": median_abs("err_E_b"),
+                "abs_err_E_s_median": median_abs("err_E_s"),
+                "distance_m_mean": float(np.mean([r["distance_m"] for r in group])),
+                "runs_mean": float(np.mean([r["runs_used"] for r in group])),
+                "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in group])),
+                "failures": sum(1 for r in group if r["failed"]),
+            }
+        )
+    summary.sort(key=lambda s: (s["floor"], -s["improvement_median"]))
+    return summary

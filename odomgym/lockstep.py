@@ -1,0 +1,221 @@
+"""Many simulated labs stepped together: calibrate a whole robot population at batch speed.
+
+A calibrator is a sequential procedure (perform an experiment, think, perform the next), and
+one robot's experiment is a few hundred physics steps of one to ten robots — Python overhead
+per step dominates. :func:`run_lockstep` runs one procedure per robot, each in its own thread
+with its own :class:`~odomgym.experiments.Lab`; whenever every still-running procedure is
+waiting for an experiment, all the requested runs are simulated as *one* batch (one pymunk
+space, :func:`odomgym.lab.simulate_runs`), and each procedure gets its runs back. Only one thread
+simulates at a time; the others only decide what to ask next.
+
+Results are independent of the batch composition: each participant's sensor noise, start poses
+and floor-roughness streams come from its own Generator, so robot 7's calibration is the same
+whether it shares a batch with 9 or 99 others (which is what lets a benchmark split its
+population over processes without changing a number).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+import numpy as np
+
+from odomgym.experiments import Experiment, SensorAccuracy
+from odomgym.floor import FloorSpec
+from odomgym.lab import experiment_route, measure, random_start_poses, simulate_runs
+from odomgym.odometry import Calibration
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+__all__ = ["Outcome", "run_lockstep"]
+
+T = TypeVar("T")
+
+
+@dataclass
+class Outcome(Generic[T]):
+    """What one participant's procedure returned, or the exception it raised."""
+
+    value: T | None = None
+    error: BaseException | None = None
+
+
+class _Participant:
+    """The Lab one procedure sees (see :class:`odomgym.experiments.Lab`)."""
+
+    def __init__(self, coordinator: _Coordinator, index: int, robot: RobotSpec) -> None:
+        self._coordinator = coordinator
+        self._index = index
+        self._robot = robot
+        self._runs_used = 0
+        self._distance_used = 0.0
+
+    @property
+    def robot(self) -> RobotSpec:
+        return self._robot
+
+    @property
+    def runs_used(self) -> int:
+        return self._runs_used
+
+    @property
+    def distance_used(self) -> float:
+        return self._distance_used
+
+    def perform(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
+        runs = self._coordinator.request(self._index, experiment, calibration)
+        self._runs_used += len(runs)
+        self._distance_used += sum(run.distance for run in runs)
+        return runs
+
+
+class _Coordinator:
+    def __init__(
+        self,
+        robots: Sequence[RobotSpec],
+        floor: FloorSpec,
+        rngs: Sequence[np.random.Generator],
+        sensor: SensorAccuracy,
+        cruise_speed: float,
+        start_region: float | None,
+    ) -> None:
+        self.robots = list(robots)
+        self.floor = floor
+        self.rngs = list(rngs)
+        self.sensor = sensor
+        self.cruise_speed = cruise_speed
+        self.start_region = start_region
+        self.condition = threading.Condition()
+        self.pending: dict[int, tuple[Experiment, Calibration]] = {}
+        self.results: dict[int, list[Run] | BaseException] = {}
+        self.active: set[int] = set()
+
+    def request(self, index: int, experiment: Experiment, calibration: Calibration) -> list[Run]:
+        with self.condition:
+            self.pending[index] = (experiment, calibration)
+            self.condition.notify_all()
+            while index not in self.results:
+                self.condition.wait()
+            result = self.results.pop(index)
+        if isinstance(result, BaseException):
+            raise result
+        return result
+
+    def finished(self, index: int) -> None:
+        with self.condition:
+            self.active.discard(index)
+            self.condition.notify_all()
+
+    def serve(self) -> None:
+        """Simulate batches until every participant has finished."""
+        while True:
+            with self.condition:
+                while self.active and len(self.pending) < len(self.active):
+                    self.condition.wait()
+                if not self.active:
+                    return
+                batch = sorted(self.pending.items())
+                self.pending.clear()
+            outcome = self._simulate(batch)
+            with self.condition:
+                self.results.update(outcome)
+                self.condition.notify_all()
+
+    def _simulate(
+        self, batch: list[tuple[int, tuple[Experiment, Calibration]]]
+    ) -> dict[int, list[Run] | BaseException]:
+        specs: list[RobotSpec] = []
+        routes = []
+        calibrations: list[Calibration] = []
+        streams: list[np.random.Generator] = []
+        starts: list[np.ndarray] = []
+        kinds: list[str] = []
+        directions: list[str | None] = []
+        owners: list[int] = []
+        for index, (experiment, calibration) in batch:
+            rng = self.rngs[index]
+            route = experiment_route(experiment)
+            poses = random_start_poses(rng, experiment.runs, self.start_region)
+            for k in range(experiment.runs):
+                specs.append(self.robots[index])
+                routes.append(route)
+                calibrations.append(calibration)
+                kinds.append(experiment.kind)
+                directions.append(experiment.direction)
+                owners.append(index)
+                starts.append(np.zeros(3) if poses is None else poses[k])
+            streams.extend(rng.spawn(experiment.runs))
+        try:
+            runs, _ = simulate_runs(
+                specs,
+                self.floor,
+                routes,
+                calibration=calibrations,
+                rng=streams,
+                cruise_speed=self.cruise_speed,
+                kind=kinds,
+                direction=directions,
+                start_poses=np.array(starts),
+            )
+        except (RuntimeError, ValueError) as exc:
+            return {index: exc for index, _ in batch}
+        grouped: dict[int, list[Run]] = {index: [] for index, _ in batch}
+        for owner, run in zip(owners, runs, strict=True):
+            grouped[owner].append(run)
+        return {index: measure(grouped[index], self.sensor, self.rngs[index]) for index, _ in batch}
+
+
+def run_lockstep(
+    procedure: Callable[[_Participant, int], T],
+    robots: Sequence[RobotSpec],
+    floor: FloorSpec,
+    rngs: Sequence[np.random.Generator],
+    *,
+    sensor: SensorAccuracy | None = None,
+    cruise_speed: float = 0.2,
+    start_region: float | None = None,
+) -> list[Outcome[T]]:
+    """Run ``procedure(lab, index)`` for every robot, simulating their experiments together.
+
+    Args:
+        procedure: e.g. ``lambda lab, i: calibrator.calibrate(lab)``; called in a worker
+            thread per robot with that robot's Lab.
+        robots: the hidden true robots (they must share the nominal parameters the reference
+            driver uses).
+        floor: the floor all robots share (they do not collide).
+        rngs: one Generator per robot: its sensor noise, start poses and roughness.
+        sensor: the ground-truth sensor's accuracy (default: seed 000's sonar calibrator).
+        cruise_speed: the reference driver's leg speed [m/s].
+        start_region: random start poses within ±start_region [m] (see ``SimLab``).
+
+    Returns:
+        One :class:`Outcome` per robot, in order.
+    """
+    if len(rngs) != len(robots):
+        raise ValueError(f"need one Generator per robot ({len(robots)}), got {len(rngs)}")
+    coordinator = _Coordinator(
+        robots, floor, rngs, sensor or SensorAccuracy(), cruise_speed, start_region
+    )
+    outcomes: list[Outcome[T]] = [Outcome() for _ in robots]
+
+    def work(index: int) -> None:
+        try:
+            outcomes[index].value = procedure(
+                _Participant(coordinator, index, robots[index]), index
+            )
+        except Exception as exc:  # reported per robot, the others carry on
+            outcomes[index].error = exc
+        finally:
+            coordinator.finished(index)
+
+    coordinator.active = set(range(len(robots)))
+    threads = [threading.Thread(target=work, args=(i,), daemon=True) for i in range(len(robots))]
+    for thread in threads:
+        thread.start()
+    coordinator.serve()
+    for thread in threads:
+        thread.join()
+    return outcomes

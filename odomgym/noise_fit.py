@@ -1,0 +1,880 @@
+"""Estimating the wheel-noise constants k_L, k_R [m^½] from repeated runs (seed 004 §6.3).
+
+Why: Chong & Kleeman's model gives each wheel's travel d white noise of variance k²·|d| (Eq. 4).
+They chose k_L, k_R "by trial and error" from 60 runs of 10 m forward and 10 m back, and found
+that no pair reproduced all six elements of the measured covariance, the off-track y fitting
+worst (Fig. 4). This module makes that fit a maximum-likelihood estimate with intervals and a
+per-component goodness of fit, so the statement can be checked on any set of runs.
+
+The model. For one run, the end-pose error ε = true − odometry (x [m], y [m], θ [rad], in the
+run's start frame, :func:`odomgym.runs.return_error`) is zero-mean Gaussian with covariance
+
+    Σ = k_L²·A + k_R²·B        (Eq. 23 summed over the run; A, B: k = (1, 0) and (0, 1)),
+
+because every segment's Cov(U_k) (Eqs. 25–28) and hence their composition is linear in k_L² and
+k_R². A and B come from the run's *own* odometry path: each sample's wheel travels (encoder
+counts × metres per tick, calibrated) are one constant-curvature segment.
+
+Systematic errors. Eq. 4 has zero mean; a real robot's residual calibration error does not. With
+``systematic="group-mean"`` (the default), runs are grouped (same session, path and direction:
+the same systematic error) and the fit uses only within-group contrasts (Helmert contrasts,
+i.e. restricted maximum likelihood, REML): any error common to a group cancels exactly,
+whatever its size. The consequence: each group costs 3 of its 3·n observations, and a systematic
+error that changes *from run to run* (drift, battery, slightly different paths) is not removed
+and is charged to k. ``systematic="none"`` trusts the odometry to be calibrated and uses every
+run's error as it is.
+
+Intervals are profile-likelihood intervals by default (deterministic; exact in the large-sample
+limit *if the model is right*), or percentile bootstrap intervals over runs resampled within
+their groups (``interval="bootstrap"``, with an explicit generator): robust to a wrong noise
+shape, which the component fit below may reveal.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import optimize, stats
+
+from odomgym.covariance import propagate_path
+from odomgym.floor import FloorSpec
+from odomgym.io import atomic_writer
+from odomgym.odometry import Calibration
+from odomgym.robot import PRESETS, RobotSpec
+from odomgym.runs import Run, return_error
+
+__all__ = [
+    "MIN_RUNS",
+    "ComponentFit",
+    "NoiseFit",
+    "NoiseSamples",
+    "fit_noise",
+    "fit_noise_report",
+    "format_noise_report",
+    "noise_samples",
+    "plot_noise_fit",
+    "published_calibration",
+    "run_noise_basis",
+    "simulate_noise_experiment",
+    "with_wheel_noise",
+]
+
+FloatArray = NDArray[np.float64]
+Systematic = Literal["group-mean", "none"]
+IntervalMethod = Literal["profile", "bootstrap"]
+
+MIN_RUNS = 5
+"""Fewest runs (after removing group means: contrasts + 1) a fit accepts; below this the
+covariance of three components cannot even be estimated."""
+
+COMPONENTS = (("x", "m"), ("y", "m"), ("theta", "rad"))
+_QUAD_NODES = 16  # exact to round-off for |Δθ| ≲ 1 rad per sample (covariance.py)
+_MAX_SAMPLE_TURN = 1.0  # [rad]; samples turning more go through propagate_path instead
+
+
+# ----------------------------------------------------------------------------- per-run inputs
+def _wheel_travels(run: Run, robot: RobotSpec, cal: Calibration) -> tuple[FloatArray, float]:
+    """Per-sample wheel travels (T−1, 2) [m] and the effective wheelbase [m], as
+    :func:`odomgym.runs.replay_odometry` computes them."""
+    per_tick = robot.metres_per_tick * cal.distance_scale
+    inc = np.diff(run.counts, axis=0).astype(np.float64)
+    travels = inc * np.array([cal.c_left * per_tick, cal.c_right * per_tick])
+    return travels, cal.wheelbase_scale * robot.wheelbase
+
+
+def _check_run(run: Run, travels: FloatArray) -> None:
+    for name, values in (("time", run.time), ("true_pose", run.true_pose)):
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"{run.source}: run has non-finite (NaN/inf) values in {name}")
+    if not np.all(np.isfinite(travels)):
+        raise ValueError(f"{run.source}: wheel travels are not finite (robot or calibration?)")
+    if not np.abs(travels).sum() > 0.0:
+        raise ValueError(f"{run.source}: run has zero length (no encoder counts changed)")
+
+
+def _path_basis(travels: FloatArray, wheelbase: float) -> tuple[FloatArray, FloatArray]:
+    """A, B of one path: Σ_k F_k·Cov(U_k)·F_kᵀ for k = (1, 0) and (0, 1), vectorised.
+
+    Same quantities as :func:`odomgym.covariance.propagate_path`: the product of the Eq. 21
+    start Jacobians from the end of segment k to the end of the path is the shear
+    [[1, 0, −(y_N − y_k)], [0, 1, x_N − x_k], [0, 0, 1]], and each segment's Cov(U_k) is the
+    Gauss–Legendre form of Eqs. 23–24 (:func:`odomgym.covariance.quadrature_motion_covariance`,
+    exact to round-off for per-sample turns below 1 rad).
+    """
+    left, right = travels[:, 0], travels[:, 1]
+    dtheta = (right - left) / wheelbase
+    heading0 = np.concatenate([[0.0], np.cumsum(dtheta)[:-1]])
+    chord = 0.5 * (left + right) * np.sinc(0.5 * dtheta / math.pi)
+    mid = heading0 + 0.5 * dtheta
+    x_end, y_end = np.cumsum(chord * np.cos(mid)), np.cumsum(chord * np.sin(mid))
+    u, w = np.polynomial.legendre.leggauss(_QUAD_NODES)
+    s, w = 0.5 * (u + 1.0), 0.5 * w
+    theta = heading0[:, None] + s * dtheta[:, None]  # (K, nodes)
+    rest = 0.5 * dtheta[:, None] * (1.0 - s)
+    arm = 0.5 * (left + right)[:, None] / wheelbase * (1.0 - s) * np.sinc(rest / math.pi)
+    a = np.stack([0.5 * np.cos(theta), 0.5 * np.sin(theta), np.zeros_like(theta)], axis=-1)
+    q = np.stack(
+        [arm * np.sin(theta + rest), -arm * np.cos(theta + rest), np.full_like(theta, -1.0)],
+        axis=-1,
+    )
+    q[..., 2] /= wheelbase
+    shear = np.zeros((len(left), 3, 3))
+    shear[:, 0, 0] = shear[:, 1, 1] = shear[:, 2, 2] = 1.0
+    shear[:, 0, 2] = -(y_end[-1] - y_end)
+    shear[:, 1, 2] = x_end[-1] - x_end
+    out = []
+    for jac, travel in ((a + q, left), (a - q, right)):  # J_L = a + q, J_R = a − q (Eq. 24)
+        moved = np.einsum("kij,knj->kni", shear, jac)  # F_k · J(s)
+        out.append(np.einsum("k,n,kni,knj->ij", np.abs(travel), w, moved, moved))
+    return out[0], out[1]
+
+
+def run_noise_basis(
+    run: Run,
+    robot: RobotSpec,
+    calibration: Calibration | None = None,
+    *,
+    method: Literal["vectorised", "propagate_path"] = "vectorised",
+) -> tuple[FloatArray, FloatArray]:
+    """A, B (3×3 each, [m²/m^1, …] per unit k²) with Σ = k_L²·A + k_R²·B for ``run``.
+
+    The odometry path is the run's encoder counts under ``robot``'s nominal parameters and
+    ``calibration``, one segment per sample. ``method="propagate_path"`` runs
+    :func:`odomgym.covariance.propagate_path` with (k_L, k_R) = (1, 0) and (0, 1) (the
+    reference, ~50 µs per sample); the default computes the same sums in numpy (see
+    :func:`_path_basis`), ~50× faster, and falls back to the reference for samples that turn
+    more than 1 rad.
+    """
+    cal = calibration if calibration is not None else Calibration()
+    travels, wheelbase = _wheel_travels(run, robot, cal)
+    _check_run(run, travels)
+    if method == "vectorised" and np.abs(np.diff(travels, axis=1)).max() / wheelbase < (
+        _MAX_SAMPLE_TURN
+    ):
+        return _path_basis(travels, wheelbase)
+    segments = [(float(left), float(right)) for left, right in travels]
+    return (
+        propagate_path(segments, wheelbase, 1.0, 0.0).cov,
+        propagate_path(segments, wheelbase, 0.0, 1.0).cov,
+    )
+
+
+@dataclass(frozen=True)
+class NoiseSamples:
+    """What the fit needs from n runs.
+
+    Attributes:
+        errors: (n, 3) end-pose errors true − odometry in each run's start frame [m, m, rad].
+        basis_left, basis_right: (n, 3, 3) A and B of each run (Σ = k_L²·A + k_R²·B).
+        groups: a label per run; runs sharing a label share one systematic error.
+        sources: where each run came from, for messages.
+    """
+
+    errors: FloatArray
+    basis_left: FloatArray
+    basis_right: FloatArray
+    groups: tuple[str, ...]
+    sources: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        n = len(self.errors)
+        shapes = (self.errors.shape, self.basis_left.shape, self.basis_right.shape)
+        if shapes != ((n, 3), (n, 3, 3), (n, 3, 3)) or len(self.groups) != n:
+            raise ValueError(f"inconsistent sample arrays: {shapes}, {len(self.groups)} groups")
+        finite = np.asarray(np.isfinite(self.errors).all(axis=1), dtype=bool).tolist()
+        if not all(finite):
+            bad = ", ".join(s for s, ok in zip(self.sources, finite, strict=True) if not ok)
+            raise ValueError(f"non-finite (NaN/inf) errors in runs {bad}")
+
+    @property
+    def n_runs(self) -> int:
+        """Number of runs n."""
+        return len(self.errors)
+
+    def __add__(self, other: NoiseSamples) -> NoiseSamples:
+        """Pool two sets of runs (e.g. several sessions); groups keep their labels."""
+        return NoiseSamples(
+            np.concatenate([self.errors, other.errors]),
+            np.concatenate([self.basis_left, other.basis_left]),
+            np.concatenate([self.basis_right, other.basis_right]),
+            self.groups + other.groups,
+            self.sources + other.sources,
+        )
+
+
+def noise_samples(
+    runs: Sequence[Run],
+    robot: RobotSpec,
+    calibration: Calibration | None = None,
+    *,
+    group: str | Sequence[str] | Callable[[Run], str] = "all",
+) -> NoiseSamples:
+    """Errors and bases of ``runs`` under ``robot``'s nominal parameters and ``calibration``.
+
+    ``group`` labels runs that share a systematic error: one label for all, one per run, or a
+    function of the run (e.g. by direction). Raises ValueError for an empty list, non-finite
+    values or a run of zero length, naming the run.
+    """
+    if not runs:
+        raise ValueError("no runs given")
+    labels = (
+        [group] * len(runs)
+        if isinstance(group, str)
+        else [group(r) for r in runs]
+        if callable(group)
+        else list(group)
+    )
+    if len(labels) != len(runs):
+        raise ValueError(f"{len(labels)} group labels for {len(runs)} runs")
+    errors, lefts, rights = [], [], []
+    for run in runs:
+        basis_left, basis_right = run_noise_basis(run, robot, calibration)  # checks the run
+        errors.append(return_error(run, robot, calibration, frame="start"))
+        lefts.append(basis_left)
+        rights.append(basis_right)
+    return NoiseSamples(
+        np.array(errors),
+        np.array(lefts),
+        np.array(rights),
+        tuple(labels),
+        tuple(r.source for r in runs),
+    )
+
+
+# ----------------------------------------------------------------------------- likelihood
+@dataclass(frozen=True)
+class _Design:
+    """The runs of one fit: errors, bases, and (for REML) which group each run is in."""
+
+    errors: FloatArray  # (n, 3)
+    basis_left: FloatArray  # (n, 3, 3)
+    basis_right: FloatArray
+    membership: FloatArray | None  # (G, n) one-hot, or None for systematic="none"
+    n_obs: int  # 3·(n − G), or 3·n
+    constant: float  # Σ_g 3·log n_g (REML's log det XᵀX), or 0
+
+
+def _design(samples: NoiseSamples, index: NDArray[np.intp], systematic: Systematic) -> _Design:
+    errors = samples.errors[index]
+    if systematic == "none":
+        return _Design(errors, samples.basis_left[index], samples.basis_right[index], None,
+                       3 * len(index), 0.0)  # fmt: skip
+    labels = [samples.groups[i] for i in index]
+    names = list(dict.fromkeys(labels))
+    membership = np.array([[lab == name for lab in labels] for name in names], dtype=float)
+    sizes = membership.sum(axis=1)
+    return _Design(errors, samples.basis_left[index], samples.basis_right[index], membership,
+                   3 * (len(index) - len(names)), 3.0 * float(np.log(sizes).sum()))  # fmt: skip
+
+
+def _terms(design: _Design, k2_left: float, k2_right: float) -> tuple[float, float]:
+    """(log det, quadratic form) of the (restricted) Gaussian likelihood; (inf, inf) where a
+    run's Σ is singular.
+
+    With group means removed this is REML: for contrasts z = K·ε with K·X = 0 (X stacks one
+    3×3 identity per run of a group), log det(KΣKᵀ) = Σ log det Σ_i + Σ_g log det(Σ_i∈g Σ_i⁻¹)
+    − Σ_g 3·log n_g, and zᵀ(KΣKᵀ)⁻¹z = Σ εᵢᵀΣᵢ⁻¹εᵢ − Σ_g t_gᵀ(Σ_i∈g Σ_i⁻¹)⁻¹t_g with
+    t_g = Σ_i∈g Σᵢ⁻¹εᵢ: the residuals about the generalised-least-squares group mean. Only 3×3
+    matrices are ever factorised, however many runs a group holds.
+    """
+    sigma = k2_left * design.basis_left + k2_right * design.basis_right
+    try:
+        chol = np.linalg.cholesky(sigma)
+    except np.linalg.LinAlgError:
+        return math.inf, math.inf
+    logdet = 2.0 * float(np.log(np.diagonal(chol, axis1=1, axis2=2)).sum())
+    precision = np.linalg.inv(sigma)
+    weighted = np.einsum("nij,nj->ni", precision, design.errors)
+    quad = float(np.einsum("ni,ni->", weighted, design.errors))
+    if design.membership is not None:
+        info = np.einsum("gn,nij->gij", design.membership, precision)
+        total = design.membership @ weighted
+        sign, group_logdet = np.linalg.slogdet(info)
+        if not np.all(sign > 0):
+            return math.inf, math.inf
+        logdet += float(group_logdet.sum()) - design.constant
+        quad -= float(np.einsum("gi,gi->", total, np.linalg.solve(info, total[..., None])[..., 0]))
+    return logdet, quad
+
+
+def _log_likelihood(design: _Design, k2_left: float, k2_right: float) -> float:
+    """Gaussian log-likelihood of the contrasts (REML when they are within-group contrasts);
+    −inf where the covariance is singular (e.g. k_L = 0 on straight runs)."""
+    n_obs = design.n_obs
+    logdet, quad = _terms(design, k2_left, k2_right)
+    if not math.isfinite(logdet):
+        return -math.inf
+    return -0.5 * (logdet + quad + n_obs * math.log(2.0 * math.pi))
+
+
+def _mle(design: _Design) -> tuple[float, float, float]:
+    """(k_L², k_R², log-likelihood) maximised over k² ≥ 0.
+
+    Parametrised as k_L² = λ·u, k_R² = λ·(1 − u): for fixed u, ℓ = −½(N·log λ + log det S_u +
+    Q_u/λ + N·log 2π) is maximal at λ = Q_u/N (N observations), which leaves a bounded search
+    over u ∈ [0, 1] — no starting values or scales to guess.
+    """
+    n_obs = design.n_obs
+
+    def profile(u: float) -> tuple[float, float]:
+        logdet, quad = _terms(design, u, 1.0 - u)
+        if not (math.isfinite(logdet) and quad > 0.0):
+            return -math.inf, 0.0
+        lam = quad / n_obs
+        return -0.5 * (n_obs * math.log(lam) + logdet + n_obs * (1.0 + math.log(2 * math.pi))), lam
+
+    grid = np.linspace(0.0, 1.0, 41)
+    values = [profile(float(u))[0] for u in grid]
+    best = int(np.argmax(values))
+    if not math.isfinite(values[best]):
+        raise ValueError("the errors are degenerate under every k_L/k_R split (all zero?)")
+    low, high = float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])
+    res = optimize.minimize_scalar(
+        lambda u: -profile(u)[0], bounds=(low, high), method="bounded", options={"xatol": 1e-10}
+    )
+    u = float(res.x) if -float(res.fun) >= values[best] else float(grid[best])
+    ell, lam = profile(u)
+    return lam * u, lam * (1.0 - u), ell
+
+
+def _profile_interval(
+    design: _Design, estimate: tuple[float, float, float], which: int, confidence: float
+) -> tuple[float, float]:
+    """Profile-likelihood interval of k_L² (``which`` = 0) or k_R² (1): where
+    2·(ℓ̂ − max over the other k² of ℓ) stays below the χ²₁ quantile."""
+    best = estimate[2]
+    limit = 0.5 * float(stats.chi2.ppf(confidence, 1))
+    scale = estimate[0] + estimate[1]
+
+    def deficit(value: float) -> float:
+        def neg(other: float) -> float:
+            pair = (value, other) if which == 0 else (other, value)
+            ell = _log_likelihood(design, *pair)
+            return -ell if math.isfinite(ell) else 1e300
+
+        hi = 4.0 * scale + value
+        res = optimize.minimize_scalar(neg, bounds=(0.0, hi), method="bounded",
+                                       options={"xatol": 1e-9 * scale})  # fmt: skip
+        ell = min(float(res.fun), neg(0.0))
+        return best - (-ell) - limit
+
+    centre = estimate[which]
+    floor = 1e-9 * scale
+    lower = floor if deficit(floor) <= 0.0 else optimize.brentq(
+        deficit, floor, max(centre, floor * 2), xtol=1e-12 * scale
+    )  # fmt: skip
+    step, upper = max(centre, 0.1 * scale), centre
+    for _ in range(60):
+        upper = centre + step
+        if deficit(upper) > 0.0:
+            break
+        step *= 2.0
+    upper = optimize.brentq(deficit, max(centre, floor), upper, xtol=1e-12 * scale)
+    return (0.0 if lower <= floor else float(lower)), float(upper)
+
+
+# ----------------------------------------------------------------------------- the fit
+@dataclass(frozen=True)
+class ComponentFit:
+    """How well the fitted model predicts one error component.
+
+    Attributes:
+        name, unit: ``"x"``/``"y"`` [m] or ``"theta"`` [rad].
+        measured_var: pooled variance of the residuals (errors less group means) [unit²].
+        predicted_var: what the fitted Σ predicts for that pooled variance [unit²].
+        ratio: measured_var / predicted_var (1 = perfect; > 1: the model under-predicts).
+        chi2, dof: Σ zᵀC⁻¹z over this component's contrasts, χ²-distributed with ``dof``
+            degrees of freedom if the model is right (ignoring that k was fitted).
+        p_value: two-sided P of a χ²_dof at least as far from its median as ``chi2``.
+    """
+
+    name: str
+    unit: str
+    measured_var: float
+    predicted_var: float
+    ratio: float
+    chi2: float
+    dof: int
+    p_value: float
+
+
+@dataclass(frozen=True)
+class NoiseFit:
+    """k_L, k_R [m^½] with intervals, and the fit's diagnostics.
+
+    ``measured_cov`` and ``predicted_cov`` (3×3, [m², m·rad, rad²]) are pooled over the runs in
+    the same way (residual outer products over the residual degrees of freedom, and the
+    model's expectation of that average); ``residuals`` (n, 3) are the errors less their group
+    means (or the errors, with ``systematic="none"``).
+    """
+
+    k_left: float
+    k_right: float
+    k_left_interval: tuple[float, float]
+    k_right_interval: tuple[float, float]
+    confidence: float
+    interval_method: IntervalMethod
+    systematic: Systematic
+    n_runs: int
+    n_groups: int
+    dof: int
+    log_likelihood: float
+    chi2_total: float
+    components: tuple[ComponentFit, ...]
+    measured_cov: FloatArray
+    predicted_cov: FloatArray
+    residuals: FloatArray
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe summary (no per-run arrays)."""
+        return {
+            "k_left_sqrt_m": self.k_left,
+            "k_right_sqrt_m": self.k_right,
+            "k_left_interval": list(self.k_left_interval),
+            "k_right_interval": list(self.k_right_interval),
+            "confidence": self.confidence,
+            "interval_method": self.interval_method,
+            "systematic": self.systematic,
+            "runs": self.n_runs,
+            "groups": self.n_groups,
+            "dof": self.dof,
+            "log_likelihood": self.log_likelihood,
+            "chi2_total": self.chi2_total,
+            "components": [vars(c) for c in self.components],
+            "measured_cov": self.measured_cov.tolist(),
+            "predicted_cov": self.predicted_cov.tolist(),
+            "measured_corr": _corr(self.measured_cov),
+            "predicted_corr": _corr(self.predicted_cov),
+        }
+
+
+def _corr(cov: FloatArray) -> dict[str, float | None]:
+    std = np.sqrt(np.diag(cov))
+    out: dict[str, float | None] = {}
+    for key, (i, j) in (("x_y", (0, 1)), ("x_theta", (0, 2)), ("y_theta", (1, 2))):
+        value = cov[i, j] / (std[i] * std[j]) if std[i] * std[j] > 0 else math.nan
+        out[key] = float(value) if math.isfinite(value) else None
+    return out
+
+
+def _group_index(samples: NoiseSamples, systematic: Systematic) -> list[NDArray[np.intp]]:
+    groups: dict[str, list[int]] = {}
+    for i, label in enumerate(samples.groups):
+        groups.setdefault(label, []).append(i)
+    index = [np.array(v, dtype=np.intp) for v in groups.values()]
+    if systematic == "group-mean":
+        lonely = [label for label, v in groups.items() if len(v) < 2]
+        if lonely:
+            raise ValueError(
+                f"groups with a single run carry no information once their mean is removed: "
+                f"{', '.join(lonely)} (pool them with others, or use systematic='none')"
+            )
+    dof = samples.n_runs - (len(index) if systematic == "group-mean" else 0)
+    if dof < MIN_RUNS - 1 or samples.n_runs < MIN_RUNS:
+        raise ValueError(
+            f"too few runs: {samples.n_runs} runs in {len(index)} groups leave {dof} independent "
+            f"errors; the fit needs at least {MIN_RUNS} runs and {MIN_RUNS - 1} independent "
+            "errors (runs minus groups when group means are removed)"
+        )
+    return index
+
+
+def _diagnostics(
+    samples: NoiseSamples, index: list[NDArray[np.intp]], systematic: Systematic,
+    k2_left: float, k2_right: float,
+) -> tuple[tuple[ComponentFit, ...], FloatArray, FloatArray, FloatArray, int]:  # fmt: skip
+    """Per-component fit, pooled measured and predicted covariances, residuals, dof.
+
+    Residuals about the plain group mean have E[Σ rrᵀ] = Σ_i (1 − 1/n_g)·Σ_i, which is the
+    prediction; χ² per component uses the scalar form of :func:`_terms` (GLS group mean).
+    """
+    sigma = k2_left * samples.basis_left + k2_right * samples.basis_right  # (n, 3, 3)
+    residuals = samples.errors.copy()
+    predicted, chi2, dof = np.zeros((3, 3)), np.zeros(3), 0
+    for members in index:
+        var = np.diagonal(sigma[members], axis1=1, axis2=2)  # (m, 3)
+        err = samples.errors[members]
+        chi2 += (err**2 / var).sum(axis=0)
+        if systematic == "group-mean":
+            residuals[members] -= err.mean(axis=0)
+            chi2 -= (err / var).sum(axis=0) ** 2 / (1.0 / var).sum(axis=0)
+            predicted += (1.0 - 1.0 / len(members)) * sigma[members].sum(axis=0)
+            dof += len(members) - 1
+        else:
+            predicted += sigma[members].sum(axis=0)
+            dof += len(members)
+    measured = residuals.T @ residuals / dof
+    predicted /= dof
+    components = []
+    for j, (name, unit) in enumerate(COMPONENTS):
+        upper = float(stats.chi2.sf(chi2[j], dof))
+        components.append(
+            ComponentFit(name, unit, float(measured[j, j]), float(predicted[j, j]),
+                         float(measured[j, j] / predicted[j, j]), float(chi2[j]), dof,
+                         min(1.0, 2.0 * min(upper, 1.0 - upper)))
+        )  # fmt: skip
+    return tuple(components), measured, predicted, residuals, dof
+
+
+def fit_noise(
+    samples: NoiseSamples,
+    *,
+    systematic: Systematic = "group-mean",
+    confidence: float = 0.95,
+    interval: IntervalMethod = "profile",
+    rng: np.random.Generator | None = None,
+    n_bootstrap: int = 200,
+) -> NoiseFit:
+    """Maximum-likelihood k_L, k_R [m^½] of seed 004 Eq. 4 from the runs in ``samples``.
+
+    See the module docstring for the model and the two ways of treating systematic errors.
+    ``interval="profile"``: the set of k² whose profile log-likelihood lies within
+    χ²₁(confidence)/2 of the maximum (reported as k = √k²; clipped at 0). ``"bootstrap"``:
+    percentile interval of ``n_bootstrap`` refits on runs resampled with replacement within
+    each group, drawn from ``rng`` (required).
+
+    Raises:
+        ValueError: fewer than :data:`MIN_RUNS` runs (or independent errors), a group of one
+            run under ``"group-mean"``, a bad option, or degenerate (all-zero) errors.
+    """
+    if systematic not in ("group-mean", "none"):
+        raise ValueError(f"systematic must be 'group-mean' or 'none', got {systematic!r}")
+    if interval not in ("profile", "bootstrap"):
+        raise ValueError(f"interval must be 'profile' or 'bootstrap', got {interval!r}")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    index = _group_index(samples, systematic)
+    design = _design(samples, np.arange(samples.n_runs), systematic)
+    estimate = _mle(design)
+    if interval == "profile":
+        bounds = [_profile_interval(design, estimate, w, confidence) for w in (0, 1)]
+    else:
+        if rng is None:
+            raise ValueError("interval='bootstrap' needs rng=np.random.Generator")
+        if n_bootstrap < 20:
+            raise ValueError(f"n_bootstrap must be >= 20, got {n_bootstrap!r}")
+        draws = np.empty((n_bootstrap, 2))
+        for b in range(n_bootstrap):
+            pick = np.concatenate([rng.choice(m, size=len(m)) for m in index])
+            draws[b] = _mle(_design(samples, pick, systematic))[:2]
+        tail = 50.0 * (1.0 - confidence)
+        qs = np.percentile(draws, [tail, 100.0 - tail], axis=0)
+        bounds = [(float(qs[0, w]), float(qs[1, w])) for w in (0, 1)]
+    components, measured, predicted, residuals, dof = _diagnostics(
+        samples, index, systematic, estimate[0], estimate[1]
+    )
+    return NoiseFit(
+        k_left=math.sqrt(estimate[0]),
+        k_right=math.sqrt(estimate[1]),
+        k_left_interval=(math.sqrt(bounds[0][0]), math.sqrt(bounds[0][1])),
+        k_right_interval=(math.sqrt(bounds[1][0]), math.sqrt(bounds[1][1])),
+        confidence=confidence,
+        interval_method=interval,
+        systematic=systematic,
+        n_runs=samples.n_runs,
+        n_groups=len(index),
+        dof=dof,
+        log_likelihood=estimate[2],
+        chi2_total=_terms(design, estimate[0], estimate[1])[1],
+        components=components,
+        measured_cov=measured,
+        predicted_cov=predicted,
+        residuals=residuals,
+    )
+
+
+# ----------------------------------------------------------------------------- runs to fit
+def simulate_noise_experiment(
+    robot: str | RobotSpec = "labmate",
+    *,
+    k: float = 0.002,
+    runs: int = 60,
+    distance: float = 10.0,
+    rng: np.random.Generator,
+    ideal: bool = True,
+    friction: float = 0.8,
+    cruise_speed: float = 0.2,
+) -> tuple[list[Run], RobotSpec]:
+    """Seed 004 §6.3 in simulation: ``runs`` robots drive ``distance`` [m] forward and back
+    (backwards, no turn) on ``FloorSpec(roughness=k)`` [m^½], all in one pymunk space.
+
+    ``robot`` is a preset name (``"labmate"``, ``"monash"``, …) or a spec; ``ideal`` drops its
+    systematic errors (true = nominal), so the errors are the floor's alone and their mean is
+    ~0. Returns the runs and the robot whose nominal parameters replay their odometry.
+    """
+    spec = _preset(robot)
+    if ideal:
+        spec = spec.ideal()
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise ValueError(f"runs must be a positive integer, got {runs!r}")
+    from odomgym.lab import simulate_runs  # the physics stack loads only when simulating
+    from odomgym.paths import straight_route
+
+    floor = FloorSpec(friction=friction, roughness=k, name=f"roughness-{k:g}")
+    recorded, _ = simulate_runs(
+        spec, floor, straight_route(distance, return_trip=True), rng=rng, repeats=runs,
+        cruise_speed=cruise_speed, kind="straight",
+    )  # fmt: skip
+    return recorded, spec
+
+
+def _preset(robot: str | RobotSpec) -> RobotSpec:
+    if isinstance(robot, RobotSpec):
+        return robot
+    if robot not in PRESETS:
+        raise ValueError(f"unknown robot preset {robot!r}; known: {', '.join(sorted(PRESETS))}")
+    return PRESETS[robot]
+
+
+def with_wheel_noise(
+    runs: Sequence[Run],
+    robot: RobotSpec,
+    k_left: float,
+    k_right: float,
+    *,
+    rng: np.random.Generator,
+    calibration: Calibration | None = None,
+) -> list[Run]:
+    """Copies of ``runs`` whose ground truth is their encoder path re-driven with wheel noise.
+
+    Each sample's wheel travel d (from the counts, as the odometry sees it) becomes
+    d + k·√|d|·ξ with ξ ~ N(0, 1) per wheel and sample (Eq. 4, with *separate* k_L, k_R, which
+    :class:`~odomgym.floor.FloorSpec` cannot express), integrated as exact arcs from the first
+    true pose. This is the kinematic Monte Carlo of :mod:`odomgym.montecarlo` on a recorded
+    path: a known ground truth for testing the fit, including its second-order effects.
+    """
+    cal = calibration if calibration is not None else Calibration()
+    noisy = []
+    for run in runs:
+        travels, wheelbase = _wheel_travels(run, robot, cal)
+        _check_run(run, travels)
+        scale = np.sqrt(np.abs(travels)) * np.array([k_left, k_right])
+        travels = travels + scale * rng.standard_normal(travels.shape)
+        dtheta = (travels[:, 1] - travels[:, 0]) / wheelbase
+        x0, y0, th0 = run.true_pose[0]
+        theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
+        chord = travels.mean(axis=1) * np.sinc(0.5 * dtheta / math.pi)
+        mid = theta[:-1] + 0.5 * dtheta
+        pose = np.empty_like(run.true_pose)
+        pose[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(chord * np.cos(mid))])
+        pose[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(chord * np.sin(mid))])
+        pose[:, 2] = theta
+        noisy.append(Run(run.kind, run.time, run.counts, pose, run.direction, run.side,
+                         run.source, dict(run.meta, wheel_noise=(k_left, k_right))))  # fmt: skip
+    return noisy
+
+
+def published_calibration(
+    session_dir: str | Path, robot: RobotSpec, method: str = "optiodom"
+) -> Calibration | None:
+    """The calibration ``method`` published for an OptiOdom session, or None if not listed.
+
+    Reads ``published_results.csv`` two folders above the session (the data set's root):
+    the calibrated (b, D_R, D_L) [m] of Sousa et al. 2022, mapped onto ``robot``'s nominal.
+    """
+    folder = Path(session_dir)
+    table = folder.resolve().parent.parent / "published_results.csv"
+    if not table.is_file():
+        return None
+    with table.open(encoding="utf-8") as file:
+        for row in csv.DictReader(file):
+            if row["method"] == method and row["session"] == folder.name:
+                return Calibration.from_parameters(
+                    robot, float(row["b"]), float(row["dr"]), float(row["dl"])
+                )
+    return None
+
+
+def _group_label(run: Run) -> str:
+    """Runs sharing a systematic error: same session, path kind and turning direction."""
+    turn = run.direction or (str(run.meta.get("turn", "")) if run.kind == "free" else "")
+    return ":".join(part for part in (str(run.meta.get("session", "")), run.kind, turn) if part)
+
+
+# ----------------------------------------------------------------------------- report
+def fit_noise_report(
+    *,
+    robot: str = "labmate",
+    k: float = 0.002,
+    runs: int = 60,
+    distance: float = 10.0,
+    seed: int = 0,
+    data: Sequence[str | Path] = (),
+    pool: Literal["all", "path-type", "session"] = "path-type",
+    calibration: Literal["published", "session"] = "published",
+    systematic: Systematic = "group-mean",
+    interval: IntervalMethod = "profile",
+    confidence: float = 0.95,
+    n_bootstrap: int = 200,
+    plot: str | Path | None = None,
+) -> dict[str, Any]:
+    """Fit k_L, k_R on a simulated §6.3 experiment or on recorded sessions; a JSON-safe dict.
+
+    Without ``data``: :func:`simulate_noise_experiment` with ``robot`` (preset name, ideal),
+    ``k`` [m^½], ``runs``, ``distance`` [m] and ``seed``; one fit, whose entry says whether
+    the intervals cover the true k. With ``data`` (OptiOdom session folders, or folders
+    holding them): each session's runs are replayed with its published OptiOdom calibration
+    (``calibration="published"``, falling back to the session's own parameters when it has
+    none) or with its own metadata (``"session"``); runs are grouped by session, path and
+    turning direction (the groups whose means are removed), and pooled into one fit per path
+    type (``pool="path-type"``), per session, or all together. A pool that cannot be fitted
+    (too few runs) is listed under ``"skipped"`` with the reason. ``plot``: write the Fig. 4
+    scatters there (one file per fit, the fit's name appended when there are several).
+    """
+    seeds = np.random.SeedSequence(seed).spawn(2)
+    sim_rng, boot_rng = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
+    pools: dict[str, NoiseSamples] = {}
+    report: dict[str, Any] = {
+        "model": "Chong & Kleeman 1997 (seed 004): wheel noise variance k^2|d| (Eq. 4), "
+        "end-pose covariance k_L^2 A + k_R^2 B (Eqs. 23-28); Gaussian maximum likelihood",
+        "systematic": systematic,
+        "interval": interval,
+        "confidence": confidence,
+    }
+    if not data:
+        recorded, spec = simulate_noise_experiment(
+            robot, k=k, runs=runs, distance=distance, rng=sim_rng
+        )
+        pools["simulation"] = noise_samples(recorded, spec, group="all")
+        report["source"] = "simulation"
+        report["inputs"] = {"robot": spec.name, "ideal": True, "k_true_sqrt_m": k, "runs": runs,
+                            "distance_m": distance, "seed": seed}  # fmt: skip
+    else:
+        from odomgym.data import find_sessions, read_session
+
+        folders = [p for d in data for p in (find_sessions(d) or [Path(d)])]
+        sessions = []
+        for folder in folders:
+            session = read_session(folder)
+            cal = (
+                published_calibration(folder, session.robot) if calibration == "published" else None
+            )
+            used = "published" if cal is not None else "session"
+            samples = noise_samples(session.runs, session.robot, cal or session.initial,
+                                    group=_group_label)  # fmt: skip
+            key = {"all": "all", "path-type": session.path_type, "session": session.name}[pool]
+            pools[key] = pools[key] + samples if key in pools else samples
+            sessions.append({"session": session.name, "path_type": session.path_type,
+                             "runs": session.n_runs, "calibration": used})  # fmt: skip
+        report["source"] = "data"
+        report["inputs"] = {"sessions": sessions, "pool": pool, "seed": seed}
+    report["fits"], report["skipped"], report["plots"] = [], [], []
+    for name, samples in pools.items():
+        try:
+            fit = fit_noise(samples, systematic=systematic, confidence=confidence,
+                            interval=interval, rng=boot_rng, n_bootstrap=n_bootstrap)  # fmt: skip
+        except ValueError as exc:
+            report["skipped"].append({"name": name, "reason": str(exc)})
+            continue
+        entry = {"name": name, **fit.to_dict()}
+        if not data:
+            entry["covers_true"] = {
+                "k_left": fit.k_left_interval[0] <= k <= fit.k_left_interval[1],
+                "k_right": fit.k_right_interval[0] <= k <= fit.k_right_interval[1],
+            }
+        report["fits"].append(entry)
+        if plot is not None:
+            target = Path(plot)
+            if len(pools) > 1:
+                target = target.with_name(f"{target.stem}-{name}{target.suffix}")
+            plot_noise_fit(target, fit, title=f"{name}: {fit.n_runs} runs")
+            report["plots"].append(str(target))
+    return report
+
+
+def format_noise_report(report: dict[str, Any]) -> str:
+    """The fits as a table: k_L, k_R with intervals, then measured against predicted spread
+    per component (x, y [mm], θ [deg]) with the variance ratio and χ² test."""
+    inputs = report["inputs"]
+    if report["source"] == "simulation":
+        head = (f"simulation: {inputs['robot']} (ideal), {inputs['runs']} runs of "
+                f"{inputs['distance_m']:g} m forward and back, floor k = "
+                f"{inputs['k_true_sqrt_m']:g} m^1/2, seed {inputs['seed']}")  # fmt: skip
+    else:
+        head = f"data: {len(inputs['sessions'])} sessions, pooled by {inputs['pool']}"
+    removed = "group means removed (REML)" if report["systematic"] == "group-mean" else "none"
+    lines = [
+        f"Wheel-noise fit, Chong & Kleeman Eq. 4 — {head}",
+        f"systematic errors: {removed}; intervals: {report['confidence']:.0%} {report['interval']}",
+        "",
+        f"{'fit':<14}{'runs':>5}{'groups':>7}   {'k_L [m^1/2]':<28}{'k_R [m^1/2]':<28}",
+    ]
+    for fit in report["fits"]:
+        cells = [
+            f"{fit[f'k_{s}_sqrt_m']:.3e} [{fit[f'k_{s}_interval'][0]:.2e}, "
+            f"{fit[f'k_{s}_interval'][1]:.2e}]"
+            for s in ("left", "right")
+        ]
+        lines.append(f"{fit['name']:<14}{fit['runs']:>5}{fit['groups']:>7}   "
+                     f"{cells[0]:<28}{cells[1]:<28}")  # fmt: skip
+    for fit in report["fits"]:
+        lines += ["", f"{fit['name']}: component  measured std  predicted std  var ratio  "
+                  f"chi2/dof        p"]  # fmt: skip
+        for c in fit["components"]:
+            scale, unit = (1e3, "mm") if c["unit"] == "m" else (180.0 / math.pi, "deg")
+            lines.append(
+                f"{'':<14}{c['name']:<7}{scale * math.sqrt(c['measured_var']):>10.3f} {unit:<3}"
+                f"{scale * math.sqrt(c['predicted_var']):>10.3f} {unit:<3}{c['ratio']:>9.2f}"
+                f"{c['chi2']:>9.1f}/{c['dof']:<4}{c['p_value']:>9.3f}"
+            )
+        corr = "  ".join(
+            f"{key} {_fmt(fit['measured_corr'][key])}/{_fmt(fit['predicted_corr'][key])}"
+            for key in ("x_y", "x_theta", "y_theta")
+        )
+        lines.append(f"{'':<14}corr measured/predicted: {corr}")
+    for skip in report["skipped"]:
+        lines.append(f"skipped {skip['name']}: {skip['reason']}")
+    return "\n".join(lines)
+
+
+def _fmt(value: float | None) -> str:
+    return "—" if value is None else f"{value:+.2f}"
+
+
+def plot_noise_fit(path: str | Path, fit: NoiseFit, *, title: str = "") -> None:
+    """Seed 004 Fig. 4: residual scatters x–y, x–θ, y–θ with the measured (solid) and the
+    fitted model's (dashed) 95 % ellipses, x, y in mm and θ in degrees; written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scale = np.array([1e3, 1e3, 180.0 / math.pi])
+    labels = ("x error [mm]", "y error [mm]", "θ error [deg]")
+    radius = math.sqrt(float(stats.chi2.ppf(0.95, 2)))
+    circle = np.stack([np.cos(np.linspace(0, 2 * math.pi, 200)),
+                       np.sin(np.linspace(0, 2 * math.pi, 200))])  # fmt: skip
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.5))
+    for ax, (i, j) in zip(axes, ((0, 1), (0, 2), (1, 2)), strict=True):
+        ax.scatter(fit.residuals[:, i] * scale[i], fit.residuals[:, j] * scale[j], s=12,
+                   color="tab:blue", label="runs")  # fmt: skip
+        for cov, style, name in ((fit.measured_cov, "-", "measured"),
+                                 (fit.predicted_cov, "--", "model")):  # fmt: skip
+            sub = cov[np.ix_((i, j), (i, j))] * np.outer(scale[[i, j]], scale[[i, j]])
+            values, vectors = np.linalg.eigh(sub)
+            ring = vectors @ (np.sqrt(np.maximum(values, 0.0))[:, None] * circle) * radius
+            ax.plot(ring[0], ring[1], style, color="k", label=f"95 % {name}")
+        ax.set_xlabel(labels[i])
+        ax.set_ylabel(labels[j])
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(
+        f"{title}  k_L = {fit.k_left:.2e}, k_R = {fit.k_right:.2e} m^1/2".strip(), fontsize=10
+    )
+    fig.tight_layout()
+    target = Path(path)
+
+    def write(tmp: Path) -> None:
+        fig.savefig(tmp, dpi=120, format=target.suffix.lstrip(".") or "png")
+
+    try:
+        atomic_writer(target, write)
+    finally:
+        plt.close(fig)
