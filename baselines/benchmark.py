@@ -12,8 +12,9 @@ Floors (:data:`BENCH_FLOORS`):
   return-error scatter σ ≈ 25 mm that seed 000 §6.3 reports (a perfectly smooth floor would
   make every method look 100× better than any real lab allows);
 * ``rough`` — k = 0.002 m^½ (five times rougher);
-* ``bumpy`` — the concrete floor strewn with 10 mm cables (0.5 per m², 0.3 m long) and every run
-  started at a random pose, so cables are met at random (≈ 0.1 crossings per metre per wheel).
+* ``bumpy`` — the concrete floor strewn with 10 mm cables (1.5 per m², 0.3 m long) and every run
+  started at a random pose, so cables are met at random (≈ 0.29 crossings per metre per wheel,
+  about 5 per wheel on a 4×4 m square; seed 002 §6.1 laid 10 cables along 18 m).
 
 Randomness: robot i on floor f draws everything (its errors, sensor noise, start poses, floor
 roughness) from ``SeedSequence([seed, i, f, purpose])``, and every method sees the same streams
@@ -73,7 +74,7 @@ def _bumpy(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
     floor = FloorSpec.scattered_cables(
         rng,
         half_size=BUMPY_START_REGION + 6.0,
-        per_square_metre=0.5,
+        per_square_metre=1.5,
         roughness=FLOORS["concrete"].roughness,
         name="bumpy",
     )

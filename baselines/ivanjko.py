@@ -110,7 +110,8 @@ def _fit(
         ftol=1e-12,
         gtol=1e-12,
     )
-    return np.exp(np.asarray(solution.x, dtype=float))
+    factors: FloatArray = np.exp(np.asarray(solution.x, dtype=float))
+    return factors
 
 
 def fit_wheels(
@@ -124,9 +125,7 @@ def fit_wheels(
     (x, y [m]) of straight ``runs`` replayed with ``calibration``; b stays fixed."""
 
     def make(x: FloatArray) -> Calibration:
-        return scale_parameters(
-            robot, calibration, left=math.exp(x[0]), right=math.exp(x[1])
-        )
+        return scale_parameters(robot, calibration, left=math.exp(x[0]), right=math.exp(x[1]))
 
     k_left, k_right = _fit(runs, robot, calibration, [0, 1], [0, 1], residuals, make)
     return float(k_right), float(k_left)
@@ -237,9 +236,11 @@ class Ivanjko(Calibrator):
             if max(abs(right - 1.0), abs(left - 1.0), abs(factor - 1.0)) < self.tolerance:
                 converged = True
                 break
-        notes = [] if converged else [
-            f"not converged to |K − 1| < {self.tolerance:g} after {rounds} rounds"
-        ]
+        notes = (
+            []
+            if converged
+            else [f"not converged to |K − 1| < {self.tolerance:g} after {rounds} rounds"]
+        )
         params = calibration.parameters(robot)
         return CalibrationResult(
             calibration=calibration,

@@ -18,21 +18,31 @@ increments in between, give the parameters by two ordinary least-squares problem
        x_end − x_start = Σ_j (r_R·Δφ_R,j + r_L·Δφ_L,j)/2 · cos μ_j
        y_end − y_start = Σ_j (r_R·Δφ_R,j + r_L·Δφ_L,j)/2 · sin μ_j
 
-   two rows per run: Φ_xy·r = Δp, solved by least squares.
+   two rows per run: Φ_xy·r = Δp. As published (``position="radii"``) both radii are unknowns
+   and b = argmin ‖(r_R, r_L) − b·c‖² = (c·r)/(c·c).
 
-Then b = argmin ‖(r_R, r_L) − b·c‖² = (c·r)/(c·c). The condition numbers of Φ_θ and Φ_xy
-(reported as ``cond_theta`` and ``cond_xy``) say how informative the runs were: closed paths
-(squares) return to their start, so their Δp is nearly zero and carries the *ratio* r_R/r_L but
-hardly the scale; runs that end far from their start (straight runs) fix the scale.
+**Departure (default ``position="wheelbase"``).** On the paths a lab offers (straight runs,
+squares, spins) the wheels turn either together (φ_R ≈ φ_L on straight legs) or against each
+other (φ_R ≈ −φ_L on the spot, where the centre does not move), so the two columns of Φ_xy are
+nearly proportional: the position rows fix the mean radius well but the *ratio* r_R/r_L hardly
+at all (measured on the LabMate with E_d = 1.004, 3+3 squares and 3 straight runs: cond(Φ_xy) ≈
+58 and E_d estimates of 0.81–1.11 over three seeds). The heading rows, on the other hand, fix
+c_R/c_L = r_R/r_L precisely. By default that ratio is kept and the position rows estimate a
+single unknown, b, with r_R = b·c_R and r_L = b·c_L (then Φ_xy·c is the one-column regressor).
+Antonelli et al. drove varied paths (arcs of different curvature) for which Φ_xy is well
+conditioned; ``position="radii"`` is the published estimator for such data.
+
+The condition numbers of Φ_θ and of the two-column Φ_xy (``cond_theta``, ``cond_xy``) say how
+informative the runs were.
 
 **Frames and units.** Poses are the runs' ground truth in its own frame (x, y [m], θ [rad]
 unwrapped); headings start from the first ground-truth heading. The result is absolute
 (D = 2r, b), independent of the calibration active while driving.
 
-Default experiments: 3 cw and 3 ccw UMBmark squares of 4 m (the heading rows: ±2π of turning
-fixes b relative to the wheels, the legs' drift the ratio r_R/r_L) and 3 straight runs of 3 m
-(the position rows: the distance fixes the scale). Any runs a lab provides will do; Antonelli et
-al. drove a set of varied paths.
+Default experiments: 3 cw and 3 ccw UMBmark squares of 4 m (heading rows: ±2π of turning fixes b
+relative to the wheels, the legs' drift the ratio r_R/r_L) and 3 straight runs of 3 m (position
+rows: squares return to their start, so the distance of the straight runs fixes the scale).
+Any runs a lab provides will do.
 """
 
 from __future__ import annotations
@@ -40,7 +50,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,9 +61,10 @@ from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["LeastSquares", "LeastSquaresFit", "fit_least_squares"]
+__all__ = ["LeastSquares", "LeastSquaresFit", "PositionUnknowns", "fit_least_squares"]
 
 FloatArray = NDArray[np.float64]
+PositionUnknowns = Literal["wheelbase", "radii"]
 
 
 @dataclass(frozen=True)
@@ -89,14 +100,24 @@ def _wheel_rotations(run: Run, robot: RobotSpec) -> FloatArray:
     return increments[:, ::-1] * (2.0 * math.pi / robot.ticks_per_rev)
 
 
-def fit_least_squares(runs: Sequence[Run], robot: RobotSpec) -> LeastSquaresFit:
+def fit_least_squares(
+    runs: Sequence[Run], robot: RobotSpec, *, position: PositionUnknowns = "wheelbase"
+) -> LeastSquaresFit:
     """Antonelli et al.'s two least-squares problems on ``runs`` (see the module docstring).
+
+    Args:
+        runs: the runs (at least two; their regressors must have full rank).
+        robot: the nominal robot (its ``ticks_per_rev``).
+        position: the unknowns of the position rows: ``"wheelbase"`` (default; r_R/r_L kept
+            from the heading rows, one unknown b) or ``"radii"`` (r_R and r_L, as published).
 
     Raises:
         ValueError: fewer than two runs, or runs whose regressors are rank-deficient (e.g. only
             straight runs for the heading rows, only closed paths at one size for the
             position rows).
     """
+    if position not in ("wheelbase", "radii"):
+        raise ValueError(f"position must be 'wheelbase' or 'radii', got {position!r}")
     if len(runs) < 2:
         raise ValueError(f"least-squares calibration needs at least two runs, got {len(runs)}")
     rotations = [_wheel_rotations(run, robot) for run in runs]
@@ -114,25 +135,34 @@ def fit_least_squares(runs: Sequence[Run], robot: RobotSpec) -> LeastSquaresFit:
     c_right, c_left = float(c[0]), float(c[1])
 
     # Step 2: position rows with the headings of step 1.
-    rows, targets = [], []
+    rows: list[list[float]] = []
+    targets: list[float] = []
     for run, rot in zip(runs, rotations, strict=True):
         dtheta = c_right * rot[:, 0] - c_left * rot[:, 1]
         theta = run.true_pose[0, 2] + np.cumsum(dtheta) - dtheta
         mid = theta + 0.5 * dtheta
         cos_mid, sin_mid = np.cos(mid), np.sin(mid)
-        rows.append([0.5 * rot[:, 0] @ cos_mid, 0.5 * rot[:, 1] @ cos_mid])
-        rows.append([0.5 * rot[:, 0] @ sin_mid, 0.5 * rot[:, 1] @ sin_mid])
-        targets.extend(run.true_pose[-1, :2] - run.true_pose[0, :2])
+        rows.append([float(0.5 * rot[:, 0] @ cos_mid), float(0.5 * rot[:, 1] @ cos_mid)])
+        rows.append([float(0.5 * rot[:, 0] @ sin_mid), float(0.5 * rot[:, 1] @ sin_mid)])
+        targets.extend(float(v) for v in run.true_pose[-1, :2] - run.true_pose[0, :2])
     phi_xy = np.array(rows)
     d_xy = np.array(targets)
-    if np.linalg.matrix_rank(phi_xy) < 2:
-        raise ValueError(
-            "the position regressor is rank-deficient: the runs need to end away from their "
-            "start in different ways (add straight runs)"
-        )
-    r, *_ = np.linalg.lstsq(phi_xy, d_xy, rcond=None)
-    r_right, r_left = float(r[0]), float(r[1])
-    wheelbase = (c_right * r_right + c_left * r_left) / (c_right**2 + c_left**2)
+    if position == "radii":
+        if np.linalg.matrix_rank(phi_xy) < 2:
+            raise ValueError(
+                "the position regressor is rank-deficient: the runs need to end away from "
+                "their start with different ratios of right to left wheel rotation"
+            )
+        r, *_ = np.linalg.lstsq(phi_xy, d_xy, rcond=None)
+        r_right, r_left = float(r[0]), float(r[1])
+        wheelbase = (c_right * r_right + c_left * r_left) / (c_right**2 + c_left**2)
+    else:
+        column = phi_xy @ c
+        if not float(column @ column) > 0.0:
+            raise ValueError("the runs do not move the robot away from their start")
+        wheelbase = float(column @ d_xy) / float(column @ column)
+        r_right, r_left = wheelbase * c_right, wheelbase * c_left
+    r = np.array([r_right, r_left])
     if not (r_right > 0.0 and r_left > 0.0 and wheelbase > 0.0):
         raise ValueError(
             f"least squares gave non-physical parameters r_R = {r_right}, r_L = {r_left}, "
@@ -165,6 +195,8 @@ class LeastSquares(Calibrator):
         straight_distance: their length [m].
         spins_per_direction: cw and ccw in-place spins of ``spin_angle`` (default 0).
         spin_angle: spin angle [rad].
+        position: unknowns of the position rows, ``"wheelbase"`` (default) or ``"radii"`` (as
+            published); see the module docstring.
     """
 
     name: ClassVar[str] = "least_squares"
@@ -183,6 +215,7 @@ class LeastSquares(Calibrator):
         straight_distance: float = 3.0,
         spins_per_direction: int = 0,
         spin_angle: float = math.pi,
+        position: PositionUnknowns = "wheelbase",
     ) -> None:
         if min(squares_per_direction, straight_runs, spins_per_direction) < 0:
             raise ValueError("run counts must be >= 0")
@@ -195,12 +228,15 @@ class LeastSquares(Calibrator):
             raise ValueError("need squares or spins: the heading rows need turning")
         if not straight_runs:
             raise ValueError("need straight runs: closed paths hardly fix the wheel radii")
+        if position not in ("wheelbase", "radii"):
+            raise ValueError(f"position must be 'wheelbase' or 'radii', got {position!r}")
         self.side = side
         self.squares_per_direction = squares_per_direction
         self.straight_runs = straight_runs
         self.straight_distance = straight_distance
         self.spins_per_direction = spins_per_direction
         self.spin_angle = spin_angle
+        self.position: PositionUnknowns = position
 
     def experiments(self) -> list[Experiment]:
         """Squares (cw, ccw), spins (cw, ccw) and straight runs, as configured."""
@@ -234,9 +270,9 @@ class LeastSquares(Calibrator):
                     f"least-squares calibration needs {experiment.runs} {what} runs of size "
                     f"{experiment.size:g} that this lab cannot provide: {exc}"
                 ) from exc
-        fit = fit_least_squares(runs, lab.robot)
+        fit = fit_least_squares(runs, lab.robot, position=self.position)
         notes = []
-        if fit.cond_xy > 100.0:
+        if self.position == "radii" and fit.cond_xy > 30.0:
             notes.append(
                 f"position regressor poorly conditioned (cond = {fit.cond_xy:.0f}): the runs "
                 "say little about the wheel radii"

@@ -45,6 +45,7 @@ from odomgym.runs import Run
 
 __all__ = [
     "PARAMETER_NAMES",
+    "POOR_CONDITION",
     "Trajectory",
     "TrajectoryFit",
     "fit_trajectories",
@@ -140,14 +141,15 @@ class TrajectoryFit:
         calibration: the fitted calibration (absolute).
         parameters: the fitted b, D_R, D_L [m] (keys ``wheelbase``, ``right_diameter``,
             ``left_diameter``).
-        rms_before, rms_after: RMS position error over the residual samples [m], with the
-            starting and the fitted calibration.
+        rms_before, rms_after: RMS position error ‖p_odo − p_gt‖ over the samples used [m],
+            with the starting and with the fitted calibration.
         relative_std: standard errors of the relative changes of (D_L, D_R, b) [-] from the
             Gauss–Newton covariance s²·(JᵀJ)⁻¹, s² the residual variance: how well the runs
-            pinned each parameter down (ignores the correlation of successive samples' errors,
-            so optimistic).
-        condition: condition number of the Jacobian at the solution [-].
-        residuals: number of scalar residuals (2 per sample used).
+            pin each parameter down (it ignores the correlation of successive samples' errors,
+            so it is optimistic).
+        condition: condition number of the Jacobian at the solution [-]; large values
+            (hundreds and more) mean the runs hardly tell the parameters apart.
+        residuals: number of scalar residuals.
         evaluations: cost-function evaluations.
     """
 
@@ -161,35 +163,53 @@ class TrajectoryFit:
     evaluations: int
 
 
+#: Jacobian condition number above which :class:`Trajectory` warns in its notes [-]. Measured:
+#: 18–24 on the OptiOdom square and circular sessions, 56 on 4 m simulated squares, 140–3600 on
+#: the straight-run-and-spin sessions, where b is not identifiable from positions.
+POOR_CONDITION = 100.0
+
+
 def fit_trajectories(
     runs: Sequence[Run],
     robot: RobotSpec,
     initial: Calibration | None = None,
     *,
     sample_distance: float | None = None,
+    heading_weight: float = 0.0,
     loss: str = "linear",
 ) -> TrajectoryFit:
     """Fit D_L, D_R and b to the ground-truth trajectories of ``runs`` (Sousa et al. 2022).
 
     Args:
-        runs: runs of any shape (squares, straight runs, spins, free paths — each must move).
+        runs: runs of any shape (squares, circles, straight runs, free paths).
         robot: the nominal robot (its ``metres_per_tick`` and ``wheelbase``).
         initial: the starting calibration (default: uncalibrated).
         sample_distance: use samples every so many metres of travel [m] (the authors: 0.5);
             ``None`` (default): every sample.
+        heading_weight: also fit the heading errors, weighted by this length [m/rad] (0, the
+            default, is the paper's position-only cost). Needed for runs that turn without
+            translating: an in-place spin moves no position, so a position-only cost cannot
+            see b in it (on the OptiOdom straight-and-spin sessions it drives b to 0.05–0.19 m
+            instead of 0.2 m).
         loss: :func:`scipy.optimize.least_squares` loss (``"linear"``; ``"soft_l1"`` or
             ``"huber"`` to down-weight outliers such as slip), with scale 5 mm.
 
     Raises:
-        ValueError: no runs, or runs too short or motionless to tell the parameters apart
-            (a singular Jacobian).
+        ValueError: no runs, or runs that do not determine the parameters at all (a singular
+            Jacobian, e.g. only straight runs).
     """
     if not runs:
         raise ValueError("trajectory optimisation needs at least one run")
+    if not heading_weight >= 0.0:
+        raise ValueError(f"heading_weight must be >= 0 [m/rad], got {heading_weight}")
     start = initial if initial is not None else Calibration()
     base = start.parameters(robot)
+    rows = [0, 1, 2] if heading_weight > 0.0 else [0, 1]
+    weights = np.array([1.0, 1.0, heading_weight])[rows]
     chosen = [sample_indices(run, sample_distance) for run in runs]
-    truth = np.concatenate([run.true_pose[idx, :2] for run, idx in zip(runs, chosen, strict=True)])
+    truth = np.concatenate(
+        [run.true_pose[idx][:, rows] for run, idx in zip(runs, chosen, strict=True)]
+    )
 
     def calibration_at(x: FloatArray) -> Calibration:
         return Calibration.from_parameters(
@@ -202,6 +222,7 @@ def fit_trajectories(
     cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
 
     def evaluate(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Errors (samples, rows) [m, rad] and the weighted Jacobian (samples·rows, 3)."""
         key = np.asarray(x, dtype=float).tobytes()
         if key not in cache:
             cache.clear()
@@ -209,21 +230,29 @@ def fit_trajectories(
             poses, jacs = [], []
             for run, idx in zip(runs, chosen, strict=True):
                 pose, jac = replay_with_jacobian(run, robot, cal)
-                poses.append(pose[idx, :2])
-                jacs.append(jac[idx, :2, :])
-            residual = (np.concatenate(poses) - truth).reshape(-1)
-            cache[key] = (residual, np.concatenate(jacs).reshape(-1, 3))
+                poses.append(pose[idx][:, rows])
+                jacs.append(jac[idx][:, rows, :])
+            errors = np.concatenate(poses) - truth
+            jacobian = (np.concatenate(jacs) * weights[None, :, None]).reshape(-1, 3)
+            cache[key] = (errors, jacobian)
         return cache[key]
 
+    def residual(x: FloatArray) -> FloatArray:
+        weighted: FloatArray = (evaluate(x)[0] * weights).reshape(-1)
+        return weighted
+
+    def rms_position(errors: FloatArray) -> float:
+        return float(np.sqrt(np.mean(errors[:, 0] ** 2 + errors[:, 1] ** 2)))
+
     x0 = np.zeros(3)
-    r0, j0 = evaluate(x0)
-    if np.linalg.matrix_rank(j0) < 3:
+    errors0, jacobian0 = evaluate(x0)
+    if np.linalg.matrix_rank(jacobian0) < 3:
         raise ValueError(
             "the runs do not tell D_L, D_R and b apart (singular Jacobian): they need both "
             "straight travel and turning"
         )
     solution = least_squares(
-        lambda x: evaluate(x)[0],
+        residual,
         x0,
         jac=lambda x: evaluate(x)[1],
         method="trf",
@@ -235,20 +264,19 @@ def fit_trajectories(
         gtol=1e-12,
     )
     x = np.asarray(solution.x, dtype=float)
-    residual, jac = evaluate(x)
-    dof = max(residual.size - 3, 1)
-    variance = float(residual @ residual) / dof
-    covariance = variance * np.linalg.pinv(jac.T @ jac)
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    errors, jacobian = evaluate(x)
+    final = residual(x)
+    variance = float(final @ final) / max(final.size - 3, 1)
+    std = np.sqrt(np.clip(np.diag(variance * np.linalg.pinv(jacobian.T @ jacobian)), 0.0, None))
     calibration = calibration_at(x)
     return TrajectoryFit(
         calibration=calibration,
         parameters=calibration.parameters(robot),
-        rms_before=float(np.sqrt(np.mean(r0.reshape(-1, 2) ** 2) * 2.0)),
-        rms_after=float(np.sqrt(np.mean(residual.reshape(-1, 2) ** 2) * 2.0)),
+        rms_before=rms_position(errors0),
+        rms_after=rms_position(errors),
         relative_std=(float(std[0]), float(std[1]), float(std[2])),
-        condition=float(np.linalg.cond(jac)),
-        residuals=int(residual.size),
+        condition=float(np.linalg.cond(jacobian)),
+        residuals=int(final.size),
         evaluations=int(solution.nfev),
     )
 
@@ -273,6 +301,7 @@ class Trajectory(Calibrator):
         straight_runs: additional straight runs (0: none).
         straight_distance: their length [m].
         sample_distance: see :func:`fit_trajectories` [m].
+        heading_weight: see :func:`fit_trajectories` [m/rad] (0: the paper's cost).
         loss: see :func:`fit_trajectories`.
     """
 
@@ -290,6 +319,7 @@ class Trajectory(Calibrator):
         straight_runs: int = 0,
         straight_distance: float = 3.0,
         sample_distance: float | None = None,
+        heading_weight: float = 0.0,
         loss: str = "linear",
     ) -> None:
         if not side > 0.0 or runs_per_direction < 1:
@@ -305,7 +335,10 @@ class Trajectory(Calibrator):
         self.runs_per_direction = runs_per_direction
         self.straight_runs = straight_runs
         self.straight_distance = straight_distance
+        if not heading_weight >= 0.0:
+            raise ValueError(f"heading_weight must be >= 0 [m/rad], got {heading_weight}")
         self.sample_distance = sample_distance
+        self.heading_weight = heading_weight
         self.loss = loss
 
     def experiments(self) -> list[Experiment]:
@@ -338,6 +371,7 @@ class Trajectory(Calibrator):
             lab.robot,
             calibration,
             sample_distance=self.sample_distance,
+            heading_weight=self.heading_weight,
             loss=self.loss,
         )
         estimates = {
@@ -355,13 +389,19 @@ class Trajectory(Calibrator):
             "condition": fit.condition,
             "evaluations": float(fit.evaluations),
         }
+        notes = [
+            f"fitted {fit.residuals} residuals of {len(runs)} runs: RMS position error "
+            f"{fit.rms_before * 1e3:.1f} mm → {fit.rms_after * 1e3:.1f} mm"
+        ]
+        if fit.condition > POOR_CONDITION:
+            notes.append(
+                f"poorly conditioned (Jacobian condition number {fit.condition:.0f}): the runs "
+                "hardly tell the parameters apart"
+            )
         return CalibrationResult(
             calibration=fit.calibration,
             estimates=estimates,
             runs_used=lab.runs_used - runs0,
             distance_used=lab.distance_used - dist0,
-            notes=[
-                f"fitted {fit.residuals} position residuals of {len(runs)} runs: RMS "
-                f"{fit.rms_before * 1e3:.1f} mm → {fit.rms_after * 1e3:.1f} mm"
-            ],
+            notes=notes,
         )

@@ -3,7 +3,8 @@
 Commands:
     ``odomgym run square|straight …``   drive runs in simulation, report return errors;
     ``odomgym calibrate METHOD …``      calibrate (simulated robot or measured session) and
-                                         validate on fresh runs.
+                                         validate on fresh runs;
+    ``odomgym bench calibrators …``     every calibrator on a robot population, three floors.
 
 Every command exits 0 on success, 2 on bad input (with a message naming the field and, where it
 came from a file, the file and line) and never leaves a half-written output file.
@@ -263,6 +264,58 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_bench(args: argparse.Namespace) -> int:
+    import os
+    import time
+
+    from odomgym.baselines import CALIBRATORS
+    from odomgym.baselines.bench_report import markdown_summary, write_outputs
+    from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
+
+    methods = tuple(args.methods or CALIBRATORS)
+    unknown = [m for m in methods if m not in CALIBRATORS]
+    if unknown:
+        raise SpecError(
+            f"unknown method(s) {', '.join(unknown)}; methods: {', '.join(CALIBRATORS)}",
+            field="methods",
+        )
+    try:
+        config = BenchConfig(
+            robots=args.robots,
+            floors=tuple(args.floor),
+            methods=methods,
+            budget=args.budget,
+            seed=args.seed,
+        )
+    except ValueError as exc:
+        raise SpecError(str(exc), field="floor") from None
+    jobs = args.jobs or os.cpu_count() or 1
+    show_bar = not args.json and sys.stderr.isatty()
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=config.robots, unit="robot", desc="benchmark", disable=not show_bar, file=sys.stderr
+    )
+
+    def progress(done: int, total: int) -> None:
+        bar.n = done
+        bar.refresh()
+
+    start = time.perf_counter()
+    rows = run_benchmark(config, jobs=jobs, backend=args.backend, progress=progress)
+    elapsed = time.perf_counter() - start
+    bar.close()
+    written = write_outputs(config, rows, Path(args.out), elapsed)
+    if args.json:
+        print(to_json({"elapsed_s": elapsed, "jobs": jobs, "summary": summarize(rows)}))
+    else:
+        print(markdown_summary(config, rows))
+        print(f"{len(rows)} results in {elapsed:.1f} s on {jobs} job(s) ({args.backend}); wrote:")
+        for path in written:
+            print(f"  {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command."""
     parser = argparse.ArgumentParser(
@@ -311,6 +364,30 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--json", action="store_true", help="one JSON object instead of a table")
     calibrate.add_argument("--plot", help="write the before/after return-error scatter (PNG)")
     calibrate.set_defaults(handler=_command_calibrate)
+
+    bench = commands.add_parser(
+        "bench",
+        help="benchmark calibrators on a simulated robot population",
+        description="Sample robots with hidden systematic errors, give every calibrator the same "
+        "budget on the same robots and floors, validate on fresh squares, report.",
+    )
+    bench.add_argument("what", choices=["calibrators"])
+    bench.add_argument("--robots", type=_count, default=100, help="population size (100)")
+    bench.add_argument(
+        "--floor",
+        nargs="+",
+        choices=["smooth", "rough", "bumpy"],
+        default=["smooth", "rough", "bumpy"],
+        help="benchmark floors (all three by default)",
+    )
+    bench.add_argument("--methods", nargs="+", help="calibrators (default: all)")
+    bench.add_argument("--budget", type=_count, default=16, help="runs per calibration (16)")
+    bench.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
+    bench.add_argument("--backend", choices=["local", "ray"], default="local")
+    bench.add_argument("--seed", type=int, default=0)
+    bench.add_argument("--out", default="bench-out", help="output folder (bench-out)")
+    bench.add_argument("--json", action="store_true", help="print the summary as JSON")
+    bench.set_defaults(handler=_command_bench)
     return parser
 
 

@@ -1,0 +1,178 @@
+"""Tables, files and plots of the calibrator benchmark (:mod:`odomgym.baselines.benchmark`).
+
+Everything is written atomically into one output folder:
+
+* ``summary.md`` — per floor, one row per method: improvement of E_max,syst (median and
+  quartiles), E_max,syst after, parameter errors against the hidden truth, runs, distance, wall
+  time, failures; then the same split by the size of the wheelbase error |E_b − 1|;
+* ``summary.csv``, ``results.csv`` (one row per robot, method, floor), ``results.json``;
+* ``improvement.png`` (distributions per method and floor) and ``scatter_<method>.png``
+  (robot 0's return errors before/after, like seed 000 Fig. 6.5).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from odomgym.baselines.benchmark import BenchConfig, summarize
+from odomgym.io import atomic_write_text, atomic_writer
+from odomgym.report import plot_return_errors
+
+__all__ = ["markdown_summary", "write_outputs"]
+
+LARGE_EB = 0.025  # |E_b − 1| above this counts as a "large" wheelbase error
+
+
+def _cell(summary: dict[str, Any]) -> str:
+    return (
+        f"{summary['improvement_median']:.1f} "
+        f"[{summary['improvement_q25']:.1f}–{summary['improvement_q75']:.1f}]"
+    )
+
+
+def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str:
+    """The Markdown report (see the module docstring)."""
+    summary = summarize(rows)
+    lines = [
+        f"# Calibrator benchmark: {config.robots} robots, budget {config.budget} runs, "
+        f"seed {config.seed}",
+        "",
+        f"Population: {config.population.base}, E_d ∈ {list(config.population.e_d)}, "
+        f"E_b ∈ {list(config.population.e_b)}, E_s ∈ {list(config.population.e_s)}. "
+        f"Validation: {config.validation_runs} cw + {config.validation_runs} ccw fresh 4×4 m "
+        "squares per robot, true return errors. Improvement = E_max,syst before / after "
+        "(seed 000 Table III reports 10–22-fold for UMBmark on a LabMate).",
+        "",
+    ]
+    for floor in config.floors:
+        lines += [
+            f"## Floor: {floor}",
+            "",
+            "| method | improvement median [q25–q75] | E_max,syst after [mm] | "
+            "abs(ΔE_d) | abs(ΔE_b) | abs(ΔE_s) | runs | distance [m] | wall/robot [s] | failed |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for s in (s for s in summary if s["floor"] == floor):
+            lines.append(
+                f"| {s['method']} | {_cell(s)} | {s['e_max_after_median_mm']:.1f} | "
+                f"{s['abs_err_E_d_median']:.2e} | {s['abs_err_E_b_median']:.2e} | "
+                f"{s['abs_err_E_s_median']:.2e} | {s['runs_mean']:.0f} | "
+                f"{s['distance_m_mean']:.0f} | {s['wall_time_s_mean']:.3f} | {s['failures']} |"
+            )
+        small = [r for r in rows if r["floor"] == floor and abs(r["true_E_b"] - 1) <= LARGE_EB]
+        large = [r for r in rows if r["floor"] == floor and abs(r["true_E_b"] - 1) > LARGE_EB]
+        if small and large:
+            lines += [
+                "",
+                f"By wheelbase error (|E_b − 1| ≤ {LARGE_EB} vs larger), median improvement:",
+                "",
+                "| method | small E_b error | large E_b error |",
+                "|---|---|---|",
+            ]
+            by_small = {s["method"]: s for s in summarize(small)}
+            by_large = {s["method"]: s for s in summarize(large)}
+            for method in config.methods:
+                if method in by_small and method in by_large:
+                    lines.append(
+                        f"| {method} | {_cell(by_small[method])} | {_cell(by_large[method])} |"
+                    )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _csv(records: Sequence[dict[str, Any]]) -> str:
+    if not records:
+        return ""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(records[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(records)
+    return buffer.getvalue()
+
+
+def write_outputs(
+    config: BenchConfig, rows: Sequence[dict[str, Any]], out: Path, elapsed: float
+) -> list[Path]:
+    """Write every output file into ``out``; returns their paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    plain = [{k: v for k, v in r.items() if k != "scatter"} for r in rows]
+    summary = summarize(rows)
+    written = [out / name for name in ("summary.md", "summary.csv", "results.csv", "results.json")]
+    atomic_write_text(written[0], markdown_summary(config, rows))
+    atomic_write_text(written[1], _csv(summary))
+    atomic_write_text(written[2], _csv(plain))
+    document = {
+        "config": {
+            "robots": config.robots,
+            "floors": list(config.floors),
+            "methods": list(config.methods),
+            "budget": config.budget,
+            "seed": config.seed,
+            "validation_runs": config.validation_runs,
+        },
+        "elapsed_s": elapsed,
+        "summary": summary,
+        "rows": plain,
+    }
+    atomic_write_text(written[3], json.dumps(document, indent=1, default=float))
+    written.append(_plot_improvements(config, rows, out / "improvement.png"))
+    for row in rows:
+        if "scatter" in row:
+            path = out / f"scatter_{row['method']}.png"
+            before, after = row["scatter"]["before"], row["scatter"]["after"]
+            plot_return_errors(
+                path,
+                [
+                    ("before", np.array(before["cw"]), np.array(before["ccw"])),
+                    ("after", np.array(after["cw"]), np.array(after["ccw"])),
+                ],
+                f"{row['method']}, robot {row['robot']}, {row['floor']} floor",
+            )
+            written.append(path)
+    return written
+
+
+def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(
+        1, len(config.floors), figsize=(4.2 * len(config.floors), 4.2), sharey=True, squeeze=False
+    )
+    for ax, floor in zip(axes[0], config.floors, strict=True):
+        data = [
+            [
+                r["improvement"]
+                for r in rows
+                if r["floor"] == floor and r["method"] == m and np.isfinite(r["improvement"])
+            ]
+            for m in config.methods
+        ]
+        ax.boxplot(data, showfliers=True)
+        ax.set_xticks(range(1, len(config.methods) + 1), config.methods, rotation=30)
+        ax.set_yscale("log")
+        ax.axhspan(10, 22, color="tab:green", alpha=0.12, label="seed 000 Table III (10–22×)")
+        ax.set_title(f"{floor} floor")
+        ax.grid(True, axis="y", alpha=0.3)
+    axes[0][0].set_ylabel("E_max,syst before / after")
+    axes[0][0].legend(fontsize=8, loc="lower left")
+    fig.suptitle(f"Calibrator benchmark: {config.robots} robots, budget {config.budget} runs")
+    fig.tight_layout()
+
+    def write(tmp: Path) -> None:
+        fig.savefig(tmp, dpi=110, format="png")
+
+    try:
+        atomic_writer(path, write)
+    finally:
+        plt.close(fig)
+    return path
