@@ -55,13 +55,14 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
         lines += [
             f"## Floor: {floor}",
             "",
-            "| method | improvement median [q25–q75] | E_max,syst after [mm] | "
+            "| method | E_max,syst before → after [mm] | improvement median [q25–q75] | "
             "abs(ΔE_d) | abs(ΔE_b) | abs(ΔE_s) | runs | distance [m] | wall/robot [s] | failed |",
             "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for s in (s for s in summary if s["floor"] == floor):
             lines.append(
-                f"| {s['method']} | {_cell(s)} | {s['e_max_after_median_mm']:.1f} | "
+                f"| {s['method']} | {s['e_max_before_median_mm']:.0f} → "
+                f"{s['e_max_after_median_mm']:.1f} | {_cell(s)} | "
                 f"{s['abs_err_E_d_median']:.2e} | {s['abs_err_E_b_median']:.2e} | "
                 f"{s['abs_err_E_s_median']:.2e} | {s['runs_mean']:.0f} | "
                 f"{s['distance_m_mean']:.0f} | {s['wall_time_s_mean']:.3f} | {s['failures']} |"

@@ -406,6 +406,7 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 "improvement_median": float(q50),
                 "improvement_q25": float(q25),
                 "improvement_q75": float(q75),
+                "e_max_before_median_mm": float(np.median([r["e_max_before_mm"] for r in group])),
                 "e_max_after_median_mm": float(np.median([r["e_max_after_mm"] for r in group])),
                 "abs_err_E_d_median": median_abs("err_E_d"),
                 "abs_err_E_b_median": median_abs("err_E_b"),
