@@ -1,15 +1,38 @@
 """Reference solutions: calibration methods behind one interface.
 
 ``CALIBRATORS`` maps each method's command-line name to its class (see
-:class:`odomgym.baselines.base.Calibrator`).
+:class:`odomgym.baselines.base.Calibrator`):
+
+* ``umbmark`` — Borenstein & Feng's UMBmark with the E_s phase of seed 001;
+* ``jung_chung`` — Jung & Chung, from the return *heading* errors;
+* ``lee`` — Lee et al., UMBmark without the "E_d does not affect turns" assumption;
+* ``ivanjko`` — Ivanjko et al., straight runs and in-place spins, nonlinear least squares;
+* ``least_squares`` — Antonelli et al. style linear least squares over whole runs;
+* ``trajectory`` — OptiOdom-style optimisation over whole trajectories.
 """
 
 from __future__ import annotations
 
 from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.ivanjko import Ivanjko
 from odomgym.baselines.jung_chung import JungChung
+from odomgym.baselines.least_squares import LeastSquares
+from odomgym.baselines.lee import Lee
+from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.umbmark import UMBmark
 
-CALIBRATORS: dict[str, type[Calibrator]] = {cls.name: cls for cls in (UMBmark, JungChung)}
+CALIBRATORS: dict[str, type[Calibrator]] = {
+    cls.name: cls for cls in (UMBmark, JungChung, Lee, Ivanjko, LeastSquares, Trajectory)
+}
 
-__all__ = ["CALIBRATORS", "CalibrationResult", "Calibrator", "JungChung", "UMBmark"]
+__all__ = [
+    "CALIBRATORS",
+    "CalibrationResult",
+    "Calibrator",
+    "Ivanjko",
+    "JungChung",
+    "LeastSquares",
+    "Lee",
+    "Trajectory",
+    "UMBmark",
+]

@@ -121,10 +121,24 @@ def _squares_only(runs: int) -> dict[str, Any]:
     return {"runs_per_direction": max(1, runs // 2)}
 
 
+def _ivanjko_budget(runs: int) -> dict[str, Any]:
+    # A third straight runs, a third spins each way (Ivanjko et al.'s experiment).
+    share = max(1, runs // 3)
+    return {"straight_runs": share, "spin_runs": share}
+
+
+def _least_squares_budget(runs: int) -> dict[str, Any]:
+    straight = max(1, runs // 4)
+    return {"straight_runs": straight, "squares_per_direction": max(1, (runs - straight) // 2)}
+
+
 METHOD_BUDGETS: dict[str, Callable[[int], dict[str, Any]]] = {
     "umbmark": _umbmark_budget,
     "jung_chung": _squares_only,
     "lee": _squares_only,
+    "ivanjko": _ivanjko_budget,
+    "least_squares": _least_squares_budget,
+    "trajectory": _squares_only,
 }
 """How each method spends a budget of N runs (constructor keywords). Methods not listed here
 provide ``for_budget(runs)`` themselves or run with their defaults."""

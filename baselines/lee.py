@@ -43,7 +43,11 @@ multiplied by E_d, b by E_b (``Calibration.from_errors(E_d, E_b, E_s=(1 + E_d)/2
 :func:`lee_correction`). ``"split"`` uses UMBmark's split instead (α_d = 0: the method is then
 UMBmark with R̂ = L/β). Both give the odometry the same b/D_a, so the same headings; they
 differ in how they name it. The paper's E_b with UMBmark's mean-preserving factors would mix
-the two models and mis-scale every turn by (E_d − 1)/2.
+the two models and mis-scale every turn by (E_d − 1)/2 (measured on the LabMate with E_d =
+1.004, E_b = 1.02, E_s = 0.995: E_max,syst 50 mm instead of 16 mm). On such a robot — odomgym's
+default split — Lee et al.'s E_b (1.0279) and E_s (1.0020) are not the true 1.02 and 0.995;
+their ratio, 1.0259, is the true 1.0251 plus the +0.0007 second-order bias that UMBmark's
+first-order equations share at these error sizes.
 """
 
 from __future__ import annotations
@@ -283,6 +287,7 @@ class Lee(Calibrator):
             E_max_syst=summary.e_max_syst,
         )
         correction = lee_correction(found.e_d, found.e_b, self.diameter_error)
+        estimates["E_s"] = correction.distance_scale  # what the wheel model implies
         return CalibrationResult(
             calibration=calibration.then(correction),
             estimates=estimates,

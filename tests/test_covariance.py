@@ -34,22 +34,24 @@ import numpy as np
 import pytest
 
 from odomgym.covariance import (
-    MonteCarloResult,
     PoseEstimate,
     arc_motion_covariance,
     classic_inconsistency,
     classic_step,
-    covariance_report,
     end_pose,
-    format_report,
-    monte_carlo,
-    monte_carlo_loop,
     motion_covariance,
     propagate_path,
     propagate_segment,
     quadrature_motion_covariance,
     straight_motion_covariance,
     turn_motion_covariance,
+)
+from odomgym.montecarlo import (
+    MonteCarloResult,
+    covariance_report,
+    format_report,
+    monte_carlo,
+    monte_carlo_loop,
 )
 
 B = 0.4  # wheelbase of all simulations [m]
