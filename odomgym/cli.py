@@ -316,6 +316,20 @@ def _command_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_leaderboard(args: argparse.Namespace) -> int:
+    from odomgym.baselines.leaderboard import format_leaderboard, run_leaderboard
+
+    board = run_leaderboard(args.data, methods=args.methods)
+    text = format_leaderboard(board)
+    if args.out:
+        atomic_write_text(Path(args.out), text + "\n")
+    if args.json:
+        print(to_json(board.as_dict()))
+    else:
+        print(text)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command."""
     parser = argparse.ArgumentParser(
@@ -388,6 +402,16 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", default="bench-out", help="output folder (bench-out)")
     bench.add_argument("--json", action="store_true", help="print the summary as JSON")
     bench.set_defaults(handler=_command_bench)
+
+    board = commands.add_parser(
+        "leaderboard",
+        help="real-data leaderboard: calibrate on one recorded session, evaluate on the others",
+    )
+    board.add_argument("--data", required=True, help="folder of OptiOdom sessions")
+    board.add_argument("--methods", nargs="+", help="calibrators (default: all)")
+    board.add_argument("--out", help="also write the Markdown table here")
+    board.add_argument("--json", action="store_true")
+    board.set_defaults(handler=_command_leaderboard)
     return parser
 
 

@@ -5,8 +5,10 @@ one robot's experiment is a few hundred physics steps of one to ten robots — P
 per step dominates. :func:`run_lockstep` runs one procedure per robot, each in its own thread
 with its own :class:`~odomgym.experiments.Lab`; whenever every still-running procedure is
 waiting for an experiment, all the requested runs are simulated as *one* batch (one pymunk
-space, :func:`odomgym.lab.simulate_runs`), and each procedure gets its runs back. Only one thread
-simulates at a time; the others only decide what to ask next.
+space, :func:`odomgym.lab.simulate_runs`), and each procedure gets its runs back. The threads
+pass a baton: exactly one of them runs at any time (the procedures in a fixed order, then the
+batch simulation), so the schedule is deterministic and a process never runs more than one
+thread's numerical work at once.
 
 Results are independent of the batch composition: each participant's sensor noise, start poses
 and floor-roughness streams come from its own Generator, so robot 7's calibration is the same
@@ -73,6 +75,9 @@ class _Participant:
 
 
 class _Coordinator:
+    """Baton passing: exactly one thread runs at a time — the coordinator, or one participant
+    between two of its experiments. Deterministic, and no oversubscription of the cores."""
+
     def __init__(
         self,
         robots: Sequence[RobotSpec],
@@ -88,41 +93,47 @@ class _Coordinator:
         self.sensor = sensor
         self.cruise_speed = cruise_speed
         self.start_region = start_region
-        self.condition = threading.Condition()
+        self.turn = [threading.Event() for _ in robots]  # participant i may run
+        self.yielded = threading.Event()  # the running participant handed the baton back
         self.pending: dict[int, tuple[Experiment, Calibration]] = {}
         self.results: dict[int, list[Run] | BaseException] = {}
         self.active: set[int] = set()
 
     def request(self, index: int, experiment: Experiment, calibration: Calibration) -> list[Run]:
-        with self.condition:
-            self.pending[index] = (experiment, calibration)
-            self.condition.notify_all()
-            while index not in self.results:
-                self.condition.wait()
-            result = self.results.pop(index)
+        self.pending[index] = (experiment, calibration)
+        self._hand_back(index)
+        result = self.results.pop(index)
         if isinstance(result, BaseException):
             raise result
         return result
 
     def finished(self, index: int) -> None:
-        with self.condition:
-            self.active.discard(index)
-            self.condition.notify_all()
+        self.active.discard(index)
+        self.yielded.set()
+
+    def _hand_back(self, index: int) -> None:
+        self.turn[index].clear()
+        self.yielded.set()
+        self.turn[index].wait()
+
+    def _run(self, index: int) -> None:
+        """Let participant ``index`` run until it asks for an experiment or finishes."""
+        self.yielded.clear()
+        self.turn[index].set()
+        self.yielded.wait()
 
     def serve(self) -> None:
-        """Simulate batches until every participant has finished."""
+        """Alternate: every participant runs to its next request; one batch simulates them."""
+        ready = sorted(self.active)
         while True:
-            with self.condition:
-                while self.active and len(self.pending) < len(self.active):
-                    self.condition.wait()
-                if not self.active:
-                    return
-                batch = sorted(self.pending.items())
-                self.pending.clear()
-            outcome = self._simulate(batch)
-            with self.condition:
-                self.results.update(outcome)
-                self.condition.notify_all()
+            for index in ready:
+                self._run(index)
+            if not self.pending:
+                return
+            batch = sorted(self.pending.items())
+            self.pending.clear()
+            self.results.update(self._simulate(batch))
+            ready = [index for index, _ in batch]
 
     def _simulate(
         self, batch: list[tuple[int, tuple[Experiment, Calibration]]]
@@ -202,6 +213,7 @@ def run_lockstep(
     outcomes: list[Outcome[T]] = [Outcome() for _ in robots]
 
     def work(index: int) -> None:
+        coordinator.turn[index].wait()  # start only when handed the baton
         try:
             outcomes[index].value = procedure(
                 _Participant(coordinator, index, robots[index]), index

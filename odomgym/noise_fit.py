@@ -1,42 +1,50 @@
 """Estimating the wheel-noise constants k_L, k_R [m^½] from repeated runs (seed 004 §6.3).
 
 Why: Chong & Kleeman's model gives each wheel's travel d white noise of variance k²·|d| (Eq. 4).
-They chose k_L, k_R "by trial and error" from 60 runs of 10 m forward and 10 m back, and found
-that no pair reproduced all six elements of the measured covariance, the off-track y fitting
-worst (Fig. 4). This module makes that fit a maximum-likelihood estimate with intervals and a
-per-component goodness of fit, so the statement can be checked on any set of runs.
+They chose k_L, k_R "by trial and error" from 60 runs of 10 m forward and 10 m back and found no
+pair that reproduced all six elements of the measured covariance, the off-track y fitting worst
+(Fig. 4). Here that fit is a maximum-likelihood estimate with intervals and a per-component
+goodness of fit, so such statements can be checked on any set of runs.
 
-The model. For one run, the end-pose error ε = true − odometry (x [m], y [m], θ [rad], in the
-run's start frame, :func:`odomgym.runs.return_error`) is zero-mean Gaussian with covariance
+**Model.** A run's end-pose error ε = true − odometry (x [m], y [m], θ [rad] in the run's start
+frame, as :func:`odomgym.runs.return_error`) is zero-mean Gaussian with covariance
 
-    Σ = k_L²·A + k_R²·B        (Eq. 23 summed over the run; A, B: k = (1, 0) and (0, 1)),
+    Σ = k_L²·A + k_R²·B      (Eq. 23 over the whole run; A, B = Σ at (k_L, k_R) = (1, 0), (0, 1)),
 
-because every segment's Cov(U_k) (Eqs. 25–28) and hence their composition is linear in k_L² and
-k_R². A and B come from the run's *own* odometry path: each sample's wheel travels (encoder
-counts × metres per tick, calibrated) are one constant-curvature segment.
+since every segment's Cov(U_k) (Eqs. 25–28), and so their composition, is linear in k_L², k_R².
+A and B come from the run's *own* odometry path: each sample's wheel travels (encoder counts ×
+metres per tick, calibrated) form one constant-curvature segment (:func:`run_noise_basis`).
 
-Systematic errors. Eq. 4 has zero mean; a real robot's residual calibration error does not. With
-``systematic="group-mean"`` (the default), runs are grouped (same session, path and direction:
-the same systematic error) and the fit uses only within-group contrasts (Helmert contrasts,
-i.e. restricted maximum likelihood, REML): any error common to a group cancels exactly,
-whatever its size. The consequence: each group costs 3 of its 3·n observations, and a systematic
-error that changes *from run to run* (drift, battery, slightly different paths) is not removed
-and is charged to k. ``systematic="none"`` trusts the odometry to be calibrated and uses every
-run's error as it is.
+**Systematic errors.** Eq. 4 has zero mean; a real robot's residual calibration error does not.
+With ``systematic="group-mean"`` (default) runs are grouped — same session, path and turning
+direction, hence the same systematic error — and only within-group contrasts enter the
+likelihood (restricted maximum likelihood, REML): an error common to a group cancels exactly,
+whatever its size. Consequences: a group of n runs yields 3(n − 1) observations, not 3n, and a
+systematic error that changes *from run to run* (drift, battery, slightly different paths) is
+not removed but charged to k. ``systematic="none"`` takes the odometry as calibrated.
 
-Intervals are profile-likelihood intervals by default (deterministic; exact in the large-sample
-limit *if the model is right*), or percentile bootstrap intervals over runs resampled within
-their groups (``interval="bootstrap"``, with an explicit generator): robust to a wrong noise
-shape, which the component fit below may reveal.
+**Intervals.** Profile likelihood by default (deterministic; asymptotically exact *if the model
+is right*), or a percentile bootstrap over runs resampled within their groups
+(``interval="bootstrap"``, explicit generator), which stays honest when the component fit shows
+the model is wrong.
+
+**Validity.** Eq. 23 is first order. On 10 m out and back at k = 0.002 m^½ (σ_θ ≈ 2° at the end)
+the along-track error gains the second-order shortening −½∫δθ² ds, which Σ lacks: measured over
+12 seeds of 60 simulated runs, the x variance then exceeds the fitted prediction 1.4-fold and k
+comes out 10–17 % high (interval coverage 50–75 %). At the paper's k ≈ 0.0005 m^½ the estimates
+are unbiased to 1–5 % with ~90 % coverage of the 95 % intervals. With unequal k the quieter
+wheel's estimate, which rests on the x–θ covariance, absorbs the excess first: +5 % at
+k_L, k_R = 0.0002, 0.0006 m^½, +12 % at 0.0003, 0.0009 (``tests/test_noise_fit.py``).
+
+Simulated experiments, recorded sessions, the report and the Fig. 4 plot are in
+:mod:`odomgym.noise_report`.
 """
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -44,10 +52,8 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from odomgym.covariance import propagate_path
-from odomgym.floor import FloorSpec
-from odomgym.io import atomic_writer
 from odomgym.odometry import Calibration
-from odomgym.robot import PRESETS, RobotSpec
+from odomgym.robot import RobotSpec
 from odomgym.runs import Run, return_error
 
 __all__ = [
@@ -56,14 +62,8 @@ __all__ = [
     "NoiseFit",
     "NoiseSamples",
     "fit_noise",
-    "fit_noise_report",
-    "format_noise_report",
     "noise_samples",
-    "plot_noise_fit",
-    "published_calibration",
     "run_noise_basis",
-    "simulate_noise_experiment",
-    "with_wheel_noise",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -143,7 +143,7 @@ def run_noise_basis(
     *,
     method: Literal["vectorised", "propagate_path"] = "vectorised",
 ) -> tuple[FloatArray, FloatArray]:
-    """A, B (3×3 each, [m²/m^1, …] per unit k²) with Σ = k_L²·A + k_R²·B for ``run``.
+    """A, B (3×3 each; Σ's units [m², m·rad, rad²] per metre of k²) with Σ = k_L²·A + k_R²·B.
 
     The odometry path is the run's encoder counts under ``robot``'s nominal parameters and
     ``calibration``, one segment per sample. ``method="propagate_path"`` runs
@@ -197,6 +197,17 @@ class NoiseSamples:
     def n_runs(self) -> int:
         """Number of runs n."""
         return len(self.errors)
+
+    def select(self, keep: Sequence[bool]) -> NoiseSamples:
+        """The runs where ``keep`` is true."""
+        mask = np.asarray(keep, dtype=bool)
+        return NoiseSamples(
+            self.errors[mask],
+            self.basis_left[mask],
+            self.basis_right[mask],
+            tuple(g for g, k in zip(self.groups, mask, strict=True) if k),
+            tuple(s for s, k in zip(self.sources, mask, strict=True) if k),
+        )
 
     def __add__(self, other: NoiseSamples) -> NoiseSamples:
         """Pool two sets of runs (e.g. several sessions); groups keep their labels."""
@@ -392,7 +403,8 @@ class ComponentFit:
         ratio: measured_var / predicted_var (1 = perfect; > 1: the model under-predicts).
         chi2, dof: Σ zᵀC⁻¹z over this component's contrasts, χ²-distributed with ``dof``
             degrees of freedom if the model is right (ignoring that k was fitted).
-        p_value: two-sided P of a χ²_dof at least as far from its median as ``chi2``.
+        p_value: two-sided p of ``chi2``: 2·min(P(χ²_dof ≥ chi2), P(χ²_dof ≤ chi2)); small
+            values flag a component the model over- (ratio < 1) or under-predicts (> 1).
     """
 
     name: str
@@ -523,6 +535,39 @@ def _diagnostics(
     return tuple(components), measured, predicted, residuals, dof
 
 
+def _bootstrap_interval(
+    samples: NoiseSamples, residuals: FloatArray, index: list[NDArray[np.intp]],
+    systematic: Systematic, confidence: float, rng: np.random.Generator, n_bootstrap: int,
+) -> list[tuple[float, float]]:  # fmt: skip
+    """Percentile intervals of k_L², k_R² over refits on runs resampled within their groups.
+
+    With group means removed, a run is resampled as its residual (error less group mean) ×
+    √(n_g/(n_g − 1)), with its own A, B: resampling n_g residuals with replacement and removing
+    their mean again shrinks the spread by (n_g − 1)/n_g on average, which would bias the
+    intervals low for the small groups of recorded sessions (3 runs: by a third).
+    """
+    errors = samples.errors
+    if systematic == "group-mean":
+        errors = residuals.copy()
+        for members in index:
+            errors[members] *= math.sqrt(len(members) / (len(members) - 1))
+    draws = []
+    for _ in range(n_bootstrap):
+        pick = np.concatenate([rng.choice(m, size=len(m)) for m in index])
+        resampled = NoiseSamples(errors[pick], samples.basis_left[pick],
+                                 samples.basis_right[pick], tuple(samples.groups[i] for i in pick),
+                                 tuple(samples.sources[i] for i in pick))  # fmt: skip
+        try:
+            draws.append(_mle(_design(resampled, np.arange(len(pick)), systematic))[:2])
+        except ValueError:  # every group drew copies of one run: no spread to fit
+            continue
+    if len(draws) < n_bootstrap // 2:
+        raise ValueError(f"only {len(draws)} of {n_bootstrap} bootstrap refits succeeded")
+    tail = 50.0 * (1.0 - confidence)
+    qs = np.percentile(draws, [tail, 100.0 - tail], axis=0)
+    return [(float(qs[0, w]), float(qs[1, w])) for w in (0, 1)]
+
+
 def fit_noise(
     samples: NoiseSamples,
     *,
@@ -553,6 +598,9 @@ def fit_noise(
     index = _group_index(samples, systematic)
     design = _design(samples, np.arange(samples.n_runs), systematic)
     estimate = _mle(design)
+    components, measured, predicted, residuals, dof = _diagnostics(
+        samples, index, systematic, estimate[0], estimate[1]
+    )
     if interval == "profile":
         bounds = [_profile_interval(design, estimate, w, confidence) for w in (0, 1)]
     else:
@@ -560,16 +608,8 @@ def fit_noise(
             raise ValueError("interval='bootstrap' needs rng=np.random.Generator")
         if n_bootstrap < 20:
             raise ValueError(f"n_bootstrap must be >= 20, got {n_bootstrap!r}")
-        draws = np.empty((n_bootstrap, 2))
-        for b in range(n_bootstrap):
-            pick = np.concatenate([rng.choice(m, size=len(m)) for m in index])
-            draws[b] = _mle(_design(samples, pick, systematic))[:2]
-        tail = 50.0 * (1.0 - confidence)
-        qs = np.percentile(draws, [tail, 100.0 - tail], axis=0)
-        bounds = [(float(qs[0, w]), float(qs[1, w])) for w in (0, 1)]
-    components, measured, predicted, residuals, dof = _diagnostics(
-        samples, index, systematic, estimate[0], estimate[1]
-    )
+        bounds = _bootstrap_interval(samples, residuals, index, systematic, confidence,
+                                     rng, n_bootstrap)  # fmt: skip
     return NoiseFit(
         k_left=math.sqrt(estimate[0]),
         k_right=math.sqrt(estimate[1]),
@@ -588,293 +628,3 @@ def fit_noise(
         predicted_cov=predicted,
         residuals=residuals,
     )
-
-
-# ----------------------------------------------------------------------------- runs to fit
-def simulate_noise_experiment(
-    robot: str | RobotSpec = "labmate",
-    *,
-    k: float = 0.002,
-    runs: int = 60,
-    distance: float = 10.0,
-    rng: np.random.Generator,
-    ideal: bool = True,
-    friction: float = 0.8,
-    cruise_speed: float = 0.2,
-) -> tuple[list[Run], RobotSpec]:
-    """Seed 004 §6.3 in simulation: ``runs`` robots drive ``distance`` [m] forward and back
-    (backwards, no turn) on ``FloorSpec(roughness=k)`` [m^½], all in one pymunk space.
-
-    ``robot`` is a preset name (``"labmate"``, ``"monash"``, …) or a spec; ``ideal`` drops its
-    systematic errors (true = nominal), so the errors are the floor's alone and their mean is
-    ~0. Returns the runs and the robot whose nominal parameters replay their odometry.
-    """
-    spec = _preset(robot)
-    if ideal:
-        spec = spec.ideal()
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
-        raise ValueError(f"runs must be a positive integer, got {runs!r}")
-    from odomgym.lab import simulate_runs  # the physics stack loads only when simulating
-    from odomgym.paths import straight_route
-
-    floor = FloorSpec(friction=friction, roughness=k, name=f"roughness-{k:g}")
-    recorded, _ = simulate_runs(
-        spec, floor, straight_route(distance, return_trip=True), rng=rng, repeats=runs,
-        cruise_speed=cruise_speed, kind="straight",
-    )  # fmt: skip
-    return recorded, spec
-
-
-def _preset(robot: str | RobotSpec) -> RobotSpec:
-    if isinstance(robot, RobotSpec):
-        return robot
-    if robot not in PRESETS:
-        raise ValueError(f"unknown robot preset {robot!r}; known: {', '.join(sorted(PRESETS))}")
-    return PRESETS[robot]
-
-
-def with_wheel_noise(
-    runs: Sequence[Run],
-    robot: RobotSpec,
-    k_left: float,
-    k_right: float,
-    *,
-    rng: np.random.Generator,
-    calibration: Calibration | None = None,
-) -> list[Run]:
-    """Copies of ``runs`` whose ground truth is their encoder path re-driven with wheel noise.
-
-    Each sample's wheel travel d (from the counts, as the odometry sees it) becomes
-    d + k·√|d|·ξ with ξ ~ N(0, 1) per wheel and sample (Eq. 4, with *separate* k_L, k_R, which
-    :class:`~odomgym.floor.FloorSpec` cannot express), integrated as exact arcs from the first
-    true pose. This is the kinematic Monte Carlo of :mod:`odomgym.montecarlo` on a recorded
-    path: a known ground truth for testing the fit, including its second-order effects.
-    """
-    cal = calibration if calibration is not None else Calibration()
-    noisy = []
-    for run in runs:
-        travels, wheelbase = _wheel_travels(run, robot, cal)
-        _check_run(run, travels)
-        scale = np.sqrt(np.abs(travels)) * np.array([k_left, k_right])
-        travels = travels + scale * rng.standard_normal(travels.shape)
-        dtheta = (travels[:, 1] - travels[:, 0]) / wheelbase
-        x0, y0, th0 = run.true_pose[0]
-        theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
-        chord = travels.mean(axis=1) * np.sinc(0.5 * dtheta / math.pi)
-        mid = theta[:-1] + 0.5 * dtheta
-        pose = np.empty_like(run.true_pose)
-        pose[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(chord * np.cos(mid))])
-        pose[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(chord * np.sin(mid))])
-        pose[:, 2] = theta
-        noisy.append(Run(run.kind, run.time, run.counts, pose, run.direction, run.side,
-                         run.source, dict(run.meta, wheel_noise=(k_left, k_right))))  # fmt: skip
-    return noisy
-
-
-def published_calibration(
-    session_dir: str | Path, robot: RobotSpec, method: str = "optiodom"
-) -> Calibration | None:
-    """The calibration ``method`` published for an OptiOdom session, or None if not listed.
-
-    Reads ``published_results.csv`` two folders above the session (the data set's root):
-    the calibrated (b, D_R, D_L) [m] of Sousa et al. 2022, mapped onto ``robot``'s nominal.
-    """
-    folder = Path(session_dir)
-    table = folder.resolve().parent.parent / "published_results.csv"
-    if not table.is_file():
-        return None
-    with table.open(encoding="utf-8") as file:
-        for row in csv.DictReader(file):
-            if row["method"] == method and row["session"] == folder.name:
-                return Calibration.from_parameters(
-                    robot, float(row["b"]), float(row["dr"]), float(row["dl"])
-                )
-    return None
-
-
-def _group_label(run: Run) -> str:
-    """Runs sharing a systematic error: same session, path kind and turning direction."""
-    turn = run.direction or (str(run.meta.get("turn", "")) if run.kind == "free" else "")
-    return ":".join(part for part in (str(run.meta.get("session", "")), run.kind, turn) if part)
-
-
-# ----------------------------------------------------------------------------- report
-def fit_noise_report(
-    *,
-    robot: str = "labmate",
-    k: float = 0.002,
-    runs: int = 60,
-    distance: float = 10.0,
-    seed: int = 0,
-    data: Sequence[str | Path] = (),
-    pool: Literal["all", "path-type", "session"] = "path-type",
-    calibration: Literal["published", "session"] = "published",
-    systematic: Systematic = "group-mean",
-    interval: IntervalMethod = "profile",
-    confidence: float = 0.95,
-    n_bootstrap: int = 200,
-    plot: str | Path | None = None,
-) -> dict[str, Any]:
-    """Fit k_L, k_R on a simulated §6.3 experiment or on recorded sessions; a JSON-safe dict.
-
-    Without ``data``: :func:`simulate_noise_experiment` with ``robot`` (preset name, ideal),
-    ``k`` [m^½], ``runs``, ``distance`` [m] and ``seed``; one fit, whose entry says whether
-    the intervals cover the true k. With ``data`` (OptiOdom session folders, or folders
-    holding them): each session's runs are replayed with its published OptiOdom calibration
-    (``calibration="published"``, falling back to the session's own parameters when it has
-    none) or with its own metadata (``"session"``); runs are grouped by session, path and
-    turning direction (the groups whose means are removed), and pooled into one fit per path
-    type (``pool="path-type"``), per session, or all together. A pool that cannot be fitted
-    (too few runs) is listed under ``"skipped"`` with the reason. ``plot``: write the Fig. 4
-    scatters there (one file per fit, the fit's name appended when there are several).
-    """
-    seeds = np.random.SeedSequence(seed).spawn(2)
-    sim_rng, boot_rng = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
-    pools: dict[str, NoiseSamples] = {}
-    report: dict[str, Any] = {
-        "model": "Chong & Kleeman 1997 (seed 004): wheel noise variance k^2|d| (Eq. 4), "
-        "end-pose covariance k_L^2 A + k_R^2 B (Eqs. 23-28); Gaussian maximum likelihood",
-        "systematic": systematic,
-        "interval": interval,
-        "confidence": confidence,
-    }
-    if not data:
-        recorded, spec = simulate_noise_experiment(
-            robot, k=k, runs=runs, distance=distance, rng=sim_rng
-        )
-        pools["simulation"] = noise_samples(recorded, spec, group="all")
-        report["source"] = "simulation"
-        report["inputs"] = {"robot": spec.name, "ideal": True, "k_true_sqrt_m": k, "runs": runs,
-                            "distance_m": distance, "seed": seed}  # fmt: skip
-    else:
-        from odomgym.data import find_sessions, read_session
-
-        folders = [p for d in data for p in (find_sessions(d) or [Path(d)])]
-        sessions = []
-        for folder in folders:
-            session = read_session(folder)
-            cal = (
-                published_calibration(folder, session.robot) if calibration == "published" else None
-            )
-            used = "published" if cal is not None else "session"
-            samples = noise_samples(session.runs, session.robot, cal or session.initial,
-                                    group=_group_label)  # fmt: skip
-            key = {"all": "all", "path-type": session.path_type, "session": session.name}[pool]
-            pools[key] = pools[key] + samples if key in pools else samples
-            sessions.append({"session": session.name, "path_type": session.path_type,
-                             "runs": session.n_runs, "calibration": used})  # fmt: skip
-        report["source"] = "data"
-        report["inputs"] = {"sessions": sessions, "pool": pool, "seed": seed}
-    report["fits"], report["skipped"], report["plots"] = [], [], []
-    for name, samples in pools.items():
-        try:
-            fit = fit_noise(samples, systematic=systematic, confidence=confidence,
-                            interval=interval, rng=boot_rng, n_bootstrap=n_bootstrap)  # fmt: skip
-        except ValueError as exc:
-            report["skipped"].append({"name": name, "reason": str(exc)})
-            continue
-        entry = {"name": name, **fit.to_dict()}
-        if not data:
-            entry["covers_true"] = {
-                "k_left": fit.k_left_interval[0] <= k <= fit.k_left_interval[1],
-                "k_right": fit.k_right_interval[0] <= k <= fit.k_right_interval[1],
-            }
-        report["fits"].append(entry)
-        if plot is not None:
-            target = Path(plot)
-            if len(pools) > 1:
-                target = target.with_name(f"{target.stem}-{name}{target.suffix}")
-            plot_noise_fit(target, fit, title=f"{name}: {fit.n_runs} runs")
-            report["plots"].append(str(target))
-    return report
-
-
-def format_noise_report(report: dict[str, Any]) -> str:
-    """The fits as a table: k_L, k_R with intervals, then measured against predicted spread
-    per component (x, y [mm], θ [deg]) with the variance ratio and χ² test."""
-    inputs = report["inputs"]
-    if report["source"] == "simulation":
-        head = (f"simulation: {inputs['robot']} (ideal), {inputs['runs']} runs of "
-                f"{inputs['distance_m']:g} m forward and back, floor k = "
-                f"{inputs['k_true_sqrt_m']:g} m^1/2, seed {inputs['seed']}")  # fmt: skip
-    else:
-        head = f"data: {len(inputs['sessions'])} sessions, pooled by {inputs['pool']}"
-    removed = "group means removed (REML)" if report["systematic"] == "group-mean" else "none"
-    lines = [
-        f"Wheel-noise fit, Chong & Kleeman Eq. 4 — {head}",
-        f"systematic errors: {removed}; intervals: {report['confidence']:.0%} {report['interval']}",
-        "",
-        f"{'fit':<14}{'runs':>5}{'groups':>7}   {'k_L [m^1/2]':<28}{'k_R [m^1/2]':<28}",
-    ]
-    for fit in report["fits"]:
-        cells = [
-            f"{fit[f'k_{s}_sqrt_m']:.3e} [{fit[f'k_{s}_interval'][0]:.2e}, "
-            f"{fit[f'k_{s}_interval'][1]:.2e}]"
-            for s in ("left", "right")
-        ]
-        lines.append(f"{fit['name']:<14}{fit['runs']:>5}{fit['groups']:>7}   "
-                     f"{cells[0]:<28}{cells[1]:<28}")  # fmt: skip
-    for fit in report["fits"]:
-        lines += ["", f"{fit['name']}: component  measured std  predicted std  var ratio  "
-                  f"chi2/dof        p"]  # fmt: skip
-        for c in fit["components"]:
-            scale, unit = (1e3, "mm") if c["unit"] == "m" else (180.0 / math.pi, "deg")
-            lines.append(
-                f"{'':<14}{c['name']:<7}{scale * math.sqrt(c['measured_var']):>10.3f} {unit:<3}"
-                f"{scale * math.sqrt(c['predicted_var']):>10.3f} {unit:<3}{c['ratio']:>9.2f}"
-                f"{c['chi2']:>9.1f}/{c['dof']:<4}{c['p_value']:>9.3f}"
-            )
-        corr = "  ".join(
-            f"{key} {_fmt(fit['measured_corr'][key])}/{_fmt(fit['predicted_corr'][key])}"
-            for key in ("x_y", "x_theta", "y_theta")
-        )
-        lines.append(f"{'':<14}corr measured/predicted: {corr}")
-    for skip in report["skipped"]:
-        lines.append(f"skipped {skip['name']}: {skip['reason']}")
-    return "\n".join(lines)
-
-
-def _fmt(value: float | None) -> str:
-    return "—" if value is None else f"{value:+.2f}"
-
-
-def plot_noise_fit(path: str | Path, fit: NoiseFit, *, title: str = "") -> None:
-    """Seed 004 Fig. 4: residual scatters x–y, x–θ, y–θ with the measured (solid) and the
-    fitted model's (dashed) 95 % ellipses, x, y in mm and θ in degrees; written atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    scale = np.array([1e3, 1e3, 180.0 / math.pi])
-    labels = ("x error [mm]", "y error [mm]", "θ error [deg]")
-    radius = math.sqrt(float(stats.chi2.ppf(0.95, 2)))
-    circle = np.stack([np.cos(np.linspace(0, 2 * math.pi, 200)),
-                       np.sin(np.linspace(0, 2 * math.pi, 200))])  # fmt: skip
-    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.5))
-    for ax, (i, j) in zip(axes, ((0, 1), (0, 2), (1, 2)), strict=True):
-        ax.scatter(fit.residuals[:, i] * scale[i], fit.residuals[:, j] * scale[j], s=12,
-                   color="tab:blue", label="runs")  # fmt: skip
-        for cov, style, name in ((fit.measured_cov, "-", "measured"),
-                                 (fit.predicted_cov, "--", "model")):  # fmt: skip
-            sub = cov[np.ix_((i, j), (i, j))] * np.outer(scale[[i, j]], scale[[i, j]])
-            values, vectors = np.linalg.eigh(sub)
-            ring = vectors @ (np.sqrt(np.maximum(values, 0.0))[:, None] * circle) * radius
-            ax.plot(ring[0], ring[1], style, color="k", label=f"95 % {name}")
-        ax.set_xlabel(labels[i])
-        ax.set_ylabel(labels[j])
-        ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle(
-        f"{title}  k_L = {fit.k_left:.2e}, k_R = {fit.k_right:.2e} m^1/2".strip(), fontsize=10
-    )
-    fig.tight_layout()
-    target = Path(path)
-
-    def write(tmp: Path) -> None:
-        fig.savefig(tmp, dpi=120, format=target.suffix.lstrip(".") or "png")
-
-    try:
-        atomic_writer(target, write)
-    finally:
-        plt.close(fig)

@@ -24,14 +24,11 @@ import numpy as np
 import pytest
 
 from odomgym.covariance import propagate_path
-from odomgym.noise_fit import (
-    NoiseSamples,
-    fit_noise,
+from odomgym.noise_fit import NoiseSamples, fit_noise, noise_samples, run_noise_basis
+from odomgym.noise_report import (
     fit_noise_report,
     format_noise_report,
-    noise_samples,
     plot_noise_fit,
-    run_noise_basis,
     simulate_noise_experiment,
     with_wheel_noise,
 )

@@ -1,0 +1,204 @@
+"""The real-data leaderboard: calibrate on one recorded session, evaluate on the others.
+
+A calibration is only worth what it does on runs it has not seen. For every method and every
+recorded session it can use, the method calibrates on that session; its parameters (b, D_R, D_L,
+absolute, in metres) are then applied to every *other* session — squares, straight-and-spin
+and circular paths alike, each with its own nominal robot — and judged by the OptiOdom
+evaluation measures
+(:mod:`odomgym.evaluation`). The leaderboard ranks methods by the mean cross-session final and
+maximum position errors. Beside it, the in-session results are compared with the authors' own
+numbers in ``published_results.csv`` (Sousa et al. 2022, whose "optiodom" rows are compared with
+our ``trajectory`` method).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from odomgym.baselines.base import Calibrator
+from odomgym.baselines.validation import make_calibrator
+from odomgym.data import RecordedLab, Session, find_sessions, read_session
+from odomgym.errors import SpecError
+from odomgym.evaluation import EvaluationMeasures, evaluate
+from odomgym.odometry import Calibration
+
+__all__ = ["Leaderboard", "format_leaderboard", "published_results", "run_leaderboard"]
+
+PUBLISHED_NAMES = {
+    "umbmark": "umbmark",
+    "jung_chung": "jung_chung",
+    "ivanjko": "ivanjko",
+    "optiodom": "trajectory",
+}
+
+
+@dataclass
+class Leaderboard:
+    """Cross-session and in-session results.
+
+    Attributes:
+        cross: per (method, calibration session, evaluation session) the measures.
+        in_session: per (method, session) the measures on the calibration session itself.
+        parameters: per (method, session) the calibrated (b, D_R, D_L) [m].
+        failures: per (method, session) why the method could not run there.
+        published: per (method, session) the authors' in-session "after" measures.
+    """
+
+    cross: dict[tuple[str, str, str], EvaluationMeasures] = field(default_factory=dict)
+    in_session: dict[tuple[str, str], EvaluationMeasures] = field(default_factory=dict)
+    parameters: dict[tuple[str, str], tuple[float, float, float]] = field(default_factory=dict)
+    failures: dict[tuple[str, str], str] = field(default_factory=dict)
+    published: dict[tuple[str, str], dict[str, float]] = field(default_factory=dict)
+
+    def ranking(self) -> list[dict[str, Any]]:
+        """Methods by mean cross-session final position error (then max position error)."""
+        methods = sorted({m for m, _, _ in self.cross})
+        table = []
+        for method in methods:
+            values = [v for (m, _, _), v in self.cross.items() if m == method]
+            table.append(
+                {
+                    "method": method,
+                    "pairs": len(values),
+                    "final_pos_mm": 1e3 * float(np.mean([v.final_position for v in values])),
+                    "max_pos_mm": 1e3 * float(np.mean([v.max_position for v in values])),
+                    "final_th_deg": math.degrees(float(np.mean([v.final_heading for v in values]))),
+                    "max_th_deg": math.degrees(float(np.mean([v.max_heading for v in values]))),
+                }
+            )
+        table.sort(key=lambda row: (row["final_pos_mm"], row["max_pos_mm"]))
+        return table
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {
+            "ranking": self.ranking(),
+            "in_session": {f"{m}/{s}": v.as_published() for (m, s), v in self.in_session.items()},
+            "parameters": {
+                f"{m}/{s}": dict(zip(("b", "dr", "dl"), p, strict=True))
+                for (m, s), p in self.parameters.items()
+            },
+            "published": {f"{m}/{s}": v for (m, s), v in self.published.items()},
+            "failures": {f"{m}/{s}": why for (m, s), why in self.failures.items()},
+        }
+
+
+def published_results(path: Path) -> dict[tuple[str, str], dict[str, float]]:
+    """The authors' "after" measures per (our method name, session) from the CSV."""
+    results: dict[tuple[str, str], dict[str, float]] = {}
+    if not path.is_file():
+        return results
+    with path.open(newline="", encoding="utf-8") as handle:
+        for row in csv.DictReader(handle):
+            method = PUBLISHED_NAMES.get(row["method"])
+            if method is None:
+                continue
+            results[(method, row["session"])] = {
+                key: float(row[f"after_{key}"])
+                for key in ("max_pos", "max_th_deg", "final_pos", "final_th_deg")
+            }
+    return results
+
+
+def _calibrator_for(cls: type[Calibrator], session: Session) -> Calibrator:
+    """``cls`` configured for what ``session`` holds (counts it lacks keep their defaults, and
+    the method then says what is missing)."""
+    holdings = session.holdings()
+    return make_calibrator(
+        cls,
+        side=session.side or None,
+        runs_per_direction=holdings.get("square cw") or None,
+        squares_per_direction=holdings.get("square cw", 0),
+        straight_runs=holdings.get("straight") or None,
+        spin_runs=holdings.get("spin cw") or None,
+        spins_per_direction=holdings.get("spin cw", 0),
+    )
+
+
+def run_leaderboard(
+    root: str | Path,
+    methods: Sequence[str] | None = None,
+    path_types: Sequence[str] = ("square", "ivanjko"),
+) -> Leaderboard:
+    """Calibrate every method on every session of ``path_types`` below ``root`` that holds
+    the runs it needs; evaluate each result on *all* other sessions (every path type, so that
+    methods calibrating on different experiments are judged on the same runs)."""
+    from odomgym.baselines import CALIBRATORS
+
+    names = list(methods or CALIBRATORS)
+    every = [read_session(p) for p in find_sessions(root)]
+    sessions = [s for s in every if s.path_type in path_types]
+    if not sessions:
+        raise SpecError(f"no sessions of types {list(path_types)} below {root}", field="data")
+    board = Leaderboard(published=published_results(Path(root) / "published_results.csv"))
+    for method in names:
+        cls = CALIBRATORS[method]
+        for source in sessions:
+            try:
+                calibrator = _calibrator_for(cls, source)
+                result = calibrator.calibrate(RecordedLab(source), source.initial)
+            except (LookupError, ValueError, ArithmeticError) as exc:
+                board.failures[(method, source.name)] = str(exc)
+                continue
+            params = result.calibration.parameters(source.robot)
+            absolute = (params["wheelbase"], params["right_diameter"], params["left_diameter"])
+            board.parameters[(method, source.name)] = absolute
+            board.in_session[(method, source.name)] = evaluate(
+                source.runs, source.robot, result.calibration
+            )
+            for target in every:
+                if target.name == source.name:
+                    continue
+                transferred = Calibration.from_parameters(target.robot, *absolute)
+                board.cross[(method, source.name, target.name)] = evaluate(
+                    target.runs, target.robot, transferred
+                )
+    return board
+
+
+def format_leaderboard(board: Leaderboard) -> str:
+    """Markdown: the cross-session ranking, then in-session results against the published."""
+    lines = [
+        "## Cross-session leaderboard (calibrate on one session, evaluate on the others)",
+        "",
+        "| rank | method | pairs | final pos [mm] | max pos [mm] | final θ [deg] | max θ [deg] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for rank, row in enumerate(board.ranking(), start=1):
+        lines.append(
+            f"| {rank} | {row['method']} | {row['pairs']} | {row['final_pos_mm']:.2f} | "
+            f"{row['max_pos_mm']:.2f} | {row['final_th_deg']:.3f} | {row['max_th_deg']:.3f} |"
+        )
+    lines += [
+        "",
+        "## In-session results against the published ones (Sousa et al. 2022)",
+        "",
+        "| method | session | final pos ours / published [mm] | max pos ours / published [mm] |",
+        "|---|---|---|---|",
+    ]
+    for (method, session), ours in sorted(board.in_session.items()):
+        theirs = board.published.get((method, session))
+        if theirs is None:
+            continue
+        mine = ours.as_published()
+        lines.append(
+            f"| {method} | {session} | {1e3 * mine['final_pos']:.2f} / "
+            f"{1e3 * theirs['final_pos']:.2f} | {1e3 * mine['max_pos']:.2f} / "
+            f"{1e3 * theirs['max_pos']:.2f} |"
+        )
+    if board.failures:
+        lines += ["", "Not run (the session lacks the experiments the method needs):", ""]
+        by_method: dict[str, list[str]] = {}
+        for (method, session), _why in sorted(board.failures.items()):
+            by_method.setdefault(method, []).append(session)
+        for method, sessions in by_method.items():
+            first = board.failures[(method, sessions[0])]
+            lines.append(f"* {method}: {', '.join(sessions)} — e.g. {first}")
+    return "\n".join(lines)
