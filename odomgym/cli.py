@@ -4,7 +4,10 @@ Commands:
     ``odomgym run square|straight …``   drive runs in simulation, report return errors;
     ``odomgym calibrate METHOD …``      calibrate (simulated robot or measured session) and
                                          validate on fresh runs;
-    ``odomgym bench calibrators …``     every calibrator on a robot population, three floors.
+    ``odomgym bench calibrators …``     every calibrator on a robot population, three floors;
+    ``odomgym leaderboard --data DIR``  real data: calibrate on one session, test on the others;
+    ``odomgym covariance …``            Chong & Kleeman closed-form covariance (+ Monte Carlo);
+    ``odomgym fit-noise …``             estimate k_L, k_R from repeated runs.
 
 Every command exits 0 on success, 2 on bad input (with a message naming the field and, where it
 came from a file, the file and line) and never leaves a half-written output file.
@@ -330,6 +333,70 @@ def _command_leaderboard(args: argparse.Namespace) -> int:
     return 0
 
 
+def _nonnegative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (np.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return value
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+def _command_covariance(args: argparse.Namespace) -> int:
+    from odomgym.montecarlo import covariance_report, format_report
+
+    try:
+        report = covariance_report(
+            args.left,
+            args.right,
+            args.wheelbase,
+            args.kl,
+            args.kr,
+            init_std=tuple(args.init_std),
+            montecarlo_runs=args.montecarlo,
+            partitions=args.partitions,
+            rng=np.random.default_rng(args.seed),
+        )
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
+    print(to_json(report) if args.json else format_report(report))
+    return 0
+
+
+def _command_fit_noise(args: argparse.Namespace) -> int:
+    from odomgym.noise_report import fit_noise_report, format_noise_report
+
+    try:
+        report = fit_noise_report(
+            robot=args.robot,
+            k=args.k,
+            runs=args.runs,
+            distance=args.distance,
+            seed=args.seed,
+            data=tuple(args.data or ()),
+            pool=args.pool,
+            interval=args.interval,
+            plot=args.plot,
+        )
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
+    print(to_json(report) if args.json else format_noise_report(report))
+    if args.plot and not args.json:
+        print(f"plot written to {args.plot}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command."""
     parser = argparse.ArgumentParser(
@@ -412,6 +479,55 @@ def build_parser() -> argparse.ArgumentParser:
     board.add_argument("--out", help="also write the Markdown table here")
     board.add_argument("--json", action="store_true")
     board.set_defaults(handler=_command_leaderboard)
+
+    cov = commands.add_parser(
+        "covariance",
+        help="Chong & Kleeman odometry covariance in closed form (and by Monte Carlo)",
+        description="Mean, standard deviations and correlations of the end pose after wheel "
+        "travels L (left) and R (right) [m] with wheel noise k [m^0.5] (seed 004), laid out like "
+        "the paper's Tables 1-7.",
+    )
+    cov.add_argument("--left", type=_finite, required=True, help="left wheel travel L [m]")
+    cov.add_argument("--right", type=_finite, required=True, help="right wheel travel R [m]")
+    cov.add_argument("--wheelbase", type=_positive, required=True, help="wheelbase B [m]")
+    cov.add_argument("--kl", type=_nonnegative, required=True, help="k_L [m^0.5]")
+    cov.add_argument("--kr", type=_nonnegative, required=True, help="k_R [m^0.5]")
+    cov.add_argument(
+        "--init-std",
+        nargs=3,
+        type=_nonnegative,
+        default=[0.0, 0.0, 0.0],
+        metavar=("SX", "SY", "STH"),
+        help="initial pose standard deviations [m, m, rad]",
+    )
+    cov.add_argument("--montecarlo", type=int, default=0, metavar="RUNS", help="Monte Carlo runs")
+    cov.add_argument("--partitions", type=_count, default=1000, help="path partitions (1000)")
+    cov.add_argument("--seed", type=int, default=0)
+    cov.add_argument("--json", action="store_true")
+    cov.set_defaults(handler=_command_covariance)
+
+    noise = commands.add_parser(
+        "fit-noise",
+        help="estimate the wheel noise constants k_L, k_R from repeated runs (seed 004 §6.3)",
+        description="Without --data: simulate N runs of D m forward and back on a rough floor of "
+        "known k and fit it back. With --data: fit recorded OptiOdom sessions.",
+    )
+    noise.add_argument("--robot", default="labmate", help="robot preset for the simulation")
+    noise.add_argument("--k", type=_nonnegative, default=0.0005, help="true k [m^0.5] to simulate")
+    noise.add_argument("--runs", type=_count, default=60, help="simulated runs (60)")
+    noise.add_argument("--distance", type=_positive, default=10.0, help="out-and-back length [m]")
+    noise.add_argument("--seed", type=int, default=0)
+    noise.add_argument("--data", nargs="+", help="OptiOdom session folders (or their parents)")
+    noise.add_argument(
+        "--pool",
+        choices=["all", "path-type", "kind", "session"],
+        default="kind",
+        help="which recorded runs are fitted together (default: by run kind)",
+    )
+    noise.add_argument("--interval", choices=["profile", "bootstrap"], default="profile")
+    noise.add_argument("--plot", help="write the error scatters with 95 %% ellipses (PNG)")
+    noise.add_argument("--json", action="store_true")
+    noise.set_defaults(handler=_command_fit_noise)
     return parser
 
 

@@ -57,3 +57,56 @@ def test_bad_inputs_exit_2_with_a_message(
         main(["run", "square", "--ed", "nan"])
     with pytest.raises(SystemExit):
         main(["run", "square", "--runs", "0"])
+
+
+def test_covariance_command_worked_example(capsys: pytest.CaptureFixture[str]) -> None:
+    """Seed 004 Table 1, first column (the worked example of shared/seeds/README.md)."""
+    args = ["covariance", "--left", "3", "--right", "1", "--wheelbase", "0.4"]
+    assert main([*args, "--kl", "0.001", "--kr", "0.001", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    text = json.dumps(report)
+    assert "0.0014375" in text or "0.0014376" in text  # σ_x = 1.4376e-3 m
+
+
+def test_covariance_command_rejects_bad_input() -> None:
+    with pytest.raises(SystemExit):
+        main(
+            [
+                "covariance",
+                "--left",
+                "3",
+                "--right",
+                "1",
+                "--wheelbase",
+                "0",
+                "--kl",
+                "0.001",
+                "--kr",
+                "0.001",
+            ]
+        )
+    with pytest.raises(SystemExit):
+        main(
+            [
+                "covariance",
+                "--left",
+                "nan",
+                "--right",
+                "1",
+                "--wheelbase",
+                "0.4",
+                "--kl",
+                "0",
+                "--kr",
+                "0",
+            ]
+        )
+
+
+def test_fit_noise_command_on_simulated_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plot = tmp_path / "noise.png"
+    assert main(["fit-noise", "--runs", "12", "--distance", "4", "--plot", str(plot)]) == 0
+    out = capsys.readouterr().out
+    assert "k_L" in out and plot.exists()
