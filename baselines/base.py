@@ -15,8 +15,49 @@ from typing import ClassVar
 
 from odomgym.experiments import Experiment, Lab
 from odomgym.odometry import Calibration
+from odomgym.runs import Run
 
-__all__ = ["CalibrationResult", "Calibrator"]
+__all__ = [
+    "CalibrationResult",
+    "Calibrator",
+    "check_square_settings",
+    "perform",
+    "square_experiments",
+]
+
+
+def check_square_settings(side: float, runs_per_direction: int) -> None:
+    """Raise ValueError unless the square side [m] is positive and there is at least one run."""
+    if not side > 0.0 or runs_per_direction < 1:
+        raise ValueError(
+            f"need side > 0 and runs_per_direction >= 1, got {side}, {runs_per_direction}"
+        )
+
+
+def square_experiments(side: float, runs_per_direction: int) -> list[Experiment]:
+    """The bi-directional square experiment: ``runs_per_direction`` cw, then as many ccw."""
+    return [
+        Experiment("square", "cw", runs_per_direction, side),
+        Experiment("square", "ccw", runs_per_direction, side),
+    ]
+
+
+def perform(
+    lab: Lab, experiment: Experiment, calibration: Calibration, *, method: str, hint: str = ""
+) -> list[Run]:
+    """``lab.perform``, with a ``LookupError`` saying which method needed which runs.
+
+    Recorded labs refuse experiments their session does not hold; the message then names the
+    method, the runs it needed and what the lab said (``hint`` adds method-specific advice).
+    """
+    try:
+        return lab.perform(experiment, calibration)
+    except LookupError as exc:
+        what = f"{experiment.direction or ''} {experiment.kind}".strip()
+        raise LookupError(
+            f"{method} needs {experiment.runs} {what} runs of size {experiment.size:g} that "
+            f"this lab cannot provide{hint}: {exc}"
+        ) from exc
 
 
 @dataclass

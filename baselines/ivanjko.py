@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import CalibrationResult, Calibrator, perform
 from odomgym.baselines.trajectory import replay_with_jacobian, sample_indices
 from odomgym.experiments import Experiment, Lab
 from odomgym.odometry import Calibration
@@ -230,7 +230,16 @@ class Ivanjko(Calibrator):
         robot = lab.robot
         runs0, dist0 = lab.runs_used, lab.distance_used
         start = initial if initial is not None else Calibration()
-        straight, spin_cw, spin_ccw = (self._perform(lab, e, start) for e in self.experiments())
+        straight, spin_cw, spin_ccw = (
+            perform(
+                lab,
+                e,
+                start,
+                method="Ivanjko et al.'s calibration",
+                hint=" (straight runs [m] and 180° spins [rad])",
+            )
+            for e in self.experiments()
+        )
 
         calibration = start
         k_r = k_l = k_b = 1.0
@@ -271,15 +280,3 @@ class Ivanjko(Calibrator):
             distance_used=lab.distance_used - dist0,
             notes=notes,
         )
-
-    @staticmethod
-    def _perform(lab: Lab, experiment: Experiment, calibration: Calibration) -> list[Run]:
-        try:
-            return lab.perform(experiment, calibration)
-        except LookupError as exc:
-            what = f"{experiment.direction or ''} {experiment.kind}".strip()
-            raise LookupError(
-                f"Ivanjko et al.'s calibration needs {experiment.runs} {what} runs of size "
-                f"{experiment.size:g} (straight runs [m] and 180° spins [rad]) that this lab "
-                f"cannot provide: {exc}"
-            ) from exc

@@ -39,7 +39,12 @@ from typing import ClassVar, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import (
+    CalibrationResult,
+    Calibrator,
+    check_square_settings,
+    square_experiments,
+)
 from odomgym.baselines.umbmark import (
     e_b_from_alpha,
     e_d_from_beta,
@@ -184,20 +189,14 @@ class JungChung(Calibrator):
     ) -> None:
         if conventions not in ("jung_chung", "optiodom"):
             raise ValueError(f"conventions must be 'jung_chung' or 'optiodom', got {conventions!r}")
-        if not side > 0.0 or runs_per_direction < 1:
-            raise ValueError(
-                f"need side > 0 and runs_per_direction >= 1, got {side}, {runs_per_direction}"
-            )
+        check_square_settings(side, runs_per_direction)
         self.side = side
         self.runs_per_direction = runs_per_direction
         self.conventions: JungChungConventions = conventions
 
     def experiments(self) -> list[Experiment]:
         """The cw and the ccw squares."""
-        return [
-            Experiment("square", "cw", self.runs_per_direction, self.side),
-            Experiment("square", "ccw", self.runs_per_direction, self.side),
-        ]
+        return square_experiments(self.side, self.runs_per_direction)
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares in ``lab`` with ``initial`` and correct E_b and E_d."""

@@ -68,7 +68,7 @@ from typing import ClassVar, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import CalibrationResult, Calibrator, perform
 from odomgym.experiments import Experiment, Lab
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
@@ -338,14 +338,7 @@ class LeastSquares(Calibrator):
         calibration = initial if initial is not None else Calibration()
         runs: list[Run] = []
         for experiment in self.experiments():
-            try:
-                runs.extend(lab.perform(experiment, calibration))
-            except LookupError as exc:
-                what = f"{experiment.direction or ''} {experiment.kind}".strip()
-                raise LookupError(
-                    f"least-squares calibration needs {experiment.runs} {what} runs of size "
-                    f"{experiment.size:g} that this lab cannot provide: {exc}"
-                ) from exc
+            runs.extend(perform(lab, experiment, calibration, method="least-squares calibration"))
         fit = fit_least_squares(runs, lab.robot, position=self.position, weighting=self.weighting)
         notes = []
         if self.position == "radii" and fit.cond_xy > 30.0:

@@ -59,7 +59,12 @@ from typing import ClassVar, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import (
+    CalibrationResult,
+    Calibrator,
+    check_square_settings,
+    square_experiments,
+)
 from odomgym.baselines.umbmark import e_b_from_alpha, perform_squares
 from odomgym.experiments import Experiment, Lab
 from odomgym.metrics import centre_of_gravity, summarize_umbmark
@@ -237,10 +242,7 @@ class Lee(Calibrator):
         *,
         diameter_error: DiameterError = "right_wheel",
     ) -> None:
-        if not side > 0.0 or runs_per_direction < 1:
-            raise ValueError(
-                f"need side > 0 and runs_per_direction >= 1, got {side}, {runs_per_direction}"
-            )
+        check_square_settings(side, runs_per_direction)
         if diameter_error not in ("right_wheel", "split"):
             raise ValueError(
                 f"diameter_error must be 'right_wheel' or 'split', got {diameter_error!r}"
@@ -251,10 +253,7 @@ class Lee(Calibrator):
 
     def experiments(self) -> list[Experiment]:
         """The cw and the ccw squares."""
-        return [
-            Experiment("square", "cw", self.runs_per_direction, self.side),
-            Experiment("square", "ccw", self.runs_per_direction, self.side),
-        ]
+        return square_experiments(self.side, self.runs_per_direction)
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares with ``initial`` active and correct E_d and E_b."""

@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import CalibrationResult, Calibrator, perform
 from odomgym.experiments import Experiment, Lab
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
@@ -367,15 +367,16 @@ class Trajectory(Calibrator):
         calibration = initial if initial is not None else Calibration()
         runs: list[Run] = []
         for experiment in self.experiments():
-            try:
-                runs.extend(lab.perform(experiment, calibration))
-            except LookupError as exc:
-                what = f"{experiment.direction or ''} {experiment.kind}".strip()
-                raise LookupError(
-                    f"trajectory optimisation cannot run in this lab: it needs "
-                    f"{experiment.runs} {what} runs of size {experiment.size:g} ({exc}); for "
-                    "recorded runs of other shapes call fit_trajectories(runs, robot) directly"
-                ) from exc
+            runs.extend(
+                perform(
+                    lab,
+                    experiment,
+                    calibration,
+                    method="trajectory optimisation",
+                    hint=" (for recorded runs of other shapes call fit_trajectories(runs, robot) "
+                    "directly)",
+                )
+            )
         fit = fit_trajectories(
             runs,
             lab.robot,

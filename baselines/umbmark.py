@@ -43,7 +43,7 @@ from typing import ClassVar, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import CalibrationResult, Calibrator, square_experiments
 from odomgym.experiments import Experiment, Lab
 from odomgym.metrics import centre_of_gravity, summarize_umbmark
 from odomgym.odometry import Calibration
@@ -232,8 +232,9 @@ def perform_squares(
     lab: Lab, calibration: Calibration, side: float, runs: int
 ) -> tuple[list[Run], list[Run]]:
     """Drive ``runs`` cw squares, then ``runs`` ccw squares of side ``side`` [m]."""
-    cw = lab.perform(Experiment("square", "cw", runs=runs, size=side), calibration)
-    ccw = lab.perform(Experiment("square", "ccw", runs=runs, size=side), calibration)
+    cw_experiment, ccw_experiment = square_experiments(side, runs)
+    cw = lab.perform(cw_experiment, calibration)
+    ccw = lab.perform(ccw_experiment, calibration)
     return cw, ccw
 
 
