@@ -110,3 +110,66 @@ def test_fit_noise_command_on_simulated_runs(
     assert main(["fit-noise", "--runs", "12", "--distance", "4", "--plot", str(plot)]) == 0
     out = capsys.readouterr().out
     assert "k_L" in out and plot.exists()
+
+
+def test_calibrate_saves_and_exports(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    calib, ros = tmp_path / "calib.toml", tmp_path / "dd.yaml"
+    args = [
+        "calibrate",
+        "umbmark",
+        "--robot",
+        "navbot",
+        "--eb",
+        "1.03",
+        "--side",
+        "1",
+        "--runs",
+        "2",
+    ]
+    code = main(
+        [*args, "--save", str(calib), "--export", "ros2", "--export-path", str(ros), "--json"]
+    )
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["estimate"]["E_b"] == pytest.approx(1.03, abs=0.006)
+    assert "wheel_separation_multiplier" in ros.read_text()
+    # The saved calibration is accepted by `odomgym run`.
+    assert (
+        main(
+            [
+                "run",
+                "square",
+                "--robot",
+                "navbot",
+                "--eb",
+                "1.03",
+                "--side",
+                "1",
+                "--runs",
+                "1",
+                "--calibration",
+                str(calib),
+                "--json",
+            ]
+        )
+        == 0
+    )
+
+
+def test_calibrate_on_measured_session_reproduces_published(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from conftest import SHARED
+
+    session = SHARED / "data" / "optiodom-diff" / "square" / "230620202042"
+    if not session.is_dir():
+        pytest.skip(f"OptiOdom data not found at {session}")
+    code = main(
+        ["calibrate", "umbmark", "--data", str(session), "--conventions", "optiodom", "--json"]
+    )
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    # published_results.csv: umbmark, 230620202042: b = 0.201458, D_R = 0.083954, D_L = 0.084046
+    assert report["b"] == pytest.approx(0.201458, rel=0.002)
+    assert report["dr"] == pytest.approx(0.083954, rel=0.002)
+    assert report["dl"] == pytest.approx(0.084046, rel=0.002)
