@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.baselines.base import Calibrator
+from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.experiments import Lab
 from odomgym.floor import FLOORS, FloorSpec
 from odomgym.lab import random_start_poses, simulate_runs
 from odomgym.lockstep import run_lockstep
@@ -41,7 +42,7 @@ from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
 from odomgym.paths import square_route
 from odomgym.robot import PRESETS, RobotSpec
-from odomgym.runs import end_error
+from odomgym.runs import Direction, end_error
 
 __all__ = [
     "BENCH_FLOORS",
@@ -151,7 +152,8 @@ def configure(cls: type[Calibrator], runs: int) -> Calibrator:
         calibrator = for_budget(runs)
         assert isinstance(calibrator, Calibrator)
         return calibrator
-    options = METHOD_BUDGETS.get(cls.name, lambda _runs: {})(runs)
+    allocate = METHOD_BUDGETS.get(cls.name)
+    options = allocate(runs) if allocate is not None else {}
     return cls(**options)
 
 
@@ -225,8 +227,12 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
         for method in config.methods:
             cls = CALIBRATORS[method]
             start = time.perf_counter()
+
+            def procedure(lab: Lab, _index: int, cls: type[Calibrator] = cls) -> CalibrationResult:
+                return configure(cls, config.budget).calibrate(lab)
+
             outcomes = run_lockstep(
-                lambda lab, _i, cls=cls: configure(cls, config.budget).calibrate(lab),
+                procedure,
                 robots,
                 floor,
                 [_stream(config, i, floor_index, 2) for i in indices],
@@ -292,7 +298,8 @@ def _validate(
     out: list[list[dict[str, FloatArray]]] = [
         [{} for _ in range(len(calibrations[k]) + 1)] for k in range(len(robots))
     ]
-    for d, direction in enumerate(("cw", "ccw")):
+    directions: tuple[Direction, Direction] = ("cw", "ccw")
+    for d, direction in enumerate(directions):
         specs: list[RobotSpec] = []
         cals: list[Calibration] = []
         streams: list[np.random.Generator] = []
@@ -404,7 +411,7 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row in rows:
         groups.setdefault((row["method"], row["floor"]), []).append(row)
-    summary = []
+    summary: list[dict[str, Any]] = []
     for (method, floor), group in groups.items():
         improvement = np.array([r["improvement"] for r in group])
         q25, q50, q75 = np.percentile(improvement, [25, 50, 75])
@@ -431,5 +438,5 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 "failures": sum(1 for r in group if r["failed"]),
             }
         )
-    summary.sort(key=lambda s: (s["floor"], -s["improvement_median"]))
+    summary.sort(key=lambda s: (str(s["floor"]), -float(s["improvement_median"])))
     return summary

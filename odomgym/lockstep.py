@@ -25,7 +25,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from odomgym.experiments import Experiment, SensorAccuracy
+from odomgym.experiments import Experiment, Lab, SensorAccuracy
 from odomgym.floor import FloorSpec
 from odomgym.lab import experiment_route, measure, random_start_poses, simulate_runs
 from odomgym.odometry import Calibration
@@ -180,7 +180,7 @@ class _Coordinator:
 
 
 def run_lockstep(
-    procedure: Callable[[_Participant, int], T],
+    procedure: Callable[[Lab, int], T],
     robots: Sequence[RobotSpec],
     floor: FloorSpec,
     rngs: Sequence[np.random.Generator],

@@ -26,7 +26,9 @@ echo "== ruff check"
 echo "== ruff format --check"
 "$VENV/bin/ruff" format --check .
 echo "== mypy (installed package)"
-PACKAGE_DIR="$("$VENV/bin/python" -c 'import odomgym, pathlib; print(pathlib.Path(odomgym.__file__).parent)')"
-"$VENV/bin/mypy" "$PACKAGE_DIR"
+# From a neutral folder, so that the source folder odomgym/ (which lacks envs/ and baselines/,
+# mapped in by package-dir) does not shadow the installed package.
+REPO="$(pwd)"
+(cd "$(mktemp -d)" && "$REPO/$VENV/bin/mypy" --config-file "$REPO/pyproject.toml" -p odomgym)
 echo "== pytest"
 "$VENV/bin/pytest" -p no:cacheprovider

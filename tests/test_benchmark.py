@@ -112,10 +112,13 @@ def test_benchmark_rows_do_not_depend_on_chunking(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_benchmark_processes_and_ray_agree() -> None:
+def test_benchmark_processes_and_ray_agree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     config = BenchConfig(robots=2, floors=("smooth",), methods=("umbmark",), budget=4)
     local = run_benchmark(config, jobs=2)
     ray = pytest.importorskip("ray")
+    # Ray puts the driver's working directory on its workers' path; from a source checkout that
+    # folder's odomgym/ (without envs/ and baselines/) would shadow the installed package.
+    monkeypatch.chdir(tmp_path)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         distributed = run_benchmark(config, jobs=2, backend="ray")
