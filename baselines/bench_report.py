@@ -41,7 +41,8 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
     """The Markdown report (see the module docstring)."""
     summary = summarize(rows)
     lines = [
-        f"# Calibrator benchmark: {config.robots} robots, budget {config.budget} runs, "
+        f"# Calibrator benchmark: {config.robots} robots, budget "
+        f"{' / '.join(str(b) for b in config.budgets)} runs, "
         f"seed {config.seed}",
         "",
         f"Population: {config.population.base}, E_d ∈ {list(config.population.e_d)}, "
@@ -79,7 +80,7 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
             ]
             by_small = {s["method"]: s for s in summarize(small)}
             by_large = {s["method"]: s for s in summarize(large)}
-            for method in config.methods:
+            for method, _, _ in config.entries():
                 if method in by_small and method in by_large:
                     lines.append(
                         f"| {method} | {_cell(by_small[method])} | {_cell(by_large[method])} |"
@@ -115,6 +116,7 @@ def write_outputs(
             "floors": list(config.floors),
             "methods": list(config.methods),
             "budget": config.budget,
+            "extra_budgets": list(config.extra_budgets),
             "seed": config.seed,
             "validation_runs": config.validation_runs,
         },
@@ -156,17 +158,19 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
                 for r in rows
                 if r["floor"] == floor and r["method"] == m and np.isfinite(r["improvement"])
             ]
-            for m in config.methods
+            for m, _, _ in config.entries()
         ]
+        labels = [label for label, _, _ in config.entries()]
         ax.boxplot(data, showfliers=True)
-        ax.set_xticks(range(1, len(config.methods) + 1), config.methods, rotation=30)
+        ax.set_xticks(range(1, len(labels) + 1), labels, rotation=30)
         ax.set_yscale("log")
         ax.axhspan(10, 22, color="tab:green", alpha=0.12, label="seed 000 Table III (10–22×)")
         ax.set_title(f"{floor} floor")
         ax.grid(True, axis="y", alpha=0.3)
     axes[0][0].set_ylabel("E_max,syst before / after")
     axes[0][0].legend(fontsize=8, loc="lower left")
-    fig.suptitle(f"Calibrator benchmark: {config.robots} robots, budget {config.budget} runs")
+    budgets = " / ".join(str(b) for b in config.budgets)
+    fig.suptitle(f"Calibrator benchmark: {config.robots} robots, budget {budgets} runs")
     fig.tight_layout()
 
     def write(tmp: Path) -> None:

@@ -166,6 +166,8 @@ class BenchConfig:
         floors: names in :data:`BENCH_FLOORS`.
         methods: calibrator names (``odomgym.baselines.CALIBRATORS``).
         budget: runs each calibrator may perform per robot.
+        extra_budgets: further budgets to compare (each method then appears once per budget,
+            labelled ``method@runs``), e.g. ``(4,)`` to see which methods survive few runs.
         seed: master seed.
         validation_runs: fresh squares per direction used to validate each result.
         population: the error ranges.
@@ -175,6 +177,7 @@ class BenchConfig:
     floors: tuple[str, ...] = ("smooth", "rough", "bumpy")
     methods: tuple[str, ...] = ()
     budget: int = 16
+    extra_budgets: tuple[int, ...] = ()
     seed: int = 0
     validation_runs: int = 5
     population: Population = Population()
@@ -185,8 +188,22 @@ class BenchConfig:
                 raise ValueError(
                     f"unknown benchmark floor {floor!r}; floors: {', '.join(BENCH_FLOORS)}"
                 )
-        if self.robots < 1 or self.budget < 1 or self.validation_runs < 1:
-            raise ValueError("robots, budget and validation_runs must be >= 1")
+        if self.robots < 1 or self.validation_runs < 1 or min(self.budgets) < 1:
+            raise ValueError("robots, budgets and validation_runs must be >= 1")
+
+    @property
+    def budgets(self) -> tuple[int, ...]:
+        """Every budget compared, the main one first."""
+        return (self.budget, *(b for b in self.extra_budgets if b != self.budget))
+
+    def entries(self) -> list[tuple[str, str, int]]:
+        """``(label, method, budget)`` of every competitor, in report order."""
+        several = len(self.budgets) > 1
+        return [
+            (f"{method}@{budget}" if several else method, method, budget)
+            for method in self.methods
+            for budget in self.budgets
+        ]
 
 
 def _stream(config: BenchConfig, *key: int) -> np.random.Generator:
@@ -224,12 +241,14 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
         floor, start_region = BENCH_FLOORS[floor_name](_stream(config, 0, floor_index, 1))
         calibrations: list[list[Calibration]] = [[] for _ in robots]
         method_rows: list[list[dict[str, Any]]] = [[] for _ in robots]
-        for method in config.methods:
+        for label, method, budget in config.entries():
             cls = CALIBRATORS[method]
             start = time.perf_counter()
 
-            def procedure(lab: Lab, _index: int, cls: type[Calibrator] = cls) -> CalibrationResult:
-                return configure(cls, config.budget).calibrate(lab)
+            def procedure(
+                lab: Lab, _index: int, cls: type[Calibrator] = cls, budget: int = budget
+            ) -> CalibrationResult:
+                return configure(cls, budget).calibrate(lab)
 
             outcomes = run_lockstep(
                 procedure,
@@ -245,7 +264,8 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
                 calibrations[k].append(calibration)
                 method_rows[k].append(
                     {
-                        "method": method,
+                        "method": label,
+                        "budget": budget,
                         "floor": floor_name,
                         "robot": indices[k],
                         "true_E_d": robot.e_d,
@@ -369,13 +389,8 @@ def run_benchmark(
                 done += len(futures[future])
                 if progress is not None:
                     progress(done, config.robots)
-    rows.sort(
-        key=lambda r: (
-            config.floors.index(r["floor"]),
-            r["robot"],
-            config.methods.index(r["method"]),
-        )
-    )
+    order = [label for label, _, _ in config.entries()]
+    rows.sort(key=lambda r: (config.floors.index(r["floor"]), r["robot"], order.index(r["method"])))
     return rows
 
 

@@ -304,7 +304,8 @@ def _command_bench(args: argparse.Namespace) -> int:
             robots=args.robots,
             floors=tuple(args.floor),
             methods=methods,
-            budget=args.budget,
+            budget=args.budget[0],
+            extra_budgets=tuple(args.budget[1:]),
             seed=args.seed,
         )
     except ValueError as exc:
@@ -459,7 +460,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="benchmark floors (all three by default)",
     )
     bench.add_argument("--methods", nargs="+", help="calibrators (default: all)")
-    bench.add_argument("--budget", type=_count, default=16, help="runs per calibration (16)")
+    bench.add_argument(
+        "--budget",
+        type=_count,
+        nargs="+",
+        default=[16],
+        help="runs per calibration (16); several values compare budgets, e.g. --budget 16 4",
+    )
     bench.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
     bench.add_argument("--backend", choices=["local", "ray"], default="local")
     bench.add_argument("--seed", type=int, default=0)

@@ -126,3 +126,12 @@ def test_benchmark_processes_and_ray_agree(tmp_path: Path, monkeypatch: pytest.M
         ray.shutdown()
     assert [r["improvement"] for r in local] == [r["improvement"] for r in distributed]
     assert [r["est_E_d"] for r in local] == [r["est_E_d"] for r in distributed]
+
+
+def test_benchmark_compares_budgets() -> None:
+    config = BenchConfig(
+        robots=1, floors=("smooth",), methods=("umbmark",), budget=6, extra_budgets=(2,)
+    )
+    rows = run_chunk(config, [0])
+    assert [(r["method"], r["budget"]) for r in rows] == [("umbmark@6", 6), ("umbmark@2", 2)]
+    assert rows[1]["runs_used"] <= 2 < rows[0]["runs_used"]
