@@ -143,14 +143,11 @@ def write_outputs(
 
 
 def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path: Path) -> Path:
-    import matplotlib
+    # A Figure without pyplot: no global backend switch, nothing left open in a notebook.
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(
-        1, len(config.floors), figsize=(4.2 * len(config.floors), 4.2), sharey=True, squeeze=False
-    )
+    fig = Figure(figsize=(4.2 * len(config.floors), 4.2))
+    axes = fig.subplots(1, len(config.floors), sharey=True, squeeze=False)
     for ax, floor in zip(axes[0], config.floors, strict=True):
         data = [
             [
@@ -176,8 +173,5 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
     def write(tmp: Path) -> None:
         fig.savefig(tmp, dpi=110, format="png")
 
-    try:
-        atomic_writer(path, write)
-    finally:
-        plt.close(fig)
+    atomic_writer(path, write)
     return path

@@ -133,6 +133,9 @@ def _least_squares_budget(runs: int) -> dict[str, Any]:
     return {"straight_runs": straight, "squares_per_direction": max(1, (runs - straight) // 2)}
 
 
+MIN_BUDGET: dict[str, int] = {"ivanjko": 3, "least_squares": 3}
+"""Fewest runs a method can calibrate with (2 for the rest: one square each way)."""
+
 METHOD_BUDGETS: dict[str, Callable[[int], dict[str, Any]]] = {
     "umbmark": _umbmark_budget,
     "jung_chung": _squares_only,
@@ -188,8 +191,14 @@ class BenchConfig:
                 raise ValueError(
                     f"unknown benchmark floor {floor!r}; floors: {', '.join(BENCH_FLOORS)}"
                 )
-        if self.robots < 1 or self.validation_runs < 1 or min(self.budgets) < 1:
-            raise ValueError("robots, budgets and validation_runs must be >= 1")
+        if self.robots < 1 or self.validation_runs < 1:
+            raise ValueError("robots and validation_runs must be >= 1")
+        for method in self.methods:
+            least = MIN_BUDGET.get(method, 2)
+            if min(self.budgets) < least:
+                raise ValueError(
+                    f"{method} needs a budget of at least {least} runs, got {min(self.budgets)}"
+                )
 
     @property
     def budgets(self) -> tuple[int, ...]:
@@ -289,6 +298,8 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
                 row["e_max_before_mm"] = 1e3 * e_before
                 row["e_max_after_mm"] = 1e3 * e_after
                 row["improvement"] = e_before / e_after if e_after > 0 else math.inf
+                if not math.isfinite(e_after) and not row["failed"]:
+                    row["failed"] = "validation squares did not finish with this calibration"
                 for name in ("E_d", "E_b", "E_s"):
                     row[f"err_{name}"] = row[f"est_{name}"] - row[f"true_{name}"]
                 if indices[k] == 0 and f == 0:
@@ -345,8 +356,16 @@ def _validate(
             rng=streams,
             direction=direction,
             start_poses=np.array(starts),
+            on_timeout="keep",
         )
-        errors = np.array([end_error(run, end) for run, end in zip(sim, odom, strict=True)])
+        # A calibration so wrong that the robot cannot finish a square gets NaN errors (and so
+        # a NaN E_max,syst): it is reported as failed, not allowed to stop the benchmark.
+        errors = np.array(
+            [
+                end_error(run, end) if run.meta["finished"] else np.full(3, np.nan)
+                for run, end in zip(sim, odom, strict=True)
+            ]
+        )
         for (k, c), start_row in zip(slots[::runs], range(0, len(slots), runs), strict=True):
             out[k][c][direction] = errors[start_row : start_row + runs]
     return out
@@ -427,7 +446,10 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     for row in rows:
         groups.setdefault((row["method"], row["floor"]), []).append(row)
     summary: list[dict[str, Any]] = []
-    for (method, floor), group in groups.items():
+    for (method, floor), all_rows in groups.items():
+        # Failed calibrations are counted, not scored: scoring them as "uncalibrated" would
+        # pull the medians toward 1 and hide how often a method fails.
+        group = [r for r in all_rows if not r["failed"]] or all_rows
         improvement = np.array([r["improvement"] for r in group])
         q25, q50, q75 = np.percentile(improvement, [25, 50, 75])
 
@@ -450,7 +472,7 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 "distance_m_mean": float(np.mean([r["distance_m"] for r in group])),
                 "runs_mean": float(np.mean([r["runs_used"] for r in group])),
                 "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in group])),
-                "failures": sum(1 for r in group if r["failed"]),
+                "failures": sum(1 for r in all_rows if r["failed"]),
             }
         )
     summary.sort(key=lambda s: (str(s["floor"]), -float(s["improvement_median"])))

@@ -71,7 +71,7 @@ def validate_actions(action: Any, shape: tuple[int, ...]) -> FloatArray:
     array = np.asarray(action, dtype=np.float64)
     if array.shape != shape:
         raise ValueError(f"action must have shape {shape}, got {array.shape}")
-    if not math.isfinite(array.sum()):
+    if not np.isfinite(array).all():
         raise ValueError(f"action must be finite, got {array.tolist()}")
     return np.minimum(np.maximum(array, -1.0), 1.0)
 

@@ -40,8 +40,8 @@ class StraightLineEnv(RouteEnv):
     ## Arguments
 
     ``robot``, ``floor``, ``calibration``, ``dt``, ``reward_weights``, ``render_mode`` as
-    UMBmarkSquare; ``distance`` [m] (default 10.0); ``return_trip`` (default False; also a
-    ``reset`` option).
+    UMBmarkSquare, and ``covariance_k``; ``distance`` [m] (default 10.0); ``return_trip``
+    (default False; also a ``reset`` option).
 
     ## Version History
 

@@ -38,7 +38,7 @@ class UMBmarkSquareEnv(RouteEnv):
 
     | idx | name | unit |
     |-----|------|------|
-    | 0 | distance left on a leg, or heading left to turn | m / rad |
+    | 0 | distance left on a leg, or rotation left to turn (unwrapped) | m / rad |
     | 1 | lateral offset from the leg's line (left +) | m |
     | 2 | target heading − odometry heading, wrapped to [−π, π) | rad |
     | 3, 4 | left, right wheel speed from the encoders / max wheel speed | - |

@@ -5,7 +5,9 @@ returns an :class:`OdometryVectorEnv` whose sub-envs are the robots of one
 :class:`odomgym.trial.Trial`: one pymunk space, ``pymunk.batch`` state I/O and compiled
 per-robot kernels, instead of 256 Python env objects. Spaces, reward, ``info`` and episode ends
 are those of the single envs (``odomgym.envs.umbmark``, ``odomgym.envs.straight``); ``info``
-entries are arrays with a leading robot axis. Autoreset follows Gymnasium's default
+entries are arrays with a leading robot axis (``odom_covariance`` is not offered here: the
+closed-form propagation is per robot and would cost more than the physics). ``time`` is the
+simulated time since the vector env's reset. Autoreset follows Gymnasium's default
 ``NEXT_STEP`` mode: the step after a sub-env ends resets it and ignores its action.
 """
 
@@ -55,7 +57,13 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         dt: float = 0.05,
         reward_weights: RewardWeights | None = None,
         max_episode_steps: int = 6000,
+        covariance_k: tuple[float, float] | None = None,
     ) -> None:
+        if covariance_k is not None:
+            raise ValueError(
+                "covariance_k is offered by the single envs only (gymnasium.make); the vector "
+                "env does not propagate the odometry covariance"
+            )
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if isinstance(robot, (RobotSpec, str)):
@@ -121,17 +129,23 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             trial.reset(indices=idx)
             self._steps[idx] = 0
             self._fraction[idx] = 0.0
-        self._steps += 1
+        self._steps[~resetting] += 1  # the reset step is not a step of the new episode
         obs = trial.observation()
         fraction = trial.progress.state[:, 7]
         terminated = trial.done & ~resetting
         truncated = (self._steps >= self.max_episode_steps) & ~terminated & ~resetting
-        progress = self.weights.progress * (fraction - self._fraction)
-        rewards = progress - self.weights.time + self.weights.completion * terminated
-        rewards[resetting] = 0.0
+        terms = {
+            "progress": self.weights.progress * (fraction - self._fraction),
+            "time": np.full(self.num_envs, -self.weights.time),
+            "completion": self.weights.completion * terminated.astype(float),
+        }
+        for values in terms.values():
+            values[resetting] = 0.0
+        rewards = terms["progress"] + terms["time"] + terms["completion"]
         self._fraction = fraction.copy()
         self._autoreset = terminated | truncated
         info = self._info(trial, terminated)
+        info["reward_terms"] = terms
         return obs, rewards, terminated, truncated, info
 
     def _info(self, trial: Trial, terminated: NDArray[np.bool_]) -> dict[str, Any]:
@@ -141,6 +155,8 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             "true_pose": trial.true_pose.copy(),
             "pose_error": error,
             "encoder_counts": trial.world.counts.copy(),
+            "segment": trial.progress.index.copy(),
+            "time": np.full(self.num_envs, trial.world.time),
         }
         if terminated.any():
             info["return_error"] = np.where(terminated[:, None], error, np.nan)

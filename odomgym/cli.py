@@ -80,6 +80,43 @@ def _count(text: str) -> int:
     return value
 
 
+def _seed(text: str) -> int:
+    """An argparse type: a whole number >= 0 (numpy seeds and counts)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
+
+
+def _check_plot_path(path: str | None) -> None:
+    """Fail before any simulation if matplotlib cannot write ``path``'s format."""
+    if path is None:
+        return
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    suffix = Path(path).suffix.lstrip(".").lower()
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if suffix not in formats:
+        raise SpecError(
+            f"cannot write a plot as {path!r}: use one of .{', .'.join(sorted(formats))}",
+            field="plot",
+        )
+
+
+def _check_methods(methods: Sequence[str] | None) -> None:
+    from odomgym.baselines import CALIBRATORS
+
+    unknown = [m for m in methods or () if m not in CALIBRATORS]
+    if unknown:
+        raise SpecError(
+            f"unknown method(s) {', '.join(unknown)}; methods: {', '.join(CALIBRATORS)}",
+            field="methods",
+        )
+
+
 def _add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--robot",
@@ -92,7 +129,7 @@ def _add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--floor", default="smooth", help="smooth, bumpy, slippery, rough, or a floor .toml file"
     )
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--seed", type=_seed, default=0, help="random seed >= 0 (default 0)")
     parser.add_argument("--calibration", help="calibration .toml used by the odometry")
 
 
@@ -118,6 +155,7 @@ def _progress_bar(enabled: bool, total_runs: int) -> Any:
 
 
 def _command_run(args: argparse.Namespace) -> int:
+    _check_plot_path(args.plot)
     robot = _robot_from(args)
     floor: FloorSpec = load_floor(args.floor)
     calibration: Calibration = (
@@ -232,6 +270,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
             field="method",
         )
     cls = CALIBRATORS[args.method]
+    _check_plot_path(args.plot)
     if args.data:
         from odomgym.data import read_session
 
@@ -239,7 +278,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
         calibrator = make_calibrator(
             cls,
             side=session.side or None,
-            runs_per_direction=max(1, len(session.select("square", "cw"))) or None,
+            runs_per_direction=max(1, len(session.select("square", "cw"))),
             conventions=args.conventions,
         )
         report = calibrate_on_session(calibrator, session)
@@ -292,13 +331,8 @@ def _command_bench(args: argparse.Namespace) -> int:
     from odomgym.baselines.bench_report import markdown_summary, write_outputs
     from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
 
+    _check_methods(args.methods)
     methods = tuple(args.methods or CALIBRATORS)
-    unknown = [m for m in methods if m not in CALIBRATORS]
-    if unknown:
-        raise SpecError(
-            f"unknown method(s) {', '.join(unknown)}; methods: {', '.join(CALIBRATORS)}",
-            field="methods",
-        )
     try:
         config = BenchConfig(
             robots=args.robots,
@@ -340,6 +374,7 @@ def _command_bench(args: argparse.Namespace) -> int:
 def _command_leaderboard(args: argparse.Namespace) -> int:
     from odomgym.baselines.leaderboard import format_leaderboard, run_leaderboard
 
+    _check_methods(args.methods)
     board = run_leaderboard(args.data, methods=args.methods)
     text = format_leaderboard(board)
     if args.out:
@@ -374,6 +409,8 @@ def _command_covariance(args: argparse.Namespace) -> int:
 
 def _command_fit_noise(args: argparse.Namespace) -> int:
     from odomgym.noise_report import fit_noise_report, format_noise_report
+
+    _check_plot_path(args.plot)
 
     try:
         report = fit_noise_report(
@@ -469,7 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
     bench.add_argument("--backend", choices=["local", "ray"], default="local")
-    bench.add_argument("--seed", type=int, default=0)
+    bench.add_argument("--seed", type=_seed, default=0)
     bench.add_argument("--out", default="bench-out", help="output folder (bench-out)")
     bench.add_argument("--json", action="store_true", help="print the summary as JSON")
     bench.set_defaults(handler=_command_bench)
@@ -504,9 +541,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar=("SX", "SY", "STH"),
         help="initial pose standard deviations [m, m, rad]",
     )
-    cov.add_argument("--montecarlo", type=int, default=0, metavar="RUNS", help="Monte Carlo runs")
+    cov.add_argument("--montecarlo", type=_seed, default=0, metavar="RUNS", help="Monte Carlo runs")
     cov.add_argument("--partitions", type=_count, default=1000, help="path partitions (1000)")
-    cov.add_argument("--seed", type=int, default=0)
+    cov.add_argument("--seed", type=_seed, default=0)
     cov.add_argument("--json", action="store_true")
     cov.set_defaults(handler=_command_covariance)
 
@@ -520,7 +557,7 @@ def build_parser() -> argparse.ArgumentParser:
     noise.add_argument("--k", type=_nonnegative, default=0.0005, help="true k [m^0.5] to simulate")
     noise.add_argument("--runs", type=_count, default=60, help="simulated runs (60)")
     noise.add_argument("--distance", type=_positive, default=10.0, help="out-and-back length [m]")
-    noise.add_argument("--seed", type=int, default=0)
+    noise.add_argument("--seed", type=_seed, default=0)
     noise.add_argument("--data", nargs="+", help="OptiOdom session folders (or their parents)")
     noise.add_argument(
         "--pool",

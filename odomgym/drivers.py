@@ -1,6 +1,7 @@
 """Reference drivers: plain policy objects that perform the odometry experiments.
 
-:class:`ReferenceDriver` maps an env observation (see :func:`odomgym.trial.observation_layout`)
+:class:`ReferenceDriver` maps an env observation (layout: :mod:`odomgym.trial`,
+:data:`odomgym.trial.OBSERVATION_NAMES`)
 to wheel-speed actions. It drives the UMBmark manoeuvres the way seed 000 §6.3 describes — 0.2
 m/s on the legs, a complete stop, an on-the-spot turn with the wheels at about ±0.2 m/s — with
 trapezoidal speed profiles that respect the robot's acceleration limit, so a well-behaved robot
@@ -110,13 +111,13 @@ def _drive(
     for i in range(obs.shape[0]):
         remaining = float(obs[i, 0])
         cross = float(obs[i, 1])
-        heading_error = float(obs[i, 2])
+        heading_error = float(obs[i, 2])  # wrapped; a turn's rotation left is obs[i, 0]
         direction = float(obs[i, 6])
         if obs[i, 5] > 0.5:
             # Turn in place: trapezoid on the wheel arc (b/2)·|Δψ| left, then a final creep.
-            arc = half_b * abs(heading_error)
+            arc = half_b * abs(remaining)
             wheel = min(turn_wheel_speed, math.sqrt(2.0 * accel * arc), approach_gain * arc)
-            omega = math.copysign(wheel, heading_error) / half_b
+            omega = math.copysign(wheel, remaining) / half_b
             v = 0.0
         else:
             # Straight leg: trapezoid on the distance left, final creep, heading hold. The

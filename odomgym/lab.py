@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,6 +60,7 @@ def simulate_runs(
     direction: str | Sequence[str | None] | None = None,
     progress: Callable[[float], None] | None = None,
     start_poses: FloatArray | None = None,
+    on_timeout: Literal["raise", "keep"] = "raise",
 ) -> tuple[list[Run], FloatArray]:
     """Drive ``route`` with the reference driver; return the runs and the robots' own odometry
     end poses (K, 3).
@@ -74,7 +76,11 @@ def simulate_runs(
         cruise_speed: leg speed [m/s] of the reference driver (UMBmark: 0.2).
         dt: control period [s].
         max_time: give up after this much simulated time [s] (default: 20 × the nominal
-            route time); raises RuntimeError naming the robots that did not finish.
+            route time + 60 s).
+        on_timeout: ``"raise"`` — RuntimeError naming the robots that did not finish;
+            ``"keep"`` — return their runs up to the time limit, marked
+            ``run.meta["finished"] = False`` (a batch of many robots then does not fail for
+            one robot's sake).
         kind, direction: labels stored in the runs (one for all, or one per robot).
         progress: called with the completed fraction (0..1) now and then, for progress bars.
         start_poses: where each robot starts on the floor (K, 3) [m, m, rad] (default: the
@@ -118,6 +124,9 @@ def simulate_runs(
         return np.asarray(observe(), dtype=np.float64)
 
     while not done.all():
+        if step >= max_steps and on_timeout == "keep":
+            finished_at[finished_at < 0] = step
+            break
         if step >= max_steps:
             stuck = np.flatnonzero(~done).tolist()
             names = sorted({routes[i].name for i in stuck})
@@ -154,7 +163,7 @@ def simulate_runs(
                 direction=directions[i],  # type: ignore[arg-type]
                 side=_route_size(routes[i]),
                 source=f"sim:{routes[i].name}",
-                meta={"robot": specs[i].name, "floor": floor.name},
+                meta={"robot": specs[i].name, "floor": floor.name, "finished": bool(done[i])},
             )
         )
     return runs, trial.odom_pose.copy()

@@ -170,13 +170,23 @@ class _Coordinator:
                 kind=kinds,
                 direction=directions,
                 start_poses=np.array(starts),
+                on_timeout="keep",
             )
-        except (RuntimeError, ValueError) as exc:
+        except Exception as exc:  # e.g. an invalid calibration: every requester is told
             return {index: exc for index, _ in batch}
         grouped: dict[int, list[Run]] = {index: [] for index, _ in batch}
         for owner, run in zip(owners, runs, strict=True):
             grouped[owner].append(run)
-        return {index: measure(grouped[index], self.sensor, self.rngs[index]) for index, _ in batch}
+        outcome: dict[int, list[Run] | BaseException] = {}
+        for index, (experiment, _) in batch:
+            if all(run.meta["finished"] for run in grouped[index]):
+                outcome[index] = measure(grouped[index], self.sensor, self.rngs[index])
+            else:  # only the robot that could not finish fails, not its batch companions
+                outcome[index] = RuntimeError(
+                    f"robot {index} did not finish its {experiment.kind} runs within the time "
+                    "limit (a slippery floor, or a calibration that makes it circle?)"
+                )
+        return outcome
 
 
 def run_lockstep(

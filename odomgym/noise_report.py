@@ -318,17 +318,16 @@ def _signed(value: float | None) -> str:
 def plot_noise_fit(path: str | Path, fit: NoiseFit, *, title: str = "") -> None:
     """Seed 004 Fig. 4: residual scatters x–y, x–θ, y–θ with the measured (solid) and the
     fitted model's (dashed) 95 % ellipses, x, y in mm and θ in degrees; written atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # A Figure without pyplot: no global backend switch, nothing left open in a notebook.
+    from matplotlib.figure import Figure
 
     scale = np.array([1e3, 1e3, 180.0 / math.pi])
     labels = ("x error [mm]", "y error [mm]", "θ error [deg]")
     radius = math.sqrt(float(stats.chi2.ppf(0.95, 2)))
     circle = np.stack([np.cos(np.linspace(0, 2 * math.pi, 200)),
                        np.sin(np.linspace(0, 2 * math.pi, 200))])  # fmt: skip
-    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.5))
+    fig = Figure(figsize=(13.5, 4.5))
+    axes = fig.subplots(1, 3)
     for ax, (i, j) in zip(axes, ((0, 1), (0, 2), (1, 2)), strict=True):
         ax.scatter(fit.residuals[:, i] * scale[i], fit.residuals[:, j] * scale[j], s=12,
                    color="tab:blue", label="runs")  # fmt: skip
@@ -351,7 +350,4 @@ def plot_noise_fit(path: str | Path, fit: NoiseFit, *, title: str = "") -> None:
     def write(tmp: Path) -> None:
         fig.savefig(tmp, dpi=120, format=target.suffix.lstrip(".") or "png")
 
-    try:
-        atomic_writer(target, write)
-    finally:
-        plt.close(fig)
+    atomic_writer(target, write)

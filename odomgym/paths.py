@@ -69,6 +69,10 @@ class Route:
     name: str
     segments: tuple[Segment, ...]
 
+    def __post_init__(self) -> None:
+        if not self.segments:
+            raise ValueError(f"route {self.name!r} has no segments")
+
     def wheel_travel(self, wheelbase: float) -> float:
         """Path length in wheel metres: drives plus turns as wheel arcs (b/2)·|Δψ| [m]."""
         return sum(
@@ -165,6 +169,10 @@ class RouteProgress:
             self._cumulative = np.zeros((self.n, self.segment_count + 1))
             self.index = np.zeros(self.n, dtype=np.intp)
             indices = np.arange(self.n)
+        if len(routes) not in (1, len(indices)):
+            raise ValueError(
+                f"need one route, or one per robot ({len(indices)}), got {len(routes)}"
+            )
         for row, i in enumerate(np.asarray(indices)):
             route = routes[row] if len(routes) == len(indices) else routes[0]
             if len(route.segments) > self.segment_count:
@@ -266,9 +274,10 @@ def _route_update(
             s = min(k, count[i] - 1)
             # Turns count the rotation left unwrapped (a 360° spin must not look finished at
             # the start); drives hold a heading, so their error is wrapped to [−π, π).
-            error = heading[i, s] - pose[i, 2]
-            if not is_turn[i, s]:
-                error = (error + math.pi) % two_pi - math.pi
+            # A turn counts the rotation left unwrapped (a 360° spin must not look finished at
+            # the start): that goes to ``remaining``; the heading error itself is wrapped.
+            rotation_left = heading[i, s] - pose[i, 2]
+            error = (rotation_left + math.pi) % two_pi - math.pi
             rel_x = pose[i, 0] - start[i, s, 0]
             rel_y = pose[i, 1] - start[i, s, 1]
             travelled = rel_x * unit[i, s, 0] + rel_y * unit[i, s, 1]
@@ -280,8 +289,8 @@ def _route_update(
             )
             direction = 1.0 if (turn or facing >= 0.0) else -1.0
             if turn:
-                remaining = error
-                done_part = length[i, s] - abs(error)
+                remaining = rotation_left
+                done_part = length[i, s] - abs(rotation_left)
                 cross = 0.0
             else:
                 remaining = length[i, s] - travelled

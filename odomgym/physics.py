@@ -1,10 +1,11 @@
 """The physics World: differential-drive robots as pymunk rigid bodies with friction-limited wheels.
 
 One :class:`World` holds a *batch* of N robots in one pymunk space (they do not interact); the
-single-robot envs are a batch of one. Every per-wheel computation is a numpy operation over the
-whole batch, and body state crosses the Python/Chipmunk boundary through ``pymunk.batch`` once
-per step in each direction, because per-body Python attribute access — not Chipmunk — dominates
-the cost of a step (measured in ``benchmarks/bench_speed.py``).
+single-robot envs are a batch of one. The per-wheel arithmetic of a step (wheel controllers,
+encoders, contact velocities, floor effects) runs in numba-compiled loops over the robots, and
+body state crosses the Python/Chipmunk boundary once per physics substep in each direction —
+through ``pymunk.batch`` for four or more robots, per-body attribute access below that (cheaper
+for a batch of one; both measured in ``benchmarks/bench_speed.py`` and docs/architecture.md).
 
 Model, per robot (top-down, no gravity in the plane):
 
@@ -104,8 +105,8 @@ class World:
             raise ValueError("World needs at least one robot")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-        if substeps < 1:
-            raise ValueError(f"substeps must be >= 1, got {substeps!r}")
+        if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be a whole number >= 1, got {substeps!r}")
         self.robots: tuple[RobotSpec, ...] = tuple(specs)
         self.floor = floor if floor is not None else FloorSpec()
         if self.floor.roughness > 0 and rng is None:
@@ -256,6 +257,10 @@ class World:
         """
         command = np.asarray(wheel_rate_cmd, dtype=np.float64)
         if command.shape != (self.n, 2):
+            if command.size != 2 * self.n:
+                raise ValueError(
+                    f"wheel_rate_cmd must have shape ({self.n}, 2), got {command.shape}"
+                )
             command = command.reshape(self.n, 2)
         h = self._h
         for _ in range(self.substeps):

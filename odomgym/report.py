@@ -29,16 +29,26 @@ FloatArray = NDArray[np.float64]
 
 
 def to_json(data: Any) -> str:
-    """One line of JSON; numpy scalars and arrays become plain numbers and lists."""
+    """One line of JSON; numpy scalars and arrays become plain numbers and lists, and
+    non-finite numbers become ``null``."""
 
-    def default(value: Any) -> Any:
-        if isinstance(value, np.ndarray):
-            return value.tolist()
-        if isinstance(value, np.generic):
-            return value.item()
-        raise TypeError(f"cannot serialise {type(value).__name__}")
+    return json.dumps(_plain(data), allow_nan=False)
 
-    return json.dumps(data, default=default, allow_nan=True)
+
+def _plain(value: Any) -> Any:
+    """JSON-ready copy: arrays → lists, numpy scalars → Python, NaN/±inf → None (strict JSON,
+    so tools like jq can read it)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def format_return_errors(
@@ -77,14 +87,13 @@ def plot_return_errors(
     ``groups`` are ``(label, cw_errors (n, ≥2), ccw_errors (m, ≥2))`` — e.g. before and after
     calibration; each group's centres of gravity are marked and E_max,syst is in the legend.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # A Figure without pyplot: no global backend switch, nothing left open in a notebook.
+    from matplotlib.figure import Figure
 
     from odomgym.metrics import centre_of_gravity, e_max_syst
 
-    fig, ax = plt.subplots(figsize=(6.5, 6.0))
+    fig = Figure(figsize=(6.5, 6.0))
+    ax = fig.subplots()
     markers = ("o", "s", "^", "D")
     for k, (label, cw, ccw) in enumerate(groups):
         marker = markers[k % len(markers)]
@@ -118,10 +127,7 @@ def plot_return_errors(
     def write(tmp: Path) -> None:
         fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png")
 
-    try:
-        atomic_writer(path, write)
-    finally:
-        plt.close(fig)
+    atomic_writer(path, write)
 
 
 def format_simulation_report(report: Any, floor_name: str) -> str:

@@ -10,7 +10,8 @@ Observation layout (one row per robot, ``float32``), in the odometry frame:
 ====  =====================  ==========================================================  =========
 idx   name                   meaning                                                     unit
 ====  =====================  ==========================================================  =========
-0     ``remaining``          distance left on a drive, or heading left to turn           m / rad
+0     ``remaining``          distance left on a drive, or rotation left to turn          m / rad
+                             (unwrapped: a 360° spin starts at 2π)
 1     ``cross``              lateral offset from the drive's line (left +)               m
 2     ``heading_error``      target heading − odometry heading, wrapped                  rad
 3     ``wheel_speed_left``   left wheel speed from the encoders / max wheel speed        -
@@ -61,6 +62,8 @@ class Trial:
         dt: control period [s]; substeps: physics steps per control period.
         rng: floor-roughness noise source (required on rough floors).
         track_slip: accumulate per-wheel slip in ``world.slip``.
+        start_poses: where each robot starts on the floor (N, 3) [m, m, rad] (default: the
+            origin); odometry and route live in each robot's start frame.
     """
 
     def __init__(

@@ -135,3 +135,25 @@ def test_benchmark_compares_budgets() -> None:
     rows = run_chunk(config, [0])
     assert [(r["method"], r["budget"]) for r in rows] == [("umbmark@6", 6), ("umbmark@2", 2)]
     assert rows[1]["runs_used"] <= 2 < rows[0]["runs_used"]
+
+
+def test_a_robot_that_cannot_finish_fails_alone() -> None:
+    """One impossible calibration (odometry wheelbase × 1000: it never completes a spin) fails
+    that robot only, not the robots sharing its batch."""
+    from odomgym.experiments import Experiment
+
+    def procedure(lab, index):  # type: ignore[no-untyped-def]
+        calibration = odomgym.Calibration(wheelbase_scale=1000.0 if index == 1 else 1.0)
+        return len(lab.perform(Experiment("spin", "ccw", 1, np.pi), calibration))
+
+    together = run_lockstep(
+        procedure, [LABMATE] * 3, CONCRETE, [np.random.default_rng(i) for i in range(3)]
+    )
+    assert isinstance(together[1].error, RuntimeError)
+    alone = run_lockstep(procedure, [LABMATE], CONCRETE, [np.random.default_rng(0)])
+    assert together[0].value == alone[0].value and together[2].error is None
+
+
+def test_bench_config_rejects_budgets_a_method_cannot_use() -> None:
+    with pytest.raises(ValueError, match="ivanjko needs a budget of at least 3"):
+        BenchConfig(methods=("ivanjko",), budget=2)

@@ -59,13 +59,21 @@ def test_bad_inputs_exit_2_with_a_message(
         main(["run", "square", "--runs", "0"])
 
 
+def _numbers(value: object) -> list[float]:
+    if isinstance(value, dict):
+        return [n for v in value.values() for n in _numbers(v)]
+    if isinstance(value, list):
+        return [n for v in value for n in _numbers(v)]
+    return [float(value)] if isinstance(value, int | float) and not isinstance(value, bool) else []
+
+
 def test_covariance_command_worked_example(capsys: pytest.CaptureFixture[str]) -> None:
     """Seed 004 Table 1, first column (the worked example of shared/seeds/README.md)."""
     args = ["covariance", "--left", "3", "--right", "1", "--wheelbase", "0.4"]
     assert main([*args, "--kl", "0.001", "--kr", "0.001", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    text = json.dumps(report)
-    assert "0.0014375" in text or "0.0014376" in text  # σ_x = 1.4376e-3 m
+    numbers = _numbers(report)
+    assert any(abs(v - 1.4376e-3) < 1e-7 for v in numbers)  # σ_x = 1.4376e-3 m (Table 1)
 
 
 def test_covariance_command_rejects_bad_input() -> None:
@@ -173,3 +181,27 @@ def test_calibrate_on_measured_session_reproduces_published(
     assert report["b"] == pytest.approx(0.201458, rel=0.002)
     assert report["dr"] == pytest.approx(0.083954, rel=0.002)
     assert report["dl"] == pytest.approx(0.084046, rel=0.002)
+
+
+def test_cli_rejects_bad_seed_plot_format_and_method(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit):
+        main(["run", "square", "--seed", "-1"])
+    assert main(["run", "square", "--runs", "1", "--plot", str(tmp_path / "x.foo")]) == 2
+    assert "cannot write a plot" in capsys.readouterr().err
+    assert main(["leaderboard", "--data", str(tmp_path), "--methods", "nosuch"]) == 2
+    assert "unknown method" in capsys.readouterr().err
+
+
+def test_output_files_get_ordinary_permissions(tmp_path: Path) -> None:
+    import os
+
+    from odomgym.odometry import Calibration
+
+    umask = os.umask(0o022)
+    try:
+        Calibration().save(tmp_path / "calib.toml")
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "calib.toml").stat().st_mode & 0o777 == 0o644

@@ -58,3 +58,21 @@ def test_vector_env_rejects_bad_actions() -> None:
         envs.step(np.full((2, 2), np.nan, dtype=np.float32))
     with pytest.raises(ValueError, match="shape"):
         envs.step(np.zeros((3, 2), dtype=np.float32))
+
+
+def test_vector_env_truncates_every_episode_after_the_same_number_of_steps() -> None:
+    envs = gym.make_vec("StraightLine-v0", num_envs=1, max_episode_steps=5)
+    envs.reset(seed=0)
+    ends = []
+    for step in range(1, 16):
+        _, _, terminated, truncated, info = envs.step(np.zeros((1, 2), dtype=np.float32))
+        assert set(info["reward_terms"]) == {"progress", "time", "completion"}
+        if truncated[0] or terminated[0]:
+            ends.append(step)
+    # 5 steps, then a reset step, then 5 more: truncation at steps 5, 11 and (next) 17.
+    assert ends == [5, 11]
+
+
+def test_vector_env_rejects_covariance_option() -> None:
+    with pytest.raises(ValueError, match="covariance_k"):
+        gym.make_vec("UMBmarkSquare-v0", num_envs=2, covariance_k=(0.001, 0.001))
