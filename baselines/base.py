@@ -20,6 +20,7 @@ from odomgym.runs import Run
 __all__ = [
     "CalibrationResult",
     "Calibrator",
+    "SquareCalibrator",
     "check_square_settings",
     "perform",
     "square_experiments",
@@ -98,3 +99,21 @@ class Calibrator(ABC):
     @abstractmethod
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Run the method in ``lab``, starting from ``initial`` (default: uncalibrated)."""
+
+
+class SquareCalibrator(Calibrator):
+    """Base of methods that need only the bi-directional square experiment.
+
+    Args:
+        side: square side L [m] (seed 000: 4 m).
+        runs_per_direction: squares per direction (seed 000: 5).
+    """
+
+    def __init__(self, side: float = 4.0, runs_per_direction: int = 5) -> None:
+        check_square_settings(side, runs_per_direction)
+        self.side = side
+        self.runs_per_direction = runs_per_direction
+
+    def experiments(self) -> list[Experiment]:
+        """The cw and the ccw squares."""
+        return square_experiments(self.side, self.runs_per_direction)

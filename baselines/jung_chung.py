@@ -41,9 +41,7 @@ from numpy.typing import ArrayLike
 
 from odomgym.baselines.base import (
     CalibrationResult,
-    Calibrator,
-    check_square_settings,
-    square_experiments,
+    SquareCalibrator,
 )
 from odomgym.baselines.umbmark import (
     e_b_from_alpha,
@@ -51,7 +49,7 @@ from odomgym.baselines.umbmark import (
     optiodom_update,
     perform_squares,
 )
-from odomgym.experiments import Experiment, Lab
+from odomgym.experiments import Lab
 from odomgym.odometry import Calibration, wrap_angle
 from odomgym.runs import return_error
 
@@ -162,7 +160,7 @@ def jung_chung_estimates(
 
 # mypy cannot follow the setuptools package-dir mapping odomgym.baselines → baselines/, so
 # to it Calibrator is Any; drop the ignore once that mapping is visible to mypy.
-class JungChung(Calibrator):
+class JungChung(SquareCalibrator):
     """Jung & Chung's heading-error calibration on ``runs_per_direction`` cw + ccw squares.
 
     Args:
@@ -189,14 +187,8 @@ class JungChung(Calibrator):
     ) -> None:
         if conventions not in ("jung_chung", "optiodom"):
             raise ValueError(f"conventions must be 'jung_chung' or 'optiodom', got {conventions!r}")
-        check_square_settings(side, runs_per_direction)
-        self.side = side
-        self.runs_per_direction = runs_per_direction
+        super().__init__(side, runs_per_direction)
         self.conventions: JungChungConventions = conventions
-
-    def experiments(self) -> list[Experiment]:
-        """The cw and the ccw squares."""
-        return square_experiments(self.side, self.runs_per_direction)
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares in ``lab`` with ``initial`` and correct E_b and E_d."""

@@ -61,12 +61,10 @@ from numpy.typing import ArrayLike
 
 from odomgym.baselines.base import (
     CalibrationResult,
-    Calibrator,
-    check_square_settings,
-    square_experiments,
+    SquareCalibrator,
 )
 from odomgym.baselines.umbmark import e_b_from_alpha, perform_squares
-from odomgym.experiments import Experiment, Lab
+from odomgym.experiments import Lab
 from odomgym.metrics import centre_of_gravity, summarize_umbmark
 from odomgym.odometry import Calibration
 from odomgym.runs import return_error
@@ -219,7 +217,7 @@ def lee_correction(e_d: float, e_b: float, diameter_error: DiameterError) -> Cal
     return Calibration.from_errors(e_d, e_b, e_s)
 
 
-class Lee(Calibrator):
+class Lee(SquareCalibrator):
     """Lee et al.'s calibration from ``runs_per_direction`` cw and ccw squares (see the module).
 
     Args:
@@ -242,18 +240,12 @@ class Lee(Calibrator):
         *,
         diameter_error: DiameterError = "right_wheel",
     ) -> None:
-        check_square_settings(side, runs_per_direction)
+        super().__init__(side, runs_per_direction)
         if diameter_error not in ("right_wheel", "split"):
             raise ValueError(
                 f"diameter_error must be 'right_wheel' or 'split', got {diameter_error!r}"
             )
-        self.side = side
-        self.runs_per_direction = runs_per_direction
         self.diameter_error: DiameterError = diameter_error
-
-    def experiments(self) -> list[Experiment]:
-        """The cw and the ccw squares."""
-        return square_experiments(self.side, self.runs_per_direction)
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares with ``initial`` active and correct E_d and E_b."""

@@ -20,7 +20,7 @@ from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.runs import Direction, Run
 
-__all__ = ["Experiment", "ExperimentKind", "Lab", "SensorAccuracy"]
+__all__ = ["BookkeepingLab", "Experiment", "ExperimentKind", "Lab", "SensorAccuracy"]
 
 ExperimentKind = Literal["square", "straight", "spin"]
 
@@ -93,3 +93,35 @@ class Lab(Protocol):
     def distance_used(self) -> float:
         """Distance travelled so far [m]."""
         ...
+
+
+class BookkeepingLab:
+    """Base of labs that drive robots: the robot under test and the books (runs, distance).
+
+    Subclasses call :meth:`_book` with the runs each experiment produced.
+    """
+
+    def __init__(self, robot: RobotSpec) -> None:
+        self._robot = robot
+        self._runs_used = 0
+        self._distance_used = 0.0
+
+    @property
+    def robot(self) -> RobotSpec:
+        """The robot under test (calibrators use only its nominal parameters)."""
+        return self._robot
+
+    @property
+    def runs_used(self) -> int:
+        """Runs performed so far."""
+        return self._runs_used
+
+    @property
+    def distance_used(self) -> float:
+        """Distance travelled so far [m] (the true path length in simulation)."""
+        return self._distance_used
+
+    def _book(self, runs: list[Run]) -> list[Run]:
+        self._runs_used += len(runs)
+        self._distance_used += sum(run.distance for run in runs)
+        return runs

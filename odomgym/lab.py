@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.drivers import ReferenceDriver
-from odomgym.experiments import Experiment, SensorAccuracy
+from odomgym.experiments import BookkeepingLab, Experiment, SensorAccuracy
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
 from odomgym.paths import Route, spin_route, square_route, straight_route
@@ -210,7 +210,7 @@ def measure(runs: Sequence[Run], sensor: SensorAccuracy, rng: np.random.Generato
     return measured
 
 
-class SimLab:
+class SimLab(BookkeepingLab):
     """A simulated lab around a hidden true robot.
 
     Args:
@@ -236,29 +236,12 @@ class SimLab:
         cruise_speed: float = 0.2,
         start_region: float | None = None,
     ) -> None:
-        self._robot = robot
+        super().__init__(robot)
         self.start_region = start_region
         self.floor = floor if floor is not None else FloorSpec()
         self.sensor = sensor if sensor is not None else SensorAccuracy()
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.cruise_speed = cruise_speed
-        self._runs_used = 0
-        self._distance_used = 0.0
-
-    @property
-    def robot(self) -> RobotSpec:
-        """The robot under test (calibrators use only its nominal parameters)."""
-        return self._robot
-
-    @property
-    def runs_used(self) -> int:
-        """Runs performed so far."""
-        return self._runs_used
-
-    @property
-    def distance_used(self) -> float:
-        """Distance travelled so far [m] (true path length)."""
-        return self._distance_used
 
     def perform(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
         """Drive the experiment ``experiment.runs`` times with ``calibration`` in the odometry."""
@@ -274,6 +257,5 @@ class SimLab:
             direction=experiment.direction,
             start_poses=random_start_poses(self.rng, experiment.runs, self.start_region),
         )
-        self._runs_used += len(runs)
-        self._distance_used += sum(run.distance for run in runs)
+        self._book(runs)  # the true path length, before the sensor adds its noise
         return measure(runs, self.sensor, self.rng)

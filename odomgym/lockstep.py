@@ -25,7 +25,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from odomgym.experiments import Experiment, Lab, SensorAccuracy
+from odomgym.experiments import BookkeepingLab, Experiment, Lab, SensorAccuracy
 from odomgym.floor import FloorSpec
 from odomgym.lab import experiment_route, measure, random_start_poses, simulate_runs
 from odomgym.odometry import Calibration
@@ -45,33 +45,16 @@ class Outcome(Generic[T]):
     error: BaseException | None = None
 
 
-class _Participant:
+class _Participant(BookkeepingLab):
     """The Lab one procedure sees (see :class:`odomgym.experiments.Lab`)."""
 
     def __init__(self, coordinator: _Coordinator, index: int, robot: RobotSpec) -> None:
+        super().__init__(robot)
         self._coordinator = coordinator
         self._index = index
-        self._robot = robot
-        self._runs_used = 0
-        self._distance_used = 0.0
-
-    @property
-    def robot(self) -> RobotSpec:
-        return self._robot
-
-    @property
-    def runs_used(self) -> int:
-        return self._runs_used
-
-    @property
-    def distance_used(self) -> float:
-        return self._distance_used
 
     def perform(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
-        runs = self._coordinator.request(self._index, experiment, calibration)
-        self._runs_used += len(runs)
-        self._distance_used += sum(run.distance for run in runs)
-        return runs
+        return self._book(self._coordinator.request(self._index, experiment, calibration))
 
 
 class _Coordinator:
