@@ -26,6 +26,10 @@ Model, per robot (top-down, no gravity in the plane):
   cable the horizontal advance follows the rigid-wheel-over-cylinder geometry
   (:func:`odomgym.floor.cable_advance`), on a rough floor it carries white noise of variance
   k²·|d| (seed 004 Eq. 4), and friction patches change μ.
+* **Effects** — the robot spec's further effects (:mod:`odomgym.effects`: backlash, wheel toe,
+  turn skid, bumps, wheel roughness, a tracked point offset) act through hooks at fixed stages of
+  the step (transmission, contact velocities before and after the floor, the tracked point). The
+  World asks the registry for them and knows no effect by name.
 
 Units: metres, radians, seconds, kilograms, newtons. Wheel index 0 is the left wheel, 1 the right.
 """
@@ -42,6 +46,7 @@ import pymunk.batch as pbatch
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
+from odomgym.effects import EFFECTS, WorldHook
 from odomgym.floor import CableGrid, FloorSpec, apply_cable_deficits
 from odomgym.robot import RobotSpec
 
@@ -87,6 +92,11 @@ class World:
         ``counts`` (N, 2) encoder counts (int64, quantised true rotation);
         ``slip`` (N, 2) accumulated |rim travel − ground travel| of each wheel [m];
         ``time`` simulated time [s].
+
+    Arrays effect hooks may change during a step (:class:`odomgym.effects.WorldHook`):
+        ``rim_speed`` (N, 2) rim speed of each wheel this substep [m/s];
+        ``ground_velocity`` (N, 2, 2) no-slip velocity of each wheel contact [m/s];
+        ``wheel_roughness`` (N, 2) k of each wheel [m^½] (set once, in ``configure``).
     """
 
     def __init__(
@@ -109,14 +119,7 @@ class World:
             raise ValueError(f"substeps must be a whole number >= 1, got {substeps!r}")
         self.robots: tuple[RobotSpec, ...] = tuple(specs)
         self.floor = floor if floor is not None else FloorSpec()
-        if self.floor.roughness > 0 and rng is None:
-            raise ValueError("a rough floor needs rng=np.random.Generator for its noise")
         self._noise_streams: list[np.random.Generator] = []
-        if rng is not None and self.floor.roughness > 0:
-            streams = rng.spawn(len(specs)) if isinstance(rng, np.random.Generator) else list(rng)
-            if len(streams) != len(specs):
-                raise ValueError(f"need one noise Generator per robot ({len(specs)})")
-            self._noise_streams = streams
         self._noise_block = np.zeros((len(specs), _NOISE_BLOCK, 2))
         self._noise_next = _NOISE_BLOCK  # forces a refill at the first use
         self.dt = float(dt)
@@ -145,13 +148,76 @@ class World:
         max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
         self._bump_grid = CableGrid.build(self.floor, float(self.true_radius.max()), 1.5 * max_step)
         self._has_patches = bool(self.floor.patches)
-        self._rough = self.floor.roughness > 0.0
+        self.wheel_roughness = np.full((self.n, 2), self.floor.roughness)
+        self._hooks = self._effect_hooks()
+        for hook in self._hooks:
+            hook.configure(self)
+        self._rough = bool(np.any(self.wheel_roughness > 0.0))
         self._modifies_ground = self._has_bumps or self._has_patches or self._rough
+        self._transmission = [h for h in self._hooks if h.has_transmission]
+        self._shape = [h for h in self._hooks if h.has_shape]
+        self._perturb = [h for h in self._hooks if h.has_perturb]
+        self._tracked = [h for h in self._hooks if h.has_tracked]
+        self._bind_noise(rng)
 
         self._build_space()
         self.reset()
 
     # ------------------------------------------------------------------ construction
+    def _effect_hooks(self) -> list[WorldHook]:
+        """One hook per registered effect that some robot of the batch carries."""
+        hooks: list[WorldHook] = []
+        for name, effect in EFFECTS.items():
+            rows = [spec.effect_values(name) for spec in self.robots]
+            if all(r is None for r in rows):
+                continue
+            absent = effect.absent_values()
+            values = np.array(
+                [[(r or absent).get(p, absent[p]) for p in absent] for r in rows], dtype=float
+            )
+            hook = effect.world_hook(self, values)
+            if hook is not None:
+                hooks.append(hook)
+        return hooks
+
+    def _bind_noise(self, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> None:
+        """Give each robot its own noise stream: roughness draws, then one child per hook."""
+        random_hooks = [h for h in self._hooks if h.needs_rng]
+        if not (self._rough or random_hooks):
+            return
+        if rng is None:
+            raise ValueError(
+                "a rough floor or a robot with noise effects needs rng=np.random.Generator"
+            )
+        streams = rng.spawn(self.n) if isinstance(rng, np.random.Generator) else list(rng)
+        if len(streams) != self.n:
+            raise ValueError(f"need one noise Generator per robot ({self.n})")
+        self._noise_streams = streams
+        if random_hooks:
+            # Each robot's stream spawns one child per random hook, so a robot's draws depend
+            # neither on its batch nor on the roughness draws.
+            children = [stream.spawn(len(random_hooks)) for stream in streams]
+            for k, hook in enumerate(random_hooks):
+                hook.bind_rng([robot_children[k] for robot_children in children])
+
+    @property
+    def rim_speed(self) -> FloatArray:
+        """Rim speed of each wheel during the current substep (N, 2) [m/s]."""
+        return self._rim_speed
+
+    @property
+    def ground_velocity(self) -> FloatArray:
+        """No-slip velocity of each wheel contact (N, 2, 2) [m/s] for the current substep."""
+        return self._ground_v
+
+    def tracked_pose(self) -> FloatArray:
+        """The poses (N, 3) a tracking system reports: the true pose, moved to the tracked point
+        by effects such as ``gt_sensor_offset``."""
+        pose = self.pose.copy()
+        for hook in self._tracked:
+            pose = hook.tracked(pose)
+        return pose
+
     def _build_space(self) -> None:
         space = pymunk.Space()
         space.iterations = self.iterations
@@ -224,6 +290,7 @@ class World:
             self.counts = np.zeros((self.n, 2), dtype=np.int64)
             self.slip = np.zeros((self.n, 2))
             self._rim_speed = np.zeros((self.n, 2))
+            self._motor_step = np.zeros((self.n, 2))
             self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
             self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
             self._no_noise = np.zeros((self.n, 2))
@@ -247,6 +314,8 @@ class World:
         self.wheel_angle[indices] = 0.0
         self.counts[indices] = 0
         self.slip[indices] = 0.0
+        for hook in getattr(self, "_hooks", ()):
+            hook.reset(indices)
 
     # ------------------------------------------------------------------ stepping
     def step(self, wheel_rate_cmd: FloatArray) -> None:
@@ -277,10 +346,26 @@ class World:
                 self.counts,
                 self._rim_speed,
                 self._ground_v,
+                self._motor_step,
             ):
                 raise ValueError("wheel rate commands must be finite")
+            if self._transmission:
+                for hook in self._transmission:
+                    hook.transmission(self._motor_step)
+                _rim_from_wheel_step(
+                    self._motor_step,
+                    self.true_radius,
+                    self.pose,
+                    h,
+                    self._rim_speed,
+                    self._ground_v,
+                )
+            for hook in self._shape:
+                hook.shape(self, h)
             if self._modifies_ground:
                 self._floor_effects(h)
+            for hook in self._perturb:
+                hook.perturb(self, h)
             self._write_ground_velocity()
             self.space.step(h)
             self._read_state(h)
@@ -315,7 +400,7 @@ class World:
             self._lateral,
             self._rim_speed,
             noise,
-            self.floor.roughness,
+            self.wheel_roughness,
             h,
             self._contact,
             self._ground_v,
@@ -432,6 +517,7 @@ def _drive_wheels(
     counts: IntArray,
     rim_speed: FloatArray,
     ground_v: FloatArray,
+    motor_step: FloatArray,
 ) -> bool:
     """Wheel velocity controllers, encoders and no-slip contact velocities of one substep.
 
@@ -439,7 +525,8 @@ def _drive_wheels(
     (the acceleration limit), rotate by the trapezoid mean rate × h, count ticks (floor of the
     true rotation), and set the ground velocity to the mean rim speed along the heading at which
     Chipmunk will solve this step. In-place on ``rate``, ``angle``, ``counts``, ``rim_speed``,
-    ``ground_v``; returns False (touching nothing) if any command is not finite.
+    ``ground_v`` and ``motor_step`` (the rotation this substep [rad], for transmission
+    effects); returns False (touching nothing) if any command is not finite.
     """
     n = command.shape[0]
     for i in range(n):
@@ -457,6 +544,7 @@ def _drive_wheels(
             rate[i, w] = old + delta
             mean = old + 0.5 * delta  # constant acceleration within the substep
             angle[i, w] += mean * h
+            motor_step[i, w] = mean * h
             counts[i, w] = math.floor(angle[i, w] * ticks_per_rad[i])
             speed = mean * true_radius[i, w]
             rim_speed[i, w] = speed
@@ -466,12 +554,33 @@ def _drive_wheels(
 
 
 @kernel
+def _rim_from_wheel_step(
+    wheel_step: FloatArray,
+    true_radius: FloatArray,
+    pose: FloatArray,
+    h: float,
+    rim_speed: FloatArray,
+    ground_v: FloatArray,
+) -> None:
+    """Rim speeds and no-slip contact velocities from the wheel rotation of this substep (after
+    transmission effects changed it), in place."""
+    for i in range(wheel_step.shape[0]):
+        cos_t = math.cos(pose[i, 2])
+        sin_t = math.sin(pose[i, 2])
+        for w in range(2):
+            speed = wheel_step[i, w] * true_radius[i, w] / h
+            rim_speed[i, w] = speed
+            ground_v[i, w, 0] = speed * cos_t
+            ground_v[i, w, 1] = speed * sin_t
+
+
+@kernel
 def _floor_kernel(
     pose: FloatArray,
     lateral: FloatArray,
     rim_speed: FloatArray,
     noise: FloatArray,
-    roughness: float,
+    roughness: FloatArray,
     h: float,
     contact: FloatArray,
     ground_v: FloatArray,
@@ -479,7 +588,8 @@ def _floor_kernel(
     """Contact points (N, 2, 2) [m] and rough-floor ground velocities, in place.
 
     Roughness: each wheel's ground travel is its rim travel plus k·√|d|·ξ (seed 004 Eq. 4),
-    i.e. the ground velocity along the heading gains k·√(|v|·h)·ξ / h.
+    i.e. the ground velocity along the heading gains k·√(|v|·h)·ξ / h, with k = ``roughness``
+    (N, 2) of that wheel [m^½].
     """
     for i in range(pose.shape[0]):
         cos_t = math.cos(pose[i, 2])
@@ -487,7 +597,8 @@ def _floor_kernel(
         for w in range(2):
             contact[i, w, 0] = pose[i, 0] - sin_t * lateral[i, w]
             contact[i, w, 1] = pose[i, 1] + cos_t * lateral[i, w]
-            if roughness > 0.0:
-                extra = roughness * math.sqrt(abs(rim_speed[i, w]) * h) * noise[i, w] / h
+            k = roughness[i, w]
+            if k > 0.0:
+                extra = k * math.sqrt(abs(rim_speed[i, w]) * h) * noise[i, w] / h
                 ground_v[i, w, 0] += extra * cos_t
                 ground_v[i, w, 1] += extra * sin_t

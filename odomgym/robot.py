@@ -28,7 +28,20 @@ from typing import Any
 from odomgym.errors import SpecError, locate_key, require_positive, require_range
 from odomgym.io import atomic_write_text
 
-__all__ = ["PRESETS", "RobotSpec", "load_robot"]
+__all__ = ["PRESETS", "EffectTable", "RobotSpec", "load_robot"]
+
+EffectTable = tuple[tuple[str, tuple[tuple[str, float], ...]], ...]
+"""Effects of a spec: ((name, ((parameter, value), ...)), ...), sorted by name."""
+
+
+def _normalise_effects(effects: Any) -> EffectTable:
+    """Accept a mapping {name: {parameter: value}} or the stored tuple form; drop empty ones."""
+    items = effects.items() if isinstance(effects, Mapping) else effects
+    table: dict[str, tuple[tuple[str, float], ...]] = {}
+    for name, values in items:
+        pairs = values.items() if isinstance(values, Mapping) else values
+        table[str(name)] = tuple(sorted((str(k), float(v)) for k, v in pairs))
+    return tuple(sorted(table.items()))
 
 
 @dataclass(frozen=True)
@@ -58,6 +71,11 @@ class RobotSpec:
             controller (large value) asks for more force than friction gives, so wheels slip.
         name: a label for tables and plots.
         source: where the numbers come from (free text, for provenance).
+        effects: further physical effects from the catalogue (:mod:`odomgym.effects`) and
+            their parameters, as ``{name: {parameter: value}}`` (stored as sorted tuples so
+            the spec stays hashable); the geometric ones (``wheel_diameter_ratio``,
+            ``wheelbase``, ``distance_scale``) live in the true diameters and wheelbase
+            instead. TOML: ``[robot.effects.NAME]`` tables.
     """
 
     wheel_diameter: float
@@ -74,8 +92,10 @@ class RobotSpec:
     max_wheel_accel: float = 0.5
     name: str = "robot"
     source: str = ""
+    effects: EffectTable = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "effects", _normalise_effects(self.effects))
         # Fill derived defaults so every instance is fully specified after construction.
         fill: dict[str, float] = {}
         if self.true_left_diameter is None:
@@ -162,6 +182,31 @@ class RobotSpec:
         """Return a copy whose true parameters equal the nominal ones (no systematic error)."""
         return self.with_errors(1.0, 1.0, 1.0)
 
+    # ------------------------------------------------------------------ effects
+    def effect_values(self, name: str) -> dict[str, float] | None:
+        """The stored parameters of effect ``name``, or None if the spec does not carry it."""
+        for key, values in self.effects:
+            if key == name:
+                return dict(values)
+        return None
+
+    def with_effect(self, name: str, values: Mapping[str, float] | None) -> RobotSpec:
+        """A copy carrying effect ``name`` with ``values`` (None or absent values remove it).
+
+        Values are stored as given; :meth:`odomgym.effects.Effect.write` validates them first.
+        """
+        from odomgym.effects import get_effect
+
+        effect = get_effect(name)
+        table = {k: dict(v) for k, v in self.effects if k != name}
+        if values is not None and not effect.is_absent(values):
+            table[name] = dict(values)
+        return dataclasses.replace(self, effects=_normalise_effects(table))
+
+    def effect_dict(self) -> dict[str, dict[str, float]]:
+        """The stored effects as ``{name: {parameter: value}}``."""
+        return {name: dict(values) for name, values in self.effects}
+
     # ------------------------------------------------------------------ derived physics
     @property
     def moment_of_inertia(self) -> float:
@@ -177,8 +222,13 @@ class RobotSpec:
 
     # ------------------------------------------------------------------ TOML
     def to_dict(self) -> dict[str, Any]:
-        """All fields as a plain dict (TOML-ready; ``None`` never occurs after construction)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        """All fields as a plain dict (TOML-ready; ``None`` never occurs after construction;
+        effects as ``{name: {parameter: value}}``, omitted when there are none)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out.pop("effects")
+        if self.effects:
+            out["effects"] = self.effect_dict()
+        return out
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, path: Path | None = None) -> RobotSpec:
@@ -189,6 +239,15 @@ class RobotSpec:
         """
         table = dict(data.get("robot", data))
         errors = {k: table.pop(k) for k in ("e_d", "e_b", "e_s") if k in table}
+        effect_tables = table.pop("effects", {})
+        if not isinstance(effect_tables, Mapping) or not all(
+            isinstance(v, Mapping) for v in effect_tables.values()
+        ):
+            raise SpecError(
+                "effects must be tables [robot.effects.NAME] of parameter = value",
+                field="effects",
+                source=locate_key(path, "effects") if path else None,
+            )
         known = {f.name for f in dataclasses.fields(cls)}
         for key in table:
             if key not in known:
@@ -224,6 +283,17 @@ class RobotSpec:
             raise SpecError(str(exc), field=exc.field, source=str(path) if path else None) from None
         if errors:
             spec = spec.with_errors(errors.get("e_d"), errors.get("e_b"), errors.get("e_s"))
+        if effect_tables:
+            from odomgym.effects import get_effect
+
+            for name, values in effect_tables.items():
+                where = _locate_table(path, f"effects.{name}") if path else None
+                effect = get_effect(name, source=where)
+                for key in values:
+                    if path is not None:
+                        where = _locate_table(path, f"effects.{name}", key)
+                    effect.validate({key: values[key]}, source=where)
+                spec = effect.write(spec, effect.validate(values, source=where))
         return spec
 
     def save(self, path: str | Path) -> None:
@@ -231,6 +301,29 @@ class RobotSpec:
         import tomli_w
 
         atomic_write_text(Path(path), tomli_w.dumps({"robot": self.to_dict()}))
+
+
+def _locate_table(path: Path, table: str, key: str | None = None) -> str:
+    """``"file:line"`` of the header ``[robot.TABLE]`` (or ``[TABLE]``), or of ``key`` below
+    it; falls back to the file name."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError:
+        return str(path)
+    headers = {f"[robot.{table}]", f"[{table}]"}
+    inside = False
+    for number, line in enumerate(lines, start=1):
+        stripped = line.split("#", 1)[0].strip()
+        if stripped.startswith("["):
+            if inside and key is not None:
+                break
+            inside = stripped.replace(" ", "") in headers
+            if inside and key is None:
+                return f"{path}:{number}"
+            continue
+        if inside and key is not None and stripped.split("=", 1)[0].strip() == key:
+            return f"{path}:{number}"
+    return str(path)
 
 
 def load_robot(spec: str | Path) -> RobotSpec:

@@ -1,0 +1,74 @@
+"""The effect catalogue: physical mechanisms that make a robot disagree with its odometry.
+
+Each effect (``docs/effects.md``) is a physical extension of the simulator with a few named
+parameters, nested at a value meaning "absent", saved in the robot TOML as
+``[robot.effects.NAME]``. The catalogue is open: :func:`register_effect` adds one.
+
+========================  =====================  ============================================
+name                      parameters             what it is
+========================  =====================  ============================================
+``wheel_diameter_ratio``  ``e_d``                E_d = D_R/D_L ≠ 1 (mean diameter unchanged)
+``wheelbase``             ``e_b``                effective wheelbase ≠ nominal
+``distance_scale``        ``e_s``                mean wheel diameter ≠ nominal
+``wheel_toe``             ``angle`` [rad]        crab at a constant angle while translating
+``turn_skid``             ``gain`` [s²/m]        yaw under-rotation growing with |v·ω|
+``backlash``              ``angle`` [rad]        dead band lost at every wheel reversal
+``floor_bumps``           ``rate`` [1/m],        sparse heading jumps from bumps
+                          ``heading_jump`` [rad]
+``floor_roughness``       ``k_left``,            Chong & Kleeman wheel noise
+                          ``k_right`` [m^½]
+``gt_sensor_offset``      ``dx``, ``dy`` [m]     tracked point offset from the axle midpoint
+========================  =====================  ============================================
+"""
+
+from __future__ import annotations
+
+from odomgym.effects.base import (
+    EFFECTS,
+    Effect,
+    Parameter,
+    ReplayArrays,
+    WorldHook,
+    get_effect,
+    register_effect,
+)
+from odomgym.effects.geometry import DistanceScale, Wheelbase, WheelDiameterRatio
+from odomgym.effects.motion import TurnSkid, WheelToe
+from odomgym.effects.noise import FloorBumps, FloorRoughness
+from odomgym.effects.sensor import GroundTruthOffset, offset_point
+from odomgym.effects.transmission import Backlash, play_operator
+
+__all__ = [
+    "EFFECTS",
+    "Backlash",
+    "DistanceScale",
+    "Effect",
+    "FloorBumps",
+    "FloorRoughness",
+    "GroundTruthOffset",
+    "Parameter",
+    "ReplayArrays",
+    "TurnSkid",
+    "WheelDiameterRatio",
+    "WheelToe",
+    "Wheelbase",
+    "WorldHook",
+    "get_effect",
+    "offset_point",
+    "play_operator",
+    "register_effect",
+]
+
+for _effect in (
+    WheelDiameterRatio(),
+    Wheelbase(),
+    DistanceScale(),
+    WheelToe(),
+    TurnSkid(),
+    Backlash(),
+    FloorBumps(),
+    FloorRoughness(),
+    GroundTruthOffset(),
+):
+    if _effect.name not in EFFECTS:
+        register_effect(_effect)

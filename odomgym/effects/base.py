@@ -1,0 +1,282 @@
+"""The effect interface and its registry.
+
+An :class:`Effect` is a named physical mechanism with a few named :class:`Parameter` s. It has up
+to four faces, each optional:
+
+* **spec** — how its values live in a :class:`~odomgym.robot.RobotSpec` (by default in
+  ``spec.effects[name]``; the geometric effects map onto the true diameters and wheelbase);
+* **world** — a :class:`WorldHook` that the pymunk :class:`~odomgym.physics.World` calls at fixed
+  stages of its step (transmission, contact velocities, perturbations, the tracked point), so an
+  env built from the spec *behaves* like the robot;
+* **replay** — the same equations applied to a logged run's encoder counts (:class:`ReplayArrays`,
+  all samples of a run at once), which is what the discrepancy workflow fits;
+* **noise** — for zero-mean effects: per-sample wheel-travel variance and heading-jump rates that
+  enter the workflow's likelihood.
+
+The World and the workflow ask the registry (:data:`EFFECTS`); neither knows effect names, so
+:func:`register_effect` adds a user's effect without editing either (worked example in
+``docs/effects.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.errors import SpecError, require_finite
+
+if TYPE_CHECKING:
+    from odomgym.physics import World
+    from odomgym.robot import RobotSpec
+
+__all__ = [
+    "EFFECTS",
+    "Effect",
+    "Parameter",
+    "ReplayArrays",
+    "WorldHook",
+    "get_effect",
+    "register_effect",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One named parameter of an effect.
+
+    Attributes:
+        name: the key in the TOML table ``[robot.effects.EFFECT]``.
+        unit: SI unit, for tables and docs.
+        absent: the value at which the effect does nothing (the nesting point).
+        low, high: the values a spec may hold (validation).
+        scale: a typical small magnitude, used as the finite-difference step and initial scale
+            when fitting (same unit).
+        doc: one line on what it means.
+    """
+
+    name: str
+    unit: str
+    absent: float
+    low: float
+    high: float
+    scale: float
+    doc: str = ""
+
+
+class Effect:
+    """Base class of the catalogue's entries; subclasses set the class attributes and override
+    the faces they have (see the module docstring)."""
+
+    name: ClassVar[str] = ""
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    noise: ClassVar[bool] = False
+    """True for zero-mean effects that change the spread, not the mean, of the disagreement."""
+    summary: ClassVar[str] = ""
+    reveals: ClassVar[str] = ""
+    """Which experiments make it visible (for reports and the docs)."""
+
+    # ------------------------------------------------------------------ values
+    @classmethod
+    def parameter_names(cls) -> tuple[str, ...]:
+        """The parameters' names, in order."""
+        return tuple(p.name for p in cls.parameters)
+
+    @classmethod
+    def absent_values(cls) -> dict[str, float]:
+        """The values at which the effect is absent."""
+        return {p.name: p.absent for p in cls.parameters}
+
+    @classmethod
+    def is_absent(cls, values: Mapping[str, float]) -> bool:
+        """True if every parameter sits at its absent value."""
+        return all(float(values.get(p.name, p.absent)) == p.absent for p in cls.parameters)
+
+    @classmethod
+    def validate(cls, values: Mapping[str, Any], *, source: str | None = None) -> dict[str, float]:
+        """Check names and ranges; missing parameters take their absent values.
+
+        Raises :class:`SpecError` naming ``effects.NAME.PARAM``.
+        """
+        known = {p.name: p for p in cls.parameters}
+        for key in values:
+            if key not in known:
+                raise SpecError(
+                    f"unknown parameter {key!r} of effect {cls.name!r}; parameters: "
+                    f"{', '.join(known)}",
+                    field=f"effects.{cls.name}.{key}",
+                    source=source,
+                )
+        out: dict[str, float] = {}
+        for p in cls.parameters:
+            label = f"effects.{cls.name}.{p.name}"
+            value = require_finite(label, values.get(p.name, p.absent), source=source)
+            if not p.low <= value <= p.high:
+                raise SpecError(
+                    f"{label} must lie in [{p.low:g}, {p.high:g}] {p.unit}, got {value!r}",
+                    field=label,
+                    source=source,
+                )
+            out[p.name] = value
+        return out
+
+    # ------------------------------------------------------------------ spec face
+    def read(self, spec: RobotSpec) -> dict[str, float]:
+        """The effect's current values in ``spec`` (absent values if it does not carry it)."""
+        stored = spec.effect_values(self.name)
+        return dict(stored) if stored is not None else self.absent_values()
+
+    def write(self, spec: RobotSpec, values: Mapping[str, float]) -> RobotSpec:
+        """A copy of ``spec`` carrying ``values`` (dropping the effect if they are absent)."""
+        return spec.with_effect(self.name, self.validate(values))
+
+    # ------------------------------------------------------------------ world face
+    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+        """The hook the World installs; ``values`` (N, P) holds every robot's parameters in
+        :attr:`parameters` order (absent values for robots that lack the effect)."""
+        del world, values
+        return None
+
+    # ------------------------------------------------------------------ replay face
+    def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
+        """Apply the effect to one run's arrays at ``stage`` (in place); see
+        :class:`ReplayArrays` for the stages."""
+        del stage, values, arrays
+
+    # ------------------------------------------------------------------ noise face
+    def wheel_variance(self, values: Mapping[str, float], travel: FloatArray) -> FloatArray | None:
+        """Extra variance of each wheel's ground travel per sample (n, 2) [m²], or None."""
+        del values, travel
+        return None
+
+    def heading_jumps(
+        self, values: Mapping[str, float], travel: FloatArray, wheelbase: float
+    ) -> tuple[FloatArray, float] | None:
+        """(expected number of heading jumps per sample (n,), jump size [rad]), or None."""
+        del values, travel, wheelbase
+        return None
+
+
+@dataclass
+class ReplayArrays:
+    """One run's arrays as the kinematic replay transforms them, stage by stage.
+
+    Stages, in order (``docs/effects.md``):
+
+    ``"transmission"``  ``wheel`` (n, 2) [rad]: wheel rotation per sample, initially the motor
+                        rotation the encoders counted;
+    ``"body"``          ``ds`` (n,) [m], ``dtheta`` (n,) [rad] and ``crab`` (n,) [rad], the angle
+                        between the heading and the direction of translation, after the true
+                        geometry turned ``wheel`` into ``travel`` (n, 2) [m];
+    ``"measurement"``   ``tracked`` (T, 3): the pose the ground-truth system reports, initially the
+                        axle-midpoint ``pose`` (T, 3) [m, m, rad].
+
+    ``dt`` (n,) [s] holds the sample intervals.
+    """
+
+    dt: FloatArray
+    wheel: FloatArray
+    travel: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    ds: FloatArray = field(default_factory=lambda: np.zeros(0))
+    dtheta: FloatArray = field(default_factory=lambda: np.zeros(0))
+    crab: FloatArray = field(default_factory=lambda: np.zeros(0))
+    pose: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    tracked: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+class WorldHook:
+    """What an effect does inside the World's step. Override the stages used and set the
+    matching ``has_*`` flag, so the World skips the others at no cost.
+
+    Stages of one physics substep of length h [s]:
+
+    1. ``transmission(motor_step)`` — (N, 2) motor rotation this substep [rad], in place to the
+       wheel rotation (the encoders count the motor);
+    2. ``shape(world, h)`` — change ``world.ground_velocity`` (N, 2, 2) [m/s], the no-slip
+       velocities of the wheel contacts, before the floor acts;
+    3. ``perturb(world, h)`` — after the floor (cables, roughness) acted, same array;
+    and outside the step: ``tracked(pose)`` — the pose a tracking system reports.
+
+    ``configure(world)`` runs once when the World is built (e.g. to add wheel roughness),
+    ``reset(indices)`` when robots are reset. Hooks that draw random numbers set
+    ``needs_rng`` and receive one Generator per robot in ``bind_rng``.
+    """
+
+    has_transmission: ClassVar[bool] = False
+    has_shape: ClassVar[bool] = False
+    has_perturb: ClassVar[bool] = False
+    has_tracked: ClassVar[bool] = False
+    needs_rng: ClassVar[bool] = False
+
+    def configure(self, world: World) -> None:
+        """Adjust the World's per-robot parameter arrays once, before the first step."""
+        del world
+
+    def bind_rng(self, streams: Sequence[np.random.Generator]) -> None:
+        """Receive one random stream per robot (only if ``needs_rng``)."""
+        del streams
+
+    def reset(self, indices: NDArray[np.intp]) -> None:
+        """Robots ``indices`` were put back at rest."""
+        del indices
+
+    def transmission(self, motor_step: FloatArray) -> None:
+        """Motor rotation → wheel rotation this substep, in place (N, 2) [rad]."""
+        del motor_step
+
+    def shape(self, world: World, h: float) -> None:
+        """Change the no-slip contact velocities before the floor acts."""
+        del world, h
+
+    def perturb(self, world: World, h: float) -> None:
+        """Change the contact velocities after the floor acted."""
+        del world, h
+
+    def tracked(self, pose: FloatArray) -> FloatArray:
+        """The pose (N, 3) a tracking system would report for true poses ``pose``."""
+        return pose
+
+
+EFFECTS: dict[str, Effect] = {}
+"""The registry: effect name → instance. Add to it with :func:`register_effect`."""
+
+
+def register_effect(effect: Effect, *, replace: bool = False) -> Effect:
+    """Add ``effect`` to the catalogue (so robot TOMLs, the World and ``diagnose`` know it).
+
+    Raises ValueError for a nameless effect, a parameter list that does not nest (absent value
+    outside its range) or a name already taken (unless ``replace``).
+    """
+    name = effect.name
+    if not name or not name.replace("_", "").isalnum():
+        raise ValueError(f"an effect needs a name of letters, digits and '_', got {name!r}")
+    if name in EFFECTS and not replace:
+        raise ValueError(f"an effect named {name!r} is already registered")
+    if not effect.parameters:
+        raise ValueError(f"effect {name!r} has no parameters")
+    for p in effect.parameters:
+        if not (p.low <= p.absent <= p.high) or not (math.isfinite(p.scale) and p.scale > 0):
+            raise ValueError(
+                f"effect {name!r}: parameter {p.name!r} must have low <= absent <= high and a "
+                "positive scale"
+            )
+    EFFECTS[name] = effect
+    return effect
+
+
+def get_effect(name: str, *, source: str | None = None) -> Effect:
+    """The registered effect ``name``; :class:`SpecError` listing the known ones otherwise."""
+    try:
+        return EFFECTS[name]
+    except KeyError:
+        raise SpecError(
+            f"unknown effect {name!r}; known effects: {', '.join(sorted(EFFECTS))}",
+            field=f"effects.{name}",
+            source=source,
+        ) from None
