@@ -22,7 +22,6 @@ the whitened innovations turn a fit of the mean model into generalised least squ
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,8 +122,37 @@ def run_likelihood(
         mask,
         np.array([sensor.position, sensor.position, sensor.heading]),
         gaussian_jumps,
+        True,
+        np.zeros(0),
     )
     return RunLikelihood(float(loglik), whitened, int(count))
+
+
+def expected_square_gap(
+    run: Run, replay: Replay, spec: RobotSpec, sensor: SensorNoise, mask: NDArray[np.bool_]
+) -> FloatArray:
+    """E|measured − predicted position|² [m²] at every sample (NaN where not in ``mask``) if the
+    model were right: what noise alone leaves (the sensor, wheel noise, heading jumps as their
+    variance), propagated open loop from the start."""
+    variance, jumps, size = process_noise(spec, replay.travel)
+    expected = np.full(len(run.time), np.nan)
+    _filter(
+        replay.pose,
+        replay.tracked,
+        replay.ds,
+        replay.dtheta,
+        replay.wheelbase,
+        variance,
+        jumps,
+        size,
+        np.zeros((len(run.time), 3)),
+        mask,
+        np.array([sensor.position, sensor.position, sensor.heading]),
+        True,
+        False,
+        expected,
+    )
+    return expected
 
 
 @kernel
@@ -141,6 +169,8 @@ def _filter(
     mask: NDArray[np.bool_],
     sigma: FloatArray,
     gaussian_jumps: bool,
+    update: bool,
+    expected: FloatArray,
 ) -> tuple[float, FloatArray, int]:
     n_samples = pose.shape[0]
     whitened = np.zeros(3 * n_samples)
@@ -161,26 +191,44 @@ def _filter(
     a2 = np.zeros((2, 2))
     for k in range(1, n_samples):
         m = k - 1
-        dx = pose[k, 0] - pose[m, 0]
-        dy = pose[k, 1] - pose[m, 1]
-        f = np.eye(3)
-        f[0, 2] = -dy
-        f[1, 2] = dx
-        mean = f @ mean
-        cov = f @ cov @ f.T
+        # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): scalar code, no
+        # temporaries (this loop runs once per logged sample).
+        ux = -(pose[k, 1] - pose[m, 1])
+        uy = pose[k, 0] - pose[m, 0]
+        mean[0] += ux * mean[2]
+        mean[1] += uy * mean[2]
+        p20 = cov[2, 0]
+        p21 = cov[2, 1]
+        p22 = cov[2, 2]
+        cov[0, 0] += 2.0 * ux * p20 + ux * ux * p22
+        cov[1, 1] += 2.0 * uy * p21 + uy * uy * p22
+        cov[0, 1] += ux * p21 + uy * p20 + ux * uy * p22
+        cov[1, 0] = cov[0, 1]
+        cov[0, 2] += ux * p22
+        cov[2, 0] = cov[0, 2]
+        cov[1, 2] += uy * p22
+        cov[2, 1] = cov[1, 2]
         mid = pose[m, 2] + 0.5 * dtheta[m]
         c = math.cos(mid)
         s = math.sin(mid)
         half = ds[m] / (2.0 * wheelbase)
-        g = np.empty((3, 2))
-        g[0, 0] = 0.5 * c + half * s
-        g[0, 1] = 0.5 * c - half * s
-        g[1, 0] = 0.5 * s - half * c
-        g[1, 1] = 0.5 * s + half * c
-        g[2, 0] = -1.0 / wheelbase
-        g[2, 1] = 1.0 / wheelbase
-        q = np.diag(variance[m])
-        cov = cov + g @ q @ g.T
+        for w in range(2):
+            var = variance[m, w]
+            if var == 0.0:
+                continue
+            sign = 1.0 if w == 0 else -1.0
+            gx = 0.5 * c + sign * half * s
+            gy = 0.5 * s - sign * half * c
+            gt = -sign / wheelbase
+            cov[0, 0] += var * gx * gx
+            cov[1, 1] += var * gy * gy
+            cov[2, 2] += var * gt * gt
+            cov[0, 1] += var * gx * gy
+            cov[1, 0] = cov[0, 1]
+            cov[0, 2] += var * gx * gt
+            cov[2, 0] = cov[0, 2]
+            cov[1, 2] += var * gy * gt
+            cov[2, 1] = cov[1, 2]
         mu = jumps[m]
         if mu > 0.0:
             if gaussian_jumps:
@@ -195,6 +243,15 @@ def _filter(
                 a2[0, 1] += mu * px * py
                 a2[1, 1] += mu * py * py
         if not (mask[k, 0] or mask[k, 1] or mask[k, 2]):
+            continue
+        if not update:
+            # Open loop: the expected squared position disagreement (tracked point) from
+            # noise alone, E|z_xy|² = tr(H P Hᵀ)_xy + 2σ², jumps as their variance.
+            ox = tracked[k, 0] - pose[k, 0]
+            oy = tracked[k, 1] - pose[k, 1]
+            vx = cov[0, 0] - 2.0 * oy * cov[0, 2] + oy * oy * cov[2, 2]
+            vy = cov[1, 1] + 2.0 * ox * cov[1, 2] + ox * ox * cov[2, 2]
+            expected[k] = vx + vy + sigma[0] ** 2 + sigma[1] ** 2
             continue
         # Measurement: tracked point = axle + R(θ)·o, linearised in δθ.
         ox = tracked[k, 0] - pose[k, 0]
@@ -291,8 +348,3 @@ def _filter(
         cov = 0.5 * (new_cov + new_cov.T)
         count += dim
     return loglik, whitened, count
-
-
-def total_loglik(parts: Mapping[str, RunLikelihood]) -> float:
-    """Sum of the runs' log-likelihoods."""
-    return float(sum(p.loglik for p in parts.values()))

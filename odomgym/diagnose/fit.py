@@ -1,0 +1,401 @@
+"""Fitting candidate effects to logged runs, and scoring them on runs they did not see.
+
+**Fit.** A model is a :class:`~odomgym.robot.RobotSpec` (its effects) plus the ground-truth
+sensor's noise. A systematic effect's parameters are fitted by generalised least squares — the
+whitened innovations of :func:`odomgym.diagnose.likelihood.run_likelihood` (heading jumps as their
+variance) — with :func:`scipy.optimize.least_squares`; noise parameters (the sensor's σ and a
+noise effect's parameters) by maximum likelihood. The two alternate twice, because an effect that
+explains the mean lowers the noise the data need.
+
+**Score.** Whole runs are held out in K folds (stratified by experiment label). A systematic
+candidate's fold fits are one Gauss–Newton step from the full fit on the whitened system (exact
+for the linear part; effects are small), so a run's held-out log-likelihood is its score at the
+full fit corrected by the quadratic change; a noise candidate is refitted per fold. The base
+model's noise is fitted on all runs. The log-likelihood of a held-out run is a proper scoring
+rule, so the per-run differences to the base model compare candidates honestly.
+
+**Test.** The best candidate's improvement is tested against the family of all candidates with
+a max-T sign-flip test over runs (Westfall & Young 1993): the sign of every run's improvements is
+flipped together, which keeps the dependence between candidates, and the largest studentised mean
+over candidates forms the null distribution.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares, minimize
+
+from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_likelihood
+from odomgym.diagnose.replay import Replay, replay_run
+from odomgym.effects import EFFECTS, Effect
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+__all__ = [
+    "CandidateFit",
+    "Dataset",
+    "evaluate",
+    "fit_candidate",
+    "fit_noise",
+    "folds_for",
+    "max_t_test",
+    "noise_curvature",
+    "paired_sign_test",
+]
+
+FloatArray = NDArray[np.float64]
+_MIN_SIGMA = 1e-5  # [m] / [rad]: floor of the sensor σ a fit may reach
+
+
+@dataclass
+class Dataset:
+    """Runs with the pose components that enter the likelihood."""
+
+    runs: list[Run]
+    masks: list[NDArray[np.bool_]]
+
+    @classmethod
+    def of(cls, runs: Sequence[Run], min_interval: float) -> Dataset:
+        return cls(list(runs), [measurement_mask(r, min_interval) for r in runs])
+
+    def subset(self, index: Sequence[int]) -> Dataset:
+        return Dataset([self.runs[i] for i in index], [self.masks[i] for i in index])
+
+    def __len__(self) -> int:
+        return len(self.runs)
+
+
+@dataclass
+class Evaluation:
+    """Per-run log-likelihoods (mixture) and whitened innovations (Gaussian jumps)."""
+
+    loglik: FloatArray
+    whitened: list[FloatArray]
+    replays: list[Replay]
+
+
+def evaluate(
+    data: Dataset,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    *,
+    whitened: bool = True,
+    replays: list[Replay] | None = None,
+) -> Evaluation:
+    """Replay every run through ``spec`` and filter it."""
+    reps = replays if replays is not None else [replay_run(r, spec) for r in data.runs]
+    logs = np.empty(len(data))
+    white: list[FloatArray] = []
+    for j, (run, rep, mask) in enumerate(zip(data.runs, reps, data.masks, strict=True)):
+        logs[j] = run_likelihood(run, rep, spec, sensor, mask).loglik
+        if whitened:
+            white.append(run_likelihood(run, rep, spec, sensor, mask, gaussian_jumps=True).whitened)
+    return Evaluation(logs, white, reps)
+
+
+def _noise_vector(
+    spec: RobotSpec, sensor: SensorNoise, effect: Effect | None
+) -> tuple[FloatArray, Callable[[FloatArray], tuple[RobotSpec, SensorNoise]]]:
+    """Log-parametrisation of the sensor σ and a noise effect's parameters (floors at a tenth
+    of their scale, so 'absent' is approached continuously)."""
+    start = [math.log(max(sensor.position, _MIN_SIGMA)), math.log(max(sensor.heading, _MIN_SIGMA))]
+    params = effect.parameters if effect is not None else ()
+    current = effect.read(spec) if effect is not None else {}
+    for p in params:
+        start.append(math.log(max(current[p.name], p.scale)))
+
+    def build(x: FloatArray) -> tuple[RobotSpec, SensorNoise]:
+        noise = SensorNoise(
+            max(math.exp(float(x[0])), _MIN_SIGMA), max(math.exp(float(x[1])), _MIN_SIGMA)
+        )
+        out = spec
+        if effect is not None:
+            values = {
+                p.name: min(p.high, max(p.low, math.exp(float(v))))
+                for p, v in zip(params, x[2:], strict=True)
+            }
+            out = effect.write(spec, values)
+        return out, noise
+
+    return np.array(start), build
+
+
+def fit_noise(
+    data: Dataset,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    effect: Effect | None = None,
+    *,
+    replays: list[Replay] | None = None,
+) -> tuple[RobotSpec, SensorNoise, float]:
+    """Maximum-likelihood sensor σ (and ``effect``'s noise parameters); returns the spec, the
+    sensor noise and the total log-likelihood."""
+    reps = replays if replays is not None else [replay_run(r, spec) for r in data.runs]
+    x0, build = _noise_vector(spec, sensor, effect)
+
+    def objective(x: FloatArray) -> float:
+        s, n = build(x)
+        return -float(evaluate(data, s, n, whitened=False, replays=reps).loglik.sum())
+
+    low = np.full(len(x0), math.log(_MIN_SIGMA))
+    if effect is not None:
+        low[2:] = [math.log(0.1 * p.scale) for p in effect.parameters]
+    high = np.full(len(x0), 0.0)  # σ < 1 m, 1 rad; noise parameters < e^0 = 1
+    result = minimize(
+        objective,
+        np.clip(x0, low, high),
+        method="L-BFGS-B",
+        bounds=list(zip(low, high, strict=True)),
+        options={"eps": 1e-4, "ftol": 1e-7, "maxfun": 60 * len(x0)},
+    )
+    best_spec, best_sensor = build(result.x)
+    return best_spec, best_sensor, -float(result.fun)
+
+
+def noise_curvature(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
+    log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
+    reps = [replay_run(r, spec) for r in data.runs]
+    x0, build = _noise_vector(spec, sensor, effect)
+    step = 0.05
+
+    def per_run(x: FloatArray) -> FloatArray:
+        s, n = build(x)
+        return evaluate(data, s, n, whitened=False, replays=reps).loglik
+
+    p = len(x0)
+    f0 = per_run(x0)
+    grad = np.zeros((len(data), p))
+    hess = np.zeros((len(data), p, p))
+    plus: list[FloatArray] = []
+    minus: list[FloatArray] = []
+    for a in range(p):
+        e = np.zeros(p)
+        e[a] = step
+        plus.append(per_run(x0 + e))
+        minus.append(per_run(x0 - e))
+        grad[:, a] = (plus[a] - minus[a]) / (2 * step)
+        hess[:, a, a] = (plus[a] - 2 * f0 + minus[a]) / step**2
+    for a in range(p):
+        for b in range(a + 1, p):
+            e = np.zeros(p)
+            e[a] = step
+            e[b] = step
+            both = per_run(x0 + e)
+            value = (both - plus[a] - plus[b] + f0) / step**2
+            hess[:, a, b] = value
+            hess[:, b, a] = value
+    return f0, grad, hess
+
+
+def _systematic_vector(
+    spec: RobotSpec, effect: Effect
+) -> tuple[FloatArray, FloatArray, FloatArray, Callable[[FloatArray], RobotSpec]]:
+    """Parameters in units of their scale, relative to the current values, with bounds."""
+    current = effect.read(spec)
+    params = effect.parameters
+    origin = np.array([current[p.name] for p in params])
+    scale = np.array([p.scale for p in params])
+    low = np.array([p.low for p in params])
+    high = np.array([p.high for p in params])
+
+    def build(u: FloatArray) -> RobotSpec:
+        values = np.clip(origin + u * scale, low, high)
+        return effect.write(spec, {p.name: float(v) for p, v in zip(params, values, strict=True)})
+
+    return np.zeros(len(params)), (low - origin) / scale, (high - origin) / scale, build
+
+
+def _whitened_stack(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise
+) -> tuple[FloatArray, list[FloatArray]]:
+    ev = evaluate(data, spec, sensor)
+    return np.concatenate(ev.whitened), ev.whitened
+
+
+@dataclass
+class CandidateFit:
+    """One candidate effect fitted to the fit runs."""
+
+    name: str
+    spec: RobotSpec
+    sensor: SensorNoise
+    values: dict[str, float]
+    loglik: FloatArray  # per run, at the full fit
+    cv_loglik: FloatArray = field(default_factory=lambda: np.zeros(0))  # per run, held out
+    stderr: dict[str, float] = field(default_factory=dict)
+    jacobian: list[FloatArray] = field(default_factory=list)  # per run (m, p), whitened
+    whitened: list[FloatArray] = field(default_factory=list)  # per run (m,)
+
+
+def fit_candidate(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
+) -> CandidateFit:
+    """Fit ``effect`` added to (or freed in) ``spec``; the sensor noise is refitted."""
+    current_spec, current_sensor = spec, sensor
+    if effect.noise:
+        current_spec, current_sensor, _ = fit_noise(data, spec, sensor, effect)
+        ev = evaluate(data, current_spec, current_sensor, whitened=False)
+        return CandidateFit(
+            effect.name, current_spec, current_sensor, effect.read(current_spec), ev.loglik
+        )
+    for _ in range(2):
+        u0, low, high, build = _systematic_vector(current_spec, effect)
+        fixed_sensor = current_sensor
+
+        def residual(u: FloatArray, build=build, noise=fixed_sensor) -> FloatArray:  # type: ignore[no-untyped-def]
+            return _whitened_stack(data, build(u), noise)[0]
+
+        result = least_squares(
+            residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=30
+        )
+        current_spec = build(result.x)
+        current_spec, current_sensor, _ = fit_noise(data, current_spec, current_sensor)
+    fit = CandidateFit(
+        effect.name,
+        current_spec,
+        current_sensor,
+        effect.read(current_spec),
+        evaluate(data, current_spec, current_sensor, whitened=False).loglik,
+    )
+    _linearise(data, fit, effect)
+    return fit
+
+
+def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
+    """Per-run whitened residuals and Jacobians at the fit (central differences), and the
+    parameters' standard errors from the Gauss–Newton curvature."""
+    u0, _, _, build = _systematic_vector(fit.spec, effect)
+    _, base = _whitened_stack(data, fit.spec, fit.sensor)
+    columns: list[list[FloatArray]] = [[] for _ in data.runs]
+    step = 0.05
+    for k in range(len(u0)):
+        du = np.zeros_like(u0)
+        du[k] = step
+        _, plus = _whitened_stack(data, build(u0 + du), fit.sensor)
+        _, minus = _whitened_stack(data, build(u0 - du), fit.sensor)
+        for j in range(len(data.runs)):
+            columns[j].append((plus[j] - minus[j]) / (2.0 * step))
+    fit.whitened = base
+    fit.jacobian = [np.stack(c, axis=1) for c in columns]
+    info = sum(j.T @ j for j in fit.jacobian)
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        cov = np.full((len(u0), len(u0)), np.inf)
+    for k, p in enumerate(effect.parameters):
+        fit.stderr[p.name] = float(math.sqrt(max(cov[k, k], 0.0)) * p.scale)
+
+
+def folds_for(runs: Sequence[Run], count: int, rng: np.random.Generator) -> list[list[int]]:
+    """``count`` folds of run indices, stratified by experiment label (round-robin)."""
+    labels: dict[str, list[int]] = {}
+    for j, run in enumerate(runs):
+        labels.setdefault(str(run.meta.get("experiment", run.kind)), []).append(j)
+    folds: list[list[int]] = [[] for _ in range(count)]
+    position = 0
+    for label in sorted(labels):
+        members = labels[label]
+        for j in rng.permutation(len(members)):
+            folds[position % count].append(members[int(j)])
+            position += 1
+    return [sorted(f) for f in folds if f]
+
+
+def cross_validate(
+    data: Dataset,
+    fit: CandidateFit,
+    effect: Effect | None,
+    folds: Sequence[Sequence[int]],
+    base_spec: RobotSpec,
+    base_sensor: SensorNoise,
+) -> FloatArray:
+    """Held-out log-likelihood of every run under ``fit`` refitted without its fold."""
+    out = np.empty(len(data))
+    if effect is None:  # the base model: nothing to refit but what all models share
+        out[:] = fit.loglik
+        return out
+    if effect.noise:
+        # One Newton step from the full fit per fold, on the per-run log-likelihood's
+        # quadratic expansion in the log noise parameters (sensor σ and the effect's own).
+        f0, grad, hess = noise_curvature(data, fit.spec, fit.sensor, effect)
+        for fold in folds:
+            held = set(fold)
+            train = [j for j in range(len(data)) if j not in held]
+            g = grad[train].sum(axis=0)
+            h = hess[train].sum(axis=0)
+            try:
+                delta = -np.linalg.solve(h, g)
+            except np.linalg.LinAlgError:
+                delta = np.zeros(len(g))
+            if not np.all(np.isfinite(delta)) or np.linalg.eigvalsh(h).max() >= 0:
+                delta = np.zeros(len(g))  # not a maximum: keep the full fit
+            for j in fold:
+                out[j] = f0[j] + grad[j] @ delta + 0.5 * delta @ hess[j] @ delta
+        return out
+    for fold in folds:
+        held = set(fold)
+        train = [j for j in range(len(data)) if j not in held]
+        a = sum(fit.jacobian[j].T @ fit.jacobian[j] for j in train)
+        b = sum(fit.jacobian[j].T @ fit.whitened[j] for j in train)
+        try:
+            delta = -np.linalg.solve(a, b)
+        except np.linalg.LinAlgError:
+            delta = np.zeros(len(b))
+        for j in fold:
+            moved = fit.whitened[j] + fit.jacobian[j] @ delta
+            out[j] = fit.loglik[j] - 0.5 * (moved @ moved - fit.whitened[j] @ fit.whitened[j])
+    return out
+
+
+def _studentised(d: FloatArray) -> FloatArray:
+    """Studentised means over the last axis (0 where the spread is 0)."""
+    n = d.shape[-1]
+    mean = d.mean(axis=-1)
+    sd = d.std(axis=-1, ddof=1) if n > 1 else np.zeros_like(mean)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(sd > 0, mean / (sd / math.sqrt(n)), np.where(mean > 0, np.inf, 0.0))
+    return np.asarray(t)
+
+
+def _sign_matrix(n: int, rng: np.random.Generator, draws: int) -> FloatArray:
+    if n <= 12:
+        return np.array(list(itertools.product((1.0, -1.0), repeat=n)))
+    signs = rng.choice([1.0, -1.0], size=(draws, n))
+    signs[0] = 1.0
+    return signs
+
+
+def max_t_test(
+    improvements: FloatArray, rng: np.random.Generator, draws: int = 4000
+) -> tuple[FloatArray, FloatArray]:
+    """Studentised mean improvement of each candidate (C,) and its family-wise p-value
+    (single-step max-T, sign flips of whole runs; exact when there are at most 12 runs)."""
+    d = np.asarray(improvements, dtype=float)
+    t_obs = _studentised(d)
+    signs = _sign_matrix(d.shape[1], rng, draws)
+    null_max = np.array([_studentised(d * s).max() for s in signs])
+    p = np.array([(np.sum(null_max >= t - 1e-12)) / len(null_max) for t in t_obs])
+    return t_obs, p
+
+
+def paired_sign_test(diff: FloatArray, rng: np.random.Generator, draws: int = 4000) -> float:
+    """One-sided p-value that the mean of ``diff`` (per run) exceeds 0 (sign flips)."""
+    d = np.asarray(diff, dtype=float)
+    signs = _sign_matrix(len(d), rng, draws)
+    observed = _studentised(d[None, :])[0]
+    null = _studentised(signs * d[None, :])
+    return float(np.mean(null >= observed - 1e-12))
+
+
+def candidate_effects(exclude: Sequence[str] = ()) -> list[Effect]:
+    """Every registered effect, in registry order, less ``exclude``."""
+    return [e for name, e in EFFECTS.items() if name not in exclude]

@@ -1,0 +1,422 @@
+"""The discrepancy workflow: where the model and the robot disagree, which effect is missing,
+add it, show the gap shrink on runs the fit never saw.
+
+:func:`diagnose` takes logged runs (any source: :mod:`odomgym.data`) and a robot model and returns
+a :class:`Diagnosis`:
+
+1. **Split.** A fraction of whole runs (stratified by experiment label, seeded) is held out for
+   the final gap report; nothing is fitted on them.
+2. **Where.** :func:`odomgym.diagnose.where.localise` on the model as given.
+3. **Which.** Every registered effect is fitted added to the current model
+   (:mod:`odomgym.diagnose.fit`) and scored by K-fold cross-validated log-likelihood on whole
+   fit runs; the best improvement over the current model is tested family-wise (max-T sign
+   flips). Candidates the best does not beat significantly (paired sign-flip test) are tied.
+   Verdicts: one significant winner — ``explained``; tied winners — ``ambiguous`` (with the
+   experiment that would separate them); nothing significant — ``none`` if the model's whitened
+   innovations look like noise (run means and lag-1 correlation), else ``unexplained``.
+4. **Add.** The winner's fitted spec becomes the current model; 3–4 repeat while a round names
+   an effect (at most ``max_rounds``).
+5. **Shrink.** The held-out runs are replayed through the model as given and the final one; the
+   gap (RMS position disagreement of the tracked point over their measured samples) before and
+   after, with bootstrap intervals over runs, and the fraction of the *reducible* gap closed:
+   (MS_before − MS_after)/(MS_before − MS_noise), MS_noise being what the final model's noise
+   alone predicts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.diagnose.experiments import separating_experiment
+from odomgym.diagnose.fit import (
+    CandidateFit,
+    Dataset,
+    candidate_effects,
+    cross_validate,
+    evaluate,
+    fit_candidate,
+    fit_noise,
+    folds_for,
+    max_t_test,
+    paired_sign_test,
+)
+from odomgym.diagnose.likelihood import SensorNoise, expected_square_gap
+from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.where import Finding, localise, run_residuals
+from odomgym.effects import EFFECTS
+from odomgym.errors import SpecError
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+__all__ = ["DiagnoseConfig", "Diagnosis", "diagnose", "split_runs"]
+
+FloatArray = NDArray[np.float64]
+GAP_METRIC = (
+    "root-mean-square distance [m] between the measured and the predicted tracked position "
+    "over every measured sample after the first of the held-out runs (runs weighted equally); "
+    "predictions replay each run's logged wheel motions through the model"
+)
+
+
+@dataclass(frozen=True)
+class DiagnoseConfig:
+    """Settings of :func:`diagnose`.
+
+    Attributes:
+        holdout: fraction of runs held out for the gap report (0 < holdout < 1).
+        seed: seeds the split, the folds and the sign-flip tests.
+        alpha: family-wise significance level of the selection test.
+        max_rounds: most effects added one after the other.
+        checkpoint_interval: least time between two samples entering the likelihood [s]
+            (dense ground truth is thinned; its sensor noise is then closer to white).
+        folds: most cross-validation folds.
+        candidates: effect names to consider (default: the whole catalogue).
+        initial_sensor: starting guess of the sensor noise (position [m], heading [rad]).
+    """
+
+    holdout: float = 0.3
+    seed: int = 0
+    alpha: float = 0.05
+    max_rounds: int = 3
+    checkpoint_interval: float = 0.25
+    folds: int = 10
+    candidates: tuple[str, ...] | None = None
+    initial_sensor: tuple[float, float] = (0.002, 0.005)
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.holdout < 1.0:
+            raise SpecError(f"holdout must lie in (0, 1), got {self.holdout!r}", field="holdout")
+        if not 0.0 < self.alpha < 1.0:
+            raise SpecError(f"alpha must lie in (0, 1), got {self.alpha!r}", field="alpha")
+        if self.max_rounds < 1 or self.folds < 2:
+            raise SpecError("max_rounds must be >= 1 and folds >= 2", field="max_rounds")
+        for name in self.candidates or ():
+            if name not in EFFECTS:
+                raise SpecError(
+                    f"unknown effect {name!r}; known: {', '.join(EFFECTS)}", field="candidates"
+                )
+
+
+@dataclass
+class Candidate:
+    """One candidate of one round."""
+
+    round: int
+    name: str
+    values: dict[str, float]
+    stderr: dict[str, float]
+    cv_improvement: float  # mean held-out log-likelihood gain per run [nats]
+    t: float
+    p_family: float
+    significant: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class Round:
+    """One round of Which/Add."""
+
+    number: int
+    verdict: str
+    winner: str | None
+    tied: list[str]
+    separating: dict[str, Any] | None
+    candidates: list[Candidate]
+    consistency_p: float
+
+
+@dataclass
+class Diagnosis:
+    """What :func:`diagnose` found (``as_dict`` is ``report.json``)."""
+
+    verdict: str
+    named_effects: list[str]
+    parameters: dict[str, dict[str, dict[str, float]]]
+    initial: RobotSpec
+    model: RobotSpec
+    sensor: SensorNoise
+    gap_before: float
+    gap_after: float
+    gap_ci: dict[str, list[float]]
+    noise_floor: float
+    fraction_closed: float
+    fraction_ci: list[float]
+    rounds: list[Round]
+    findings: list[Finding]
+    fit_runs: list[str]
+    holdout_runs: list[str]
+    holdout_gaps: dict[str, list[float]] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON report (``report.json``)."""
+        return {
+            "verdict": self.verdict,
+            "named_effects": self.named_effects,
+            "parameters": self.parameters,
+            "gap_metric": GAP_METRIC,
+            "gap_before": self.gap_before,
+            "gap_after": self.gap_after,
+            "gap_ci": self.gap_ci,
+            "noise_floor": self.noise_floor,
+            "fraction_of_reducible_gap_closed": self.fraction_closed,
+            "fraction_ci": self.fraction_ci,
+            "sensor_noise": {"position": self.sensor.position, "heading": self.sensor.heading},
+            "candidates": [c.as_dict() for r in self.rounds for c in r.candidates],
+            "rounds": [
+                {
+                    "round": r.number,
+                    "verdict": r.verdict,
+                    "winner": r.winner,
+                    "tied": r.tied,
+                    "separating_experiment": r.separating,
+                    "consistency_p": r.consistency_p,
+                }
+                for r in self.rounds
+            ],
+            "where": [f.as_dict() for f in self.findings],
+            "fit_runs": self.fit_runs,
+            "holdout_runs": self.holdout_runs,
+            "holdout_gaps": self.holdout_gaps,
+            "model": self.model.to_dict(),
+        }
+
+
+def _run_id(run: Run, index: int) -> str:
+    return str(run.meta.get("run", index + 1))
+
+
+def split_runs(
+    runs: Sequence[Run], holdout: float, rng: np.random.Generator
+) -> tuple[list[int], list[int]]:
+    """(fit, held-out) run indices: per experiment label, a ``holdout`` share held out
+    (rounded, at least one run kept for fitting per label); at least one held out overall."""
+    labels: dict[str, list[int]] = {}
+    for j, run in enumerate(runs):
+        labels.setdefault(str(run.meta.get("experiment", run.kind)), []).append(j)
+    held: list[int] = []
+    for label in sorted(labels):
+        members = [labels[label][int(k)] for k in rng.permutation(len(labels[label]))]
+        count = min(round(holdout * len(members)), len(members) - 1)
+        held.extend(members[:count])
+    if not held:
+        held = [int(rng.integers(len(runs)))]
+    fit = [j for j in range(len(runs)) if j not in set(held)]
+    return fit, sorted(held)
+
+
+def _consistency(data: Dataset, spec: RobotSpec, sensor: SensorNoise) -> float:
+    """p-value that the whitened innovations are white noise: per-run means (χ²) and pooled
+    lag-1 correlation (normal), Bonferroni-combined."""
+    from scipy import stats
+
+    ev = evaluate(data, spec, sensor)
+    chi2 = 0.0
+    dof = 0
+    lag_num = 0.0
+    lag_n = 0
+    for w, mask in zip(ev.whitened, data.masks, strict=True):
+        values = w.reshape(-1, 3)[mask]  # row order: time, then component
+        per = w.reshape(-1, 3)
+        for c in range(3):
+            series = per[mask[:, c], c]
+            if len(series) >= 2:
+                chi2 += float(series.sum()) ** 2 / len(series)
+                dof += 1
+                lag_num += float(np.sum(series[1:] * series[:-1]))
+                lag_n += len(series) - 1
+        del values
+    p_mean = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
+    p_lag = float(2 * stats.norm.sf(abs(lag_num / math.sqrt(max(lag_n, 1))))) if lag_n else 1.0
+    return min(1.0, 2 * min(p_mean, p_lag))
+
+
+def _gaps(
+    runs: Sequence[Run], spec: RobotSpec, sensor: SensorNoise, interval: float
+) -> tuple[FloatArray, FloatArray]:
+    """Per run: mean-square position disagreement [m²] and what noise alone predicts [m²]."""
+    ms = np.empty(len(runs))
+    floor = np.empty(len(runs))
+    for j, run in enumerate(runs):
+        rep = replay_run(run, spec)
+        measured = np.isfinite(run.true_pose[:, :2]).all(axis=1)
+        measured[np.flatnonzero(measured)[0]] = False
+        d = run.true_pose[measured, :2] - rep.tracked[measured, :2]
+        ms[j] = float(np.mean(np.sum(d * d, axis=1)))
+        mask = np.zeros_like(run.true_pose, dtype=bool)
+        mask[measured] = True
+        expected = expected_square_gap(run, rep, spec, sensor, mask)
+        floor[j] = float(np.nanmean(expected[measured]))
+    del interval
+    return ms, floor
+
+
+def _bootstrap(
+    values: Sequence[FloatArray],
+    statistic: Callable[..., float],
+    rng: np.random.Generator,
+    draws: int = 2000,
+) -> list[float]:
+    n = len(values[0])
+    out = []
+    for _ in range(draws):
+        pick = rng.integers(0, n, n)
+        out.append(statistic(*(v[pick] for v in values)))
+    low, high = np.nanpercentile(out, [2.5, 97.5])
+    return [float(low), float(high)]
+
+
+def diagnose(
+    runs: Sequence[Run],
+    robot: RobotSpec,
+    config: DiagnoseConfig | None = None,
+    *,
+    progress: Callable[[str, float], None] | None = None,
+) -> Diagnosis:
+    """Run the workflow of the module docstring on ``runs`` with the model ``robot``."""
+    cfg = config if config is not None else DiagnoseConfig()
+    report = progress if progress is not None else (lambda stage, fraction: None)
+    if len(runs) < 3:
+        raise SpecError(f"diagnose needs at least 3 runs, got {len(runs)}", field="runs")
+    rng = np.random.default_rng(cfg.seed)
+    fit_index, held_index = split_runs(runs, cfg.holdout, rng)
+    fit_runs = [runs[j] for j in fit_index]
+    held_runs = [runs[j] for j in held_index]
+    if len(fit_runs) < 2:
+        raise SpecError("too few runs left to fit after the hold-out split", field="holdout")
+    data = Dataset.of(fit_runs, cfg.checkpoint_interval)
+    for run, mask in zip(fit_runs, data.masks, strict=True):
+        if not mask.any():
+            raise SpecError(
+                f"run {run.meta.get('run', '?')} has no measured pose after its first sample",
+                field="x",
+                source=run.source,
+            )
+    report("where", 0.0)
+    findings = localise(run_residuals(runs, robot), cfg.alpha)
+    names = cfg.candidates or tuple(EFFECTS)
+    spec = robot
+    sensor = SensorNoise(*cfg.initial_sensor)
+    spec, sensor, _ = fit_noise(data, spec, sensor)
+    rounds: list[Round] = []
+    named: list[str] = []
+    parameters: dict[str, dict[str, dict[str, float]]] = {}
+    folds = folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng)
+    for number in range(1, cfg.max_rounds + 1):
+        effects = [e for e in candidate_effects() if e.name in names]
+        base = CandidateFit(
+            "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
+        )
+        base_cv = cross_validate(data, base, None, folds, spec, sensor)
+        fits: list[CandidateFit] = []
+        for k, effect in enumerate(effects):
+            report(f"round {number}: {effect.name}", k / len(effects))
+            fit = fit_candidate(data, spec, sensor, effect)
+            fit.cv_loglik = cross_validate(data, fit, effect, folds, spec, sensor)
+            fits.append(fit)
+        improvements = np.array([f.cv_loglik - base_cv for f in fits])
+        t, p = max_t_test(improvements, rng)
+        candidates = [
+            Candidate(
+                number,
+                f.name,
+                f.values,
+                f.stderr,
+                float(improvements[k].mean()),
+                float(t[k]),
+                float(p[k]),
+                bool(p[k] < cfg.alpha and improvements[k].mean() > 0),
+            )
+            for k, f in enumerate(fits)
+        ]
+        significant = [k for k, c in enumerate(candidates) if c.significant]
+        consistency = _consistency(data, spec, sensor)
+        if not significant:
+            verdict = "none" if consistency >= cfg.alpha else "unexplained"
+            rounds.append(Round(number, verdict, None, [], None, candidates, consistency))
+            break
+        best = max(significant, key=lambda k: candidates[k].cv_improvement)
+        tied = [best]
+        for k in significant:
+            if k != best:
+                gap = improvements[best] - improvements[k]
+                if paired_sign_test(gap, rng) >= cfg.alpha:
+                    tied.append(k)
+        if len(tied) > 1:
+            runner = max((k for k in tied if k != best), key=lambda k: candidates[k].cv_improvement)
+            name, separation, _ = separating_experiment(fits[best].spec, fits[runner].spec, sensor)
+            separating = {
+                "between": [fits[best].name, fits[runner].name],
+                "experiment": name,
+                "separation_sigma": separation,
+            }
+            rounds.append(
+                Round(
+                    number,
+                    "ambiguous",
+                    None,
+                    [fits[k].name for k in tied],
+                    separating,
+                    candidates,
+                    consistency,
+                )
+            )
+            break
+        winner = fits[best]
+        named.append(winner.name)
+        parameters[winner.name] = {
+            key: {"value": value, "stderr": winner.stderr.get(key, math.nan)}
+            for key, value in winner.values.items()
+        }
+        rounds.append(Round(number, "explained", winner.name, [], None, candidates, consistency))
+        spec, sensor = winner.spec, winner.sensor
+    report("shrink", 1.0)
+    verdict = "explained" if named else rounds[-1].verdict
+    ms_before, _ = _gaps(held_runs, robot, sensor, cfg.checkpoint_interval)
+    ms_after, ms_floor = _gaps(held_runs, spec, sensor, cfg.checkpoint_interval)
+
+    def rms(values: FloatArray) -> float:
+        return float(math.sqrt(np.mean(values)))
+
+    def fraction(before: FloatArray, after: FloatArray, floor: FloatArray) -> float:
+        reducible = float(np.mean(before) - np.mean(floor))
+        if reducible <= 0:
+            return math.nan
+        return float((np.mean(before) - np.mean(after)) / reducible)
+
+    boot = np.random.default_rng(cfg.seed + 1)
+    gap_ci = {
+        "before": _bootstrap([ms_before], rms, boot),
+        "after": _bootstrap([ms_after], rms, boot),
+        "difference": _bootstrap([ms_before, ms_after], lambda b, a: rms(b) - rms(a), boot),
+    }
+    return Diagnosis(
+        verdict=verdict,
+        named_effects=named,
+        parameters=parameters,
+        initial=robot,
+        model=spec,
+        sensor=sensor,
+        gap_before=rms(ms_before),
+        gap_after=rms(ms_after),
+        gap_ci=gap_ci,
+        noise_floor=rms(ms_floor),
+        fraction_closed=fraction(ms_before, ms_after, ms_floor),
+        fraction_ci=_bootstrap([ms_before, ms_after, ms_floor], fraction, boot),
+        rounds=rounds,
+        findings=findings,
+        fit_runs=[_run_id(runs[j], j) for j in fit_index],
+        holdout_runs=[_run_id(runs[j], j) for j in held_index],
+        holdout_gaps={
+            "before": np.sqrt(ms_before).tolist(),
+            "after": np.sqrt(ms_after).tolist(),
+            "noise": np.sqrt(ms_floor).tolist(),
+        },
+    )
