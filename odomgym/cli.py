@@ -7,7 +7,9 @@ Commands:
     ``odomgym bench calibrators …``     every calibrator on a robot population, three floors;
     ``odomgym leaderboard --data DIR``  real data: calibrate on one session, test on the others;
     ``odomgym covariance …``            Chong & Kleeman closed-form covariance (+ Monte Carlo);
-    ``odomgym fit-noise …``             estimate k_L, k_R from repeated runs.
+    ``odomgym fit-noise …``             estimate k_L, k_R from repeated runs;
+    ``odomgym diagnose DATA --robot R``  where a model and a robot's logs disagree, which
+                                         catalogue effect is missing, and the gap it closes.
 
 Every command exits 0 on success, 2 on bad input (with a message naming the field and, where it
 came from a file, the file and line) and never leaves a half-written output file.
@@ -38,7 +40,7 @@ from odomgym.report import (
     to_json,
 )
 from odomgym.robot import RobotSpec, load_robot
-from odomgym.runs import end_error
+from odomgym.runs import Run, end_error
 
 __all__ = ["main"]
 
@@ -170,6 +172,7 @@ def _command_run(args: argparse.Namespace) -> int:
         plans = [("-", straight_route(args.distance, args.return_trip))]
     show_bar = not args.json and sys.stderr.isatty()
     bar = _progress_bar(show_bar, len(plans))
+    logged: list[Run] = []
     rows: list[tuple[int, str, np.ndarray]] = []
     records: list[dict[str, Any]] = []
     errors_by_direction: dict[str, list[np.ndarray]] = {"cw": [], "ccw": []}
@@ -193,6 +196,9 @@ def _command_run(args: argparse.Namespace) -> int:
         )
         for run, odom in zip(runs, odom_end, strict=True):
             number += 1
+            label = args.path if direction == "-" else f"{args.path}_{direction}"
+            run.meta.update(run=str(number), experiment=label)
+            logged.append(run)
             error = end_error(run, odom)
             rows.append((number, direction, error))
             if direction in errors_by_direction:
@@ -208,6 +214,10 @@ def _command_run(args: argparse.Namespace) -> int:
                 }
             )
     bar.close()
+    if args.log:
+        from odomgym.data.native import write_native
+
+        write_native(Path(args.log), logged)
     summary = None
     if errors_by_direction["cw"] and errors_by_direction["ccw"]:
         summary = summarize_umbmark(
@@ -432,6 +442,70 @@ def _command_fit_noise(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fraction(text: str) -> float:
+    """An argparse type: a number strictly between 0 and 1."""
+    value = _finite(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1, got {text!r}")
+    return value
+
+
+def _command_diagnose(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from odomgym.data.logs import read_log
+    from odomgym.diagnose.report import format_markdown, report_json, write_outputs
+    from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
+
+    data = Path(args.data)
+    robot = load_robot(args.robot) if args.robot else None
+    config = DiagnoseConfig(
+        holdout=args.holdout,
+        seed=args.seed,
+        max_rounds=args.max_rounds,
+        candidates=tuple(args.candidates) if args.candidates else None,
+    )
+    out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
+    runs, nominal = read_log(
+        data,
+        robot=robot,
+        format=args.format,
+        pose_topic=args.pose_topic,
+        joint_topic=args.joint_topic,
+        encoder_topic=args.encoder_topic,
+        left_joint=args.left_joint,
+        right_joint=args.right_joint,
+    )
+    model = robot if robot is not None else nominal
+    if model is None:
+        raise SpecError("give the robot model with --robot robot.toml", field="robot")
+    show_bar = not args.json and sys.stderr.isatty()
+    bar = tqdm(total=100, desc="diagnose", disable=not show_bar, file=sys.stderr, leave=False)
+
+    def progress(stage: str, fraction: float) -> None:
+        bar.set_description(stage)
+        bar.n = int(100 * fraction)
+        bar.refresh()
+
+    try:
+        diagnosis = diagnose(runs, model, config, progress=progress)
+    except ValueError as exc:
+        if isinstance(exc, SpecError):
+            raise
+        raise SpecError(str(exc)) from None
+    finally:
+        bar.close()
+    written = write_outputs(diagnosis, out, str(data))
+    if args.json:
+        print(report_json(diagnosis))
+    else:
+        print(format_markdown(diagnosis, str(data)))
+        print("wrote:")
+        for path in written:
+            print(f"  {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command."""
     parser = argparse.ArgumentParser(
@@ -450,6 +524,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--return-trip", action="store_true", help="straight: drive back as well")
     run.add_argument("--json", action="store_true", help="JSON lines instead of a table")
     run.add_argument("--plot", help="write the return-error scatter (PNG) here")
+    run.add_argument(
+        "--log", help="also save the runs in odomgym's native CSV format (for diagnose)"
+    )
     run.set_defaults(handler=_command_run)
 
     calibrate = commands.add_parser(
@@ -569,6 +646,32 @@ def build_parser() -> argparse.ArgumentParser:
     noise.add_argument("--plot", help="write the error scatters with 95 %% ellipses (PNG)")
     noise.add_argument("--json", action="store_true")
     noise.set_defaults(handler=_command_fit_noise)
+
+    diag = commands.add_parser(
+        "diagnose",
+        help="find where a robot model and measured logs disagree and which effect is missing",
+        description="Replay measured runs through the robot model, localise the disagreement, "
+        "fit every catalogue effect, name the one the data support (or say the data cannot tell "
+        "them apart, or that none explains it), write the updated robot TOML, and report the "
+        "gap before and after on held-out runs.",
+    )
+    diag.add_argument("data", help="a native CSV, an OptiOdom folder or a ROS 2 bag")
+    diag.add_argument("--robot", help="robot .toml (or preset) of the model to test")
+    diag.add_argument(
+        "--format", choices=["native", "optiodom", "rosbag"], help="default: detected"
+    )
+    diag.add_argument("--out", help="output folder (default: <DATA name>-diagnose)")
+    diag.add_argument("--holdout", type=_fraction, default=0.3, help="share of runs held out (0.3)")
+    diag.add_argument("--seed", type=_seed, default=0)
+    diag.add_argument("--max-rounds", type=_count, default=3, help="most effects added (3)")
+    diag.add_argument("--candidates", nargs="+", help="effects to consider (default: all)")
+    diag.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
+    diag.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
+    diag.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")
+    diag.add_argument("--left-joint", default="left_wheel_joint")
+    diag.add_argument("--right-joint", default="right_wheel_joint")
+    diag.add_argument("--json", action="store_true", help="print report.json")
+    diag.set_defaults(handler=_command_diagnose)
     return parser
 
 

@@ -113,7 +113,11 @@ def simulate_runs(
     capacity = int(2.0 * nominal_time / dt) + 100
     poses = np.empty((capacity, trial.n, 3))
     counts = np.empty((capacity, trial.n, 2), dtype=np.int64)
-    poses[0] = trial.true_pose
+    # What a tracking system reports: the true pose, or the tracked point of a robot whose
+    # ground-truth sensor is offset (effect ``gt_sensor_offset``).
+    world = trial.world
+    record = world.tracked_pose if world.has_tracked_point else (lambda: trial.true_pose)
+    poses[0] = record()
     counts[0] = trial.world.counts
     finished_at = np.full(trial.n, -1, dtype=np.int64)
     done = trial.progress.done
@@ -142,7 +146,7 @@ def simulate_runs(
             capacity *= 2
             poses = np.concatenate([poses, np.empty_like(poses)])
             counts = np.concatenate([counts, np.empty_like(counts)])
-        poses[step] = trial.true_pose
+        poses[step] = record()
         counts[step] = trial.world.counts
         if progress is not None and step % 100 == 0:
             progress(float(trial.progress.state[:, 7].mean()))

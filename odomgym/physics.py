@@ -210,6 +210,11 @@ class World:
         """No-slip velocity of each wheel contact (N, 2, 2) [m/s] for the current substep."""
         return self._ground_v
 
+    @property
+    def has_tracked_point(self) -> bool:
+        """True if some robot's tracked point differs from its axle midpoint."""
+        return bool(self._tracked)
+
     def tracked_pose(self) -> FloatArray:
         """The poses (N, 3) a tracking system reports: the true pose, moved to the tracked point
         by effects such as ``gt_sensor_offset``."""

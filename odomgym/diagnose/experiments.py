@@ -88,7 +88,7 @@ def synthetic_run(experiment: SyntheticExperiment, robot: RobotSpec, dt: float =
     pose[0] = 0.0
     return Run(
         kind="free",
-        time=np.arange(len(counts)) * dt,
+        time=np.arange(len(counts), dtype=np.float64) * dt,
         counts=np.round(counts).astype(np.int64),
         true_pose=pose,
         meta={"experiment": experiment.name},

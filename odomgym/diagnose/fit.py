@@ -344,8 +344,8 @@ def cross_validate(
     for fold in folds:
         held = set(fold)
         train = [j for j in range(len(data)) if j not in held]
-        a = sum(fit.jacobian[j].T @ fit.jacobian[j] for j in train)
-        b = sum(fit.jacobian[j].T @ fit.whitened[j] for j in train)
+        a: FloatArray = np.sum([fit.jacobian[j].T @ fit.jacobian[j] for j in train], axis=0)
+        b: FloatArray = np.sum([fit.jacobian[j].T @ fit.whitened[j] for j in train], axis=0)
         try:
             delta = -np.linalg.solve(a, b)
         except np.linalg.LinAlgError:

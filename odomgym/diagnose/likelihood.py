@@ -123,7 +123,7 @@ def run_likelihood(
         np.array([sensor.position, sensor.position, sensor.heading]),
         gaussian_jumps,
         True,
-        np.zeros(0),
+        np.zeros((0, 2)),
     )
     return RunLikelihood(float(loglik), whitened, int(count))
 
@@ -131,11 +131,12 @@ def run_likelihood(
 def expected_square_gap(
     run: Run, replay: Replay, spec: RobotSpec, sensor: SensorNoise, mask: NDArray[np.bool_]
 ) -> FloatArray:
-    """E|measured − predicted position|² [m²] at every sample (NaN where not in ``mask``) if the
-    model were right: what noise alone leaves (the sensor, wheel noise, heading jumps as their
-    variance), propagated open loop from the start."""
+    """E|measured − predicted position|² [m²] and E(heading disagreement)² [rad²] at every
+    sample (T, 2) (NaN where not in ``mask``) if the model were right: what noise alone leaves
+    (the sensor, wheel noise, heading jumps as their variance), propagated open loop from the
+    start."""
     variance, jumps, size = process_noise(spec, replay.travel)
-    expected = np.full(len(run.time), np.nan)
+    expected = np.full((len(run.time), 2), np.nan)
     _filter(
         replay.pose,
         replay.tracked,
@@ -251,7 +252,8 @@ def _filter(
             oy = tracked[k, 1] - pose[k, 1]
             vx = cov[0, 0] - 2.0 * oy * cov[0, 2] + oy * oy * cov[2, 2]
             vy = cov[1, 1] + 2.0 * ox * cov[1, 2] + ox * ox * cov[2, 2]
-            expected[k] = vx + vy + sigma[0] ** 2 + sigma[1] ** 2
+            expected[k, 0] = vx + vy + sigma[0] ** 2 + sigma[1] ** 2
+            expected[k, 1] = cov[2, 2] + sigma[2] ** 2
             continue
         # Measurement: tracked point = axle + R(θ)·o, linearised in δθ.
         ox = tracked[k, 0] - pose[k, 0]
@@ -335,15 +337,15 @@ def _filter(
         top = logs.max()
         total = 0.0
         for j in range(n_comp):
-            total += math.exp(logs[j] - top)
+            total += float(math.exp(logs[j] - top))
         loglik += top + math.log(total)
         for j in range(n_comp):
-            w = math.exp(logs[j] - top) / total
-            new_mean += w * means[j]
+            weight = math.exp(logs[j] - top) / total
+            new_mean += weight * means[j]
         for j in range(n_comp):
-            w = math.exp(logs[j] - top) / total
+            weight = math.exp(logs[j] - top) / total
             d = means[j] - new_mean
-            new_cov += w * (covs[j] + np.outer(d, d))
+            new_cov += weight * (covs[j] + np.outer(d, d))
         mean = new_mean
         cov = 0.5 * (new_cov + new_cov.T)
         count += dim

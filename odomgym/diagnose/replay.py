@@ -101,4 +101,5 @@ def _start_pose(measured: FloatArray, effects: list[tuple[str, dict[str, float]]
     for _ in range(3):
         seen = _measure(pose, effects, arrays)
         pose = pose + (target - seen)
-    return pose[0]
+    start: FloatArray = pose[0]
+    return start

@@ -204,7 +204,7 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
     pvals = np.array([t[3] for _, t in tested])
     adjusted = _holm(pvals)
     findings = []
-    for ((view, group, component, unit, values), (mean, low, high, _)), p in zip(
+    for ((view, group, component, unit, sample), (mean, low, high, _)), p in zip(
         tested, adjusted, strict=True
     ):
         findings.append(
@@ -213,7 +213,7 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
                 group,
                 component,
                 unit,
-                int(np.isfinite(values).sum()),
+                int(np.isfinite(sample).sum()),
                 mean,
                 low,
                 high,

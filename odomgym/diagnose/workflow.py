@@ -58,9 +58,12 @@ __all__ = ["DiagnoseConfig", "Diagnosis", "diagnose", "split_runs"]
 
 FloatArray = NDArray[np.float64]
 GAP_METRIC = (
-    "root-mean-square distance [m] between the measured and the predicted tracked position "
-    "over every measured sample after the first of the held-out runs (runs weighted equally); "
-    "predictions replay each run's logged wheel motions through the model"
+    "root-mean-square disagreement between the measured and the predicted tracked pose over "
+    "every measured sample after the first of the held-out runs (runs weighted equally), in "
+    "units of the ground-truth sensor's noise: sqrt(mean(|Δp|²/σ_p² + Δθ²/σ_θ²)/3) with the "
+    "sensor σ fitted for the updated model, so 1 is the sensor's own noise; predictions replay "
+    "each run's logged wheel motions through the model. gap_position_mm and gap_heading_deg "
+    "give the same in physical units"
 )
 
 
@@ -154,6 +157,7 @@ class Diagnosis:
     fit_runs: list[str]
     holdout_runs: list[str]
     holdout_gaps: dict[str, list[float]] = field(default_factory=dict)
+    physical: dict[str, list[float]] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON report (``report.json``)."""
@@ -185,6 +189,7 @@ class Diagnosis:
             "fit_runs": self.fit_runs,
             "holdout_runs": self.holdout_runs,
             "holdout_gaps": self.holdout_gaps,
+            **{key: {"before": v[0], "after": v[1]} for key, v in self.physical.items()},
             "model": self.model.to_dict(),
         }
 
@@ -238,24 +243,31 @@ def _consistency(data: Dataset, spec: RobotSpec, sensor: SensorNoise) -> float:
     return min(1.0, 2 * min(p_mean, p_lag))
 
 
-def _gaps(
-    runs: Sequence[Run], spec: RobotSpec, sensor: SensorNoise, interval: float
-) -> tuple[FloatArray, FloatArray]:
-    """Per run: mean-square position disagreement [m²] and what noise alone predicts [m²]."""
-    ms = np.empty(len(runs))
-    floor = np.empty(len(runs))
+def _gaps(runs: Sequence[Run], spec: RobotSpec, sensor: SensorNoise) -> dict[str, FloatArray]:
+    """Per run: mean-square disagreement (position [m²], heading [rad²], and normalised by the
+    sensor σ as in :data:`GAP_METRIC`) and what noise alone predicts for the normalised one."""
+    out = {k: np.empty(len(runs)) for k in ("position", "heading", "normalised", "floor")}
     for j, run in enumerate(runs):
         rep = replay_run(run, spec)
-        measured = np.isfinite(run.true_pose[:, :2]).all(axis=1)
+        measured: NDArray[np.bool_] = np.asarray(np.isfinite(run.true_pose[:, :2]).all(axis=1))
         measured[np.flatnonzero(measured)[0]] = False
-        d = run.true_pose[measured, :2] - rep.tracked[measured, :2]
-        ms[j] = float(np.mean(np.sum(d * d, axis=1)))
+        d = run.true_pose[measured] - rep.tracked[measured]
+        heading = np.mod(d[:, 2] + math.pi, 2 * math.pi) - math.pi
+        has_heading = np.isfinite(heading)
+        pos2 = np.sum(d[:, :2] ** 2, axis=1)
+        head2 = np.where(has_heading, heading**2, 0.0)
         mask = np.zeros_like(run.true_pose, dtype=bool)
         mask[measured] = True
-        expected = expected_square_gap(run, rep, spec, sensor, mask)
-        floor[j] = float(np.nanmean(expected[measured]))
-    del interval
-    return ms, floor
+        expected = expected_square_gap(run, rep, spec, sensor, mask)[measured]
+        sp2, sh2 = sensor.position**2, sensor.heading**2
+        dims = 2.0 + has_heading
+        out["position"][j] = float(np.mean(pos2))
+        out["heading"][j] = float(np.mean(head2[has_heading])) if has_heading.any() else 0.0
+        out["normalised"][j] = float(np.mean((pos2 / sp2 + head2 / sh2) / dims))
+        out["floor"][j] = float(
+            np.mean((expected[:, 0] / sp2 + np.where(has_heading, expected[:, 1], 0) / sh2) / dims)
+        )
+    return out
 
 
 def _bootstrap(
@@ -269,7 +281,10 @@ def _bootstrap(
     for _ in range(draws):
         pick = rng.integers(0, n, n)
         out.append(statistic(*(v[pick] for v in values)))
-    low, high = np.nanpercentile(out, [2.5, 97.5])
+    finite = np.array(out)[np.isfinite(out)]
+    if len(finite) < 0.5 * draws:
+        return [math.nan, math.nan]
+    low, high = np.percentile(finite, [2.5, 97.5])
     return [float(low), float(high)]
 
 
@@ -379,8 +394,9 @@ def diagnose(
         spec, sensor = winner.spec, winner.sensor
     report("shrink", 1.0)
     verdict = "explained" if named else rounds[-1].verdict
-    ms_before, _ = _gaps(held_runs, robot, sensor, cfg.checkpoint_interval)
-    ms_after, ms_floor = _gaps(held_runs, spec, sensor, cfg.checkpoint_interval)
+    before = _gaps(held_runs, robot, sensor)
+    after = _gaps(held_runs, spec, sensor)
+    ms_before, ms_after, ms_floor = before["normalised"], after["normalised"], after["floor"]
 
     def rms(values: FloatArray) -> float:
         return float(math.sqrt(np.mean(values)))
@@ -418,5 +434,12 @@ def diagnose(
             "before": np.sqrt(ms_before).tolist(),
             "after": np.sqrt(ms_after).tolist(),
             "noise": np.sqrt(ms_floor).tolist(),
+        },
+        physical={
+            "gap_position_mm": [1e3 * rms(before["position"]), 1e3 * rms(after["position"])],
+            "gap_heading_deg": [
+                math.degrees(rms(before["heading"])),
+                math.degrees(rms(after["heading"])),
+            ],
         },
     )

@@ -53,7 +53,8 @@ class FloorRoughness(Effect):
 
     def wheel_variance(self, values: Mapping[str, float], travel: FloatArray) -> FloatArray | None:
         k2 = np.array([values["k_left"] ** 2, values["k_right"] ** 2])
-        return np.abs(travel) * k2
+        out: FloatArray = np.abs(travel) * k2
+        return out
 
 
 class _RoughnessHook(WorldHook):

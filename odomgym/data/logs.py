@@ -1,0 +1,102 @@
+"""One entry point for measured logs in any supported format: :func:`read_log`.
+
+Formats: ``native`` (odomgym's CSV, :mod:`odomgym.data.native`), ``optiodom`` (a session folder
+or a folder of sessions, :mod:`odomgym.data.optiodom`) and ``rosbag`` (ROS 2 bags,
+:mod:`odomgym.data.rosbag2`). Without ``format`` the layout decides: a ``.csv`` file is native,
+a folder holding ``*_metadata.csv`` files is OptiOdom, a bag folder (``metadata.yaml``) or an
+``.mcap``/``.db3`` file is a ROS 2 bag.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from odomgym.errors import SpecError
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+__all__ = ["FORMATS", "LogFormat", "detect_format", "read_log"]
+
+LogFormat = Literal["native", "optiodom", "rosbag"]
+FORMATS: tuple[LogFormat, ...] = ("native", "optiodom", "rosbag")
+
+
+def detect_format(path: Path) -> LogFormat:
+    """The format of ``path`` from its layout (see the module docstring)."""
+    if not path.exists():
+        raise SpecError("no such file or folder", field="DATA", source=str(path))
+    if path.is_file():
+        if path.suffix.lower() == ".csv":
+            return "native"
+        if path.suffix.lower() in (".mcap", ".db3"):
+            return "rosbag"
+    elif any(path.rglob("*_metadata.csv")):
+        return "optiodom"
+    elif any(path.rglob("metadata.yaml")) or any(path.rglob("*.mcap")) or any(path.rglob("*.db3")):
+        return "rosbag"
+    raise SpecError(
+        "cannot tell the log format (a .csv file, an OptiOdom folder or a ROS 2 bag); "
+        "give --format native|optiodom|rosbag",
+        field="format",
+        source=str(path),
+    )
+
+
+def read_log(
+    path: str | Path,
+    *,
+    robot: RobotSpec | None = None,
+    format: LogFormat | None = None,
+    pose_topic: str | None = None,
+    joint_topic: str | None = None,
+    encoder_topic: str | None = None,
+    left_joint: str = "left_wheel_joint",
+    right_joint: str = "right_wheel_joint",
+) -> tuple[list[Run], RobotSpec | None]:
+    """Read every run of ``path``; returns the runs and, for OptiOdom data, the nominal robot of
+    its (first) session's metadata (``None`` for other formats)."""
+    where = Path(path)
+    kind = format if format is not None else detect_format(where)
+    if kind not in FORMATS:
+        raise SpecError(f"unknown format {kind!r}; formats: {', '.join(FORMATS)}", field="format")
+    if kind == "native":
+        from odomgym.data.native import read_native
+
+        return read_native(where, robot=robot), None
+    if kind == "rosbag":
+        from odomgym.data.rosbag2 import read_rosbag
+
+        if robot is None:
+            raise SpecError("reading ROS 2 bags needs --robot (ticks per rev)", field="robot")
+        if pose_topic is None:
+            raise SpecError("reading ROS 2 bags needs --pose-topic", field="pose_topic")
+        bag_runs = read_rosbag(
+            where,
+            pose_topic=pose_topic,
+            joint_topic=joint_topic,
+            encoder_topic=encoder_topic,
+            left=left_joint,
+            right=right_joint,
+            robot=robot,
+        )
+        return bag_runs, None
+    from odomgym.data.optiodom import find_sessions, read_session
+
+    folders = [where] if (where / f"{where.name}_metadata.csv").exists() else find_sessions(where)
+    if not folders:
+        raise SpecError("no OptiOdom session below this folder", source=str(where))
+    runs: list[Run] = []
+    nominal: RobotSpec | None = None
+    for folder in folders:
+        session = read_session(folder)
+        nominal = nominal or session.robot
+        for run in session.runs:
+            label = run.kind if run.direction is None else f"{run.kind}_{run.direction}"
+            if run.kind == "free":
+                label = session.path_type
+            run.meta.update(
+                run=f"{session.name}-{run.meta['index']:02d}", experiment=label, format="optiodom"
+            )
+            runs.append(run)
+    return runs, nominal
