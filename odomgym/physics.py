@@ -532,9 +532,10 @@ def _drive_wheels(
 
     Per wheel: clip the command to ±max_rate, move the rate toward it by at most max_rate_step
     (the acceleration limit), rotate by the trapezoid mean rate × h, count ticks (floor of the
-    true rotation), and set the contact velocities (:func:`_set_ground_velocity`). In-place on ``rate``, ``angle``, ``counts``, ``rim_speed``,
-    ``ground_v`` and ``motor_step`` (the rotation this substep [rad], for transmission
-    effects); returns False (touching nothing) if any command is not finite.
+    true rotation), and set the contact velocities (:func:`_set_ground_velocity`). In place on
+    ``rate``, ``angle``, ``counts``, ``rim_speed``, ``ground_v`` and ``motor_step`` (the rotation
+    this substep [rad], for transmission effects); returns False (touching nothing) if any
+    command is not finite.
     """
     n = command.shape[0]
     for i in range(n):

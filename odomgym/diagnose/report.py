@@ -89,18 +89,23 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
         f"(95 % interval {d.fraction_ci[0]:.2f}–{d.fraction_ci[1]:.2f}). Sensor noise fitted: "
         f"{1e3 * d.sensor.position:.2f} mm, {math.degrees(d.sensor.heading):.3f}°.",
         "",
-        "## Candidates (held-out log-likelihood gain per run, family-wise p)",
+        "## Candidates",
         "",
-        "| round | effect | gain [nats/run] | t | p (family-wise) | fitted |",
-        "|---|---|---|---|---|---|",
+        "Held-out gain: log-likelihood gained on runs left out of the fit (cross-validation), "
+        "summed over the fit runs; LR: in-sample likelihood ratio 2Δℓ, its p-value "
+        "Bonferroni-corrected over the candidates; sign flips: family-wise max-T p over runs.",
+        "",
+        "| round | effect | held-out gain [nats] | LR | p (family-wise) | p (sign flips) "
+        "| fitted |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in d.rounds:
-        for c in sorted(r.candidates, key=lambda c: -c.cv_improvement):
+        for c in sorted(r.candidates, key=lambda c: -c.cv_gain):
             fitted = ", ".join(f"{k} = {v:.4g}" for k, v in c.values.items())
             mark = " ✔" if c.significant else ""
             lines.append(
-                f"| {r.number} | {c.name}{mark} | {c.cv_improvement:.2f} | {c.t:.2f} | "
-                f"{c.p_family:.4f} | {fitted} |"
+                f"| {r.number} | {c.name}{mark} | {c.cv_gain:.1f} | {c.lr:.1f} | "
+                f"{c.p_family:.2g} | {c.p_sign_flip:.2g} | {fitted} |"
             )
     lines += ["", "## Where the model as given disagrees (Holm-corrected tests)", ""]
     lines += [
