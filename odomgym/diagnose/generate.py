@@ -25,12 +25,13 @@ from odomgym.lab import simulate_runs
 from odomgym.paths import spin_route, square_route, straight_route
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
+from odomgym.runs import Direction, Run
 
 __all__ = ["Protocol", "simulate_protocol"]
 
 FloatArray = NDArray[np.float64]
 Protocol = Literal["rich", "umbmark"]
+_DIRECTIONS: tuple[Direction, ...] = ("cw", "ccw")
 
 
 def _arc(
@@ -69,11 +70,11 @@ def simulate_protocol(
     ground = floor if floor is not None else FloorSpec()
     plans: list[tuple[str, list[Run]]] = []
     if protocol == "umbmark":
-        for d in ("cw", "ccw"):
+        for d in _DIRECTIONS:
             runs, _ = simulate_runs(robot, ground, square_route(1.5, d), rng=rng, repeats=5)
             plans.append((f"square_{d}", runs))
     else:
-        for d in ("cw", "ccw"):
+        for d in _DIRECTIONS:
             runs, _ = simulate_runs(robot, ground, square_route(1.5, d), rng=rng, repeats=2)
             plans.append((f"square_{d}", runs))
         runs, _ = simulate_runs(robot, ground, straight_route(3.0, True), rng=rng, repeats=2)
@@ -82,7 +83,7 @@ def simulate_protocol(
         plans.append(("straight_oneway", runs))
         for speed, tag in ((0.1, "slow"), (0.3, "fast")):
             for angle in (90, 180, 360):
-                for d in ("cw", "ccw"):
+                for d in _DIRECTIONS:
                     runs, _ = simulate_runs(
                         robot,
                         ground,
