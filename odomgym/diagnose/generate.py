@@ -116,3 +116,137 @@ def simulate_protocol(
                 )
             )
     return out
+
+
+#: Directions of the two-parameter effects' hidden values: (dx, dy) of ``gt_sensor_offset`` is
+#: drawn uniformly on the circle; ``floor_roughness`` has k_L = k_R; ``floor_bumps`` has a fixed
+#: rate and a varying jump.
+BUMP_RATE = 0.5
+"""Bumps per metre of one wheel's travel in hidden ``floor_bumps`` effects [1/m]."""
+
+
+def detection_limit(
+    name: str,
+    protocol: Protocol,
+    *,
+    robot: RobotSpec | None = None,
+    sensor: tuple[float, float] = (0.001, 0.002),
+    direction: tuple[float, ...] | None = None,
+) -> float:
+    """The smallest detectable magnitude of effect ``name`` under ``protocol`` [its unit].
+
+    Systematic effects: three Cramér–Rao standard errors of the magnitude along ``direction``
+    (unit vector in parameter space; default the first parameter), from the Fisher information
+    of the protocol's noise-free runs measured by a sensor of σ = ``sensor`` — i.e. the
+    magnitude whose expected likelihood-ratio statistic is 9. Magnitudes are offsets from the
+    absent value (e_d − 1 for ``wheel_diameter_ratio``).
+    Noise effects (no Fisher information at their absent value): ``floor_roughness`` — the k
+    (both wheels) whose heading spread over 6 m of travel equals the sensor's heading σ,
+    σ_θ·b/√(2·6 m) (Chong & Kleeman 1997, Eq. 4 summed over both wheels); ``floor_bumps`` —
+    a heading jump equal to the sensor's heading σ at :data:`BUMP_RATE` bumps per metre.
+    """
+    from odomgym.diagnose.fit import CandidateFit, Dataset, _linearise
+    from odomgym.diagnose.likelihood import SensorNoise
+    from odomgym.effects import EFFECTS
+
+    nominal = robot if robot is not None else NOMINAL_ROBOT
+    effect = EFFECTS[name]
+    if name == "floor_roughness":
+        return sensor[1] * nominal.true_wheelbase / math.sqrt(2.0 * 6.0)
+    if name == "floor_bumps":
+        return sensor[1]
+    runs = simulate_protocol(nominal, protocol, np.random.default_rng(0), sensor=(0.0, 0.0))
+    data = Dataset.of(runs, 0.25)
+    noise = SensorNoise(*sensor)
+    fit = CandidateFit(name, nominal, noise, effect.read(nominal), np.zeros(len(runs)))
+    _linearise(data, fit, effect)
+    info = sum(j.T @ j for j in fit.jacobian)
+    scale = np.array([p.scale for p in effect.parameters])
+    u = np.zeros(len(scale))
+    if direction is None:
+        u[0] = 1.0
+    else:
+        u[:] = direction
+    physical = info / np.outer(scale, scale)
+    return float(3.0 / math.sqrt(max(float(u @ physical @ u), 1e-300)))
+
+
+def hidden_effect(
+    name: str, factor: float, protocol: Protocol, rng: np.random.Generator
+) -> dict[str, float]:
+    """Parameter values of effect ``name`` at ``factor`` × its :func:`detection_limit` under
+    ``protocol``, with a random sign (and a random direction for ``gt_sensor_offset``)."""
+    from odomgym.effects import EFFECTS
+
+    effect = EFFECTS[name]
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    if name == "floor_roughness":
+        k = factor * detection_limit(name, protocol)
+        return {"k_left": k, "k_right": k}
+    if name == "floor_bumps":
+        return {"rate": BUMP_RATE, "heading_jump": factor * detection_limit(name, protocol)}
+    if name == "gt_sensor_offset":
+        angle = rng.uniform(0.0, 2.0 * math.pi)
+        u = (math.cos(angle), math.sin(angle))
+        m = factor * detection_limit(name, protocol, direction=u)
+        return {"dx": m * u[0], "dy": m * u[1]}
+    p = effect.parameters[0]
+    m = factor * detection_limit(name, protocol)
+    if name in ("turn_skid", "backlash"):
+        sign = 1.0  # one-sided parameters
+    return {p.name: p.absent + sign * m}
+
+
+NOMINAL_ROBOT = RobotSpec(
+    name="optiodom-ideal",
+    wheel_diameter=0.084,
+    wheelbase=0.200,
+    ticks_per_rev=64 * 43.7,
+    mass=3.0,
+    chassis_length=0.26,
+    chassis_width=0.26,
+    max_wheel_speed=0.4,
+    max_wheel_accel=0.5,
+    source="the OptiOdom robot's nominal parameters (optiodom-diff README), no errors",
+)
+"""The robot the generator's hidden effects are added to."""
+
+
+def hidden_effect_trial(
+    name: str | None,
+    protocol: Protocol,
+    seed: int,
+    *,
+    factor_range: tuple[float, float] = (3.0, 10.0),
+) -> dict[str, object]:
+    """One blind trial: a robot carrying effect ``name`` (None: no effect) at a random
+    magnitude of ``factor_range`` × its detection limit, simulated under ``protocol`` with seed
+    ``seed``, diagnosed against the nominal model without being told the effect. Returns the
+    truth, the verdict, the named/tied effects and the held-out gaps."""
+    from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
+
+    rng = np.random.default_rng(seed)
+    factor = float(rng.uniform(*factor_range))
+    robot = NOMINAL_ROBOT
+    values: dict[str, float] = {}
+    if name is not None:
+        from odomgym.effects import EFFECTS
+
+        values = hidden_effect(name, factor, protocol, rng)
+        robot = EFFECTS[name].write(robot, values)
+    runs = simulate_protocol(robot, protocol, rng)
+    result = diagnose(runs, NOMINAL_ROBOT, DiagnoseConfig(seed=seed))
+    last = result.rounds[-1]
+    return {
+        "truth": name or "none",
+        "factor": factor if name else 0.0,
+        "values": values,
+        "verdict": result.verdict,
+        "top1": result.named_effects[0] if result.named_effects else result.verdict,
+        "named": result.named_effects,
+        "tied": last.tied,
+        "fitted": result.parameters,
+        "gap_before": result.gap_before,
+        "gap_after": result.gap_after,
+        "seed": seed,
+    }

@@ -1,0 +1,226 @@
+"""The discrepancy workflow (``odomgym diagnose``) on data whose missing effect it is not told.
+
+Two sources of logs:
+
+* the independent generator of ``tests/independent_robot.py`` — continuous-time exact-arc
+  integration, S-curve speed profiles, 10 Hz logs, no odomgym simulator code — so the workflow is
+  shown not to depend on odomgym's own World;
+* the pymunk World itself (:func:`odomgym.diagnose.generate.hidden_effect_trial`), at magnitudes
+  of 3–10 × each effect's detection limit (three Cramér–Rao standard errors, see
+  :func:`odomgym.diagnose.generate.detection_limit`).
+
+The confusion matrix over many seeds is ``benchmarks/bench_diagnose.py``; these tests pin a
+fixed set of seeds.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from independent_robot import IndependentRobot, generate, rich_protocol
+
+from odomgym.cli import main
+from odomgym.data.native import write_native
+from odomgym.diagnose.generate import NOMINAL_ROBOT, hidden_effect_trial
+from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
+from odomgym.effects import EFFECTS
+from odomgym.robot import RobotSpec, load_robot
+
+MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8, max_wheel_speed=0.6)
+
+
+def _independent(effects: dict[str, dict[str, float]], seed: int) -> list:  # type: ignore[type-arg]
+    return generate(IndependentRobot(effects=effects), rich_protocol(), np.random.default_rng(seed))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "values"),
+    [
+        ("wheel_toe", {"angle": 0.005}),
+        ("backlash", {"angle": 0.015}),
+        ("gt_sensor_offset", {"dx": 0.006, "dy": -0.004}),
+        ("turn_skid", {"gain": 0.2}),
+    ],
+)
+def test_independent_generator_effect_is_named_and_fitted(
+    name: str, values: dict[str, float]
+) -> None:
+    result = diagnose(_independent({name: values}, seed=11), MODEL, DiagnoseConfig(seed=1))
+    assert result.verdict == "explained"
+    assert result.named_effects[0] == name
+    for key, truth in values.items():
+        fitted = result.parameters[name][key]
+        # Within 5 standard errors or 5 % of the truth (the independent generator's continuous
+        # motion is not the replay's sampled one: a small model difference remains).
+        assert abs(fitted["value"] - truth) < max(5 * fitted["stderr"], 0.05 * abs(truth)), key
+    assert result.gap_after < result.gap_before
+
+
+@pytest.mark.slow
+def test_independent_generator_without_effect_is_none() -> None:
+    result = diagnose(_independent({}, seed=12), MODEL, DiagnoseConfig(seed=2))
+    assert result.verdict == "none"
+    assert result.named_effects == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [*EFFECTS, None])
+def test_world_hidden_effect_at_three_times_the_detection_limit(name: str | None) -> None:
+    """One blind trial per effect (and one without) at 3-10 x the detection limit."""
+    trial = hidden_effect_trial(
+        name, "rich", seed=100 + (sorted(EFFECTS).index(name) if name else 99)
+    )
+    if name is None:
+        assert trial["verdict"] == "none", trial
+    else:
+        assert trial["top1"] == name, trial
+        assert trial["gap_after"] <= trial["gap_before"], trial
+
+
+@pytest.mark.slow
+def test_umbmark_end_points_cannot_separate_wheelbase_from_its_look_alikes() -> None:
+    """Squares measured at their end points only: a wheelbase error (E_b = 1.01) turns every
+    90° corner by the same amount, which the end points cannot tell from other per-corner
+    effects: the verdict is ambiguous, wheelbase among the tied, and a separating experiment is
+    proposed."""
+    from odomgym.diagnose.generate import simulate_protocol
+
+    robot = NOMINAL_ROBOT.with_errors(e_b=1.01)
+    runs = simulate_protocol(robot, "umbmark", np.random.default_rng(3))
+    result = diagnose(runs, NOMINAL_ROBOT, DiagnoseConfig(seed=3))
+    last = result.rounds[-1]
+    assert result.verdict == "ambiguous", [(c.name, c.cv_gain) for c in last.candidates]
+    assert "wheelbase" in last.tied
+    assert last.separating is not None and last.separating["separation_sigma"] > 3
+
+
+@pytest.mark.slow
+def test_cli_diagnose_native_log_writes_the_report_and_a_loadable_model(tmp_path: Path) -> None:
+    runs = _independent({"wheel_diameter_ratio": {"e_d": 1.004}}, seed=13)
+    data = tmp_path / "robot_logs.csv"
+    write_native(data, runs)
+    robot = tmp_path / "robot.toml"
+    MODEL.save(robot)
+    out = tmp_path / "out"
+    assert main(["diagnose", str(data), "--robot", str(robot), "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    for key in (
+        "verdict",
+        "named_effects",
+        "parameters",
+        "gap_before",
+        "gap_after",
+        "gap_metric",
+        "candidates",
+    ):
+        assert key in report
+    assert report["verdict"] == "explained"
+    assert report["named_effects"] == ["wheel_diameter_ratio"]
+    assert report["gap_after"] < report["gap_before"]
+    assert {"report.md", "model.toml", "gap_before_after.png", "where.png"} <= {
+        p.name for p in out.iterdir()
+    }
+    model = load_robot(out / "model.toml")
+    assert model.e_d == pytest.approx(1.004, rel=2e-4)
+    env = gym.make("UMBmarkSquare-v0", robot=str(out / "model.toml"))
+    assert env.unwrapped.robot.e_d == pytest.approx(model.e_d)
+
+
+def test_cli_run_log_round_trips_through_the_native_reader(tmp_path: Path) -> None:
+    from odomgym.data.native import read_native
+
+    log = tmp_path / "runs.csv"
+    code = main(
+        [
+            "run",
+            "square",
+            "--robot",
+            "optiodom",
+            "--side",
+            "0.5",
+            "--runs",
+            "1",
+            "--log",
+            str(log),
+            "--json",
+        ]
+    )
+    assert code == 0
+    runs = read_native(log)
+    assert [r.meta["experiment"] for r in runs] == ["square_cw", "square_ccw"]
+    assert np.isfinite(runs[0].true_pose).all()
+
+
+@pytest.mark.parametrize(
+    ("text", "pattern"),
+    [
+        ("[robot.effects.wheel_wobble]\namount = 1.0\n", r"robot\.toml:\d+: unknown effect"),
+        ("[robot.effects.backlash]\nangle = -1.0\n", r"robot\.toml:\d+: effects\.backlash"),
+    ],
+)
+def test_cli_bad_robot_toml_is_one_line_and_leaves_no_output(
+    tmp_path: Path, text: str, pattern: str
+) -> None:
+    data = tmp_path / "logs.csv"
+    write_native(data, _independent({}, seed=1)[:4])
+    robot = tmp_path / "robot.toml"
+    robot.write_text(
+        "[robot]\nwheel_diameter = 0.084\nwheelbase = 0.2\nticks_per_rev = 2796.8\n" + text
+    )
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "odomgym.cli",
+            "diagnose",
+            str(data),
+            "--robot",
+            str(robot),
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    import re
+
+    assert re.search(pattern, lines[0]), lines[0]
+    assert not out.exists()
+
+
+def test_cli_bad_log_names_file_line_and_field(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = tmp_path / "logs.csv"
+    data.write_text(
+        "run,experiment,t,ticks_left,ticks_right,x,y,theta\n"
+        "1,straight,0,0,0,0,0,0\n1,straight,0.1,5,5,,,\n1,straight,0.05,9,9,0.01,0,0\n"
+    )
+    robot = tmp_path / "robot.toml"
+    MODEL.save(robot)
+    assert main(["diagnose", str(data), "--robot", str(robot), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "logs.csv:4" in err and "t" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_run_without_measured_pose_after_the_start_is_refused(tmp_path: Path) -> None:
+    runs = _independent({}, seed=2)[:4]
+    runs[0].true_pose[1:] = math.nan
+    from odomgym.errors import SpecError
+
+    with pytest.raises(SpecError, match="no measured pose"):
+        diagnose(runs, MODEL, DiagnoseConfig(holdout=0.25))
