@@ -325,8 +325,10 @@ def cross_validate(
         return out
     if effect.noise:
         # One Newton step from the full fit per fold, on the per-run log-likelihood's
-        # quadratic expansion in the log noise parameters (sensor σ and the effect's own).
-        f0, grad, hess = noise_curvature(data, fit.spec, fit.sensor, effect)
+        # quadratic expansion in the log noise parameters (sensor σ and the effect's own),
+        # limited to a factor e^±1; the held-out runs are then evaluated exactly there.
+        _, grad, hess = noise_curvature(data, fit.spec, fit.sensor, effect)
+        x0, build = _noise_vector(fit.spec, fit.sensor, effect)
         for fold in folds:
             held = set(fold)
             train = [j for j in range(len(data)) if j not in held]
@@ -338,8 +340,9 @@ def cross_validate(
                 delta = np.zeros(len(g))
             if not np.all(np.isfinite(delta)) or np.linalg.eigvalsh(h).max() >= 0:
                 delta = np.zeros(len(g))  # not a maximum: keep the full fit
-            for j in fold:
-                out[j] = f0[j] + grad[j] @ delta + 0.5 * delta @ hess[j] @ delta
+            spec, sensor = build(x0 + np.clip(delta, -1.0, 1.0))
+            held_data = data.subset(list(fold))
+            out[list(fold)] = evaluate(held_data, spec, sensor, whitened=False).loglik
         return out
     for fold in folds:
         held = set(fold)

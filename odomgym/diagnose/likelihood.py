@@ -8,10 +8,12 @@ is the replay (:mod:`odomgym.diagnose.replay`); the disagreement grows through
   equations, δ ← F·δ + G·w with F the displacement coupling (a heading error δθ moves later
   positions by δθ × displacement) and G = ∂(x, y, θ)/∂(d_L, d_R), exactly the propagation of
   Chong & Kleeman's Eq. 23 applied sample by sample;
-* **heading jumps** (``floor_bumps``): a Poisson number of jumps of size a between two
-  measurements; the innovation is a Gaussian mixture over the jump count (0–3), collapsed to
-  one Gaussian after each update (a first-order generalised pseudo-Bayesian filter). With
-  ``gaussian_jumps`` the jumps enter as their variance instead (for least-squares fits);
+* **wheel jumps** (``floor_bumps``): a Poisson number of sudden losses of e metres of one
+  wheel's travel between two measurements (a bump: the pose moves −e/2 along the track and
+  turns ±e/b); the innovation is a Gaussian mixture over the jump count (0–3), each jump's
+  effect propagated to the measurement like the wheel noise, collapsed to one Gaussian after
+  each update (a first-order generalised pseudo-Bayesian filter). With ``gaussian_jumps`` the
+  jumps enter as their variance instead (for least-squares fits);
 * **the sensor** — every measured pose component has white noise (σ_xy, σ_xy, σ_θ); the first
   measured pose starts the replay, so its noise is the initial covariance.
 
@@ -74,10 +76,10 @@ def measurement_mask(run: Run, min_interval: float) -> NDArray[np.bool_]:
 
 
 def process_noise(spec: RobotSpec, travel: FloatArray) -> tuple[FloatArray, FloatArray, float]:
-    """Per-sample wheel variance (n, 2) [m²], expected heading jumps (n,) and jump size [rad]
-    from the spec's noise effects."""
+    """Per-sample wheel variance (n, 2) [m²], expected wheel jumps (n, 2) and the travel each
+    jump loses [m], from the spec's noise effects."""
     variance = np.zeros_like(travel)
-    jumps = np.zeros(len(travel))
+    jumps = np.zeros_like(travel)
     size = 0.0
     for name, values in spec.effect_dict().items():
         effect = EFFECTS.get(name)
@@ -86,11 +88,11 @@ def process_noise(spec: RobotSpec, travel: FloatArray) -> tuple[FloatArray, Floa
         extra = effect.wheel_variance(values, travel)
         if extra is not None:
             variance += extra
-        jumping = effect.heading_jumps(values, travel, float(spec.true_wheelbase))
+        jumping = effect.wheel_jumps(values, travel, float(spec.true_wheelbase))
         if jumping is not None:
             rate, jump = jumping
             if size and jump != size:
-                raise ValueError("only one heading-jump effect is supported at a time")
+                raise ValueError("only one wheel-jump effect is supported at a time")
             jumps += rate
             size = jump
     return variance, jumps, size
@@ -157,6 +159,37 @@ def expected_square_gap(
 
 
 @kernel
+def _propagate(mat: FloatArray, ux: float, uy: float) -> None:
+    """mat ← F·mat·Fᵀ in place for F = I + u·e_θᵀ, u = (ux, uy, 0): a heading error moves later
+    positions by δθ × displacement. Scalar code: this runs once per logged sample."""
+    p20 = mat[2, 0]
+    p21 = mat[2, 1]
+    p22 = mat[2, 2]
+    mat[0, 0] += 2.0 * ux * p20 + ux * ux * p22
+    mat[1, 1] += 2.0 * uy * p21 + uy * uy * p22
+    mat[0, 1] += ux * p21 + uy * p20 + ux * uy * p22
+    mat[1, 0] = mat[0, 1]
+    mat[0, 2] += ux * p22
+    mat[2, 0] = mat[0, 2]
+    mat[1, 2] += uy * p22
+    mat[2, 1] = mat[1, 2]
+
+
+@kernel
+def _add_outer(mat: FloatArray, weight: float, gx: float, gy: float, gt: float) -> None:
+    """mat += weight·g·gᵀ in place, g = (gx, gy, gt)."""
+    mat[0, 0] += weight * gx * gx
+    mat[1, 1] += weight * gy * gy
+    mat[2, 2] += weight * gt * gt
+    mat[0, 1] += weight * gx * gy
+    mat[1, 0] = mat[0, 1]
+    mat[0, 2] += weight * gx * gt
+    mat[2, 0] = mat[0, 2]
+    mat[1, 2] += weight * gy * gt
+    mat[2, 1] = mat[1, 2]
+
+
+@kernel
 def _filter(
     pose: FloatArray,
     tracked: FloatArray,
@@ -187,9 +220,8 @@ def _filter(
     r0 = np.diag(sigma**2)
     cov = hinv @ r0 @ hinv.T
     mean = np.zeros(3)
-    a0 = 0.0  # Σμ since the last update, and its first and second moments in position
-    a1 = np.zeros(2)
-    a2 = np.zeros((2, 2))
+    a0 = 0.0  # expected jumps since the last update
+    vacc = np.zeros((3, 3))  # Σ μ·(Φg)(Φg)ᵀ of those jumps, propagated to the current sample
     for k in range(1, n_samples):
         m = k - 1
         # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): scalar code, no
@@ -198,51 +230,29 @@ def _filter(
         uy = pose[k, 0] - pose[m, 0]
         mean[0] += ux * mean[2]
         mean[1] += uy * mean[2]
-        p20 = cov[2, 0]
-        p21 = cov[2, 1]
-        p22 = cov[2, 2]
-        cov[0, 0] += 2.0 * ux * p20 + ux * ux * p22
-        cov[1, 1] += 2.0 * uy * p21 + uy * uy * p22
-        cov[0, 1] += ux * p21 + uy * p20 + ux * uy * p22
-        cov[1, 0] = cov[0, 1]
-        cov[0, 2] += ux * p22
-        cov[2, 0] = cov[0, 2]
-        cov[1, 2] += uy * p22
-        cov[2, 1] = cov[1, 2]
+        _propagate(cov, ux, uy)
+        if a0 > 0.0:
+            _propagate(vacc, ux, uy)
         mid = pose[m, 2] + 0.5 * dtheta[m]
         c = math.cos(mid)
         s = math.sin(mid)
         half = ds[m] / (2.0 * wheelbase)
         for w in range(2):
             var = variance[m, w]
-            if var == 0.0:
+            mu = jumps[m, w]
+            if mu > 0.0 and gaussian_jumps:
+                var += mu * size * size
+            if var == 0.0 and mu == 0.0:
                 continue
             sign = 1.0 if w == 0 else -1.0
             gx = 0.5 * c + sign * half * s
             gy = 0.5 * s - sign * half * c
             gt = -sign / wheelbase
-            cov[0, 0] += var * gx * gx
-            cov[1, 1] += var * gy * gy
-            cov[2, 2] += var * gt * gt
-            cov[0, 1] += var * gx * gy
-            cov[1, 0] = cov[0, 1]
-            cov[0, 2] += var * gx * gt
-            cov[2, 0] = cov[0, 2]
-            cov[1, 2] += var * gy * gt
-            cov[2, 1] = cov[1, 2]
-        mu = jumps[m]
-        if mu > 0.0:
-            if gaussian_jumps:
-                cov[2, 2] += mu * size * size
-            else:
-                px = pose[k, 0]
-                py = pose[k, 1]
+            if var > 0.0:
+                _add_outer(cov, var, gx, gy, gt)
+            if mu > 0.0 and not gaussian_jumps:
                 a0 += mu
-                a1[0] += mu * px
-                a1[1] += mu * py
-                a2[0, 0] += mu * px * px
-                a2[0, 1] += mu * px * py
-                a2[1, 1] += mu * py * py
+                _add_outer(vacc, mu * size * size, gx, gy, gt)
         if not (mask[k, 0] or mask[k, 1] or mask[k, 2]):
             continue
         if not update:
@@ -283,24 +293,7 @@ def _filter(
         weights = np.ones(_MAX_JUMPS + 1)
         if a0 > 0.0 and not gaussian_jumps:
             n_comp = _MAX_JUMPS + 1
-            px = pose[k, 0]
-            py = pose[k, 1]
-            # u = J(p_k − p_m) = (−(y_k − y_m), x_k − x_m)
-            su_x = -(py * a0 - a1[1])
-            su_y = px * a0 - a1[0]
-            sxx = px * px * a0 - 2.0 * px * a1[0] + a2[0, 0]
-            syy = py * py * a0 - 2.0 * py * a1[1] + a2[1, 1]
-            sxy = px * py * a0 - px * a1[1] - py * a1[0] + a2[0, 1]
-            v1[0, 0] = syy
-            v1[1, 1] = sxx
-            v1[0, 1] = -sxy
-            v1[1, 0] = -sxy
-            v1[0, 2] = su_x
-            v1[2, 0] = su_x
-            v1[1, 2] = su_y
-            v1[2, 1] = su_y
-            v1[2, 2] = a0
-            v1 = v1 * (size * size / a0)
+            v1 = vacc / a0  # the covariance one jump adds
             total = 0.0
             term = math.exp(-a0)
             for j in range(_MAX_JUMPS + 1):
@@ -310,8 +303,7 @@ def _filter(
             for j in range(_MAX_JUMPS + 1):
                 weights[j] /= total
             a0 = 0.0
-            a1[:] = 0.0
-            a2[:, :] = 0.0
+            vacc[:, :] = 0.0
         new_mean = np.zeros(3)
         new_cov = np.zeros((3, 3))
         means = np.zeros((n_comp, 3))

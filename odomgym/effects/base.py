@@ -155,10 +155,12 @@ class Effect:
         del values, travel
         return None
 
-    def heading_jumps(
+    def wheel_jumps(
         self, values: Mapping[str, float], travel: FloatArray, wheelbase: float
     ) -> tuple[FloatArray, float] | None:
-        """(expected number of heading jumps per sample (n,), jump size [rad]), or None."""
+        """Sparse losses of wheel travel: (expected number per sample and wheel (n, 2), travel
+        lost per jump [m]), or None. A loss e on one wheel moves the pose by −e/2 along the
+        track and turns it by ±e/b: the heading jumps of bumps."""
         del values, travel, wheelbase
         return None
 

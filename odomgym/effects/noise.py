@@ -10,7 +10,8 @@
   travel, as a real wheel climbs over a cable; the draws come from the robot's own stream.
 
 Neither moves the mean of the disagreement; the workflow's likelihood carries them as per-sample
-wheel variance and as heading jumps (a Gaussian-sum filter), see :mod:`odomgym.diagnose.likelihood`.
+wheel variance and as sparse wheel-travel losses (a Gaussian-sum filter), see
+:mod:`odomgym.diagnose.likelihood`.
 """
 
 from __future__ import annotations
@@ -84,12 +85,13 @@ class FloorBumps(Effect):
     def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
         return _BumpHook(values[:, 0].copy(), values[:, 1] * 2.0 * world.half_track)
 
-    def heading_jumps(
+    def wheel_jumps(
         self, values: Mapping[str, float], travel: FloatArray, wheelbase: float
     ) -> tuple[FloatArray, float] | None:
         if self.is_absent(values):
             return None
-        return values["rate"] * np.abs(travel).sum(axis=1), values["heading_jump"]
+        expected: FloatArray = values["rate"] * np.abs(travel)
+        return expected, values["heading_jump"] * wheelbase
 
 
 class _BumpHook(WorldHook):
