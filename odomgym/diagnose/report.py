@@ -75,7 +75,7 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
         f"Held out: {len(d.holdout_runs)} runs ({', '.join(d.holdout_runs)}); fitted on "
         f"{len(d.fit_runs)}. Gap = {GAP_METRIC}.",
         "",
-        "| | gap [sensor σ] | 95 % interval | position RMS [mm] | heading RMS [°] |",
+        "| | gap (1 = noise) | 95 % interval | position RMS [mm] | heading RMS [°] |",
         "|---|---|---|---|---|",
         f"| model as given | {d.gap_before:.2f} | "
         f"{d.gap_ci['before'][0]:.2f}–{d.gap_ci['before'][1]:.2f} | "
@@ -83,7 +83,7 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
         f"| updated model | {d.gap_after:.2f} | "
         f"{d.gap_ci['after'][0]:.2f}–{d.gap_ci['after'][1]:.2f} | "
         f"{d.physical['gap_position_mm'][1]:.2f} | {d.physical['gap_heading_deg'][1]:.3f} |",
-        f"| noise alone (updated model) | {d.noise_floor:.2f} | | | |",
+        f"| noise alone | {d.noise_floor:.2f} | | | |",
         "",
         f"Fraction of the reducible gap closed: {d.fraction_closed:.2f} "
         f"(95 % interval {d.fraction_ci[0]:.2f}–{d.fraction_ci[1]:.2f}). Sensor noise fitted: "
@@ -144,7 +144,7 @@ def _plot(diagnosis: Diagnosis, folder: Path) -> list[str]:
     ax.bar(runs + 0.2, np.array(gaps["after"]), 0.4, label="updated model")
     ax.plot(runs, np.array(gaps["noise"]), "k_", markersize=14, label="noise alone")
     ax.set_xticks(runs, d.holdout_runs, rotation=60, fontsize=7)
-    ax.set_ylabel("RMS gap [sensor σ]")
+    ax.set_ylabel("gap: RMS whitened innovation (1 = noise)")
     ax.set_title("held-out runs: gap before and after " + (", ".join(d.named_effects) or "—"))
     ax.legend(fontsize=8)
     fig.tight_layout()

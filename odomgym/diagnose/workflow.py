@@ -22,10 +22,9 @@ a :class:`Diagnosis`:
 4. **Add.** The winner's fitted spec becomes the current model; 3–4 repeat while a round names
    an effect (at most ``max_rounds``).
 5. **Shrink.** The held-out runs are replayed through the model as given and the final one; the
-   gap (RMS position disagreement of the tracked point over their measured samples) before and
-   after, with bootstrap intervals over runs, and the fraction of the *reducible* gap closed:
-   (MS_before − MS_after)/(MS_before − MS_noise), MS_noise being what the final model's noise
-   alone predicts.
+   gap (:data:`GAP_METRIC`: RMS whitened innovation, 1 at the noise floor) before and after,
+   with bootstrap intervals over runs, and the fraction of the *reducible* gap closed,
+   (MS_before − MS_after)/(MS_before − 1); plus the plain disagreement in mm and degrees.
 """
 
 from __future__ import annotations
@@ -51,7 +50,12 @@ from odomgym.diagnose.fit import (
     folds_for,
     max_t_test,
 )
-from odomgym.diagnose.likelihood import SensorNoise, expected_square_gap
+from odomgym.diagnose.likelihood import (
+    SensorNoise,
+    expected_square_gap,
+    measurement_mask,
+    run_likelihood,
+)
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.where import Finding, localise, run_residuals
 from odomgym.effects import EFFECTS
@@ -63,12 +67,13 @@ __all__ = ["DiagnoseConfig", "Diagnosis", "diagnose", "split_runs"]
 
 FloatArray = NDArray[np.float64]
 GAP_METRIC = (
-    "root-mean-square disagreement between the measured and the predicted tracked pose over "
-    "every measured sample after the first of the held-out runs (runs weighted equally), in "
-    "units of the ground-truth sensor's noise: sqrt(mean(|Δp|²/σ_p² + Δθ²/σ_θ²)/3) with the "
-    "sensor σ fitted for the updated model, so 1 is the sensor's own noise; predictions replay "
-    "each run's logged wheel motions through the model. gap_position_mm and gap_heading_deg "
-    "give the same in physical units"
+    "root-mean-square whitened innovation of the held-out runs (runs weighted equally): each "
+    "run's logged wheel motions are replayed through the model and its disagreement with the "
+    "measured poses is Kalman-filtered under the model's noise effects and the last fitted "
+    "sensor noise; every innovation is divided by its predicted standard deviation. A model "
+    "that explains the data gives 1 (the noise floor); a missing effect makes it larger. "
+    "gap_position_mm, gap_heading_deg and gap_open_loop_sigma give the plain (unfiltered) "
+    "disagreement over every measured sample after the first"
 )
 
 
@@ -253,12 +258,20 @@ def _consistency(data: Dataset, spec: RobotSpec, sensor: SensorNoise) -> float:
     return min(1.0, 2 * min(p_mean, p_lag))
 
 
-def _gaps(runs: Sequence[Run], spec: RobotSpec, sensor: SensorNoise) -> dict[str, FloatArray]:
-    """Per run: mean-square disagreement (position [m²], heading [rad²], and normalised by the
-    sensor σ as in :data:`GAP_METRIC`) and what noise alone predicts for the normalised one."""
-    out = {k: np.empty(len(runs)) for k in ("position", "heading", "normalised", "floor")}
+def _gaps(
+    runs: Sequence[Run], spec: RobotSpec, sensor: SensorNoise, interval: float
+) -> dict[str, FloatArray]:
+    """Per run: mean square of the whitened innovations (:data:`GAP_METRIC`), and of the open-loop
+    disagreement (position [m²], heading [rad²], normalised by the sensor σ, and what noise
+    alone predicts for the normalised one)."""
+    keys = ("whitened", "position", "heading", "normalised", "floor")
+    out = {k: np.empty(len(runs)) for k in keys}
     for j, run in enumerate(runs):
         rep = replay_run(run, spec)
+        filtered = run_likelihood(
+            run, rep, spec, sensor, measurement_mask(run, interval), gaussian_jumps=True
+        )
+        out["whitened"][j] = float(filtered.whitened @ filtered.whitened) / max(filtered.count, 1)
         measured: NDArray[np.bool_] = np.asarray(np.isfinite(run.true_pose[:, :2]).all(axis=1))
         measured[np.flatnonzero(measured)[0]] = False
         d = run.true_pose[measured] - rep.tracked[measured]
@@ -412,9 +425,12 @@ def diagnose(
         spec, sensor = winner.spec, winner.sensor
     report("shrink", 1.0)
     verdict = "explained" if named else rounds[-1].verdict
-    before = _gaps(held_runs, robot, sensor)
-    after = _gaps(held_runs, spec, sensor)
-    ms_before, ms_after, ms_floor = before["normalised"], after["normalised"], after["floor"]
+    # The model as given keeps its own noise effects; both are filtered with the sensor noise
+    # fitted last (the best estimate of the measurement's own noise).
+    before = _gaps(held_runs, robot, sensor, cfg.checkpoint_interval)
+    after = _gaps(held_runs, spec, sensor, cfg.checkpoint_interval)
+    ms_before, ms_after = before["whitened"], after["whitened"]
+    ms_floor = np.ones(len(held_runs))
 
     def rms(values: FloatArray) -> float:
         return float(math.sqrt(np.mean(values)))
@@ -459,5 +475,7 @@ def diagnose(
                 math.degrees(rms(before["heading"])),
                 math.degrees(rms(after["heading"])),
             ],
+            "gap_open_loop_sigma": [rms(before["normalised"]), rms(after["normalised"])],
+            "noise_floor_open_loop_sigma": [rms(before["floor"]), rms(after["floor"])],
         },
     )
