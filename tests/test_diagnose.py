@@ -87,10 +87,11 @@ def test_world_hidden_effect_at_three_times_the_detection_limit(name: str | None
 
 @pytest.mark.slow
 def test_umbmark_end_points_cannot_separate_wheelbase_from_its_look_alikes() -> None:
-    """Squares measured at their end points only: a wheelbase error (E_b = 1.01) turns every
-    90° corner by the same amount, which the end points cannot tell from other per-corner
-    effects: the verdict is ambiguous, wheelbase among the tied, and a separating experiment is
-    proposed."""
+    """Squares measured at their end points only: a wheelbase error (E_b = 1.01) under-turns
+    every corner, and so does a mean-diameter scale E_s = 1/E_b (it scales the wheel travel of
+    the turns too), while the scaled legs of a closed square leave its end point where it was.
+    The verdict must be ambiguous, wheelbase among the tied, and the separating experiment a
+    straight run (E_s stretches it by 1 %, E_b does not)."""
     from odomgym.diagnose.generate import simulate_protocol
 
     robot = NOMINAL_ROBOT.with_errors(e_b=1.01)
@@ -99,7 +100,10 @@ def test_umbmark_end_points_cannot_separate_wheelbase_from_its_look_alikes() -> 
     last = result.rounds[-1]
     assert result.verdict == "ambiguous", [(c.name, c.cv_gain) for c in last.candidates]
     assert "wheelbase" in last.tied
-    assert last.separating is not None and last.separating["separation_sigma"] > 3
+    assert last.separating is not None
+    if set(last.separating["between"]) == {"wheelbase", "distance_scale"}:
+        assert last.separating["experiment"].startswith("straight")
+        assert last.separating["separation_mm"] > 20  # 1 % of 4 m
 
 
 @pytest.mark.slow

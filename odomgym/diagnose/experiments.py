@@ -19,7 +19,7 @@ from odomgym.diagnose.replay import replay_run
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["MENU", "SyntheticExperiment", "separating_experiment", "synthetic_run"]
+__all__ = ["MENU", "Separation", "SyntheticExperiment", "separating_experiment", "synthetic_run"]
 
 FloatArray = NDArray[np.float64]
 
@@ -95,19 +95,30 @@ def synthetic_run(experiment: SyntheticExperiment, robot: RobotSpec, dt: float =
     )
 
 
+@dataclass(frozen=True)
+class Separation:
+    """How far apart two models' predictions of one experiment are, at their largest over the
+    run: position [m], heading [rad], and the larger of the two in sensor σ."""
+
+    experiment: str
+    position: float
+    heading: float
+    sigma: float
+
+
 def separating_experiment(
     first: RobotSpec, second: RobotSpec, sensor: SensorNoise
-) -> tuple[str, float, list[tuple[str, float]]]:
+) -> tuple[Separation, list[Separation]]:
     """The menu experiment whose predicted tracked poses under ``first`` and ``second`` differ
     most, in sensor standard deviations (largest over the run, position and heading); returns
-    (name, separation, every experiment's separation)."""
+    it and every experiment's separation."""
     scores = []
     for experiment in MENU:
         run = synthetic_run(experiment, first)
         a = replay_run(run, first).tracked
         b = replay_run(run, second).tracked
-        pos = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) / max(sensor.position, 1e-9)
-        head = np.abs(a[:, 2] - b[:, 2]) / max(sensor.heading, 1e-9)
-        scores.append((experiment.name, float(max(pos.max(), head.max()))))
-    best = max(scores, key=lambda item: item[1])
-    return best[0], best[1], scores
+        pos = float(np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]).max())
+        head = float(np.abs(a[:, 2] - b[:, 2]).max())
+        sigma = max(pos / max(sensor.position, 1e-9), head / max(sensor.heading, 1e-9))
+        scores.append(Separation(experiment.name, pos, head, sigma))
+    return max(scores, key=lambda item: item.sigma), scores

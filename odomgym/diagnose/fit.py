@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -46,7 +47,7 @@ __all__ = [
     "folds_for",
     "max_t_test",
     "noise_curvature",
-    "paired_sign_test",
+    "strata",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -295,14 +296,24 @@ def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
         fit.stderr[p.name] = float(math.sqrt(max(cov[k, k], 0.0)) * p.scale)
 
 
-def folds_for(runs: Sequence[Run], count: int, rng: np.random.Generator) -> list[list[int]]:
-    """``count`` folds of run indices, stratified by experiment label (round-robin)."""
-    labels: dict[str, list[int]] = {}
+def strata(runs: Sequence[Run]) -> dict[str, list[int]]:
+    """Run indices grouped by experiment *family* — the experiment label's first word
+    (``spin`` for ``spin_cw_90_fast``), so that a protocol of many one-run labels is still split
+    across its kinds of manoeuvre — each group ordered by label."""
+    groups: dict[str, list[tuple[str, int]]] = {}
     for j, run in enumerate(runs):
-        labels.setdefault(str(run.meta.get("experiment", run.kind)), []).append(j)
+        label = str(run.meta.get("experiment", run.kind))
+        family = re.split(r"[_\-\s]", label, maxsplit=1)[0] or label
+        groups.setdefault(family, []).append((label, j))
+    return {family: [j for _, j in sorted(items)] for family, items in sorted(groups.items())}
+
+
+def folds_for(runs: Sequence[Run], count: int, rng: np.random.Generator) -> list[list[int]]:
+    """``count`` folds of run indices, stratified by experiment family (round-robin)."""
+    labels = strata(runs)
     folds: list[list[int]] = [[] for _ in range(count)]
     position = 0
-    for label in sorted(labels):
+    for label in labels:
         members = labels[label]
         for j in rng.permutation(len(members)):
             folds[position % count].append(members[int(j)])
@@ -388,15 +399,6 @@ def max_t_test(
     null_max = np.array([_studentised(d * s).max() for s in signs])
     p = np.array([(np.sum(null_max >= t - 1e-12)) / len(null_max) for t in t_obs])
     return t_obs, p
-
-
-def paired_sign_test(diff: FloatArray, rng: np.random.Generator, draws: int = 4000) -> float:
-    """One-sided p-value that the mean of ``diff`` (per run) exceeds 0 (sign flips)."""
-    d = np.asarray(diff, dtype=float)
-    signs = _sign_matrix(len(d), rng, draws)
-    observed = _studentised(d[None, :])[0]
-    null = _studentised(signs * d[None, :])
-    return float(np.mean(null >= observed - 1e-12))
 
 
 def candidate_effects(exclude: Sequence[str] = ()) -> list[Effect]:

@@ -65,8 +65,9 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
         lines += [
             f"Tied in round {last.number}: {', '.join(last.tied)}. The experiment that would "
             f"separate {sep['between'][0]} from {sep['between'][1]} best: "
-            f"**{sep['experiment']}** (predicted outcomes differ by "
-            f"{sep['separation_sigma']:.1f} sensor σ).",
+            f"**{sep['experiment']}** (the two fitted models' predictions differ by up to "
+            f"{sep['separation_mm']:.1f} mm and {sep['separation_deg']:.2f}°, "
+            f"{sep['separation_sigma']:.1f} × the sensor noise fitted on these data).",
             "",
         ]
     lines += [

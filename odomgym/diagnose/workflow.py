@@ -49,6 +49,7 @@ from odomgym.diagnose.fit import (
     fit_noise,
     folds_for,
     max_t_test,
+    strata,
 )
 from odomgym.diagnose.likelihood import (
     SensorNoise,
@@ -218,14 +219,13 @@ def _run_id(run: Run, index: int) -> str:
 def split_runs(
     runs: Sequence[Run], holdout: float, rng: np.random.Generator
 ) -> tuple[list[int], list[int]]:
-    """(fit, held-out) run indices: per experiment label, a ``holdout`` share held out
-    (rounded, at least one run kept for fitting per label); at least one held out overall."""
-    labels: dict[str, list[int]] = {}
-    for j, run in enumerate(runs):
-        labels.setdefault(str(run.meta.get("experiment", run.kind)), []).append(j)
+    """(fit, held-out) run indices: per experiment family (:func:`odomgym.diagnose.fit.strata`),
+    a ``holdout`` share held out (rounded, at least one run of each family kept for fitting);
+    at least one held out overall."""
     held: list[int] = []
-    for label in sorted(labels):
-        members = [labels[label][int(k)] for k in rng.permutation(len(labels[label]))]
+    for members_in_order in strata(runs).values():
+        order = rng.permutation(len(members_in_order))
+        members = [members_in_order[int(k)] for k in order]
         count = min(round(holdout * len(members)), len(members) - 1)
         held.extend(members[:count])
     if not held:
@@ -323,6 +323,13 @@ def diagnose(
     report = progress if progress is not None else (lambda stage, fraction: None)
     if len(runs) < 3:
         raise SpecError(f"diagnose needs at least 3 runs, got {len(runs)}", field="runs")
+    for run in runs:
+        if not measurement_mask(run, 0.0).any():
+            raise SpecError(
+                f"run {run.meta.get('run', '?')} has no measured pose after its first sample",
+                field="x",
+                source=run.source,
+            )
     rng = np.random.default_rng(cfg.seed)
     fit_index, held_index = split_runs(runs, cfg.holdout, rng)
     fit_runs = [runs[j] for j in fit_index]
@@ -330,13 +337,6 @@ def diagnose(
     if len(fit_runs) < 2:
         raise SpecError("too few runs left to fit after the hold-out split", field="holdout")
     data = Dataset.of(fit_runs, cfg.checkpoint_interval)
-    for run, mask in zip(fit_runs, data.masks, strict=True):
-        if not mask.any():
-            raise SpecError(
-                f"run {run.meta.get('run', '?')} has no measured pose after its first sample",
-                field="x",
-                source=run.source,
-            )
     report("where", 0.0)
     findings = localise(run_residuals(runs, robot), cfg.alpha)
     names = cfg.candidates or tuple(EFFECTS)
@@ -397,11 +397,13 @@ def diagnose(
         ]
         if len(tied) > 1:
             runner = max((k for k in tied if k != best), key=lambda k: candidates[k].cv_gain)
-            name, separation, _ = separating_experiment(fits[best].spec, fits[runner].spec, sensor)
+            found, _ = separating_experiment(fits[best].spec, fits[runner].spec, sensor)
             separating = {
                 "between": [fits[best].name, fits[runner].name],
-                "experiment": name,
-                "separation_sigma": separation,
+                "experiment": found.experiment,
+                "separation_mm": 1e3 * found.position,
+                "separation_deg": math.degrees(found.heading),
+                "separation_sigma": found.sigma,
             }
             rounds.append(
                 Round(
