@@ -101,52 +101,57 @@ def evaluate(
 
 
 def _noise_vector(
-    spec: RobotSpec, sensor: SensorNoise, effect: Effect | None
-) -> tuple[FloatArray, Callable[[FloatArray], tuple[RobotSpec, SensorNoise]]]:
-    """Log-parametrisation of the sensor σ and a noise effect's parameters (floors at a tenth
-    of their scale, so 'absent' is approached continuously)."""
+    spec: RobotSpec, sensor: SensorNoise, effects: Sequence[Effect]
+) -> tuple[FloatArray, FloatArray, Callable[[FloatArray], tuple[RobotSpec, SensorNoise]]]:
+    """Log-parametrisation of the sensor σ and the noise effects' parameters (floors at a tenth
+    of their scale, so 'absent' is approached continuously); returns start, lower bounds and
+    the map back to (spec, sensor)."""
     start = [math.log(max(sensor.position, _MIN_SIGMA)), math.log(max(sensor.heading, _MIN_SIGMA))]
-    params = effect.parameters if effect is not None else ()
-    current = effect.read(spec) if effect is not None else {}
-    for p in params:
-        start.append(math.log(max(current[p.name], p.scale)))
+    low = [math.log(_MIN_SIGMA)] * 2
+    for effect in effects:
+        current = effect.read(spec)
+        for p in effect.parameters:
+            start.append(math.log(max(current[p.name], p.scale)))
+            low.append(math.log(0.1 * p.scale))
 
     def build(x: FloatArray) -> tuple[RobotSpec, SensorNoise]:
         noise = SensorNoise(
             max(math.exp(float(x[0])), _MIN_SIGMA), max(math.exp(float(x[1])), _MIN_SIGMA)
         )
         out = spec
-        if effect is not None:
-            values = {
-                p.name: min(p.high, max(p.low, math.exp(float(v))))
-                for p, v in zip(params, x[2:], strict=True)
-            }
-            out = effect.write(spec, values)
+        k = 2
+        for effect in effects:
+            values = {}
+            for p in effect.parameters:
+                values[p.name] = min(p.high, max(p.low, math.exp(float(x[k]))))
+                k += 1
+            out = effect.write(out, values)
         return out, noise
 
-    return np.array(start), build
+    return np.array(start), np.array(low), build
+
+
+def _moves_mean(effects: Sequence[Effect]) -> bool:
+    """True if some effect's parameters change the replay (then replays cannot be cached)."""
+    return any(type(e).replay is not Effect.replay for e in effects)
 
 
 def fit_noise(
     data: Dataset,
     spec: RobotSpec,
     sensor: SensorNoise,
-    effect: Effect | None = None,
-    *,
-    replays: list[Replay] | None = None,
+    *effects: Effect | None,
 ) -> tuple[RobotSpec, SensorNoise, float]:
-    """Maximum-likelihood sensor σ (and ``effect``'s noise parameters); returns the spec, the
-    sensor noise and the total log-likelihood."""
-    reps = replays if replays is not None else [replay_run(r, spec) for r in data.runs]
-    x0, build = _noise_vector(spec, sensor, effect)
+    """Maximum-likelihood sensor σ (and the noise parameters of ``effects``); returns the spec,
+    the sensor noise and the total log-likelihood."""
+    chosen = [e for e in effects if e is not None]
+    reps = None if _moves_mean(chosen) else [replay_run(r, spec) for r in data.runs]
+    x0, low, build = _noise_vector(spec, sensor, chosen)
 
     def objective(x: FloatArray) -> float:
         s, n = build(x)
         return -float(evaluate(data, s, n, whitened=False, replays=reps).loglik.sum())
 
-    low = np.full(len(x0), math.log(_MIN_SIGMA))
-    if effect is not None:
-        low[2:] = [math.log(0.1 * p.scale) for p in effect.parameters]
     high = np.full(len(x0), 0.0)  # σ < 1 m, 1 rad; noise parameters < e^0 = 1
     result = minimize(
         objective,
@@ -160,12 +165,12 @@ def fit_noise(
 
 
 def noise_curvature(
-    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effects: Sequence[Effect]
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
     log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
-    reps = [replay_run(r, spec) for r in data.runs]
-    x0, build = _noise_vector(spec, sensor, effect)
+    reps = None if _moves_mean(effects) else [replay_run(r, spec) for r in data.runs]
+    x0, _, build = _noise_vector(spec, sensor, effects)
     step = 0.05
 
     def per_run(x: FloatArray) -> FloatArray:
@@ -238,12 +243,17 @@ class CandidateFit:
 
 
 def fit_candidate(
-    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
+    data: Dataset,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    effect: Effect,
+    nuisance: Effect | None = None,
 ) -> CandidateFit:
-    """Fit ``effect`` added to (or freed in) ``spec``; the sensor noise is refitted."""
+    """Fit ``effect`` added to (or freed in) ``spec``; the sensor noise (and, for a systematic
+    effect, the ``nuisance`` noise effect's parameters) are refitted alongside."""
     current_spec, current_sensor = spec, sensor
     if effect.noise:
-        current_spec, current_sensor, _ = fit_noise(data, spec, sensor, effect)
+        current_spec, current_sensor, _ = fit_noise(data, spec, sensor, effect, nuisance)
         ev = evaluate(data, current_spec, current_sensor, whitened=False)
         return CandidateFit(
             effect.name, current_spec, current_sensor, effect.read(current_spec), ev.loglik
@@ -259,7 +269,7 @@ def fit_candidate(
             residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=30
         )
         current_spec = build(result.x)
-        current_spec, current_sensor, _ = fit_noise(data, current_spec, current_sensor)
+        current_spec, current_sensor, _ = fit_noise(data, current_spec, current_sensor, nuisance)
     fit = CandidateFit(
         effect.name,
         current_spec,
@@ -326,8 +336,7 @@ def cross_validate(
     fit: CandidateFit,
     effect: Effect | None,
     folds: Sequence[Sequence[int]],
-    base_spec: RobotSpec,
-    base_sensor: SensorNoise,
+    nuisance: Effect | None = None,
 ) -> FloatArray:
     """Held-out log-likelihood of every run under ``fit`` refitted without its fold."""
     out = np.empty(len(data))
@@ -338,8 +347,9 @@ def cross_validate(
         # One Newton step from the full fit per fold, on the per-run log-likelihood's
         # quadratic expansion in the log noise parameters (sensor σ and the effect's own),
         # limited to a factor e^±1; the held-out runs are then evaluated exactly there.
-        _, grad, hess = noise_curvature(data, fit.spec, fit.sensor, effect)
-        x0, build = _noise_vector(fit.spec, fit.sensor, effect)
+        chosen = [effect] + ([nuisance] if nuisance is not None and nuisance is not effect else [])
+        _, grad, hess = noise_curvature(data, fit.spec, fit.sensor, chosen)
+        x0, _, build = _noise_vector(fit.spec, fit.sensor, chosen)
         for fold in folds:
             held = set(fold)
             train = [j for j in range(len(data)) if j not in held]

@@ -58,7 +58,7 @@ def replay_run(run: Run, spec: RobotSpec) -> Replay:
     effects = _effects_of(spec)
     dt = np.diff(run.time)
     motor = np.diff(run.counts, axis=0).astype(np.float64) * (2.0 * np.pi / spec.ticks_per_rev)
-    arrays = ReplayArrays(dt=dt, wheel=motor)
+    arrays = ReplayArrays(dt=dt, wheel=motor, wheelbase=float(spec.true_wheelbase))
     for name, values in effects:
         EFFECTS[name].replay("transmission", values, arrays)
     radius = 0.5 * np.array([spec.true_left_diameter, spec.true_right_diameter], dtype=float)

@@ -96,16 +96,16 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
         "summed over the fit runs; LR: in-sample likelihood ratio 2Δℓ, its p-value "
         "Bonferroni-corrected over the candidates; sign flips: family-wise max-T p over runs.",
         "",
-        "| round | effect | held-out gain [nats] | LR | p (family-wise) | p (sign flips) "
+        "| round | stage | effect | held-out gain [nats] | LR | p (family-wise) | p (sign flips) "
         "| fitted |",
-        "|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in d.rounds:
-        for c in sorted(r.candidates, key=lambda c: -c.cv_gain):
+        for c in sorted(r.candidates, key=lambda c: (c.stage, -c.cv_gain)):
             fitted = ", ".join(f"{k} = {v:.4g}" for k, v in c.values.items())
             mark = " ✔" if c.significant else ""
             lines.append(
-                f"| {r.number} | {c.name}{mark} | {c.cv_gain:.1f} | {c.lr:.1f} | "
+                f"| {r.number} | {c.stage} | {c.name}{mark} | {c.cv_gain:.1f} | {c.lr:.1f} | "
                 f"{c.p_family:.2g} | {c.p_sign_flip:.2g} | {fitted} |"
             )
     lines += ["", "## Where the model as given disagrees (Holm-corrected tests)", ""]

@@ -7,7 +7,13 @@ a :class:`Diagnosis`:
 1. **Split.** A fraction of whole runs (stratified by experiment label, seeded) is held out for
    the final gap report; nothing is fitted on them.
 2. **Where.** :func:`odomgym.diagnose.where.localise` on the model as given.
-3. **Which.** Every registered effect is fitted added to the current model
+3. **Which**, in two stages. First every effect but the wheel noise (``floor_roughness``),
+   each fitted with that wheel noise as a free *nuisance* beside the sensor noise: a random
+   walk can absorb a systematic drift run by run (on the OptiOdom data it out-scored every
+   systematic effect when it competed on equal terms), so an effect must beat the best
+   wheel-noise explanation. Only if none is significant, the wheel noise itself against the
+   model with sensor noise alone. In each stage every effect is fitted added to the current
+   model
    (:mod:`odomgym.diagnose.fit`) and scored by K-fold cross-validated log-likelihood on whole
    fit runs. A candidate is significant if its likelihood-ratio test against the current model
    passes at α after a Bonferroni correction for the number of candidates (χ² with as many
@@ -59,12 +65,16 @@ from odomgym.diagnose.likelihood import (
 )
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.where import Finding, localise, run_residuals
-from odomgym.effects import EFFECTS
+from odomgym.effects import EFFECTS, Effect
 from odomgym.errors import SpecError
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["DiagnoseConfig", "Diagnosis", "diagnose", "split_runs"]
+__all__ = ["NUISANCE", "DiagnoseConfig", "Diagnosis", "diagnose", "split_runs"]
+
+NUISANCE = "floor_roughness"
+"""The noise effect fitted as a nuisance beside every systematic candidate (see the module
+docstring, step 3)."""
 
 FloatArray = NDArray[np.float64]
 GAP_METRIC = (
@@ -126,6 +136,7 @@ class Candidate:
     """One candidate of one round."""
 
     round: int
+    stage: str  # "mean" (systematic effects) or "noise"
     name: str
     values: dict[str, float]
     stderr: dict[str, float]
@@ -171,6 +182,7 @@ class Diagnosis:
     fraction_closed: float
     fraction_ci: list[float]
     rounds: list[Round]
+    candidates: list[Candidate]
     findings: list[Finding]
     fit_runs: list[str]
     holdout_runs: list[str]
@@ -191,7 +203,7 @@ class Diagnosis:
             "fraction_of_reducible_gap_closed": self.fraction_closed,
             "fraction_ci": self.fraction_ci,
             "sensor_noise": {"position": self.sensor.position, "heading": self.sensor.heading},
-            "candidates": [c.as_dict() for r in self.rounds for c in r.candidates],
+            "candidates": [c.as_dict() for c in self.candidates],
             "rounds": [
                 {
                     "round": r.number,
@@ -311,6 +323,58 @@ def _bootstrap(
     return [float(low), float(high)]
 
 
+def _score_candidates(
+    data: Dataset,
+    effects: Sequence[Effect],
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    nuisance: Effect | None,
+    folds: Sequence[Sequence[int]],
+    where: tuple[int, str],
+    cfg: DiagnoseConfig,
+    rng: np.random.Generator,
+    report: Callable[[str, float], None],
+) -> tuple[list[Candidate], list[CandidateFit]]:
+    """Fit, cross-validate and test ``effects`` against the current model ``spec`` (in round and
+    stage ``where``)."""
+    number, stage = where
+    base = CandidateFit(
+        "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
+    )
+    base_cv = cross_validate(data, base, None, folds)
+    fits: list[CandidateFit] = []
+    for k, effect in enumerate(effects):
+        report(f"round {number}: {effect.name}", k / len(effects))
+        fit = fit_candidate(data, spec, sensor, effect, nuisance)
+        fit.cv_loglik = cross_validate(data, fit, effect, folds, nuisance)
+        fits.append(fit)
+    improvements = np.array([f.cv_loglik - base_cv for f in fits])
+    t, p_flip = max_t_test(improvements, rng)
+    candidates = []
+    for k, f in enumerate(fits):
+        lr = max(0.0, 2.0 * float(np.sum(f.loglik - base.loglik)))
+        dof = len(EFFECTS[f.name].parameters)
+        p_family = min(1.0, len(fits) * float(stats.chi2.sf(lr, dof)))  # Bonferroni
+        gain = float(improvements[k].sum())
+        candidates.append(
+            Candidate(
+                round=number,
+                stage=stage,
+                name=f.name,
+                values=f.values,
+                stderr=f.stderr,
+                cv_gain=gain,
+                cv_improvement=float(improvements[k].mean()),
+                lr=lr,
+                p_family=p_family,
+                t=float(t[k]),
+                p_sign_flip=float(p_flip[k]),
+                significant=bool(p_family < cfg.alpha and gain > 0.0),
+            )
+        )
+    return candidates, fits
+
+
 def diagnose(
     runs: Sequence[Run],
     robot: RobotSpec,
@@ -344,50 +408,47 @@ def diagnose(
     sensor = SensorNoise(*cfg.initial_sensor)
     spec, sensor, _ = fit_noise(data, spec, sensor)
     rounds: list[Round] = []
+    all_candidates: list[Candidate] = []
     named: list[str] = []
     parameters: dict[str, dict[str, dict[str, float]]] = {}
     folds = folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng)
+    nuisance = EFFECTS.get(NUISANCE)
     for number in range(1, cfg.max_rounds + 1):
-        effects = [e for e in candidate_effects() if e.name in names]
-        base = CandidateFit(
-            "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
-        )
-        base_cv = cross_validate(data, base, None, folds, spec, sensor)
+        candidates: list[Candidate] = []
         fits: list[CandidateFit] = []
-        for k, effect in enumerate(effects):
-            report(f"round {number}: {effect.name}", k / len(effects))
-            fit = fit_candidate(data, spec, sensor, effect)
-            fit.cv_loglik = cross_validate(data, fit, effect, folds, spec, sensor)
-            fits.append(fit)
-        improvements = np.array([f.cv_loglik - base_cv for f in fits])
-        t, p_flip = max_t_test(improvements, rng)
-        candidates = []
-        for k, f in enumerate(fits):
-            lr = max(0.0, 2.0 * float(np.sum(f.loglik - base.loglik)))
-            dof = len(EFFECTS[f.name].parameters)
-            p_lr = float(stats.chi2.sf(lr, dof))
-            p_family = min(1.0, len(fits) * p_lr)  # Bonferroni over the candidates
-            gain = float(improvements[k].sum())
-            candidates.append(
-                Candidate(
-                    round=number,
-                    name=f.name,
-                    values=f.values,
-                    stderr=f.stderr,
-                    cv_gain=gain,
-                    cv_improvement=float(improvements[k].mean()),
-                    lr=lr,
-                    p_family=p_family,
-                    t=float(t[k]),
-                    p_sign_flip=float(p_flip[k]),
-                    significant=bool(p_family < cfg.alpha and gain > 0.0),
-                )
+        round_candidates: list[Candidate] = []
+        base_spec, base_sensor = spec, sensor
+        for stage in ("mean", "noise"):
+            if stage == "mean":
+                effects = [e for e in candidate_effects((NUISANCE,)) if e.name in names]
+                helper = nuisance
+            else:
+                effects = [e for e in candidate_effects() if e.name == NUISANCE and e.name in names]
+                helper = None
+            if not effects:
+                continue
+            base_spec, base_sensor, _ = fit_noise(data, spec, sensor, helper)
+            candidates, fits = _score_candidates(
+                data,
+                effects,
+                base_spec,
+                base_sensor,
+                helper,
+                folds,
+                (number, stage),
+                cfg,
+                rng,
+                report,
             )
+            round_candidates.extend(candidates)
+            if any(c.significant for c in candidates):
+                break
+        all_candidates.extend(round_candidates)
         significant = [k for k, c in enumerate(candidates) if c.significant]
-        consistency = _consistency(data, spec, sensor)
+        consistency = _consistency(data, base_spec, base_sensor)
         if not significant:
             verdict = "none" if consistency >= cfg.alpha else "unexplained"
-            rounds.append(Round(number, verdict, None, [], None, candidates, consistency))
+            rounds.append(Round(number, verdict, None, [], None, round_candidates, consistency))
             break
         best = max(significant, key=lambda k: candidates[k].cv_gain)
         tied = [best] + [
@@ -412,7 +473,7 @@ def diagnose(
                     None,
                     [fits[k].name for k in tied],
                     separating,
-                    candidates,
+                    round_candidates,
                     consistency,
                 )
             )
@@ -423,8 +484,13 @@ def diagnose(
             key: {"value": value, "stderr": winner.stderr.get(key, math.nan)}
             for key, value in winner.values.items()
         }
-        rounds.append(Round(number, "explained", winner.name, [], None, candidates, consistency))
-        spec, sensor = winner.spec, winner.sensor
+        rounds.append(
+            Round(number, "explained", winner.name, [], None, round_candidates, consistency)
+        )
+        # Only the named effect joins the model (not the nuisance wheel noise fitted beside a
+        # systematic effect); the sensor noise is refitted for it.
+        spec = EFFECTS[winner.name].write(spec, winner.values)
+        spec, sensor, _ = fit_noise(data, spec, sensor)
     report("shrink", 1.0)
     verdict = "explained" if named else rounds[-1].verdict
     # The model as given keeps its own noise effects; both are filtered with the sensor noise
@@ -463,6 +529,7 @@ def diagnose(
         fraction_closed=fraction(ms_before, ms_after, ms_floor),
         fraction_ci=_bootstrap([ms_before, ms_after, ms_floor], fraction, boot),
         rounds=rounds,
+        candidates=all_candidates,
         findings=findings,
         fit_runs=[_run_id(runs[j], j) for j in fit_index],
         holdout_runs=[_run_id(runs[j], j) for j in held_index],

@@ -179,11 +179,12 @@ class ReplayArrays:
     ``"measurement"``   ``tracked`` (T, 3): the pose the ground-truth system reports, initially the
                         axle-midpoint ``pose`` (T, 3) [m, m, rad].
 
-    ``dt`` (n,) [s] holds the sample intervals.
+    ``dt`` (n,) [s] holds the sample intervals, ``wheelbase`` the model's true wheelbase [m].
     """
 
     dt: FloatArray
     wheel: FloatArray
+    wheelbase: float = 0.0
     travel: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     ds: FloatArray = field(default_factory=lambda: np.zeros(0))
     dtheta: FloatArray = field(default_factory=lambda: np.zeros(0))

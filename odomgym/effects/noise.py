@@ -9,9 +9,10 @@
   left wheel, −a under the right. In the World the lost travel is spread over 5 cm of the wheel's
   travel, as a real wheel climbs over a cable; the draws come from the robot's own stream.
 
-Neither moves the mean of the disagreement; the workflow's likelihood carries them as per-sample
-wheel variance and as sparse wheel-travel losses (a Gaussian-sum filter), see
-:mod:`odomgym.diagnose.likelihood`.
+Roughness does not move the mean of the disagreement; bumps do a little — their losses always
+shorten a wheel's travel, by ``rate``·a·b per metre on average, which the replay applies. The
+workflow's likelihood carries the rest as per-sample wheel variance and as sparse wheel-travel
+losses (a Gaussian-sum filter), see :mod:`odomgym.diagnose.likelihood`.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.effects.base import Effect, Parameter, WorldHook
+from odomgym.effects.base import Effect, Parameter, ReplayArrays, WorldHook
 
 if TYPE_CHECKING:
     from odomgym.physics import World
@@ -84,6 +85,13 @@ class FloorBumps(Effect):
 
     def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
         return _BumpHook(values[:, 0].copy(), values[:, 1] * 2.0 * world.half_track)
+
+    def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
+        # The losses always shorten a wheel's travel: on average by rate·e per metre, which is a
+        # systematic shortening of the distance; the jumps scatter around it (noise face).
+        if stage == "transmission" and not self.is_absent(values):
+            loss = values["rate"] * values["heading_jump"] * arrays.wheelbase
+            arrays.wheel = arrays.wheel * (1.0 - loss)
 
     def wheel_jumps(
         self, values: Mapping[str, float], travel: FloatArray, wheelbase: float
