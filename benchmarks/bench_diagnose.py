@@ -77,21 +77,16 @@ def speed() -> dict[str, Any]:
     from odomgym.robot import RobotSpec
 
     robot = IndependentRobot(effects={"wheelbase": {"e_b": 1.01}})
+    # One 8 m square at 0.3 m/s (with its stops and corner turns) is a run of about two minutes.
     laps = [
-        Manoeuvre(kind="square", direction=d, size=4.0, speed=0.3, label=f"square_{d}")
+        Manoeuvre(kind="square", direction=d, size=8.0, speed=0.3, label=f"square_{d}")
         for d in ("cw", "ccw")
     ]
-    runs = []
-    rng = np.random.default_rng(0)
-    while len(runs) < 40:
-        # Two squares back to back make one run of about two minutes.
-        for lap in laps:
-            runs.extend(generate(robot, [lap, lap], rng, log_rate_hz=20.0))
-    runs = runs[:40]
+    runs = generate(robot, laps * 20, np.random.default_rng(0), log_rate_hz=20.0)
     duration = sum(r.time[-1] for r in runs) / len(runs)
     model = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8)
     start = time.perf_counter()
-    diagnosis = diagnose(runs, model, DiagnoseConfig())
+    diagnosis = diagnose(runs, model, DiagnoseConfig(jobs=os.cpu_count() or 1))
     elapsed = time.perf_counter() - start
     return {
         "runs": len(runs),

@@ -18,6 +18,7 @@ came from a file, the file and line) and never leaves a half-written output file
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -334,7 +335,6 @@ def _command_calibrate(args: argparse.Namespace) -> int:
 
 
 def _command_bench(args: argparse.Namespace) -> int:
-    import os
     import time
 
     from odomgym.baselines import CALIBRATORS
@@ -464,6 +464,7 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         seed=args.seed,
         max_rounds=args.max_rounds,
         candidates=tuple(args.candidates) if args.candidates else None,
+        jobs=args.jobs or os.cpu_count() or 1,
     )
     out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
     runs, nominal = read_log(
@@ -665,6 +666,7 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--seed", type=_seed, default=0)
     diag.add_argument("--max-rounds", type=_count, default=3, help="most effects added (3)")
     diag.add_argument("--candidates", nargs="+", help="effects to consider (default: all)")
+    diag.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
     diag.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
     diag.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
     diag.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")

@@ -190,6 +190,82 @@ def _add_outer(mat: FloatArray, weight: float, gx: float, gy: float, gt: float) 
 
 
 @kernel
+def _gauss_update(
+    prior: FloatArray,
+    mean: FloatArray,
+    h: FloatArray,
+    nu: FloatArray,
+    rdiag: FloatArray,
+    dim: int,
+    work: FloatArray,
+    sol: FloatArray,
+    s_nu: FloatArray,
+    out_mean: FloatArray,
+    out_cov: FloatArray,
+) -> float:
+    """One Kalman update with the first ``dim`` rows of ``h`` (measurement noise ``rdiag``,
+    innovation ``nu``), written out for at most three rows without temporaries; returns the
+    innovation's log density, leaves the whitened innovation L⁻¹ν in ``sol`` and the posterior
+    in ``out_mean``, ``out_cov``. ``work`` (4, 3, 3) and ``s_nu`` (3,) are scratch space."""
+    hp = work[0]  # H·P (dim × 3)
+    s_mat = work[1]  # H·P·Hᵀ + R
+    chol = work[2]  # its Cholesky factor
+    x = work[3]  # S⁻¹·H·P
+    for a in range(dim):
+        for b in range(3):
+            hp[a, b] = h[a, 0] * prior[0, b] + h[a, 1] * prior[1, b] + h[a, 2] * prior[2, b]
+    for a in range(dim):
+        for b in range(dim):
+            s_mat[a, b] = hp[a, 0] * h[b, 0] + hp[a, 1] * h[b, 1] + hp[a, 2] * h[b, 2]
+        s_mat[a, a] += rdiag[a]
+    logdet = 0.0
+    for a in range(dim):
+        for b in range(a + 1):
+            acc = s_mat[a, b]
+            for c in range(b):
+                acc -= chol[a, c] * chol[b, c]
+            if a == b:
+                chol[a, a] = math.sqrt(max(acc, 1e-300))
+            else:
+                chol[a, b] = acc / chol[b, b]
+        logdet += 2.0 * math.log(chol[a, a])
+    quad = 0.0
+    for a in range(dim):  # forward substitution: L·sol = ν
+        acc = nu[a]
+        for c in range(a):
+            acc -= chol[a, c] * sol[c]
+        sol[a] = acc / chol[a, a]
+        quad += sol[a] * sol[a]
+    for b in range(3):  # X = S⁻¹·(H·P), column by column: L·y = hp, Lᵀ·x = y
+        for a in range(dim):
+            acc = hp[a, b]
+            for c in range(a):
+                acc -= chol[a, c] * x[c, b]
+            x[a, b] = acc / chol[a, a]
+        for a in range(dim - 1, -1, -1):
+            acc = x[a, b]
+            for c in range(a + 1, dim):
+                acc -= chol[c, a] * x[c, b]
+            x[a, b] = acc / chol[a, a]
+    # Gain K = (H·P)ᵀ·S⁻¹: posterior mean + (H·P)ᵀ·S⁻¹ν, covariance P − (H·P)ᵀ·S⁻¹·(H·P).
+    for a in range(dim - 1, -1, -1):  # S⁻¹ν: back substitution Lᵀ·s_nu = sol
+        acc = sol[a]
+        for c in range(a + 1, dim):
+            acc -= chol[c, a] * s_nu[c]
+        s_nu[a] = acc / chol[a, a]
+    for a in range(3):
+        out_mean[a] = mean[a]
+        for c in range(dim):
+            out_mean[a] += hp[c, a] * s_nu[c]
+        for b in range(3):
+            acc = prior[a, b]
+            for c in range(dim):
+                acc -= hp[c, a] * x[c, b]
+            out_cov[a, b] = acc
+    return -0.5 * (dim * math.log(2.0 * math.pi) + logdet + quad)
+
+
+@kernel
 def _filter(
     pose: FloatArray,
     tracked: FloatArray,
@@ -222,6 +298,19 @@ def _filter(
     mean = np.zeros(3)
     a0 = 0.0  # expected jumps since the last update
     vacc = np.zeros((3, 3))  # Σ μ·(Φg)(Φg)ᵀ of those jumps, propagated to the current sample
+    rows = np.zeros(3, dtype=np.int64)
+    h = np.zeros((3, 3))
+    nu = np.zeros(3)
+    rdiag = np.zeros(3)
+    v1 = np.zeros((3, 3))
+    prior = np.zeros((3, 3))
+    work = np.zeros((4, 3, 3))
+    sol = np.zeros(3)
+    s_nu = np.zeros(3)
+    weights = np.zeros(_MAX_JUMPS + 1)
+    logs = np.zeros(_MAX_JUMPS + 1)
+    means = np.zeros((_MAX_JUMPS + 1, 3))
+    covs = np.zeros((_MAX_JUMPS + 1, 3, 3))
     for k in range(1, n_samples):
         m = k - 1
         # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): scalar code, no
@@ -265,80 +354,78 @@ def _filter(
             expected[k, 0] = vx + vy + sigma[0] ** 2 + sigma[1] ** 2
             expected[k, 1] = cov[2, 2] + sigma[2] ** 2
             continue
-        # Measurement: tracked point = axle + R(θ)·o, linearised in δθ.
+        # Measurement: tracked point = axle + R(θ)·o, linearised in δθ. Work arrays are
+        # preallocated (this runs once per measured sample).
         ox = tracked[k, 0] - pose[k, 0]
         oy = tracked[k, 1] - pose[k, 1]
-        rows = np.empty(3, dtype=np.int64)
         dim = 0
         for j in range(3):
             if mask[k, j]:
                 rows[dim] = j
                 dim += 1
-        h = np.zeros((dim, 3))
-        z = np.empty(dim)
-        r = np.zeros((dim, dim))
         for a in range(dim):
             j = rows[a]
+            for b in range(3):
+                h[a, b] = 0.0
             h[a, j] = 1.0
             if j == 0:
                 h[a, 2] = -oy
             elif j == 1:
                 h[a, 2] = ox
-            z[a] = residual[k, j]
-            r[a, a] = sigma[j] ** 2
-        nu = z - h @ mean
-        # Jump mixture: V1 = a²·E[g gᵀ] of one jump since the last update.
+            nu[a] = residual[k, j] - (h[a, 0] * mean[0] + h[a, 1] * mean[1] + h[a, 2] * mean[2])
+            rdiag[a] = sigma[j] ** 2
         n_comp = 1
-        v1 = np.zeros((3, 3))
-        weights = np.ones(_MAX_JUMPS + 1)
+        weights[0] = 1.0
         if a0 > 0.0 and not gaussian_jumps:
+            # Jump mixture: v1 = the covariance one jump since the last update adds.
             n_comp = _MAX_JUMPS + 1
-            v1 = vacc / a0  # the covariance one jump adds
             total = 0.0
             term = math.exp(-a0)
-            for j in range(_MAX_JUMPS + 1):
+            for j in range(n_comp):
                 weights[j] = term
                 total += term
                 term = term * a0 / (j + 1)
-            for j in range(_MAX_JUMPS + 1):
+            for j in range(n_comp):
                 weights[j] /= total
+            for a in range(3):
+                for b in range(3):
+                    v1[a, b] = vacc[a, b] / a0
             a0 = 0.0
             vacc[:, :] = 0.0
-        new_mean = np.zeros(3)
-        new_cov = np.zeros((3, 3))
-        means = np.zeros((n_comp, 3))
-        covs = np.zeros((n_comp, 3, 3))
-        logs = np.zeros(n_comp)
+        top = -math.inf
         for j in range(n_comp):
-            prior = cov + j * v1
-            s_mat = h @ prior @ h.T + r
-            chol = np.linalg.cholesky(s_mat)
-            sol = np.linalg.solve(chol, nu)
-            logdet = 0.0
-            for a in range(dim):
-                logdet += 2.0 * math.log(chol[a, a])
-            logs[j] = math.log(weights[j]) - 0.5 * (
-                dim * math.log(2.0 * math.pi) + logdet + sol @ sol
+            for a in range(3):
+                for b in range(3):
+                    prior[a, b] = cov[a, b] + j * v1[a, b]
+            logs[j] = math.log(weights[j]) + _gauss_update(
+                prior, mean, h, nu, rdiag, dim, work, sol, s_nu, means[j], covs[j]
             )
             if j == 0:
                 for a in range(dim):
                     whitened[3 * k + rows[a]] = sol[a]
-            gain = prior @ h.T @ np.linalg.inv(s_mat)
-            means[j] = mean + gain @ nu
-            covs[j] = (np.eye(3) - gain @ h) @ prior
-        top = logs.max()
+            top = max(top, logs[j])
         total = 0.0
         for j in range(n_comp):
-            total += float(math.exp(logs[j] - top))
+            total += math.exp(logs[j] - top)
         loglik += top + math.log(total)
+        for a in range(3):
+            mean[a] = 0.0
+            for b in range(3):
+                cov[a, b] = 0.0
         for j in range(n_comp):
             weight = math.exp(logs[j] - top) / total
-            new_mean += weight * means[j]
+            for a in range(3):
+                mean[a] += weight * means[j, a]
         for j in range(n_comp):
             weight = math.exp(logs[j] - top) / total
-            d = means[j] - new_mean
-            new_cov += weight * (covs[j] + np.outer(d, d))
-        mean = new_mean
-        cov = 0.5 * (new_cov + new_cov.T)
+            for a in range(3):
+                da = means[j, a] - mean[a]
+                for b in range(3):
+                    cov[a, b] += weight * (covs[j, a, b] + da * (means[j, b] - mean[b]))
+        for a in range(3):
+            for b in range(a + 1, 3):
+                sym = 0.5 * (cov[a, b] + cov[b, a])
+                cov[a, b] = sym
+                cov[b, a] = sym
         count += dim
     return loglik, whitened, count

@@ -36,7 +36,9 @@ a :class:`Diagnosis`:
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,6 +107,7 @@ class DiagnoseConfig:
         tie_nats: candidates whose held-out log-likelihood gains differ by less than this
             [nats] are tied (2·3 = 6 on the deviance scale: below "strong" evidence in Kass &
             Raftery 1995, §3.2).
+        jobs: worker processes fitting candidates side by side (results do not depend on it).
     """
 
     holdout: float = 0.3
@@ -116,6 +119,7 @@ class DiagnoseConfig:
     candidates: tuple[str, ...] | None = None
     initial_sensor: tuple[float, float] = (0.002, 0.005)
     tie_nats: float = 3.0
+    jobs: int = 1
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:
@@ -323,6 +327,18 @@ def _bootstrap(
     return [float(low), float(high)]
 
 
+def _fit_and_score(
+    job: tuple[Dataset, RobotSpec, SensorNoise, str, str | None, Sequence[Sequence[int]]],
+) -> CandidateFit:
+    """Fit one candidate and cross-validate it (a unit of work for a worker process)."""
+    data, spec, sensor, name, nuisance_name, folds = job
+    effect = EFFECTS[name]
+    nuisance = EFFECTS[nuisance_name] if nuisance_name else None
+    fit = fit_candidate(data, spec, sensor, effect, nuisance)
+    fit.cv_loglik = cross_validate(data, fit, effect, folds, nuisance)
+    return fit
+
+
 def _score_candidates(
     data: Dataset,
     effects: Sequence[Effect],
@@ -342,12 +358,20 @@ def _score_candidates(
         "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
     )
     base_cv = cross_validate(data, base, None, folds)
+    jobs = [
+        (data, spec, sensor, e.name, nuisance.name if nuisance else None, folds) for e in effects
+    ]
     fits: list[CandidateFit] = []
-    for k, effect in enumerate(effects):
-        report(f"round {number}: {effect.name}", k / len(effects))
-        fit = fit_candidate(data, spec, sensor, effect, nuisance)
-        fit.cv_loglik = cross_validate(data, fit, effect, folds, nuisance)
-        fits.append(fit)
+    if cfg.jobs > 1 and len(effects) > 1 and "fork" in mp.get_all_start_methods():
+        # Forked workers share the registry (user effects included) and the compiled kernels.
+        with ProcessPoolExecutor(cfg.jobs, mp_context=mp.get_context("fork")) as pool:
+            for k, fit in enumerate(pool.map(_fit_and_score, jobs)):
+                report(f"round {number}: {effects[k].name}", (k + 1) / len(effects))
+                fits.append(fit)
+    else:
+        for k, job in enumerate(jobs):
+            report(f"round {number}: {effects[k].name}", k / len(effects))
+            fits.append(_fit_and_score(job))
     improvements = np.array([f.cv_loglik - base_cv for f in fits])
     t, p_flip = max_t_test(improvements, rng)
     candidates = []
