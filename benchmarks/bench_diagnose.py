@@ -1,7 +1,7 @@
 """The discrepancy workflow on hidden effects: a confusion matrix, false alarms, and its speed.
 
     python benchmarks/bench_diagnose.py [--trials 10] [--protocol rich|umbmark] [--jobs 2]
-                                        [--speed] [--json] [--out FILE.md]
+                                        [--classes none ...] [--speed] [--json] [--out FILE.md]
 
 Accuracy: for every effect of the catalogue and for "none", ``--trials`` blind trials
 (:func:`odomgym.diagnose.generate.hidden_effect_trial`: a random magnitude of 3–10 × the effect's
@@ -37,9 +37,20 @@ def _trial(job: tuple[str | None, str, int]) -> dict[str, Any]:
     return hidden_effect_trial(job[0], job[1], job[2])  # type: ignore[arg-type]
 
 
-def accuracy(trials: int, protocol: str, jobs: int) -> dict[str, Any]:
+def accuracy(
+    trials: int, protocol: str, jobs: int, only: list[str] | None = None
+) -> dict[str, Any]:
     classes: list[str | None] = [*EFFECTS, None]
-    work = [(name, protocol, 1000 * k + i) for k, name in enumerate(classes) for i in range(trials)]
+    if only:
+        classes = [c for c in classes if (c or "none") in only]
+    # Seeds depend on the class's place in the whole catalogue, so a --classes subset repeats
+    # exactly the trials of the full run.
+    everything: list[str | None] = [*EFFECTS, None]
+    work = [
+        (name, protocol, 1000 * everything.index(name) + i)
+        for name in classes
+        for i in range(trials)
+    ]
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         rows = list(pool.map(_trial, work))
@@ -121,9 +132,22 @@ def markdown(result: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trials", type=int, default=10)
-    parser.add_argument("--protocol", choices=["rich", "umbmark"], default="rich")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--trials", type=int, default=10, help="blind trials per row (default 10)")
+    parser.add_argument(
+        "--protocol",
+        choices=["rich", "umbmark"],
+        default="rich",
+        help="characterisation protocol, or UMBmark end points only (default rich)",
+    )
+    parser.add_argument(
+        "--classes",
+        nargs="+",
+        choices=[*EFFECTS, "none"],
+        help="only these rows (hidden effects, or 'none' for false alarms); default all",
+    )
+    parser.add_argument(
+        "--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: cores)"
+    )
     parser.add_argument("--speed", action="store_true", help="only the 40-run speed figure")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--out", help="also write the Markdown table here")
@@ -140,7 +164,7 @@ def main() -> None:
             )
         )
         return
-    result = accuracy(args.trials, args.protocol, args.jobs)
+    result = accuracy(args.trials, args.protocol, args.jobs, args.classes)
     text = markdown(result)
     if args.out:
         Path(args.out).write_text(text + "\n", encoding="utf-8")

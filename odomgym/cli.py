@@ -664,7 +664,9 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--out", help="output folder (default: <DATA name>-diagnose)")
     diag.add_argument("--holdout", type=_fraction, default=0.3, help="share of runs held out (0.3)")
     diag.add_argument("--seed", type=_seed, default=0)
-    diag.add_argument("--max-rounds", type=_count, default=3, help="most effects added (3)")
+    diag.add_argument(
+        "--max-rounds", type=_count, default=8, help="most rounds of adding an effect (8)"
+    )
     diag.add_argument("--candidates", nargs="+", help="effects to consider (default: all)")
     diag.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
     diag.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")

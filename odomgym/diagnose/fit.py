@@ -102,17 +102,21 @@ def evaluate(
 
 def _noise_vector(
     spec: RobotSpec, sensor: SensorNoise, effects: Sequence[Effect]
-) -> tuple[FloatArray, FloatArray, Callable[[FloatArray], tuple[RobotSpec, SensorNoise]]]:
+) -> tuple[
+    FloatArray, FloatArray, FloatArray, Callable[[FloatArray], tuple[RobotSpec, SensorNoise]]
+]:
     """Log-parametrisation of the sensor σ and the noise effects' parameters (floors at a tenth
-    of their scale, so 'absent' is approached continuously); returns start, lower bounds and
-    the map back to (spec, sensor)."""
+    of their scale, so 'absent' is approached continuously; ceilings at the parameters' own
+    upper limits); returns start, lower and upper bounds and the map back to (spec, sensor)."""
     start = [math.log(max(sensor.position, _MIN_SIGMA)), math.log(max(sensor.heading, _MIN_SIGMA))]
     low = [math.log(_MIN_SIGMA)] * 2
+    high = [0.0, 0.0]  # σ < 1 m, 1 rad
     for effect in effects:
         current = effect.read(spec)
         for p in effect.parameters:
             start.append(math.log(max(current[p.name], p.scale)))
             low.append(math.log(0.1 * p.scale))
+            high.append(math.log(p.high))
 
     def build(x: FloatArray) -> tuple[RobotSpec, SensorNoise]:
         noise = SensorNoise(
@@ -128,7 +132,7 @@ def _noise_vector(
             out = effect.write(out, values)
         return out, noise
 
-    return np.array(start), np.array(low), build
+    return np.array(start), np.array(low), np.array(high), build
 
 
 def _moves_mean(effects: Sequence[Effect]) -> bool:
@@ -146,13 +150,12 @@ def fit_noise(
     the sensor noise and the total log-likelihood."""
     chosen = [e for e in effects if e is not None]
     reps = None if _moves_mean(chosen) else [replay_run(r, spec) for r in data.runs]
-    x0, low, build = _noise_vector(spec, sensor, chosen)
+    x0, low, high, build = _noise_vector(spec, sensor, chosen)
 
     def objective(x: FloatArray) -> float:
         s, n = build(x)
         return -float(evaluate(data, s, n, whitened=False, replays=reps).loglik.sum())
 
-    high = np.full(len(x0), 0.0)  # σ < 1 m, 1 rad; noise parameters < e^0 = 1
     result = minimize(
         objective,
         np.clip(x0, low, high),
@@ -170,7 +173,7 @@ def noise_curvature(
     """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
     log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
     reps = None if _moves_mean(effects) else [replay_run(r, spec) for r in data.runs]
-    x0, _, build = _noise_vector(spec, sensor, effects)
+    x0, _, _, build = _noise_vector(spec, sensor, effects)
     step = 0.05
 
     def per_run(x: FloatArray) -> FloatArray:
@@ -349,7 +352,7 @@ def cross_validate(
         # limited to a factor e^±1; the held-out runs are then evaluated exactly there.
         chosen = [effect] + ([nuisance] if nuisance is not None and nuisance is not effect else [])
         _, grad, hess = noise_curvature(data, fit.spec, fit.sensor, chosen)
-        x0, _, build = _noise_vector(fit.spec, fit.sensor, chosen)
+        x0, _, _, build = _noise_vector(fit.spec, fit.sensor, chosen)
         for fold in folds:
             held = set(fold)
             train = [j for j in range(len(data)) if j not in held]

@@ -108,10 +108,28 @@ def run_likelihood(
     gaussian_jumps: bool = False,
 ) -> RunLikelihood:
     """Filter ``run``'s disagreement with ``replay`` under ``spec``'s noise and ``sensor``."""
-    variance, jumps, size = process_noise(spec, replay.travel)
     residual = np.where(mask, run.true_pose - replay.tracked, 0.0)
     residual[:, 2] = np.mod(residual[:, 2] + math.pi, 2.0 * math.pi) - math.pi
     loglik, whitened, count = _filter(
+        *_model_arrays(replay, spec, sensor),
+        residual,
+        mask,
+        gaussian_jumps,
+        True,
+        np.zeros((0, 2)),
+    )
+    return RunLikelihood(float(loglik), whitened, int(count))
+
+
+def _model_arrays(
+    replay: Replay, spec: RobotSpec, sensor: SensorNoise
+) -> tuple[
+    FloatArray, FloatArray, FloatArray, FloatArray, float, FloatArray, FloatArray, float, FloatArray
+]:
+    """The replay's motion, ``spec``'s process noise and ``sensor``'s sigmas in the order the
+    compiled ``_filter`` takes them (it accepts arrays and scalars only)."""
+    variance, jumps, size = process_noise(spec, replay.travel)
+    return (
         replay.pose,
         replay.tracked,
         replay.ds,
@@ -120,14 +138,8 @@ def run_likelihood(
         variance,
         jumps,
         size,
-        residual,
-        mask,
         np.array([sensor.position, sensor.position, sensor.heading]),
-        gaussian_jumps,
-        True,
-        np.zeros((0, 2)),
     )
-    return RunLikelihood(float(loglik), whitened, int(count))
 
 
 def expected_square_gap(
@@ -137,20 +149,11 @@ def expected_square_gap(
     sample (T, 2) (NaN where not in ``mask``) if the model were right: what noise alone leaves
     (the sensor, wheel noise, heading jumps as their variance), propagated open loop from the
     start."""
-    variance, jumps, size = process_noise(spec, replay.travel)
     expected = np.full((len(run.time), 2), np.nan)
     _filter(
-        replay.pose,
-        replay.tracked,
-        replay.ds,
-        replay.dtheta,
-        replay.wheelbase,
-        variance,
-        jumps,
-        size,
+        *_model_arrays(replay, spec, sensor),
         np.zeros((len(run.time), 3)),
         mask,
-        np.array([sensor.position, sensor.position, sensor.heading]),
         True,
         False,
         expected,
@@ -275,9 +278,9 @@ def _filter(
     variance: FloatArray,
     jumps: FloatArray,
     size: float,
+    sigma: FloatArray,
     residual: FloatArray,
     mask: NDArray[np.bool_],
-    sigma: FloatArray,
     gaussian_jumps: bool,
     update: bool,
     expected: FloatArray,

@@ -55,10 +55,29 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
     if d.named_effects:
         lines += ["| effect (in the order added) | parameter | value | standard error |"]
         lines += ["|---|---|---|---|"]
+        bounded: list[str] = []
         for name in d.named_effects:
+            limits = {p.name: (p.low, p.high) for p in EFFECTS[name].parameters}
             for key, entry in d.parameters[name].items():
-                lines.append(f"| {name} | {key} | {entry['value']:.6g} | {entry['stderr']:.2g} |")
+                value = entry["value"]
+                edge = value in limits.get(key, ())
+                if edge:
+                    bounded.append(f"{name}.{key}")
+                lines.append(
+                    f"| {name} | {key} | {value:.6g}{' (bound)' if edge else ''} | "
+                    f"{entry['stderr']:.2g} |"
+                )
         lines.append("")
+        if bounded:
+            lines += [
+                f"At the edge of its allowed range: {', '.join(bounded)}. The effect stands in "
+                "for something the catalogue describes only roughly: read its name as the "
+                "closest mechanism, not a measurement.",
+                "",
+            ]
+        for name in d.named_effects:
+            if EFFECTS[name].confounded:
+                lines += [f"Also consistent with `{name}`: {EFFECTS[name].confounded}.", ""]
     last = d.rounds[-1]
     if last.verdict == "ambiguous" and last.separating:
         sep = last.separating

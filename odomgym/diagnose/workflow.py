@@ -113,7 +113,7 @@ class DiagnoseConfig:
     holdout: float = 0.3
     seed: int = 0
     alpha: float = 0.05
-    max_rounds: int = 3
+    max_rounds: int = 8
     checkpoint_interval: float = 0.25
     folds: int = 10
     candidates: tuple[str, ...] | None = None
@@ -503,7 +503,10 @@ def diagnose(
             )
             break
         winner = fits[best]
-        named.append(winner.name)
+        # An effect already in the model may win again (refitted once others joined): its
+        # parameters are updated, it is listed once, where it was first added.
+        if winner.name not in named:
+            named.append(winner.name)
         parameters[winner.name] = {
             key: {"value": value, "stderr": winner.stderr.get(key, math.nan)}
             for key, value in winner.values.items()

@@ -81,6 +81,10 @@ class Effect:
     summary: ClassVar[str] = ""
     reveals: ClassVar[str] = ""
     """Which experiments make it visible (for reports and the docs)."""
+    confounded: ClassVar[str] = ""
+    """What else, outside the catalogue, produces exactly the same logs (the report repeats it
+    whenever the effect is named, so a reader does not take the name for more than the data
+    can say)."""
 
     # ------------------------------------------------------------------ values
     @classmethod

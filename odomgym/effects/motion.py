@@ -45,6 +45,12 @@ class WheelToe(Effect):
         "one-way straight runs with ground truth along the track (cancels on closed loops and "
         "on out-and-back runs)"
     )
+    confounded = (
+        "a yaw misalignment of the ground-truth body frame (e.g. a motion-capture rigid body "
+        "defined a little off the robot's axis) puts the same constant angle between the "
+        "measured heading and the direction of travel; pose logs cannot tell the two apart, "
+        "a check of the rigid-body alignment can"
+    )
 
     def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
         return _ToeHook(values[:, 0].copy())
