@@ -35,7 +35,15 @@ from odomgym.paths import Route
 from odomgym.robot import RobotSpec, load_robot
 from odomgym.trial import OBSERVATION_NAMES, Trial
 
-__all__ = ["RewardWeights", "RouteEnv", "action_space", "observation_space", "validate_actions"]
+__all__ = [
+    "FixedRoute",
+    "RewardWeights",
+    "RouteEnv",
+    "RouteEpisodes",
+    "action_space",
+    "observation_space",
+    "validate_actions",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -93,6 +101,67 @@ def resolve_specs(
     return robot_spec, floor_spec, cal
 
 
+@dataclass(frozen=True)
+class FixedRoute:
+    """The same route every episode, whatever the ``reset`` options."""
+
+    route: Route
+
+    def __call__(self, options: dict[str, Any]) -> Route:
+        del options
+        return self.route
+
+
+class RouteEpisodes:
+    """Reward, termination and ``info`` of route-following for every robot of a
+    :class:`~odomgym.trial.Trial`: the one place the single envs and the native vector env
+    compute them (arrays with a leading robot axis; a single env takes row 0).
+
+    Args:
+        weights: the reward weights (module docstring).
+        n: number of robots.
+    """
+
+    def __init__(self, weights: RewardWeights, n: int) -> None:
+        self.weights = weights
+        self.n = n
+        self._fraction = np.zeros(n)
+        self._start_time = np.zeros(n)
+        self._time_term = np.full(n, -weights.time)
+
+    def begin(self, trial: Trial, indices: NDArray[np.intp] | None = None) -> None:
+        """Start new episodes for ``indices`` (default: every robot)."""
+        chosen = slice(None) if indices is None else indices
+        self._fraction[chosen] = 0.0
+        self._start_time[chosen] = trial.world.time
+
+    def advance(self, trial: Trial) -> tuple[FloatArray, NDArray[np.bool_], dict[str, FloatArray]]:
+        """After a step: rewards (N,), terminated (N,) and the reward terms (each (N,))."""
+        fraction = trial.progress.state[:, 7]
+        terminated = trial.done.copy()
+        weights = self.weights
+        terms = {
+            "progress": weights.progress * (fraction - self._fraction),
+            "time": self._time_term.copy(),
+            "completion": weights.completion * terminated,
+        }
+        self._fraction = fraction.copy()
+        return terms["progress"] + terms["time"] + terms["completion"], terminated, terms
+
+    def info(self, trial: Trial) -> dict[str, Any]:
+        """The per-step ``info`` entries (each with a leading robot axis): poses, their error,
+        encoder counts, route segment and the time since each robot's episode began [s]."""
+        error = trial.pose_error()
+        return {
+            "odom_pose": trial.odom_pose.copy(),
+            "true_pose": trial.true_pose.copy(),
+            "pose_error": error,
+            "encoder_counts": trial.world.counts.copy(),
+            "segment": trial.progress.index.astype(np.int64),
+            "time": trial.world.time - self._start_time,
+        }
+
+
 class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
     """Base of the single-robot envs: a robot follows a route by its own odometry.
 
@@ -131,12 +200,14 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
         self.dt = float(dt)
+        # Frames are one control period apart: played back at 1/dt they run in real time.
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.dt}
         self.render_mode = render_mode
         self.weights = reward_weights or RewardWeights()
+        self._episodes = RouteEpisodes(self.weights, 1)
         self.observation_space = observation_space()
         self.action_space = action_space()
         self._trial: Trial | None = None
-        self._fraction = 0.0
         self._terminated = False
         self._renderer: Any = None
         self._history: list[tuple[float, float, float, float, float, float]] = []
@@ -162,7 +233,7 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
             rng=self.np_random,
         )
         self.route = route
-        self._fraction = 0.0
+        self._episodes.begin(self._trial)
         self._terminated = False
         self._covariance = np.zeros((3, 3))
         self._history = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
@@ -181,27 +252,17 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         if previous_pose is not None:
             self._propagate_covariance(trial, previous_pose)
         obs = trial.observation()[0]
-        fraction = float(obs[7])
-        terminated = bool(trial.progress.index[0] >= trial.progress.segment_count)
+        rewards, done, terms = self._episodes.advance(trial)
+        terminated = bool(done[0])
         self._terminated = terminated
-        terms = {
-            "progress": self.weights.progress * (fraction - self._fraction),
-            "time": -self.weights.time,
-            "completion": self.weights.completion if terminated else 0.0,
-        }
-        self._fraction = fraction
+        reward_terms = {name: float(value[0]) for name, value in terms.items()}
         if self.render_mode is not None:
             t, o = trial.true_pose[0], trial.odom_pose[0]
             self._history.append((t[0], t[1], t[2], o[0], o[1], o[2]))
             if self.render_mode == "human":
                 self.render()
-        return (
-            obs,
-            float(sum(terms.values())),
-            terminated,
-            False,
-            self._info(trial, terms, terminated),
-        )
+        info = self._info(trial, reward_terms, terminated)
+        return obs, float(rewards[0]), terminated, False, info
 
     def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
         """Chong & Kleeman (seed 004 Eq. 23): carry the odometry covariance through this step's
@@ -221,25 +282,16 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         self._covariance = estimate.cov
 
     def _info(self, trial: Trial, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
-        true_pose = trial.true_pose[0].copy()
-        odom_pose = trial.odom_pose[0].copy()
-        error = true_pose - odom_pose
-        error[2] = (error[2] + math.pi) % (2.0 * math.pi) - math.pi
-        info: dict[str, Any] = {
-            "odom_pose": odom_pose,
-            "true_pose": true_pose,
-            "pose_error": error,
-            "encoder_counts": trial.world.counts[0].copy(),
-            "segment": int(trial.progress.index[0]),
-            "time": trial.world.time,
-            "reward_terms": terms,
-        }
+        info: dict[str, Any] = {key: value[0] for key, value in self._episodes.info(trial).items()}
+        info["segment"] = int(info["segment"])
+        info["time"] = float(info["time"])
+        info["reward_terms"] = terms
         if self.covariance_k is not None:
             info["odom_covariance"] = self._covariance.copy()
         if terminated:
             # The robot started at the origin heading +x, so the world frame is the UMBmark
             # start frame: ε = true − odometry (seed 000 §6.1).
-            info["return_error"] = error.copy()
+            info["return_error"] = info["pose_error"].copy()
         return info
 
     def _require_trial(self) -> Trial:

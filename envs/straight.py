@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from odomgym.envs.base import RewardWeights, RouteEnv
@@ -10,7 +11,22 @@ from odomgym.odometry import Calibration
 from odomgym.paths import Route, straight_route
 from odomgym.robot import RobotSpec
 
-__all__ = ["StraightLineEnv"]
+__all__ = ["StraightLineEnv", "StraightRoute"]
+
+
+@dataclass(frozen=True)
+class StraightRoute:
+    """The episode's straight run from the ``reset`` options: ``distance`` [m] out, and back
+    if ``return_trip`` (or ``options["return_trip"]``); shared by the single and vector env."""
+
+    distance: float
+    return_trip: bool
+
+    def __post_init__(self) -> None:
+        straight_route(self.distance, self.return_trip)  # validate now
+
+    def __call__(self, options: dict[str, Any]) -> Route:
+        return straight_route(self.distance, bool(options.get("return_trip", self.return_trip)))
 
 
 class StraightLineEnv(RouteEnv):
@@ -70,9 +86,9 @@ class StraightLineEnv(RouteEnv):
             render_mode=render_mode,
             covariance_k=covariance_k,
         )
-        straight_route(distance, return_trip)  # validate now
+        self.route_rule = StraightRoute(float(distance), bool(return_trip))
         self.distance = float(distance)
         self.return_trip = bool(return_trip)
 
     def _route(self, options: dict[str, Any]) -> Route:
-        return straight_route(self.distance, bool(options.get("return_trip", self.return_trip)))
+        return self.route_rule(options)

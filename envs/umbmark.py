@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Literal
 
 from odomgym.envs.base import RewardWeights, RouteEnv
@@ -10,7 +11,22 @@ from odomgym.odometry import Calibration
 from odomgym.paths import Route, square_route
 from odomgym.robot import RobotSpec
 
-__all__ = ["UMBmarkSquareEnv"]
+__all__ = ["SquareRoute", "UMBmarkSquareEnv"]
+
+
+@dataclass(frozen=True)
+class SquareRoute:
+    """The episode's square from the ``reset`` options: ``side`` [m], and ``direction`` unless
+    ``options["direction"]`` names another (shared by the single and the vector env)."""
+
+    side: float
+    direction: Literal["cw", "ccw"]
+
+    def __post_init__(self) -> None:
+        square_route(self.side, self.direction)  # validate now, not at the first reset
+
+    def __call__(self, options: dict[str, Any]) -> Route:
+        return square_route(self.side, options.get("direction", self.direction))
 
 
 class UMBmarkSquareEnv(RouteEnv):
@@ -109,10 +125,9 @@ class UMBmarkSquareEnv(RouteEnv):
             render_mode=render_mode,
             covariance_k=covariance_k,
         )
-        square_route(side, direction)  # validate now, not at the first reset
+        self.route_rule = SquareRoute(float(side), direction)
         self.side = float(side)
         self.direction: Literal["cw", "ccw"] = direction
 
     def _route(self, options: dict[str, Any]) -> Route:
-        direction = options.get("direction", self.direction)
-        return square_route(self.side, direction)
+        return self.route_rule(options)

@@ -3,33 +3,51 @@
 ``gymnasium.make_vec("UMBmarkSquare-v0", num_envs=256, vectorization_mode="vector_entry_point")``
 returns an :class:`OdometryVectorEnv` whose sub-envs are the robots of one
 :class:`odomgym.trial.Trial`: one pymunk space, ``pymunk.batch`` state I/O and compiled
-per-robot kernels, instead of 256 Python env objects. Spaces, reward, ``info`` and episode ends
-are those of the single envs (``odomgym.envs.umbmark``, ``odomgym.envs.straight``); ``info``
-entries are arrays with a leading robot axis (``odom_covariance`` is not offered here: the
-closed-form propagation is per robot and would cost more than the physics). ``time`` is the
-simulated time since the vector env's reset. Autoreset follows Gymnasium's default
-``NEXT_STEP`` mode: the step after a sub-env ends resets it and ignores its action.
+per-robot kernels, instead of 256 Python env objects. Spaces, reward, termination and ``info``
+are computed by the same code as the single envs' (:class:`odomgym.envs.base.RouteEpisodes`),
+and ``info`` has the layout :class:`gymnasium.vector.SyncVectorEnv` gives: every entry an array
+with a leading sub-env axis and a boolean mask ``_key`` beside it (``reward_terms`` a dict of
+such arrays; ``return_error`` only where an episode ended). ``odom_covariance`` is not offered
+here (the closed-form propagation is per robot and would cost more than the physics).
+
+Seeding follows Gymnasium's ``VectorEnv.reset``: ``seed=s`` gives sub-env k the seed s + k, a
+list gives each sub-env its own, and sub-env k then draws exactly what a single env reset with
+its seed draws. ``options`` (e.g. ``{"direction": "ccw"}``) reach every sub-env, and
+``options["reset_mask"]`` resets only some. Autoreset follows Gymnasium's ``NEXT_STEP`` mode:
+the step after a sub-env ends resets it (from its own random stream) and ignores its action.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import numpy as np
+from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
 
-from odomgym.envs.base import RewardWeights, action_space, observation_space, resolve_specs
+from odomgym.envs.base import (
+    FixedRoute,
+    RewardWeights,
+    RouteEpisodes,
+    action_space,
+    observation_space,
+    resolve_specs,
+    validate_actions,
+)
+from odomgym.envs.straight import StraightRoute
+from odomgym.envs.umbmark import SquareRoute
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
-from odomgym.paths import Route, square_route, straight_route
+from odomgym.paths import Route
 from odomgym.robot import RobotSpec
 from odomgym.trial import Trial
 
 __all__ = ["OdometryVectorEnv", "make_square_vector_env", "make_straight_vector_env"]
 
 FloatArray = NDArray[np.float64]
+RouteFactory = Callable[[dict[str, Any]], Route]
 
 
 class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray[Any]]):
@@ -37,9 +55,10 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
 
     Args:
         num_envs: number of robots.
+        route: the route of an episode from the ``reset`` options (the single env's rule), or
+            one fixed :class:`~odomgym.paths.Route` for all.
         robot: one spec for all, or a sequence of ``num_envs`` specs (a robot population).
         floor, calibration, dt, reward_weights: as the single envs.
-        routes: one route for all, or one per robot.
         max_episode_steps: truncation limit per sub-env.
     """
 
@@ -49,7 +68,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
     def __init__(
         self,
         num_envs: int,
-        routes: Route | Sequence[Route],
+        route: RouteFactory | Route,
         robot: RobotSpec | str | Sequence[RobotSpec] = "labmate",
         floor: FloorSpec | str = "smooth",
         calibration: Calibration | str | None = None,
@@ -74,9 +93,12 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             if len(self.robots) != num_envs:
                 raise ValueError(f"need {num_envs} robot specs, got {len(self.robots)}")
             _, self.floor, self.calibration = resolve_specs(self.robots[0], floor, calibration)
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
         self.num_envs = num_envs
-        self.routes = [routes] * num_envs if isinstance(routes, Route) else list(routes)
+        self._route: RouteFactory = FixedRoute(route) if isinstance(route, Route) else route
         self.dt = float(dt)
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.dt}
         self.weights = reward_weights or RewardWeights()
         self.max_episode_steps = int(max_episode_steps)
         self.single_observation_space = observation_space()
@@ -85,26 +107,78 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         self.action_space = action_space((num_envs, 2))
         self.render_mode = None
         self._trial: Trial | None = None
+        self._episodes = RouteEpisodes(self.weights, num_envs)
+        self._rngs: list[np.random.Generator] = []
+        self._everyone = np.ones(num_envs, dtype=bool)
+
+    def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)):
+            return [int(seed) + k for k in range(self.num_envs)]
+        seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(
+                f"seed: a list of seeds needs one per sub-env ({self.num_envs}), got {len(seeds)}"
+            )
+        return seeds
 
     def reset(
-        self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
+        self,
+        *,
+        seed: int | Sequence[int | None] | None = None,
+        options: dict[str, Any] | None = None,
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
-        if isinstance(seed, list):
-            seed = seed[0] if seed else None
-        super().reset(seed=seed)
-        self._trial = Trial(
-            self.robots,
-            self.floor,
-            self.routes,
-            calibration=self.calibration,
-            dt=self.dt,
-            rng=self.np_random,
-        )
-        self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._fraction = np.zeros(self.num_envs)
-        self._autoreset = np.zeros(self.num_envs, dtype=bool)
-        obs = self._trial.observation()
-        return obs, self._info(self._trial, np.zeros(self.num_envs, dtype=bool))
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        seeds = self._seeds(seed)
+        if mask is None or self._trial is None:
+            chosen = np.arange(self.num_envs)
+        else:
+            mask = np.asarray(mask)
+            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
+                raise ValueError(
+                    f"options['reset_mask'] must be a bool array of shape ({self.num_envs},) "
+                    "with at least one True"
+                )
+            chosen = np.flatnonzero(mask)
+        if not self._rngs:
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        else:
+            for k in chosen:
+                if seeds[k] is not None:
+                    self._rngs[k] = seeding.np_random(seeds[k])[0]
+        route = self._route(options)
+        if self._trial is None or len(chosen) == self.num_envs:
+            # A fresh World, as a single env builds one per episode; sub-env k's noise comes
+            # from its own generator exactly as a single env's World takes it (one child).
+            self._trial = Trial(
+                self.robots,
+                self.floor,
+                route,
+                calibration=self.calibration,
+                dt=self.dt,
+                rng=[rng.spawn(1)[0] for rng in self._rngs],
+            )
+            self._steps = np.zeros(self.num_envs, dtype=np.int64)
+            self._autoreset = np.zeros(self.num_envs, dtype=bool)
+            self._episodes.begin(self._trial)
+        else:
+            self._restart(chosen, [route] * len(chosen))
+        present = np.zeros(self.num_envs, dtype=bool)
+        present[chosen] = True
+        return self._trial.observation(), self._vector_info(present, None)
+
+    def _restart(self, indices: NDArray[np.intp], routes: Sequence[Route]) -> None:
+        """New episodes for sub-envs ``indices``: fresh noise streams from their generators,
+        then back at the start of ``routes``."""
+        trial = self._trial
+        assert trial is not None
+        trial.world.rebind_noise(indices, [self._rngs[k].spawn(1)[0] for k in indices])
+        trial.reset(indices=indices, routes=routes)
+        self._steps[indices] = 0
+        self._autoreset[indices] = False
+        self._episodes.begin(trial, indices)
 
     def step(
         self, actions: NDArray[np.float32]
@@ -114,53 +188,51 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         trial = self._trial
         if trial is None:
             raise RuntimeError("call reset() before step()")
-        array = np.asarray(actions, dtype=np.float64)
-        if array.shape != (self.num_envs, 2):
-            raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {array.shape}")
-        if not np.isfinite(array).all():
-            raise ValueError("actions must be finite")
-        array = np.clip(array, -1.0, 1.0)
-        resetting = self._autoreset
+        array = validate_actions(actions, (self.num_envs, 2))
+        resetting = self._autoreset.copy()
         if resetting.any():
             array[resetting] = 0.0
         trial.step(array)
+        rewards, done, terms = self._episodes.advance(trial)
         if resetting.any():
             idx = np.flatnonzero(resetting)
-            trial.reset(indices=idx)
-            self._steps[idx] = 0
-            self._fraction[idx] = 0.0
-        self._steps[~resetting] += 1  # the reset step is not a step of the new episode
-        obs = trial.observation()
-        fraction = trial.progress.state[:, 7]
-        terminated = trial.done & ~resetting
-        truncated = (self._steps >= self.max_episode_steps) & ~terminated & ~resetting
-        terms = {
-            "progress": self.weights.progress * (fraction - self._fraction),
-            "time": np.full(self.num_envs, -self.weights.time),
-            "completion": self.weights.completion * terminated.astype(float),
-        }
-        for values in terms.values():
-            values[resetting] = 0.0
-        rewards = terms["progress"] + terms["time"] + terms["completion"]
-        self._fraction = fraction.copy()
+            # As Gymnasium's autoreset: reset() without options, so the default route.
+            self._restart(idx, [self._route({})] * len(idx))
+            rewards[resetting] = 0.0
+            for values in terms.values():
+                values[resetting] = 0.0
+        running = ~resetting
+        self._steps[running] += 1  # the reset step is not a step of the new episode
+        terminated = done & running
+        truncated = (self._steps >= self.max_episode_steps) & ~terminated & running
         self._autoreset = terminated | truncated
-        info = self._info(trial, terminated)
-        info["reward_terms"] = terms
-        return obs, rewards, terminated, truncated, info
-
-    def _info(self, trial: Trial, terminated: NDArray[np.bool_]) -> dict[str, Any]:
-        error = trial.pose_error()
-        info: dict[str, Any] = {
-            "odom_pose": trial.odom_pose.copy(),
-            "true_pose": trial.true_pose.copy(),
-            "pose_error": error,
-            "encoder_counts": trial.world.counts.copy(),
-            "segment": trial.progress.index.copy(),
-            "time": np.full(self.num_envs, trial.world.time),
-        }
+        info = self._vector_info(self._everyone, terms, running)
         if terminated.any():
-            info["return_error"] = np.where(terminated[:, None], error, np.nan)
+            info["return_error"] = np.where(terminated[:, None], info["pose_error"], 0.0)
             info["_return_error"] = terminated.copy()
+        return trial.observation(), rewards, terminated, truncated, info
+
+    def _vector_info(
+        self,
+        present: NDArray[np.bool_],
+        terms: dict[str, FloatArray] | None,
+        rewarded: NDArray[np.bool_] | None = None,
+    ) -> dict[str, Any]:
+        """``info`` in :class:`gymnasium.vector.SyncVectorEnv`'s layout: ``present`` marks the
+        sub-envs that report (all after a step, the reset ones after a reset), ``rewarded``
+        those with reward terms (not the ones autoreset this step: a reset reports none)."""
+        assert self._trial is not None
+        info: dict[str, Any] = {}
+        for key, value in self._episodes.info(self._trial).items():
+            info[key] = np.where(present.reshape(-1, *[1] * (value.ndim - 1)), value, 0)
+            info[f"_{key}"] = present.copy()
+        reward_terms: dict[str, Any] = {}
+        if terms is not None and rewarded is not None and rewarded.any():
+            for key, value in terms.items():
+                reward_terms[key] = value
+                reward_terms[f"_{key}"] = rewarded.copy()
+        info["reward_terms"] = reward_terms
+        info["_reward_terms"] = present.copy()
         return info
 
 
@@ -173,7 +245,7 @@ def make_square_vector_env(
 ) -> OdometryVectorEnv:
     """Vector entry point of ``UMBmarkSquare-v0`` (``gymnasium.make_vec``)."""
     kwargs.pop("render_mode", None)
-    return OdometryVectorEnv(num_envs, square_route(side, direction), **kwargs)
+    return OdometryVectorEnv(num_envs, SquareRoute(side, direction), **kwargs)
 
 
 def make_straight_vector_env(
@@ -185,4 +257,4 @@ def make_straight_vector_env(
 ) -> OdometryVectorEnv:
     """Vector entry point of ``StraightLine-v0`` (``gymnasium.make_vec``)."""
     kwargs.pop("render_mode", None)
-    return OdometryVectorEnv(num_envs, straight_route(distance, return_trip), **kwargs)
+    return OdometryVectorEnv(num_envs, StraightRoute(distance, return_trip), **kwargs)

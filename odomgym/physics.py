@@ -25,7 +25,7 @@ Model, per robot (top-down, no gravity in the plane):
 * **Floor** — the ground body's velocity is the rim velocity corrected by the floor: over a
   cable the horizontal advance follows the rigid-wheel-over-cylinder geometry
   (:func:`odomgym.floor.cable_advance`), on a rough floor it carries white noise of variance
-  k²·|d| (seed 004 Eq. 4), and friction patches change μ.
+  k²·|d| (Chong & Kleeman 1997, Eq. 4), and friction patches change μ.
 * **Effects** — the robot spec's further effects (:mod:`odomgym.effects`: backlash, wheel toe,
   turn skid, bumps, wheel roughness, a tracked point offset) act through hooks at fixed stages of
   the step (transmission, contact velocities before and after the floor, the tracked point). The
@@ -74,7 +74,8 @@ class World:
         floor: the floor all robots share.
         dt: control period [s]: commands are held and encoders sampled once per ``dt``.
             Default 0.05 s, the 20 Hz odometry rate of the OptiOdom robot whose measured logs
-            ship in ``shared/data/optiodom-diff`` (the CLAPPER sampled at 40 ms, seed 002 §3.1).
+            ship in ``shared/data/optiodom-diff`` (the CLAPPER sampled at 40 ms, Borenstein 1995,
+            §3.1).
         substeps: physics steps per control period (each of ``dt/substeps`` seconds).
         iterations: Chipmunk solver iterations; the two wheel joints of one chassis are coupled
             and converge within a few iterations when no wheel slips.
@@ -199,6 +200,33 @@ class World:
             children = [stream.spawn(len(random_hooks)) for stream in streams]
             for k, hook in enumerate(random_hooks):
                 hook.bind_rng([robot_children[k] for robot_children in children])
+
+    def rebind_noise(
+        self, indices: Sequence[int] | NDArray[np.intp], streams: Sequence[np.random.Generator]
+    ) -> None:
+        """Give robots ``indices`` new noise streams, as if each had a World of its own built
+        with ``streams[k]``: a vector env's sub-env, reset with its own seed, draws what a
+        single env reset with that seed would (call before :meth:`reset` of those robots).
+
+        The roughness draws continue from the new stream at the shared block position (a
+        stream's draws do not depend on how they are chunked); every random effect hook gets
+        its children of the stream, in the order :meth:`_bind_noise` gives them.
+        """
+        random_hooks = [h for h in self._hooks if h.needs_rng]
+        if not (self._rough or random_hooks):
+            return
+        if len(streams) != len(indices):
+            raise ValueError("need one noise Generator per robot index")
+        start = self._noise_next
+        for i, stream in zip(indices, streams, strict=True):
+            i = int(i)
+            self._noise_streams[i] = stream
+            if random_hooks:
+                children = stream.spawn(len(random_hooks))
+                for hook, child in zip(random_hooks, children, strict=True):
+                    hook.rebind_rng(i, child)
+            if start < _NOISE_BLOCK:
+                self._noise_block[i, start:] = stream.standard_normal((_NOISE_BLOCK - start, 2))
 
     @property
     def rim_speed(self) -> FloatArray:
@@ -641,9 +669,9 @@ def _floor_kernel(
 ) -> None:
     """Contact points (N, 2, 2) [m] and rough-floor ground velocities, in place.
 
-    Roughness: each wheel's ground travel is its rim travel plus k·√|d|·ξ (seed 004 Eq. 4),
-    i.e. the ground velocity along the heading gains k·√(|v|·h)·ξ / h, with k = ``roughness``
-    (N, 2) of that wheel [m^½].
+    Roughness: each wheel's ground travel is its rim travel plus k·√|d|·ξ (Chong & Kleeman 1997,
+    Eq. 4), i.e. the ground velocity along the heading gains k·√(|v|·h)·ξ / h, with
+    k = ``roughness`` (N, 2) of that wheel [m^½].
     """
     for i in range(pose.shape[0]):
         cos_t = math.cos(pose[i, 2])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -66,7 +68,10 @@ def test_vector_env_truncates_every_episode_after_the_same_number_of_steps() -> 
     ends = []
     for step in range(1, 16):
         _, _, terminated, truncated, info = envs.step(np.zeros((1, 2), dtype=np.float32))
-        assert set(info["reward_terms"]) == {"progress", "time", "completion"}
+        terms = {"progress", "time", "completion"}
+        # As SyncVectorEnv: a step that only resets the sub-env reports no reward terms.
+        expected = set() if step in (6, 12) else terms | {f"_{t}" for t in terms}
+        assert set(info["reward_terms"]) == expected
         if truncated[0] or terminated[0]:
             ends.append(step)
     # 5 steps, then a reset step, then 5 more: truncation at steps 5, 11 and (next) 17.
@@ -76,3 +81,90 @@ def test_vector_env_truncates_every_episode_after_the_same_number_of_steps() -> 
 def test_vector_env_rejects_covariance_option() -> None:
     with pytest.raises(ValueError, match="covariance_k"):
         gym.make_vec("UMBmarkSquare-v0", num_envs=2, covariance_k=(0.001, 0.001))
+
+
+def _rollout(
+    envs: gym.vector.VectorEnv, robot: odomgym.RobotSpec, steps: int, **reset: Any
+) -> list:
+    driver = ReferenceDriver(robot)
+    obs, info = envs.reset(**reset)
+    out = [(obs, info)]
+    for _ in range(steps):
+        obs, *rest = envs.step(driver(obs).astype(np.float32))
+        out.append((obs, *rest))
+    return out
+
+
+def _assert_same(a: Any, b: Any, path: str = "") -> None:
+    """Equal structure, dtypes and values (physics to 1e-5: batch and per-body I/O round
+    differently in the last bits)."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), f"{path}: keys {sorted(a)} vs {sorted(b)}"
+        for key in a:
+            _assert_same(a[key], b[key], f"{path}.{key}")
+    elif isinstance(a, (tuple, list)):
+        assert len(a) == len(b)
+        for k, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_same(x, y, f"{path}[{k}]")
+    else:
+        x, y = np.asarray(a), np.asarray(b)
+        assert x.shape == y.shape and x.dtype == y.dtype, (
+            f"{path}: {x.dtype}{x.shape} vs {y.dtype}{y.shape}"
+        )
+        if x.dtype == np.bool_ or np.issubdtype(x.dtype, np.integer):
+            np.testing.assert_array_equal(x, y, err_msg=path)
+        else:
+            np.testing.assert_allclose(x, y, atol=1e-5, err_msg=path)
+
+
+def test_native_vector_env_gives_what_sync_vector_env_gives() -> None:
+    """Seeds per sub-env, reset options, autoreset, info keys, masks and dtypes: the native
+    vector env against Gymnasium's SyncVectorEnv over single envs, on a rough floor (so every
+    sub-env draws its own noise) with episodes that end at different steps."""
+    robot = odomgym.PRESETS["navbot"]
+    kwargs = {"robot": robot, "floor": "rough", "distance": 0.3, "return_trip": False}
+    native = gym.make_vec("StraightLine-v0", num_envs=3, **kwargs)
+    sync = gym.make_vec("StraightLine-v0", num_envs=3, vectorization_mode="sync", **kwargs)
+    reset = {"seed": [5, 11, 7], "options": {"return_trip": True}}
+    a = _rollout(native, robot, 400, **reset)
+    b = _rollout(sync, robot, 400, **reset)
+    ends = sum(int(np.sum(step[2])) for step in a[1:])
+    assert ends >= 3  # episodes ended (and were autoreset) during the rollout
+    _assert_same(a, b)
+
+
+def test_sub_env_k_equals_a_single_env_reset_with_seed_k() -> None:
+    robot = odomgym.PRESETS["navbot"]
+    kwargs = {"robot": robot, "floor": "rough", "side": 0.5}
+    vector = gym.make_vec("UMBmarkSquare-v0", num_envs=2, **kwargs)
+    obs_v, _ = vector.reset(seed=[1, 99], options={"direction": "ccw"})
+    singles = [gym.make("UMBmarkSquare-v0", **kwargs) for _ in range(2)]
+    obs_s = [
+        env.reset(seed=s, options={"direction": "ccw"})[0]
+        for env, s in zip(singles, [1, 99], strict=True)
+    ]
+    driver = ReferenceDriver(robot)
+    for _ in range(300):
+        actions = driver(obs_v).astype(np.float32)
+        obs_v, _, _, _, info = vector.step(actions)
+        for k, env in enumerate(singles):
+            obs_s[k], *_, info_s = env.step(actions[k])
+            np.testing.assert_allclose(info["true_pose"][k], info_s["true_pose"], atol=1e-6)
+    # Different seeds, different noise: the two sub-envs went different ways.
+    assert np.abs(info["true_pose"][0] - info["true_pose"][1]).max() > 1e-4
+    # And a list [1, 2] differs from [1, 99] in sub-env 1 only.
+    other = _rollout(
+        gym.make_vec("UMBmarkSquare-v0", num_envs=2, **kwargs), robot, 300, seed=[1, 2]
+    )
+    again = _rollout(
+        gym.make_vec("UMBmarkSquare-v0", num_envs=2, **kwargs), robot, 300, seed=[1, 99]
+    )
+    assert np.array_equal(other[-1][-1]["true_pose"][0], again[-1][-1]["true_pose"][0])
+    assert not np.array_equal(other[-1][-1]["true_pose"][1], again[-1][-1]["true_pose"][1])
+
+
+def test_render_fps_follows_the_control_period() -> None:
+    assert gym.make("UMBmarkSquare-v0", dt=0.1).metadata["render_fps"] == 10.0
+    vector = gym.make_vec("UMBmarkSquare-v0", num_envs=2, dt=0.025)
+    assert vector.metadata["render_fps"] == 40.0
+    assert vector.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP

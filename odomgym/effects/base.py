@@ -229,6 +229,11 @@ class WorldHook:
         """Receive one random stream per robot (only if ``needs_rng``)."""
         del streams
 
+    def rebind_rng(self, index: int, stream: np.random.Generator) -> None:
+        """Robot ``index`` gets a new stream (a vector env's sub-env reset with a seed); a
+        hook that draws at binding time draws again, as :meth:`bind_rng` would."""
+        del index, stream
+
     def reset(self, indices: NDArray[np.intp]) -> None:
         """Robots ``indices`` were put back at rest."""
         del indices

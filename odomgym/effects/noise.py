@@ -122,6 +122,11 @@ class _BumpHook(WorldHook):
             self._draw(i, 0)
             self._draw(i, 1)
 
+    def rebind_rng(self, index: int, stream: np.random.Generator) -> None:
+        self.streams[index] = stream
+        self._draw(index, 0)
+        self._draw(index, 1)
+
     def _draw(self, i: int, w: int) -> None:
         rate = self.rate[i]
         self.next[i, w] = self.streams[i].exponential(1.0 / rate) if rate > 0 else math.inf
