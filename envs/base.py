@@ -265,7 +265,7 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         return obs, float(rewards[0]), terminated, False, info
 
     def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
-        """Chong & Kleeman (seed 004 Eq. 23): carry the odometry covariance through this step's
+        """Chong & Kleeman 1997, Eq. 23: carry the odometry covariance through this step's
         wheel travels as one constant-curvature segment."""
         from odomgym.covariance import PoseEstimate, propagate_segment
 
@@ -290,7 +290,7 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
             info["odom_covariance"] = self._covariance.copy()
         if terminated:
             # The robot started at the origin heading +x, so the world frame is the UMBmark
-            # start frame: ε = true − odometry (seed 000 §6.1).
+            # start frame: ε = true − odometry (Borenstein & Feng 1994, §6.1).
             info["return_error"] = info["pose_error"].copy()
         return info
 

@@ -34,30 +34,54 @@ class StraightLineEnv(RouteEnv):
 
     The robot drives ``distance`` metres along +x by its own odometry and stops; with
     ``return_trip`` it then drives back to the start *backwards* without turning — the CLAPPER's
-    straight-line experiment (seed 002 §6.1: 18 m out and back, cables under the right wheels on
-    the return leg). Cable bumps and friction patches come from the floor spec, so a bump under
-    one wheel turns the robot by the geometric amount while the odometry notices nothing (seed
-    002 Table I).
+    straight-line experiment (Borenstein 1995, §6.1: 18 m out and back, cables under the right
+    wheels on the return leg). Cable bumps and friction patches come from the floor spec, so a
+    bump under one wheel turns the robot by the geometric amount while the odometry notices
+    nothing (Borenstein 1995, Table I).
 
-    ## Action Space, Observation Space, Rewards, Info
+    ## Action Space
 
-    As :class:`odomgym.envs.umbmark.UMBmarkSquareEnv` (``return_error`` at the end is the
-    true − odometry pose at the finish, in the start frame).
+    ``Box(-1, 1, (2,), float32)``: left and right wheel speed commands as fractions of the
+    robot's ``max_wheel_speed`` [m/s]; values outside [−1, 1] are clipped, NaN or ±inf raise
+    ``ValueError``.
+
+    ## Observation Space
+
+    ``Box((8,), float32)`` in the odometry frame: distance left on the current leg [m], lateral
+    offset from the leg's line (left +) [m], target heading − odometry heading [rad], left and
+    right encoder wheel speed / max wheel speed, 0 (no turns on this route), +1 on the way out
+    and −1 on the way back (driving backwards), share of the route completed.
+
+    ## Rewards
+
+    ``progress`` (share of the route completed this step, by odometry, × 1.0), ``time``
+    (−0.001 per step), ``completion`` (+1.0 when done); terms in ``info["reward_terms"]``.
 
     ## Starting State
 
-    At rest at the origin heading +x.
+    At rest at the origin heading +x; the odometry starts there too.
 
     ## Episode End
 
-    Terminated when the odometry says the last leg is done and the wheels stopped; truncated by
+    Terminated when the odometry says the last leg is done and both wheels stopped; truncated by
     ``max_episode_steps`` (4000 steps = 200 s by default).
+
+    ## Info
+
+    Every step: ``odom_pose``, ``true_pose`` (x, y [m], θ [rad]), ``pose_error`` (true −
+    odometry, θ wrapped), ``encoder_counts``, ``segment``, ``time`` [s since the episode
+    began], ``reward_terms``; at the end ``return_error``: true − odometry at the finish, in the
+    start frame [m, m, rad]. With ``covariance_k``, ``odom_covariance`` (Chong & Kleeman 1997,
+    Eqs. 23-28).
 
     ## Arguments
 
-    ``robot``, ``floor``, ``calibration``, ``dt``, ``reward_weights``, ``render_mode`` as
-    UMBmarkSquare, and ``covariance_k``; ``distance`` [m] (default 10.0); ``return_trip``
-    (default False; also a ``reset`` option).
+    ``robot`` (preset name, ``.toml`` path or :class:`~odomgym.robot.RobotSpec`; default
+    ``"labmate"``), ``floor`` (a floor preset name, a ``.toml`` path or
+    :class:`~odomgym.floor.FloorSpec`), ``calibration`` (a :class:`~odomgym.odometry.Calibration`
+    or its ``.toml`` path), ``distance`` [m] (default 10.0), ``return_trip`` (default False;
+    also a ``reset`` option ``{"return_trip": True}``), ``dt`` [s] (control period, default
+    0.05), ``reward_weights``, ``render_mode``, ``covariance_k`` (k_L, k_R [m^½] or None).
 
     ## Version History
 

@@ -32,7 +32,7 @@ class SquareRoute:
 class UMBmarkSquareEnv(RouteEnv):
     """## Description
 
-    A differential-drive robot drives the UMBmark square (Borenstein & Feng 1994, seed 000
+    A differential-drive robot drives the UMBmark square (Borenstein & Feng 1994,
     §3.2 and §6.3): four legs of ``side`` metres, a complete stop and a 90° turn in place at the
     end of each leg (the fourth turn restores the starting heading), clockwise or
     counter-clockwise. The robot steers by its *own odometry*; its true motion comes from a
@@ -82,11 +82,11 @@ class UMBmarkSquareEnv(RouteEnv):
     Every step: ``odom_pose``, ``true_pose`` (x, y [m], θ [rad], unwrapped), ``pose_error``
     (true − odometry, θ wrapped), ``encoder_counts`` (left, right), ``segment``, ``time`` [s],
     ``reward_terms``. At the end: ``return_error`` (ε_x, ε_y [m], ε_θ [rad]) in the UMBmark
-    convention (seed 000 §6.1): true − odometry in the start frame (origin at the start, +x the
-    initial heading; cw squares go toward −y). With ``covariance_k=(k_L, k_R)``, also
-    ``odom_covariance``: the 3×3 covariance [m², m·rad, rad²] the Chong & Kleeman model
-    (seed 004 Eqs. 23-28) predicts for the odometry pose, so a 95 % error ellipse can be drawn
-    next to the true error.
+    convention (Borenstein & Feng 1994, §6.1): true − odometry in the start frame (origin at
+    the start, +x the initial heading; cw squares go toward −y). With
+    ``covariance_k=(k_L, k_R)``, also ``odom_covariance``: the 3×3 covariance [m², m·rad, rad²]
+    the Chong & Kleeman model (Chong & Kleeman 1997, Eqs. 23-28) predicts for the odometry
+    pose, so a 95 % error ellipse can be drawn next to the true error.
 
     ## Arguments
 
