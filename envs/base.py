@@ -302,14 +302,17 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
     # ------------------------------------------------------------------ rendering
     def render(self) -> NDArray[np.uint8] | None:
         """Top-down view: floor bumps, the route, the true path (blue), the odometry path
-        (orange), the robot at its true pose and a ghost at its odometry pose."""
+        (orange), the robot at its true pose and a ghost at its odometry pose, with a legend
+        and a scale bar."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
             return None
         from odomgym.envs.render import TopDownRenderer
 
         if self._renderer is None:
-            self._renderer = TopDownRenderer(self.robot, self.floor, self.render_mode)
+            self._renderer = TopDownRenderer(
+                self.robot, self.floor, self.render_mode, self.metadata["render_fps"]
+            )
         return self._renderer.draw(self.route, self._history)  # type: ignore[no-any-return]
 
     def close(self) -> None:

@@ -36,10 +36,13 @@ PATCH = (200, 225, 240)
 class TopDownRenderer:
     """Draws the floor, the route, the true and odometry paths and the robot."""
 
-    def __init__(self, robot: RobotSpec, floor: FloorSpec, mode: str) -> None:
+    def __init__(self, robot: RobotSpec, floor: FloorSpec, mode: str, fps: float = 20.0) -> None:
         self.robot = robot
         self.floor = floor
         self.mode = mode
+        self.fps = fps
+        pygame.font.init()
+        self.font = pygame.font.Font(None, 18)
         if mode == "human":
             pygame.display.init()
             self.window: Any = pygame.display.set_mode((SIZE, SIZE))
@@ -97,14 +100,41 @@ class TopDownRenderer:
         last = history[-1] if history else (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._robot(surf, px, last[3], last[4], last[5], ODOM_PATH, 1)
         self._robot(surf, px, last[0], last[1], last[2], TRUE_PATH, 3)
+        self._legend(surf)
+        self._scale_bar(surf, scale)
         if self.mode == "human":
             assert self.window is not None
             self.window.blit(surf, (0, 0))
             pygame.event.pump()
             pygame.display.flip()
-            self.clock.tick(20)
+            self.clock.tick(self.fps)
             return None
         return np.transpose(np.array(pygame.surfarray.pixels3d(surf)), (1, 0, 2)).copy()
+
+    def _legend(self, surf: Any) -> None:
+        """Top-left key: which line is which."""
+        entries = [
+            (TRUE_PATH, "true path (simulation)"),
+            (ODOM_PATH, "odometry path"),
+            (ROUTE, "planned route"),
+        ]
+        for row, (colour, text) in enumerate(entries):
+            y = 12 + 18 * row
+            pygame.draw.line(surf, colour, (10, y), (34, y), 3)
+            surf.blit(self.font.render(text, True, (40, 40, 40)), (40, y - 7))
+
+    def _scale_bar(self, surf: Any, scale: float) -> None:
+        """Bottom-left bar of a round length (1, 2 or 5 × 10^k m) about a sixth of the view."""
+        target = SIZE / 6 / scale
+        power = 10.0 ** math.floor(math.log10(target))
+        length = max(m * power for m in (1.0, 2.0, 5.0) if m * power <= target)
+        pixels = round(length * scale)
+        y = SIZE - 20
+        pygame.draw.line(surf, (40, 40, 40), (10, y), (10 + pixels, y), 3)
+        for x in (10, 10 + pixels):
+            pygame.draw.line(surf, (40, 40, 40), (x, y - 5), (x, y + 5), 2)
+        label = f"{length:g} m" if length >= 1.0 else f"{length * 100:g} cm"
+        surf.blit(self.font.render(label, True, (40, 40, 40)), (14 + pixels, y - 8))
 
     def _robot(
         self, surf: Any, px: Any, x: float, y: float, theta: float, colour: Any, width: int
