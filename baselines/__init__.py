@@ -3,7 +3,7 @@
 ``CALIBRATORS`` maps each method's command-line name to its class (see
 :class:`odomgym.baselines.base.Calibrator`):
 
-* ``umbmark`` — Borenstein & Feng's UMBmark with the E_s phase of seed 001;
+* ``umbmark`` — UMBmark (Borenstein & Feng 1994) with the E_s phase of solderspot 2014;
 * ``jung_chung`` — Jung & Chung, from the return *heading* errors;
 * ``lee`` — Lee et al., UMBmark without the "E_d does not affect turns" assumption;
 * ``ivanjko`` — Ivanjko et al., straight runs and in-place spins, nonlinear least squares;

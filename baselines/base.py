@@ -105,8 +105,8 @@ class SquareCalibrator(Calibrator):
     """Base of methods that need only the bi-directional square experiment.
 
     Args:
-        side: square side L [m] (seed 000: 4 m).
-        runs_per_direction: squares per direction (seed 000: 5).
+        side: square side L [m] (Borenstein & Feng 1994: 4 m).
+        runs_per_direction: squares per direction (Borenstein & Feng 1994: 5).
     """
 
     def __init__(self, side: float = 4.0, runs_per_direction: int = 5) -> None:

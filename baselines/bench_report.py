@@ -7,7 +7,7 @@ Everything is written atomically into one output folder:
   time, failures; then the same split by the size of the wheelbase error |E_b − 1|;
 * ``summary.csv``, ``results.csv`` (one row per robot, method, floor), ``results.json``;
 * ``improvement.png`` (distributions per method and floor) and ``scatter_<method>.png``
-  (robot 0's return errors before/after, like seed 000 Fig. 6.5).
+  (robot 0's return errors before/after, like Borenstein & Feng 1994, Fig. 6.5).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
         f"E_b ∈ {list(config.population.e_b)}, E_s ∈ {list(config.population.e_s)}. "
         f"Validation: {config.validation_runs} cw + {config.validation_runs} ccw fresh 4×4 m "
         "squares per robot, true return errors. Improvement = E_max,syst before / after "
-        "(seed 000 Table III reports 10–22-fold for UMBmark on a LabMate).",
+        "(Borenstein & Feng 1994, Table III, reports 10–22-fold for UMBmark on a LabMate).",
         "",
     ]
     for floor in config.floors:
@@ -161,7 +161,13 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
         ax.boxplot(data, showfliers=True)
         ax.set_xticks(range(1, len(labels) + 1), labels, rotation=30)
         ax.set_yscale("log")
-        ax.axhspan(10, 22, color="tab:green", alpha=0.12, label="seed 000 Table III (10–22×)")
+        ax.axhspan(
+            10,
+            22,
+            color="tab:green",
+            alpha=0.12,
+            label="Borenstein & Feng 1994, Table III (10–22×)",
+        )
         ax.set_title(f"{floor} floor")
         ax.grid(True, axis="y", alpha=0.3)
     axes[0][0].set_ylabel("E_max,syst before / after")

@@ -4,17 +4,17 @@ Which calibration method should a user trust, with how many runs, on which floor
 samples a population of simulated robots with systematic errors drawn uniformly over
 :class:`Population`'s ranges, gives every calibrator the same experiment budget on the same robot
 and floor (same random streams), then validates each result on fresh UMBmark squares it has not
-seen (5 cw + 5 ccw, 4×4 m, true return errors; E_max,syst of seed 000 Eq. 3.3).
+seen (5 cw + 5 ccw, 4×4 m, true return errors; E_max,syst of Borenstein & Feng 1994, Eq. 3.3).
 
 Floors (:data:`BENCH_FLOORS`):
 
 * ``smooth`` — a smooth concrete lab floor: roughness k = 0.0004 m^½, which gives the LabMate
-  return-error scatter σ ≈ 25 mm that seed 000 §6.3 reports (a perfectly smooth floor would
-  make every method look 100× better than any real lab allows);
+  return-error scatter σ ≈ 25 mm that Borenstein & Feng 1994, §6.3, report (a perfectly smooth
+  floor would make every method look 100× better than any real lab allows);
 * ``rough`` — k = 0.002 m^½ (five times rougher);
 * ``bumpy`` — the concrete floor strewn with 10 mm cables (1.5 per m², 0.3 m long) and every run
   started at a random pose, so cables are met at random (≈ 0.29 crossings per metre per wheel,
-  about 5 per wheel on a 4×4 m square; seed 002 §6.1 laid 10 cables along 18 m).
+  about 5 per wheel on a 4×4 m square; Borenstein 1995, §6.1, laid 10 cables along 18 m).
 
 Randomness: robot i on floor f draws everything (its errors, sensor noise, start poses, floor
 roughness) from ``SeedSequence([seed, i, f, purpose])``, and every method sees the same streams
@@ -110,7 +110,8 @@ class Population:
 
 
 def _umbmark_budget(runs: int) -> dict[str, Any]:
-    # Seed 001's procedure when the budget allows (2 E_s phases of 3 straight runs + 5 + 5).
+    # The procedure of solderspot 2014 when the budget allows (2 E_s phases of 3 straight runs
+    # + 5 + 5).
     if runs >= 16:
         return {"scale_phases": 2, "straight_runs": 3, "runs_per_direction": (runs - 6) // 2}
     if runs >= 6:

@@ -2,9 +2,9 @@
 
 C. Jung, W. Chung, *Calibration of kinematic parameters for two wheel differential mobile
 robots by using experimental heading errors*, Int. J. Adv. Robot. Syst. 8(6):134–142, 2011,
-doi:10.5772/50906. Where UMBmark (seed 000 §6) infers the Type A and Type B angles from
-return *positions*, Jung & Chung read them from the return *heading* errors, which the
-first-order model (:func:`odomgym.baselines.umbmark.first_order_return_errors`) predicts as
+doi:10.5772/50906. Where UMBmark (Borenstein & Feng 1994, §6) infers the Type A and Type B
+angles from return *positions*, Jung & Chung read them from the return *heading* errors, which
+the first-order model (:func:`odomgym.baselines.umbmark.first_order_return_errors`) predicts as
 θ_cw = 4(α + β) and θ_ccw = 4(β − α) for errors true − odometry [rad]:
 
     α_b = (θ_cw − θ_ccw)/8,    β = (θ_cw + θ_ccw)/8,    α_d = π·b·β/(4L)
@@ -27,7 +27,7 @@ divides by n a second time (``wrapToPi(atan2(Σsin, Σcos)/n)``). Their α_b and
 and E_d − 1, come out about n times too small (3× on their six-run sessions). The parameter
 update is theirs too (:func:`odomgym.baselines.umbmark.optiodom_update`). The default
 (``conventions="jung_chung"``) uses the circular mean and composes the correction with the
-calibration in place (seed 001).
+calibration in place (solderspot 2014).
 """
 
 from __future__ import annotations

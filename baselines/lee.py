@@ -1,11 +1,11 @@
 """Lee et al.: UMBmark without the assumption that unequal wheels leave the 90° turns alone.
 
 K. Lee, C. Jung, W. Chung, *Accurate calibration of kinematic parameters for two wheel
-differential mobile robots*, J. Mech. Sci. Technol. 25(6):1603–1611, 2011. UMBmark (seed 000
-§6) attributes the whole Type A error α (every corner turned by 90° − α) to the wheelbase.
-Lee et al. note that unequal wheels also change an on-the-spot turn: if the diameter error sits
-in the right wheel (D_L as believed, D_R = E_d·D_L), each wheel's nominal quarter-turn arc
-π·b/4 makes the robot turn (1 + E_d)·π/4 instead of π/2, an *over*-turn of
+differential mobile robots*, J. Mech. Sci. Technol. 25(6):1603–1611, 2011. UMBmark (Borenstein &
+Feng 1994, §6) attributes the whole Type A error α (every corner turned by 90° − α) to the
+wheelbase. Lee et al. note that unequal wheels also change an on-the-spot turn: if the diameter
+error sits in the right wheel (D_L as believed, D_R = E_d·D_L), each wheel's nominal
+quarter-turn arc π·b/4 makes the robot turn (1 + E_d)·π/4 instead of π/2, an *over*-turn of
 
     α_d = (E_d − 1)·π/4 = π·b / (4·(R − b/2))        (E_d = (R + b/2)/(R − b/2))
 
@@ -17,19 +17,19 @@ per corner. With the centres of gravity x_cw, x_ccw, y_cw, y_ccw of the return e
     R̂_y = −4L²/(y_cw + y_ccw)             (= L/β_y,  β_y = (y_cw + y_ccw)/(−4L), Eq. 6.22b)
     α_y = (y_cw − y_ccw)/(−4L) + π·b/(4·(R̂_y − b/2))
 
-and, as UMBmark, E_d = (R̂ + b/2)/(R̂ − b/2) and E_b = (π/2)/(π/2 − α) (seed 000 Eqs. 6.24,
-6.29) from x and from y, averaged (footnote 2 of §6.3). b is the wheelbase the odometry used
-while driving [m], L the square side [m]; angles in radians.
+and, as UMBmark, E_d = (R̂ + b/2)/(R̂ − b/2) and E_b = (π/2)/(π/2 − α) (Borenstein & Feng
+1994, Eqs. 6.24, 6.29) from x and from y, averaged (footnote 2 of §6.3). b is the wheelbase the
+odometry used while driving [m], L the square side [m]; angles in radians.
 
 **Sign conventions, checked against the simulator.** odomgym's square starts at the origin
 heading +x, cw squares turn toward −y, and return errors are true − odometry in the start frame
-— the frame of seed 000 Eqs. 6.19–6.20, in which α > 0 means under-turning (E_b > 1) and β > 0
-means the legs curve left (E_d = D_R/D_L > 1, R̂ > 0). A larger right wheel over-turns every
-corner, cw and ccw alike, so the observed α is α_b − α_d and the wheelbase's share is
-α_b = α + α_d: the "+" of the formulas above. No sign had to change. Simulated on the LabMate
-with b_true = 1.02·b and only the right wheel 0.4 % larger (D_L nominal), Lee et al. recover
-E_b = 1.0208 where UMBmark's α gives 1.0187 — UMBmark's value is b relative to the *mean*
-diameter, 1.02/1.002.
+— the frame of Borenstein & Feng 1994, Eqs. 6.19–6.20, in which α > 0 means under-turning
+(E_b > 1) and β > 0 means the legs curve left (E_d = D_R/D_L > 1, R̂ > 0). A larger right
+wheel over-turns every corner, cw and ccw alike, so the observed α is α_b − α_d and the
+wheelbase's share is α_b = α + α_d: the "+" of the formulas above. No sign had to change.
+Simulated on the LabMate with b_true = 1.02·b and only the right wheel 0.4 % larger (D_L
+nominal), Lee et al. recover E_b = 1.0208 where UMBmark's α gives 1.0187 — UMBmark's value is b
+relative to the *mean* diameter, 1.02/1.002.
 
 **Which wheel carries E_d (``diameter_error``).** α_d ≠ 0 is a statement about the mean
 diameter. Wheels split as UMBmark's correction factors and
@@ -211,7 +211,7 @@ def lee_correction(e_d: float, e_b: float, diameter_error: DiameterError) -> Cal
 
     ``"right_wheel"``: left travel per count unchanged, right × E_d, b × E_b (so the mean
     diameter grows by (1 + E_d)/2). ``"split"``: UMBmark's c_L = 2/(E_d + 1), c_R = 2/(1/E_d
-    + 1), b × E_b (seed 000 Eqs. 6.28, 6.33–6.34).
+    + 1), b × E_b (Borenstein & Feng 1994, Eqs. 6.28, 6.33–6.34).
     """
     e_s = 0.5 * (1.0 + e_d) if diameter_error == "right_wheel" else 1.0
     return Calibration.from_errors(e_d, e_b, e_s)

@@ -1,14 +1,14 @@
 """UMBmark calibration of E_d and E_b from bi-directional square runs (Borenstein & Feng).
 
 J. Borenstein, L. Feng, *UMBmark — A Method for Measuring, Comparing, and Correcting
-Dead-reckoning Errors in Mobile Robots*, Univ. of Michigan TR UM-MEAM-94-22, 1994, §6 (seed 000),
-with the E_s phase and multiplicative iteration of seed 001.
+Dead-reckoning Errors in Mobile Robots*, Univ. of Michigan TR UM-MEAM-94-22, 1994, §6,
+with the E_s phase and multiplicative iteration of solderspot 2014.
 
 **Frame.** Return errors ε = true − odometry at the end of each square, in the *start frame*:
-origin at the first true pose, +x along the starting heading, +y to its left (seed 000 §6.1: the
-first leg runs along +x and a ccw square goes to +y). In that frame the first-order model of
-seed 000 Eqs. 6.3–6.20 (implemented by :func:`first_order_return_errors`) gives the centres of
-gravity
+origin at the first true pose, +x along the starting heading, +y to its left (Borenstein & Feng
+1994, §6.1: the first leg runs along +x and a ccw square goes to +y). In that frame the
+first-order model of Borenstein & Feng 1994, Eqs. 6.3–6.20 (implemented by
+:func:`first_order_return_errors`) gives the centres of gravity
 
     x_cw = −2L(α + β),   x_ccw = −2L(α − β)        (Eqs. 6.19, 6.20)
     y_cw = −2L(α + β),   y_ccw = +2Lα − 2Lβ        (Eqs. 6.6b, 6.10b, 6.14b, 6.18b)
@@ -73,7 +73,7 @@ EdWheelbase = Literal["nominal", "corrected"]
 
 # ------------------------------------------------------------------------ the first-order model
 def e_b_from_alpha(alpha: float) -> float:
-    """E_b = (π/2)/(π/2 − α), α [rad] — seed 000 Eq. 6.29 in radians."""
+    """E_b = (π/2)/(π/2 − α), α [rad] — Borenstein & Feng 1994, Eq. 6.29, in radians."""
     if not abs(alpha) < 0.5 * math.pi:
         raise ValueError(f"Type A error α = {alpha} rad is outside the model's range (|α| < π/2)")
     return 0.5 * math.pi / (0.5 * math.pi - alpha)
@@ -85,7 +85,7 @@ def alpha_from_e_b(e_b: float) -> float:
 
 
 def e_d_from_beta(beta: float, side: float, wheelbase: float) -> float:
-    """E_d = (R + b/2)/(R − b/2) with R = (L/2)/sin(β/2) — seed 000 Eqs. 6.23–6.24.
+    """E_d = (R + b/2)/(R − b/2) with R = (L/2)/sin(β/2) — Borenstein & Feng 1994, Eqs. 6.23–6.24.
 
     Written as (1 + k)/(1 − k) with k = b·sin(β/2)/L, which is the same and stays finite for
     β = 0 (R = ∞, E_d = 1). ``side`` L and ``wheelbase`` b in metres, β in radians.
@@ -110,9 +110,9 @@ def first_order_return_errors(
 ) -> tuple[FloatArray, FloatArray]:
     """Return errors (x, y [m], θ [rad]) of one cw and one ccw square, first-order model.
 
-    Superposes seed 000 Eqs. 6.3–6.18 (Type A: 6.6, 6.10; Type B: 6.14, 6.18) as in Eqs.
-    6.19–6.20, in the start frame. The heading errors follow from the same model: each of the
-    four corners turns α too little and each leg bends β to the left, so θ_cw = 4α + 4β and
+    Superposes Borenstein & Feng 1994, Eqs. 6.3–6.18 (Type A: 6.6, 6.10; Type B: 6.14, 6.18) as
+    in Eqs. 6.19–6.20, in the start frame. The heading errors follow from the same model: each of
+    the four corners turns α too little and each leg bends β to the left, so θ_cw = 4α + 4β and
     θ_ccw = −4α + 4β.
 
     Returns:
@@ -133,7 +133,7 @@ class UMBmarkEstimates:
         beta: Type B error β per leg [rad] (mean of the components used).
         radius: R = (L/2)/sin(β/2) of the mean β [m] (``inf`` for β = 0), Eq. 6.23.
         e_d: E_d = D_R/D_L relative to the odometry that drove (mean of E_d,x and E_d,y when
-            both are used, footnote 2 of seed 000 §6.3) [-].
+            both are used, footnote 2 of Borenstein & Feng 1994, §6.3) [-].
         e_b: E_b = b_actual/b relative to the odometry that drove (likewise averaged) [-].
         alpha_x, beta_x, alpha_y, beta_y: the per-component angles [rad] (``nan`` if unused).
     """
@@ -149,7 +149,7 @@ class UMBmarkEstimates:
     beta_y: float = math.nan
 
     def as_dict(self) -> dict[str, float]:
-        """Named as in seed 000 (``alpha``, ``beta``, ``R``, ``E_d``, ``E_b``, …)."""
+        """Named as in Borenstein & Feng 1994 (``alpha``, ``beta``, ``R``, ``E_d``, ``E_b``, …)."""
         out = {
             "alpha": self.alpha,
             "beta": self.beta,
@@ -173,7 +173,7 @@ def umbmark_estimates(
     use: Components = "xy",
     ed_wheelbase: EdWheelbase = "nominal",
 ) -> UMBmarkEstimates:
-    """α, β, R, E_d and E_b from cw and ccw return errors — seed 000 Eqs. 6.22–6.29.
+    """α, β, R, E_d and E_b from cw and ccw return errors — Borenstein & Feng 1994, Eqs. 6.22–6.29.
 
     Args:
         cw_errors, ccw_errors: return errors (n, ≥2) [m], start frame (see the module
@@ -266,31 +266,31 @@ def _return_errors(
 # mypy cannot follow the setuptools package-dir mapping odomgym.baselines → baselines/, so
 # to it Calibrator is Any; drop the ignore once that mapping is visible to mypy.
 class UMBmark(Calibrator):
-    """UMBmark (seed 000 §6) with the E_s phase and iteration of seed 001.
+    """UMBmark (Borenstein & Feng 1994, §6) with the E_s phase and iteration of solderspot 2014.
 
     Procedure (default ``conventions="umbmark"``):
 
-    1. **E_s phase** (seed 001), ``scale_phases`` times: drive ``straight_runs`` straight runs
-       of ``straight_distance`` [m]; E_s = mean(true distance / odometric distance) (start-to-end
-       displacements); the odometry's distance scale is multiplied by E_s. Skipped, with a note,
-       if the lab has no straight runs (it raises ``LookupError``).
+    1. **E_s phase** (solderspot 2014), ``scale_phases`` times: drive ``straight_runs`` straight
+       runs of ``straight_distance`` [m]; E_s = mean(true distance / odometric distance)
+       (start-to-end displacements); the odometry's distance scale is multiplied by E_s. Skipped,
+       with a note, if the lab has no straight runs (it raises ``LookupError``).
     2. **Squares**: ``runs_per_direction`` cw then as many ccw squares of side ``side`` [m];
        return errors in the start frame; E_d and E_b by :func:`umbmark_estimates`; the odometry
        is corrected by c_L, c_R (Eqs. 6.33–6.34) and b ← E_b·b (Eq. 6.28), multiplying any
-       correction already in place (seed 001).
-    3. **Second compensation** (optional, seed 000 §6.3): repeat the squares with the new
-       calibration; if E_max,syst > 3·SEM (:func:`odomgym.metrics.summarize_umbmark`), correct
-       again on top of the first correction.
+       correction already in place (solderspot 2014).
+    3. **Second compensation** (optional, Borenstein & Feng 1994, §6.3): repeat the squares with
+       the new calibration; if E_max,syst > 3·SEM (:func:`odomgym.metrics.summarize_umbmark`),
+       correct again on top of the first correction.
 
     Args:
-        side: square side L [m] (seed 000: 4 m).
-        runs_per_direction: squares per direction (seed 000: 5).
+        side: square side L [m] (Borenstein & Feng 1994: 4 m).
+        runs_per_direction: squares per direction (Borenstein & Feng 1994: 5).
         use: ``"xy"`` (default; footnote 2), ``"x"`` or ``"y"``; see :func:`umbmark_estimates`.
         conventions: ``"umbmark"`` or ``"optiodom"`` (see the module docstring); the latter
             defaults ``use`` to ``"x"`` and refuses an E_s phase or a second compensation.
-        scale_phases: E_s phases (default 2 as seed 001; 0 with optiodom conventions).
-        straight_runs: straight runs per E_s phase (seed 001: 3).
-        straight_distance: straight-run length [m] (seed 001: 2 m).
+        scale_phases: E_s phases (default 2 as solderspot 2014; 0 with optiodom conventions).
+        straight_runs: straight runs per E_s phase (solderspot 2014: 3).
+        straight_distance: straight-run length [m] (solderspot 2014: 2 m).
         second_compensation: whether to verify and, if the 3×SEM rule advises, correct again.
     """
 
@@ -401,7 +401,7 @@ class UMBmark(Calibrator):
         estimates: dict[str, float],
         notes: list[str],
     ) -> Calibration:
-        """Seed 001's E_s phases: E_s = mean(true / odometric straight-run distance)."""
+        """The E_s phases of solderspot 2014: E_s = mean(true / odometric straight-run distance)."""
         experiment = Experiment("straight", None, self.straight_runs, self.straight_distance)
         e_s_total, done = 1.0, 0
         for phase in range(1, self.scale_phases + 1):

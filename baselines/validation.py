@@ -2,8 +2,8 @@
 
 * :func:`calibrate_in_simulation` — a hidden true robot in a :class:`~odomgym.lab.SimLab`; the
   calibrator performs its experiments (through a sensor model), then fresh UMBmark squares are
-  driven with the uncalibrated and with the calibrated odometry, and E_max,syst (seed 000 Eq.
-  3.3) is computed from the *true* return errors.
+  driven with the uncalibrated and with the calibrated odometry, and E_max,syst (Borenstein &
+  Feng 1994, Eq. 3.3) is computed from the *true* return errors.
 * :func:`calibrate_on_session` — a recorded session of a real robot in a
   :class:`~odomgym.data.RecordedLab`; the result is judged by the OptiOdom evaluation measures
   (:mod:`odomgym.evaluation`) on the session's runs, or on other sessions' runs.
@@ -84,7 +84,7 @@ class SimulationReport:
 
     @property
     def improvement(self) -> float:
-        """E_max,syst before / after (seed 000 Table III's "improvement")."""
+        """E_max,syst before / after (the "improvement" of Borenstein & Feng 1994, Table III)."""
         return self.e_max_before / self.e_max_after if self.e_max_after > 0 else float("inf")
 
     def parameter_errors(self) -> dict[str, float]:

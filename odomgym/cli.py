@@ -283,9 +283,9 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     cls = CALIBRATORS[args.method]
     _check_plot_path(args.plot)
     if args.data:
-        from odomgym.data import read_session
+        from odomgym.data import read_session, resolve_data
 
-        session = read_session(args.data)
+        session = read_session(resolve_data(args.data, session=True))
         calibrator = make_calibrator(
             cls,
             side=session.side or None,
@@ -383,9 +383,10 @@ def _command_bench(args: argparse.Namespace) -> int:
 
 def _command_leaderboard(args: argparse.Namespace) -> int:
     from odomgym.baselines.leaderboard import format_leaderboard, run_leaderboard
+    from odomgym.data import resolve_data
 
     _check_methods(args.methods)
-    board = run_leaderboard(args.data, methods=args.methods)
+    board = run_leaderboard(resolve_data(args.data), methods=args.methods)
     text = format_leaderboard(board)
     if args.out:
         atomic_write_text(Path(args.out), text + "\n")
@@ -418,10 +419,11 @@ def _command_covariance(args: argparse.Namespace) -> int:
 
 
 def _command_fit_noise(args: argparse.Namespace) -> int:
+    from odomgym.data import resolve_data
     from odomgym.noise_report import fit_noise_report, format_noise_report
 
     _check_plot_path(args.plot)
-
+    data = tuple(resolve_data(folder) for folder in args.data or ())
     try:
         report = fit_noise_report(
             robot=args.robot,
@@ -429,7 +431,7 @@ def _command_fit_noise(args: argparse.Namespace) -> int:
             runs=args.runs,
             distance=args.distance,
             seed=args.seed,
-            data=tuple(args.data or ()),
+            data=data,
             pool=args.pool,
             interval=args.interval,
             plot=args.plot,
@@ -454,10 +456,11 @@ def _command_diagnose(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from odomgym.data.logs import read_log
+    from odomgym.data.samples import resolve_data
     from odomgym.diagnose.report import format_markdown, report_json, write_outputs
     from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
 
-    data = Path(args.data)
+    data = resolve_data(args.data, field="DATA")
     robot = load_robot(args.robot) if args.robot else None
     config = DiagnoseConfig(
         holdout=args.holdout,
@@ -542,7 +545,9 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--side", type=_positive, default=4.0, help="square side L [m]")
     calibrate.add_argument("--runs", type=_count, default=5, help="squares per direction")
     calibrate.add_argument(
-        "--data", help="a recorded OptiOdom session folder instead of simulation"
+        "--data",
+        help="a recorded OptiOdom session folder instead of simulation, or a shipped session "
+        "(optiodom:square/230620202042)",
     )
     calibrate.add_argument(
         "--conventions",
@@ -593,7 +598,11 @@ def build_parser() -> argparse.ArgumentParser:
         "leaderboard",
         help="real-data leaderboard: calibrate on one recorded session, evaluate on the others",
     )
-    board.add_argument("--data", required=True, help="folder of OptiOdom sessions")
+    board.add_argument(
+        "--data",
+        required=True,
+        help="folder of OptiOdom sessions, or optiodom: for the shipped ones",
+    )
     board.add_argument("--methods", nargs="+", help="calibrators (default: all)")
     board.add_argument("--out", help="also write the Markdown table here")
     board.add_argument("--json", action="store_true")
@@ -603,8 +612,8 @@ def build_parser() -> argparse.ArgumentParser:
         "covariance",
         help="Chong & Kleeman odometry covariance in closed form (and by Monte Carlo)",
         description="Mean, standard deviations and correlations of the end pose after wheel "
-        "travels L (left) and R (right) [m] with wheel noise k [m^0.5] (seed 004), laid out like "
-        "the paper's Tables 1-7.",
+        "travels L (left) and R (right) [m] with wheel noise k [m^0.5] (Chong & Kleeman 1997), "
+        "laid out like the paper's Tables 1-7.",
     )
     cov.add_argument("--left", type=_finite, required=True, help="left wheel travel L [m]")
     cov.add_argument("--right", type=_finite, required=True, help="right wheel travel R [m]")
@@ -627,7 +636,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     noise = commands.add_parser(
         "fit-noise",
-        help="estimate the wheel noise constants k_L, k_R from repeated runs (seed 004 §6.3)",
+        help="estimate the wheel noise constants k_L, k_R from repeated runs "
+        "(Chong & Kleeman 1997, §6.3)",
         description="Without --data: simulate N runs of D m forward and back on a rough floor of "
         "known k and fit it back. With --data: fit recorded OptiOdom sessions.",
     )
@@ -636,7 +646,11 @@ def build_parser() -> argparse.ArgumentParser:
     noise.add_argument("--runs", type=_count, default=60, help="simulated runs (60)")
     noise.add_argument("--distance", type=_positive, default=10.0, help="out-and-back length [m]")
     noise.add_argument("--seed", type=_seed, default=0)
-    noise.add_argument("--data", nargs="+", help="OptiOdom session folders (or their parents)")
+    noise.add_argument(
+        "--data",
+        nargs="+",
+        help="OptiOdom session folders (or their parents), or shipped data (optiodom:ivanjko)",
+    )
     noise.add_argument(
         "--pool",
         choices=["all", "path-type", "kind", "session"],
@@ -656,7 +670,10 @@ def build_parser() -> argparse.ArgumentParser:
         "them apart, or that none explains it), write the updated robot TOML, and report the "
         "gap before and after on held-out runs.",
     )
-    diag.add_argument("data", help="a native CSV, an OptiOdom folder or a ROS 2 bag")
+    diag.add_argument(
+        "data",
+        help="a native CSV, an OptiOdom folder, shipped data (optiodom:square) or a ROS 2 bag",
+    )
     diag.add_argument("--robot", help="robot .toml (or preset) of the model to test")
     diag.add_argument(
         "--format", choices=["native", "optiodom", "rosbag"], help="default: detected"

@@ -1,4 +1,4 @@
-"""Closed-form odometry covariance of Chong & Kleeman (seed 004) and the classic model.
+"""Closed-form odometry covariance of Chong & Kleeman 1997 and the classic model.
 
 Why: an EKF needs the covariance of the odometry pose. The classic incremental model (Eqs. 1–3)
 depends on how a path is cut into steps; Chong & Kleeman instead give each wheel's travel d

@@ -2,10 +2,11 @@
 
 :class:`ReferenceDriver` maps an env observation (layout: :mod:`odomgym.trial`,
 :data:`odomgym.trial.OBSERVATION_NAMES`)
-to wheel-speed actions. It drives the UMBmark manoeuvres the way seed 000 §6.3 describes — 0.2
-m/s on the legs, a complete stop, an on-the-spot turn with the wheels at about ±0.2 m/s — with
-trapezoidal speed profiles that respect the robot's acceleration limit, so a well-behaved robot
-does not slip. It steers by the robot's own odometry; it never sees the true pose.
+to wheel-speed actions. It drives the UMBmark manoeuvres the way Borenstein & Feng 1994, §6.3,
+describe — 0.2 m/s on the legs, a complete stop, an on-the-spot turn with the wheels at about
+±0.2 m/s — with trapezoidal speed profiles that respect the robot's acceleration limit, so a
+well-behaved robot does not slip. It steers by the robot's own odometry; it never sees the true
+pose.
 
 It is batched: ``act`` takes one observation (D,) or a batch (N, D).
 """
@@ -32,7 +33,7 @@ class ReferenceDriver:
         robot: the robot (its *nominal* wheelbase, speed and acceleration limits are used).
         cruise_speed: speed on straight legs [m/s] (UMBmark: 0.2 m/s).
         turn_wheel_speed: wheel rim speed during in-place turns [m/s]; default: the cruise
-            speed (UMBmark: ≈ ±0.2 m/s at 0.2 m/s on the legs, seed 000 §6.3).
+            speed (UMBmark: ≈ ±0.2 m/s at 0.2 m/s on the legs, Borenstein & Feng 1994, §6.3).
         accel_fraction: fraction of the robot's wheel acceleration limit used for planning
             the stops, so the velocity controller can always follow [-].
         approach_gain: final-approach gain [1/s]: speed = gain × remaining distance, so the

@@ -13,9 +13,9 @@ a set of runs, which ``published_results.csv`` lists as ``max_pos``, ``max_th_de
 * the largest final heading error [rad].
 
 Why whole trajectories and not just return errors: a calibration can close the loop at the end
-of a square while being wrong in between (Type A and Type B errors cancelling, seed 000 §6), and
-the maxima over all samples expose that. Position errors are frame-independent in magnitude, so
-no frame choice is needed here.
+of a square while being wrong in between (Type A and Type B errors cancelling, Borenstein & Feng
+1994, §6), and the maxima over all samples expose that. Position errors are frame-independent in
+magnitude, so no frame choice is needed here.
 """
 
 from __future__ import annotations

@@ -36,7 +36,7 @@ class Experiment:
         direction: ``"cw"``/``"ccw"`` for squares and spins; ``None`` for straight runs.
         runs: how many repetitions.
         size: square side L or straight distance D [m], or spin angle [rad].
-        return_trip: straight runs only: drive back to the start as well (seed 002 §6.1).
+        return_trip: straight runs only: drive back to the start as well (Borenstein 1995, §6.1).
     """
 
     kind: ExperimentKind
@@ -60,8 +60,8 @@ class Experiment:
 class SensorAccuracy:
     """Standard deviations of the ground-truth sensor that measures a run's poses.
 
-    Defaults: the sonar calibrator of seed 000 §6.3 (±2 mm in x and y, ±0.4° in orientation),
-    read as one standard deviation.
+    Defaults: the sonar calibrator of Borenstein & Feng 1994, §6.3 (±2 mm in x and y, ±0.4° in
+    orientation), read as one standard deviation.
     """
 
     position_std: float = 0.002  # [m]

@@ -1,14 +1,15 @@
 """Floor specifications: friction, cable bumps, low-friction patches and roughness.
 
-The floor is where non-systematic odometry errors come from (seed 000 §2.1, seed 002 §3.1):
+The floor is where non-systematic odometry errors come from (Borenstein & Feng 1994, §2.1;
+Borenstein 1995, §3.1):
 
 * **friction** μ limits the force each wheel can pass to the ground, so slip emerges when a
   manoeuvre asks for more (hard acceleration, fast turns, low μ);
 * **cable bumps** make a wheel rotate more than it advances horizontally — computed here from the
-  geometry of a rigid wheel rolling over a rigid cylinder (seed 002 Fig. 4, Table I);
+  geometry of a rigid wheel rolling over a rigid cylinder (Borenstein 1995, Fig. 4, Table I);
 * **patches** of lower friction (a wet or polished spot);
 * **roughness** k [m^½]: each wheel's true ground travel differs from its rim travel by zero-mean
-  white noise of variance k²·|d| (Chong & Kleeman, seed 004 Eq. 4).
+  white noise of variance k²·|d| (Chong & Kleeman 1997, Eq. 4).
 
 Coordinates are the world frame [m] in which every env starts its robot at the origin, heading
 along +x.
@@ -52,7 +53,7 @@ class CableBump:
     Attributes:
         x, y: centre of the cable [m].
         angle: direction of the cable's axis from +x [rad].
-        diameter: cable diameter [m] (seed 002 §6 uses a 10 mm cable).
+        diameter: cable diameter [m] (Borenstein 1995, §6, uses a 10 mm cable).
         length: cable length [m]; a short cable lies under one wheel only.
     """
 
@@ -97,7 +98,8 @@ class FloorSpec:
             (0.8 ≈ rubber on dry concrete).
         bumps: cables lying on the floor.
         patches: rectangles with their own friction coefficient.
-        roughness: k [m^½] of seed 004 Eq. 4; per-wheel ground-travel noise variance k²·|d|.
+        roughness: k [m^½] of Chong & Kleeman 1997, Eq. 4; per-wheel ground-travel noise variance
+            k²·|d|.
         name: a label.
     """
 
@@ -284,7 +286,7 @@ def bump_extra_rotation(wheel_radius: float, cable_diameter: float) -> float:
     w = 2·√(r·ρ) apart horizontally; from there the wheel centre moves on a circle of radius
     R = r + ρ around the cable axis, rolling without slip, so the wheel turns through an arc of
     R·2ψ₀ (ψ₀ = asin(w/R)) while advancing 2w. The excess R·2ψ₀ − 2w is what the encoder
-    over-reports (seed 002 Eq. 1 uses the chord approximation of the same picture; LabMate,
+    over-reports (Borenstein 1995, Eq. 1, uses the chord approximation of the same picture; LabMate,
     r = 75 mm, 10 mm cable: 3.40 mm (0.57° of heading on b = 340 mm), versus the paper's 2.63
     mm estimate).
     """
@@ -544,7 +546,7 @@ FLOORS: dict[str, FloorSpec] = {
     "slippery": FloorSpec(friction=0.2, name="slippery"),
     "rough": FloorSpec(friction=0.8, roughness=0.002, name="rough"),
     # A lab's concrete floor: k chosen so that a LabMate's 4×4 m UMBmark return errors scatter
-    # with σ ≈ 25 mm about their centre of gravity, as seed 000 §6.3 reports (measured: k =
-    # 0.0005 m^½ gives 31.5 mm over 200 runs; σ scales with k).
+    # with σ ≈ 25 mm about their centre of gravity, as Borenstein & Feng 1994, §6.3, report
+    # (measured: k = 0.0005 m^½ gives 31.5 mm over 200 runs; σ scales with k).
     "concrete": FloorSpec(friction=0.8, roughness=0.0004, name="concrete"),
 }

@@ -192,7 +192,8 @@ def _route_size(route: Route) -> float:
 def measure(runs: Sequence[Run], sensor: SensorAccuracy, rng: np.random.Generator) -> list[Run]:
     """Runs as a ground-truth sensor of the given accuracy sees them: every pose sample gets
     independent Gaussian noise (σ_x = σ_y = ``position_std``, σ_θ = ``heading_std``), except
-    the first — the start pose is where the sensor's frame is set up, as in seed 000 §6.3."""
+    the first — the start pose is where the sensor's frame is set up, as in Borenstein & Feng
+    1994, §6.3."""
     measured = []
     for run in runs:
         noise = rng.standard_normal(run.true_pose.shape) * np.array(

@@ -191,7 +191,8 @@ def run_lockstep(
             driver uses).
         floor: the floor all robots share (they do not collide).
         rngs: one Generator per robot: its sensor noise, start poses and roughness.
-        sensor: the ground-truth sensor's accuracy (default: seed 000's sonar calibrator).
+        sensor: the ground-truth sensor's accuracy (default: the sonar calibrator of Borenstein &
+            Feng 1994).
         cruise_speed: the reference driver's leg speed [m/s].
         start_region: random start poses within ±start_region [m] (see ``SimLab``).
 

@@ -1,4 +1,4 @@
-"""UMBmark accuracy measures (Borenstein & Feng, seed 000 §3 and §6.3).
+"""UMBmark accuracy measures (Borenstein & Feng 1994, §3 and §6.3).
 
 Return errors ε = (ε_x, ε_y, ε_θ) are true − odometry at the end of a square run, in the start
 frame (:func:`odomgym.runs.return_error`). For each direction the *centre of gravity* is the mean
@@ -19,7 +19,7 @@ FloatArray = NDArray[np.float64]
 
 
 def centre_of_gravity(errors: ArrayLike) -> FloatArray:
-    """Mean (x_c.g., y_c.g.) [m] of return errors (n, ≥2) — seed 000 Eq. 3.2."""
+    """Mean (x_c.g., y_c.g.) [m] of return errors (n, ≥2) — Borenstein & Feng 1994, Eq. 3.2."""
     array = np.asarray(errors, dtype=float)
     if array.ndim != 2 or array.shape[0] == 0 or array.shape[1] < 2:
         raise ValueError(f"need return errors of shape (n>=1, >=2), got {array.shape}")
@@ -27,7 +27,7 @@ def centre_of_gravity(errors: ArrayLike) -> FloatArray:
 
 
 def e_max_syst(cw_errors: ArrayLike, ccw_errors: ArrayLike) -> float:
-    """E_max,syst = max(r_c.g.,cw, r_c.g.,ccw) [m] — seed 000 Eq. 3.3."""
+    """E_max,syst = max(r_c.g.,cw, r_c.g.,ccw) [m] — Borenstein & Feng 1994, Eq. 3.3."""
     return float(
         max(np.hypot(*centre_of_gravity(cw_errors)), np.hypot(*centre_of_gravity(ccw_errors)))
     )
@@ -35,7 +35,7 @@ def e_max_syst(cw_errors: ArrayLike, ccw_errors: ArrayLike) -> float:
 
 @dataclass(frozen=True)
 class UMBmarkSummary:
-    """Centres of gravity, E_max,syst and the second-compensation rule of seed 000 §6.3.
+    """Centres of gravity, E_max,syst, second-compensation rule (Borenstein & Feng 1994, §6.3).
 
     Attributes:
         cg_cw, cg_ccw: centres of gravity (x, y) [m].

@@ -1,4 +1,4 @@
-"""Monte Carlo check of the Chong & Kleeman closed forms (seed 004 §6.1) and its report.
+"""Monte Carlo check of the closed forms of Chong & Kleeman 1997 (§6.1) and its report.
 
 Why a module of its own: :mod:`odomgym.covariance` holds the theory (Eqs. 14, 23, 25–28) that the
 envs and the noise fit use; this module *simulates* the same wheel-noise model (Eq. 4) run by run

@@ -1,4 +1,4 @@
-"""Estimating the wheel-noise constants k_L, k_R [m^½] from repeated runs (seed 004 §6.3).
+"""Estimating wheel-noise constants k_L, k_R [m^½] from repeated runs (Chong & Kleeman 1997, §6.3).
 
 Why: Chong & Kleeman's model gives each wheel's travel d white noise of variance k²·|d| (Eq. 4).
 They chose k_L, k_R "by trial and error" from 60 runs of 10 m forward and 10 m back and found no
@@ -577,7 +577,7 @@ def fit_noise(
     rng: np.random.Generator | None = None,
     n_bootstrap: int = 200,
 ) -> NoiseFit:
-    """Maximum-likelihood k_L, k_R [m^½] of seed 004 Eq. 4 from the runs in ``samples``.
+    """Maximum-likelihood k_L, k_R [m^½] (Chong & Kleeman 1997, Eq. 4) from the runs in ``samples``.
 
     See the module docstring for the model and the two ways of treating systematic errors.
     ``interval="profile"``: the set of k² whose profile log-likelihood lies within

@@ -1,4 +1,4 @@
-"""Running the wheel-noise fit of :mod:`odomgym.noise_fit` (seed 004 §6.3) end to end.
+"""Running the wheel-noise fit of :mod:`odomgym.noise_fit` (Chong & Kleeman 1997, §6.3) end to end.
 
 Where the runs come from — the §6.3 experiment simulated on a rough floor
 (:func:`simulate_noise_experiment`), a recorded path re-driven with known per-wheel noise
@@ -58,8 +58,8 @@ def simulate_noise_experiment(
     friction: float = 0.8,
     cruise_speed: float = 0.2,
 ) -> tuple[list[Run], RobotSpec]:
-    """Seed 004 §6.3 in simulation: ``runs`` robots drive ``distance`` [m] forward and back
-    (backwards, no turn) on ``FloorSpec(roughness=k)`` [m^½], all in one pymunk space.
+    """Chong & Kleeman 1997, §6.3, in simulation: ``runs`` robots drive ``distance`` [m] forward
+    and back (backwards, no turn) on ``FloorSpec(roughness=k)`` [m^½], all in one pymunk space.
 
     ``robot`` is a preset name (``"labmate"``, ``"monash"``, …) or a spec; ``ideal`` drops its
     systematic errors (true = nominal), so the errors are the floor's alone and their mean is
@@ -197,7 +197,7 @@ def fit_noise_report(
     sim_rng, boot_rng = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
     pools: dict[str, NoiseSamples] = {}
     report: dict[str, Any] = {
-        "model": "Chong & Kleeman 1997 (seed 004): wheel noise variance k^2|d| (Eq. 4), "
+        "model": "Chong & Kleeman 1997: wheel noise variance k^2|d| (Eq. 4), "
         "end-pose covariance k_L^2 A + k_R^2 B (Eqs. 23-28); Gaussian maximum likelihood",
         "systematic": systematic,
         "interval": interval,
@@ -316,8 +316,8 @@ def _signed(value: float | None) -> str:
 
 
 def plot_noise_fit(path: str | Path, fit: NoiseFit, *, title: str = "") -> None:
-    """Seed 004 Fig. 4: residual scatters x–y, x–θ, y–θ with the measured (solid) and the
-    fitted model's (dashed) 95 % ellipses, x, y in mm and θ in degrees; written atomically."""
+    """Chong & Kleeman 1997, Fig. 4: residual scatters x–y, x–θ, y–θ with the measured (solid) and
+    the fitted model's (dashed) 95 % ellipses, x, y in mm and θ in degrees; written atomically."""
     # A Figure without pyplot: no global backend switch, nothing left open in a notebook.
     from matplotlib.figure import Figure
 

@@ -2,7 +2,7 @@
 
 The odometry knows only the nominal robot (wheel diameter D_n, wheelbase b_n, counts per
 revolution C_e) and a :class:`Calibration`. Per sampling period, with encoder increments N_L, N_R
-(seed 000 Eqs. 2.1–2.4 with the corrections of Eq. 6.35 and seed 001):
+(Borenstein & Feng 1994, Eqs. 2.1–2.4, with the corrections of Eq. 6.35 and of solderspot 2014):
 
     Δs_L = c_L · E_s · π·D_n/C_e · N_L,   Δs_R = c_R · E_s · π·D_n/C_e · N_R
     Δs = (Δs_R + Δs_L)/2,   Δθ = (Δs_R − Δs_L) / b_eff,   b_eff = E_b,est · b_n
@@ -39,10 +39,10 @@ class Calibration:
     """Correction factors applied by the odometry (all dimensionless).
 
     Attributes:
-        c_left, c_right: wheel correction factors c_L, c_R (seed 000 Eqs. 6.33–6.35).
+        c_left, c_right: wheel correction factors c_L, c_R (Borenstein & Feng 1994, Eqs. 6.33–6.35).
         wheelbase_scale: E_b as estimated; the odometry uses b_eff = wheelbase_scale · b_n
-            (seed 000 Eq. 6.28).
-        distance_scale: E_s as estimated; multiplies both wheels' travel (seed 001).
+            (Borenstein & Feng 1994, Eq. 6.28).
+        distance_scale: E_s as estimated; multiplies both wheels' travel (solderspot 2014).
 
     The identity calibration (all ones) is the uncalibrated robot.
     """
@@ -59,7 +59,10 @@ class Calibration:
     # ------------------------------------------------------------------ conversions
     @classmethod
     def from_errors(cls, e_d: float = 1.0, e_b: float = 1.0, e_s: float = 1.0) -> Calibration:
-        """The calibration that exactly compensates E_d, E_b, E_s (seed 000 Eqs. 6.28–6.34)."""
+        """The calibration that exactly compensates E_d, E_b, E_s.
+
+        Borenstein & Feng 1994, Eqs. 6.28–6.34.
+        """
         return cls(
             c_left=2.0 / (e_d + 1.0),
             c_right=2.0 / (1.0 / e_d + 1.0),
@@ -104,8 +107,8 @@ class Calibration:
     def then(self, other: Calibration) -> Calibration:
         """Compose: ``other`` was estimated on a robot already corrected by ``self``.
 
-        Used by iterated calibration (seed 000 §6.3 "second compensation", seed 001): every
-        factor multiplies.
+        Used by iterated calibration (Borenstein & Feng 1994, §6.3 "second compensation";
+        solderspot 2014): every factor multiplies.
         """
         return Calibration(
             c_left=self.c_left * other.c_left,

@@ -1,14 +1,14 @@
 """Routes: the sequences of straight drives and in-place turns that odometry experiments use.
 
 A :class:`Route` is a list of :class:`Segment` s. The robot follows it *by its own odometry*,
-exactly as in UMBmark (seed 000 §6.3: "at the end of each leg the robot came to a complete stop
-and rotated on-the-spot through 90°"). :class:`RouteProgress` tracks, for a batch of robots, which
-segment each is on and expresses the odometry pose relative to it — the quantities a driver needs
-and an env observes.
+exactly as in UMBmark (Borenstein & Feng 1994, §6.3: "at the end of each leg the robot came to a
+complete stop and rotated on-the-spot through 90°"). :class:`RouteProgress` tracks, for a batch
+of robots, which segment each is on and expresses the odometry pose relative to it — the
+quantities a driver needs and an env observes.
 
 Frames: the route is laid out in the odometry frame, which coincides with the world frame at the
 start (origin, heading +x). ``cw`` squares turn right (toward −y), ``ccw`` squares left (+y),
-matching seed 000 Eqs. 6.3–6.18.
+matching Borenstein & Feng 1994, Eqs. 6.3–6.18.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ class Route:
 
 def square_route(side: float = 4.0, direction: Literal["cw", "ccw"] = "cw") -> Route:
     """The UMBmark square: four legs of ``side`` metres, a 90° turn in place after each (the
-    fourth turn restores the starting heading, seed 000 §6.3)."""
+    fourth turn restores the starting heading, Borenstein & Feng 1994, §6.3)."""
     if not side > 0:
         raise ValueError(f"side must be > 0, got {side!r}")
     if direction not in ("cw", "ccw"):
@@ -105,7 +105,7 @@ def square_route(side: float = 4.0, direction: Literal["cw", "ccw"] = "cw") -> R
 
 def straight_route(distance: float = 10.0, return_trip: bool = False) -> Route:
     """Drive ``distance`` metres along +x; with ``return_trip``, stop and drive back to the
-    start *backwards* (no turn), as the CLAPPER did (seed 002 §6.1: 18 m out and back)."""
+    start *backwards* (no turn), as the CLAPPER did (Borenstein 1995, §6.1: 18 m out and back)."""
     if not distance > 0:
         raise ValueError(f"distance must be > 0, got {distance!r}")
     out = Segment("drive", (0.0, 0.0), (distance, 0.0), 0.0)

@@ -73,7 +73,9 @@ def format_return_errors(
             f"centre of gravity ccw: x = {1e3 * summary.cg_ccw[0]:8.2f} mm, "
             f"y = {1e3 * summary.cg_ccw[1]:8.2f} mm"
         )
-        lines.append(f"E_max,syst = {1e3 * summary.e_max_syst:.2f} mm (seed 000 Eq. 3.3)")
+        lines.append(
+            f"E_max,syst = {1e3 * summary.e_max_syst:.2f} mm (Borenstein & Feng 1994, Eq. 3.3)"
+        )
     return "\n".join(lines)
 
 
@@ -82,7 +84,7 @@ def plot_return_errors(
     groups: Sequence[tuple[str, FloatArray, FloatArray]],
     title: str,
 ) -> None:
-    """Scatter of return position errors like seed 000 Fig. 6.5.
+    """Scatter of return position errors like Borenstein & Feng 1994, Fig. 6.5.
 
     ``groups`` are ``(label, cw_errors (n, ≥2), ccw_errors (m, ≥2))`` — e.g. before and after
     calibration; each group's centres of gravity are marked and E_max,syst is in the legend.

@@ -1,12 +1,12 @@
 """Robot specifications: what the odometry *believes* versus what the hardware *is*.
 
 A differential-drive robot's dead-reckoning drifts because its nominal parameters (the ones
-programmed into the odometry) differ from the true, physical ones. Borenstein & Feng
-(UMBmark TR, seed 000, §2.3 and §6) name the dominant systematic errors:
+programmed into the odometry) differ from the true, physical ones. Borenstein & Feng 1994
+(the UMBmark report, §2.3 and §6) name the dominant systematic errors:
 
 * ``E_d = D_R / D_L`` — the ratio of the true right and left effective wheel diameters;
 * ``E_b = b_actual / b_nominal`` — the wheelbase error;
-* ``E_s = D_a / D_nominal`` — the scaling error of the mean diameter (seed 001).
+* ``E_s = D_a / D_nominal`` — the scaling error of the mean diameter (solderspot 2014).
 
 :class:`RobotSpec` keeps the nominal parameters and the true ones side by side. The physics uses
 the true values; :class:`odomgym.odometry.Odometry` sees only the nominal ones (plus whatever
@@ -144,17 +144,17 @@ class RobotSpec:
     # ------------------------------------------------------------------ systematic errors
     @property
     def e_d(self) -> float:
-        """E_d = D_R / D_L, the wheel-diameter ratio (seed 000 Eq. 6.24) [-]."""
+        """E_d = D_R / D_L, the wheel-diameter ratio (Borenstein & Feng 1994, Eq. 6.24) [-]."""
         return float(self.true_right_diameter) / float(self.true_left_diameter)
 
     @property
     def e_b(self) -> float:
-        """E_b = b_actual / b_nominal, the wheelbase error (seed 000 Eq. 6.29) [-]."""
+        """E_b = b_actual / b_nominal, wheelbase error (Borenstein & Feng 1994, Eq. 6.29) [-]."""
         return float(self.true_wheelbase) / self.wheelbase
 
     @property
     def e_s(self) -> float:
-        """E_s = D_a / D_n, the scaling error of the mean wheel diameter (seed 001) [-]."""
+        """E_s = D_a / D_n, the scaling error of the mean wheel diameter (solderspot 2014) [-]."""
         mean = 0.5 * (float(self.true_left_diameter) + float(self.true_right_diameter))
         return mean / self.wheel_diameter
 
@@ -164,7 +164,7 @@ class RobotSpec:
         """Return a copy whose true parameters carry the given systematic errors.
 
         Unspecified errors keep their current values. The split of the mean diameter
-        D_a = E_s·D_n into D_L and D_R follows seed 000 Eqs. 6.31–6.32:
+        D_a = E_s·D_n into D_L and D_R follows Borenstein & Feng 1994, Eqs. 6.31–6.32:
         D_L = 2/(E_d + 1)·D_a, D_R = 2/(1/E_d + 1)·D_a.
         """
         ed = self.e_d if e_d is None else require_positive("e_d", e_d)
@@ -358,39 +358,42 @@ def load_robot(spec: str | Path) -> RobotSpec:
 PRESETS: dict[str, RobotSpec] = {
     "labmate": RobotSpec(
         name="labmate",
-        wheel_diameter=0.150,  # wheel radius 75 mm: seed 002 Table I, seed 000 §6.3
-        wheelbase=0.340,  # b = 340.00 mm nominal: seed 000 Fig. 6.5
-        ticks_per_rev=2048.0,  # not given in the seeds; a 512-line quadrature encoder (assumed)
-        true_wheelbase=0.33617,  # b = 336.17 mm after UMBmark calibration: seed 000 Fig. 6.5
-        true_left_diameter=0.150 * 2.0 / (1.00084 + 1.0),  # D_R/D_L = 1.00084: seed 000 Fig. 6.5
+        # wheel radius 75 mm: Borenstein 1995, Table I; Borenstein & Feng 1994, §6.3
+        wheel_diameter=0.150,
+        wheelbase=0.340,  # b = 340.00 mm nominal: Borenstein & Feng 1994, Fig. 6.5
+        ticks_per_rev=2048.0,  # not given in the papers; a 512-line quadrature encoder (assumed)
+        # b = 336.17 mm and D_R/D_L = 1.00084 after UMBmark calibration: Borenstein & Feng 1994,
+        # Fig. 6.5
+        true_wheelbase=0.33617,
+        true_left_diameter=0.150 * 2.0 / (1.00084 + 1.0),
         true_right_diameter=0.150 * 2.0 / (1.0 / 1.00084 + 1.0),
         mass=70.0,  # assumed: a TRC LabMate base with payload, ~70 kg
         chassis_length=0.76,  # assumed: LabMate footprint ≈ 0.76 × 0.76 m
         chassis_width=0.76,
         max_wheel_speed=1.0,
         max_wheel_accel=1.0,  # assumed controller limit
-        source="seed 000 §6.3 and Fig. 6.5, seed 002 Table I; mass, footprint, encoder and "
-        "controller limits assumed",
+        source="Borenstein & Feng 1994, §6.3 and Fig. 6.5; Borenstein 1995, Table I; mass, "
+        "footprint, encoder and controller limits assumed",
     ),
     "navbot": RobotSpec(
         name="navbot",
-        wheel_diameter=0.032,  # D = 32 mm: seed 001
-        wheelbase=0.078,  # b = 78 mm: seed 001
-        ticks_per_rev=909.0,  # 909 ticks/rev: seed 001
+        wheel_diameter=0.032,  # D = 32 mm: solderspot 2014
+        wheelbase=0.078,  # b = 78 mm: solderspot 2014
+        ticks_per_rev=909.0,  # 909 ticks/rev: solderspot 2014
         mass=0.6,  # assumed: a small hobby robot
         chassis_length=0.12,
         chassis_width=0.10,
         max_wheel_speed=0.3,
         max_wheel_accel=0.5,
-        source="seed 001 (b, D, ticks); mass and footprint assumed",
+        source="solderspot 2014 (b, D, ticks); mass and footprint assumed",
     ),
     "monash": RobotSpec(
         name="monash",
         wheel_diameter=2
-        * 0.06890,  # left wheel radius 0.06890 m before calibration: seed 004 Table 8
-        wheelbase=0.37100,  # B = 0.37100 m before calibration: seed 004 Table 8
-        ticks_per_rev=4096.0,  # not given in seed 004 (assumed)
-        true_left_diameter=2 * 0.068662,  # after calibration: seed 004 Table 8
+        * 0.06890,  # left wheel radius 0.06890 m before calibration: Chong & Kleeman 1997, Table 8
+        wheelbase=0.37100,  # B = 0.37100 m before calibration: Chong & Kleeman 1997, Table 8
+        ticks_per_rev=4096.0,  # not given in Chong & Kleeman 1997 (assumed)
+        true_left_diameter=2 * 0.068662,  # after calibration: Chong & Kleeman 1997, Table 8
         true_right_diameter=2 * 0.068871,
         true_wheelbase=0.36898,
         mass=20.0,  # assumed
@@ -398,7 +401,7 @@ PRESETS: dict[str, RobotSpec] = {
         chassis_width=0.45,
         max_wheel_speed=0.5,
         max_wheel_accel=0.5,
-        source="Chong & Kleeman, seed 004 Table 8 (before/after calibration); mass assumed",
+        source="Chong & Kleeman 1997, Table 8 (before/after calibration); mass assumed",
     ),
     "optiodom": RobotSpec(
         name="optiodom",

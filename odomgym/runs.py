@@ -9,7 +9,7 @@ evaluated on runs it did not produce.
 Frames: ground-truth poses are in the frame of whatever measured them (the simulator's world
 frame, or a motion-capture frame). :func:`return_error` expresses errors in the *start frame*
 (origin at the first ground-truth pose, +x along its heading), the frame of the UMBmark
-equations (seed 000 §6.1).
+equations (Borenstein & Feng 1994, §6.1).
 """
 
 from __future__ import annotations
@@ -122,8 +122,8 @@ def return_error(
 
     With ``frame="start"`` (default), ε_x, ε_y [m] are in the frame whose origin is the first
     true pose and whose +x axis is the starting heading — the frame of the UMBmark equations
-    (seed 000 §6.1). ``frame="world"`` keeps the ground-truth frame (the OptiOdom authors'
-    convention: errors in the motion-capture frame). ε_θ [rad] is wrapped to [−π, π).
+    (Borenstein & Feng 1994, §6.1). ``frame="world"`` keeps the ground-truth frame (the OptiOdom
+    authors' convention: errors in the motion-capture frame). ε_θ [rad] is wrapped to [−π, π).
     """
     odom = replay_odometry(run, robot, calibration)
     ends = np.stack([run.true_pose[-1], odom[-1]])

@@ -6,8 +6,8 @@ The hidden truth is the ``labmate`` preset with E_d = 1.004, E_b = 1.02 and E_s 
 smooth floor, ground truth through the default sensor (σ = 2 mm, 0.4°), every run from a random
 start pose in a 4 × 4 m region (so frame handling is exercised). Tolerances are fractions of
 each error's deviation from 1, set from ten seeds (calibration seeds 0–9, validation seeds
-1000–1009) with margin; the largest measured fraction is given next to each. E_max,syst is seed
-000 Eq. 3.3 on fresh 5 cw + 5 ccw 4 m squares with the resulting calibration.
+1000–1009) with margin; the largest measured fraction is given next to each. E_max,syst is
+Borenstein & Feng 1994, Eq. 3.3, on fresh 5 cw + 5 ccw 4 m squares with the resulting calibration.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import OPTIODOM
 
 from odomgym.baselines.base import CalibrationResult, Calibrator
 from odomgym.baselines.ivanjko import Ivanjko
@@ -45,14 +45,18 @@ from odomgym.runs import replay_odometry, return_error
 
 TRUTH = PRESETS["labmate"].with_errors(e_d=1.004, e_b=1.02, e_s=0.995)
 START_REGION = 2.0  # [m]
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "optiodom-diff"
-IVANJKO_SESSIONS = ["250620201618", "250620201636", "250620201655", "250620201738"]
-SQUARE_SESSIONS = ["230620202042", "230620202144", "230620202258", "230620202317"]
-
-needs_data = pytest.mark.skipif(
-    not (DATA / "published_results.csv").is_file(),
-    reason=f"OptiOdom data not found at {DATA} (clone the shared/ folder beside the repository)",
-)
+# The full OptiOdom data in shared/ when present, else the sessions shipped in the package.
+DATA = OPTIODOM
+IVANJKO_SESSIONS = [
+    name
+    for name in ("250620201618", "250620201636", "250620201655", "250620201738")
+    if (DATA / "ivanjko" / name).is_dir()
+]
+SQUARE_SESSIONS = [
+    name
+    for name in ("230620202042", "230620202144", "230620202258", "230620202317")
+    if (DATA / "square" / name).is_dir()
+]
 
 
 @dataclass(frozen=True)
@@ -145,8 +149,9 @@ def test_recovers_the_hidden_errors_and_improves_e_max_syst(name: str) -> None:
     ids=["labmate", "optiodom", "large"],
 )
 def test_lee_inverts_its_first_order_model(e_d: float, e_b: float, side: float, b: float) -> None:
-    """Return errors of seed 000's first-order model whose corners turn α_b − α_d (a right wheel
-    E_d times the left one over-turns each corner by α_d) give back E_b and E_d exactly."""
+    """Return errors of the first-order model of Borenstein & Feng 1994, with corners that turn
+    α_b − α_d (a right wheel E_d times the left one over-turns each corner by α_d), give back E_b
+    and E_d exactly."""
     alpha_b = alpha_from_e_b(e_b)
     beta = 2.0 * side * (e_d - 1.0) / ((e_d + 1.0) * b)  # β = L/R̂, E_d = (R̂ + b/2)/(R̂ − b/2)
     alpha_observed = alpha_b - lee_alpha_d(beta, side, b)
@@ -227,8 +232,6 @@ def test_replay_with_jacobian_matches_replay_and_central_differences() -> None:
 @pytest.fixture(scope="module")
 def published() -> dict[tuple[str, str], dict[str, float]]:
     path = DATA / "published_results.csv"
-    if not path.is_file():
-        pytest.skip(f"published_results.csv not found at {path}")
     with path.open(encoding="utf-8") as file:
         return {
             (row["method"], row["session"]): {
@@ -238,7 +241,6 @@ def published() -> dict[tuple[str, str], dict[str, float]]:
         }
 
 
-@needs_data
 @pytest.mark.parametrize("session", IVANJKO_SESSIONS)
 def test_ivanjko_reproduces_published_results(
     session: str, published: dict[tuple[str, str], dict[str, float]]
@@ -259,7 +261,6 @@ def test_ivanjko_reproduces_published_results(
     assert result.runs_used == recorded.n_runs
 
 
-@needs_data
 @pytest.mark.parametrize("session", SQUARE_SESSIONS)
 def test_trajectory_fit_matches_published_optiodom_on_squares(
     session: str, published: dict[tuple[str, str], dict[str, float]]
@@ -275,7 +276,6 @@ def test_trajectory_fit_matches_published_optiodom_on_squares(
     assert after <= published[("optiodom", session)]["after_max_pos"] + 0.0005
 
 
-@needs_data
 def test_position_only_trajectory_cost_cannot_see_the_wheelbase_in_spins() -> None:
     """On the straight-and-spin sessions the paper's position-only cost leaves b free (an
     in-place spin moves no position): b drifts to 0.05–0.19 m and the Jacobian's condition
@@ -292,7 +292,6 @@ def test_position_only_trajectory_cost_cannot_see_the_wheelbase_in_spins() -> No
         assert with_heading.parameters["wheelbase"] == pytest.approx(0.2009, rel=0.005)
 
 
-@needs_data
 def test_calibrators_name_what_a_recorded_session_lacks() -> None:
     robot = PRESETS["optiodom"]
     square = RecordedLab(read_session(DATA / "square" / "230620202042"), robot=robot)

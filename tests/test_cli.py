@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from conftest import OPTIODOM
 
 from odomgym.cli import main
 
@@ -68,7 +69,7 @@ def _numbers(value: object) -> list[float]:
 
 
 def test_covariance_command_worked_example(capsys: pytest.CaptureFixture[str]) -> None:
-    """Seed 004 Table 1, first column (the worked example of shared/seeds/README.md)."""
+    """Chong & Kleeman 1997, Table 1, first column (worked example of shared/seeds/README.md)."""
     args = ["covariance", "--left", "3", "--right", "1", "--wheelbase", "0.4"]
     assert main([*args, "--kl", "0.001", "--kr", "0.001", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
@@ -164,17 +165,15 @@ def test_calibrate_saves_and_exports(tmp_path: Path, capsys: pytest.CaptureFixtu
     )
 
 
+@pytest.mark.parametrize(
+    "data",
+    ["optiodom:square/230620202042", str(OPTIODOM / "square" / "230620202042")],
+    ids=["shipped-name", "folder"],
+)
 def test_calibrate_on_measured_session_reproduces_published(
-    capsys: pytest.CaptureFixture[str],
+    data: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from conftest import SHARED
-
-    session = SHARED / "data" / "optiodom-diff" / "square" / "230620202042"
-    if not session.is_dir():
-        pytest.skip(f"OptiOdom data not found at {session}")
-    code = main(
-        ["calibrate", "umbmark", "--data", str(session), "--conventions", "optiodom", "--json"]
-    )
+    code = main(["calibrate", "umbmark", "--data", data, "--conventions", "optiodom", "--json"])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
     # published_results.csv: umbmark, 230620202042: b = 0.201458, D_R = 0.083954, D_L = 0.084046

@@ -1,4 +1,4 @@
-"""Chong & Kleeman (seed 004), Tables 1–7: closed-form odometry covariance and its Monte Carlo.
+"""Chong & Kleeman 1997, Tables 1–7: closed-form odometry covariance and its Monte Carlo.
 
 The numbers below are transcribed from the paper's tables (B = 0.4 m; columns (I)–(III) are
 k_L, k_R = 0.001/0.001, 0.003/0.002, 0.01/0.02 m^½, and 0.05, 0.1, 0.5 m^½ in Table 7). The

@@ -1,5 +1,5 @@
 """Jung & Chung's heading-error equations: exact inversion of their model, agreement with the
-first-order model of seed 000, and the OptiOdom authors' heading-centre bug."""
+first-order model of Borenstein & Feng 1994, and the OptiOdom authors' heading-centre bug."""
 
 from __future__ import annotations
 
@@ -48,9 +48,10 @@ def test_estimates_invert_the_model(case: str) -> None:
 
 
 @pytest.mark.parametrize("case", list(CASES))
-def test_angles_agree_with_the_first_order_model_of_seed_000(case: str) -> None:
-    """From seed 000's return errors, α_b and β are UMBmark's α and β exactly; E_d too (to
-    second order); E_b differs by the α_d that Jung & Chung attribute to E_d."""
+def test_angles_agree_with_the_first_order_model_of_borenstein_feng_1994(case: str) -> None:
+    """From the return errors of the model of Borenstein & Feng 1994, α_b and β are UMBmark's α
+    and β exactly; E_d too (to second order); E_b differs by the α_d that Jung & Chung attribute
+    to E_d."""
     e_d, e_b, side, b = CASES[case]
     alpha, beta = alpha_from_e_b(e_b), beta_from_e_d(e_d, side, b)
     cw, ccw = first_order_return_errors(alpha, beta, side)

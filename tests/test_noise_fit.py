@@ -1,4 +1,4 @@
-"""Fitting Chong & Kleeman's wheel-noise constants k_L, k_R (seed 004 §6.3) by maximum likelihood.
+"""Fitting the wheel-noise constants k_L, k_R of Chong & Kleeman 1997 (§6.3) by maximum likelihood.
 
 The paper drove 60 runs of 10 m forward and 10 m back and chose k_L = 0.00040, k_R = 0.00058 m^½
 by trial and error. Here the same experiment is simulated (a rough floor in the physics, or
@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import OPTIODOM
 
 from odomgym.covariance import propagate_path
 from odomgym.noise_fit import NoiseSamples, fit_noise, noise_samples, run_noise_basis
@@ -35,10 +36,10 @@ from odomgym.noise_report import (
 from odomgym.robot import PRESETS, RobotSpec
 from odomgym.runs import Run, return_error
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "optiodom-diff"
+DATA = OPTIODOM  # the full OptiOdom data in shared/ when present, else the shipped sessions
 K = 0.0005  # [m^½]: the paper's parquet floor is 0.0004/0.00058
 RUNS, DISTANCE = 60, 10.0  # §6.3: 60 runs of 10 m forward and 10 m back
-PAPER_KL, PAPER_KR = 0.00040, 0.00058  # [m^½], seed 004 §6.3
+PAPER_KL, PAPER_KR = 0.00040, 0.00058  # [m^½], Chong & Kleeman 1997, §6.3
 
 
 # ---------------------------------------------------------------------------------- fixtures
@@ -239,15 +240,8 @@ def test_simulated_report_is_json_and_reproducible(tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------------------------- real data
-needs_data = pytest.mark.skipif(
-    not (DATA / "published_results.csv").is_file(),
-    reason=f"OptiOdom data not found at {DATA} (clone the shared/ folder beside the repository)",
-)
-
-
-@needs_data
 def test_optiodom_sessions_fit_and_findings() -> None:
-    """All 14 OptiOdom sessions, replayed with the published OptiOdom calibrations, group means
+    """Every session of DATA, replayed with the published OptiOdom calibrations, group means
     removed, one fit per path type and run kind. Robust findings: every fit gives finite k in
     the range Eq. 4 was meant for (≤ 0.02 m^½); the in-place spins fit the model in all three
     components; on the squares the model fitted to the heading error over-predicts the position
@@ -269,7 +263,6 @@ def test_optiodom_sessions_fit_and_findings() -> None:
     assert format_noise_report(report).count("\n") > 10
 
 
-@needs_data
 def test_optiodom_fit_is_reproducible() -> None:
     kwargs = {"data": [DATA / "ivanjko"], "interval": "bootstrap", "seed": 11, "n_bootstrap": 50}
     assert fit_noise_report(**kwargs) == fit_noise_report(**kwargs)  # type: ignore[arg-type]

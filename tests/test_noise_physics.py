@@ -1,9 +1,9 @@
-"""Floor roughness realised in the physics agrees with Chong & Kleeman's closed form (seed 004).
+"""Floor roughness realised in the physics agrees with the closed form of Chong & Kleeman 1997.
 
 The roughness k adds white noise of variance k²·|d| to each wheel's *ground* travel inside the
 wheel–floor contact (odomgym.physics), while the encoders count the rim. So the odometry of N
 robots commanded identically is identical, and their true poses scatter around it with the
-covariance seed 004 Eqs. 23-28 predict along the driven wheel travels.
+covariance Chong & Kleeman 1997, Eqs. 23-28, predict along the driven wheel travels.
 """
 
 from __future__ import annotations
@@ -110,8 +110,8 @@ def test_env_reports_the_closed_form_covariance() -> None:
             break
     cov = info["odom_covariance"]
     assert np.all(np.linalg.eigvalsh(cov) >= -1e-15)
-    # Seed 004's consistency: the step-by-step composition equals one straight segment
-    # (Eqs. 26-27) of the same length.
+    # The consistency of Chong & Kleeman 1997: the step-by-step composition equals one straight
+    # segment (Eqs. 26-27) of the same length.
     travelled = float(info["odom_pose"][0])
     single = propagate_path([(travelled, travelled)], ROBOT.wheelbase, K, K).cov
     np.testing.assert_allclose(cov, single, rtol=0.02, atol=1e-12)

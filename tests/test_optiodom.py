@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import OPTIODOM
 
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.umbmark import UMBmark
@@ -29,29 +30,25 @@ from odomgym.experiments import Experiment
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "optiodom-diff"
-SQUARE_SESSIONS = ["230620202042", "230620202144", "230620202258", "230620202317"]
+# The full data set in shared/ when present, else the sessions shipped in the package.
+DATA = OPTIODOM
+SQUARE_SESSIONS = [
+    name
+    for name in ("230620202042", "230620202144", "230620202258", "230620202317")
+    if (DATA / "square" / name).is_dir()
+]
 MEASURES = ("max_pos", "max_th_deg", "final_pos", "final_th_deg")
-
-needs_data = pytest.mark.skipif(
-    not (DATA / "published_results.csv").is_file(),
-    reason=f"OptiOdom data not found at {DATA} (clone the shared/ folder beside the repository)",
-)
 
 
 # ---------------------------------------------------------------------------------- fixtures
 @pytest.fixture(scope="module")
 def sessions() -> dict[str, Session]:
-    if not (DATA / "square").is_dir():
-        pytest.skip(f"OptiOdom data not found at {DATA}")
     return {name: read_session(DATA / "square" / name) for name in SQUARE_SESSIONS}
 
 
 @pytest.fixture(scope="module")
 def published() -> dict[tuple[str, str], dict[str, float]]:
     path = DATA / "published_results.csv"
-    if not path.is_file():
-        pytest.skip(f"published_results.csv not found at {path}")
     table: dict[tuple[str, str], dict[str, float]] = {}
     with path.open(encoding="utf-8") as file:
         for row in csv.DictReader(file):
@@ -66,7 +63,6 @@ def _assert_close(found: float, expected: float, rel: float, what: str) -> None:
 
 
 # ---------------------------------------------------------------------------------- reader
-@needs_data
 def test_square_session_layout(sessions: dict[str, Session]) -> None:
     """Nominal robot from the metadata, runs cw then ccw, counts [left, right] from 0."""
     session = sessions["230620202144"]
@@ -91,7 +87,6 @@ def test_square_session_layout(sessions: dict[str, Session]) -> None:
     assert all(t < -6.0 for t in turns[:3]) and all(t > 6.0 for t in turns[3:])
 
 
-@needs_data
 @pytest.mark.parametrize("folder", ["ivanjko", "circular"])
 def test_other_path_types_read(folder: str) -> None:
     for path in find_sessions(DATA / folder):
@@ -104,7 +99,6 @@ def test_other_path_types_read(folder: str) -> None:
             assert session.holdings() == {"free": session.n_runs}
 
 
-@needs_data
 def test_unequal_metadata_diameters_become_the_initial_calibration(tmp_path: Path) -> None:
     source = DATA / "square" / "230620202042"
     target = tmp_path / "square" / "230620202042"
@@ -123,7 +117,6 @@ def test_unequal_metadata_diameters_become_the_initial_calibration(tmp_path: Pat
 
 
 # ---------------------------------------------------------------------------------- lab
-@needs_data
 def test_recorded_lab_serves_and_refuses(sessions: dict[str, Session]) -> None:
     session = sessions["230620202317"]
     lab = RecordedLab(session)
@@ -145,7 +138,6 @@ def test_recorded_lab_serves_and_refuses(sessions: dict[str, Session]) -> None:
 
 
 # ---------------------------------------------------------------------------------- published
-@needs_data
 @pytest.mark.parametrize("name", SQUARE_SESSIONS)
 def test_published_before_calibration(
     name: str, sessions: dict[str, Session], published: dict[tuple[str, str], dict[str, float]]
@@ -165,8 +157,6 @@ def test_published_before_calibration(
 
 def _published_rows() -> list[tuple[str, str, str]]:
     path = DATA / "published_results.csv"
-    if not path.is_file():
-        return []
     with path.open(encoding="utf-8") as file:
         return [(r["method"], r["path"], r["session"]) for r in csv.DictReader(file)]
 
@@ -176,7 +166,6 @@ def _read(path_type: str, name: str) -> Session:
     return read_session(DATA / path_type / name)
 
 
-@needs_data
 @pytest.mark.parametrize(("method", "path_type", "name"), _published_rows())
 def test_published_before_measures_of_every_row(
     method: str,
@@ -207,7 +196,6 @@ CALIBRATORS: dict[str, Callable[[Session], UMBmark | JungChung]] = {
 }
 
 
-@needs_data
 @pytest.mark.parametrize("method", list(CALIBRATORS))
 @pytest.mark.parametrize("name", SQUARE_SESSIONS)
 def test_published_calibration_reproduced(
@@ -238,7 +226,6 @@ def _corrected_and_compat(
     return out[0], out[1]
 
 
-@needs_data
 @pytest.mark.parametrize("name", SQUARE_SESSIONS)
 def test_corrected_jung_chung_beats_the_published_implementation(
     name: str, sessions: dict[str, Session]
@@ -261,14 +248,13 @@ def test_corrected_jung_chung_beats_the_published_implementation(
         assert corrected[key] < 0.95 * compat[key], (key, corrected[key], compat[key])
 
 
-@needs_data
 @pytest.mark.parametrize("name", SQUARE_SESSIONS)
 def test_corrected_umbmark_matches_the_published_one(
     name: str, sessions: dict[str, Session]
 ) -> None:
-    """Seed 000's UMBmark (x and y averaged, start frame) lands within 0.1 % of the authors'
-    x-only parameters on these small (0.75 m) squares and improves every measure over the
-    uncalibrated robot; its E_s phase is skipped (no straight runs), with a note."""
+    """The UMBmark of Borenstein & Feng 1994 (x and y averaged, start frame) lands within 0.1 % of
+    the authors' x-only parameters on these small (0.75 m) squares and improves every measure
+    over the uncalibrated robot; its E_s phase is skipped (no straight runs), with a note."""
     session = sessions[name]
     n = len(session.select("square", "cw"))
     result = UMBmark(session.side, n).calibrate(RecordedLab(session), session.initial)
@@ -286,13 +272,13 @@ def test_corrected_umbmark_matches_the_published_one(
         assert after[key] < before[key], key
 
 
-@needs_data
 @pytest.mark.parametrize("name", SQUARE_SESSIONS)
 def test_heading_and_position_methods_agree_on_the_data(
     name: str, sessions: dict[str, Session]
 ) -> None:
     """The signs of Jung & Chung's heading equations, checked on the data: the corrected method
-    and seed 000's UMBmark find the same b, D_R, D_L to 0.1 % (measured: ≤ 0.06 %)."""
+    and the UMBmark of Borenstein & Feng 1994 find the same b, D_R, D_L to 0.1 % (measured:
+    ≤ 0.06 %)."""
     session = sessions[name]
     n = len(session.select("square", "cw"))
     lab = RecordedLab(session)
@@ -304,7 +290,6 @@ def test_heading_and_position_methods_agree_on_the_data(
         assert heading[key] == pytest.approx(position[key], rel=1e-3), key
 
 
-@needs_data
 def test_second_compensation_on_recorded_squares(sessions: dict[str, Session]) -> None:
     session = sessions["230620202317"]
     result = UMBmark(session.side, 5, second_compensation=True).calibrate(

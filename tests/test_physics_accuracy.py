@@ -1,4 +1,7 @@
-"""Physics against analytic predictions: seed 000 §6.1 (UMBmark) and seed 002 Table I (bumps)."""
+"""Physics against analytic predictions.
+
+Borenstein & Feng 1994, §6.1 (UMBmark); Borenstein 1995, Table I (bumps).
+"""
 
 from __future__ import annotations
 
@@ -35,7 +38,8 @@ def test_ideal_robot_square_is_exact(direction: str) -> None:
 
 
 def _first_order_prediction(e_d: float, e_b: float, b: float, side: float) -> dict[str, float]:
-    """Return errors of seed 000 Eqs. 6.19-6.20 (x) and their y counterparts (6.22b, 6.26b)."""
+    """Return errors of Borenstein & Feng 1994, Eqs. 6.19-6.20 (x), and their y counterparts
+    (6.22b, 6.26b)."""
     alpha = (math.pi / 2) * (1.0 - 1.0 / e_b)  # Eq. 6.29 solved for α [rad]
     if e_d == 1.0:
         beta = 0.0
@@ -53,7 +57,7 @@ def _first_order_prediction(e_d: float, e_b: float, b: float, side: float) -> di
 @pytest.mark.parametrize(("e_d", "e_b"), [(1.002, 1.0), (1.0, 1.01), (0.998, 1.0), (1.0, 0.99)])
 def test_umbmark_first_order_predictions(e_d: float, e_b: float) -> None:
     """Issue #2 must-pass 2: E_d or E_b alone → return errors within 10 % of the first-order
-    predictions of seed 000 Eqs. 6.3-6.20."""
+    predictions of Borenstein & Feng 1994, Eqs. 6.3-6.20."""
     robot = LABMATE.with_errors(e_d, e_b, 1.0)
     predicted = _first_order_prediction(e_d, e_b, LABMATE.wheelbase, SIDE)
     measured = {}
@@ -65,12 +69,12 @@ def test_umbmark_first_order_predictions(e_d: float, e_b: float) -> None:
         assert measured[key] == pytest.approx(value, rel=0.10), key
 
 
-def test_cable_geometry_of_seed_002_table_1() -> None:
+def test_cable_geometry_of_borenstein_1995_table_1() -> None:
     """Rigid 75 mm wheel over a 10 mm cable: the encoder over-reports R·2ψ₀ − 2w.
 
-    Seed 002 Table I estimates 2.63 mm with a chord approximation (Eqs. 1-3); the exact arc of a
-    wheel rolling over a cylinder gives 3.40 mm, i.e. 0.57° of heading on b = 340 mm, close to
-    the ≈ 0.6° per bump measured in seed 002 §6.1.
+    Borenstein 1995, Table I, estimates 2.63 mm with a chord approximation (Eqs. 1-3); the exact
+    arc of a wheel rolling over a cylinder gives 3.40 mm, i.e. 0.57° of heading on b = 340 mm,
+    close to the ≈ 0.6° per bump measured in Borenstein 1995, §6.1.
     """
     extra = bump_extra_rotation(0.075, 0.010)
     r, rho = 0.075, 0.005

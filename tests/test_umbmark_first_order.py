@@ -1,4 +1,4 @@
-"""UMBmark's equations invert seed 000's first-order model (Eqs. 6.3–6.20) exactly.
+"""UMBmark inverts its first-order model exactly (Borenstein & Feng 1994, Eqs. 6.3–6.20).
 
 Return errors are built from injected E_d and E_b through the model (α from Eq. 6.29, β from
 Eqs. 6.23–6.24, positions from Eqs. 6.19–6.20 and their y counterparts); the estimates must give
@@ -27,9 +27,9 @@ from odomgym.baselines.umbmark import (
 
 # (E_d, E_b, side L [m], wheelbase b [m])
 CASES = {
-    # seed 000 Fig. 6.5: LabMate 4 × 4 m, b 340.00 → 336.17 mm, D_R/D_L = 1.00084
+    # Borenstein & Feng 1994, Fig. 6.5: LabMate 4 × 4 m, b 340.00 → 336.17 mm, D_R/D_L = 1.00084
     "labmate": (1.00084, 336.17 / 340.0, 4.0, 0.340),
-    # seed 001: NavBot 800 mm square, b = 78 mm, first-round estimates
+    # solderspot 2014: NavBot 800 mm square, b = 78 mm, first-round estimates
     "navbot": (1.002463028, 0.9918532967, 0.8, 0.078),
     # OptiOdom session 230620202144, the authors' UMBmark: b 0.205 → 0.201304 m
     "optiodom": (0.084022 / 0.083978, 0.201304 / 0.205, 0.75, 0.205),
@@ -91,7 +91,7 @@ def test_type_a_and_b_signs_follow_figures_6_1_and_6_2() -> None:
 
 
 def _exact_corners(alpha: float, beta: float, side: float, direction: str) -> NDArray[np.float64]:
-    """End point of seed 000 Eqs. 6.3–6.18 *before* the small-angle approximations."""
+    """End point of Borenstein & Feng 1994, Eqs. 6.3–6.18, before the small-angle approximations."""
     a, b, s = alpha, beta, side
     if direction == "ccw":
         type_a = (

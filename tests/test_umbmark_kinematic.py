@@ -106,7 +106,7 @@ class KinematicLab:
 
 
 def e_max(robot: RobotSpec, calibration: Calibration, side: float = 4.0) -> float:
-    """E_max,syst [m] (seed 000 Eq. 3.3) of one noise-free cw and one ccw square."""
+    """E_max,syst [m] (Borenstein & Feng 1994, Eq. 3.3) of one noise-free cw and one ccw square."""
 
     def error(direction: Direction) -> np.ndarray:
         run = drive(robot, calibration, Experiment("square", direction, 1, side))
@@ -116,10 +116,10 @@ def e_max(robot: RobotSpec, calibration: Calibration, side: float = 4.0) -> floa
 
 
 def test_table_iii_labmate_improvement() -> None:
-    """Seed 000 Table III, E-1: the LabMate (4 × 4 m, b = 340 mm nominal, calibrated to
-    336.17 mm and D_R/D_L = 1.00084) had E_max,syst = 317 mm before compensation; the eight
-    experiments improved 10- to 22-fold. Without non-systematic errors the kinematic LabMate
-    starts at 311 mm and UMBmark improves it more than 50-fold (88-fold measured)."""
+    """Borenstein & Feng 1994, Table III, E-1: the LabMate (4 × 4 m, b = 340 mm nominal,
+    calibrated to 336.17 mm and D_R/D_L = 1.00084) had E_max,syst = 317 mm before compensation;
+    the eight experiments improved 10- to 22-fold. Without non-systematic errors the kinematic
+    LabMate starts at 311 mm and UMBmark improves it more than 50-fold (88-fold measured)."""
     before = e_max(LABMATE, Calibration())
     assert before == pytest.approx(0.317, rel=0.05)
     result = UMBmark(4.0, 5, scale_phases=0).calibrate(KinematicLab(LABMATE))
@@ -142,9 +142,9 @@ def test_table_iii_labmate_improvement() -> None:
 def test_umbmark_recovers_e_d_and_e_b(
     e_d: float, e_b: float, use: Components, tolerance: float
 ) -> None:
-    """Within ``tolerance`` of the deviation from 1, plus β²/π: seed 000's assumption that E_d
-    causes no Type A error (#5) holds to first order only, and E_d alone leaks about β²/π
-    into E_b (1.8e-4 for E_d = 1.002, measured)."""
+    """Within ``tolerance`` of the deviation from 1, plus β²/π: the assumption of Borenstein &
+    Feng 1994 that E_d causes no Type A error (#5) holds to first order only, and E_d alone leaks
+    about β²/π into E_b (1.8e-4 for E_d = 1.002, measured)."""
     robot = LABMATE.with_errors(e_d=e_d, e_b=e_b, e_s=1.0)
     result = UMBmark(4.0, 5, use=use, scale_phases=0).calibrate(KinematicLab(robot))
     found = result.calibration
@@ -156,7 +156,7 @@ def test_umbmark_recovers_e_d_and_e_b(
 
 
 def test_scale_phase_finds_e_s() -> None:
-    """Seed 001's E_s phase: 2 × 3 straight runs of 2 m find E_s = 1.01 to 1e-4."""
+    """The E_s phase of solderspot 2014: 2 × 3 straight runs of 2 m find E_s = 1.01 to 1e-4."""
     robot = LABMATE.with_errors(e_s=1.01)
     umbmark = UMBmark(4.0, 5)
     result = umbmark.calibrate(KinematicLab(robot))
@@ -199,7 +199,7 @@ def test_jung_chung_recovers_e_b_and_e_d_in_its_own_model() -> None:
     assert abs(found.e_d - e_d) <= 1e-3 * abs(e_d - 1.0)
     assert abs(found.wheelbase_scale - e_b) <= 1e-3 * abs(e_b - 1.0)
 
-    straddling = LABMATE  # D_L, D_R split around 150 mm (seed 000 Eqs. 6.31–6.32)
+    straddling = LABMATE  # D_L, D_R split around 150 mm (Borenstein & Feng 1994, Eqs. 6.31–6.32)
     found = JungChung(4.0, 5).calibrate(KinematicLab(straddling)).calibration
     assert abs(found.wheelbase_scale - e_b) <= 0.05 * abs(e_b - 1.0)
     assert e_max(straddling, found) < e_max(straddling, Calibration()) / 30.0

@@ -1,4 +1,5 @@
-"""Seed 000 Table III on the physics simulator: UMBmark and Jung & Chung calibrate the LabMate.
+"""Borenstein & Feng 1994, Table III, on the physics simulator: UMBmark and Jung & Chung calibrate
+the LabMate.
 
 Table III lists E_max,syst before and after UMBmark compensation for eight LabMate experiments
 (4 × 4 m squares, 5 cw + 5 ccw): 232–423 mm before, 10- to 22-fold improvements after. The
