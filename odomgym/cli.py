@@ -516,6 +516,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="odomgym",
         description="Wheel-odometry experiments, calibration and benchmarks in simulation.",
     )
+    from odomgym import __version__
+
+    parser.add_argument("--version", action="version", version=f"odomgym {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="drive squares or straight runs and report return errors")

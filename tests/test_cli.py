@@ -204,3 +204,15 @@ def test_output_files_get_ordinary_permissions(tmp_path: Path) -> None:
     finally:
         os.umask(umask)
     assert (tmp_path / "calib.toml").stat().st_mode & 0o777 == 0o644
+
+
+def test_version_and_python_dash_m() -> None:
+    import subprocess
+    import sys
+
+    from odomgym import __version__
+
+    out = subprocess.run(
+        [sys.executable, "-m", "odomgym", "--version"], capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == f"odomgym {__version__}"
