@@ -14,9 +14,15 @@ The core API: :class:`~odomgym.robot.RobotSpec`, :class:`~odomgym.floor.FloorSpe
 
 from __future__ import annotations
 
+from odomgym._source_tree import install_source_tree_finder
 from odomgym.floor import FLOORS, CableBump, FloorSpec, FrictionPatch, load_floor
 from odomgym.odometry import Calibration, Odometry, load_calibration
 from odomgym.robot import PRESETS, RobotSpec, load_robot
+
+# In a source checkout (Python started in the repository root), ``odomgym/`` shadows the
+# installed package and lacks ``envs`` and ``baselines``, which setuptools' ``package-dir`` maps
+# in from the top-level folders; this finder maps them the same way. A no-op when installed.
+install_source_tree_finder()
 
 __version__ = "0.1.0"
 

@@ -216,3 +216,23 @@ def test_version_and_python_dash_m() -> None:
         [sys.executable, "-m", "odomgym", "--version"], capture_output=True, text=True, check=True
     )
     assert out.stdout.strip() == f"odomgym {__version__}"
+
+
+def test_envs_and_baselines_import_from_the_repository_root() -> None:
+    """Python started in the checkout's root sees the source folder ``odomgym/`` first; the
+    package-dir folders envs/ and baselines/ must still be found as odomgym.envs/.baselines."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    code = (
+        "import odomgym, odomgym.envs.umbmark, odomgym.baselines; "
+        "print(odomgym.__file__); print(odomgym.envs.umbmark.__file__)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True
+    )
+    package, envs = out.stdout.split()
+    assert Path(package).resolve() == root / "odomgym" / "__init__.py"
+    assert Path(envs).resolve() == root / "envs" / "umbmark.py"
