@@ -97,7 +97,9 @@ class DiagnoseConfig:
     Attributes:
         holdout: fraction of runs held out for the gap report (0 < holdout < 1).
         seed: seeds the split, the folds and the sign-flip tests.
-        alpha: family-wise significance level of the selection test.
+        alpha: bound on the false-alarm rate of the verdict on data the model explains: half
+            goes to the selection test (family-wise over the candidates), half to the
+            whiteness test behind ``unexplained`` (Bonferroni over the two).
         max_rounds: most effects added one after the other.
         checkpoint_interval: least time between two samples entering the likelihood [s]
             (dense ground truth is thinned; its sensor noise is then closer to white).
@@ -393,7 +395,7 @@ def _score_candidates(
                 p_family=p_family,
                 t=float(t[k]),
                 p_sign_flip=float(p_flip[k]),
-                significant=bool(p_family < cfg.alpha and gain > 0.0),
+                significant=bool(p_family < 0.5 * cfg.alpha and gain > 0.0),
             )
         )
     return candidates, fits
@@ -471,7 +473,7 @@ def diagnose(
         significant = [k for k, c in enumerate(candidates) if c.significant]
         consistency = _consistency(data, base_spec, base_sensor)
         if not significant:
-            verdict = "none" if consistency >= cfg.alpha else "unexplained"
+            verdict = "none" if consistency >= 0.5 * cfg.alpha else "unexplained"
             rounds.append(Round(number, verdict, None, [], None, round_candidates, consistency))
             break
         best = max(significant, key=lambda k: candidates[k].cv_gain)
