@@ -22,9 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.baselines.base import Calibrator
-from odomgym.baselines.validation import make_calibrator
-from odomgym.data import RecordedLab, Session, find_sessions, read_session
+from odomgym.baselines.validation import calibrator_for_session
+from odomgym.data import RecordedLab, find_sessions, read_session
 from odomgym.errors import SpecError
 from odomgym.evaluation import EvaluationMeasures, evaluate
 from odomgym.odometry import Calibration
@@ -107,21 +106,6 @@ def published_results(path: Path) -> dict[tuple[str, str], dict[str, float]]:
     return results
 
 
-def _calibrator_for(cls: type[Calibrator], session: Session) -> Calibrator:
-    """``cls`` configured for what ``session`` holds (counts it lacks keep their defaults, and
-    the method then says what is missing)."""
-    holdings = session.holdings()
-    return make_calibrator(
-        cls,
-        side=session.side or None,
-        runs_per_direction=holdings.get("square cw") or None,
-        squares_per_direction=holdings.get("square cw", 0),
-        straight_runs=holdings.get("straight") or None,
-        spin_runs=holdings.get("spin cw") or None,
-        spins_per_direction=holdings.get("spin cw", 0),
-    )
-
-
 def run_leaderboard(
     root: str | Path,
     methods: Sequence[str] | None = None,
@@ -142,7 +126,7 @@ def run_leaderboard(
         cls = CALIBRATORS[method]
         for source in sessions:
             try:
-                calibrator = _calibrator_for(cls, source)
+                calibrator = calibrator_for_session(cls, source)
                 result = calibrator.calibrate(RecordedLab(source), source.initial)
             except (LookupError, ValueError, ArithmeticError) as exc:
                 board.failures[(method, source.name)] = str(exc)

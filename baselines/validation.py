@@ -56,6 +56,25 @@ def make_calibrator(cls: type[Calibrator], **options: Any) -> Calibrator:
     return cls(**{k: v for k, v in options.items() if k in accepted and v is not None})
 
 
+def calibrator_for_session(
+    cls: type[Calibrator], session: Session, conventions: str | None = None
+) -> Calibrator:
+    """``cls`` sized for what ``session`` holds (its square side, and how many squares,
+    straights and spins it has); counts the session lacks keep the method's defaults, and
+    the method then says what is missing. One rule for the CLI and the leaderboard."""
+    holdings = session.holdings()
+    return make_calibrator(
+        cls,
+        side=session.side or None,
+        runs_per_direction=holdings.get("square cw") or None,
+        squares_per_direction=holdings.get("square cw", 0),
+        straight_runs=holdings.get("straight") or None,
+        spin_runs=holdings.get("spin cw") or None,
+        spins_per_direction=holdings.get("spin cw", 0),
+        conventions=conventions,
+    )
+
+
 @dataclass
 class SimulationReport:
     """A calibrator's result on a simulated robot, validated on fresh squares.

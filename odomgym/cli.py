@@ -272,6 +272,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     from odomgym.baselines.validation import (
         calibrate_in_simulation,
         calibrate_on_session,
+        calibrator_for_session,
         make_calibrator,
     )
 
@@ -286,13 +287,17 @@ def _command_calibrate(args: argparse.Namespace) -> int:
         from odomgym.data import read_session, resolve_data
 
         session = read_session(resolve_data(args.data, session=True))
-        calibrator = make_calibrator(
-            cls,
-            side=session.side or None,
-            runs_per_direction=max(1, len(session.select("square", "cw"))),
-            conventions=args.conventions,
-        )
-        report = calibrate_on_session(calibrator, session)
+        try:
+            calibrator = calibrator_for_session(cls, session, args.conventions)
+            report = calibrate_on_session(calibrator, session)
+        except (LookupError, ValueError) as exc:
+            if isinstance(exc, SpecError):
+                raise
+            # The session lacks an experiment the method needs (e.g. squares for UMBmark).
+            message = str(exc.args[0]) if exc.args else str(exc)
+            raise SpecError(
+                f"{args.method} cannot calibrate on {args.data}: {message}", field="data"
+            ) from None
         _write_calibration_outputs(args, report.result.calibration)
         if args.json:
             print(to_json(report.as_dict()))

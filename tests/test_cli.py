@@ -236,3 +236,24 @@ def test_envs_and_baselines_import_from_the_repository_root() -> None:
     package, envs = out.stdout.split()
     assert Path(package).resolve() == root / "odomgym" / "__init__.py"
     assert Path(envs).resolve() == root / "envs" / "umbmark.py"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["square", "ivanjko", "circular"])
+def test_every_method_on_every_shipped_session_kind(
+    kind: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A result, or one line saying what the method needs: never a traceback."""
+    from odomgym.baselines import CALIBRATORS
+    from odomgym.data import sample_sessions
+
+    session = next(name for name in sample_sessions() if name.startswith(f"{kind}/"))
+    for method in sorted(CALIBRATORS):
+        code = main(["calibrate", method, "--data", f"optiodom:{session}", "--json"])
+        out, err = capsys.readouterr()
+        if code == 0:
+            assert json.loads(out)["method"]
+        else:
+            assert code == 2
+            lines = err.strip().splitlines()
+            assert len(lines) == 1 and lines[0].startswith(f"odomgym: error: {method} cannot")
