@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.errors import SpecError
 from odomgym.experiments import Lab
 from odomgym.floor import FLOORS, FloorSpec
 from odomgym.lab import random_start_poses, simulate_runs
@@ -189,16 +190,23 @@ class BenchConfig:
     def __post_init__(self) -> None:
         for floor in self.floors:
             if floor not in BENCH_FLOORS:
-                raise ValueError(
-                    f"unknown benchmark floor {floor!r}; floors: {', '.join(BENCH_FLOORS)}"
+                raise SpecError(
+                    f"unknown benchmark floor {floor!r}; floors: {', '.join(BENCH_FLOORS)}",
+                    field="floor",
                 )
-        if self.robots < 1 or self.validation_runs < 1:
-            raise ValueError("robots and validation_runs must be >= 1")
+        if self.robots < 1:
+            raise SpecError(f"robots must be >= 1, got {self.robots}", field="robots")
+        if self.validation_runs < 1:
+            raise SpecError(
+                f"validation_runs must be >= 1, got {self.validation_runs}",
+                field="validation_runs",
+            )
         for method in self.methods:
             least = MIN_BUDGET.get(method, 2)
             if min(self.budgets) < least:
-                raise ValueError(
-                    f"{method} needs a budget of at least {least} runs, got {min(self.budgets)}"
+                raise SpecError(
+                    f"{method} needs a budget of at least {least} runs, got {min(self.budgets)}",
+                    field="budget",
                 )
 
     @property

@@ -168,3 +168,20 @@ def test_a_robot_that_cannot_finish_fails_alone() -> None:
 def test_bench_config_rejects_budgets_a_method_cannot_use() -> None:
     with pytest.raises(ValueError, match="ivanjko needs a budget of at least 3"):
         BenchConfig(methods=("ivanjko",), budget=2)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"floors": ("marble",)}, "floor"),
+        ({"robots": 0}, "robots"),
+        ({"validation_runs": 0}, "validation_runs"),
+        ({"methods": ("ivanjko",), "budget": 2}, "budget"),
+    ],
+)
+def test_bench_config_errors_name_their_field(kwargs: dict, field: str) -> None:
+    from odomgym.errors import SpecError
+
+    with pytest.raises(SpecError) as caught:
+        BenchConfig(**kwargs)
+    assert caught.value.field == field
