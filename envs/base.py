@@ -124,7 +124,6 @@ class RouteEpisodes:
 
     def __init__(self, weights: RewardWeights, n: int) -> None:
         self.weights = weights
-        self.n = n
         self._fraction = np.zeros(n)
         self._start_time = np.zeros(n)
         self._time_term = np.full(n, -weights.time)

@@ -223,8 +223,12 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         those with reward terms (not the ones autoreset this step: a reset reports none)."""
         assert self._trial is not None
         info: dict[str, Any] = {}
+        everyone = bool(present.all())
         for key, value in self._episodes.info(self._trial).items():
-            info[key] = np.where(present.reshape(-1, *[1] * (value.ndim - 1)), value, 0)
+            # The entries are fresh arrays; only a partial reset blanks the absent sub-envs.
+            if not everyone:
+                value[~present] = 0
+            info[key] = value
             info[f"_{key}"] = present.copy()
         reward_terms: dict[str, Any] = {}
         if terms is not None and rewarded is not None and rewarded.any():

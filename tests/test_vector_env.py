@@ -168,3 +168,16 @@ def test_render_fps_follows_the_control_period() -> None:
     vector = gym.make_vec("UMBmarkSquare-v0", num_envs=2, dt=0.025)
     assert vector.metadata["render_fps"] == 40.0
     assert vector.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+
+
+def test_partial_reset_with_reset_mask_matches_sync_vector_env() -> None:
+    robot = odomgym.PRESETS["navbot"]
+    kwargs = {"robot": robot, "floor": "rough", "distance": 0.3}
+    results = []
+    for mode in ("vector_entry_point", "sync"):
+        envs = gym.make_vec("StraightLine-v0", num_envs=3, vectorization_mode=mode, **kwargs)
+        out = _rollout(envs, robot, 30, seed=[3, 4, 5])
+        mask = np.array([False, True, False])
+        out.append(envs.reset(seed=[None, 9, None], options={"reset_mask": mask}))
+        results.append(out)
+    _assert_same(results[0], results[1])
