@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym._jit import kernel
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.odometry import Calibration, load_calibration
 from odomgym.paths import Route
@@ -75,13 +76,32 @@ def action_space(shape: tuple[int, ...] = (2,)) -> gym.spaces.Box:
 
 def validate_actions(action: Any, shape: tuple[int, ...]) -> FloatArray:
     """Check and clip actions: NaN/inf or a wrong shape raise ValueError; values outside
-    [−1, 1] are clipped (the documented rule: a motor controller saturates)."""
-    array = np.asarray(action, dtype=np.float64)
+    [−1, 1] are clipped (the documented rule: a motor controller saturates).
+
+    Returns a new float64 array (never the caller's array, which is left untouched).
+    """
+    try:
+        array = np.array(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"action must be numbers of shape {shape}, got {type(action).__name__}"
+        ) from None
     if array.shape != shape:
         raise ValueError(f"action must have shape {shape}, got {array.shape}")
-    if not np.isfinite(array).all():
+    if not _clip_unit(array.reshape(-1)):
         raise ValueError(f"action must be finite, got {array.tolist()}")
-    return np.minimum(np.maximum(array, -1.0), 1.0)
+    return array
+
+
+@kernel
+def _clip_unit(values: FloatArray) -> bool:
+    """Clip to [−1, 1] in place; False (values untouched) if any is NaN or infinite."""
+    for k in range(values.shape[0]):
+        if not math.isfinite(values[k]):
+            return False
+    for k in range(values.shape[0]):
+        values[k] = min(max(values[k], -1.0), 1.0)
+    return True
 
 
 def resolve_specs(
@@ -126,7 +146,6 @@ class RouteEpisodes:
         self.weights = weights
         self._fraction = np.zeros(n)
         self._start_time = np.zeros(n)
-        self._time_term = np.full(n, -weights.time)
 
     def begin(self, trial: Trial, indices: NDArray[np.intp] | None = None) -> None:
         """Start new episodes for ``indices`` (default: every robot)."""
@@ -135,30 +154,68 @@ class RouteEpisodes:
         self._start_time[chosen] = trial.world.time
 
     def advance(self, trial: Trial) -> tuple[FloatArray, NDArray[np.bool_], dict[str, FloatArray]]:
-        """After a step: rewards (N,), terminated (N,) and the reward terms (each (N,))."""
-        fraction = trial.progress.state[:, 7]
-        terminated = trial.done.copy()
+        """After a step: rewards (N,), terminated (N,) and the reward terms (each (N,)), all
+        fresh arrays the caller may keep or change."""
+        n = self._fraction.shape[0]
+        terms = np.empty((3, n))
+        rewards = np.empty(n)
+        terminated = np.empty(n, dtype=np.bool_)
         weights = self.weights
-        terms = {
-            "progress": weights.progress * (fraction - self._fraction),
-            "time": self._time_term.copy(),
-            "completion": weights.completion * terminated,
-        }
-        self._fraction = fraction.copy()
-        return terms["progress"] + terms["time"] + terms["completion"], terminated, terms
+        progress = trial.progress
+        _advance_episodes(
+            progress.state,
+            progress.index,
+            progress.segment_counts,
+            weights.progress,
+            weights.time,
+            weights.completion,
+            self._fraction,
+            terms,
+            rewards,
+            terminated,
+        )
+        return rewards, terminated, {"progress": terms[0], "time": terms[1], "completion": terms[2]}
 
     def info(self, trial: Trial) -> dict[str, Any]:
-        """The per-step ``info`` entries (each with a leading robot axis): poses, their error,
-        encoder counts, route segment and the time since each robot's episode began [s]."""
-        error = trial.pose_error()
+        """The per-step ``info`` entries (each a fresh array with a leading robot axis): poses,
+        their error, encoder counts, route segment and the time since each robot's episode
+        began [s]."""
+        poses, counts, segment, elapsed = trial.snapshot(self._start_time)
         return {
-            "odom_pose": trial.odom_pose.copy(),
-            "true_pose": trial.true_pose.copy(),
-            "pose_error": error,
-            "encoder_counts": trial.world.counts.copy(),
-            "segment": trial.progress.index.astype(np.int64),
-            "time": trial.world.time - self._start_time,
+            "odom_pose": poses[:, 0:3],
+            "true_pose": poses[:, 3:6],
+            "pose_error": poses[:, 6:9],
+            "encoder_counts": counts,
+            "segment": segment,
+            "time": elapsed,
         }
+
+
+@kernel
+def _advance_episodes(
+    state: FloatArray,
+    index: NDArray[np.intp],
+    count: NDArray[np.intp],
+    w_progress: float,
+    w_time: float,
+    w_completion: float,
+    fraction: FloatArray,
+    terms: FloatArray,
+    rewards: FloatArray,
+    terminated: NDArray[np.bool_],
+) -> None:
+    """Reward terms (3, N) = progress, time, completion (module docstring), their sum, and
+    which robots finished their route; ``fraction`` (the route share at the last step) moves
+    on in place."""
+    for i in range(state.shape[0]):
+        done = index[i] >= count[i]
+        now = state[i, 7]
+        terms[0, i] = w_progress * (now - fraction[i])
+        terms[1, i] = -w_time
+        terms[2, i] = w_completion * (1.0 if done else 0.0)
+        rewards[i] = terms[0, i] + terms[1, i] + terms[2, i]
+        terminated[i] = done
+        fraction[i] = now
 
 
 class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
@@ -254,7 +311,11 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         rewards, done, terms = self._episodes.advance(trial)
         terminated = bool(done[0])
         self._terminated = terminated
-        reward_terms = {name: float(value[0]) for name, value in terms.items()}
+        reward_terms = {
+            "progress": float(terms["progress"][0]),
+            "time": float(terms["time"][0]),
+            "completion": float(terms["completion"][0]),
+        }
         if self.render_mode is not None:
             t, o = trial.true_pose[0], trial.odom_pose[0]
             self._history.append((t[0], t[1], t[2], o[0], o[1], o[2]))
@@ -281,10 +342,16 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         self._covariance = estimate.cov
 
     def _info(self, trial: Trial, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
-        info: dict[str, Any] = {key: value[0] for key, value in self._episodes.info(trial).items()}
-        info["segment"] = int(info["segment"])
-        info["time"] = float(info["time"])
-        info["reward_terms"] = terms
+        entries = self._episodes.info(trial)
+        info: dict[str, Any] = {
+            "odom_pose": entries["odom_pose"][0],
+            "true_pose": entries["true_pose"][0],
+            "pose_error": entries["pose_error"][0],
+            "encoder_counts": entries["encoder_counts"][0],
+            "segment": int(entries["segment"][0]),
+            "time": float(entries["time"][0]),
+            "reward_terms": terms,
+        }
         if self.covariance_k is not None:
             info["odom_covariance"] = self._covariance.copy()
         if terminated:

@@ -162,6 +162,7 @@ class RouteProgress:
             self._unit = np.zeros((*size, 2))  # direction of motion of a drive
             self._length = np.zeros(size)
             self._heading = np.zeros(size)
+            self._direction = np.ones(size)  # +1 a drive along its heading, −1 reversing
             self._count = np.zeros(self.n, dtype=np.intp)
             self.state = np.zeros((self.n, 8))
             self._advanced = np.zeros(self.n, dtype=np.bool_)
@@ -189,6 +190,11 @@ class RouteProgress:
                     dx, dy = seg.end[0] - seg.start[0], seg.end[1] - seg.start[1]
                     norm = math.hypot(dx, dy)
                     self._unit[i, s] = (dx / norm, dy / norm)
+                    # +1 when a drive moves along the heading it holds, −1 when reversing.
+                    facing = (dx * math.cos(seg.heading) + dy * math.sin(seg.heading)) / norm
+                    self._direction[i, s] = 1.0 if facing >= 0.0 else -1.0
+                else:
+                    self._direction[i, s] = 1.0
                 total += seg.length
                 self._cumulative[i, s + 1] = total
             self._cumulative[i, len(route.segments) + 1 :] = total
@@ -215,7 +221,6 @@ class RouteProgress:
         drives, rad for turns) — and returns which robots moved on.
         """
         advanced = self._advanced
-        advanced[:] = False
         _route_update(
             odom_pose,
             wheel_speed,
@@ -226,6 +231,7 @@ class RouteProgress:
             self._unit,
             self._length,
             self._heading,
+            self._direction,
             self._cumulative,
             self.position_tolerance,
             self.heading_tolerance,
@@ -237,6 +243,11 @@ class RouteProgress:
             advanced,
         )
         return advanced.copy()
+
+    @property
+    def segment_counts(self) -> NDArray[np.intp]:
+        """Number of segments of each robot's route (N,) (read it, do not write it)."""
+        return self._count
 
     @property
     def total(self) -> FloatArray:
@@ -255,6 +266,7 @@ def _route_update(
     unit: FloatArray,
     length: FloatArray,
     heading: FloatArray,
+    drive_direction: FloatArray,
     cumulative: FloatArray,
     position_tolerance: FloatArray,
     heading_tolerance: FloatArray,
@@ -268,12 +280,11 @@ def _route_update(
     """Route features of each robot's current segment (see :meth:`RouteProgress.update`)."""
     two_pi = 2.0 * math.pi
     for i in range(pose.shape[0]):
+        advanced[i] = False
         for _attempt in range(2):  # the second pass describes the segment just moved on to
             k = index[i]
             finished = k >= count[i]
             s = min(k, count[i] - 1)
-            # Turns count the rotation left unwrapped (a 360° spin must not look finished at
-            # the start); drives hold a heading, so their error is wrapped to [−π, π).
             # A turn counts the rotation left unwrapped (a 360° spin must not look finished at
             # the start): that goes to ``remaining``; the heading error itself is wrapped.
             rotation_left = heading[i, s] - pose[i, 2]
@@ -283,11 +294,7 @@ def _route_update(
             travelled = rel_x * unit[i, s, 0] + rel_y * unit[i, s, 1]
             cross = unit[i, s, 0] * rel_y - unit[i, s, 1] * rel_x
             turn = is_turn[i, s]
-            # +1 when a drive moves along the heading it holds, −1 when reversing.
-            facing = unit[i, s, 0] * math.cos(heading[i, s]) + unit[i, s, 1] * math.sin(
-                heading[i, s]
-            )
-            direction = 1.0 if (turn or facing >= 0.0) else -1.0
+            direction = drive_direction[i, s]
             if turn:
                 remaining = rotation_left
                 done_part = length[i, s] - abs(rotation_left)

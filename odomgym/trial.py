@@ -24,18 +24,20 @@ idx   name                   meaning                                            
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym._jit import kernel
 from odomgym.floor import FloorSpec
-from odomgym.odometry import Calibration, Odometry, wrap_angle
+from odomgym.odometry import Calibration, Odometry
 from odomgym.paths import Route, RouteProgress
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
 
-__all__ = ["OBSERVATION_NAMES", "Trial"]
+__all__ = ["OBSERVATION_NAMES", "Trial", "pose_error_into"]
 
 FloatArray = NDArray[np.float64]
 
@@ -108,6 +110,7 @@ class Trial:
         )
         self._max_speed = np.array([s.max_wheel_speed for s in specs])
         self._action_to_rate = (self._max_speed / self.world.nominal_radius)[:, None]
+        self._command = np.zeros((self.n, 2))  # wheel-rate commands of a step [rad/s]
         self._refresh(advance=False)
 
     @property
@@ -138,7 +141,8 @@ class Trial:
 
         Returns the robots that completed a segment this step.
         """
-        self.world.step(actions * self._action_to_rate)
+        np.multiply(actions, self._action_to_rate, out=self._command)
+        self.world.step(self._command)
         self.odometry.update(self.world.counts, self.world.dt)
         return self._refresh(advance=True)
 
@@ -169,16 +173,94 @@ class Trial:
 
     def true_pose_in_start_frame(self) -> FloatArray:
         """Ground-truth poses (N, 3) in each robot's start frame — the odometry's frame."""
-        if not self._offset:
-            return self.world.pose.copy()
-        start = self.start_poses
-        c, s = np.cos(start[:, 2]), np.sin(start[:, 2])
-        dx = self.world.pose[:, 0] - start[:, 0]
-        dy = self.world.pose[:, 1] - start[:, 1]
-        return np.stack([c * dx + s * dy, -s * dx + c * dy, self.world.pose[:, 2] - start[:, 2]], 1)
+        out = np.empty((self.n, 3))
+        _start_frame(self.world.pose, self.start_poses, out)
+        return out
 
-    def pose_error(self) -> FloatArray:
-        """True − odometry (N, 3) in the start frame, heading wrapped to [−π, π) [m, m, rad]."""
-        error = self.true_pose_in_start_frame() - self.odometry.pose
-        error[:, 2] = wrap_angle(error[:, 2])
-        return error
+    def snapshot(
+        self, start_time: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64], FloatArray]:
+        """Fresh copies, in one compiled pass, of what an env reports after a step: poses
+        (N, 9) = odometry, truth, their error (:meth:`pose_error`); encoder counts (N, 2);
+        route segment (N,); time since ``start_time`` (N,) [s]."""
+        n = self.n
+        poses = np.empty((n, 9))
+        counts = np.empty((n, 2), dtype=np.int64)
+        segment = np.empty(n, dtype=np.int64)
+        elapsed = np.empty(n)
+        world = self.world
+        _snapshot(
+            world.pose,
+            self.start_poses,
+            self.odometry.pose,
+            world.counts,
+            self.progress.index,
+            world.time,
+            start_time,
+            poses,
+            counts,
+            segment,
+            elapsed,
+        )
+        return poses, counts, segment, elapsed
+
+    def pose_error(self, out: FloatArray | None = None) -> FloatArray:
+        """True − odometry (N, 3) in the start frame, heading wrapped to [−π, π) [m, m, rad];
+        written into ``out`` (N, 3) if given."""
+        if out is None:
+            out = np.empty((self.n, 3))
+        pose_error_into(self.world.pose, self.start_poses, self.odometry.pose, out)
+        return out
+
+
+@kernel
+def _start_frame(pose: FloatArray, start: FloatArray, out: FloatArray) -> None:
+    """World-frame poses (N, 3) expressed in each robot's start frame, into ``out``."""
+    for i in range(pose.shape[0]):
+        c = math.cos(start[i, 2])
+        s = math.sin(start[i, 2])
+        dx = pose[i, 0] - start[i, 0]
+        dy = pose[i, 1] - start[i, 1]
+        out[i, 0] = c * dx + s * dy
+        out[i, 1] = -s * dx + c * dy
+        out[i, 2] = pose[i, 2] - start[i, 2]
+
+
+@kernel
+def pose_error_into(
+    pose: FloatArray, start: FloatArray, odom: FloatArray, out: FloatArray
+) -> None:
+    """True pose (world frame) in each robot's start frame minus odometry (N, 3), heading
+    wrapped to [−π, π), into ``out`` (compiled; callable from other kernels)."""
+    _start_frame(pose, start, out)
+    two_pi = 2.0 * math.pi
+    for i in range(pose.shape[0]):
+        out[i, 0] -= odom[i, 0]
+        out[i, 1] -= odom[i, 1]
+        out[i, 2] = (out[i, 2] - odom[i, 2] + math.pi) % two_pi - math.pi
+
+
+@kernel
+def _snapshot(
+    true_pose: FloatArray,
+    start_poses: FloatArray,
+    odom_pose: FloatArray,
+    counts: NDArray[np.int64],
+    index: NDArray[np.intp],
+    time: float,
+    start_time: FloatArray,
+    poses: FloatArray,
+    counts_out: NDArray[np.int64],
+    segment: NDArray[np.int64],
+    elapsed: FloatArray,
+) -> None:
+    """The arrays of :meth:`Trial.snapshot`, filled in one pass."""
+    pose_error_into(true_pose, start_poses, odom_pose, poses[:, 6:9])
+    for i in range(true_pose.shape[0]):
+        for k in range(3):
+            poses[i, k] = odom_pose[i, k]
+            poses[i, 3 + k] = true_pose[i, k]
+        counts_out[i, 0] = counts[i, 0]
+        counts_out[i, 1] = counts[i, 1]
+        segment[i] = index[i]
+        elapsed[i] = time - start_time[i]
