@@ -303,9 +303,9 @@ class World:
         ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp)
         position = {int(body_id): k for k, body_id in enumerate(ids)}
         self._chassis_rows = np.array([position[b.id] for b in self._chassis], dtype=np.intp)
-        self._ground_rows = np.array(
-            [position[b.id] for b in self._ground], dtype=np.intp
-        ).reshape(self.n, 2)
+        self._ground_rows = np.array([position[b.id] for b in self._ground], dtype=np.intp).reshape(
+            self.n, 2
+        )
         self._velocity_out = np.zeros((len(ids), 2))
         self._make_buffers()
 
@@ -548,7 +548,9 @@ class World:
             pbatch.set_space_bodies(self.space, pbatch.BodyFields.VELOCITY, self._out_buffer)
         elif self._direct_io:
             set_velocity = _CHIPMUNK.cpBodySetVelocity
-            for ground, velocity in zip(self._ground, ground_v.reshape(-1, 2).tolist()):
+            for ground, velocity in zip(
+                self._ground, ground_v.reshape(-1, 2).tolist(), strict=True
+            ):
                 set_velocity(ground._body, velocity)
         else:
             for ground, (vx, vy) in zip(

@@ -227,9 +227,7 @@ def _start_frame(pose: FloatArray, start: FloatArray, out: FloatArray) -> None:
 
 
 @kernel
-def pose_error_into(
-    pose: FloatArray, start: FloatArray, odom: FloatArray, out: FloatArray
-) -> None:
+def pose_error_into(pose: FloatArray, start: FloatArray, odom: FloatArray, out: FloatArray) -> None:
     """True pose (world frame) in each robot's start frame minus odometry (N, 3), heading
     wrapped to [−π, π), into ``out`` (compiled; callable from other kernels)."""
     _start_frame(pose, start, out)
