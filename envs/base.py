@@ -22,7 +22,9 @@ the truth is reported in ``info`` for evaluation, never rewarded.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
+from os import PathLike
 from typing import Any
 
 import gymnasium as gym
@@ -105,19 +107,20 @@ def _clip_unit(values: FloatArray) -> bool:
 
 
 def resolve_specs(
-    robot: RobotSpec | str,
-    floor: FloorSpec | str,
-    calibration: Calibration | str | None,
+    robot: RobotSpec | str | PathLike[str],
+    floor: FloorSpec | str | PathLike[str],
+    calibration: Calibration | str | PathLike[str] | None,
 ) -> tuple[RobotSpec, FloorSpec, Calibration]:
-    """Accept specs or their names/paths (presets, ``.toml`` files)."""
-    robot_spec = load_robot(robot) if isinstance(robot, str) else robot
-    floor_spec = load_floor(floor) if isinstance(floor, str) else floor
+    """Accept specs or their names/paths (presets, ``.toml`` files as ``str`` or
+    :class:`pathlib.Path`)."""
+    robot_spec = robot if isinstance(robot, RobotSpec) else load_robot(os.fspath(robot))
+    floor_spec = floor if isinstance(floor, FloorSpec) else load_floor(os.fspath(floor))
     if calibration is None:
         cal = Calibration()
-    elif isinstance(calibration, str):
-        cal = load_calibration(calibration)
-    else:
+    elif isinstance(calibration, Calibration):
         cal = calibration
+    else:
+        cal = load_calibration(os.fspath(calibration))
     return robot_spec, floor_spec, cal
 
 
@@ -231,9 +234,9 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
 
     def __init__(
         self,
-        robot: RobotSpec | str = "labmate",
-        floor: FloorSpec | str = "smooth",
-        calibration: Calibration | str | None = None,
+        robot: RobotSpec | str | PathLike[str] = "labmate",
+        floor: FloorSpec | str | PathLike[str] = "smooth",
+        calibration: Calibration | str | PathLike[str] | None = None,
         *,
         dt: float = 0.05,
         reward_weights: RewardWeights | None = None,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from os import PathLike
 from typing import Any
 
 from odomgym.envs.base import RewardWeights, RouteEnv
@@ -90,9 +91,9 @@ class StraightLineEnv(RouteEnv):
 
     def __init__(
         self,
-        robot: RobotSpec | str = "labmate",
-        floor: FloorSpec | str = "smooth",
-        calibration: Calibration | str | None = None,
+        robot: RobotSpec | str | PathLike[str] = "labmate",
+        floor: FloorSpec | str | PathLike[str] = "smooth",
+        calibration: Calibration | str | PathLike[str] | None = None,
         *,
         distance: float = 10.0,
         return_trip: bool = False,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from os import PathLike
 from typing import Any, Literal
 
 from odomgym.envs.base import RewardWeights, RouteEnv
@@ -105,9 +106,9 @@ class UMBmarkSquareEnv(RouteEnv):
 
     def __init__(
         self,
-        robot: RobotSpec | str = "labmate",
-        floor: FloorSpec | str = "smooth",
-        calibration: Calibration | str | None = None,
+        robot: RobotSpec | str | PathLike[str] = "labmate",
+        floor: FloorSpec | str | PathLike[str] = "smooth",
+        calibration: Calibration | str | PathLike[str] | None = None,
         *,
         side: float = 4.0,
         direction: Literal["cw", "ccw"] = "cw",

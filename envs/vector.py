@@ -20,6 +20,7 @@ the step after a sub-env ends resets it (from its own random stream) and ignores
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from os import PathLike
 from typing import Any, Literal
 
 import numpy as np
@@ -69,9 +70,9 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         self,
         num_envs: int,
         route: RouteFactory | Route,
-        robot: RobotSpec | str | Sequence[RobotSpec] = "labmate",
-        floor: FloorSpec | str = "smooth",
-        calibration: Calibration | str | None = None,
+        robot: RobotSpec | str | PathLike[str] | Sequence[RobotSpec] = "labmate",
+        floor: FloorSpec | str | PathLike[str] = "smooth",
+        calibration: Calibration | str | PathLike[str] | None = None,
         *,
         dt: float = 0.05,
         reward_weights: RewardWeights | None = None,
@@ -85,7 +86,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             )
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
-        if isinstance(robot, (RobotSpec, str)):
+        if isinstance(robot, (RobotSpec, str, PathLike)):
             spec, self.floor, self.calibration = resolve_specs(robot, floor, calibration)
             self.robots: list[RobotSpec] = [spec] * num_envs
         else:
@@ -189,21 +190,26 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         if trial is None:
             raise RuntimeError("call reset() before step()")
         array = validate_actions(actions, (self.num_envs, 2))
-        resetting = self._autoreset.copy()
-        if resetting.any():
+        any_reset = bool(self._autoreset.any())
+        if any_reset:
+            resetting = self._autoreset.copy()  # _restart clears the flags
             array[resetting] = 0.0
         trial.step(array)
         rewards, done, terms = self._episodes.advance(trial)
-        if resetting.any():
+        if any_reset:
             idx = np.flatnonzero(resetting)
             # As Gymnasium's autoreset: reset() without options, so the default route.
             self._restart(idx, [self._route({})] * len(idx))
             rewards[resetting] = 0.0
             for values in terms.values():
                 values[resetting] = 0.0
-        running = ~resetting
-        self._steps[running] += 1  # the reset step is not a step of the new episode
-        terminated = done & running
+            running = ~resetting
+            self._steps += running  # the reset step is not a step of the new episode
+            terminated = done & running
+        else:
+            running = self._everyone
+            self._steps += 1
+            terminated = done
         truncated = (self._steps >= self.max_episode_steps) & ~terminated & running
         self._autoreset = terminated | truncated
         info = self._vector_info(self._everyone, terms, running)

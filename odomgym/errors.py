@@ -25,11 +25,14 @@ class SpecError(ValueError):
         super().__init__(prefix + message)
 
 
-def locate_key(path: Path, key: str) -> str:
-    """Return ``"file:line"`` for the first line of ``path`` that assigns ``key``.
+def locate_key(path: Path, key: str, *, table: str | None = None, index: int = 0) -> str:
+    """Return ``"file:line"`` for the line of ``path`` that assigns ``key``.
 
     TOML parsers report syntax errors with line numbers but not semantic ones (a negative
-    wheelbase parses fine), so semantic errors find their line by a textual search.
+    wheelbase parses fine), so semantic errors find their line by a textual search: the first
+    assignment of ``key`` in the file or, with ``table``, the first one inside the ``index``-th
+    ``[[table]]`` (or ``[[<parent>.table]]``) entry of an array of tables. Falls back to the
+    file alone (or the entry's header line) when the text does not show it.
     """
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
@@ -37,10 +40,21 @@ def locate_key(path: Path, key: str) -> str:
         return str(path)
     leaf = key.split(".")[-1]
     pattern = re.compile(rf"^\s*{re.escape(leaf)}\s*=")
-    for number, line in enumerate(lines, start=1):
-        if pattern.match(line):
-            return f"{path}:{number}"
-    return str(path)
+    start, stop = 0, len(lines)
+    if table is not None:
+        header = re.compile(rf"^\s*\[\[\s*(?:[\w-]+\.)*{re.escape(table)}\s*\]\]")
+        entries = [n for n, line in enumerate(lines) if header.match(line)]
+        if index >= len(entries):
+            return str(path)
+        start = entries[index]
+        following = [
+            n for n, line in enumerate(lines) if n > start and line.lstrip().startswith("[")
+        ]
+        stop = following[0] if following else len(lines)
+    for number in range(start, stop):
+        if pattern.match(lines[number]):
+            return f"{path}:{number + 1}"
+    return f"{path}:{start + 1}" if table is not None else str(path)
 
 
 def require_positive(name: str, value: object, *, source: str | None = None) -> float:

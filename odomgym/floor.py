@@ -26,9 +26,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from odomgym._jit import kernel
+# The crossing geometry lives in odomgym.cables; its two public functions stay importable here.
+from odomgym.cables import bump_extra_rotation, cable_advance
 from odomgym.errors import SpecError, locate_key, require_finite, require_positive, require_range
 from odomgym.io import atomic_write_text
 
@@ -37,7 +38,6 @@ __all__ = [
     "CableBump",
     "FloorSpec",
     "FrictionPatch",
-    "apply_cable_deficits",
     "bump_extra_rotation",
     "cable_advance",
     "load_floor",
@@ -85,8 +85,14 @@ class FrictionPatch:
         for name in ("x_min", "y_min", "x_max", "y_max"):
             require_finite(name, getattr(self, name))
         require_positive("friction", self.friction)
-        if self.x_max <= self.x_min or self.y_max <= self.y_min:
-            raise SpecError("patch must have x_max > x_min and y_max > y_min", field="patch")
+        if self.x_max <= self.x_min:
+            raise SpecError(
+                f"x_max must exceed x_min, got {self.x_max!r} <= {self.x_min!r}", field="x_max"
+            )
+        if self.y_max <= self.y_min:
+            raise SpecError(
+                f"y_max must exceed y_min, got {self.y_max!r} <= {self.y_min!r}", field="y_max"
+            )
 
 
 @dataclass(frozen=True)
@@ -246,242 +252,29 @@ def _list_of_tables(value: object, name: str, path: Path | None) -> Sequence[Map
 
 
 def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path | None) -> Any:
+    """Build the ``label`` entry (e.g. ``bumps[2]``) of an array of tables; errors point at the
+    line inside that entry."""
+    table, _, rest = label.partition("[")
+    index = int(rest.rstrip("]")) if rest else 0
+
+    def where(key: str) -> str | None:
+        return locate_key(path, key, table=table, index=index) if path else None
+
     names = {f.name for f in dataclasses.fields(kind)}
     for key in item:
         if key not in names:
             raise SpecError(
                 f"unknown field {key!r} in {label}; known: {', '.join(sorted(names))}",
                 field=f"{label}.{key}",
-                source=locate_key(path, key) if path else None,
+                source=where(key),
             )
     try:
         return kind(**item)
     except TypeError as exc:
-        raise SpecError(
-            f"{label}: {exc}", field=label, source=str(path) if path else None
-        ) from None
+        raise SpecError(f"{label}: {exc}", field=label, source=where(label)) from None
     except SpecError as exc:
         key = exc.field or label
-        raise SpecError(
-            f"{label}.{exc}",
-            field=f"{label}.{key}",
-            source=locate_key(path, key) if path else None,
-        ) from None
-
-
-# ---------------------------------------------------------------------- bump geometry
-def _profile(
-    radius_wheel: float | FloatArray, radius_cable: float | FloatArray
-) -> tuple[Any, Any, Any]:
-    big_r = radius_wheel + radius_cable
-    half_width = 2.0 * np.sqrt(radius_wheel * radius_cable)  # centre offset at first contact
-    psi0 = np.arcsin(half_width / big_r)
-    return big_r, half_width, psi0
-
-
-def bump_extra_rotation(wheel_radius: float, cable_diameter: float) -> float:
-    """Rim travel minus horizontal advance for one full crossing of a cable [m].
-
-    A rigid wheel of radius r meets a rigid cylinder of radius ρ when their centres are
-    w = 2·√(r·ρ) apart horizontally; from there the wheel centre moves on a circle of radius
-    R = r + ρ around the cable axis, rolling without slip, so the wheel turns through an arc of
-    R·2ψ₀ (ψ₀ = asin(w/R)) while advancing 2w. The excess R·2ψ₀ − 2w is what the encoder
-    over-reports (Borenstein 1995, Eq. 1, uses the chord approximation of the same picture; LabMate,
-    r = 75 mm, 10 mm cable: 3.40 mm (0.57° of heading on b = 340 mm), versus the paper's 2.63
-    mm estimate).
-    """
-    big_r, half_width, psi0 = _profile(wheel_radius, 0.5 * cable_diameter)
-    return float(2.0 * big_r * psi0 - 2.0 * half_width)
-
-
-@kernel
-def cable_advance_scalar(
-    offset: float, rim_travel: float, wheel_radius: float, cable_radius: float
-) -> float:
-    """Horizontal advance of a wheel centre across a cable, for a given rim travel [m].
-
-    ``offset`` is the signed horizontal distance of the wheel centre from the cable axis
-    (perpendicular to the axis) at the start of the step, ``rim_travel`` the signed rim travel
-    in the same direction. The map from horizontal position x to accumulated rim travel s(x) is
-    x on the flat, −w + R·(asin(x/R) + ψ₀) over the cable, and x + 2Rψ₀ − 2w beyond it (R = r + ρ,
-    w = 2√(rρ), ψ₀ = asin(w/R)); the advance is s⁻¹(s(x₀) + Δs) − x₀, exact for any step size
-    and either direction of travel.
-    """
-    big_r = wheel_radius + cable_radius
-    half_width = 2.0 * math.sqrt(wheel_radius * cable_radius)
-    psi0 = math.asin(half_width / big_r)
-    excess = 2.0 * big_r * psi0 - 2.0 * half_width
-    x0 = offset
-    # Entirely on the flat (before or beyond the cable): exactly the rim travel, with no
-    # rounding, so testing a distant cable changes nothing.
-    if (x0 <= -half_width and x0 + rim_travel <= -half_width) or (
-        x0 >= half_width and x0 + rim_travel >= half_width
-    ):
-        return rim_travel
-    if x0 <= -half_width:
-        s0 = x0
-    elif x0 >= half_width:
-        s0 = x0 + excess
-    else:
-        s0 = -half_width + big_r * (math.asin(min(max(x0 / big_r, -1.0), 1.0)) + psi0)
-    s1 = s0 + rim_travel
-    if s1 <= -half_width:
-        x1 = s1
-    elif s1 >= half_width + excess:
-        x1 = s1 - excess
-    else:
-        x1 = big_r * math.sin(min(max((s1 + half_width) / big_r - psi0, -psi0), psi0))
-    return x1 - x0
-
-
-@kernel
-def _cable_advance_many(
-    offset: FloatArray, rim_travel: FloatArray, wheel_radius: FloatArray, cable_radius: FloatArray
-) -> FloatArray:
-    out = np.empty(offset.size)
-    for k in range(offset.size):
-        out[k] = cable_advance_scalar(offset[k], rim_travel[k], wheel_radius[k], cable_radius[k])
-    return out
-
-
-def cable_advance(
-    offset: ArrayLike, rim_travel: ArrayLike, wheel_radius: ArrayLike, cable_radius: ArrayLike
-) -> FloatArray:
-    """:func:`cable_advance_scalar` over broadcast arrays (same units, same result shape)."""
-    arrays = np.broadcast_arrays(
-        *(np.asarray(a, dtype=np.float64) for a in (offset, rim_travel, wheel_radius, cable_radius))
-    )
-    shape = arrays[0].shape
-    flat = [np.ascontiguousarray(a).ravel() for a in arrays]
-    return np.asarray(_cable_advance_many(*flat)).reshape(shape)
-
-
-@dataclass(frozen=True)
-class CableGrid:
-    """A uniform grid over the floor listing, per cell, the cables a wheel there may touch.
-
-    Why: a floor can hold thousands of cables, and a wheel meets at most one or two at a time.
-    Each cable is entered in every cell its reach (half its length along the axis; the
-    wheel-cable contact half-width 2√(rρ) plus one step's travel across) overlaps, so a wheel
-    only tests the cables of
-    its own cell. Arrays are CSR-style: cell ``c`` lists ``items[starts[c]:starts[c + 1]]``.
-    """
-
-    cable_x: FloatArray
-    cable_y: FloatArray
-    axis_x: FloatArray
-    axis_y: FloatArray
-    half_length: FloatArray
-    radius: FloatArray
-    origin_x: float
-    origin_y: float
-    cell: float
-    nx: int
-    ny: int
-    starts: NDArray[np.int64]
-    items: NDArray[np.int64]
-
-    @classmethod
-    def build(cls, floor: FloorSpec, max_wheel_radius: float, max_step: float) -> CableGrid:
-        """Index ``floor``'s cables for wheels of radius up to ``max_wheel_radius`` [m] that
-        travel at most ``max_step`` [m] per physics step (a step starting outside a cable's
-        contact zone may end inside it, so the reach includes one step)."""
-        cx, cy, ax, ay, half_len, radius, _ = floor.bump_arrays()
-        if cx.size == 0:
-            empty = np.zeros(0)
-            return cls(
-                empty,
-                empty,
-                empty,
-                empty,
-                empty,
-                empty,
-                0.0,
-                0.0,
-                1.0,
-                0,
-                0,
-                np.zeros(1, dtype=np.int64),
-                np.zeros(0, dtype=np.int64),
-            )
-        reach = 2.0 * np.sqrt(max_wheel_radius * radius) + max_step + 1e-6  # [m]
-        extent_x = np.abs(ax) * half_len + np.abs(ay) * reach
-        extent_y = np.abs(ay) * half_len + np.abs(ax) * reach
-        cell = float(max(0.25, 2.0 * float(np.max(half_len))))
-        origin_x = float(np.min(cx - extent_x)) - cell
-        origin_y = float(np.min(cy - extent_y)) - cell
-        nx = math.ceil((float(np.max(cx + extent_x)) - origin_x) / cell) + 1
-        ny = math.ceil((float(np.max(cy + extent_y)) - origin_y) / cell) + 1
-        buckets: list[list[int]] = [[] for _ in range(nx * ny)]
-        for m in range(cx.size):
-            x_lo = int((cx[m] - extent_x[m] - origin_x) // cell)
-            x_hi = int((cx[m] + extent_x[m] - origin_x) // cell)
-            y_lo = int((cy[m] - extent_y[m] - origin_y) // cell)
-            y_hi = int((cy[m] + extent_y[m] - origin_y) // cell)
-            for gy in range(y_lo, y_hi + 1):
-                for gx in range(x_lo, x_hi + 1):
-                    buckets[gy * nx + gx].append(m)
-        starts = np.zeros(nx * ny + 1, dtype=np.int64)
-        starts[1:] = np.cumsum([len(b) for b in buckets])
-        items = np.array([m for b in buckets for m in b], dtype=np.int64)
-        return cls(
-            cx, cy, ax, ay, half_len, radius, origin_x, origin_y, cell, nx, ny, starts, items
-        )
-
-
-@kernel
-def apply_cable_deficits(
-    contact: FloatArray,
-    pose: FloatArray,
-    rim_speed: FloatArray,
-    h: float,
-    wheel_radius: FloatArray,
-    cable_x: FloatArray,
-    cable_y: FloatArray,
-    axis_x: FloatArray,
-    axis_y: FloatArray,
-    half_length: FloatArray,
-    cable_radius: FloatArray,
-    origin_x: float,
-    origin_y: float,
-    cell: float,
-    nx: int,
-    ny: int,
-    starts: NDArray[np.int64],
-    items: NDArray[np.int64],
-    ground_v: FloatArray,
-) -> None:
-    """Remove from each wheel's ground velocity the horizontal travel lost to cables.
-
-    The wheel's rim travel along its heading has a component across each cable of its grid
-    cell (along the cable's normal); :func:`odomgym.floor.cable_advance_scalar` maps it to the
-    horizontal advance, and the difference, divided by h, leaves the ground velocity.
-    """
-    for i in range(contact.shape[0]):
-        hx = math.cos(pose[i, 2])
-        hy = math.sin(pose[i, 2])
-        for w in range(2):
-            wx = contact[i, w, 0]
-            wy = contact[i, w, 1]
-            gx = math.floor((wx - origin_x) / cell)
-            gy = math.floor((wy - origin_y) / cell)
-            if gx < 0 or gy < 0 or gx >= nx or gy >= ny:
-                continue
-            c = gy * nx + gx
-            for k in range(starts[c], starts[c + 1]):
-                m = items[k]
-                rel_x = wx - cable_x[m]
-                rel_y = wy - cable_y[m]
-                if abs(rel_x * axis_x[m] + rel_y * axis_y[m]) > half_length[m]:
-                    continue
-                normal_x, normal_y = -axis_y[m], axis_x[m]
-                offset = rel_x * normal_x + rel_y * normal_y
-                across = rim_speed[i, w] * h * (hx * normal_x + hy * normal_y)
-                lost = across - cable_advance_scalar(
-                    offset, across, wheel_radius[i, w], cable_radius[m]
-                )
-                ground_v[i, w, 0] -= lost * normal_x / h
-                ground_v[i, w, 1] -= lost * normal_y / h
+        raise SpecError(f"{label}.{exc}", field=f"{label}.{key}", source=where(key)) from None
 
 
 def load_floor(spec: str | Path) -> FloorSpec:

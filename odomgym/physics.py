@@ -24,7 +24,7 @@ Model, per robot (top-down, no gravity in the plane):
   quantised to whole counts.
 * **Floor** — the ground body's velocity is the rim velocity corrected by the floor: over a
   cable the horizontal advance follows the rigid-wheel-over-cylinder geometry
-  (:func:`odomgym.floor.cable_advance`), on a rough floor it carries white noise of variance
+  (:func:`odomgym.cables.cable_advance`), on a rough floor it carries white noise of variance
   k²·|d| (Chong & Kleeman 1997, Eq. 4), and friction patches change μ.
 * **Effects** — the robot spec's further effects (:mod:`odomgym.effects`: backlash, wheel toe,
   turn skid, bumps, wheel roughness, a tracked point offset) act through hooks at fixed stages of
@@ -46,8 +46,9 @@ import pymunk.batch as pbatch
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
+from odomgym.cables import CableGrid, apply_cable_deficits
 from odomgym.effects import EFFECTS, WorldHook
-from odomgym.floor import CableGrid, FloorSpec, apply_cable_deficits
+from odomgym.floor import FloorSpec
 from odomgym.robot import RobotSpec
 
 __all__ = ["GRAVITY", "World"]
@@ -492,26 +493,13 @@ class World:
             self._ground_v,
         )
         if self._has_bumps:
-            grid = self._bump_grid
             apply_cable_deficits(
                 self._contact,
                 self.pose,
                 self._rim_speed,
                 h,
                 self.true_radius,
-                grid.cable_x,
-                grid.cable_y,
-                grid.axis_x,
-                grid.axis_y,
-                grid.half_length,
-                grid.radius,
-                grid.origin_x,
-                grid.origin_y,
-                grid.cell,
-                grid.nx,
-                grid.ny,
-                grid.starts,
-                grid.items,
+                self._bump_grid,
                 self._ground_v,
             )
         if self._has_patches:
