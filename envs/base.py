@@ -36,6 +36,7 @@ from odomgym.floor import FloorSpec, load_floor
 from odomgym.odometry import Calibration, load_calibration
 from odomgym.paths import Route
 from odomgym.robot import RobotSpec, load_robot
+from odomgym.stepping import REPORT_COLUMNS, REPORT_WIDTH, episode_report
 from odomgym.trial import OBSERVATION_NAMES, Trial
 
 __all__ = [
@@ -147,6 +148,7 @@ class RouteEpisodes:
 
     def __init__(self, weights: RewardWeights, n: int) -> None:
         self.weights = weights
+        self._weights = np.array([weights.progress, weights.time, weights.completion])
         self._fraction = np.zeros(n)
         self._start_time = np.zeros(n)
 
@@ -156,69 +158,53 @@ class RouteEpisodes:
         self._fraction[chosen] = 0.0
         self._start_time[chosen] = trial.world.time
 
-    def advance(self, trial: Trial) -> tuple[FloatArray, NDArray[np.bool_], dict[str, FloatArray]]:
-        """After a step: rewards (N,), terminated (N,) and the reward terms (each (N,)), all
-        fresh arrays the caller may keep or change."""
-        n = self._fraction.shape[0]
-        terms = np.empty((3, n))
-        rewards = np.empty(n)
-        terminated = np.empty(n, dtype=np.bool_)
-        weights = self.weights
-        progress = trial.progress
-        _advance_episodes(
-            progress.state,
+    def report(self, trial: Trial, *, rewarded: bool = True) -> FloatArray:
+        """After a step (``rewarded``) or a reset (not rewarded: the reward terms are zero): one
+        fresh row per robot with the reward, its terms, whether the route is done and every
+        ``info`` entry, in the columns of :data:`odomgym.stepping.REPORT_COLUMNS` — one
+        compiled pass (:func:`odomgym.stepping.episode_report`)."""
+        out = np.empty((trial.n, REPORT_WIDTH))
+        world, progress = trial.world, trial.progress
+        episode_report(
+            world.pose,
+            trial.start_poses,
+            trial.odom_pose,
+            world.counts,
             progress.index,
             progress.segment_counts,
-            weights.progress,
-            weights.time,
-            weights.completion,
+            progress.state,
+            world.time,
+            self._start_time,
+            self._weights,
             self._fraction,
-            terms,
-            rewards,
-            terminated,
+            rewarded,
+            out,
         )
-        return rewards, terminated, {"progress": terms[0], "time": terms[1], "completion": terms[2]}
+        return out
 
-    def info(self, trial: Trial) -> dict[str, Any]:
-        """The per-step ``info`` entries (each a fresh array with a leading robot axis): poses,
-        their error, encoder counts, route segment and the time since each robot's episode
-        began [s]."""
-        poses, counts, segment, elapsed = trial.snapshot(self._start_time)
+    @staticmethod
+    def terms(report: FloatArray) -> dict[str, FloatArray]:
+        """The reward terms of a :meth:`report` (each (N,), views of it)."""
+        return {name: report[:, _COLUMN[name]] for name in _TERMS}
+
+    @staticmethod
+    def info(report: FloatArray) -> dict[str, Any]:
+        """The ``info`` entries of a :meth:`report` (N, W), each with a leading robot axis, or
+        of one row of it (W,): poses, their error, encoder counts, route segment and the time
+        since the robot's episode began [s]."""
         return {
-            "odom_pose": poses[:, 0:3],
-            "true_pose": poses[:, 3:6],
-            "pose_error": poses[:, 6:9],
-            "encoder_counts": counts,
-            "segment": segment,
-            "time": elapsed,
+            "odom_pose": report[..., _SLICE["odom_pose"]],
+            "true_pose": report[..., _SLICE["true_pose"]],
+            "pose_error": report[..., _SLICE["pose_error"]],
+            "encoder_counts": report[..., _SLICE["encoder_counts"]].astype(np.int64),
+            "segment": report[..., _COLUMN["segment"]].astype(np.int64),
+            "time": report[..., _COLUMN["episode_time"]],
         }
 
 
-@kernel
-def _advance_episodes(
-    state: FloatArray,
-    index: NDArray[np.intp],
-    count: NDArray[np.intp],
-    w_progress: float,
-    w_time: float,
-    w_completion: float,
-    fraction: FloatArray,
-    terms: FloatArray,
-    rewards: FloatArray,
-    terminated: NDArray[np.bool_],
-) -> None:
-    """Reward terms (3, N) = progress, time, completion (module docstring), their sum, and
-    which robots finished their route; ``fraction`` (the route share at the last step) moves
-    on in place."""
-    for i in range(state.shape[0]):
-        done = index[i] >= count[i]
-        now = state[i, 7]
-        terms[0, i] = w_progress * (now - fraction[i])
-        terms[1, i] = -w_time
-        terms[2, i] = w_completion * (1.0 if done else 0.0)
-        rewards[i] = terms[0, i] + terms[1, i] + terms[2, i]
-        terminated[i] = done
-        fraction[i] = now
+_SLICE = {name: slice(first, stop) for name, (first, stop) in REPORT_COLUMNS.items()}
+_COLUMN = {name: first for name, (first, _) in REPORT_COLUMNS.items()}
+_TERMS = ("progress", "time", "completion")
 
 
 class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
@@ -298,7 +284,8 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         self._history = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
         if self.render_mode == "human":
             self.render()
-        return self._trial.observation()[0], self._info(self._trial, {}, False)
+        report = self._episodes.report(self._trial, rewarded=False)
+        return self._trial.observation()[0], self._info(report[0], {}, False)
 
     def step(
         self, action: NDArray[np.float32]
@@ -311,21 +298,17 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         if previous_pose is not None:
             self._propagate_covariance(trial, previous_pose)
         obs = trial.observation()[0]
-        rewards, done, terms = self._episodes.advance(trial)
-        terminated = bool(done[0])
+        row = self._episodes.report(trial)[0]
+        terminated = bool(row[_COLUMN["terminated"]])
         self._terminated = terminated
-        reward_terms = {
-            "progress": float(terms["progress"][0]),
-            "time": float(terms["time"][0]),
-            "completion": float(terms["completion"][0]),
-        }
+        reward_terms = {name: float(row[_COLUMN[name]]) for name in _TERMS}
         if self.render_mode is not None:
             t, o = trial.true_pose[0], trial.odom_pose[0]
             self._history.append((t[0], t[1], t[2], o[0], o[1], o[2]))
             if self.render_mode == "human":
                 self.render()
-        info = self._info(trial, reward_terms, terminated)
-        return obs, float(rewards[0]), terminated, False, info
+        reward = float(row[_COLUMN["reward"]])
+        return obs, reward, terminated, False, self._info(row, reward_terms, terminated)
 
     def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
         """Chong & Kleeman 1997, Eq. 23: carry the odometry covariance through this step's
@@ -344,17 +327,12 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
         )
         self._covariance = estimate.cov
 
-    def _info(self, trial: Trial, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
-        entries = self._episodes.info(trial)
-        info: dict[str, Any] = {
-            "odom_pose": entries["odom_pose"][0],
-            "true_pose": entries["true_pose"][0],
-            "pose_error": entries["pose_error"][0],
-            "encoder_counts": entries["encoder_counts"][0],
-            "segment": int(entries["segment"][0]),
-            "time": float(entries["time"][0]),
-            "reward_terms": terms,
-        }
+    def _info(self, row: FloatArray, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
+        """``info`` of a single env from its row of :meth:`RouteEpisodes.report`."""
+        info = RouteEpisodes.info(row)
+        info["segment"] = int(info["segment"])
+        info["time"] = float(info["time"])
+        info["reward_terms"] = terms
         if self.covariance_k is not None:
             info["odom_covariance"] = self._covariance.copy()
         if terminated:

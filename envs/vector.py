@@ -168,14 +168,16 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             self._restart(chosen, [route] * len(chosen))
         present = np.zeros(self.num_envs, dtype=bool)
         present[chosen] = True
-        return self._trial.observation(), self._vector_info(present, None)
+        report = self._episodes.report(self._trial, rewarded=False)
+        return self._trial.observation(), self._vector_info(present, report, None)
 
     def _restart(self, indices: NDArray[np.intp], routes: Sequence[Route]) -> None:
         """New episodes for sub-envs ``indices``: fresh noise streams from their generators,
         then back at the start of ``routes``."""
         trial = self._trial
         assert trial is not None
-        trial.world.rebind_noise(indices, [self._rngs[k].spawn(1)[0] for k in indices])
+        if trial.world.uses_noise:  # (a noiseless World would not take the streams)
+            trial.world.rebind_noise(indices, [self._rngs[k].spawn(1)[0] for k in indices])
         trial.reset(indices=indices, routes=routes)
         self._steps[indices] = 0
         self._autoreset[indices] = False
@@ -195,7 +197,10 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             resetting = self._autoreset.copy()  # _restart clears the flags
             array[resetting] = 0.0
         trial.step(array)
-        rewards, done, terms = self._episodes.advance(trial)
+        report = self._episodes.report(trial)
+        rewards = report[:, 0].copy()
+        done = report[:, 1] > 0.0
+        terms = RouteEpisodes.terms(report)
         if any_reset:
             idx = np.flatnonzero(resetting)
             # As Gymnasium's autoreset: reset() without options, so the default route.
@@ -206,13 +211,15 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             running = ~resetting
             self._steps += running  # the reset step is not a step of the new episode
             terminated = done & running
+            # The reset sub-envs report their new episode's start.
+            report = self._episodes.report(trial, rewarded=False)
         else:
             running = self._everyone
             self._steps += 1
             terminated = done
         truncated = (self._steps >= self.max_episode_steps) & ~terminated & running
         self._autoreset = terminated | truncated
-        info = self._vector_info(self._everyone, terms, running)
+        info = self._vector_info(self._everyone, report, terms, running)
         if terminated.any():
             info["return_error"] = np.where(terminated[:, None], info["pose_error"], 0.0)
             info["_return_error"] = terminated.copy()
@@ -221,16 +228,17 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
     def _vector_info(
         self,
         present: NDArray[np.bool_],
+        report: FloatArray,
         terms: dict[str, FloatArray] | None,
         rewarded: NDArray[np.bool_] | None = None,
     ) -> dict[str, Any]:
-        """``info`` in :class:`gymnasium.vector.SyncVectorEnv`'s layout: ``present`` marks the
-        sub-envs that report (all after a step, the reset ones after a reset), ``rewarded``
-        those with reward terms (not the ones autoreset this step: a reset reports none)."""
-        assert self._trial is not None
+        """``info`` in :class:`gymnasium.vector.SyncVectorEnv`'s layout from a
+        :meth:`RouteEpisodes.report`: ``present`` marks the sub-envs that report (all after a
+        step, the reset ones after a reset), ``rewarded`` those with reward terms (not the ones
+        autoreset this step: a reset reports none)."""
         info: dict[str, Any] = {}
         everyone = bool(present.all())
-        for key, value in self._episodes.info(self._trial).items():
+        for key, value in RouteEpisodes.info(report).items():
             # The entries are fresh arrays; only a partial reset blanks the absent sub-envs.
             if not everyone:
                 value[~present] = 0

@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym._jit import kernel
 from odomgym.errors import SpecError, locate_key, require_positive
 from odomgym.io import atomic_write_text
 from odomgym.robot import RobotSpec
+from odomgym.stepping import integrate_odometry
 
 __all__ = ["Calibration", "Odometry", "load_calibration"]
 
@@ -218,6 +218,16 @@ class Odometry:
         )
         self._wheelbase = np.array([c.wheelbase_scale for c in cal]) * self._nominal_wheelbase
 
+    @property
+    def travel_per_tick(self) -> FloatArray:
+        """Wheel travel per encoder count as the calibrated odometry believes it (N, 2) [m]."""
+        return self._travel_per_tick
+
+    @property
+    def effective_wheelbase(self) -> FloatArray:
+        """b_eff = E_b,est · b_n of each robot (N,) [m]."""
+        return np.asarray(self._wheelbase)
+
     def reset(
         self, poses: FloatArray | None = None, indices: NDArray[np.intp] | None = None
     ) -> None:
@@ -237,7 +247,7 @@ class Odometry:
         ``pose`` and ``wheel_speed`` (N, 2) [m/s] are updated in place; copy them to keep a
         history. ``dt`` [s] only serves the wheel-speed estimate.
         """
-        _integrate(
+        integrate_odometry(
             counts,
             self.last_counts,
             self._travel_per_tick,
@@ -247,32 +257,6 @@ class Odometry:
             self.wheel_speed,
         )
         return self.pose
-
-
-@kernel
-def _integrate(
-    counts: NDArray[np.int64],
-    last_counts: NDArray[np.int64],
-    travel_per_tick: FloatArray,
-    wheelbase: FloatArray,
-    inv_dt: float,
-    pose: FloatArray,
-    wheel_speed: FloatArray,
-) -> None:
-    """Midpoint dead reckoning of one sampling period, in place (module docstring equations)."""
-    for i in range(counts.shape[0]):
-        left = (counts[i, 0] - last_counts[i, 0]) * travel_per_tick[i, 0]
-        right = (counts[i, 1] - last_counts[i, 1]) * travel_per_tick[i, 1]
-        last_counts[i, 0] = counts[i, 0]
-        last_counts[i, 1] = counts[i, 1]
-        wheel_speed[i, 0] = left * inv_dt
-        wheel_speed[i, 1] = right * inv_dt
-        ds = 0.5 * (left + right)
-        dtheta = (right - left) / wheelbase[i]
-        mid = pose[i, 2] + 0.5 * dtheta
-        pose[i, 0] += ds * math.cos(mid)
-        pose[i, 1] += ds * math.sin(mid)
-        pose[i, 2] += dtheta
 
 
 def wrap_angle(angle: Any) -> Any:

@@ -20,7 +20,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym._jit import kernel
+from odomgym.stepping import route_update
 
 __all__ = [
     "Route",
@@ -146,10 +146,27 @@ class RouteProgress:
         stop_speed: float | FloatArray = 0.005,
     ) -> None:
         self.n = len(routes)
-        self.position_tolerance = np.broadcast_to(np.asarray(position_tolerance, float), (self.n,))
-        self.heading_tolerance = np.broadcast_to(np.asarray(heading_tolerance, float), (self.n,))
-        self.stop_speed = np.broadcast_to(np.asarray(stop_speed, float), (self.n,))
+        # (N, 3): position tolerance [m], heading tolerance [rad], stop speed [m/s] per robot.
+        self._limits = np.empty((self.n, 3))
+        self._limits[:, 0] = position_tolerance
+        self._limits[:, 1] = heading_tolerance
+        self._limits[:, 2] = stop_speed
         self.set_routes(routes)
+
+    @property
+    def position_tolerance(self) -> FloatArray:
+        """A drive is done when less than this remains (N,) [m]."""
+        return self._limits[:, 0]
+
+    @property
+    def heading_tolerance(self) -> FloatArray:
+        """A turn is done when the heading error is below this (N,) [rad]."""
+        return self._limits[:, 1]
+
+    @property
+    def stop_speed(self) -> FloatArray:
+        """A segment is done only when both wheels are slower than this (N,) [m/s]."""
+        return self._limits[:, 2]
 
     def set_routes(self, routes: list[Route], indices: NDArray[np.intp] | None = None) -> None:
         """Assign routes (all robots, or robots ``indices``) and restart their progress."""
@@ -158,11 +175,10 @@ class RouteProgress:
             self.segment_count = max(len(r.segments) for r in routes)
             size = (self.n, self.segment_count)
             self._is_turn = np.zeros(size, dtype=bool)
-            self._start = np.zeros((*size, 2))
-            self._unit = np.zeros((*size, 2))  # direction of motion of a drive
-            self._length = np.zeros(size)
-            self._heading = np.zeros(size)
-            self._direction = np.ones(size)  # +1 a drive along its heading, −1 reversing
+            # Per segment: start x, y [m]; unit direction of motion of a drive x, y; length
+            # [m or rad]; held heading [rad]; +1 a drive along its heading, −1 reversing. One
+            # array, so a compiled step takes it as one argument (odomgym.stepping).
+            self._segments = np.zeros((*size, 7))
             self._count = np.zeros(self.n, dtype=np.intp)
             self.state = np.zeros((self.n, 8))
             self._advanced = np.zeros(self.n, dtype=np.bool_)
@@ -183,18 +199,24 @@ class RouteProgress:
             total = 0.0
             for s, seg in enumerate(route.segments):
                 self._is_turn[i, s] = seg.kind == "turn"
-                self._start[i, s] = seg.start
-                self._heading[i, s] = seg.heading
-                self._length[i, s] = seg.length
+                unit_x = unit_y = 0.0
+                direction = 1.0
                 if seg.kind == "drive":
                     dx, dy = seg.end[0] - seg.start[0], seg.end[1] - seg.start[1]
                     norm = math.hypot(dx, dy)
-                    self._unit[i, s] = (dx / norm, dy / norm)
+                    unit_x, unit_y = dx / norm, dy / norm
                     # +1 when a drive moves along the heading it holds, −1 when reversing.
                     facing = (dx * math.cos(seg.heading) + dy * math.sin(seg.heading)) / norm
-                    self._direction[i, s] = 1.0 if facing >= 0.0 else -1.0
-                else:
-                    self._direction[i, s] = 1.0
+                    direction = 1.0 if facing >= 0.0 else -1.0
+                self._segments[i, s] = (
+                    seg.start[0],
+                    seg.start[1],
+                    unit_x,
+                    unit_y,
+                    seg.length,
+                    seg.heading,
+                    direction,
+                )
                 total += seg.length
                 self._cumulative[i, s + 1] = total
             self._cumulative[i, len(route.segments) + 1 :] = total
@@ -221,21 +243,15 @@ class RouteProgress:
         drives, rad for turns) — and returns which robots moved on.
         """
         advanced = self._advanced
-        _route_update(
+        route_update(
             odom_pose,
             wheel_speed,
             max_speed,
             self._count,
             self._is_turn,
-            self._start,
-            self._unit,
-            self._length,
-            self._heading,
-            self._direction,
+            self._segments,
             self._cumulative,
-            self.position_tolerance,
-            self.heading_tolerance,
-            self.stop_speed,
+            self._limits,
             advance,
             self.index,
             self.state,
@@ -243,6 +259,33 @@ class RouteProgress:
             advanced,
         )
         return advanced.copy()
+
+    def step_arrays(
+        self,
+    ) -> tuple[
+        NDArray[np.intp],
+        NDArray[np.bool_],
+        FloatArray,
+        FloatArray,
+        FloatArray,
+        NDArray[np.intp],
+        FloatArray,
+        FloatArray,
+        NDArray[np.bool_],
+    ]:
+        """The arrays :func:`odomgym.stepping.route_update` takes after ``max_speed``, in its
+        order, without ``advance`` (for a caller that runs it inside a larger compiled step)."""
+        return (
+            self._count,
+            self._is_turn,
+            self._segments,
+            self._cumulative,
+            self._limits,
+            self.index,
+            self.state,
+            self.progress,
+            self._advanced,
+        )
 
     @property
     def segment_counts(self) -> NDArray[np.intp]:
@@ -253,80 +296,3 @@ class RouteProgress:
     def total(self) -> FloatArray:
         """Route length of each robot, in segment units (m for drives, rad for turns)."""
         return np.asarray(self._cumulative[np.arange(self.n), self._count])
-
-
-@kernel
-def _route_update(
-    pose: FloatArray,
-    wheel_speed: FloatArray,
-    max_speed: FloatArray,
-    count: NDArray[np.intp],
-    is_turn: NDArray[np.bool_],
-    start: FloatArray,
-    unit: FloatArray,
-    length: FloatArray,
-    heading: FloatArray,
-    drive_direction: FloatArray,
-    cumulative: FloatArray,
-    position_tolerance: FloatArray,
-    heading_tolerance: FloatArray,
-    stop_speed: FloatArray,
-    advance: bool,
-    index: NDArray[np.intp],
-    state: FloatArray,
-    progress: FloatArray,
-    advanced: NDArray[np.bool_],
-) -> None:
-    """Route features of each robot's current segment (see :meth:`RouteProgress.update`)."""
-    two_pi = 2.0 * math.pi
-    for i in range(pose.shape[0]):
-        advanced[i] = False
-        for _attempt in range(2):  # the second pass describes the segment just moved on to
-            k = index[i]
-            finished = k >= count[i]
-            s = min(k, count[i] - 1)
-            # A turn counts the rotation left unwrapped (a 360° spin must not look finished at
-            # the start): that goes to ``remaining``; the heading error itself is wrapped.
-            rotation_left = heading[i, s] - pose[i, 2]
-            error = (rotation_left + math.pi) % two_pi - math.pi
-            rel_x = pose[i, 0] - start[i, s, 0]
-            rel_y = pose[i, 1] - start[i, s, 1]
-            travelled = rel_x * unit[i, s, 0] + rel_y * unit[i, s, 1]
-            cross = unit[i, s, 0] * rel_y - unit[i, s, 1] * rel_x
-            turn = is_turn[i, s]
-            direction = drive_direction[i, s]
-            if turn:
-                remaining = rotation_left
-                done_part = length[i, s] - abs(rotation_left)
-                cross = 0.0
-            else:
-                remaining = length[i, s] - travelled
-                done_part = travelled
-                cross = cross * direction
-            if finished:
-                remaining = 0.0
-                cross = 0.0
-                error = 0.0
-                progress[i] = cumulative[i, count[i]]
-            else:
-                progress[i] = cumulative[i, s] + min(max(done_part, 0.0), length[i, s])
-            state[i, 0] = remaining
-            state[i, 1] = cross
-            state[i, 2] = error
-            state[i, 3] = wheel_speed[i, 0] / max_speed[i]
-            state[i, 4] = wheel_speed[i, 1] / max_speed[i]
-            state[i, 5] = 1.0 if turn else 0.0
-            state[i, 6] = direction
-            total = cumulative[i, count[i]]
-            state[i, 7] = progress[i] / total if total > 0.0 else 1.0
-            if not advance or finished or advanced[i]:
-                break
-            stopped = max(abs(wheel_speed[i, 0]), abs(wheel_speed[i, 1])) < stop_speed[i]
-            if turn:
-                reached = abs(remaining) < heading_tolerance[i]
-            else:
-                reached = remaining < position_tolerance[i]
-            if not (reached and stopped):
-                break
-            index[i] = k + 1
-            advanced[i] = True

@@ -156,6 +156,7 @@ class World:
             [0.5 * s.mass * GRAVITY * s.drive_load_fraction for s in specs]
         )
         self._h = self.dt / self.substeps
+        self._unit_scale = np.ones(self.n)
         self.track_slip = track_slip
         self._has_bumps = bool(self.floor.bumps)
         max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
@@ -215,6 +216,11 @@ class World:
             children = [stream.spawn(len(random_hooks)) for stream in streams]
             for k, hook in enumerate(random_hooks):
                 hook.bind_rng([robot_children[k] for robot_children in children])
+
+    @property
+    def uses_noise(self) -> bool:
+        """True if some robot draws random numbers (a rough floor or a random effect)."""
+        return bool(self._noise_streams)
 
     def rebind_noise(
         self, indices: Sequence[int] | NDArray[np.intp], streams: Sequence[np.random.Generator]
@@ -376,11 +382,13 @@ class World:
             hook.reset(indices)
 
     # ------------------------------------------------------------------ stepping
-    def step(self, wheel_rate_cmd: FloatArray) -> None:
+    def step(self, wheel_rate_cmd: FloatArray, scale: FloatArray | None = None) -> None:
         """Advance one control period with commanded wheel rates (N, 2) [rad/s].
 
-        Commands beyond the robot's ``max_wheel_speed`` are clipped to it; a non-finite command
-        raises ValueError (the envs check their actions before they get here).
+        With ``scale`` (N,), robot i's wheel rates are ``wheel_rate_cmd[i] · scale[i]`` (the
+        envs pass actions in [−1, 1] and each robot's top wheel rate). Commands beyond the
+        robot's ``max_wheel_speed`` are clipped to it; a non-finite command raises ValueError
+        (the envs check their actions before they get here).
         """
         command = np.asarray(wheel_rate_cmd, dtype=np.float64)
         if command.shape != (self.n, 2):
@@ -389,6 +397,8 @@ class World:
                     f"wheel_rate_cmd must have shape ({self.n}, 2), got {command.shape}"
                 )
             command = command.reshape(self.n, 2)
+        if scale is None:
+            scale = self._unit_scale
         h = self._h
         for _ in range(self.substeps):
             if self._plain:
@@ -396,6 +406,7 @@ class World:
                 # their mid-step turn in one compiled call.
                 if not _drive_plain(
                     command,
+                    scale,
                     self.max_rate,
                     self.max_rate_step,
                     self.true_radius,
@@ -412,7 +423,7 @@ class World:
                 ):
                     raise ValueError("wheel rate commands must be finite")
             else:
-                self._drive_with_effects(command, h)
+                self._drive_with_effects(command, scale, h)
             self._write_ground_velocity()
             self.space.step(h)
             self._read_state(h)
@@ -420,11 +431,12 @@ class World:
                 self._accumulate_slip(h)
         self.time += self.dt
 
-    def _drive_with_effects(self, command: FloatArray, h: float) -> None:
+    def _drive_with_effects(self, command: FloatArray, scale: FloatArray, h: float) -> None:
         """One substep's contact velocities through every stage: wheels, transmission hooks,
         shape hooks, the floor, perturbation hooks, then the mid-step turn."""
         if not _drive_wheels(
             command,
+            scale,
             self.max_rate,
             self.max_rate_step,
             self.true_radius,
@@ -615,6 +627,7 @@ def _direct_access_works(bodies: Sequence[pymunk.Body]) -> bool:
 @kernel
 def _drive_wheels(
     command: FloatArray,
+    scale: FloatArray,
     max_rate: FloatArray,
     max_rate_step: FloatArray,
     true_radius: FloatArray,
@@ -631,9 +644,10 @@ def _drive_wheels(
 ) -> bool:
     """Wheel velocity controllers, encoders and no-slip contact velocities of one substep.
 
-    Per wheel: clip the command to ±max_rate, move the rate toward it by at most max_rate_step
-    (the acceleration limit), rotate by the trapezoid mean rate × h, count ticks (floor of the
-    true rotation), and set the contact velocities (:func:`_set_ground_velocity`). In place on
+    Per wheel: clip the command × ``scale`` of its robot to ±max_rate, move the rate toward it
+    by at most max_rate_step (the acceleration limit), rotate by the trapezoid mean rate × h,
+    count ticks (floor of the true rotation), and set the contact velocities
+    (:func:`_set_ground_velocity`). In place on
     ``rate``, ``angle``, ``counts``, ``rim_speed``, ``ground_v`` and ``motor_step`` (the rotation
     this substep [rad], for transmission effects); returns False (touching nothing) if any
     command is not finite.
@@ -646,7 +660,7 @@ def _drive_wheels(
         limit = max_rate[i]
         step = max_rate_step[i]
         for w in range(2):
-            target = min(max(command[i, w], -limit), limit)
+            target = min(max(command[i, w] * scale[i], -limit), limit)
             old = rate[i, w]
             delta = min(max(target - old, -step), step)
             rate[i, w] = old + delta
@@ -662,6 +676,7 @@ def _drive_wheels(
 @kernel
 def _drive_plain(
     command: FloatArray,
+    scale: FloatArray,
     max_rate: FloatArray,
     max_rate_step: FloatArray,
     true_radius: FloatArray,
@@ -680,6 +695,7 @@ def _drive_plain(
     when no effect or floor feature acts between them (one call instead of two)."""
     if not _drive_wheels(
         command,
+        scale,
         max_rate,
         max_rate_step,
         true_radius,

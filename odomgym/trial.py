@@ -24,20 +24,19 @@ idx   name                   meaning                                            
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym._jit import kernel
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration, Odometry
 from odomgym.paths import Route, RouteProgress
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
+from odomgym.stepping import after_step, pose_error_into, snapshot, start_frame
 
-__all__ = ["OBSERVATION_NAMES", "Trial", "pose_error_into"]
+__all__ = ["OBSERVATION_NAMES", "Trial"]
 
 FloatArray = NDArray[np.float64]
 
@@ -109,8 +108,9 @@ class Trial:
             stop_speed=np.maximum(0.005, 1.5 * per_tick / dt),
         )
         self._max_speed = np.array([s.max_wheel_speed for s in specs])
-        self._action_to_rate = (self._max_speed / self.world.nominal_radius)[:, None]
-        self._command = np.zeros((self.n, 2))  # wheel-rate commands of a step [rad/s]
+        # An action of 1 is the robot's top wheel speed: its wheel rate [rad/s] per unit action.
+        self._action_to_rate = self._max_speed / self.world.nominal_radius
+        self._route_arrays = self.progress.step_arrays()
         self._refresh(advance=False)
 
     @property
@@ -134,6 +134,7 @@ class Trial:
             keep = self.progress.routes
             chosen = np.arange(self.n) if indices is None else np.asarray(indices)
             self.progress.set_routes([keep[i] for i in chosen], chosen)
+        self._route_arrays = self.progress.step_arrays()  # set_routes may reallocate them
         self._refresh(advance=False)
 
     def step(self, actions: FloatArray) -> NDArray[np.bool_]:
@@ -141,10 +142,21 @@ class Trial:
 
         Returns the robots that completed a segment this step.
         """
-        np.multiply(actions, self._action_to_rate, out=self._command)
-        self.world.step(self._command)
-        self.odometry.update(self.world.counts, self.world.dt)
-        return self._refresh(advance=True)
+        world, odometry = self.world, self.odometry
+        world.step(actions, scale=self._action_to_rate)
+        # Dead reckoning and route progress in one compiled call (odomgym.stepping).
+        after_step(
+            world.counts,
+            odometry.last_counts,
+            odometry.travel_per_tick,
+            odometry.effective_wheelbase,
+            1.0 / world.dt,
+            odometry.pose,
+            odometry.wheel_speed,
+            self._max_speed,
+            *self._route_arrays,
+        )
+        return self._route_arrays[-1].copy()
 
     def _refresh(self, advance: bool) -> NDArray[np.bool_]:
         return self.progress.update(
@@ -174,7 +186,7 @@ class Trial:
     def true_pose_in_start_frame(self) -> FloatArray:
         """Ground-truth poses (N, 3) in each robot's start frame — the odometry's frame."""
         out = np.empty((self.n, 3))
-        _start_frame(self.world.pose, self.start_poses, out)
+        start_frame(self.world.pose, self.start_poses, out)
         return out
 
     def snapshot(
@@ -189,7 +201,7 @@ class Trial:
         segment = np.empty(n, dtype=np.int64)
         elapsed = np.empty(n)
         world = self.world
-        _snapshot(
+        snapshot(
             world.pose,
             self.start_poses,
             self.odometry.pose,
@@ -211,54 +223,3 @@ class Trial:
             out = np.empty((self.n, 3))
         pose_error_into(self.world.pose, self.start_poses, self.odometry.pose, out)
         return out
-
-
-@kernel
-def _start_frame(pose: FloatArray, start: FloatArray, out: FloatArray) -> None:
-    """World-frame poses (N, 3) expressed in each robot's start frame, into ``out``."""
-    for i in range(pose.shape[0]):
-        c = math.cos(start[i, 2])
-        s = math.sin(start[i, 2])
-        dx = pose[i, 0] - start[i, 0]
-        dy = pose[i, 1] - start[i, 1]
-        out[i, 0] = c * dx + s * dy
-        out[i, 1] = -s * dx + c * dy
-        out[i, 2] = pose[i, 2] - start[i, 2]
-
-
-@kernel
-def pose_error_into(pose: FloatArray, start: FloatArray, odom: FloatArray, out: FloatArray) -> None:
-    """True pose (world frame) in each robot's start frame minus odometry (N, 3), heading
-    wrapped to [−π, π), into ``out`` (compiled; callable from other kernels)."""
-    _start_frame(pose, start, out)
-    two_pi = 2.0 * math.pi
-    for i in range(pose.shape[0]):
-        out[i, 0] -= odom[i, 0]
-        out[i, 1] -= odom[i, 1]
-        out[i, 2] = (out[i, 2] - odom[i, 2] + math.pi) % two_pi - math.pi
-
-
-@kernel
-def _snapshot(
-    true_pose: FloatArray,
-    start_poses: FloatArray,
-    odom_pose: FloatArray,
-    counts: NDArray[np.int64],
-    index: NDArray[np.intp],
-    time: float,
-    start_time: FloatArray,
-    poses: FloatArray,
-    counts_out: NDArray[np.int64],
-    segment: NDArray[np.int64],
-    elapsed: FloatArray,
-) -> None:
-    """The arrays of :meth:`Trial.snapshot`, filled in one pass."""
-    pose_error_into(true_pose, start_poses, odom_pose, poses[:, 6:9])
-    for i in range(true_pose.shape[0]):
-        for k in range(3):
-            poses[i, k] = odom_pose[i, k]
-            poses[i, 3 + k] = true_pose[i, k]
-        counts_out[i, 0] = counts[i, 0]
-        counts_out[i, 1] = counts[i, 1]
-        segment[i] = index[i]
-        elapsed[i] = time - start_time[i]
