@@ -302,6 +302,7 @@ class World:
         self._direct_io = not self._use_batch_io and _direct_access_works(
             self._chassis + self._ground
         )
+        self._raw_space: Any = None  # Chipmunk's space pointer, after the first step
 
     def _index_bodies(self) -> None:
         """Map pymunk's body iteration order onto chassis and ground-body indices."""
@@ -327,6 +328,7 @@ class World:
         state = self.__dict__.copy()
         for key in ("_buffer", "_out_buffer"):
             state.pop(key, None)
+        state["_raw_space"] = None  # a C pointer; the unpickled space has its own
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -425,7 +427,14 @@ class World:
             else:
                 self._drive_with_effects(command, scale, h)
             self._write_ground_velocity()
-            self.space.step(h)
+            if self._raw_space is not None:
+                _CHIPMUNK.cpSpaceStep(self._raw_space, h)
+            else:
+                self.space.step(h)
+                # After pymunk's first step has checked the bodies' masses, a World (which
+                # never adds, removes or registers callbacks) can call Chipmunk's step itself:
+                # pymunk's wrapper around it costs more than the step of one robot.
+                self._raw_space = getattr(self.space, "_space", None) if self._direct_io else None
             self._read_state(h)
             if self.track_slip:
                 self._accumulate_slip(h)
