@@ -5,15 +5,28 @@ experiments it needs (with the calibration it wants active while driving), measu
 person would measure, and returns corrected odometry parameters as a
 :class:`odomgym.odometry.Calibration`. Because labs serve simulated and recorded runs alike, the
 same calibrator object calibrates a simulated robot and a real robot's recorded session.
+
+**Options.** Every method declares its settings as a frozen dataclass (``UMBmarkOptions``,
+``TrajectoryOptions``, …) registered with it as :attr:`Calibrator.options_type`. The dataclass
+validates every value and names the field that is wrong (:class:`~odomgym.errors.SpecError`);
+the method's constructor takes the same keywords and builds its options from them, and
+:meth:`Calibrator.from_options` builds a method from options. A caller that configures several
+methods from one set of settings (a command line, the benchmark, a recorded session) says per
+method which settings apply (:mod:`odomgym.baselines.validation`); an option a method does not
+take is an error, never silently dropped.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import numbers
 from abc import ABC, abstractmethod
+from collections.abc import Collection
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar, Self
 
-from odomgym.experiments import Experiment, Lab
+from odomgym.errors import SpecError, require_positive
+from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
 from odomgym.runs import Run
 
@@ -21,26 +34,68 @@ __all__ = [
     "CalibrationResult",
     "Calibrator",
     "SquareCalibrator",
+    "SquareOptions",
     "check_square_settings",
+    "option_names",
     "perform",
+    "require_choice",
+    "require_count",
     "square_experiments",
 ]
 
 
-def check_square_settings(side: float, runs_per_direction: int) -> None:
-    """Raise ValueError unless the square side [m] is positive and there is at least one run."""
-    if not side > 0.0 or runs_per_direction < 1:
-        raise ValueError(
-            f"need side > 0 and runs_per_direction >= 1, got {side}, {runs_per_direction}"
+def require_count(name: str, value: object, minimum: int = 0) -> int:
+    """``value`` as a whole number >= ``minimum``, or :class:`SpecError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise SpecError(
+            f"{name} must be a whole number, got {type(value).__name__} {value!r}", field=name
         )
+    if int(value) < minimum:
+        raise SpecError(f"{name} must be >= {minimum}, got {value}", field=name)
+    return int(value)
+
+
+def require_choice(name: str, value: object, choices: Collection[str]) -> None:
+    """:class:`SpecError` naming ``name`` unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        allowed = ", ".join(repr(c) for c in choices)
+        raise SpecError(f"{name} must be one of {allowed}, got {value!r}", field=name)
+
+
+def check_square_settings(side: float, runs_per_direction: int) -> None:
+    """Raise :class:`SpecError` unless the square side [m] is positive and there is at least
+    one run per direction."""
+    require_positive("side", side)
+    require_count("runs_per_direction", runs_per_direction, 1)
 
 
 def square_experiments(side: float, runs_per_direction: int) -> list[Experiment]:
     """The bi-directional square experiment: ``runs_per_direction`` cw, then as many ccw."""
     return [
-        Experiment("square", "cw", runs_per_direction, side),
-        Experiment("square", "ccw", runs_per_direction, side),
+        Experiment(ExperimentKind.SQUARE, "cw", runs_per_direction, side),
+        Experiment(ExperimentKind.SQUARE, "ccw", runs_per_direction, side),
     ]
+
+
+def option_names(options_type: type[Any]) -> tuple[str, ...]:
+    """The options a method takes: the fields of its options dataclass, in order."""
+    return tuple(f.name for f in dataclasses.fields(options_type))
+
+
+@dataclass(frozen=True)
+class SquareOptions:
+    """Options of a method that needs only the bi-directional square experiment.
+
+    Attributes:
+        side: square side L [m] (Borenstein & Feng 1994, §6.3: 4 m).
+        runs_per_direction: squares per direction (Borenstein & Feng 1994, §6.3: 5).
+    """
+
+    side: float = 4.0
+    runs_per_direction: int = 5
+
+    def __post_init__(self) -> None:
+        check_square_settings(self.side, self.runs_per_direction)
 
 
 def perform(
@@ -84,13 +139,27 @@ class CalibrationResult:
 class Calibrator(ABC):
     """Base class of calibration methods.
 
-    Subclasses set ``name`` (the command-line name), ``reference`` (the paper) and implement
+    Subclasses set ``name`` (the command-line name), ``reference`` (the paper) and
+    ``options_type`` (the frozen dataclass of their options; the constructor takes its fields
+    as keywords and keeps the validated options in :attr:`options`), and implement
     :meth:`experiments` (what they will ask for, for budgeting and documentation) and
     :meth:`calibrate`.
     """
 
     name: ClassVar[str]
     reference: ClassVar[str]
+    options_type: ClassVar[type[Any]]
+    options: Any
+
+    @classmethod
+    def from_options(cls, options: Any) -> Self:
+        """The method configured by ``options`` (an instance of :attr:`options_type`)."""
+        if not isinstance(options, cls.options_type):
+            raise TypeError(
+                f"{cls.name} is configured by {cls.options_type.__name__}, "
+                f"got {type(options).__name__}"
+            )
+        return cls(**{name: getattr(options, name) for name in option_names(cls.options_type)})
 
     @abstractmethod
     def experiments(self) -> list[Experiment]:
@@ -107,12 +176,20 @@ class SquareCalibrator(Calibrator):
     Args:
         side: square side L [m] (Borenstein & Feng 1994: 4 m).
         runs_per_direction: squares per direction (Borenstein & Feng 1994: 5).
+
+    Subclasses with further options build them (a subclass of :class:`SquareOptions`) and
+    pass them to :meth:`_set_squares`.
     """
 
+    options_type: ClassVar[type[Any]] = SquareOptions
+
     def __init__(self, side: float = 4.0, runs_per_direction: int = 5) -> None:
-        check_square_settings(side, runs_per_direction)
-        self.side = side
-        self.runs_per_direction = runs_per_direction
+        self._set_squares(SquareOptions(side, runs_per_direction))
+
+    def _set_squares(self, options: SquareOptions) -> None:
+        self.options = options
+        self.side = options.side
+        self.runs_per_direction = options.runs_per_direction
 
     def experiments(self) -> list[Experiment]:
         """The cw and the ccw squares."""

@@ -44,20 +44,35 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from odomgym.baselines.base import CalibrationResult, Calibrator, perform
+from odomgym.baselines.base import (
+    CalibrationResult,
+    Calibrator,
+    perform,
+    require_choice,
+    require_count,
+)
 from odomgym.baselines.trajectory import replay_with_jacobian, sample_indices
-from odomgym.experiments import Experiment, Lab
+from odomgym.errors import require_positive
+from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["Ivanjko", "ResidualSamples", "fit_wheelbase", "fit_wheels", "scale_parameters"]
+__all__ = [
+    "Ivanjko",
+    "IvanjkoOptions",
+    "ResidualSamples",
+    "fit_wheelbase",
+    "fit_wheels",
+    "scale_parameters",
+]
 
 FloatArray = NDArray[np.float64]
 ResidualSamples = Literal["end", "samples"]
@@ -161,6 +176,28 @@ def fit_wheelbase(
     return float(k_b)
 
 
+@dataclass(frozen=True)
+class IvanjkoOptions:
+    """The settings of :class:`Ivanjko` (see its Args for meaning and units)."""
+
+    straight_distance: float = 3.0
+    straight_runs: int = 3
+    spin_angle: float = math.pi
+    spin_runs: int = 3
+    tolerance: float = 0.001
+    max_iterations: int = 10
+    residuals: ResidualSamples = "end"
+
+    def __post_init__(self) -> None:
+        require_positive("straight_distance", self.straight_distance)
+        require_count("straight_runs", self.straight_runs, 1)
+        require_positive("spin_angle", self.spin_angle)
+        require_count("spin_runs", self.spin_runs, 1)
+        require_positive("tolerance", self.tolerance)
+        require_count("max_iterations", self.max_iterations, 1)
+        require_choice("residuals", self.residuals, ("end", "samples"))
+
+
 class Ivanjko(Calibrator):
     """Ivanjko et al.'s calibration from straight runs and ±180° spins (see the module).
 
@@ -182,6 +219,7 @@ class Ivanjko(Calibrator):
         "differential drive mobile robots, Proc. 16th Int. Workshop on Robotics in "
         "Alpe-Adria-Danube Region (RAAD), 2007"
     )
+    options_type: ClassVar[type[IvanjkoOptions]] = IvanjkoOptions
 
     def __init__(
         self,
@@ -194,35 +232,31 @@ class Ivanjko(Calibrator):
         max_iterations: int = 10,
         residuals: ResidualSamples = "end",
     ) -> None:
-        if not straight_distance > 0.0 or not spin_angle > 0.0:
-            raise ValueError(
-                f"need straight_distance > 0 and spin_angle > 0, got {straight_distance}, "
-                f"{spin_angle}"
-            )
-        if straight_runs < 1 or spin_runs < 1 or max_iterations < 1:
-            raise ValueError(
-                "need straight_runs, spin_runs and max_iterations >= 1, got "
-                f"{straight_runs}, {spin_runs}, {max_iterations}"
-            )
-        if not tolerance > 0.0:
-            raise ValueError(f"tolerance must be > 0, got {tolerance}")
-        if residuals not in ("end", "samples"):
-            raise ValueError(f"residuals must be 'end' or 'samples', got {residuals!r}")
-        self.straight_distance = straight_distance
-        self.straight_runs = straight_runs
-        self.spin_angle = spin_angle
-        self.spin_runs = spin_runs
-        self.tolerance = tolerance
-        self.max_iterations = max_iterations
-        self.residuals: ResidualSamples = residuals
+        options = IvanjkoOptions(
+            straight_distance=straight_distance,
+            straight_runs=straight_runs,
+            spin_angle=spin_angle,
+            spin_runs=spin_runs,
+            tolerance=tolerance,
+            max_iterations=max_iterations,
+            residuals=residuals,
+        )
+        self.options = options
+        self.straight_distance = options.straight_distance
+        self.straight_runs = options.straight_runs
+        self.spin_angle = options.spin_angle
+        self.spin_runs = options.spin_runs
+        self.tolerance = options.tolerance
+        self.max_iterations = options.max_iterations
+        self.residuals: ResidualSamples = options.residuals
 
     def experiments(self) -> list[Experiment]:
         """The straight runs, the cw spins and the ccw spins (all driven once; the iteration
         re-fits the same runs)."""
         return [
-            Experiment("straight", None, self.straight_runs, self.straight_distance),
-            Experiment("spin", "cw", self.spin_runs, self.spin_angle),
-            Experiment("spin", "ccw", self.spin_runs, self.spin_angle),
+            Experiment(ExperimentKind.STRAIGHT, None, self.straight_runs, self.straight_distance),
+            Experiment(ExperimentKind.SPIN, "cw", self.spin_runs, self.spin_angle),
+            Experiment(ExperimentKind.SPIN, "ccw", self.spin_runs, self.spin_angle),
         ]
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:

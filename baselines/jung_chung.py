@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -42,6 +43,7 @@ from numpy.typing import ArrayLike
 from odomgym.baselines.base import (
     CalibrationResult,
     SquareCalibrator,
+    SquareOptions,
 )
 from odomgym.baselines.umbmark import (
     e_b_from_alpha,
@@ -49,7 +51,7 @@ from odomgym.baselines.umbmark import (
     optiodom_update,
     perform_squares,
 )
-from odomgym.experiments import Lab
+from odomgym.experiments import Lab, parse_choice
 from odomgym.odometry import Calibration, wrap_angle
 from odomgym.runs import return_error
 
@@ -58,13 +60,33 @@ __all__ = [
     "JungChung",
     "JungChungConventions",
     "JungChungEstimates",
+    "JungChungOptions",
     "heading_centre",
     "jung_chung_estimates",
     "jung_chung_from_headings",
 ]
 
 HeadingMean = Literal["circular", "optiodom"]
-JungChungConventions = Literal["jung_chung", "optiodom"]
+
+
+class JungChungConventions(StrEnum):
+    """Whose reading of Jung & Chung :class:`JungChung` follows (see the module docstring)."""
+
+    JUNG_CHUNG = "jung_chung"  # circular-mean heading centres, correction composed
+    OPTIODOM = "optiodom"  # the OptiOdom authors' code, its double division included
+
+
+@dataclass(frozen=True)
+class JungChungOptions(SquareOptions):
+    """The settings of :class:`JungChung`: ``side`` [m], ``runs_per_direction`` and
+    ``conventions`` (a :class:`JungChungConventions` or its spelling)."""
+
+    conventions: JungChungConventions = JungChungConventions.JUNG_CHUNG
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        conventions = parse_choice(JungChungConventions, self.conventions, field="conventions")
+        object.__setattr__(self, "conventions", conventions)
 
 
 def heading_centre(errors: ArrayLike, *, mean: HeadingMean = "circular") -> float:
@@ -167,7 +189,8 @@ class JungChung(SquareCalibrator):
         side: square side L [m].
         runs_per_direction: squares per direction.
         conventions: ``"jung_chung"`` (circular-mean heading centres; correction multiplied onto
-            the calibration in place) or ``"optiodom"`` (the authors' code, bug included; see
+            the calibration in place) or ``"optiodom"`` (a :class:`JungChungConventions` or its
+            spelling) (the authors' code, bug included; see
             the module docstring).
     """
 
@@ -177,18 +200,23 @@ class JungChung(SquareCalibrator):
         "mobile robots by using experimental heading errors, Int. J. Adv. Robot. Syst. "
         "8(6):134-142, 2011, doi:10.5772/50906"
     )
+    options_type: ClassVar[type[JungChungOptions]] = JungChungOptions
 
     def __init__(
         self,
         side: float = 4.0,
         runs_per_direction: int = 5,
         *,
-        conventions: JungChungConventions = "jung_chung",
+        conventions: JungChungConventions | str = JungChungConventions.JUNG_CHUNG,
     ) -> None:
-        if conventions not in ("jung_chung", "optiodom"):
-            raise ValueError(f"conventions must be 'jung_chung' or 'optiodom', got {conventions!r}")
-        super().__init__(side, runs_per_direction)
-        self.conventions: JungChungConventions = conventions
+        options = JungChungOptions(
+            side=side,
+            runs_per_direction=runs_per_direction,
+            conventions=parse_choice(JungChungConventions, conventions, field="conventions"),
+        )
+        self._set_squares(options)
+        self.options: JungChungOptions = options
+        self.conventions = options.conventions
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares in ``lab`` with ``initial`` and correct E_b and E_d."""
@@ -198,7 +226,7 @@ class JungChung(SquareCalibrator):
         cw, ccw = perform_squares(lab, calibration, self.side, self.runs_per_direction)
         cw_err = np.array([return_error(r, robot, calibration) for r in cw])
         ccw_err = np.array([return_error(r, robot, calibration) for r in ccw])
-        compat = self.conventions == "optiodom"
+        compat = self.conventions is JungChungConventions.OPTIODOM
         found = jung_chung_estimates(
             cw_err,
             ccw_err,

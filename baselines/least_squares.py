@@ -68,8 +68,15 @@ from typing import ClassVar, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.baselines.base import CalibrationResult, Calibrator, perform
-from odomgym.experiments import Experiment, Lab
+from odomgym.baselines.base import (
+    CalibrationResult,
+    Calibrator,
+    perform,
+    require_choice,
+    require_count,
+)
+from odomgym.errors import SpecError, require_positive
+from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
@@ -77,6 +84,7 @@ from odomgym.runs import Run
 __all__ = [
     "LeastSquares",
     "LeastSquaresFit",
+    "LeastSquaresOptions",
     "PositionUnknowns",
     "Weighting",
     "fit_least_squares",
@@ -255,6 +263,41 @@ def fit_least_squares(
     )
 
 
+@dataclass(frozen=True)
+class LeastSquaresOptions:
+    """The settings of :class:`LeastSquares` (see its Args for meaning and units)."""
+
+    side: float = 4.0
+    squares_per_direction: int = 3
+    straight_runs: int = 3
+    straight_distance: float = 3.0
+    spins_per_direction: int = 0
+    spin_angle: float = math.pi
+    position: PositionUnknowns = "wheelbase"
+    weighting: Weighting = "propagated"
+
+    def __post_init__(self) -> None:
+        require_positive("side", self.side)
+        require_count("squares_per_direction", self.squares_per_direction, 0)
+        require_count("straight_runs", self.straight_runs, 0)
+        require_positive("straight_distance", self.straight_distance)
+        require_count("spins_per_direction", self.spins_per_direction, 0)
+        require_positive("spin_angle", self.spin_angle)
+        if not (self.squares_per_direction or self.spins_per_direction):
+            raise SpecError(
+                "need squares or spins (squares_per_direction or spins_per_direction >= 1): "
+                "the heading rows need turning",
+                field="squares_per_direction",
+            )
+        if not self.straight_runs:
+            raise SpecError(
+                "need straight runs: closed paths hardly fix the wheel radii",
+                field="straight_runs",
+            )
+        require_choice("position", self.position, ("wheelbase", "radii"))
+        require_choice("weighting", self.weighting, ("propagated", "uniform"))
+
+
 class LeastSquares(Calibrator):
     """Antonelli et al.'s least-squares calibration over the runs it performs.
 
@@ -277,6 +320,7 @@ class LeastSquares(Calibrator):
         "robots based on the least-squares technique: theory and experimental validation, "
         "IEEE Trans. Robotics 21(5):994-1004, 2005"
     )
+    options_type: ClassVar[type[LeastSquaresOptions]] = LeastSquaresOptions
 
     def __init__(
         self,
@@ -290,29 +334,25 @@ class LeastSquares(Calibrator):
         position: PositionUnknowns = "wheelbase",
         weighting: Weighting = "propagated",
     ) -> None:
-        if min(squares_per_direction, straight_runs, spins_per_direction) < 0:
-            raise ValueError("run counts must be >= 0")
-        if not (side > 0.0 and straight_distance > 0.0 and spin_angle > 0.0):
-            raise ValueError(
-                f"need side, straight_distance and spin_angle > 0, got {side}, "
-                f"{straight_distance}, {spin_angle}"
-            )
-        if not (squares_per_direction or spins_per_direction):
-            raise ValueError("need squares or spins: the heading rows need turning")
-        if not straight_runs:
-            raise ValueError("need straight runs: closed paths hardly fix the wheel radii")
-        if position not in ("wheelbase", "radii"):
-            raise ValueError(f"position must be 'wheelbase' or 'radii', got {position!r}")
-        if weighting not in ("propagated", "uniform"):
-            raise ValueError(f"weighting must be 'propagated' or 'uniform', got {weighting!r}")
-        self.side = side
-        self.squares_per_direction = squares_per_direction
-        self.straight_runs = straight_runs
-        self.straight_distance = straight_distance
-        self.spins_per_direction = spins_per_direction
-        self.spin_angle = spin_angle
-        self.position: PositionUnknowns = position
-        self.weighting: Weighting = weighting
+        options = LeastSquaresOptions(
+            side=side,
+            squares_per_direction=squares_per_direction,
+            straight_runs=straight_runs,
+            straight_distance=straight_distance,
+            spins_per_direction=spins_per_direction,
+            spin_angle=spin_angle,
+            position=position,
+            weighting=weighting,
+        )
+        self.options = options
+        self.side = options.side
+        self.squares_per_direction = options.squares_per_direction
+        self.straight_runs = options.straight_runs
+        self.straight_distance = options.straight_distance
+        self.spins_per_direction = options.spins_per_direction
+        self.spin_angle = options.spin_angle
+        self.position: PositionUnknowns = options.position
+        self.weighting: Weighting = options.weighting
 
     def experiments(self) -> list[Experiment]:
         """Squares (cw, ccw), spins (cw, ccw) and straight runs, as configured."""
@@ -320,16 +360,18 @@ class LeastSquares(Calibrator):
         if self.squares_per_direction:
             n = self.squares_per_direction
             out += [
-                Experiment("square", "cw", n, self.side),
-                Experiment("square", "ccw", n, self.side),
+                Experiment(ExperimentKind.SQUARE, "cw", n, self.side),
+                Experiment(ExperimentKind.SQUARE, "ccw", n, self.side),
             ]
         if self.spins_per_direction:
             n = self.spins_per_direction
             out += [
-                Experiment("spin", "cw", n, self.spin_angle),
-                Experiment("spin", "ccw", n, self.spin_angle),
+                Experiment(ExperimentKind.SPIN, "cw", n, self.spin_angle),
+                Experiment(ExperimentKind.SPIN, "ccw", n, self.spin_angle),
             ]
-        out.append(Experiment("straight", None, self.straight_runs, self.straight_distance))
+        out.append(
+            Experiment(ExperimentKind.STRAIGHT, None, self.straight_runs, self.straight_distance)
+        )
         return out
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:

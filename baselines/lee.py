@@ -62,6 +62,8 @@ from numpy.typing import ArrayLike
 from odomgym.baselines.base import (
     CalibrationResult,
     SquareCalibrator,
+    SquareOptions,
+    require_choice,
 )
 from odomgym.baselines.umbmark import e_b_from_alpha, perform_squares
 from odomgym.experiments import Lab
@@ -73,6 +75,7 @@ __all__ = [
     "DiameterError",
     "Lee",
     "LeeEstimates",
+    "LeeOptions",
     "lee_alpha_d",
     "lee_correction",
     "lee_estimates",
@@ -217,6 +220,18 @@ def lee_correction(e_d: float, e_b: float, diameter_error: DiameterError) -> Cal
     return Calibration.from_errors(e_d, e_b, e_s)
 
 
+@dataclass(frozen=True)
+class LeeOptions(SquareOptions):
+    """The settings of :class:`Lee`: ``side`` [m], ``runs_per_direction`` and
+    ``diameter_error`` (``"right_wheel"`` or ``"split"``)."""
+
+    diameter_error: DiameterError = "right_wheel"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require_choice("diameter_error", self.diameter_error, ("right_wheel", "split"))
+
+
 class Lee(SquareCalibrator):
     """Lee et al.'s calibration from ``runs_per_direction`` cw and ccw squares (see the module).
 
@@ -232,6 +247,7 @@ class Lee(SquareCalibrator):
         "K. Lee, C. Jung, W. Chung, Accurate calibration of kinematic parameters for two wheel "
         "differential mobile robots, J. Mech. Sci. Technol. 25(6):1603-1611, 2011"
     )
+    options_type: ClassVar[type[LeeOptions]] = LeeOptions
 
     def __init__(
         self,
@@ -240,12 +256,10 @@ class Lee(SquareCalibrator):
         *,
         diameter_error: DiameterError = "right_wheel",
     ) -> None:
-        super().__init__(side, runs_per_direction)
-        if diameter_error not in ("right_wheel", "split"):
-            raise ValueError(
-                f"diameter_error must be 'right_wheel' or 'split', got {diameter_error!r}"
-            )
-        self.diameter_error: DiameterError = diameter_error
+        options = LeeOptions(side, runs_per_direction, diameter_error=diameter_error)
+        self._set_squares(options)
+        self.options: LeeOptions = options
+        self.diameter_error: DiameterError = options.diameter_error
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares with ``initial`` active and correct E_d and E_b."""

@@ -47,8 +47,16 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from odomgym.baselines.base import CalibrationResult, Calibrator, perform
-from odomgym.experiments import Experiment, Lab
+from odomgym.baselines.base import (
+    CalibrationResult,
+    Calibrator,
+    perform,
+    require_choice,
+    require_count,
+    square_experiments,
+)
+from odomgym.errors import SpecError, require_finite, require_positive
+from odomgym.experiments import Experiment, ExperimentKind, Lab, parse_choice
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
@@ -56,8 +64,10 @@ from odomgym.runs import Run
 __all__ = [
     "PARAMETER_NAMES",
     "POOR_CONDITION",
+    "TRAJECTORY_PATHS",
     "Trajectory",
     "TrajectoryFit",
+    "TrajectoryOptions",
     "fit_trajectories",
     "replay_with_jacobian",
     "sample_indices",
@@ -291,23 +301,87 @@ def fit_trajectories(
     )
 
 
+#: The runs :class:`Trajectory` can ask a lab for: each turns while it moves, so positions
+#: alone determine D_L, D_R and b (a spin does not move; straight runs do not turn).
+TRAJECTORY_PATHS: tuple[ExperimentKind, ...] = (
+    ExperimentKind.SQUARE,
+    ExperimentKind.CIRCULAR,
+    ExperimentKind.FREE,
+)
+
+#: Losses of :func:`scipy.optimize.least_squares`.
+LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
+
+
+@dataclass(frozen=True)
+class TrajectoryOptions:
+    """The settings of :class:`Trajectory` (see its Args for meaning and units)."""
+
+    side: float = 4.0
+    runs_per_direction: int = 3
+    path: ExperimentKind = ExperimentKind.SQUARE
+    radius: float = 1.0
+    laps: float = 1.0
+    free_runs: int = 3
+    free_length: float = 10.0
+    straight_runs: int = 0
+    straight_distance: float = 3.0
+    sample_distance: float | None = None
+    heading_weight: float = 0.0
+    loss: str = "linear"
+
+    def __post_init__(self) -> None:
+        path = parse_choice(ExperimentKind, self.path, field="path")
+        if path not in TRAJECTORY_PATHS:
+            raise SpecError(
+                f"path must be one of {', '.join(repr(k.value) for k in TRAJECTORY_PATHS)} "
+                f"(runs that turn while they move), got {path.value!r}",
+                field="path",
+            )
+        object.__setattr__(self, "path", path)
+        require_positive("side", self.side)
+        require_count("runs_per_direction", self.runs_per_direction, 1)
+        require_positive("radius", self.radius)
+        require_positive("laps", self.laps)
+        require_count("free_runs", self.free_runs, 1)
+        require_positive("free_length", self.free_length)
+        require_count("straight_runs", self.straight_runs, 0)
+        require_positive("straight_distance", self.straight_distance)
+        if self.sample_distance is not None:
+            require_positive("sample_distance", self.sample_distance)
+        if require_finite("heading_weight", self.heading_weight) < 0.0:
+            raise SpecError(
+                f"heading_weight must be >= 0 [m/rad], got {self.heading_weight}",
+                field="heading_weight",
+            )
+        require_choice("loss", self.loss, LOSSES)
+
+
 class Trajectory(Calibrator):
     """OptiOdom-style trajectory optimisation (Sousa et al. 2022) over the runs it performs.
 
-    Default experiments: ``runs_per_direction`` cw and as many ccw UMBmark squares of side
-    ``side`` [m]. Squares suffice: the legs' lateral drift fixes D_R/D_L, the corners fix b
-    relative to the mean diameter, and the positions *along* the legs fix the mean diameter —
-    which return errors alone cannot see. ``straight_runs`` adds straight runs of
+    The runs (``path``): ``"square"`` (default) — ``runs_per_direction`` cw and as many ccw
+    UMBmark squares of side ``side`` [m]; ``"circular"`` — ``runs_per_direction`` cw and as
+    many ccw circles of radius ``radius`` [m], ``laps`` laps each; ``"free"`` — ``free_runs``
+    free paths of ``free_length`` [m] (recorded, or the simulator's random arcs,
+    :func:`odomgym.lab.free_plan`). Squares suffice: the legs' lateral drift fixes D_R/D_L, the
+    corners fix b relative to the mean diameter, and the positions *along* the legs fix the
+    mean diameter — which return errors alone cannot see. Circles need both directions: one
+    circle fixes the mean diameter and one combination of D_R/D_L and b (its curvature); the
+    circle turning the other way fixes the other. ``straight_runs`` adds straight runs of
     ``straight_distance`` [m] (more scale information; the default 0 keeps the budget of a
     UMBmark run).
 
-    On a recorded session of other shapes (circles, free paths) call :func:`fit_trajectories`
-    on the session's runs directly: a :class:`~odomgym.experiments.Lab` is asked only for
-    squares, straight runs and spins.
-
     Args:
         side: square side L [m].
-        runs_per_direction: squares per direction.
+        runs_per_direction: squares or circles per direction.
+        path: which runs to ask for: an :class:`~odomgym.experiments.ExperimentKind` among
+            :data:`TRAJECTORY_PATHS`, or its spelling.
+        radius: circle radius [m].
+        laps: laps per circular run [-].
+        free_runs: free runs.
+        free_length: length of a simulated free run [m] (recorded ones are served whatever
+            their length).
         straight_runs: additional straight runs (0: none).
         straight_distance: their length [m].
         sample_distance: see :func:`fit_trajectories` [m].
@@ -320,45 +394,73 @@ class Trajectory(Calibrator):
         "R. B. Sousa, M. R. Petry, A. P. Moreira, P. Costa, OptiOdom: a Generic Approach for "
         "Odometry Calibration of Wheeled Mobile Robots, J. Intell. Robot. Syst. 105:39, 2022"
     )
+    options_type: ClassVar[type[TrajectoryOptions]] = TrajectoryOptions
 
     def __init__(
         self,
         side: float = 4.0,
         runs_per_direction: int = 3,
         *,
+        path: ExperimentKind | str = ExperimentKind.SQUARE,
+        radius: float = 1.0,
+        laps: float = 1.0,
+        free_runs: int = 3,
+        free_length: float = 10.0,
         straight_runs: int = 0,
         straight_distance: float = 3.0,
         sample_distance: float | None = None,
         heading_weight: float = 0.0,
         loss: str = "linear",
     ) -> None:
-        if not side > 0.0 or runs_per_direction < 1:
-            raise ValueError(
-                f"need side > 0 and runs_per_direction >= 1, got {side}, {runs_per_direction}"
-            )
-        if straight_runs < 0 or not straight_distance > 0.0:
-            raise ValueError(
-                f"need straight_runs >= 0 and straight_distance > 0, got {straight_runs}, "
-                f"{straight_distance}"
-            )
-        self.side = side
-        self.runs_per_direction = runs_per_direction
-        self.straight_runs = straight_runs
-        self.straight_distance = straight_distance
-        if not heading_weight >= 0.0:
-            raise ValueError(f"heading_weight must be >= 0 [m/rad], got {heading_weight}")
-        self.sample_distance = sample_distance
-        self.heading_weight = heading_weight
-        self.loss = loss
+        self.options = TrajectoryOptions(
+            side=side,
+            runs_per_direction=runs_per_direction,
+            path=parse_choice(ExperimentKind, path, field="path"),
+            radius=radius,
+            laps=laps,
+            free_runs=free_runs,
+            free_length=free_length,
+            straight_runs=straight_runs,
+            straight_distance=straight_distance,
+            sample_distance=sample_distance,
+            heading_weight=heading_weight,
+            loss=loss,
+        )
+        options = self.options
+        self.side = options.side
+        self.runs_per_direction = options.runs_per_direction
+        self.path = options.path
+        self.straight_runs = options.straight_runs
+        self.straight_distance = options.straight_distance
+        self.sample_distance = options.sample_distance
+        self.heading_weight = options.heading_weight
+        self.loss = options.loss
 
     def experiments(self) -> list[Experiment]:
-        """The cw and ccw squares, then the optional straight runs."""
-        out = [
-            Experiment("square", "cw", self.runs_per_direction, self.side),
-            Experiment("square", "ccw", self.runs_per_direction, self.side),
-        ]
-        if self.straight_runs:
-            out.append(Experiment("straight", None, self.straight_runs, self.straight_distance))
+        """The runs of ``path``, then the optional straight runs."""
+        options = self.options
+        out: list[Experiment]
+        if options.path is ExperimentKind.SQUARE:
+            out = square_experiments(options.side, options.runs_per_direction)
+        elif options.path is ExperimentKind.CIRCULAR:
+            out = [
+                Experiment(
+                    ExperimentKind.CIRCULAR,
+                    direction,
+                    options.runs_per_direction,
+                    options.radius,
+                    laps=options.laps,
+                )
+                for direction in ("cw", "ccw")
+            ]
+        else:
+            out = [Experiment(ExperimentKind.FREE, None, options.free_runs, options.free_length)]
+        if options.straight_runs:
+            out.append(
+                Experiment(
+                    ExperimentKind.STRAIGHT, None, options.straight_runs, options.straight_distance
+                )
+            )
         return out
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
@@ -373,8 +475,8 @@ class Trajectory(Calibrator):
                     experiment,
                     calibration,
                     method="trajectory optimisation",
-                    hint=" (for recorded runs of other shapes call fit_trajectories(runs, robot) "
-                    "directly)",
+                    hint=" (choose the runs with path = 'square', 'circular' or 'free'; or "
+                    "call fit_trajectories(runs, robot) on runs of any shape)",
                 )
             )
         fit = fit_trajectories(

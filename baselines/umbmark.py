@@ -38,13 +38,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import ClassVar, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odomgym.baselines.base import CalibrationResult, Calibrator, square_experiments
-from odomgym.experiments import Experiment, Lab
+from odomgym.baselines.base import (
+    CalibrationResult,
+    Calibrator,
+    SquareOptions,
+    require_choice,
+    require_count,
+    square_experiments,
+)
+from odomgym.errors import SpecError, require_positive
+from odomgym.experiments import Experiment, ExperimentKind, Lab, parse_choice
 from odomgym.metrics import centre_of_gravity, summarize_umbmark
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
@@ -52,9 +61,10 @@ from odomgym.runs import Run, replay_odometry, return_error
 
 __all__ = [
     "Components",
-    "Conventions",
     "UMBmark",
+    "UMBmarkConventions",
     "UMBmarkEstimates",
+    "UMBmarkOptions",
     "alpha_from_e_b",
     "beta_from_e_d",
     "e_b_from_alpha",
@@ -66,7 +76,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-Conventions = Literal["umbmark", "optiodom"]
 Components = Literal["xy", "x", "y"]
 EdWheelbase = Literal["nominal", "corrected"]
 
@@ -256,13 +265,61 @@ def optiodom_update(robot: RobotSpec, current: Calibration, e_d: float, e_b: flo
 
 
 def _return_errors(
-    runs: list[Run], robot: RobotSpec, calibration: Calibration, conventions: str
+    runs: list[Run], robot: RobotSpec, calibration: Calibration, conventions: UMBmarkConventions
 ) -> FloatArray:
-    frame: Literal["start", "world"] = "world" if conventions == "optiodom" else "start"
+    optiodom = conventions is UMBmarkConventions.OPTIODOM
+    frame: Literal["start", "world"] = "world" if optiodom else "start"
     return np.array([return_error(r, robot, calibration, frame=frame) for r in runs])
 
 
 # ------------------------------------------------------------------------ the calibrator
+class UMBmarkConventions(StrEnum):
+    """Whose equations and frames :class:`UMBmark` follows (see the module docstring)."""
+
+    UMBMARK = "umbmark"  # Borenstein & Feng 1994, §6, with solderspot 2014's E_s phase
+    OPTIODOM = "optiodom"  # the OptiOdom authors' src/diff/umbmark/main.m
+
+
+@dataclass(frozen=True)
+class UMBmarkOptions(SquareOptions):
+    """The settings of :class:`UMBmark` (see its Args); ``side`` [m] and
+    ``runs_per_direction`` from :class:`~odomgym.baselines.base.SquareOptions`.
+
+    ``use = None`` and ``scale_phases = None`` mean "the conventions' default" (``"xy"`` and 2
+    for umbmark, ``"x"`` and 0 for optiodom), resolved by :class:`UMBmark`.
+    """
+
+    use: Components | None = None
+    conventions: UMBmarkConventions = UMBmarkConventions.UMBMARK
+    scale_phases: int | None = None
+    straight_runs: int = 3
+    straight_distance: float = 2.0
+    second_compensation: bool = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        conventions = parse_choice(UMBmarkConventions, self.conventions, field="conventions")
+        object.__setattr__(self, "conventions", conventions)
+        if self.use is not None:
+            require_choice("use", self.use, ("xy", "x", "y"))
+        if self.scale_phases is not None:
+            require_count("scale_phases", self.scale_phases, 0)
+        require_count("straight_runs", self.straight_runs, 1)
+        require_positive("straight_distance", self.straight_distance)
+        if not isinstance(self.second_compensation, bool):
+            raise SpecError(
+                f"second_compensation must be true or false, got {self.second_compensation!r}",
+                field="second_compensation",
+            )
+        if conventions is UMBmarkConventions.OPTIODOM and (
+            self.scale_phases or self.second_compensation
+        ):
+            raise SpecError(
+                "the OptiOdom authors' UMBmark has no E_s phase and no second compensation",
+                field="scale_phases" if self.scale_phases else "second_compensation",
+            )
+
+
 # mypy cannot follow the setuptools package-dir mapping odomgym.baselines → baselines/, so
 # to it Calibrator is Any; drop the ignore once that mapping is visible to mypy.
 class UMBmark(Calibrator):
@@ -286,8 +343,9 @@ class UMBmark(Calibrator):
         side: square side L [m] (Borenstein & Feng 1994: 4 m).
         runs_per_direction: squares per direction (Borenstein & Feng 1994: 5).
         use: ``"xy"`` (default; footnote 2), ``"x"`` or ``"y"``; see :func:`umbmark_estimates`.
-        conventions: ``"umbmark"`` or ``"optiodom"`` (see the module docstring); the latter
-            defaults ``use`` to ``"x"`` and refuses an E_s phase or a second compensation.
+        conventions: a :class:`UMBmarkConventions` or its spelling, ``"umbmark"`` or
+            ``"optiodom"`` (see the module docstring); the latter defaults ``use`` to ``"x"``
+            and refuses an E_s phase or a second compensation.
         scale_phases: E_s phases (default 2 as solderspot 2014; 0 with optiodom conventions).
         straight_runs: straight runs per E_s phase (solderspot 2014: 3).
         straight_distance: straight-run length [m] (solderspot 2014: 2 m).
@@ -299,6 +357,7 @@ class UMBmark(Calibrator):
         "J. Borenstein, L. Feng, UMBmark — A Method for Measuring, Comparing, and Correcting "
         "Dead-reckoning Errors in Mobile Robots, Univ. of Michigan TR UM-MEAM-94-22, 1994, §6"
     )
+    options_type: ClassVar[type[UMBmarkOptions]] = UMBmarkOptions
 
     def __init__(
         self,
@@ -306,44 +365,41 @@ class UMBmark(Calibrator):
         runs_per_direction: int = 5,
         *,
         use: Components | None = None,
-        conventions: Conventions = "umbmark",
+        conventions: UMBmarkConventions | str = UMBmarkConventions.UMBMARK,
         scale_phases: int | None = None,
         straight_runs: int = 3,
         straight_distance: float = 2.0,
         second_compensation: bool = False,
     ) -> None:
-        if conventions not in ("umbmark", "optiodom"):
-            raise ValueError(f"conventions must be 'umbmark' or 'optiodom', got {conventions!r}")
-        if not side > 0.0 or runs_per_direction < 1:
-            raise ValueError(
-                f"need side > 0 and runs_per_direction >= 1, got {side}, {runs_per_direction}"
-            )
-        if (scale_phases is not None and scale_phases < 0) or straight_runs < 1:
-            raise ValueError(
-                f"need scale_phases >= 0 and straight_runs >= 1, got {scale_phases}, "
-                f"{straight_runs}"
-            )
-        compat = conventions == "optiodom"
-        if compat and (scale_phases or second_compensation):
-            raise ValueError(
-                "the OptiOdom authors' UMBmark has no E_s phase and no second compensation"
-            )
-        self.side = side
-        self.runs_per_direction = runs_per_direction
-        self.conventions: Conventions = conventions
-        self.use: Components = use if use is not None else ("x" if compat else "xy")
-        self.scale_phases = scale_phases if scale_phases is not None else (0 if compat else 2)
-        self.straight_runs = straight_runs
-        self.straight_distance = straight_distance
-        self.second_compensation = second_compensation
+        options = UMBmarkOptions(
+            side=side,
+            runs_per_direction=runs_per_direction,
+            use=use,
+            conventions=parse_choice(UMBmarkConventions, conventions, field="conventions"),
+            scale_phases=scale_phases,
+            straight_runs=straight_runs,
+            straight_distance=straight_distance,
+            second_compensation=second_compensation,
+        )
+        compat = options.conventions is UMBmarkConventions.OPTIODOM
+        self.options = options
+        self.side = options.side
+        self.runs_per_direction = options.runs_per_direction
+        self.conventions = options.conventions
+        self.use: Components = options.use if options.use is not None else ("x" if compat else "xy")
+        self.scale_phases = (
+            options.scale_phases if options.scale_phases is not None else (0 if compat else 2)
+        )
+        self.straight_runs = options.straight_runs
+        self.straight_distance = options.straight_distance
+        self.second_compensation = options.second_compensation
 
     def experiments(self) -> list[Experiment]:
         """E_s phases (straight runs), the cw and ccw squares, and the verification squares."""
-        straight = Experiment("straight", None, self.straight_runs, self.straight_distance)
-        squares = [
-            Experiment("square", "cw", self.runs_per_direction, self.side),
-            Experiment("square", "ccw", self.runs_per_direction, self.side),
-        ]
+        straight = Experiment(
+            ExperimentKind.STRAIGHT, None, self.straight_runs, self.straight_distance
+        )
+        squares: list[Experiment] = square_experiments(self.side, self.runs_per_direction)
         verify = squares if self.second_compensation else []
         return [straight] * self.scale_phases + squares + verify
 
@@ -402,7 +458,9 @@ class UMBmark(Calibrator):
         notes: list[str],
     ) -> Calibration:
         """The E_s phases of solderspot 2014: E_s = mean(true / odometric straight-run distance)."""
-        experiment = Experiment("straight", None, self.straight_runs, self.straight_distance)
+        experiment = Experiment(
+            ExperimentKind.STRAIGHT, None, self.straight_runs, self.straight_distance
+        )
         e_s_total, done = 1.0, 0
         for phase in range(1, self.scale_phases + 1):
             try:
@@ -438,7 +496,7 @@ class UMBmark(Calibrator):
         """One UMBmark correction from the squares driven with ``calibration``."""
         cw_err = _return_errors(cw, robot, calibration, self.conventions)
         ccw_err = _return_errors(ccw, robot, calibration, self.conventions)
-        compat = self.conventions == "optiodom"
+        compat = self.conventions is UMBmarkConventions.OPTIODOM
         found = umbmark_estimates(
             cw_err,
             ccw_err,

@@ -14,15 +14,68 @@ give every calibrator the same budget.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from enum import StrEnum
+from typing import Protocol, TypeVar
 
+from odomgym.errors import SpecError
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.runs import Direction, Run
 
-__all__ = ["BookkeepingLab", "Experiment", "ExperimentKind", "Lab", "SensorAccuracy"]
+__all__ = [
+    "BookkeepingLab",
+    "Experiment",
+    "ExperimentKind",
+    "Lab",
+    "SensorAccuracy",
+    "parse_choice",
+]
 
-ExperimentKind = Literal["square", "straight", "spin"]
+ChoiceT = TypeVar("ChoiceT", bound=StrEnum)
+
+
+def parse_choice(choices: type[ChoiceT], value: object, *, field: str) -> ChoiceT:
+    """``value`` as a member of the string enum ``choices``: a member, or its spelling.
+
+    Why: settings arrive as strings from TOML files and the command line, and as members from
+    Python; both must land on the same member, and a misspelling must say which field was wrong
+    and what it may be — :class:`~odomgym.errors.SpecError` with ``field``.
+    """
+    if isinstance(value, choices):
+        return value
+    if isinstance(value, str):
+        try:
+            return choices(value)
+        except ValueError:
+            pass
+    allowed = ", ".join(repr(member.value) for member in choices)
+    raise SpecError(f"unknown {field} {value!r}; choose one of {allowed}", field=field)
+
+
+class ExperimentKind(StrEnum):
+    """What a run drives. The values are the spellings used in TOML, logs and run records.
+
+    * ``square`` — the UMBmark square: ``size`` = side L [m], stop and turn in place by 90° at
+      each corner (Borenstein & Feng 1994, §6.3);
+    * ``straight`` — ``size`` = distance D [m], optionally back in reverse (Borenstein 1995,
+      §6.1);
+    * ``spin`` — turn in place by ``size`` [rad] (Ivanjko et al.'s ±180° spins);
+    * ``circular`` — drive ``laps`` laps of a circle of radius ``size`` [m] without stopping
+      (as in the circular sessions of the OptiOdom data set, Sousa et al. 2022);
+    * ``free`` — any path, ``size`` = its length [m]: a person driving the robot about, or the
+      simulator's random stand-in for one (:func:`odomgym.lab.free_plan`).
+    """
+
+    SQUARE = "square"
+    STRAIGHT = "straight"
+    SPIN = "spin"
+    CIRCULAR = "circular"
+    FREE = "free"
+
+    @property
+    def has_direction(self) -> bool:
+        """Whether runs of this kind turn one way (``cw``/``ccw``) by design."""
+        return self in (ExperimentKind.SQUARE, ExperimentKind.SPIN, ExperimentKind.CIRCULAR)
 
 
 @dataclass(frozen=True)
@@ -30,13 +83,15 @@ class Experiment:
     """What to drive and how often.
 
     Attributes:
-        kind: ``"square"`` (UMBmark square, stop and turn in place at the corners),
-            ``"straight"`` (drive ``size`` metres, optionally back), ``"spin"`` (turn in place
-            by ``size`` radians).
-        direction: ``"cw"``/``"ccw"`` for squares and spins; ``None`` for straight runs.
+        kind: an :class:`ExperimentKind` (its string spelling, e.g. ``"square"``, is accepted
+            and converted).
+        direction: ``"cw"``/``"ccw"`` for squares, spins and circles; ``None`` for straight
+            and free runs.
         runs: how many repetitions.
-        size: square side L or straight distance D [m], or spin angle [rad].
+        size: square side L, straight distance D, circle radius or free path length [m], or
+            spin angle [rad].
         return_trip: straight runs only: drive back to the start as well (Borenstein 1995, §6.1).
+        laps: circular runs only: how many times round the circle (may be fractional) [-].
     """
 
     kind: ExperimentKind
@@ -44,16 +99,30 @@ class Experiment:
     runs: int = 1
     size: float = 4.0
     return_trip: bool = False
+    laps: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.kind not in ("square", "straight", "spin"):
-            raise ValueError(f"unknown experiment kind {self.kind!r}")
-        if self.kind in ("square", "spin") and self.direction not in ("cw", "ccw"):
-            raise ValueError(f"a {self.kind} experiment needs direction 'cw' or 'ccw'")
+        kind = parse_choice(ExperimentKind, self.kind, field="kind")
+        object.__setattr__(self, "kind", kind)
+        if kind.has_direction and self.direction not in ("cw", "ccw"):
+            raise SpecError(
+                f"a {kind} experiment needs direction 'cw' or 'ccw', got {self.direction!r}",
+                field="direction",
+            )
+        if not kind.has_direction and self.direction is not None:
+            raise SpecError(
+                f"a {kind} experiment has no direction, got {self.direction!r}", field="direction"
+            )
         if self.runs < 1:
-            raise ValueError(f"runs must be >= 1, got {self.runs}")
+            raise SpecError(f"runs must be >= 1, got {self.runs}", field="runs")
         if not self.size > 0:
-            raise ValueError(f"size must be > 0, got {self.size}")
+            raise SpecError(f"size must be > 0, got {self.size}", field="size")
+        if self.return_trip and kind is not ExperimentKind.STRAIGHT:
+            raise SpecError(
+                f"return_trip applies to straight runs, not {kind} runs", field="return_trip"
+            )
+        if not self.laps > 0:
+            raise SpecError(f"laps must be > 0, got {self.laps}", field="laps")
 
 
 @dataclass(frozen=True)

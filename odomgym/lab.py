@@ -6,6 +6,10 @@ says it is done, and each robot's time series becomes a :class:`~odomgym.runs.Ru
 of one experiment are simulated *together* (one pymunk space), which is why a 5 cw + 5 ccw
 UMBmark costs about as much as two runs.
 
+Circular and free runs are not routes of stops and turns but continuous arcs:
+:func:`drive_arcs` drives each robot through a plan of :class:`Arc` s (constant-curvature legs,
+:func:`circle_plan`, :func:`free_plan`) by its own odometry, without stopping between legs.
+
 :class:`SimLab` implements the :class:`~odomgym.experiments.Lab` protocol over a hidden true
 robot: a calibrator asks for experiments and receives runs whose ground truth went through a
 :class:`~odomgym.experiments.SensorAccuracy` (noisy like a real sensor), never the truth itself.
@@ -15,34 +19,78 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.drivers import ReferenceDriver
-from odomgym.experiments import BookkeepingLab, Experiment, SensorAccuracy
+from odomgym.experiments import BookkeepingLab, Experiment, ExperimentKind, SensorAccuracy
 from odomgym.floor import FloorSpec
-from odomgym.odometry import Calibration
+from odomgym.odometry import Calibration, Odometry
 from odomgym.paths import Route, spin_route, square_route, straight_route
+from odomgym.physics import World
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
+from odomgym.runs import Direction, Run
 from odomgym.trial import Trial
 
-__all__ = ["SimLab", "experiment_route", "measure", "random_start_poses", "simulate_runs"]
+__all__ = [
+    "FREE_LEG_LENGTH",
+    "FREE_MIN_RADIUS",
+    "Arc",
+    "SimLab",
+    "circle_plan",
+    "drive_arcs",
+    "experiment_route",
+    "free_plan",
+    "measure",
+    "random_start_poses",
+    "simulate_runs",
+]
 
 FloatArray = NDArray[np.float64]
 
 
 def experiment_route(experiment: Experiment) -> Route:
-    """The route an experiment drives."""
-    if experiment.kind == "square":
+    """The route a square, straight or spin experiment drives (circular and free experiments
+    drive arcs: :func:`circle_plan`, :func:`free_plan`)."""
+    kind = experiment.kind
+    if kind is ExperimentKind.SQUARE:
         assert experiment.direction is not None
         return square_route(experiment.size, experiment.direction)
-    if experiment.kind == "straight":
+    if kind is ExperimentKind.STRAIGHT:
         return straight_route(experiment.size, experiment.return_trip)
-    assert experiment.direction is not None
-    return spin_route(experiment.size, experiment.direction)
+    if kind is ExperimentKind.SPIN:
+        assert experiment.direction is not None
+        return spin_route(experiment.size, experiment.direction)
+    raise ValueError(f"a {kind} experiment drives arcs, not a route (see drive_arcs)")
+
+
+class _Recording:
+    """The time series of a batch: poses (T, K, 3) and counts (T, K, 2), grown geometrically,
+    and the step at which each robot finished."""
+
+    def __init__(self, robots: int, capacity: int) -> None:
+        self.poses = np.empty((capacity, robots, 3))
+        self.counts = np.empty((capacity, robots, 2), dtype=np.int64)
+        self.finished_at = np.full(robots, -1, dtype=np.int64)
+
+    def store(self, step: int, pose: FloatArray, counts: NDArray[np.int64]) -> None:
+        if step == len(self.poses):
+            self.poses = np.concatenate([self.poses, np.empty_like(self.poses)])
+            self.counts = np.concatenate([self.counts, np.empty_like(self.counts)])
+        self.poses[step] = pose
+        self.counts[step] = counts
+
+    def series(
+        self, robot: int, last_step: int, dt: float
+    ) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
+        """Time [s], counts and poses of ``robot`` up to the step it finished (or
+        ``last_step``)."""
+        end = (int(self.finished_at[robot]) if self.finished_at[robot] >= 0 else last_step) + 1
+        time = np.arange(end, dtype=np.float64) * dt
+        return time, self.counts[:end, robot].copy(), self.poses[:end, robot].copy()
 
 
 def simulate_runs(
@@ -110,16 +158,13 @@ def simulate_runs(
     nominal_time = max(r.wheel_travel(specs[0].wheelbase) for r in routes) / cruise_speed
     limit = max_time if max_time is not None else 20.0 * nominal_time + 60.0
     max_steps = math.ceil(limit / dt)
-    capacity = int(2.0 * nominal_time / dt) + 100
-    poses = np.empty((capacity, trial.n, 3))
-    counts = np.empty((capacity, trial.n, 2), dtype=np.int64)
+    recording = _Recording(trial.n, int(2.0 * nominal_time / dt) + 100)
     # What a tracking system reports: the true pose, or the tracked point of a robot whose
     # ground-truth sensor is offset (effect ``gt_sensor_offset``).
     world = trial.world
     record = world.tracked_pose if world.has_tracked_point else (lambda: trial.true_pose)
-    poses[0] = record()
-    counts[0] = trial.world.counts
-    finished_at = np.full(trial.n, -1, dtype=np.int64)
+    recording.store(0, record(), trial.world.counts)
+    finished_at = recording.finished_at
     done = trial.progress.done
     step = 0
     act, observe, advance = driver.act, trial.observation, trial.step
@@ -142,28 +187,20 @@ def simulate_runs(
             done = trial.progress.done
             finished_at[done & (finished_at < 0)] = step + 1
         step += 1
-        if step == capacity:  # grow the recording buffers geometrically
-            capacity *= 2
-            poses = np.concatenate([poses, np.empty_like(poses)])
-            counts = np.concatenate([counts, np.empty_like(counts)])
-        poses[step] = record()
-        counts[step] = trial.world.counts
+        recording.store(step, record(), trial.world.counts)
         if progress is not None and step % 100 == 0:
             progress(float(trial.progress.state[:, 7].mean()))
     if progress is not None:
         progress(1.0)
-    time_arr = np.arange(step + 1, dtype=np.float64) * dt
-    pose_arr = poses[: step + 1].transpose(1, 0, 2)  # (K, T, 3)
-    count_arr = counts[: step + 1].transpose(1, 0, 2)
     runs = []
     for i in range(trial.n):
-        end = int(finished_at[i]) + 1
+        time_arr, count_arr, pose_arr = recording.series(i, step, dt)
         runs.append(
             Run(
-                kind=kinds[i],
-                time=time_arr[:end].copy(),
-                counts=count_arr[i, :end].copy(),
-                true_pose=pose_arr[i, :end].copy(),
+                kind=str(kinds[i]),
+                time=time_arr,
+                counts=count_arr,
+                true_pose=pose_arr,
                 direction=directions[i],  # type: ignore[arg-type]
                 side=_route_size(routes[i]),
                 source=f"sim:{routes[i].name}",
@@ -171,6 +208,190 @@ def simulate_runs(
             )
         )
     return runs, trial.odom_pose.copy()
+
+
+#: Length of each leg of a simulated free run [m]: long enough to show a curvature (a quarter
+#: turn at the tightest radius), short enough that a 10 m run changes course ten times.
+FREE_LEG_LENGTH = 1.0
+#: Tightest turning radius of a simulated free run [m]: curvatures are drawn uniformly from
+#: [−1/FREE_MIN_RADIUS, 1/FREE_MIN_RADIUS], so the inner wheel of a 0.34 m LabMate still rolls
+#: forwards at 0.66 of the cruise speed.
+FREE_MIN_RADIUS = 0.5
+
+
+@dataclass(frozen=True)
+class Arc:
+    """One leg of constant curvature, driven without stopping.
+
+    Attributes:
+        length: path length of the axle midpoint along the leg, as the odometry measures it [m].
+        curvature: 1/radius, positive turning left (ccw) [1/m]; 0 for a straight leg.
+    """
+
+    length: float
+    curvature: float
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.length) and self.length > 0.0):
+            raise ValueError(f"an arc's length must be > 0 [m], got {self.length!r}")
+        if not math.isfinite(self.curvature):
+            raise ValueError(f"an arc's curvature must be finite [1/m], got {self.curvature!r}")
+
+
+def circle_plan(radius: float, direction: Direction, laps: float = 1.0) -> tuple[Arc, ...]:
+    """``laps`` laps of a circle of ``radius`` [m], turning right (``cw``) or left (``ccw``)."""
+    if not radius > 0.0 or not laps > 0.0:
+        raise ValueError(f"need radius > 0 [m] and laps > 0, got {radius}, {laps}")
+    sign = -1.0 if direction == "cw" else 1.0
+    return (Arc(2.0 * math.pi * radius * laps, sign / radius),)
+
+
+def free_plan(rng: np.random.Generator, length: float) -> tuple[Arc, ...]:
+    """A random path of ``length`` [m]: legs of :data:`FREE_LEG_LENGTH` (the last one shorter)
+    whose curvatures are uniform in ±1/:data:`FREE_MIN_RADIUS` — the simulator's stand-in for a
+    person driving the robot about. It turns both ways, which is what lets a trajectory fit
+    tell the two wheels apart (Sousa et al. 2022 fit such free paths too)."""
+    if not length > 0.0:
+        raise ValueError(f"length must be > 0 [m], got {length}")
+    legs = math.ceil(length / FREE_LEG_LENGTH - 1e-9)
+    curvatures = rng.uniform(-1.0 / FREE_MIN_RADIUS, 1.0 / FREE_MIN_RADIUS, size=legs)
+    last = length - (legs - 1) * FREE_LEG_LENGTH
+    return tuple(
+        Arc(FREE_LEG_LENGTH if k < legs - 1 else last, float(c)) for k, c in enumerate(curvatures)
+    )
+
+
+def drive_arcs(
+    robots: RobotSpec | Sequence[RobotSpec],
+    floor: FloorSpec,
+    plans: Sequence[Sequence[Arc]],
+    *,
+    calibration: Calibration | Sequence[Calibration] | None = None,
+    rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
+    cruise_speed: float = 0.2,
+    dt: float = 0.05,
+    kind: ExperimentKind | str = ExperimentKind.FREE,
+    direction: Direction | None = None,
+    start_poses: FloatArray | None = None,
+    max_time: float | None = None,
+) -> list[Run]:
+    """Drive each robot through its plan of arcs by its own odometry; return the runs.
+
+    The robot's controller does what a differential-drive base does with a (v, ω) command:
+    for a leg of curvature κ it asks for the body speed v = ``cruise_speed`` [m/s] and the yaw
+    rate ω = κ·v, i.e. rim speeds v ∓ ω·b/2, and turns them into wheel rates with the
+    wheelbase b and wheel diameters it *believes* (the nominal ones corrected by
+    ``calibration``) — so a calibration changes the path driven, as on a real robot. Rim
+    speeds beyond ``max_wheel_speed`` are scaled down together (the curvature is kept). A leg
+    ends when the odometry has measured its length; the next starts without stopping (the
+    wheel controllers' acceleration limit smooths the change). The robot brakes when the
+    odometric distance left is what it needs to stop at ``max_wheel_accel``, and the run ends
+    when both wheels are at rest.
+
+    Args:
+        robots: one spec per plan, or one spec for every plan.
+        floor: the floor; rough floors draw their noise from ``rng``.
+        plans: one sequence of arcs per robot.
+        calibration: the odometry calibration while driving (one, or one per robot).
+        rng: random source (required on rough floors): one Generator, or one per robot.
+        cruise_speed: body speed on the legs [m/s].
+        dt: control period [s].
+        kind, direction: labels stored in the runs.
+        start_poses: where each robot starts on the floor (K, 3) [m, m, rad] (default: the
+            origin); the plan is driven in each robot's start frame.
+        max_time: give up after this much simulated time [s] (default: 3 × the nominal time
+            + 60 s); RuntimeError names the robots that did not stop.
+
+    Returns:
+        One run per plan, true poses in the floor's frame (apply :func:`measure` before showing
+        them to a calibrator).
+    """
+    count = len(plans)
+    specs = [robots] * count if isinstance(robots, RobotSpec) else list(robots)
+    if len(specs) != count or count == 0:
+        raise ValueError(f"need one robot per plan, got {len(specs)} robots and {count} plans")
+    cals = (
+        [calibration if calibration is not None else Calibration()] * count
+        if calibration is None or isinstance(calibration, Calibration)
+        else list(calibration)
+    )
+    if len(cals) != count:
+        raise ValueError(f"need one calibration per plan ({count}), got {len(cals)}")
+    if not cruise_speed > 0.0:
+        raise ValueError(f"cruise_speed must be > 0 [m/s], got {cruise_speed}")
+    world = World(specs, floor, dt=dt, rng=rng)
+    if start_poses is not None:
+        world.reset(np.asarray(start_poses, dtype=float))
+    odometry = Odometry(specs, cals)
+    believed = [c.parameters(s) for c, s in zip(cals, specs, strict=True)]
+    half_base = np.array([0.5 * b["wheelbase"] for b in believed])
+    radius = np.array([[0.5 * b["left_diameter"], 0.5 * b["right_diameter"]] for b in believed])
+    max_speed = np.array([s.max_wheel_speed for s in specs])
+    max_accel = np.array([s.max_wheel_accel for s in specs])
+    stop_speed = np.maximum(0.005, np.array([1.5 * s.metres_per_tick / dt for s in specs]))
+    totals = np.array([sum(leg.length for leg in plan) for plan in plans])
+    ends = [np.cumsum([leg.length for leg in plan]) for plan in plans]
+    curvature = [np.array([leg.curvature for leg in plan]) for plan in plans]
+
+    nominal_time = float(totals.max()) / cruise_speed
+    limit = max_time if max_time is not None else 3.0 * nominal_time + 60.0
+    max_steps = math.ceil(limit / dt)
+    record = world.tracked_pose if world.has_tracked_point else (lambda: world.pose)
+    recording = _Recording(count, int(1.5 * nominal_time / dt) + 100)
+    recording.store(0, record(), world.counts)
+    travelled = np.zeros(count)  # odometric path length [m]
+    braking = np.zeros(count, dtype=bool)
+    command = np.zeros((count, 2))
+    step = 0
+    while (recording.finished_at < 0).any():
+        if step >= max_steps:
+            stuck = np.flatnonzero(recording.finished_at < 0).tolist()
+            raise RuntimeError(
+                f"robots {stuck} did not finish their arcs within {limit:.0f} s of simulated "
+                "time (a slippery floor?)"
+            )
+        speed = 0.5 * odometry.wheel_speed.sum(axis=1)  # odometric body speed [m/s]
+        braking |= totals - travelled <= speed**2 / (2.0 * max_accel) + np.abs(speed) * dt
+        command[:] = 0.0
+        for r in np.flatnonzero(~braking).tolist():
+            leg = min(int(np.searchsorted(ends[r], travelled[r], side="right")), len(ends[r]) - 1)
+            omega = curvature[r][leg] * cruise_speed
+            rims = cruise_speed + np.array([-omega, omega]) * half_base[r]
+            rims *= min(1.0, max_speed[r] / float(np.abs(rims).max()))
+            command[r] = rims / radius[r]
+        world.step(command)
+        odometry.update(world.counts, dt)
+        travelled += 0.5 * odometry.wheel_speed.sum(axis=1) * dt
+        step += 1
+        recording.store(step, record(), world.counts)
+        at_rest = braking & (np.abs(odometry.wheel_speed).max(axis=1) < stop_speed)
+        recording.finished_at[at_rest & (recording.finished_at < 0)] = step
+    label = str(kind)
+    runs = []
+    for i, plan in enumerate(plans):
+        time_arr, count_arr, pose_arr = recording.series(i, step, dt)
+        length = float(totals[i])
+        shape = (
+            {
+                "radius": 1.0 / abs(plan[0].curvature),
+                "laps": length * abs(plan[0].curvature) / (2.0 * math.pi),
+            }
+            if label == ExperimentKind.CIRCULAR and len(plan) == 1 and plan[0].curvature
+            else {"length": length}
+        )
+        runs.append(
+            Run(
+                kind=label,
+                time=time_arr,
+                counts=count_arr,
+                true_pose=pose_arr,
+                direction=direction,
+                side=float(shape.get("radius", 0.0)),
+                source=f"sim:{label}-{length:g}m",
+                meta={"robot": specs[i].name, "floor": floor.name, "finished": True, **shape},
+            )
+        )
+    return runs
 
 
 def random_start_poses(
@@ -249,7 +470,36 @@ class SimLab(BookkeepingLab):
         self.cruise_speed = cruise_speed
 
     def perform(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
-        """Drive the experiment ``experiment.runs`` times with ``calibration`` in the odometry."""
+        """Drive the experiment ``experiment.runs`` times with ``calibration`` in the odometry
+        (squares, straight runs and spins by the reference driver; circles and free paths by
+        :func:`drive_arcs`, a new random path for every free run)."""
+        if experiment.kind in (ExperimentKind.CIRCULAR, ExperimentKind.FREE):
+            runs = self._drive_arcs(experiment, calibration)
+        else:
+            runs = self._drive_route(experiment, calibration)
+        self._book(runs)  # the true path length, before the sensor adds its noise
+        return measure(runs, self.sensor, self.rng)
+
+    def _drive_arcs(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
+        if experiment.kind is ExperimentKind.CIRCULAR:
+            assert experiment.direction is not None
+            circle = circle_plan(experiment.size, experiment.direction, experiment.laps)
+            plans = [circle] * experiment.runs
+        else:
+            plans = [free_plan(self.rng, experiment.size) for _ in range(experiment.runs)]
+        return drive_arcs(
+            self._robot,
+            self.floor,
+            plans,
+            calibration=calibration,
+            rng=self.rng,
+            cruise_speed=self.cruise_speed,
+            kind=experiment.kind,
+            direction=experiment.direction,
+            start_poses=random_start_poses(self.rng, experiment.runs, self.start_region),
+        )
+
+    def _drive_route(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
         runs, _ = simulate_runs(
             self._robot,
             self.floor,
@@ -262,5 +512,4 @@ class SimLab(BookkeepingLab):
             direction=experiment.direction,
             start_poses=random_start_poses(self.rng, experiment.runs, self.start_region),
         )
-        self._book(runs)  # the true path length, before the sensor adds its noise
-        return measure(runs, self.sensor, self.rng)
+        return runs

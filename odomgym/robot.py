@@ -34,6 +34,12 @@ EffectTable = tuple[tuple[str, tuple[tuple[str, float], ...]], ...]
 """Effects of a spec: ((name, ((parameter, value), ...)), ...), sorted by name."""
 
 
+def _given(value: float | None, default: float) -> float:
+    """``value`` unless it is ``None`` (then ``default``), unconverted so that validation can
+    name a non-number."""
+    return default if value is None else value
+
+
 def _normalise_effects(effects: Any) -> EffectTable:
     """Accept a mapping {name: {parameter: value}} or the stored tuple form; drop empty ones."""
     items = effects.items() if isinstance(effects, Mapping) else effects
@@ -44,25 +50,27 @@ def _normalise_effects(effects: Any) -> EffectTable:
     return tuple(sorted(table.items()))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class RobotSpec:
     """A differential-drive robot: nominal (believed) and true (hidden) parameters.
 
-    Only ``wheel_diameter``, ``wheelbase`` and ``ticks_per_rev`` are required; every true
-    parameter defaults to its nominal value (an ideal robot), and the chassis defaults scale
-    with the wheelbase.
+    Only ``wheel_diameter``, ``wheelbase`` and ``ticks_per_rev`` are required. The true
+    parameters and the chassis are optional *arguments* (``float | None``): ``None`` means
+    "derive it" — every true parameter defaults to its nominal value (an ideal robot), and the
+    chassis defaults scale with the wheelbase. The stored *attributes* are always the resolved
+    floats, so the physics, the reports and :meth:`to_dict` never meet ``None``.
 
     Attributes:
         wheel_diameter: nominal wheel diameter D_n [m] the odometry uses.
         wheelbase: nominal wheelbase b_n [m], distance between the wheel contact points.
         ticks_per_rev: encoder counts per wheel revolution [counts] (may be fractional, e.g. a
             64-count motor encoder behind a 43.7:1 gear gives 2796.8).
-        true_left_diameter: true effective left wheel diameter D_L [m].
-        true_right_diameter: true effective right wheel diameter D_R [m].
-        true_wheelbase: true effective wheelbase b_actual [m].
-        mass: chassis mass [kg].
-        chassis_length: chassis length along the direction of travel [m].
-        chassis_width: chassis width [m].
+        true_left_diameter: true effective left wheel diameter D_L [m] (default D_n).
+        true_right_diameter: true effective right wheel diameter D_R [m] (default D_n).
+        true_wheelbase: true effective wheelbase b_actual [m] (default b_n).
+        mass: chassis mass [kg] (default 60 kg/m² of a 1.3 b_n × 1.3 b_n footprint).
+        chassis_length: chassis length along the direction of travel [m] (default 1.3 b_n).
+        chassis_width: chassis width [m] (default 1.3 b_n).
         drive_load_fraction: share of the weight carried by the two drive wheels [-]; the rest
             rests on ideal (frictionless) casters. Sets each wheel's normal force and so its
             friction limit μ·N.
@@ -81,37 +89,61 @@ class RobotSpec:
     wheel_diameter: float
     wheelbase: float
     ticks_per_rev: float
-    true_left_diameter: float = None  # type: ignore[assignment]  # None → derived default
-    true_right_diameter: float = None  # type: ignore[assignment]  # None → derived default
-    true_wheelbase: float = None  # type: ignore[assignment]  # None → derived default
-    mass: float = None  # type: ignore[assignment]  # None → derived default
-    chassis_length: float = None  # type: ignore[assignment]  # None → derived default
-    chassis_width: float = None  # type: ignore[assignment]  # None → derived default
-    drive_load_fraction: float = 0.9
-    max_wheel_speed: float = 0.5
-    max_wheel_accel: float = 0.5
-    name: str = "robot"
-    source: str = ""
-    effects: EffectTable = ()
+    true_left_diameter: float
+    true_right_diameter: float
+    true_wheelbase: float
+    mass: float
+    chassis_length: float
+    chassis_width: float
+    drive_load_fraction: float
+    max_wheel_speed: float
+    max_wheel_accel: float
+    name: str
+    source: str
+    effects: EffectTable
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "effects", _normalise_effects(self.effects))
-        # Fill derived defaults so every instance is fully specified after construction.
-        fill: dict[str, float] = {}
-        if self.true_left_diameter is None:
-            fill["true_left_diameter"] = self.wheel_diameter
-        if self.true_right_diameter is None:
-            fill["true_right_diameter"] = self.wheel_diameter
-        if self.true_wheelbase is None:
-            fill["true_wheelbase"] = self.wheelbase
-        if self.chassis_length is None:
-            fill["chassis_length"] = 1.3 * float(self.wheelbase)
-        if self.chassis_width is None:
-            fill["chassis_width"] = 1.3 * float(self.wheelbase)
-        if self.mass is None:
+    def __init__(
+        self,
+        wheel_diameter: float,
+        wheelbase: float,
+        ticks_per_rev: float,
+        true_left_diameter: float | None = None,
+        true_right_diameter: float | None = None,
+        true_wheelbase: float | None = None,
+        mass: float | None = None,
+        chassis_length: float | None = None,
+        chassis_width: float | None = None,
+        drive_load_fraction: float = 0.9,
+        max_wheel_speed: float = 0.5,
+        max_wheel_accel: float = 0.5,
+        name: str = "robot",
+        source: str = "",
+        effects: EffectTable | Mapping[str, Mapping[str, float]] = (),
+    ) -> None:
+        # Written out rather than generated by @dataclass, so that the optional arguments can
+        # be ``float | None`` while the attributes are the resolved floats. The derived
+        # defaults need the nominal wheelbase, which a field default cannot see.
+        # A non-number wheelbase gives NaN defaults here and is named by validate().
+        chassis = 1.3 * wheelbase if isinstance(wheelbase, int | float) else math.nan
+        values: dict[str, object] = {
+            "wheel_diameter": wheel_diameter,
+            "wheelbase": wheelbase,
+            "ticks_per_rev": ticks_per_rev,
+            "true_left_diameter": _given(true_left_diameter, wheel_diameter),
+            "true_right_diameter": _given(true_right_diameter, wheel_diameter),
+            "true_wheelbase": _given(true_wheelbase, wheelbase),
             # ~ 60 kg/m² of footprint: a light indoor robot when nothing better is known.
-            fill["mass"] = 60.0 * (1.3 * float(self.wheelbase)) ** 2
-        for key, value in fill.items():
+            "mass": _given(mass, 60.0 * chassis**2),
+            "chassis_length": _given(chassis_length, chassis),
+            "chassis_width": _given(chassis_width, chassis),
+            "drive_load_fraction": drive_load_fraction,
+            "max_wheel_speed": max_wheel_speed,
+            "max_wheel_accel": max_wheel_accel,
+            "name": name,
+            "source": source,
+            "effects": _normalise_effects(effects),
+        }
+        for key, value in values.items():
             object.__setattr__(self, key, value)
         self.validate()
 
@@ -222,8 +254,9 @@ class RobotSpec:
 
     # ------------------------------------------------------------------ TOML
     def to_dict(self) -> dict[str, Any]:
-        """All fields as a plain dict (TOML-ready; ``None`` never occurs after construction;
-        effects as ``{name: {parameter: value}}``, omitted when there are none)."""
+        """All fields as a plain dict (TOML-ready; the true parameters and chassis resolved,
+        never ``None``; effects as ``{name: {parameter: value}}``, omitted when there are
+        none)."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         out.pop("effects")
         if self.effects:

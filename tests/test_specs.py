@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import typing
 from pathlib import Path
 
 import pytest
@@ -81,6 +83,32 @@ def test_unknown_preset() -> None:
         load_robot("lab-mate")
     with pytest.raises(SpecError, match="unknown floor"):
         load_floor("icy")
+
+
+DERIVED = ("true_left_diameter", "true_right_diameter", "true_wheelbase", "mass")
+DERIVED += ("chassis_length", "chassis_width")
+
+
+def test_robot_optional_parameters_are_honestly_typed_and_resolved() -> None:
+    """The true parameters and the chassis are ``float | None`` arguments (None: derive from
+    the nominal ones) but always floats once the spec exists, in attributes and TOML."""
+    arguments = typing.get_type_hints(RobotSpec.__init__)
+    fields = {f.name: f.type for f in dataclasses.fields(RobotSpec)}
+    for name in DERIVED:
+        assert arguments[name] == float | None, name
+        assert fields[name] == "float", name
+    robot = RobotSpec(wheel_diameter=0.1, wheelbase=0.3, ticks_per_rev=100, true_wheelbase=None)
+    assert (robot.true_left_diameter, robot.true_right_diameter, robot.true_wheelbase) == (
+        0.1,
+        0.1,
+        0.3,
+    )
+    assert robot.chassis_length == robot.chassis_width == pytest.approx(1.3 * 0.3)
+    assert robot.mass == pytest.approx(60.0 * (1.3 * 0.3) ** 2)
+    assert all(isinstance(robot.to_dict()[name], float) for name in DERIVED)
+    assert RobotSpec.from_dict(robot.to_dict()) == robot
+    widened = dataclasses.replace(robot, true_wheelbase=0.31)
+    assert widened.true_wheelbase == 0.31 and widened.e_b == pytest.approx(0.31 / 0.3)
 
 
 @pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf])
