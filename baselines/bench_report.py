@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.baselines.benchmark import BenchConfig, summarize
+from odomgym.baselines.benchmark import BENCH_FLOORS, BenchConfig, summarize
 from odomgym.io import atomic_write_text, atomic_writer
 from odomgym.report import plot_return_errors
 
@@ -54,7 +54,7 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
     ]
     for floor in config.floors:
         lines += [
-            f"## Floor: {floor}",
+            f"## Floor: {floor} ({BENCH_FLOORS[floor].description})",
             "",
             "| method | E_max,syst before → after [mm] | improvement median [q25–q75] | "
             "abs(ΔE_d) | abs(ΔE_b) | abs(ΔE_s) | runs | distance [m] | wall/robot [s] | failed |",

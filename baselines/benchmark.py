@@ -6,15 +6,21 @@ samples a population of simulated robots with systematic errors drawn uniformly 
 and floor (same random streams), then validates each result on fresh UMBmark squares it has not
 seen (5 cw + 5 ccw, 4×4 m, true return errors; E_max,syst of Borenstein & Feng 1994, Eq. 3.3).
 
-Floors (:data:`BENCH_FLOORS`):
+Floors (:data:`BENCH_FLOORS`; their names never mean another floor elsewhere in odomgym):
 
-* ``smooth`` — a smooth concrete lab floor: roughness k = 0.0004 m^½, which gives the LabMate
-  return-error scatter σ ≈ 25 mm that Borenstein & Feng 1994, §6.3, report (a perfectly smooth
-  floor would make every method look 100× better than any real lab allows);
-* ``rough`` — k = 0.002 m^½ (five times rougher);
-* ``bumpy`` — the concrete floor strewn with 10 mm cables (1.5 per m², 0.3 m long) and every run
-  started at a random pose, so cables are met at random (≈ 0.29 crossings per metre per wheel,
-  about 5 per wheel on a 4×4 m square; Borenstein 1995, §6.1, laid 10 cables along 18 m).
+* ``concrete`` — the ``concrete`` preset of :data:`odomgym.floor.FLOORS`, a smooth lab floor
+  with roughness k = 0.0004 m^½, which gives the LabMate return-error scatter σ ≈ 25 mm that
+  Borenstein & Feng 1994, §6.3, report (the noiseless ``smooth`` preset would make every method
+  look 100× better than any real lab allows);
+* ``rough`` — the ``rough`` preset, k = 0.002 m^½ (five times rougher);
+* ``cables`` — the concrete floor strewn with 10 mm cables (1.5 per m², 0.3 m long, laid out
+  once per benchmark seed) and every run started at a random pose, so cables are met at random
+  (≈ 0.29 crossings per metre per wheel, about 5 per wheel on a 4×4 m square; Borenstein 1995,
+  §6.1, laid 10 cables along 18 m). Unlike the ``bumpy`` preset (one fixed layout under the
+  4×4 m squares), no two runs meet the same cables.
+
+Earlier versions called ``concrete`` "smooth" and ``cables`` "bumpy"; those names now give an
+error naming the new one (:data:`RENAMED_BENCH_FLOORS`).
 
 Randomness: robot i on floor f draws everything (its errors, sensor noise, start poses, floor
 roughness) from ``SeedSequence([seed, i, f, purpose])``, and every method sees the same streams
@@ -24,10 +30,12 @@ chunking or the order, and the comparison between methods is paired.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -35,7 +43,7 @@ from numpy.typing import NDArray
 
 from odomgym.baselines.base import CalibrationResult, Calibrator
 from odomgym.errors import SpecError
-from odomgym.experiments import Lab
+from odomgym.experiments import Lab, parse_choice
 from odomgym.floor import FLOORS, FloorSpec
 from odomgym.lab import random_start_poses, simulate_runs
 from odomgym.lockstep import run_lockstep
@@ -48,8 +56,12 @@ from odomgym.runs import Direction, end_error
 __all__ = [
     "BENCH_FLOORS",
     "METHOD_BUDGETS",
+    "RENAMED_BENCH_FLOORS",
+    "Backend",
     "BenchConfig",
+    "BenchFloor",
     "Population",
+    "check_bench_floor",
     "configure",
     "population",
     "run_benchmark",
@@ -59,35 +71,94 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-BUMPY_START_REGION = 12.0  # [m]: runs start anywhere in a 24 × 24 m area of cable-strewn floor
+CABLES_START_REGION = 12.0  # [m]: runs start anywhere in a 24 × 24 m area of cable-strewn floor
 
 
-def _smooth(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
-    del rng
-    return FLOORS["concrete"], None
+@dataclass(frozen=True)
+class BenchFloor:
+    """A benchmark floor.
+
+    Attributes:
+        description: one line for reports and ``--help``.
+        make: the floor, laid out from a generator (a benchmark draws it once per seed), and
+            the half-width [m] of the square area runs start in at random poses (``None``:
+            every run starts at the origin).
+    """
+
+    description: str
+    make: Callable[[np.random.Generator], tuple[FloorSpec, float | None]]
 
 
-def _rough(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
-    del rng
-    return FloorSpec(friction=0.8, roughness=0.002, name="rough"), None
+def _preset(name: str) -> Callable[[np.random.Generator], tuple[FloorSpec, float | None]]:
+    def make(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
+        del rng  # a preset is a fixed fact, not a draw
+        return FLOORS[name], None
+
+    return make
 
 
-def _bumpy(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
+def _cables(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
     floor = FloorSpec.scattered_cables(
         rng,
-        half_size=BUMPY_START_REGION + 6.0,
+        half_size=CABLES_START_REGION + 6.0,
         per_square_metre=1.5,
         roughness=FLOORS["concrete"].roughness,
-        name="bumpy",
+        name="cables",
     )
-    return floor, BUMPY_START_REGION
+    return floor, CABLES_START_REGION
 
 
-BENCH_FLOORS: dict[str, Callable[[np.random.Generator], tuple[FloorSpec, float | None]]] = {
-    "smooth": _smooth,
-    "rough": _rough,
-    "bumpy": _bumpy,
+# The order fixes each floor's random streams (its index): keep it, append new floors.
+BENCH_FLOORS: dict[str, BenchFloor] = {
+    "concrete": BenchFloor("the concrete preset, roughness k = 0.0004 m^0.5", _preset("concrete")),
+    "rough": BenchFloor("the rough preset, k = 0.002 m^0.5", _preset("rough")),
+    "cables": BenchFloor(
+        "concrete strewn with random 10 mm cables, runs started at random poses", _cables
+    ),
 }
+
+RENAMED_BENCH_FLOORS: dict[str, str] = {"smooth": "concrete", "bumpy": "cables"}
+"""Old benchmark floor names → today's (the old ones collided with different presets)."""
+
+
+def check_bench_floor(name: str) -> None:
+    """Raise :class:`SpecError` (field ``floor``) unless ``name`` is a benchmark floor; an old
+    name is answered with its new one."""
+    if name in BENCH_FLOORS:
+        return
+    if name in RENAMED_BENCH_FLOORS:
+        new = RENAMED_BENCH_FLOORS[name]
+        what = BENCH_FLOORS[new].description
+        raise SpecError(
+            f"the benchmark floor {name!r} is now called {new!r} ({what}); "
+            f"{name!r} names a different preset floor of run and calibrate",
+            field="floor",
+        )
+    raise SpecError(
+        f"unknown benchmark floor {name!r}; floors: {', '.join(BENCH_FLOORS)}", field="floor"
+    )
+
+
+class Backend(StrEnum):
+    """Where the benchmark's chunks of robots run.
+
+    * ``local`` — this machine: ``jobs`` worker processes (1: this process);
+    * ``ray`` — Ray tasks (``pip install 'odomgym[distributed]'``), on a cluster if
+      ``ray.init`` was called, else on a local Ray with ``jobs`` CPUs.
+    """
+
+    LOCAL = "local"
+    RAY = "ray"
+
+    def check_available(self) -> None:
+        """Raise :class:`SpecError` (field ``backend``) if this backend cannot run here; cheap
+        enough to call before any work."""
+        if self is Backend.RAY and importlib.util.find_spec("ray") is None:
+            raise SpecError(
+                "--backend ray needs Ray, which is not installed: "
+                "pip install 'odomgym[distributed]'",
+                field="backend",
+            )
 
 
 @dataclass(frozen=True)
@@ -168,7 +239,7 @@ class BenchConfig:
 
     Attributes:
         robots: population size.
-        floors: names in :data:`BENCH_FLOORS`.
+        floors: names in :data:`BENCH_FLOORS` (``concrete``, ``rough``, ``cables``).
         methods: calibrator names (``odomgym.baselines.CALIBRATORS``).
         budget: runs each calibrator may perform per robot.
         extra_budgets: further budgets to compare (each method then appears once per budget,
@@ -179,7 +250,7 @@ class BenchConfig:
     """
 
     robots: int = 100
-    floors: tuple[str, ...] = ("smooth", "rough", "bumpy")
+    floors: tuple[str, ...] = ("concrete", "rough", "cables")
     methods: tuple[str, ...] = ()
     budget: int = 16
     extra_budgets: tuple[int, ...] = ()
@@ -189,11 +260,7 @@ class BenchConfig:
 
     def __post_init__(self) -> None:
         for floor in self.floors:
-            if floor not in BENCH_FLOORS:
-                raise SpecError(
-                    f"unknown benchmark floor {floor!r}; floors: {', '.join(BENCH_FLOORS)}",
-                    field="floor",
-                )
+            check_bench_floor(floor)
         if self.robots < 1:
             raise SpecError(f"robots must be >= 1, got {self.robots}", field="robots")
         if self.validation_runs < 1:
@@ -256,7 +323,7 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
     rows: list[dict[str, Any]] = []
     for f, floor_name in enumerate(config.floors):
         floor_index = list(BENCH_FLOORS).index(floor_name)
-        floor, start_region = BENCH_FLOORS[floor_name](_stream(config, 0, floor_index, 1))
+        floor, start_region = BENCH_FLOORS[floor_name].make(_stream(config, 0, floor_index, 1))
         calibrations: list[list[Calibration]] = [[] for _ in robots]
         method_rows: list[list[dict[str, Any]]] = [[] for _ in robots]
         for label, method, budget in config.entries():
@@ -384,20 +451,23 @@ def run_benchmark(
     config: BenchConfig,
     *,
     jobs: int = 1,
-    backend: str = "local",
+    backend: Backend | str = Backend.LOCAL,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Run the benchmark; rows do not depend on ``jobs`` or ``backend``.
 
-    ``backend="local"`` uses ``jobs`` worker processes (1: this process); ``"ray"`` submits
-    the chunks as Ray tasks (``ray.init`` must have been called, or a local Ray is started
-    with ``jobs`` CPUs).
+    ``backend`` (a :class:`Backend` or its spelling): ``local`` uses ``jobs`` worker processes
+    (1: this process); ``ray`` submits the chunks as Ray tasks (``ray.init`` must have been
+    called, or a local Ray is started with ``jobs`` CPUs). An unknown or unavailable backend
+    raises :class:`SpecError` (field ``backend``) before any work.
     """
+    backend = parse_choice(Backend, backend, field="backend")
+    backend.check_available()
     # One chunk per worker: the larger a lockstep batch, the cheaper each robot.
     parts = chunks(config.robots, max(1, jobs))
     rows: list[dict[str, Any]] = []
     done = 0
-    if backend == "ray":
+    if backend is Backend.RAY:
         rows = _run_ray(config, parts, jobs, progress)
     elif jobs <= 1:
         for part in parts:
@@ -428,10 +498,8 @@ def _run_ray(
     jobs: int,
     progress: Callable[[int, int], None] | None,
 ) -> list[dict[str, Any]]:
-    try:
-        import ray
-    except ImportError as exc:
-        raise RuntimeError("--backend ray needs Ray: pip install 'odomgym[distributed]'") from exc
+    import ray  # Backend.RAY.check_available() has looked for it
+
     if not ray.is_initialized():
         ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
     remote = ray.remote(num_cpus=1)(run_chunk)

@@ -3,7 +3,7 @@
     python benchmarks/bench_calibrators.py [--robots 100] [--jobs N] [--json]
 
 Runs ``odomgym bench calibrators``' default workload — every calibrator × 100 robots × the
-smooth, rough and bumpy floors, validated on fresh squares — and prints the wall time next to
+concrete, rough and cables floors, validated on fresh squares — and prints the wall time next to
 the target, with the machine's core count. Outputs go to a temporary folder.
 """
 
@@ -46,10 +46,10 @@ def main() -> None:
         "results": len(rows),
         "wall_s": elapsed,
         "target_s": TARGET_S,
-        "umbmark_smooth_median_improvement": next(
+        "umbmark_concrete_median_improvement": next(
             s["improvement_median"]
             for s in summarize(rows)
-            if s["method"] == "umbmark" and s["floor"] == "smooth"
+            if s["method"] == "umbmark" and s["floor"] == "concrete"
         ),
     }
     if args.json:

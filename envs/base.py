@@ -299,16 +299,17 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
             self._propagate_covariance(trial, previous_pose)
         obs = trial.observation()[0]
         row = self._episodes.report(trial)[0]
-        terminated = bool(row[_COLUMN["terminated"]])
+        values = row.tolist()  # Python floats: cheaper than indexing numpy scalars one by one
+        terminated = values[_COLUMN["terminated"]] > 0.0
         self._terminated = terminated
-        reward_terms = {name: float(row[_COLUMN[name]]) for name in _TERMS}
+        reward_terms = {name: values[_COLUMN[name]] for name in _TERMS}
         if self.render_mode is not None:
             t, o = trial.true_pose[0], trial.odom_pose[0]
             self._history.append((t[0], t[1], t[2], o[0], o[1], o[2]))
             if self.render_mode == "human":
                 self.render()
-        reward = float(row[_COLUMN["reward"]])
-        return obs, reward, terminated, False, self._info(row, reward_terms, terminated)
+        info = self._info(row, reward_terms, terminated)
+        return obs, values[_COLUMN["reward"]], terminated, False, info
 
     def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
         """Chong & Kleeman 1997, Eq. 23: carry the odometry covariance through this step's

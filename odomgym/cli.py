@@ -11,28 +11,31 @@ Commands:
     ``odomgym diagnose DATA --robot R``  where a model and a robot's logs disagree, which
                                          catalogue effect is missing, and the gap it closes.
 
-Every command exits 0 on success, 2 on bad input (with a message naming the field and, where it
-came from a file, the file and line) and never leaves a half-written output file.
+Every command exits 0 on success, 2 on bad input (one line naming the field and, where it came
+from a file, the file and line) — output paths included, which are checked before any work —
+and 1 if the machine refuses a write after all (a full disk); it never leaves a half-written
+output file. After its results it says what it wrote (``wrote: …``) and, where odometry is
+driven, which calibration it applied.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
 from odomgym.errors import SpecError
-from odomgym.floor import FloorSpec, load_floor
+from odomgym.floor import FLOORS, FloorSpec, load_floor
 from odomgym.io import atomic_write_text
-from odomgym.lab import simulate_runs
-from odomgym.metrics import summarize_umbmark
 from odomgym.odometry import Calibration, load_calibration
-from odomgym.paths import Route, square_route, straight_route
+from odomgym.planning import drive_plans, ros2_yaml, square_plans, straight_plans
 from odomgym.report import (
     format_return_errors,
     format_session_report,
@@ -40,8 +43,7 @@ from odomgym.report import (
     plot_return_errors,
     to_json,
 )
-from odomgym.robot import RobotSpec, load_robot
-from odomgym.runs import Run, end_error
+from odomgym.robot import PRESETS, RobotSpec, load_robot
 
 __all__ = ["main"]
 
@@ -94,8 +96,54 @@ def _seed(text: str) -> int:
     return value
 
 
+def _check_output(
+    path: str | Path, *, option: str, folder: bool = False, swap: bool = False
+) -> None:
+    """Fail before any work, in one line naming ``option``, if ``path`` cannot be written.
+
+    Outputs are written atomically (:mod:`odomgym.io`: a temporary file beside the target,
+    renamed over it), so what must be writable is the folder where the first new entry is
+    created: the nearest existing folder above ``path``, or ``path`` itself for an existing
+    output folder. Write access is probed by creating and removing a temporary file there, as
+    a permission check alone passes for root in read-only places such as ``/proc``.
+
+    Args:
+        path: the output the user named.
+        option: the command-line option that named it (``--out``), for the message; its
+            name without dashes is the :class:`SpecError`'s field.
+        folder: ``path`` is a folder that the command writes files into (created if
+            missing); otherwise a file.
+        swap: the folder is replaced whole by a rename in its parent (``diagnose``), so the
+            parent must be writable even if the folder exists.
+    """
+    target = Path(path)
+    field = option.lstrip("-").replace("-", "_")
+
+    def fail(reason: str) -> NoReturn:
+        raise SpecError(f"{option} {path}: {reason}", field=field)
+
+    if folder and target.exists() and not target.is_dir():
+        fail("exists and is not a folder; give a folder (created if missing)")
+    if not folder and target.is_dir():
+        fail("is a folder; give a file name")
+    where = target if folder and target.is_dir() and not swap else target.absolute().parent
+    while not where.exists():
+        where = where.parent
+    if not where.is_dir():
+        fail(f"{where} is a file, not a folder")
+    try:
+        handle, probe = tempfile.mkstemp(prefix=".odomgym-write-check-", dir=where)
+    except OSError as exc:
+        # ENOENT from a folder that exists: a pseudo-filesystem such as /proc.
+        reason = "" if exc.errno == errno.ENOENT else f" ({exc.strerror or exc})"
+        fail(f"cannot create files in {where}{reason}")
+    os.close(handle)
+    os.unlink(probe)
+
+
 def _check_plot_path(path: str | None) -> None:
-    """Fail before any simulation if matplotlib cannot write ``path``'s format."""
+    """Fail before any simulation if matplotlib cannot write ``path``'s format, or the file
+    cannot be written there."""
     if path is None:
         return
     from matplotlib.backend_bases import FigureCanvasBase
@@ -107,6 +155,25 @@ def _check_plot_path(path: str | None) -> None:
             f"cannot write a plot as {path!r}: use one of .{', .'.join(sorted(formats))}",
             field="plot",
         )
+    _check_output(path, option="--plot")
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    """A status line (files written, calibration applied): on stdout beside a table, on
+    stderr with ``--json`` so that stdout stays machine-readable."""
+    print(text, file=sys.stderr if getattr(args, "json", False) else sys.stdout)
+
+
+def _report_written(args: argparse.Namespace, paths: Sequence[str | Path]) -> None:
+    if paths:
+        _say(args, "wrote: " + ", ".join(str(p) for p in paths))
+
+
+def _describe_calibration(calibration: Calibration) -> str:
+    return (
+        f"c_L = {calibration.c_left:.6f}, c_R = {calibration.c_right:.6f}, "
+        f"E_b = {calibration.wheelbase_scale:.6f}, E_s = {calibration.distance_scale:.6f}"
+    )
 
 
 def _check_methods(methods: Sequence[str] | None) -> None:
@@ -120,20 +187,29 @@ def _check_methods(methods: Sequence[str] | None) -> None:
         )
 
 
-def _add_robot_arguments(parser: argparse.ArgumentParser) -> None:
+def _floor_help() -> str:
+    return (
+        f"floor: a preset ({', '.join(FLOORS)}; smooth has no wheel noise, concrete is a lab "
+        "floor, bumpy one fixed cable layout) or a floor .toml file (default smooth)"
+    )
+
+
+def _add_robot_arguments(parser: argparse.ArgumentParser, *, calibration: bool = True) -> None:
     parser.add_argument(
         "--robot",
         default="labmate",
-        help="robot preset (labmate, navbot, monash, optiodom) or a robot .toml file",
+        help=f"robot preset ({', '.join(PRESETS)}) or a robot .toml file (default labmate)",
     )
     parser.add_argument("--ed", type=_positive, help="true E_d = D_R/D_L to inject")
     parser.add_argument("--eb", type=_positive, help="true E_b = b_actual/b_nominal to inject")
     parser.add_argument("--es", type=_positive, help="true E_s = D_mean/D_nominal to inject")
-    parser.add_argument(
-        "--floor", default="smooth", help="smooth, bumpy, slippery, rough, or a floor .toml file"
-    )
+    parser.add_argument("--floor", default="smooth", help=_floor_help())
     parser.add_argument("--seed", type=_seed, default=0, help="random seed >= 0 (default 0)")
-    parser.add_argument("--calibration", help="calibration .toml used by the odometry")
+    if calibration:
+        parser.add_argument(
+            "--calibration",
+            help="calibration .toml the odometry applies (default: none, the nominal robot)",
+        )
 
 
 def _robot_from(args: argparse.Namespace) -> RobotSpec:
@@ -143,11 +219,11 @@ def _robot_from(args: argparse.Namespace) -> RobotSpec:
     return robot
 
 
-def _progress_bar(enabled: bool, total_runs: int) -> Any:
+def _progress_bar(enabled: bool) -> Any:
     from tqdm import tqdm
 
     return tqdm(
-        total=100 * total_runs,
+        total=100,
         unit="%",
         desc="simulating",
         disable=not enabled,
@@ -158,113 +234,95 @@ def _progress_bar(enabled: bool, total_runs: int) -> Any:
 
 
 def _command_run(args: argparse.Namespace) -> int:
-    _check_plot_path(args.plot)
+    plot: str | None = getattr(args, "plot", None)
+    _check_plot_path(plot)
+    if args.log:
+        _check_output(args.log, option="--log")
     robot = _robot_from(args)
     floor: FloorSpec = load_floor(args.floor)
-    calibration: Calibration = (
-        load_calibration(args.calibration) if args.calibration else Calibration()
-    )
-    rng = np.random.default_rng(args.seed)
-    plans: list[tuple[str, Route]] = []
+    calibration = load_calibration(args.calibration) if args.calibration else None
     if args.path == "square":
-        directions = ["cw", "ccw"] if args.direction == "both" else [args.direction]
-        plans = [(d, square_route(args.side, "cw" if d == "cw" else "ccw")) for d in directions]
+        plans = square_plans(args.side, args.direction)
     else:
-        plans = [("-", straight_route(args.distance, args.return_trip))]
-    show_bar = not args.json and sys.stderr.isatty()
-    bar = _progress_bar(show_bar, len(plans))
-    logged: list[Run] = []
-    rows: list[tuple[int, str, np.ndarray]] = []
-    records: list[dict[str, Any]] = []
-    errors_by_direction: dict[str, list[np.ndarray]] = {"cw": [], "ccw": []}
-    number = 0
-    for k, (direction, route) in enumerate(plans):
+        plans = straight_plans(args.distance, args.return_trip)
+    bar = _progress_bar(not args.json and sys.stderr.isatty())
 
-        def update(fraction: float, offset: int = k) -> None:
-            bar.n = int(100 * (offset + fraction))
-            bar.refresh()
+    def update(fraction: float) -> None:
+        bar.n = int(100 * fraction)
+        bar.refresh()
 
-        runs, odom_end = simulate_runs(
+    try:
+        batch = drive_plans(
             robot,
             floor,
-            route,
-            calibration=calibration,
-            rng=rng,
+            plans,
             repeats=args.runs,
-            kind=args.path,
-            direction=direction if direction != "-" else None,
+            calibration=calibration,
+            rng=np.random.default_rng(args.seed),
             progress=update,
         )
-        for run, odom in zip(runs, odom_end, strict=True):
-            number += 1
-            label = args.path if direction == "-" else f"{args.path}_{direction}"
-            run.meta.update(run=str(number), experiment=label)
-            logged.append(run)
-            error = end_error(run, odom)
-            rows.append((number, direction, error))
-            if direction in errors_by_direction:
-                errors_by_direction[direction].append(error)
-            records.append(
-                {
-                    "run": number,
-                    "direction": direction if direction != "-" else None,
-                    "return_error": {"x": error[0], "y": error[1], "theta": error[2]},
-                    "odom_end": odom,
-                    "true_end": run.true_pose[-1],
-                    "duration_s": run.time[-1],
-                }
-            )
-    bar.close()
+    finally:
+        bar.close()
+    written: list[str] = []
     if args.log:
         from odomgym.data.native import write_native
 
-        write_native(Path(args.log), logged)
-    summary = None
-    if errors_by_direction["cw"] and errors_by_direction["ccw"]:
-        summary = summarize_umbmark(
-            np.array(errors_by_direction["cw"]), np.array(errors_by_direction["ccw"])
-        )
+        write_native(Path(args.log), batch.runs)
+        written.append(args.log)
+    summary = batch.summary()
     if args.json:
-        for record in records:
+        for record in batch.records():
             print(to_json(record))
         if summary is not None:
             print(to_json({"summary": summary.__dict__}))
     else:
         print(
             f"robot {robot.name}: E_d = {robot.e_d:.5f}, E_b = {robot.e_b:.5f}, "
-            f"E_s = {robot.e_s:.5f}; floor {floor.name}; route {plans[0][1].name}"
+            f"E_s = {robot.e_s:.5f}; floor {floor.name}; route {batch.route_name}"
         )
+    if calibration is None:
+        _say(args, "applied calibration: none (the nominal robot's odometry)")
+    else:
+        _say(
+            args, f"applied calibration: {args.calibration} ({_describe_calibration(calibration)})"
+        )
+    if not args.json:
         print("return errors (true - odometry, start frame)")
-        print(format_return_errors(rows, summary))
-    if args.plot:
-        cw = np.array(errors_by_direction["cw"]).reshape(-1, 3)
-        ccw = np.array(errors_by_direction["ccw"]).reshape(-1, 3)
+        print(format_return_errors(batch.rows(), summary))
+    if plot:
         plot_return_errors(
-            Path(args.plot), [("runs", cw, ccw)], f"{robot.name}: return errors, {floor.name} floor"
+            Path(plot),
+            [("runs", batch.errors_of("cw"), batch.errors_of("ccw"))],
+            f"{robot.name}: return errors, {floor.name} floor",
         )
-        if not args.json:
-            print(f"plot written to {args.plot}")
+        written.append(plot)
+    _report_written(args, written)
     return 0
 
 
-def _ros2_yaml(calibration: Calibration) -> str:
-    lines = [
-        "# ros2_control diff_drive_controller parameters equivalent to an odomgym calibration.",
-        "# Rename the top-level key to your controller's node name. Mapping (odomgym.odometry):",
-        "#   wheel_separation_multiplier = E_b, {left,right}_wheel_radius_multiplier = c_{L,R}*E_s",
-        "diff_drive_controller:",
-        "  ros__parameters:",
-    ]
-    for key, value in calibration.ros2_parameters().items():
-        lines.append(f"    {key}: {value:.9f}")
-    return "\n".join(lines) + "\n"
+def _check_calibration_outputs(args: argparse.Namespace) -> None:
+    if args.export_path is not None and args.export is None:
+        raise SpecError("--export-path needs --export ros2", field="export_path")
+    if args.save:
+        _check_output(args.save, option="--save")
+    if args.export:
+        _check_output(_export_path(args), option="--export-path")
+    _check_plot_path(args.plot)
 
 
-def _write_calibration_outputs(args: argparse.Namespace, calibration: Calibration) -> None:
+def _export_path(args: argparse.Namespace) -> str:
+    return str(args.export_path or "diff_drive_controller.yaml")
+
+
+def _write_calibration_outputs(args: argparse.Namespace, calibration: Calibration) -> list[str]:
+    written: list[str] = []
     if args.save:
         calibration.save(args.save)
+        written.append(args.save)
     if args.export == "ros2":
-        atomic_write_text(Path(args.export_path), _ros2_yaml(calibration))
+        atomic_write_text(Path(_export_path(args)), ros2_yaml(calibration))
+        written.append(_export_path(args))
+    return written
 
 
 def _command_calibrate(args: argparse.Namespace) -> int:
@@ -273,7 +331,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
         calibrate_in_simulation,
         calibrate_on_session,
         calibrator_for_session,
-        make_calibrator,
+        calibrator_for_squares,
     )
 
     if args.method not in CALIBRATORS:
@@ -282,7 +340,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
             field="method",
         )
     cls = CALIBRATORS[args.method]
-    _check_plot_path(args.plot)
+    _check_calibration_outputs(args)
     if args.data:
         from odomgym.data import read_session, resolve_data
 
@@ -298,11 +356,13 @@ def _command_calibrate(args: argparse.Namespace) -> int:
             raise SpecError(
                 f"{args.method} cannot calibrate on {args.data}: {message}", field="data"
             ) from None
-        _write_calibration_outputs(args, report.result.calibration)
+        written = _write_calibration_outputs(args, report.result.calibration)
         if args.json:
             print(to_json(report.as_dict()))
         else:
             print(format_session_report(report))
+        _say(args, f"calibrated: {_describe_calibration(report.result.calibration)}")
+        _report_written(args, written)
         return 0
     if args.conventions == "optiodom":
         raise SpecError(
@@ -310,7 +370,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
         )
     robot = _robot_from(args)
     floor = load_floor(args.floor)
-    calibrator = make_calibrator(cls, side=args.side, runs_per_direction=args.runs)
+    calibrator = calibrator_for_squares(cls, side=args.side, runs_per_direction=args.runs)
     report_sim = calibrate_in_simulation(
         calibrator,
         robot,
@@ -319,7 +379,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
         validation_side=args.side,
         validation_runs=args.runs,
     )
-    _write_calibration_outputs(args, report_sim.result.calibration)
+    written = _write_calibration_outputs(args, report_sim.result.calibration)
     if args.plot:
         plot_return_errors(
             Path(args.plot),
@@ -330,12 +390,13 @@ def _command_calibrate(args: argparse.Namespace) -> int:
             f"{args.method} on {robot.name}, {floor.name} floor: "
             f"{report_sim.improvement:.1f}-fold improvement",
         )
+        written.append(args.plot)
     if args.json:
         print(to_json(report_sim.as_dict()))
     else:
         print(format_simulation_report(report_sim, floor.name))
-        if args.plot:
-            print(f"plot written to {args.plot}")
+    _say(args, f"calibrated: {_describe_calibration(report_sim.result.calibration)}")
+    _report_written(args, written)
     return 0
 
 
@@ -344,8 +405,11 @@ def _command_bench(args: argparse.Namespace) -> int:
 
     from odomgym.baselines import CALIBRATORS
     from odomgym.baselines.bench_report import markdown_summary, write_outputs
-    from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
+    from odomgym.baselines.benchmark import Backend, BenchConfig, run_benchmark, summarize
 
+    backend = Backend(args.backend)
+    backend.check_available()
+    _check_output(args.out, option="--out", folder=True)
     _check_methods(args.methods)
     methods = tuple(args.methods or CALIBRATORS)
     # BenchConfig names the offending field itself (SpecError).
@@ -370,17 +434,18 @@ def _command_bench(args: argparse.Namespace) -> int:
         bar.refresh()
 
     start = time.perf_counter()
-    rows = run_benchmark(config, jobs=jobs, backend=args.backend, progress=progress)
+    try:
+        rows = run_benchmark(config, jobs=jobs, backend=backend, progress=progress)
+    finally:
+        bar.close()
     elapsed = time.perf_counter() - start
-    bar.close()
     written = write_outputs(config, rows, Path(args.out), elapsed)
     if args.json:
         print(to_json({"elapsed_s": elapsed, "jobs": jobs, "summary": summarize(rows)}))
     else:
         print(markdown_summary(config, rows))
-        print(f"{len(rows)} results in {elapsed:.1f} s on {jobs} job(s) ({args.backend}); wrote:")
-        for path in written:
-            print(f"  {path}")
+        print(f"{len(rows)} results in {elapsed:.1f} s on {jobs} job(s) ({backend}).")
+    _report_written(args, written)
     return 0
 
 
@@ -389,7 +454,11 @@ def _command_leaderboard(args: argparse.Namespace) -> int:
     from odomgym.data import resolve_data
 
     _check_methods(args.methods)
-    board = run_leaderboard(resolve_data(args.data), methods=args.methods)
+    if args.out:
+        _check_output(args.out, option="--out")
+    board = run_leaderboard(
+        resolve_data(args.data), methods=args.methods, conventions=args.conventions
+    )
     text = format_leaderboard(board)
     if args.out:
         atomic_write_text(Path(args.out), text + "\n")
@@ -397,6 +466,7 @@ def _command_leaderboard(args: argparse.Namespace) -> int:
         print(to_json(board.as_dict()))
     else:
         print(text)
+    _report_written(args, [args.out] if args.out else [])
     return 0
 
 
@@ -442,8 +512,7 @@ def _command_fit_noise(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise SpecError(str(exc)) from None
     print(to_json(report) if args.json else format_noise_report(report))
-    if args.plot and not args.json:
-        print(f"plot written to {args.plot}")
+    _report_written(args, report.get("plots", []))
     return 0
 
 
@@ -473,6 +542,7 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         jobs=args.jobs or os.cpu_count() or 1,
     )
     out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
+    _check_output(out, option="--out", folder=True, swap=True)
     runs, nominal = read_log(
         data,
         robot=robot,
@@ -507,37 +577,84 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         print(report_json(diagnosis))
     else:
         print(format_markdown(diagnosis, str(data)))
-        print("wrote:")
-        for path in written:
-            print(f"  {path}")
+    _report_written(args, written)
     return 0
 
 
+def _add_run_outputs(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--json", action="store_true", help="print JSON lines (one per run) instead of a table"
+    )
+    parser.add_argument(
+        "--log", help="also save the runs in odomgym's native CSV format here (for diagnose)"
+    )
+
+
+def _add_run_parsers(commands: Any) -> None:
+    run = commands.add_parser(
+        "run",
+        help="drive squares or straight runs in simulation and report return errors",
+        description="Drive a simulated robot with the reference driver and report the return "
+        "errors (true - odometry end pose, start frame).",
+    )
+    routes = run.add_subparsers(
+        dest="path", required=True, metavar="ROUTE", help="what to drive: square or straight"
+    )
+    square = routes.add_parser(
+        "square",
+        help="UMBmark squares (Borenstein & Feng 1994): return errors and E_max,syst",
+        description="Drive UMBmark squares cw and/or ccw; with both directions, report the "
+        "centres of gravity and E_max,syst (Borenstein & Feng 1994, Eq. 3.3).",
+    )
+    _add_robot_arguments(square)
+    square.add_argument(
+        "--direction",
+        choices=["cw", "ccw", "both"],
+        default="both",
+        help="square direction (default both: cw runs, then ccw)",
+    )
+    square.add_argument("--runs", type=_count, default=5, help="runs per direction (default 5)")
+    square.add_argument("--side", type=_positive, default=4.0, help="square side L [m] (default 4)")
+    square.add_argument("--plot", help="write the return-error scatter here (.png, .pdf, .svg)")
+    _add_run_outputs(square)
+    square.set_defaults(handler=_command_run)
+
+    straight = routes.add_parser(
+        "straight",
+        help="straight runs (optionally there and back) and their end errors",
+        description="Drive straight runs (Borenstein 1995, §6.1, drove 18 m over cables) and "
+        "report each run's end error.",
+    )
+    _add_robot_arguments(straight)
+    straight.add_argument("--runs", type=_count, default=5, help="runs (default 5)")
+    straight.add_argument(
+        "--distance", type=_positive, default=10.0, help="straight run length [m] (default 10)"
+    )
+    straight.add_argument(
+        "--return-trip",
+        action="store_true",
+        help="turn on the spot at the end and drive back to the start",
+    )
+    _add_run_outputs(straight)
+    straight.set_defaults(handler=_command_run)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of every command."""
+    """The argument parser of every command (every option has a help text: tested)."""
+    from odomgym.baselines.benchmark import BENCH_FLOORS, Backend
+
     parser = argparse.ArgumentParser(
         prog="odomgym",
-        description="Wheel-odometry experiments, calibration and benchmarks in simulation.",
+        description="Wheel-odometry experiments, calibration and benchmarks in simulation and "
+        "on measured logs.",
     )
     from odomgym import __version__
 
     parser.add_argument("--version", action="version", version=f"odomgym {__version__}")
-    commands = parser.add_subparsers(dest="command", required=True)
-
-    run = commands.add_parser("run", help="drive squares or straight runs and report return errors")
-    run.add_argument("path", choices=["square", "straight"])
-    _add_robot_arguments(run)
-    run.add_argument("--direction", choices=["cw", "ccw", "both"], default="both")
-    run.add_argument("--runs", type=_count, default=5, help="runs per direction (default 5)")
-    run.add_argument("--side", type=_positive, default=4.0, help="square side L [m] (default 4)")
-    run.add_argument("--distance", type=_positive, default=10.0, help="straight run [m]")
-    run.add_argument("--return-trip", action="store_true", help="straight: drive back as well")
-    run.add_argument("--json", action="store_true", help="JSON lines instead of a table")
-    run.add_argument("--plot", help="write the return-error scatter (PNG) here")
-    run.add_argument(
-        "--log", help="also save the runs in odomgym's native CSV format (for diagnose)"
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", help="what to do (COMMAND --help)"
     )
-    run.set_defaults(handler=_command_run)
+    _add_run_parsers(commands)
 
     calibrate = commands.add_parser(
         "calibrate",
@@ -547,9 +664,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--data, calibrate from a recorded OptiOdom session and report its evaluation measures.",
     )
     calibrate.add_argument("method", help="calibration method, e.g. umbmark, jung_chung")
-    _add_robot_arguments(calibrate)
-    calibrate.add_argument("--side", type=_positive, default=4.0, help="square side L [m]")
-    calibrate.add_argument("--runs", type=_count, default=5, help="squares per direction")
+    _add_robot_arguments(calibrate, calibration=False)
+    calibrate.add_argument(
+        "--side", type=_positive, default=4.0, help="square side L [m] (default 4)"
+    )
+    calibrate.add_argument(
+        "--runs", type=_count, default=5, help="squares per direction (default 5)"
+    )
     calibrate.add_argument(
         "--data",
         help="a recorded OptiOdom session folder instead of simulation, or a shipped session "
@@ -562,12 +683,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="optiodom: reproduce the published OptiOdom conventions (with --data)",
     )
     calibrate.add_argument("--save", help="write the calibration as TOML here")
-    calibrate.add_argument("--export", choices=["ros2"], help="also export the calibration")
     calibrate.add_argument(
-        "--export-path", default="diff_drive_controller.yaml", help="where --export writes"
+        "--export", choices=["ros2"], help="also export the calibration (ros2: diff_drive YAML)"
+    )
+    calibrate.add_argument(
+        "--export-path", help="where --export writes (default diff_drive_controller.yaml)"
     )
     calibrate.add_argument("--json", action="store_true", help="one JSON object instead of a table")
-    calibrate.add_argument("--plot", help="write the before/after return-error scatter (PNG)")
+    calibrate.add_argument(
+        "--plot", help="write the before/after return-error scatter here (.png, .pdf, .svg)"
+    )
     calibrate.set_defaults(handler=_command_calibrate)
 
     bench = commands.add_parser(
@@ -576,14 +701,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="Sample robots with hidden systematic errors, give every calibrator the same "
         "budget on the same robots and floors, validate on fresh squares, report.",
     )
-    bench.add_argument("what", choices=["calibrators"])
-    bench.add_argument("--robots", type=_count, default=100, help="population size (100)")
+    bench.add_argument("what", choices=["calibrators"], help="what to benchmark: calibrators")
+    bench.add_argument("--robots", type=_count, default=100, help="population size (default 100)")
     bench.add_argument(
         "--floor",
         nargs="+",
-        choices=["smooth", "rough", "bumpy"],
-        default=["smooth", "rough", "bumpy"],
-        help="benchmark floors (all three by default)",
+        metavar="FLOOR",
+        default=list(BENCH_FLOORS),
+        help="benchmark floors (default: all): "
+        + "; ".join(f"{name}: {floor.description}" for name, floor in BENCH_FLOORS.items()),
     )
     bench.add_argument("--methods", nargs="+", help="calibrators (default: all)")
     bench.add_argument(
@@ -594,15 +720,26 @@ def build_parser() -> argparse.ArgumentParser:
         help="runs per calibration (16); several values compare budgets, e.g. --budget 16 4",
     )
     bench.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
-    bench.add_argument("--backend", choices=["local", "ray"], default="local")
-    bench.add_argument("--seed", type=_seed, default=0)
-    bench.add_argument("--out", default="bench-out", help="output folder (bench-out)")
+    bench.add_argument(
+        "--backend",
+        choices=[b.value for b in Backend],
+        default=Backend.LOCAL.value,
+        help="local: worker processes on this machine (default); ray: Ray tasks "
+        "(pip install 'odomgym[distributed]')",
+    )
+    bench.add_argument("--seed", type=_seed, default=0, help="master random seed >= 0 (default 0)")
+    bench.add_argument(
+        "--out", default="bench-out", help="output folder, created if missing (default bench-out)"
+    )
     bench.add_argument("--json", action="store_true", help="print the summary as JSON")
     bench.set_defaults(handler=_command_bench)
 
     board = commands.add_parser(
         "leaderboard",
         help="real-data leaderboard: calibrate on one recorded session, evaluate on the others",
+        description="Calibrate every method on every recorded session that holds the runs it "
+        "needs, evaluate it on all other sessions (OptiOdom measures), and compare the "
+        "in-session results with the published ones (Sousa et al. 2022).",
     )
     board.add_argument(
         "--data",
@@ -610,8 +747,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder of OptiOdom sessions, or optiodom: for the shipped ones",
     )
     board.add_argument("--methods", nargs="+", help="calibrators (default: all)")
-    board.add_argument("--out", help="also write the Markdown table here")
-    board.add_argument("--json", action="store_true")
+    board.add_argument(
+        "--conventions",
+        choices=["optiodom"],
+        default=None,
+        help="optiodom: run UMBmark and Jung & Chung with the OptiOdom authors' conventions, "
+        "so that the in-session column reproduces their published results",
+    )
+    board.add_argument("--out", help="also write the Markdown tables to this file")
+    board.add_argument("--json", action="store_true", help="print one JSON object")
     board.set_defaults(handler=_command_leaderboard)
 
     cov = commands.add_parser(
@@ -634,10 +778,18 @@ def build_parser() -> argparse.ArgumentParser:
         metavar=("SX", "SY", "STH"),
         help="initial pose standard deviations [m, m, rad]",
     )
-    cov.add_argument("--montecarlo", type=_seed, default=0, metavar="RUNS", help="Monte Carlo runs")
-    cov.add_argument("--partitions", type=_count, default=1000, help="path partitions (1000)")
-    cov.add_argument("--seed", type=_seed, default=0)
-    cov.add_argument("--json", action="store_true")
+    cov.add_argument(
+        "--montecarlo",
+        type=_seed,
+        default=0,
+        metavar="RUNS",
+        help="Monte Carlo runs beside the closed form (default 0: none)",
+    )
+    cov.add_argument(
+        "--partitions", type=_count, default=1000, help="path partitions (default 1000)"
+    )
+    cov.add_argument("--seed", type=_seed, default=0, help="Monte Carlo seed >= 0 (default 0)")
+    cov.add_argument("--json", action="store_true", help="print one JSON object")
     cov.set_defaults(handler=_command_covariance)
 
     noise = commands.add_parser(
@@ -647,11 +799,19 @@ def build_parser() -> argparse.ArgumentParser:
         description="Without --data: simulate N runs of D m forward and back on a rough floor of "
         "known k and fit it back. With --data: fit recorded OptiOdom sessions.",
     )
-    noise.add_argument("--robot", default="labmate", help="robot preset for the simulation")
-    noise.add_argument("--k", type=_nonnegative, default=0.0005, help="true k [m^0.5] to simulate")
-    noise.add_argument("--runs", type=_count, default=60, help="simulated runs (60)")
-    noise.add_argument("--distance", type=_positive, default=10.0, help="out-and-back length [m]")
-    noise.add_argument("--seed", type=_seed, default=0)
+    noise.add_argument(
+        "--robot",
+        default="labmate",
+        help=f"robot preset for the simulation ({', '.join(PRESETS)}; default labmate)",
+    )
+    noise.add_argument(
+        "--k", type=_nonnegative, default=0.0005, help="true k [m^0.5] to simulate (0.0005)"
+    )
+    noise.add_argument("--runs", type=_count, default=60, help="simulated runs (default 60)")
+    noise.add_argument(
+        "--distance", type=_positive, default=10.0, help="out-and-back length [m] (default 10)"
+    )
+    noise.add_argument("--seed", type=_seed, default=0, help="random seed >= 0 (default 0)")
     noise.add_argument(
         "--data",
         nargs="+",
@@ -663,9 +823,18 @@ def build_parser() -> argparse.ArgumentParser:
         default="kind",
         help="which recorded runs are fitted together (default: by run kind)",
     )
-    noise.add_argument("--interval", choices=["profile", "bootstrap"], default="profile")
-    noise.add_argument("--plot", help="write the error scatters with 95 %% ellipses (PNG)")
-    noise.add_argument("--json", action="store_true")
+    noise.add_argument(
+        "--interval",
+        choices=["profile", "bootstrap"],
+        default="profile",
+        help="confidence intervals by profile likelihood (default) or bootstrap",
+    )
+    noise.add_argument(
+        "--plot",
+        help="write the error scatters with 95 %% ellipses here (.png; one file per fitted "
+        "group, suffixed by its name, when there are several)",
+    )
+    noise.add_argument("--json", action="store_true", help="print one JSON object")
     noise.set_defaults(handler=_command_fit_noise)
 
     diag = commands.add_parser(
@@ -682,11 +851,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     diag.add_argument("--robot", help="robot .toml (or preset) of the model to test")
     diag.add_argument(
-        "--format", choices=["native", "optiodom", "rosbag"], help="default: detected"
+        "--format",
+        choices=["native", "optiodom", "rosbag"],
+        help="log format (default: detected from DATA)",
     )
-    diag.add_argument("--out", help="output folder (default: <DATA name>-diagnose)")
-    diag.add_argument("--holdout", type=_fraction, default=0.3, help="share of runs held out (0.3)")
-    diag.add_argument("--seed", type=_seed, default=0)
+    diag.add_argument("--out", help="output folder, replaced whole (default: <DATA name>-diagnose)")
+    diag.add_argument(
+        "--holdout", type=_fraction, default=0.3, help="share of runs held out (default 0.3)"
+    )
+    diag.add_argument("--seed", type=_seed, default=0, help="random seed >= 0 (default 0)")
     diag.add_argument(
         "--max-rounds", type=_count, default=8, help="most rounds of adding an effect (8)"
     )
@@ -695,8 +868,16 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
     diag.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
     diag.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")
-    diag.add_argument("--left-joint", default="left_wheel_joint")
-    diag.add_argument("--right-joint", default="right_wheel_joint")
+    diag.add_argument(
+        "--left-joint",
+        default="left_wheel_joint",
+        help="ROS 2 bags: the left wheel's joint name (default left_wheel_joint)",
+    )
+    diag.add_argument(
+        "--right-joint",
+        default="right_wheel_joint",
+        help="ROS 2 bags: the right wheel's joint name (default right_wheel_joint)",
+    )
     diag.add_argument("--json", action="store_true", help="print report.json")
     diag.set_defaults(handler=_command_diagnose)
     return parser
@@ -712,6 +893,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SpecError as exc:
         print(f"odomgym: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        # Checked up front (_check_output); what is left is the machine's (a full disk).
+        print(f"odomgym: error: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

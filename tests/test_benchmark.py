@@ -100,7 +100,7 @@ def test_calibrate_in_simulation_report() -> None:
 
 def test_benchmark_rows_do_not_depend_on_chunking(tmp_path: Path) -> None:
     config = BenchConfig(
-        robots=3, floors=("smooth", "bumpy"), methods=("umbmark", "jung_chung"), budget=6
+        robots=3, floors=("concrete", "cables"), methods=("umbmark", "jung_chung"), budget=6
     )
     whole = run_chunk(config, [0, 1, 2])
     split = run_chunk(config, [0]) + run_chunk(config, [1, 2])
@@ -124,7 +124,7 @@ def test_benchmark_rows_do_not_depend_on_chunking(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_benchmark_processes_and_ray_agree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    config = BenchConfig(robots=2, floors=("smooth",), methods=("umbmark",), budget=4)
+    config = BenchConfig(robots=2, floors=("concrete",), methods=("umbmark",), budget=4)
     local = run_benchmark(config, jobs=2)
     ray = pytest.importorskip("ray")
     # Ray puts the driver's working directory on its workers' path; from a source checkout that
@@ -141,7 +141,7 @@ def test_benchmark_processes_and_ray_agree(tmp_path: Path, monkeypatch: pytest.M
 
 def test_benchmark_compares_budgets() -> None:
     config = BenchConfig(
-        robots=1, floors=("smooth",), methods=("umbmark",), budget=6, extra_budgets=(2,)
+        robots=1, floors=("concrete",), methods=("umbmark",), budget=6, extra_budgets=(2,)
     )
     rows = run_chunk(config, [0])
     assert [(r["method"], r["budget"]) for r in rows] == [("umbmark@6", 6), ("umbmark@2", 2)]
