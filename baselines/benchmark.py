@@ -49,8 +49,8 @@ from odomgym.lab import random_start_poses, simulate_runs
 from odomgym.lockstep import run_lockstep
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
-from odomgym.paths import square_route
 from odomgym.robot import PRESETS, RobotSpec
+from odomgym.routes import square_route
 from odomgym.runs import Direction, end_error
 
 __all__ = [

@@ -35,8 +35,8 @@ from odomgym.floor import FloorSpec
 from odomgym.lab import SimLab, random_start_poses, simulate_runs
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
-from odomgym.paths import square_route
 from odomgym.robot import RobotSpec
+from odomgym.routes import square_route
 from odomgym.runs import Direction, Run, end_error
 
 __all__ = [

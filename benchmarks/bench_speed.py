@@ -28,7 +28,7 @@ import numpy as np
 import odomgym
 from odomgym.floor import FLOORS
 from odomgym.lab import simulate_runs
-from odomgym.paths import square_route
+from odomgym.routes import square_route
 
 
 def umbmark_run(repeats: int = 5) -> dict[str, float]:

@@ -34,8 +34,8 @@ from numpy.typing import NDArray
 from odomgym._jit import kernel
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.odometry import Calibration, load_calibration
-from odomgym.paths import Route
 from odomgym.robot import RobotSpec, load_robot
+from odomgym.routes import Route
 from odomgym.stepping import REPORT_COLUMNS, REPORT_WIDTH, episode_report
 from odomgym.trial import OBSERVATION_NAMES, Trial
 

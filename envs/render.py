@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
-from odomgym.paths import Route
 from odomgym.robot import RobotSpec
+from odomgym.routes import Route
 
 try:
     import pygame

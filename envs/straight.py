@@ -9,8 +9,8 @@ from typing import Any
 from odomgym.envs.base import RewardWeights, RouteEnv
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
-from odomgym.paths import Route, straight_route
 from odomgym.robot import RobotSpec
+from odomgym.routes import Route, straight_route
 
 __all__ = ["StraightLineEnv", "StraightRoute"]
 

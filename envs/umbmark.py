@@ -9,8 +9,8 @@ from typing import Any, Literal
 from odomgym.envs.base import RewardWeights, RouteEnv
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
-from odomgym.paths import Route, square_route
 from odomgym.robot import RobotSpec
+from odomgym.routes import Route, square_route
 
 __all__ = ["SquareRoute", "UMBmarkSquareEnv"]
 

@@ -41,8 +41,8 @@ from odomgym.envs.straight import StraightRoute
 from odomgym.envs.umbmark import SquareRoute
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
-from odomgym.paths import Route
 from odomgym.robot import RobotSpec
+from odomgym.routes import Route
 from odomgym.trial import Trial
 
 __all__ = ["OdometryVectorEnv", "make_square_vector_env", "make_straight_vector_env"]
@@ -57,7 +57,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
     Args:
         num_envs: number of robots.
         route: the route of an episode from the ``reset`` options (the single env's rule), or
-            one fixed :class:`~odomgym.paths.Route` for all.
+            one fixed :class:`~odomgym.routes.Route` for all.
         robot: one spec for all, or a sequence of ``num_envs`` specs (a robot population).
         floor, calibration, dt, reward_weights: as the single envs.
         max_episode_steps: truncation limit per sub-env.

@@ -29,9 +29,9 @@ from odomgym.drivers import ReferenceDriver
 from odomgym.experiments import BookkeepingLab, Experiment, ExperimentKind, SensorAccuracy
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration, Odometry
-from odomgym.paths import Route, spin_route, square_route, straight_route
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
+from odomgym.routes import Route, spin_route, square_route, straight_route
 from odomgym.runs import Direction, Run
 from odomgym.trial import Trial
 

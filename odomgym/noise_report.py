@@ -71,7 +71,7 @@ def simulate_noise_experiment(
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise ValueError(f"runs must be a positive integer, got {runs!r}")
     from odomgym.lab import simulate_runs  # the physics stack loads only when simulating
-    from odomgym.paths import straight_route
+    from odomgym.routes import straight_route
 
     floor = FloorSpec(friction=friction, roughness=k, name=f"roughness-{k:g}")
     recorded, _ = simulate_runs(

@@ -24,8 +24,8 @@ from odomgym.floor import FloorSpec
 from odomgym.lab import simulate_runs
 from odomgym.metrics import UMBmarkSummary, summarize_umbmark
 from odomgym.odometry import Calibration
-from odomgym.paths import Route, square_route, straight_route
 from odomgym.robot import RobotSpec
+from odomgym.routes import Route, square_route, straight_route
 from odomgym.runs import Direction, Run, end_error
 
 __all__ = [

@@ -5,7 +5,7 @@ Why one module: these kernels call each other (a step runs them in one compiled 
 :func:`after_step` and :func:`episode_report`, because numba's dispatch costs ~0.1 µs per array
 argument and the single-robot env step is a few tens of µs), and numba's on-disk cache only
 notices edits to a kernel's own module (see :mod:`odomgym._jit`). The classes that own the state
-(:class:`odomgym.odometry.Odometry`, :class:`odomgym.paths.RouteProgress`,
+(:class:`odomgym.odometry.Odometry`, :class:`odomgym.routes.RouteProgress`,
 :class:`odomgym.trial.Trial`, the envs' ``RouteEpisodes``) call them.
 
 Units: metres, radians, seconds.
@@ -93,7 +93,7 @@ def route_update(
     progress: FloatArray,
     advanced: NDArray[np.bool_],
 ) -> None:
-    """Route features of each robot's current segment (:meth:`odomgym.paths.RouteProgress.update`).
+    """Route features of each robot's current segment (:meth:`odomgym.routes.RouteProgress.update`).
 
     ``segments`` (N, S, 7): start x, y [m], unit direction x, y, length [m or rad], held heading
     [rad], direction (+1 forwards, −1 reversing); ``limits`` (N, 3): position tolerance [m],

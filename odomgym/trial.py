@@ -31,9 +31,9 @@ from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration, Odometry
-from odomgym.paths import Route, RouteProgress
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
+from odomgym.routes import Route, RouteProgress
 from odomgym.stepping import after_step, pose_error_into, snapshot, start_frame
 
 __all__ = ["OBSERVATION_NAMES", "Trial"]

@@ -23,9 +23,9 @@ from odomgym.effects.base import EFFECTS as REGISTRY
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.lab import simulate_runs
-from odomgym.paths import spin_route, square_route, straight_route
 from odomgym.physics import World
 from odomgym.robot import PRESETS, RobotSpec, load_robot
+from odomgym.routes import spin_route, square_route, straight_route
 from odomgym.runs import Run
 
 NOMINAL = PRESETS["optiodom"].ideal()

@@ -12,8 +12,8 @@ import pytest
 
 from odomgym.floor import CableBump, FloorSpec, bump_extra_rotation, cable_advance
 from odomgym.lab import simulate_runs
-from odomgym.paths import square_route, straight_route
 from odomgym.robot import PRESETS
+from odomgym.routes import square_route, straight_route
 from odomgym.runs import return_error
 
 LABMATE = PRESETS["labmate"]

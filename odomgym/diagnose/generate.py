@@ -22,9 +22,9 @@ from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
 from odomgym.lab import simulate_runs
-from odomgym.paths import spin_route, square_route, straight_route
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
+from odomgym.routes import spin_route, square_route, straight_route
 from odomgym.runs import Direction, Run
 
 __all__ = ["Protocol", "simulate_protocol"]
