@@ -190,21 +190,29 @@ class RouteEpisodes:
     @staticmethod
     def info(report: FloatArray) -> dict[str, Any]:
         """The ``info`` entries of a :meth:`report` (N, W), each with a leading robot axis, or
-        of one row of it (W,): poses, their error, encoder counts, route segment and the time
-        since the robot's episode began [s]."""
+        of one row of it (W,), with the segment and time as Python numbers: poses, their error,
+        encoder counts, route segment and the time since the robot's episode began [s]."""
+        if report.ndim == 1:
+            segment: Any = int(report[_COLUMN["segment"]])
+            elapsed: Any = float(report[_COLUMN["episode_time"]])
+        else:
+            segment = report[:, _COLUMN["segment"]].astype(np.int64)
+            elapsed = report[:, _COLUMN["episode_time"]]
         return {
             "odom_pose": report[..., _SLICE["odom_pose"]],
             "true_pose": report[..., _SLICE["true_pose"]],
             "pose_error": report[..., _SLICE["pose_error"]],
             "encoder_counts": report[..., _SLICE["encoder_counts"]].astype(np.int64),
-            "segment": report[..., _COLUMN["segment"]].astype(np.int64),
-            "time": report[..., _COLUMN["episode_time"]],
+            "segment": segment,
+            "time": elapsed,
         }
 
 
 _SLICE = {name: slice(first, stop) for name, (first, stop) in REPORT_COLUMNS.items()}
 _COLUMN = {name: first for name, (first, _) in REPORT_COLUMNS.items()}
 _TERMS = ("progress", "time", "completion")
+_REWARD, _TERMINATED = _COLUMN["reward"], _COLUMN["terminated"]
+_PROGRESS, _TIME, _COMPLETION = (_COLUMN[name] for name in _TERMS)
 
 
 class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
@@ -290,26 +298,32 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
     def step(
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        trial = self._require_trial()
+        trial = self._trial
+        if trial is None:
+            raise RuntimeError("call reset() before step()")
         if self._terminated:
             raise RuntimeError("the episode has terminated; call reset() first")
         previous_pose = trial.odom_pose[0].copy() if self.covariance_k is not None else None
-        trial.step(validate_actions(action, (2,)).reshape(1, 2))
+        trial.step(validate_actions(action, (2,))[None])
         if previous_pose is not None:
             self._propagate_covariance(trial, previous_pose)
         obs = trial.observation()[0]
         row = self._episodes.report(trial)[0]
         values = row.tolist()  # Python floats: cheaper than indexing numpy scalars one by one
-        terminated = values[_COLUMN["terminated"]] > 0.0
+        terminated = values[_TERMINATED] > 0.0
         self._terminated = terminated
-        reward_terms = {name: values[_COLUMN[name]] for name in _TERMS}
+        reward_terms = {
+            "progress": values[_PROGRESS],
+            "time": values[_TIME],
+            "completion": values[_COMPLETION],
+        }
         if self.render_mode is not None:
             t, o = trial.true_pose[0], trial.odom_pose[0]
             self._history.append((t[0], t[1], t[2], o[0], o[1], o[2]))
             if self.render_mode == "human":
                 self.render()
         info = self._info(row, reward_terms, terminated)
-        return obs, values[_COLUMN["reward"]], terminated, False, info
+        return obs, values[_REWARD], terminated, False, info
 
     def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
         """Chong & Kleeman 1997, Eq. 23: carry the odometry covariance through this step's
@@ -331,8 +345,6 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
     def _info(self, row: FloatArray, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
         """``info`` of a single env from its row of :meth:`RouteEpisodes.report`."""
         info = RouteEpisodes.info(row)
-        info["segment"] = int(info["segment"])
-        info["time"] = float(info["time"])
         info["reward_terms"] = terms
         if self.covariance_k is not None:
             info["odom_covariance"] = self._covariance.copy()
