@@ -403,29 +403,29 @@ class World:
             scale = self._unit_scale
         h = self._h
         for _ in range(self.substeps):
-            if self._plain:
-                # No effect hooks and a plain floor: the wheels, the contact velocities and
-                # their mid-step turn in one compiled call.
-                if not _drive_plain(
-                    command,
-                    scale,
-                    self.max_rate,
-                    self.max_rate_step,
-                    self.true_radius,
-                    self.ticks_per_rad,
-                    self.pose,
-                    h,
-                    self.wheel_rate,
-                    self.wheel_angle,
-                    self.counts,
-                    self._rim_speed,
-                    self._ground_v,
-                    self._motor_step,
-                    self.half_track,
-                ):
-                    raise ValueError("wheel rate commands must be finite")
-            else:
-                self._drive_with_effects(command, scale, h)
+            # No effect hooks and a plain floor: the wheels, the contact velocities and their
+            # mid-step turn in one compiled call; otherwise the wheels, then every stage.
+            drive = _drive_plain if self._plain else _drive_wheels
+            if not drive(
+                command,
+                scale,
+                self.max_rate,
+                self.max_rate_step,
+                self.true_radius,
+                self.ticks_per_rad,
+                self.pose,
+                h,
+                self.wheel_rate,
+                self.wheel_angle,
+                self.counts,
+                self._rim_speed,
+                self._ground_v,
+                self._motor_step,
+                self.half_track,
+            ):
+                raise ValueError("wheel rate commands must be finite")
+            if not self._plain:
+                self._effect_stages(h)
             self._write_ground_velocity()
             if self._raw_space is not None:
                 _CHIPMUNK.cpSpaceStep(self._raw_space, h)
@@ -440,27 +440,9 @@ class World:
                 self._accumulate_slip(h)
         self.time += self.dt
 
-    def _drive_with_effects(self, command: FloatArray, scale: FloatArray, h: float) -> None:
-        """One substep's contact velocities through every stage: wheels, transmission hooks,
-        shape hooks, the floor, perturbation hooks, then the mid-step turn."""
-        if not _drive_wheels(
-            command,
-            scale,
-            self.max_rate,
-            self.max_rate_step,
-            self.true_radius,
-            self.ticks_per_rad,
-            self.pose,
-            h,
-            self.wheel_rate,
-            self.wheel_angle,
-            self.counts,
-            self._rim_speed,
-            self._ground_v,
-            self._motor_step,
-            self.half_track,
-        ):
-            raise ValueError("wheel rate commands must be finite")
+    def _effect_stages(self, h: float) -> None:
+        """After the wheels, one substep's contact velocities through every stage: transmission
+        hooks, shape hooks, the floor, perturbation hooks, then the mid-step turn."""
         if self._transmission:
             for hook in self._transmission:
                 hook.transmission(self._motor_step)
