@@ -96,6 +96,10 @@ class World:
             per robot. Per-robot streams make a robot's noise independent of which other robots
             share its batch.
         track_slip: accumulate each wheel's slip distance in ``slip`` (costs ~5 µs a step).
+        links: compliant linkages ``(i, j, min, max)`` between the centres of robots i and j:
+            free while the centre distance lies in [min, max] [m], a hard stop at either end
+            (a pymunk ``SlideJoint``): the CLAPPER's linear bearing (Borenstein 1995, §2;
+            :mod:`odomgym.vehicle`). Without links the robots do not interact.
 
     State arrays (read them, do not write them; shapes use N robots):
         ``pose`` (N, 3) true x, y [m], θ [rad] of the axle midpoint;
@@ -122,10 +126,17 @@ class World:
         iterations: int = 10,
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
         track_slip: bool = False,
+        links: Sequence[tuple[int, int, float, float]] = (),
     ) -> None:
         specs = [robots] if isinstance(robots, RobotSpec) else list(robots)
         if not specs:
             raise ValueError("World needs at least one robot")
+        self.links = tuple((int(i), int(j), float(lo), float(hi)) for i, j, lo, hi in links)
+        for i, j, lo, hi in self.links:
+            if not (0 <= i < len(specs) and 0 <= j < len(specs) and i != j):
+                raise ValueError(f"a link joins two different robots of the batch, got {i}, {j}")
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+                raise ValueError(f"a link's range needs 0 <= min < max [m], got {lo}, {hi}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
         if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
@@ -293,6 +304,12 @@ class World:
                 space.add(joint)
                 self._ground.append(ground)
                 self._joints.append(joint)
+        self._links: list[pymunk.SlideJoint] = []
+        for i, j, lo, hi in self.links:
+            link = pymunk.SlideJoint(self._chassis[i], self._chassis[j], (0, 0), (0, 0), lo, hi)
+            link.collide_bodies = False
+            space.add(link)
+            self._links.append(link)
         self._friction = np.full((self.n, 2), np.nan)
         self._set_friction(np.full((self.n, 2), self.floor.friction))
         self._use_batch_io = self.n >= _BATCH_IO_MIN_ROBOTS
@@ -592,6 +609,11 @@ class World:
         """Magnitude of the last friction impulse of each wheel divided by the step [N], (N, 2)."""
         h = self.dt / self.substeps
         return np.array([j.impulse / h for j in self._joints]).reshape(self.n, 2)
+
+    def link_forces(self) -> FloatArray:
+        """Force of each link's last step [N] (zero while the linkage is inside its range)."""
+        h = self.dt / self.substeps
+        return np.array([link.impulse / h for link in self._links])
 
     def friction_limits(self) -> FloatArray:
         """Current friction force limit μ·N of each wheel [N], (N, 2)."""

@@ -1,0 +1,224 @@
+"""Two-truck vehicles joined by a compliant linkage: the CLAPPER of Borenstein 1995.
+
+The CLAPPER is two differential-drive trucks (LabMates) whose centres are joined by a linkage
+that lets them move almost force-free within its range: an absolute rotary encoder at each truck
+centre measures the angle between the truck and the link, a linear encoder measures the distance
+between the centres (Borenstein 1995, §2, Figs. 1-2). Comparing these internal measurements with
+what each truck's wheel odometry says is Internal Position Error Correction (IPEC,
+:mod:`odomgym.baselines.ipec`).
+
+:class:`VehicleSpec` describes such a vehicle (two robot specs, the link and its encoders) and
+loads from TOML like the robot specs (``[vehicle]``, docs/specs.md). :func:`link_readings` turns
+true truck poses into what the internal encoders report: quantised to their resolution, plus
+their biases (the "unconventional systematic errors" of Borenstein 1995, §5.2).
+
+Conventions: truck A is the front truck, B the rear one. The link direction θ_L points from B's
+centre to A's; ψ_X = θ_X − θ_L is the angle of truck X to the link, wrapped to [−π, π)
+(Borenstein 1995, Eqs. 10-11). Units: metres, radians, seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.errors import SpecError, locate_key, require_finite, require_positive
+from odomgym.internal import LinkReading, link_angles
+from odomgym.io import atomic_write_text
+from odomgym.robot import PRESETS, RobotSpec, load_robot
+
+__all__ = ["VEHICLES", "VehicleSpec", "link_readings", "load_vehicle"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """A two-truck vehicle with a compliant linkage between the truck centres.
+
+    Attributes:
+        truck_a, truck_b: the front and rear trucks (each with its own systematic errors).
+        link_length: nominal centre distance l₀ the controller keeps [m] (Borenstein 1995,
+            §3.3: 1 m).
+        link_min, link_max: the ends of the linear bearing [m]; between them the link passes no
+            force (§2), at them it is a hard stop. The paper does not give the range; ±0.1 m
+            is assumed.
+        sample_period: T_s, how often the encoders are read and IPEC runs [s] (§4.1: 40 ms).
+        rotary_bits: resolution of the absolute rotary encoders, 2π/2^bits [rad] (§2: 10 bits,
+            0.35°).
+        rotary_bias_a, rotary_bias_b: constant bias of each rotary encoder [rad] (§5.2).
+        linear_resolution: resolution of the linear encoder [m] (§2: 0.1 mm).
+        linear_bias: constant bias of the link-length measurement [m] (§5.2: about 2 mm was
+            suspected in the prototype, whose accuracy was ±3 mm).
+        name: a label for reports.
+    """
+
+    truck_a: RobotSpec
+    truck_b: RobotSpec
+    link_length: float = 1.0
+    link_min: float = 0.9
+    link_max: float = 1.1
+    sample_period: float = 0.04
+    rotary_bits: int = 10
+    rotary_bias_a: float = 0.0
+    rotary_bias_b: float = 0.0
+    linear_resolution: float = 1e-4
+    linear_bias: float = 0.0
+    name: str = "vehicle"
+
+    def __post_init__(self) -> None:
+        for key in ("link_length", "link_min", "link_max", "sample_period", "linear_resolution"):
+            require_positive(key, getattr(self, key))
+        for key in ("rotary_bias_a", "rotary_bias_b", "linear_bias"):
+            require_finite(key, getattr(self, key))
+        if not self.link_min < self.link_length < self.link_max:
+            raise SpecError(
+                f"link_length must lie strictly between link_min and link_max, got "
+                f"{self.link_min} < {self.link_length} < {self.link_max}",
+                field="link_length",
+            )
+        bits = self.rotary_bits
+        if isinstance(bits, bool) or not isinstance(bits, int) or not 1 <= bits <= 32:
+            raise SpecError(
+                f"rotary_bits must be a whole number in [1, 32], got {bits!r}", field="rotary_bits"
+            )
+
+    @property
+    def rotary_resolution(self) -> float:
+        """One count of the rotary encoders, 2π / 2^bits [rad]."""
+        return 2.0 * math.pi / float(2**self.rotary_bits)
+
+    @property
+    def trucks(self) -> tuple[RobotSpec, RobotSpec]:
+        """(truck A, truck B)."""
+        return (self.truck_a, self.truck_b)
+
+    # ------------------------------------------------------------------ TOML
+    def to_dict(self) -> dict[str, Any]:
+        """All fields as a TOML-ready dict; a preset truck is written by its name."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, RobotSpec):
+                out[f.name] = value.name if PRESETS.get(value.name) == value else value.to_dict()
+            else:
+                out[f.name] = value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, path: Path | None = None) -> VehicleSpec:
+        """Build from a mapping (e.g. parsed TOML, flat or under ``[vehicle]``); a truck is a
+        robot preset name, a robot ``.toml`` path (relative to the vehicle file) or a table.
+        Errors name the field and, for a file, the file and line."""
+        table = dict(data.get("vehicle", data))
+
+        def where(key: str) -> str | None:
+            return locate_key(path, key) if path else None
+
+        known = {f.name for f in dataclasses.fields(cls)}
+        for key in table:
+            if key not in known:
+                raise SpecError(
+                    f"unknown vehicle field {key!r}; known fields: {', '.join(sorted(known))}",
+                    field=key,
+                    source=where(key),
+                )
+        for key in ("truck_a", "truck_b"):
+            value = table.get(key, "labmate")
+            if isinstance(value, Mapping):
+                table[key] = RobotSpec.from_dict(value, path=path)
+            elif isinstance(value, str):
+                candidate = Path(value)
+                if path is not None and not candidate.is_absolute() and value not in PRESETS:
+                    candidate = path.parent / candidate
+                table[key] = load_robot(value if value in PRESETS else candidate)
+            else:
+                raise SpecError(
+                    f"{key} must be a robot preset name, a robot .toml path or a table",
+                    field=key,
+                    source=where(key),
+                )
+        for key, value in table.items():
+            if key in ("truck_a", "truck_b"):
+                continue
+            if key == "name":
+                if not isinstance(value, str):
+                    raise SpecError("name must be a string", field=key, source=where(key))
+                continue
+            if key == "rotary_bits":
+                continue  # checked whole in __post_init__
+            require_finite(key, value, source=where(key))
+        try:
+            return cls(**table)
+        except SpecError as exc:
+            raise SpecError(
+                str(exc), field=exc.field, source=where(exc.field) if exc.field else None
+            ) from None
+
+    def save(self, path: str | Path) -> None:
+        """Write the spec as TOML, atomically (temp file, then rename)."""
+        import tomli_w
+
+        atomic_write_text(Path(path), tomli_w.dumps({"vehicle": self.to_dict()}))
+
+
+def load_vehicle(spec: str | Path) -> VehicleSpec:
+    """Return the preset called ``spec`` (``clapper``) or load a vehicle TOML file."""
+    text = str(spec)
+    if text in VEHICLES:
+        return VEHICLES[text]
+    path = Path(text)
+    if path.suffix != ".toml" and not path.exists():
+        raise SpecError(
+            f"unknown vehicle {text!r}; presets: {', '.join(sorted(VEHICLES))}, or a .toml file",
+            field="vehicle",
+        )
+    try:
+        raw = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SpecError(f"cannot read vehicle file: {exc.strerror}", source=str(path)) from None
+    try:
+        data = tomllib.loads(raw)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
+    return VehicleSpec.from_dict(data, path=path)
+
+
+def link_readings(spec: VehicleSpec, poses: FloatArray) -> LinkReading:
+    """What the internal encoders report for true truck poses (N, 2, 3) [m, m, rad].
+
+    Rotary encoders: ψ + bias, rounded to the nearest count of 2π/2^bits (an absolute encoder
+    reports the count its code disc shows). Linear encoder: the centre distance + bias,
+    rounded to its resolution. Rounding to the nearest count keeps a zero angle at zero;
+    truncation would add half a count to every reading.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    _, psi = link_angles(poses)
+    q = spec.rotary_resolution
+    bias = np.array([spec.rotary_bias_a, spec.rotary_bias_b])
+    psi_read = q * np.round((psi + bias) / q)
+    centre_a, centre_b = poses[:, 0, :2], poses[:, 1, :2]
+    length = np.hypot(*(centre_a - centre_b).T)
+    r = spec.linear_resolution
+    length_read = r * np.round((length + spec.linear_bias) / r)
+    return LinkReading(length=length_read, psi=psi_read)
+
+
+#: Vehicle presets.
+VEHICLES: dict[str, VehicleSpec] = {
+    # Borenstein 1995, §2-§3: two LabMate trucks 1 m apart, 10-bit rotary encoders, 0.1 mm
+    # linear encoder, 40 ms sampling; the bearing range (±0.1 m) is assumed.
+    "clapper": VehicleSpec(
+        truck_a=PRESETS["labmate"],
+        truck_b=PRESETS["labmate"],
+        name="clapper",
+    ),
+}

@@ -1,0 +1,122 @@
+"""The two-truck vehicle spec, its internal encoders and the compliant linkage in the World
+(Borenstein 1995, §2)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from odomgym.errors import SpecError
+from odomgym.floor import FLOORS
+from odomgym.internal import link_angles
+from odomgym.physics import World
+from odomgym.robot import PRESETS
+from odomgym.vehicle import VEHICLES, VehicleSpec, link_readings, load_vehicle
+
+CLAPPER = VEHICLES["clapper"]
+
+
+def test_clapper_preset_has_the_papers_encoders() -> None:
+    # Borenstein 1995, §2: 10-bit absolute encoders (0.35°), 0.1 mm linear encoder; §4.1: 40 ms.
+    assert math.degrees(CLAPPER.rotary_resolution) == pytest.approx(0.3515625)
+    assert CLAPPER.linear_resolution == 1e-4
+    assert CLAPPER.sample_period == 0.04
+    assert CLAPPER.link_length == 1.0
+    assert CLAPPER.truck_a == PRESETS["labmate"]
+
+
+def test_toml_round_trip_and_file_relative_truck(tmp_path: Path) -> None:
+    truck = PRESETS["labmate"].with_errors(1.002, 1.01)
+    truck_path = tmp_path / "trucks" / "b.toml"
+    truck_path.parent.mkdir()
+    truck.save(truck_path)
+    path = tmp_path / "vehicle.toml"
+    path.write_text(
+        '[vehicle]\nname = "mine"\ntruck_a = "labmate"\ntruck_b = "trucks/b.toml"\n'
+        "link_length = 1.2\nlink_min = 1.0\nlink_max = 1.4\nrotary_bias_b = 0.01\n",
+        encoding="utf-8",
+    )
+    spec = load_vehicle(path)
+    assert spec.truck_b.e_d == pytest.approx(1.002)
+    assert spec.link_length == 1.2 and spec.rotary_bias_b == 0.01
+    again = tmp_path / "again.toml"
+    spec.save(again)
+    assert load_vehicle(again) == spec
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("link_length = 1.5\n", r"vehicle\.toml:2: link_length must lie strictly between"),
+        ("rotary_bits = 0\n", r"rotary_bits must be a whole number in \[1, 32\]"),
+        ("wheel_size = 1\n", r"vehicle\.toml:2: unknown vehicle field 'wheel_size'"),
+        ("linear_bias = nan\n", r"vehicle\.toml:2: linear_bias must be finite"),
+    ],
+)
+def test_bad_vehicle_files_name_field_and_line(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "vehicle.toml"
+    path.write_text("[vehicle]\n" + text, encoding="utf-8")
+    with pytest.raises(SpecError, match=message):
+        load_vehicle(path)
+
+
+def test_readings_are_quantised_and_biased() -> None:
+    spec = VehicleSpec(PRESETS["labmate"], PRESETS["labmate"], rotary_bias_b=math.radians(1.0))
+    rng = np.random.default_rng(3)
+    poses = np.zeros((50, 2, 3))
+    poses[:, 0, :2] = rng.uniform(-0.05, 0.05, (50, 2)) + np.array([1.0, 0.0])
+    poses[:, :, 2] = rng.uniform(-0.3, 0.3, (50, 2))
+    reading = link_readings(spec, poses)
+    q, r = spec.rotary_resolution, spec.linear_resolution
+    np.testing.assert_allclose(reading.psi / q, np.round(reading.psi / q), atol=1e-9)
+    np.testing.assert_allclose(reading.length / r, np.round(reading.length / r), atol=1e-6)
+    _, psi = link_angles(poses)
+    assert np.all(np.abs(reading.psi[:, 0] - psi[:, 0]) <= q / 2 + 1e-12)
+    # The bias of encoder B shifts its readings by 1° (within one count).
+    assert np.all(np.abs(reading.psi[:, 1] - psi[:, 1] - math.radians(1.0)) <= q / 2 + 1e-12)
+    true_length = np.hypot(*(poses[:, 0, :2] - poses[:, 1, :2]).T)
+    assert np.all(np.abs(reading.length - true_length) <= r / 2 + 1e-12)
+
+
+def _two_trucks(rates_a: float, rates_b: float, steps: int) -> tuple[World, list[float]]:
+    robot = PRESETS["labmate"].ideal()
+    world = World([robot, robot], FLOORS["smooth"], dt=0.04, links=[(0, 1, 0.9, 1.1)])
+    world.reset(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    distances = []
+    for _ in range(steps):
+        world.step(np.array([[rates_a, rates_a], [rates_b, rates_b]]))
+        distances.append(float(np.hypot(*(world.pose[0, :2] - world.pose[1, :2]))))
+    return world, distances
+
+
+def test_linkage_is_force_free_inside_its_range() -> None:
+    # Both trucks at the same speed: the centre distance stays 1 m and the link passes nothing.
+    world, distances = _two_trucks(4.0, 4.0, 100)
+    assert max(abs(d - 1.0) for d in distances) < 1e-9
+    assert np.all(world.link_forces() == 0.0)
+
+
+def test_linkage_stops_the_trucks_at_the_end_of_its_range() -> None:
+    # Truck A drives away from a truck B that is told to stand still: the bearing's end stop
+    # catches it at 1.1 m and A drags B, whose braked wheels slide. Chipmunk sees the violation
+    # one step late, so the stop may overshoot by one step of travel (0.3 m/s × 40 ms) before
+    # it pulls back.
+    world, distances = _two_trucks(4.0, 0.0, 150)
+    assert distances[10] < 1.1  # free at first
+    assert max(distances) < 1.1 + 0.3 * 0.04
+    assert distances[-1] == pytest.approx(1.1, abs=1e-4)
+    # Steady drag: the link carries exactly B's sliding friction, μ·m·g·(drive load fraction).
+    truck = PRESETS["labmate"]
+    friction = FLOORS["smooth"].friction * truck.mass * 9.81 * truck.drive_load_fraction
+    assert world.link_forces()[0] == pytest.approx(friction, rel=0.01)
+
+
+def test_links_are_checked() -> None:
+    robot = PRESETS["labmate"]
+    with pytest.raises(ValueError, match="two different robots"):
+        World([robot, robot], links=[(0, 0, 0.9, 1.1)])
+    with pytest.raises(ValueError, match="min < max"):
+        World([robot, robot], links=[(0, 1, 1.1, 0.9)])
