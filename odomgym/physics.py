@@ -610,6 +610,25 @@ class World:
         h = self.dt / self.substeps
         return np.array([j.impulse / h for j in self._joints]).reshape(self.n, 2)
 
+    def lay_floor(self, floor: FloorSpec) -> None:
+        """Change the cables, patches and friction under the robots between steps, as an
+        experimenter lays cables before a return leg (Borenstein 1995, §6.1). The roughness
+        must stay as it was (each robot's noise stream was bound to it at construction)."""
+        if floor.roughness != self.floor.roughness:
+            raise ValueError(
+                f"lay_floor keeps the roughness ({self.floor.roughness}), got {floor.roughness}"
+            )
+        self.floor = floor
+        self._has_bumps = bool(floor.bumps)
+        max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
+        self._bump_grid = CableGrid.build(floor, float(self.true_radius.max()), 1.5 * max_step)
+        self._has_patches = bool(floor.patches)
+        self._modifies_ground = self._has_bumps or self._has_patches or self._rough
+        self._plain = not (
+            self._transmission or self._shape or self._perturb or self._modifies_ground
+        )
+        self._set_friction(np.full((self.n, 2), floor.friction))
+
     def link_forces(self) -> FloatArray:
         """Force of each link's last step [N] (zero while the linkage is inside its range)."""
         h = self.dt / self.substeps

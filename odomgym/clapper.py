@@ -1,0 +1,518 @@
+"""Driving a two-truck vehicle (the CLAPPER, Borenstein 1995) along a path, with or without
+internal position error correction.
+
+A :class:`VehiclePath` is a sequence of legs, each a polyline driven forwards or backwards with a
+stop at its end: the straight experiment of Borenstein 1995, §6.1 (18 m out, then 18 m back
+*backwards*) and the 7×4 m rectangle with smooth 90° turns of §6.2.
+
+:class:`VehicleDriver` is the low-level controller. The paper does not give its control law; it
+says the controller holds both rotary encoders at 0° when driving straight (§5.2) and that the
+compliant linkage absorbs its momentary errors (§2). Here each truck tracks a moving reference
+point with Kanayama et al.'s (1990) tracking law, using the vehicle's *estimated* poses (IPEC's
+or plain dead reckoning's), as the real vehicle does: truck A's reference moves along the path
+with a trapezoidal speed profile; truck B's is the path point a straight-line distance l₀ behind
+A's (so turns do not compress the link), and B's speed is corrected by the measured link length
+so the linear bearing stays near the middle of its range.
+
+:func:`drive_vehicles` runs N vehicles in one :class:`~odomgym.physics.World` (2N trucks, N
+links), sampling the encoders every T_s and feeding the estimator, and returns each vehicle's
+true and estimated poses at the end.
+
+Units: metres, radians, seconds.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.floor import CableBump, FloorSpec
+from odomgym.internal import DeadReckoning, InternalEstimator
+from odomgym.odometry import Calibration, Odometry, wrap_angle
+from odomgym.physics import World
+from odomgym.vehicle import VehicleSpec, link_readings
+
+__all__ = [
+    "CableLayer",
+    "EstimatorFactory",
+    "Leg",
+    "VehicleDriver",
+    "VehicleOutcome",
+    "VehiclePath",
+    "drive_vehicles",
+    "evenly",
+    "rectangle_path",
+    "straight_path",
+    "vehicle_pose",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Leg:
+    """A polyline ``points`` (M, 2) [m] driven ``direction`` +1 (forwards) or −1 (backwards,
+    the trucks facing the way they came), ending at rest."""
+
+    points: FloatArray
+    direction: float = 1.0
+
+    @property
+    def length(self) -> float:
+        return float(self.arc_length[-1])
+
+    @property
+    def arc_length(self) -> FloatArray:
+        """Cumulative length at each point (M,) [m]."""
+        steps = np.hypot(*np.diff(self.points, axis=0).T)
+        return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+@dataclass(frozen=True)
+class VehiclePath:
+    """Legs driven one after the other; ``name`` for reports."""
+
+    legs: tuple[Leg, ...]
+    name: str
+
+    def start_poses(self, link_length: float) -> FloatArray:
+        """Truck poses (2, 3) at the start: A at the first point facing along the first leg
+        (for a backward leg: facing against it), B ``link_length`` behind A."""
+        leg = self.legs[0]
+        d = leg.points[1] - leg.points[0]
+        heading = math.atan2(d[1], d[0]) + (0.0 if leg.direction > 0 else math.pi)
+        a = np.array([*leg.points[0], heading])
+        b = a - np.array([link_length * math.cos(heading), link_length * math.sin(heading), 0.0])
+        return np.stack([a, b])
+
+
+def straight_path(length: float = 18.0, spacing: float = 0.05) -> VehiclePath:
+    """Out ``length`` metres along +x, then back the same way *backwards* (Borenstein 1995,
+    §6.1: "traveled straight forward for 18 m, stopped, and returned straight-backward")."""
+    count = max(2, round(length / spacing) + 1)
+    out = np.stack([np.linspace(0.0, length, count), np.zeros(count)], axis=1)
+    return VehiclePath((Leg(out, 1.0), Leg(out[::-1].copy(), -1.0)), f"straight-{length:g}m")
+
+
+def rectangle_path(
+    width: float = 7.0,
+    height: float = 4.0,
+    direction: Literal["cw", "ccw"] = "ccw",
+    radius: float = 0.45,
+    spacing: float = 0.02,
+) -> VehiclePath:
+    """The §6.2 rectangle: ``width`` × ``height`` [m] with 90° fillets of ``radius`` [m] (0.45 m
+    passes each corner at r(√2 − 1) = 0.19 m, within the paper's 0.2 m), driven forwards once
+    round, starting and ending in the middle of the first long side, ``ccw`` turning left."""
+    if not 0.0 < 2.0 * radius < min(width, height):
+        raise ValueError(f"radius must be below half the shorter side, got {radius}")
+    sign = 1.0 if direction == "ccw" else -1.0
+    corners = [(0.0, 0.0), (width, 0.0), (width, sign * height), (0.0, sign * height)]
+    points: list[tuple[float, float]] = [(width / 2.0, 0.0)]
+    for k in range(1, 5):
+        corner = np.array(corners[k % 4])
+        before = np.array(corners[k - 1])
+        after = np.array(corners[(k + 1) % 4])
+        u_in = (corner - before) / np.linalg.norm(corner - before)
+        u_out = (after - corner) / np.linalg.norm(after - corner)
+        start = corner - radius * u_in
+        points.append((float(start[0]), float(start[1])))
+        centre = start + radius * np.array([-u_in[1], u_in[0]]) * sign
+        a0 = math.atan2(start[1] - centre[1], start[0] - centre[0])
+        for t in np.linspace(0.0, 1.0, max(4, int(radius * math.pi / 2 / spacing)))[1:]:
+            a = a0 + sign * t * math.pi / 2
+            points.append((centre[0] + radius * math.cos(a), centre[1] + radius * math.sin(a)))
+        del u_out
+    points.append((width / 2.0, 0.0))
+    dense = _densify(np.array(points), spacing)
+    return VehiclePath((Leg(dense, 1.0),), f"rectangle-{width:g}x{height:g}m-{direction}")
+
+
+def _densify(points: FloatArray, spacing: float) -> FloatArray:
+    out = [points[0]]
+    for p, q in itertools.pairwise(points):
+        count = max(1, math.ceil(float(np.hypot(*(q - p))) / spacing))
+        for t in np.linspace(0.0, 1.0, count + 1)[1:]:
+            out.append(p + t * (q - p))
+    return np.array(out)
+
+
+@dataclass
+class CableLayer:
+    """Lays 10 mm cables under one side's wheels as the vehicle comes, like the experimenter
+    of Borenstein 1995, §6.1 ("only under the right side-wheels of the vehicle", on the return
+    leg only).
+
+    When the vehicle's leading truck is ``lead`` metres before the next position in ``at``
+    (arc lengths along ``leg`` [m]), a cable half a track long is laid across the path there,
+    centred on that truck's wheel track on the chosen side: both trucks' wheels on that side
+    cross it and the other side's do not, as long as the trucks stay within a quarter track of
+    that line.
+    One vehicle per World: the floor is shared.
+    """
+
+    at: tuple[float, ...]
+    leg: int = 1
+    side: Literal["left", "right"] = "right"
+    diameter: float = 0.010
+    lead: float = 0.3
+    laid: list[CableBump] = field(default_factory=list)
+
+    def __call__(
+        self, leg: int, path: VehiclePath, truth: FloatArray, track: float
+    ) -> FloorSpec | None:
+        """A new floor if a cable is due (``truth``: true truck poses (2, 3); ``track``: the
+        truck's wheel track [m]), else None."""
+        if leg != self.leg or len(self.laid) >= len(self.at):
+            return None
+        points = path.legs[leg].points
+        start, end = points[0], points[-1]
+        along = (end - start) / float(np.hypot(*(end - start)))
+        travel = max(float((truth[k, :2] - start) @ along) for k in (0, 1))
+        target = self.at[len(self.laid)]
+        if travel < target - self.lead:
+            return None
+        normal = np.array([-along[1], along[0]])
+        # The leading truck's wheel track on the chosen side, extended along its heading to
+        # the cable's position: where that truck's wheels will cross.
+        lead = 0 if float((truth[0, :2] - start) @ along) >= travel else 1
+        heading = truth[lead, 2]
+        side = -1.0 if self.side == "right" else 1.0
+        left_of_truck = np.array([-math.sin(heading), math.cos(heading)])
+        wheel = truth[lead, :2] + side * 0.5 * track * left_of_truck
+        forwards = np.array([math.cos(heading), math.sin(heading)])
+        reach = (target - float((wheel - start) @ along)) / float(forwards @ along)
+        x, y = wheel + reach * forwards
+        self.laid.append(
+            CableBump(
+                x=float(x),
+                y=float(y),
+                angle=math.atan2(normal[1], normal[0]),
+                diameter=self.diameter,
+                length=0.5 * track,
+            )
+        )
+        return FloorSpec(friction=0.8, bumps=tuple(self.laid), name="cables")
+
+
+def evenly(count: int, length: float = 18.0, margin: float = 1.5) -> tuple[float, ...]:
+    """``count`` positions evenly spaced between ``margin`` and ``length − margin`` [m]."""
+    if count <= 0:
+        return ()
+    if count == 1:
+        return (length / 2.0,)
+    return tuple(float(x) for x in np.linspace(margin, length - margin, count))
+
+
+def vehicle_pose(poses: FloatArray) -> FloatArray:
+    """The vehicle's pose (N, 3) from truck poses (N, 2, 3): the midpoint of the truck centres
+    and the heading of the linkage (from B to A)."""
+    mid = 0.5 * (poses[:, 0, :2] + poses[:, 1, :2])
+    d = poses[:, 0, :2] - poses[:, 1, :2]
+    return np.column_stack([mid, np.arctan2(d[:, 1], d[:, 0])])
+
+
+@dataclass
+class _LegState:
+    arc: FloatArray
+    s_a: float = 0.0  # reference arc length of truck A [m]
+    v: float = 0.0  # reference speed [m/s]
+
+
+@dataclass
+class VehicleDriver:
+    """Kanayama tracking of moving references by both trucks (module docstring).
+
+    Args:
+        cruise_speed: reference speed on a leg [m/s] (Borenstein 1995, §6: just under 0.5).
+        accel: reference acceleration and deceleration [m/s²].
+        k_x, k_y, k_theta: Kanayama et al. 1990 gains (along-track [1/s], cross-track [1/m²],
+            heading [1/m]).
+        k_link: link-length feedback on truck B's speed [1/s].
+        lateral_accel: the reference slows for curves to keep v²·κ below this [m/s²], so that
+            the rear truck, whose reference sweeps faster than the front's through a turn,
+            stays within its wheels' speed limit.
+    """
+
+    cruise_speed: float = 0.45
+    accel: float = 0.4
+    k_x: float = 1.5
+    k_y: float = 4.0
+    k_theta: float = 3.0
+    k_link: float = 1.0
+    lateral_accel: float = 0.1
+    _legs: list[_LegState] = field(default_factory=list)
+
+    def plan(self, path: VehiclePath, n: int) -> None:
+        self._path = path
+        self._leg = np.zeros(n, dtype=np.int64)
+        self._s = np.zeros(n)
+        self._v = np.zeros(n)
+        self._s_b = np.full(n, np.nan)  # truck B's reference arc length at the last step
+        self._arcs = [leg.arc_length for leg in path.legs]
+        self._limits = [self._speed_limit(leg) for leg in path.legs]
+
+    def _speed_limit(self, leg: Leg) -> FloatArray:
+        """Largest reference speed at each point of ``leg`` [m/s]: the cruise speed, slowed for
+        curvature and, braking at ``accel``, for the curves and the stop ahead."""
+        arc = leg.arc_length
+        heading = np.unwrap(np.arctan2(*np.diff(leg.points, axis=0).T[::-1]))
+        curvature = np.zeros(len(arc))
+        ds = np.diff(arc)
+        curvature[1:-1] = np.abs(np.diff(heading)) / np.maximum(0.5 * (ds[1:] + ds[:-1]), 1e-9)
+        limit = np.minimum(
+            self.cruise_speed, np.sqrt(self.lateral_accel / np.maximum(curvature, 1e-9))
+        )
+        limit[-1] = 0.0
+        for k in range(len(arc) - 2, -1, -1):  # brake in time for what lies ahead
+            limit[k] = min(limit[k], math.sqrt(limit[k + 1] ** 2 + 2.0 * self.accel * ds[k]))
+        return limit
+
+    def done(self) -> NDArray[np.bool_]:
+        """Vehicles that have driven every leg."""
+        return np.asarray(self._leg >= len(self._path.legs))
+
+    @property
+    def leg(self) -> int:
+        """The leg every vehicle is on or has finished (vehicles wait at the end of a leg
+        until all have arrived, so that the floor can change between legs)."""
+        return int(self._leg.min())
+
+    def act(
+        self,
+        estimate: FloatArray,
+        link_length: FloatArray,
+        l0: float,
+        half_track: FloatArray,
+        dt: float,
+    ) -> FloatArray:
+        """Wheel speeds (N, 2, 2) [m/s] for the trucks from the estimated poses (N, 2, 3) and
+        the measured link lengths (N,)."""
+        n = estimate.shape[0]
+        out = np.zeros((n, 2, 2))
+        for i in range(n):
+            k = int(self._leg[i])
+            if k >= len(self._path.legs) or k > self._leg.min():
+                continue  # finished, or waiting for the others at the end of its leg
+            leg, arc = self._path.legs[k], self._arcs[k]
+            total = float(arc[-1])
+            # Reference speed: accelerate to the cruise speed, slow for curves and the stop.
+            v_max = float(np.interp(self._s[i], arc, self._limits[k]))
+            if self._s[i] < total:
+                v_max = max(v_max, 0.02)  # never stall short of the end
+            v = min(v_max, self._v[i] + self.accel * dt)
+            self._v[i] = v
+            self._s[i] = min(total, self._s[i] + v * dt)
+            if self._s[i] >= total and v < 1e-3:
+                self._leg[i] = k + 1
+                self._s[i] = 0.0
+                self._v[i] = 0.0
+                self._s_b[i] = np.nan
+                continue
+            # Truck A leads forwards and trails backwards: B's reference is l0 behind A's in
+            # the direction the trucks face, i.e. ahead in the direction of travel when reversing.
+            ref_a = _point(leg.points, arc, self._s[i])
+            s_b = _offset(leg.points, arc, self._s[i], l0, -leg.direction)
+            ref_b = _reference(leg.points, arc, s_b)
+            # B's reference moves at its own rate (slower than A's where A turns away from it);
+            # a link longer than l0 makes the trailing truck speed up, the leading one slow down.
+            previous = self._s_b[i]
+            v_b_ref = v if np.isnan(previous) else (s_b - previous) / dt
+            self._s_b[i] = s_b
+            v_b = v_b_ref + leg.direction * self.k_link * (float(link_length[i]) - l0)
+            for truck, ref, speed in ((0, ref_a, v), (1, ref_b, v_b)):
+                out[i, truck] = self._track(
+                    estimate[i, truck], ref, speed, leg.direction, float(half_track[i, truck])
+                )
+        return out
+
+    def _track(
+        self,
+        pose: FloatArray,
+        ref: tuple[float, float, float, float],
+        v_ref: float,
+        direction: float,
+        half_track: float,
+    ) -> FloatArray:
+        x_r, y_r, heading_r, curvature = ref
+        theta = pose[2] + (math.pi if direction < 0 else 0.0)
+        c, s = math.cos(theta), math.sin(theta)
+        dx, dy = x_r - pose[0], y_r - pose[1]
+        e_x = c * dx + s * dy
+        e_y = -s * dx + c * dy
+        e_theta = float(wrap_angle(heading_r - theta))
+        v = v_ref * math.cos(e_theta) + self.k_x * e_x
+        omega = v_ref * curvature + v_ref * (self.k_y * e_y + self.k_theta * math.sin(e_theta))
+        if direction < 0:
+            v = -v
+        return np.array([v - omega * half_track, v + omega * half_track])
+
+
+def _reference(points: FloatArray, arc: FloatArray, s: float) -> tuple[float, float, float, float]:
+    """:func:`_point`, continued straight (zero curvature) beyond the polyline's ends."""
+    if 0.0 <= s <= arc[-1]:
+        return _point(points, arc, s)
+    x, y = _extended(points, arc, s)
+    end = (points[0], points[1]) if s < 0.0 else (points[-2], points[-1])
+    heading = math.atan2(*(end[1] - end[0])[::-1])
+    return float(x), float(y), heading, 0.0
+
+
+def _point(points: FloatArray, arc: FloatArray, s: float) -> tuple[float, float, float, float]:
+    """Position, tangent heading and curvature of the polyline at arc length ``s``."""
+    k = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(arc) - 2))
+    t = (s - arc[k]) / max(arc[k + 1] - arc[k], 1e-12)
+    p = points[k] + t * (points[k + 1] - points[k])
+    heading = math.atan2(*(points[k + 1] - points[k])[::-1])
+    j = min(k + 1, len(arc) - 2)
+    next_heading = math.atan2(*(points[j + 1] - points[j])[::-1])
+    step = max(arc[j + 1] - arc[k], 1e-9) / 2.0 if j > k else 1.0
+    curvature = float(wrap_angle(next_heading - heading)) / step if j > k else 0.0
+    return float(p[0]), float(p[1]), heading, curvature
+
+
+def _offset(points: FloatArray, arc: FloatArray, s: float, distance: float, side: float) -> float:
+    """Arc length of the path point at straight-line ``distance`` [m] from the point at ``s``:
+    behind it (``side`` −1) or ahead of it (+1) along the polyline, on the straight extension
+    of its first or last segment beyond the ends."""
+    anchor = _extended(points, arc, s)
+    near, far = s, s + side * 3.0 * distance
+    for _ in range(
+        32
+    ):  # bisection (to ~1 nm): the chord grows monotonically from ``near`` to ``far``
+        mid = 0.5 * (near + far)
+        if float(np.hypot(*(anchor - _extended(points, arc, mid)))) < distance:
+            near = mid
+        else:
+            far = mid
+    return 0.5 * (near + far)
+
+
+def _extended(points: FloatArray, arc: FloatArray, s: float) -> FloatArray:
+    """The polyline point at arc length ``s``, continued straight beyond either end."""
+    if s < 0.0:
+        d = (points[1] - points[0]) / max(arc[1], 1e-12)
+        return np.asarray(points[0] + s * d)
+    if s > arc[-1]:
+        d = (points[-1] - points[-2]) / max(arc[-1] - arc[-2], 1e-12)
+        return np.asarray(points[-1] + (s - arc[-1]) * d)
+    return np.array(_point(points, arc, s)[:2])
+
+
+EstimatorFactory = Callable[[FloatArray], InternalEstimator]
+"""Builds an estimator from the odometry's wheelbases (N, 2) [m] (e.g. ``DeadReckoning`` or
+``odomgym.baselines.ipec.IPEC``)."""
+
+
+@dataclass(frozen=True)
+class VehicleOutcome:
+    """The end of a run of N vehicles (arrays with a leading vehicle axis).
+
+    ``true_poses``, ``estimated`` and ``odometry`` are truck poses (N, 2, 3): the truth, the
+    estimator's, and each truck's own wheel odometry. ``return_error`` (N, 3) is the vehicle's
+    true minus estimated pose (:func:`vehicle_pose`: midpoint of the truck centres, heading of
+    the link; heading wrapped), ``truck_errors`` (N, 2, 3) the same per truck. ``link_range``
+    (N, 2) the shortest and longest true centre distance seen [m], ``link_force`` (N,) the
+    largest force the bearing's end stops passed [N], ``corrections`` (N, 2) the summed
+    orientation corrections of the estimator [rad], ``time`` the simulated duration [s].
+    """
+
+    true_poses: FloatArray
+    estimated: FloatArray
+    odometry: FloatArray
+    return_error: FloatArray
+    truck_errors: FloatArray
+    link_range: FloatArray
+    link_force: FloatArray
+    corrections: FloatArray
+    time: float
+    finished: NDArray[np.bool_]
+
+
+def drive_vehicles(
+    spec: VehicleSpec,
+    floor: FloorSpec,
+    path: VehiclePath,
+    n: int = 1,
+    *,
+    estimator: EstimatorFactory | None = None,
+    calibration: Calibration | None = None,
+    driver: VehicleDriver | None = None,
+    max_time: float | None = None,
+    cables: CableLayer | None = None,
+) -> VehicleOutcome:
+    """Drive ``n`` copies of the vehicle along ``path`` on ``floor`` (all in one World; they
+    start at the same place and never touch), steering by ``estimator``'s poses
+    (default: plain dead reckoning, i.e. without IPEC). ``cables`` lays cables under the
+    vehicle as it comes (one vehicle only: the floor is shared)."""
+    if cables is not None and n != 1:
+        raise ValueError("cables are laid under one vehicle: use n=1")
+    trucks = [spec.truck_a, spec.truck_b] * n
+    links = [(2 * k, 2 * k + 1, spec.link_min, spec.link_max) for k in range(n)]
+    dt = spec.sample_period
+    world = World(trucks, floor, dt=dt, links=links)
+    start = np.tile(path.start_poses(spec.link_length), (n, 1, 1))
+    world.reset(start.reshape(2 * n, 3))
+    odometry = Odometry(trucks, calibration)
+    odometry.reset(start.reshape(2 * n, 3))
+    wheelbase = odometry.effective_wheelbase.reshape(n, 2)
+    estimate_with = (estimator or DeadReckoning)(wheelbase)
+    reading = link_readings(spec, world.pose.reshape(n, 2, 3))
+    estimate_with.reset(start.copy(), reading)
+    estimated = start.copy()
+    drive = driver or VehicleDriver()
+    drive.plan(path, n)
+    per_tick = odometry.travel_per_tick
+    rate_per_speed = 1.0 / world.nominal_radius[:, None]
+    last_counts = world.counts.copy()
+    length = np.hypot(*(start[:, 0, :2] - start[:, 1, :2]).T)
+    link_range = np.stack([length, length], axis=1)
+    link_force = np.zeros(n)
+    corrections = np.zeros((n, 2))
+    total = sum(leg.length for leg in path.legs)
+    limit = max_time if max_time is not None else 3.0 * total / drive.cruise_speed + 60.0
+    steps = 0
+    while not drive.done().all() and steps * dt < limit:
+        if cables is not None:
+            floor_now = cables(drive.leg, path, world.pose[:2], spec.truck_a.true_wheelbase)
+            if floor_now is not None:
+                world.lay_floor(floor_now.with_friction(floor.friction))
+        speeds = drive.act(estimated, reading.length, spec.link_length, 0.5 * wheelbase, dt)
+        world.step(speeds.reshape(2 * n, 2) * rate_per_speed)
+        counts = world.counts.copy()
+        travel = ((counts - last_counts) * per_tick).reshape(n, 2, 2)
+        last_counts = counts
+        odometry.update(counts, dt)
+        truth = world.pose.reshape(n, 2, 3)
+        reading = link_readings(spec, truth)
+        estimated = estimate_with.update(travel, reading)
+        corrections += estimate_with.correction
+        length = np.hypot(*(truth[:, 0, :2] - truth[:, 1, :2]).T)
+        link_range[:, 0] = np.minimum(link_range[:, 0], length)
+        link_range[:, 1] = np.maximum(link_range[:, 1], length)
+        if world.links:
+            link_force = np.maximum(link_force, world.link_forces())
+        steps += 1
+    truth = world.pose.reshape(n, 2, 3).copy()
+    truck_errors = truth - estimated
+    truck_errors[:, :, 2] = wrap_angle(truck_errors[:, :, 2])
+    error = vehicle_pose(truth) - vehicle_pose(estimated)
+    error[:, 2] = wrap_angle(error[:, 2])
+    return VehicleOutcome(
+        true_poses=truth,
+        estimated=estimated.copy(),
+        odometry=odometry.pose.reshape(n, 2, 3).copy(),
+        return_error=error,
+        truck_errors=truck_errors,
+        link_range=link_range,
+        link_force=link_force,
+        corrections=corrections,
+        time=steps * dt,
+        finished=drive.done(),
+    )
