@@ -150,7 +150,8 @@ class CableLayer:
     leg only).
 
     When the vehicle's leading truck is ``lead`` metres before the next position in ``at``
-    (arc lengths along ``leg`` [m]), a cable half a track long is laid across the path there,
+    (arc lengths along ``leg`` [m], increasing), a cable half a track long is laid across the
+    path there (perpendicular to its tangent),
     centred on that truck's wheel track on the chosen side: both trucks' wheels on that side
     cross it and the other side's do not, as long as the trucks stay within a quarter track of
     that line.
@@ -163,6 +164,7 @@ class CableLayer:
     diameter: float = 0.010
     lead: float = 0.3
     laid: list[CableBump] = field(default_factory=list)
+    _progress: list[float] = field(default_factory=lambda: [0.0, 0.0])
 
     def __call__(
         self, leg: int, path: VehiclePath, truth: FloatArray, track: float
@@ -172,22 +174,36 @@ class CableLayer:
         if leg != self.leg or len(self.laid) >= len(self.at):
             return None
         points = path.legs[leg].points
-        start, end = points[0], points[-1]
-        along = (end - start) / float(np.hypot(*(end - start)))
-        travel = max(float((truth[k, :2] - start) @ along) for k in (0, 1))
+        arc = path.legs[leg].arc_length
         target = self.at[len(self.laid)]
-        if travel < target - self.lead:
+        # How far along the leg each truck is: the arc length of its nearest path point within
+        # a window just ahead of where it was (a closed path passes its start twice).
+        reached = []
+        for k in (0, 1):
+            window = (arc >= self._progress[k] - 0.2) & (arc <= self._progress[k] + 1.0)
+            if not window.any():
+                window = arc >= self._progress[k] - 0.2
+            near = np.flatnonzero(window)
+            nearest = near[np.argmin(np.hypot(*(points[near] - truth[k, :2]).T))]
+            self._progress[k] = max(self._progress[k], float(arc[nearest]))
+            reached.append(self._progress[k])
+        if max(reached) < target - self.lead:
             return None
+        x_t, y_t, tangent_heading, _ = _point(points, arc, target)
+        at_point = np.array([x_t, y_t])
+        along = np.array([math.cos(tangent_heading), math.sin(tangent_heading)])
         normal = np.array([-along[1], along[0]])
         # The leading truck's wheel track on the chosen side, extended along its heading to
-        # the cable's position: where that truck's wheels will cross.
-        lead = 0 if float((truth[0, :2] - start) @ along) >= travel else 1
+        # the line across the path at ``target``: where that truck's wheels will cross.
+        lead = 0 if reached[0] >= reached[1] else 1
         heading = truth[lead, 2]
         side = -1.0 if self.side == "right" else 1.0
         left_of_truck = np.array([-math.sin(heading), math.cos(heading)])
         wheel = truth[lead, :2] + side * 0.5 * track * left_of_truck
         forwards = np.array([math.cos(heading), math.sin(heading)])
-        reach = (target - float((wheel - start) @ along)) / float(forwards @ along)
+        if abs(float(forwards @ along)) < 0.7:
+            return None  # the truck is turning: lay the cable when it heads across it
+        reach = -float((wheel - at_point) @ along) / float(forwards @ along)
         x, y = wheel + reach * forwards
         self.laid.append(
             CableBump(
@@ -199,6 +215,27 @@ class CableLayer:
             )
         )
         return FloorSpec(friction=0.8, bumps=tuple(self.laid), name="cables")
+
+
+def rectangle_cable_positions(
+    path: VehiclePath, count: int, clearance: float = 0.8
+) -> tuple[float, ...]:
+    """``count`` arc lengths evenly spread over the straight parts of a rectangle path, at
+    least ``clearance`` [m] from its turns and ends (cables in turns would be crossed at a
+    slant by trucks that are turning)."""
+    leg = path.legs[0]
+    arc = leg.arc_length
+    heading = np.unwrap(np.arctan2(*np.diff(leg.points, axis=0).T[::-1]))
+    straight = np.abs(np.diff(heading, prepend=heading[0])) < 1e-9
+    turning = arc[:-1][~straight]
+    candidates = np.linspace(clearance, arc[-1] - clearance, 2000)
+    if turning.size:
+        gap = np.min(np.abs(candidates[:, None] - turning[None, :]), axis=1)
+        candidates = candidates[gap >= clearance]
+    if count <= 0 or candidates.size == 0:
+        return ()
+    picks = np.linspace(0, candidates.size - 1, count).round().astype(int)
+    return tuple(float(candidates[k]) for k in picks)
 
 
 def evenly(count: int, length: float = 18.0, margin: float = 1.5) -> tuple[float, ...]:
