@@ -42,7 +42,7 @@ __all__ = [
     "register_envs",
 ]
 
-_ENVS = {
+_ENVS: dict[str, tuple[str, str | None, int]] = {
     "UMBmarkSquare-v0": (
         "odomgym.envs.umbmark:UMBmarkSquareEnv",
         "odomgym.envs.vector:make_square_vector_env",
@@ -53,6 +53,10 @@ _ENVS = {
         "odomgym.envs.vector:make_straight_vector_env",
         4000,
     ),
+    # The CLAPPER (Borenstein 1995, §6): 36 m out and back takes ~2100 steps of 40 ms, the
+    # 7×4 m rectangle ~1500.
+    "ClapperStraight-v0": ("odomgym.envs.clapper:ClapperStraightEnv", None, 6000),
+    "ClapperRectangle-v0": ("odomgym.envs.clapper:ClapperRectangleEnv", None, 4000),
 }
 
 

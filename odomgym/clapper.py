@@ -45,6 +45,7 @@ __all__ = [
     "VehicleDriver",
     "VehicleOutcome",
     "VehiclePath",
+    "VehicleTrial",
     "drive_vehicles",
     "evenly",
     "rectangle_path",
@@ -328,9 +329,12 @@ class VehicleDriver:
         l0: float,
         half_track: FloatArray,
         dt: float,
+        speed: FloatArray | None = None,
     ) -> FloatArray:
         """Wheel speeds (N, 2, 2) [m/s] for the trucks from the estimated poses (N, 2, 3) and
-        the measured link lengths (N,)."""
+        the measured link lengths (N,). ``speed`` (N,), if given, asks for a reference speed
+        as a fraction of the cruise speed (an env's action); the curve and stop limits and the
+        acceleration limit still apply."""
         n = estimate.shape[0]
         out = np.zeros((n, 2, 2))
         for i in range(n):
@@ -343,7 +347,9 @@ class VehicleDriver:
             v_max = float(np.interp(self._s[i], arc, self._limits[k]))
             if self._s[i] < total:
                 v_max = max(v_max, 0.02)  # never stall short of the end
-            v = min(v_max, self._v[i] + self.accel * dt)
+            wanted = v_max if speed is None else min(v_max, float(speed[i]) * self.cruise_speed)
+            v = min(max(wanted, self._v[i] - self.accel * dt), self._v[i] + self.accel * dt)
+            v = max(0.0, min(v, v_max))
             self._v[i] = v
             self._s[i] = min(total, self._s[i] + v * dt)
             if self._s[i] >= total and v < 1e-3:
@@ -363,9 +369,9 @@ class VehicleDriver:
             v_b_ref = v if np.isnan(previous) else (s_b - previous) / dt
             self._s_b[i] = s_b
             v_b = v_b_ref + leg.direction * self.k_link * (float(link_length[i]) - l0)
-            for truck, ref, speed in ((0, ref_a, v), (1, ref_b, v_b)):
+            for truck, ref, v_truck in ((0, ref_a, v), (1, ref_b, v_b)):
                 out[i, truck] = self._track(
-                    estimate[i, truck], ref, speed, leg.direction, float(half_track[i, truck])
+                    estimate[i, truck], ref, v_truck, leg.direction, float(half_track[i, truck])
                 )
         return out
 
@@ -472,6 +478,125 @@ class VehicleOutcome:
     finished: NDArray[np.bool_]
 
 
+class VehicleTrial:
+    """N copies of a vehicle driving ``path`` on ``floor`` in one World (they start at the same
+    place and never touch), steered by ``estimator``'s poses (default: plain dead reckoning,
+    i.e. without IPEC), one sampling interval T_s per :meth:`step`. ``cables`` lays cables as
+    the vehicle comes (one vehicle only: the floor is shared)."""
+
+    def __init__(
+        self,
+        spec: VehicleSpec,
+        floor: FloorSpec,
+        path: VehiclePath,
+        n: int = 1,
+        *,
+        estimator: EstimatorFactory | None = None,
+        calibration: Calibration | None = None,
+        driver: VehicleDriver | None = None,
+        cables: CableLayer | None = None,
+    ) -> None:
+        if cables is not None and n != 1:
+            raise ValueError("cables are laid under one vehicle: use n=1")
+        self.spec, self.floor, self.path, self.n, self.cables = spec, floor, path, n, cables
+        trucks = [spec.truck_a, spec.truck_b] * n
+        links = [(2 * k, 2 * k + 1, spec.link_min, spec.link_max) for k in range(n)]
+        self.dt = spec.sample_period
+        self.world = World(trucks, floor, dt=self.dt, links=links)
+        start = np.tile(path.start_poses(spec.link_length), (n, 1, 1))
+        self.world.reset(start.reshape(2 * n, 3))
+        self.odometry = Odometry(trucks, calibration)
+        self.odometry.reset(start.reshape(2 * n, 3))
+        self.wheelbase = self.odometry.effective_wheelbase.reshape(n, 2)
+        self.estimator = (estimator or DeadReckoning)(self.wheelbase)
+        self.reading = link_readings(spec, self.world.pose.reshape(n, 2, 3))
+        self.estimator.reset(start.copy(), self.reading)
+        self.estimated = start.copy()
+        self.driver = driver or VehicleDriver()
+        self.driver.plan(path, n)
+        self._rate_per_speed = 1.0 / self.world.nominal_radius[:, None]
+        self._last_counts = self.world.counts.copy()
+        length = np.hypot(*(start[:, 0, :2] - start[:, 1, :2]).T)
+        self.link_range = np.stack([length, length], axis=1)
+        self.link_force = np.zeros(n)
+        self.corrections = np.zeros((n, 2))
+        self.steps = 0
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s]."""
+        return self.steps * self.dt
+
+    @property
+    def done(self) -> NDArray[np.bool_]:
+        """Vehicles that have driven the whole path."""
+        return self.driver.done()
+
+    @property
+    def truth(self) -> FloatArray:
+        """True truck poses (N, 2, 3) [m, m, rad]."""
+        return self.world.pose.reshape(self.n, 2, 3)
+
+    def step(self, speed: FloatArray | None = None) -> None:
+        """One sampling interval: lay a cable if one is due, steer, move, read the encoders
+        and update the estimate. ``speed``: see :meth:`VehicleDriver.act`."""
+        world, n = self.world, self.n
+        if self.cables is not None:
+            laid = self.cables(
+                self.driver.leg, self.path, world.pose[:2], self.spec.truck_a.true_wheelbase
+            )
+            if laid is not None:
+                world.lay_floor(laid.with_friction(self.floor.friction))
+        speeds = self.driver.act(
+            self.estimated,
+            self.reading.length,
+            self.spec.link_length,
+            0.5 * self.wheelbase,
+            self.dt,
+            speed,
+        )
+        world.step(speeds.reshape(2 * n, 2) * self._rate_per_speed)
+        counts = world.counts.copy()
+        travel = ((counts - self._last_counts) * self.odometry.travel_per_tick).reshape(n, 2, 2)
+        self._last_counts = counts
+        self.odometry.update(counts, self.dt)
+        truth = self.truth
+        self.reading = link_readings(self.spec, truth)
+        self.estimated = self.estimator.update(travel, self.reading)
+        self.corrections += self.estimator.correction
+        length = np.hypot(*(truth[:, 0, :2] - truth[:, 1, :2]).T)
+        self.link_range[:, 0] = np.minimum(self.link_range[:, 0], length)
+        self.link_range[:, 1] = np.maximum(self.link_range[:, 1], length)
+        self.link_force = np.maximum(self.link_force, world.link_forces())
+        self.steps += 1
+
+    def errors(self) -> tuple[FloatArray, FloatArray]:
+        """(vehicle error (N, 3), truck errors (N, 2, 3)): true minus estimated, headings
+        wrapped; the vehicle's pose is :func:`vehicle_pose`."""
+        truth = self.truth
+        trucks = truth - self.estimated
+        trucks[:, :, 2] = wrap_angle(trucks[:, :, 2])
+        vehicle = vehicle_pose(truth) - vehicle_pose(self.estimated)
+        vehicle[:, 2] = wrap_angle(vehicle[:, 2])
+        return vehicle, trucks
+
+    def outcome(self) -> VehicleOutcome:
+        """The state now, as a :class:`VehicleOutcome`."""
+        vehicle, trucks = self.errors()
+        return VehicleOutcome(
+            true_poses=self.truth.copy(),
+            estimated=self.estimated.copy(),
+            odometry=self.odometry.pose.reshape(self.n, 2, 3).copy(),
+            return_error=vehicle,
+            truck_errors=trucks,
+            link_range=self.link_range.copy(),
+            link_force=self.link_force.copy(),
+            corrections=self.corrections.copy(),
+            time=self.time,
+            finished=self.done.copy(),
+        )
+
+
 def drive_vehicles(
     spec: VehicleSpec,
     floor: FloorSpec,
@@ -484,72 +609,20 @@ def drive_vehicles(
     max_time: float | None = None,
     cables: CableLayer | None = None,
 ) -> VehicleOutcome:
-    """Drive ``n`` copies of the vehicle along ``path`` on ``floor`` (all in one World; they
-    start at the same place and never touch), steering by ``estimator``'s poses
-    (default: plain dead reckoning, i.e. without IPEC). ``cables`` lays cables under the
-    vehicle as it comes (one vehicle only: the floor is shared)."""
-    if cables is not None and n != 1:
-        raise ValueError("cables are laid under one vehicle: use n=1")
-    trucks = [spec.truck_a, spec.truck_b] * n
-    links = [(2 * k, 2 * k + 1, spec.link_min, spec.link_max) for k in range(n)]
-    dt = spec.sample_period
-    world = World(trucks, floor, dt=dt, links=links)
-    start = np.tile(path.start_poses(spec.link_length), (n, 1, 1))
-    world.reset(start.reshape(2 * n, 3))
-    odometry = Odometry(trucks, calibration)
-    odometry.reset(start.reshape(2 * n, 3))
-    wheelbase = odometry.effective_wheelbase.reshape(n, 2)
-    estimate_with = (estimator or DeadReckoning)(wheelbase)
-    reading = link_readings(spec, world.pose.reshape(n, 2, 3))
-    estimate_with.reset(start.copy(), reading)
-    estimated = start.copy()
-    drive = driver or VehicleDriver()
-    drive.plan(path, n)
-    per_tick = odometry.travel_per_tick
-    rate_per_speed = 1.0 / world.nominal_radius[:, None]
-    last_counts = world.counts.copy()
-    length = np.hypot(*(start[:, 0, :2] - start[:, 1, :2]).T)
-    link_range = np.stack([length, length], axis=1)
-    link_force = np.zeros(n)
-    corrections = np.zeros((n, 2))
-    total = sum(leg.length for leg in path.legs)
-    limit = max_time if max_time is not None else 3.0 * total / drive.cruise_speed + 60.0
-    steps = 0
-    while not drive.done().all() and steps * dt < limit:
-        if cables is not None:
-            floor_now = cables(drive.leg, path, world.pose[:2], spec.truck_a.true_wheelbase)
-            if floor_now is not None:
-                world.lay_floor(floor_now.with_friction(floor.friction))
-        speeds = drive.act(estimated, reading.length, spec.link_length, 0.5 * wheelbase, dt)
-        world.step(speeds.reshape(2 * n, 2) * rate_per_speed)
-        counts = world.counts.copy()
-        travel = ((counts - last_counts) * per_tick).reshape(n, 2, 2)
-        last_counts = counts
-        odometry.update(counts, dt)
-        truth = world.pose.reshape(n, 2, 3)
-        reading = link_readings(spec, truth)
-        estimated = estimate_with.update(travel, reading)
-        corrections += estimate_with.correction
-        length = np.hypot(*(truth[:, 0, :2] - truth[:, 1, :2]).T)
-        link_range[:, 0] = np.minimum(link_range[:, 0], length)
-        link_range[:, 1] = np.maximum(link_range[:, 1], length)
-        if world.links:
-            link_force = np.maximum(link_force, world.link_forces())
-        steps += 1
-    truth = world.pose.reshape(n, 2, 3).copy()
-    truck_errors = truth - estimated
-    truck_errors[:, :, 2] = wrap_angle(truck_errors[:, :, 2])
-    error = vehicle_pose(truth) - vehicle_pose(estimated)
-    error[:, 2] = wrap_angle(error[:, 2])
-    return VehicleOutcome(
-        true_poses=truth,
-        estimated=estimated.copy(),
-        odometry=odometry.pose.reshape(n, 2, 3).copy(),
-        return_error=error,
-        truck_errors=truck_errors,
-        link_range=link_range,
-        link_force=link_force,
-        corrections=corrections,
-        time=steps * dt,
-        finished=drive.done(),
+    """Drive a :class:`VehicleTrial` with the reference speed profile until every vehicle has
+    driven the path (or ``max_time`` [s], default three times the nominal duration + 60 s)."""
+    trial = VehicleTrial(
+        spec,
+        floor,
+        path,
+        n,
+        estimator=estimator,
+        calibration=calibration,
+        driver=driver,
+        cables=cables,
     )
+    total = sum(leg.length for leg in path.legs)
+    limit = max_time if max_time is not None else 3.0 * total / trial.driver.cruise_speed + 60.0
+    while not trial.done.all() and trial.time < limit:
+        trial.step()
+    return trial.outcome()

@@ -1,0 +1,253 @@
+"""``ClapperStraight-v0`` and ``ClapperRectangle-v0``: the CLAPPER's experiments of Borenstein
+1995, §6, as Gymnasium envs.
+
+The vehicle (:mod:`odomgym.vehicle`) is two LabMate trucks joined by a compliant linkage; it
+drives a programmed path (:mod:`odomgym.clapper`) and knows where it is only through its
+estimator: IPEC (``ipec=True``, :class:`odomgym.baselines.ipec.IPEC`) or each truck's plain
+wheel odometry (``ipec=False``), or any :class:`odomgym.internal.InternalEstimator` factory
+passed as ``estimator``.
+
+Spaces:
+    action: ``Box(0, 1, (1,))`` — the vehicle-level motion command: the speed along the
+        programmed path as a fraction of the cruise speed (0.45 m/s, §6: "slightly below
+        0.5 m/sec"). The low-level controller steers both trucks along the path by their
+        estimated poses and keeps the linkage near its centre; it slows for curves and stops
+        at the end of each leg whatever the action asks (a command cannot drive the trucks
+        into the bearing's stops).
+    observation: ``Box((12,), float32)`` — the estimated poses of truck A and B in the start
+        frame (x, y [m], θ [rad] each), the internal encoder readings (link length l [m],
+        ψ_A, ψ_B [rad]), the share of the path done, the leg (0, 1, …) and the reference
+        speed [m/s].
+
+Reward: the share of the path completed this step (1 in total), minus 0.001 per step; the
+truth is reported in ``info``, never rewarded (the vehicle cannot know it).
+
+Episode end: terminated when the path is driven (the vehicle stops at its end); truncated by
+the registered step limit (``max_episode_steps``).
+
+``info``: ``true_poses``, ``estimated_poses`` (IPEC-corrected with ``ipec=True``),
+``odometry_poses`` (each truck's own wheel odometry) — each (2, 3) for trucks A, B;
+``link_length`` [m] and ``psi`` (2,) [rad], the internal encoder readings;
+``correction`` (2,), the estimator's orientation corrections this step [rad];
+``vehicle_error`` (3,), true minus estimated pose of the vehicle (midpoint of the truck centres,
+heading of the link), and, on the last step, ``return_error`` (the same) and
+``truck_return_errors`` (2, 3).
+"""
+
+from __future__ import annotations
+
+from os import PathLike
+from typing import Any, Literal
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.clapper import (
+    CableLayer,
+    EstimatorFactory,
+    VehiclePath,
+    VehicleTrial,
+    evenly,
+    rectangle_cable_positions,
+    rectangle_path,
+    straight_path,
+)
+from odomgym.floor import FloorSpec, load_floor
+from odomgym.vehicle import VehicleSpec, load_vehicle
+
+__all__ = ["ClapperEnv", "ClapperRectangleEnv", "ClapperStraightEnv", "ipec_estimator"]
+
+FloatArray = NDArray[np.float64]
+
+
+def ipec_estimator() -> EstimatorFactory:
+    """The CLAPPER's IPEC: Borenstein 1995, Eqs. 9-16, dead reckoning along the mid-interval
+    heading, without the composite translational correction (Eqs. 14-15), which with 10-bit
+    readings fires at every count change of ψ_A in a turn (tests/test_clapper.py)."""
+    from functools import partial
+
+    from odomgym.baselines.ipec import IPEC
+
+    return partial(IPEC, heading="midpoint", translation_correction=False)
+
+
+class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """Base of the CLAPPER envs (module docstring): subclasses give the path and the cables."""
+
+    metadata = {"render_modes": [], "render_fps": 25}  # noqa: RUF012
+
+    def __init__(
+        self,
+        vehicle: VehicleSpec | str | PathLike[str] = "clapper",
+        floor: FloorSpec | str | PathLike[str] = "smooth",
+        *,
+        ipec: bool = True,
+        estimator: EstimatorFactory | None = None,
+    ) -> None:
+        self.vehicle = vehicle if isinstance(vehicle, VehicleSpec) else load_vehicle(str(vehicle))
+        self.floor = floor if isinstance(floor, FloorSpec) else load_floor(str(floor))
+        if estimator is not None and not callable(estimator):
+            raise ValueError("estimator must build an InternalEstimator from wheelbases (N, 2)")
+        self.ipec = bool(ipec)
+        self._estimator: EstimatorFactory | None = estimator or (
+            ipec_estimator() if self.ipec else None
+        )
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.vehicle.sample_period}
+        self.action_space = gym.spaces.Box(0.0, 1.0, shape=(1,), dtype=np.float32)
+        high = np.array([1e3, 1e3, 1e4, 1e3, 1e3, 1e4, 10.0, 4.0, 4.0, 1.0, 10.0, 10.0])
+        low = -high
+        low[[6, 9, 10, 11]] = 0.0
+        self.observation_space = gym.spaces.Box(
+            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
+        )
+        self._trial: VehicleTrial | None = None
+
+    # ------------------------------------------------------------------ to implement
+    def _path(self) -> VehiclePath:
+        raise NotImplementedError
+
+    def _cables(self, path: VehiclePath) -> CableLayer | None:
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        super().reset(seed=seed)
+        del options
+        path = self._path()
+        self._trial = VehicleTrial(
+            self.vehicle, self.floor, path, estimator=self._estimator, cables=self._cables(path)
+        )
+        self._total = sum(leg.length for leg in path.legs)
+        self._done_before = 0.0
+        return self._observation(), self._info(np.zeros(2), final=False)
+
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        trial = self._trial
+        if trial is None:
+            raise RuntimeError("call reset() before step()")
+        if trial.done.all():
+            raise RuntimeError("the episode has terminated; call reset() first")
+        command = np.array(action, dtype=np.float64).reshape(-1)
+        if command.shape != (1,) or not np.isfinite(command).all():
+            raise ValueError(f"action must be one finite number in [0, 1], got {action!r}")
+        trial.step(np.clip(command, 0.0, 1.0))
+        done_now = self._path_done()
+        reward = (done_now - self._done_before) / self._total - 0.001
+        self._done_before = done_now
+        terminated = bool(trial.done.all())
+        info = self._info(trial.estimator.correction[0], final=terminated)
+        return self._observation(), float(reward), terminated, False, info
+
+    # ------------------------------------------------------------------ helpers
+    def _path_done(self) -> float:
+        trial = self._trial
+        assert trial is not None
+        driver = trial.driver
+        legs = trial.path.legs
+        k = int(driver._leg[0])
+        before = sum(leg.length for leg in legs[:k])
+        return before + (float(driver._s[0]) if k < len(legs) else 0.0)
+
+    def _observation(self) -> NDArray[np.float32]:
+        trial = self._trial
+        assert trial is not None
+        driver = trial.driver
+        obs = np.concatenate(
+            [
+                trial.estimated[0].reshape(-1),
+                [trial.reading.length[0]],
+                trial.reading.psi[0],
+                [self._path_done() / self._total, float(driver._leg[0]), float(driver._v[0])],
+            ]
+        )
+        return obs.astype(np.float32)
+
+    def _info(self, correction: FloatArray, *, final: bool) -> dict[str, Any]:
+        trial = self._trial
+        assert trial is not None
+        vehicle, trucks = trial.errors()
+        info: dict[str, Any] = {
+            "true_poses": trial.truth[0].copy(),
+            "estimated_poses": trial.estimated[0].copy(),
+            "odometry_poses": trial.odometry.pose.reshape(trial.n, 2, 3)[0].copy(),
+            "link_length": float(trial.reading.length[0]),
+            "psi": trial.reading.psi[0].copy(),
+            "correction": np.asarray(correction, dtype=np.float64).copy(),
+            "vehicle_error": vehicle[0],
+            "time": trial.time,
+        }
+        if final:
+            info["return_error"] = vehicle[0].copy()
+            info["truck_return_errors"] = trucks[0].copy()
+        return info
+
+
+class ClapperStraightEnv(ClapperEnv):
+    """``ClapperStraight-v0``: 18 m straight forwards and 18 m back *backwards* (Borenstein
+    1995, §6.1), with ``bumps`` 10 mm cables laid under the right-side wheels on the return leg,
+    evenly spaced from 1.5 m to 16.5 m. Spaces, reward, end and ``info``: module docstring."""
+
+    def __init__(
+        self,
+        vehicle: VehicleSpec | str | PathLike[str] = "clapper",
+        floor: FloorSpec | str | PathLike[str] = "smooth",
+        *,
+        bumps: int = 10,
+        length: float = 18.0,
+        ipec: bool = True,
+        estimator: EstimatorFactory | None = None,
+    ) -> None:
+        if isinstance(bumps, bool) or int(bumps) != bumps or bumps < 0:
+            raise ValueError(f"bumps must be a whole number >= 0, got {bumps!r}")
+        if not length > 3.5:
+            raise ValueError(
+                f"length must exceed 3.5 m (cables sit 1.5 m from each end), got {length!r}"
+            )
+        self.bumps, self.length = int(bumps), float(length)
+        super().__init__(vehicle, floor, ipec=ipec, estimator=estimator)
+
+    def _path(self) -> VehiclePath:
+        return straight_path(self.length)
+
+    def _cables(self, path: VehiclePath) -> CableLayer | None:
+        return CableLayer(evenly(self.bumps, self.length), leg=1) if self.bumps else None
+
+
+class ClapperRectangleEnv(ClapperEnv):
+    """``ClapperRectangle-v0``: the 7×4 m rectangle with smooth 90° turns passing each corner
+    within 0.2 m without stopping (Borenstein 1995, §6.2), ``direction`` cw or ccw, with
+    ``bumps`` 10 mm cables under the ``side`` wheels on the straight parts. Spaces, reward, end
+    and ``info``: module docstring."""
+
+    def __init__(
+        self,
+        vehicle: VehicleSpec | str | PathLike[str] = "clapper",
+        floor: FloorSpec | str | PathLike[str] = "smooth",
+        *,
+        direction: Literal["cw", "ccw"] = "cw",
+        bumps: int = 10,
+        side: Literal["left", "right"] = "right",
+        ipec: bool = True,
+        estimator: EstimatorFactory | None = None,
+    ) -> None:
+        if direction not in ("cw", "ccw"):
+            raise ValueError(f"direction must be 'cw' or 'ccw', got {direction!r}")
+        if side not in ("left", "right"):
+            raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+        if isinstance(bumps, bool) or int(bumps) != bumps or bumps < 0:
+            raise ValueError(f"bumps must be a whole number >= 0, got {bumps!r}")
+        self.direction, self.bumps, self.side = direction, int(bumps), side
+        super().__init__(vehicle, floor, ipec=ipec, estimator=estimator)
+
+    def _path(self) -> VehiclePath:
+        return rectangle_path(direction=self.direction)
+
+    def _cables(self, path: VehiclePath) -> CableLayer | None:
+        if not self.bumps:
+            return None
+        return CableLayer(rectangle_cable_positions(path, self.bumps), leg=0, side=self.side)
