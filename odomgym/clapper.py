@@ -46,6 +46,7 @@ __all__ = [
     "VehicleOutcome",
     "VehiclePath",
     "VehicleTrial",
+    "circle_path",
     "drive_vehicles",
     "evenly",
     "rectangle_path",
@@ -93,11 +94,13 @@ class VehiclePath:
         return np.stack([a, b])
 
 
-def straight_path(length: float = 18.0, spacing: float = 0.05) -> VehiclePath:
-    """Out ``length`` metres along +x, then back the same way *backwards* (Borenstein 1995,
-    §6.1: "traveled straight forward for 18 m, stopped, and returned straight-backward")."""
+def straight_path(length: float = 18.0, spacing: float = 0.05, back: bool = True) -> VehiclePath:
+    """Out ``length`` metres along +x, then (``back``) the same way *backwards* (Borenstein
+    1995, §6.1: "traveled straight forward for 18 m, stopped, and returned straight-backward")."""
     count = max(2, round(length / spacing) + 1)
     out = np.stack([np.linspace(0.0, length, count), np.zeros(count)], axis=1)
+    if not back:
+        return VehiclePath((Leg(out, 1.0),), f"straight-{length:g}m-out")
     return VehiclePath((Leg(out, 1.0), Leg(out[::-1].copy(), -1.0)), f"straight-{length:g}m")
 
 
@@ -133,6 +136,28 @@ def rectangle_path(
     points.append((width / 2.0, 0.0))
     dense = _densify(np.array(points), spacing)
     return VehiclePath((Leg(dense, 1.0),), f"rectangle-{width:g}x{height:g}m-{direction}")
+
+
+def circle_path(
+    radius: float = 2.0,
+    turns: float = 1.0,
+    direction: Literal["cw", "ccw"] = "ccw",
+    spacing: float = 0.02,
+) -> VehiclePath:
+    """``turns`` full circles of ``radius`` [m], preceded by a 1.5 m straight run-in and
+    followed by a 1.5 m run-out along the same line, so the vehicle ends heading as it started
+    after turning ``turns`` × 360° (the link-length bias experiment of Borenstein 1995,
+    §5.2)."""
+    if not radius > 0.6:
+        raise ValueError(f"radius must exceed 0.6 m (the trucks are 1 m apart), got {radius}")
+    sign = 1.0 if direction == "ccw" else -1.0
+    run = np.stack([np.linspace(0.0, 1.5, 76), np.zeros(76)], axis=1)
+    count = max(8, math.ceil(2.0 * math.pi * radius * turns / spacing))
+    angles = np.linspace(0.0, 2.0 * math.pi * turns, count + 1)[1:]
+    arc = np.stack([1.5 + radius * np.sin(angles), sign * radius * (1.0 - np.cos(angles))], axis=1)
+    out = np.stack([np.linspace(1.5, 3.0, 76)[1:], np.zeros(75)], axis=1)
+    points = np.concatenate([run, arc, out])
+    return VehiclePath((Leg(points, 1.0),), f"circle-{radius:g}m-{turns:g}x-{direction}")
 
 
 def _densify(points: FloatArray, spacing: float) -> FloatArray:
@@ -482,7 +507,8 @@ class VehicleTrial:
     """N copies of a vehicle driving ``path`` on ``floor`` in one World (they start at the same
     place and never touch), steered by ``estimator``'s poses (default: plain dead reckoning,
     i.e. without IPEC), one sampling interval T_s per :meth:`step`. ``cables`` lays cables as
-    the vehicle comes (one vehicle only: the floor is shared)."""
+    the vehicle comes (one vehicle only: the floor is shared); ``rng`` feeds a rough floor's
+    wheel noise."""
 
     def __init__(
         self,
@@ -495,6 +521,7 @@ class VehicleTrial:
         calibration: Calibration | None = None,
         driver: VehicleDriver | None = None,
         cables: CableLayer | None = None,
+        rng: np.random.Generator | None = None,
     ) -> None:
         if cables is not None and n != 1:
             raise ValueError("cables are laid under one vehicle: use n=1")
@@ -502,7 +529,7 @@ class VehicleTrial:
         trucks = [spec.truck_a, spec.truck_b] * n
         links = [(2 * k, 2 * k + 1, spec.link_min, spec.link_max) for k in range(n)]
         self.dt = spec.sample_period
-        self.world = World(trucks, floor, dt=self.dt, links=links)
+        self.world = World(trucks, floor, dt=self.dt, links=links, rng=rng)
         start = np.tile(path.start_poses(spec.link_length), (n, 1, 1))
         self.world.reset(start.reshape(2 * n, 3))
         self.odometry = Odometry(trucks, calibration)
@@ -608,6 +635,7 @@ def drive_vehicles(
     driver: VehicleDriver | None = None,
     max_time: float | None = None,
     cables: CableLayer | None = None,
+    rng: np.random.Generator | None = None,
 ) -> VehicleOutcome:
     """Drive a :class:`VehicleTrial` with the reference speed profile until every vehicle has
     driven the path (or ``max_time`` [s], default three times the nominal duration + 60 s)."""
