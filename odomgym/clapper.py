@@ -23,6 +23,7 @@ Units: metres, radians, seconds.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Callable
@@ -194,9 +195,9 @@ class CableLayer:
 
     def __call__(
         self, leg: int, path: VehiclePath, truth: FloatArray, track: float
-    ) -> FloorSpec | None:
-        """A new floor if a cable is due (``truth``: true truck poses (2, 3); ``track``: the
-        truck's wheel track [m]), else None."""
+    ) -> tuple[CableBump, ...] | None:
+        """Every cable laid so far if a new one is due (``truth``: true truck poses (2, 3);
+        ``track``: the truck's wheel track [m]), else None."""
         if leg != self.leg or len(self.laid) >= len(self.at):
             return None
         points = path.legs[leg].points
@@ -240,7 +241,7 @@ class CableLayer:
                 length=0.5 * track,
             )
         )
-        return FloorSpec(friction=0.8, bumps=tuple(self.laid), name="cables")
+        return tuple(self.laid)
 
 
 def rectangle_cable_positions(
@@ -572,8 +573,8 @@ class VehicleTrial:
             laid = self.cables(
                 self.driver.leg, self.path, world.pose[:2], self.spec.truck_a.true_wheelbase
             )
-            if laid is not None:
-                world.lay_floor(laid.with_friction(self.floor.friction))
+            if laid is not None:  # the floor as it was, plus the cables laid so far
+                world.lay_floor(dataclasses.replace(self.floor, bumps=self.floor.bumps + laid))
         speeds = self.driver.act(
             self.estimated,
             self.reading.length,
@@ -648,6 +649,7 @@ def drive_vehicles(
         calibration=calibration,
         driver=driver,
         cables=cables,
+        rng=rng,
     )
     total = sum(leg.length for leg in path.legs)
     limit = max_time if max_time is not None else 3.0 * total / trial.driver.cruise_speed + 60.0

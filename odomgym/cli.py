@@ -598,7 +598,10 @@ def _add_run_parsers(commands: Any) -> None:
         "errors (true - odometry end pose, start frame).",
     )
     routes = run.add_subparsers(
-        dest="path", required=True, metavar="ROUTE", help="what to drive: square or straight"
+        dest="path",
+        required=True,
+        metavar="ROUTE",
+        help="what to drive: square, straight, clapper-straight or clapper-rectangle",
     )
     square = routes.add_parser(
         "square",
@@ -637,6 +640,123 @@ def _add_run_parsers(commands: Any) -> None:
     )
     _add_run_outputs(straight)
     straight.set_defaults(handler=_command_run)
+    _add_clapper_parsers(routes)
+
+
+def _command_clapper(args: argparse.Namespace) -> int:
+    from odomgym.clapper_runs import format_clapper_runs, plot_clapper_runs, run_clapper, summarize
+    from odomgym.envs.clapper import ipec_estimator
+    from odomgym.vehicle import load_vehicle
+
+    _check_plot_path(args.plot)
+    spec = load_vehicle(args.vehicle)
+    floor: FloorSpec = load_floor(args.floor)
+    experiment = "straight" if args.path == "clapper-straight" else "rectangle"
+    modes = (False, True) if args.ipec is None else (bool(args.ipec),)
+    direction = getattr(args, "direction", "cw")
+    directions = ("cw", "ccw") if direction == "both" else (direction,)
+    side = getattr(args, "side", "right")
+    sides = ("right", "left") if side == "both" else (side,)
+    bar = _progress_bar(not args.json and sys.stderr.isatty())
+
+    def progress(done: int, total: int) -> None:
+        bar.n = int(100 * done / total)
+        bar.refresh()
+
+    try:
+        runs = run_clapper(
+            spec,
+            floor,
+            experiment,  # type: ignore[arg-type]
+            ipec_modes=modes,
+            directions=directions,
+            bumps=args.bumps,
+            sides=sides,
+            runs=args.runs,
+            seed=args.seed,
+            ipec=ipec_estimator(),
+            progress=progress,
+        )
+    finally:
+        bar.close()
+    if args.json:
+        for run in runs:
+            print(to_json(run.record()))
+        print(to_json({"summary": summarize(runs)}))
+    else:
+        print(
+            f"vehicle {spec.name}: trucks {spec.truck_a.name}/{spec.truck_b.name}, link "
+            f"{spec.link_length:g} m; floor {floor.name}; {experiment}, {args.bumps} bumps"
+        )
+        print("return errors (true - estimated; vehicle = midpoint of the trucks, link heading)")
+        print(format_clapper_runs(runs))
+    written: list[str] = []
+    if args.plot:
+        title = f"CLAPPER {experiment}: return errors, {args.bumps} bumps, {floor.name} floor"
+        plot_clapper_runs(Path(args.plot), runs, title)
+        written.append(args.plot)
+    _report_written(args, written)
+    return 0
+
+
+def _add_clapper_parsers(routes: Any) -> None:
+    for name, what in (
+        (
+            "clapper-straight",
+            "18 m straight out and back backwards, cables on the return leg "
+            "under the right-side wheels (Borenstein 1995, §6.1)",
+        ),
+        (
+            "clapper-rectangle",
+            "the 7x4 m rectangle with smooth turns, cables under one side (Borenstein 1995, §6.2)",
+        ),
+    ):
+        parser = routes.add_parser(
+            name,
+            help=f"the CLAPPER two-truck vehicle with/without IPEC: {what}",
+            description=f"Drive the CLAPPER (two trucks, compliant linkage) {what}, with and "
+            "without internal position error correction (IPEC), and report the return errors "
+            "and the average absolute orientation errors.",
+        )
+        parser.add_argument(
+            "--vehicle", default="clapper", help="vehicle preset (clapper) or vehicle .toml file"
+        )
+        parser.add_argument(
+            "--floor", default="concrete", help=_floor_help() + " (default concrete)"
+        )
+        parser.add_argument(
+            "--bumps", type=_seed, default=10, help="10 mm cables to cross, 0 or more (default 10)"
+        )
+        parser.add_argument(
+            "--ipec",
+            action=argparse.BooleanOptionalAction,
+            default=None,
+            help="only runs with (--ipec) or without (--no-ipec) IPEC (default: both)",
+        )
+        if name == "clapper-rectangle":
+            parser.add_argument(
+                "--direction",
+                choices=["cw", "ccw", "both"],
+                default="both",
+                help="driving direction (default both)",
+            )
+            parser.add_argument(
+                "--side",
+                choices=["right", "left", "both"],
+                default="both",
+                help="cables under the right or left wheels (default both: alternating runs)",
+            )
+        parser.add_argument(
+            "--runs", type=_count, default=3, help="runs per mode and direction (default 3)"
+        )
+        parser.add_argument("--seed", type=_seed, default=0, help="seed of the floor noise")
+        parser.add_argument(
+            "--json", action="store_true", help="print JSON lines (one per run, then a summary)"
+        )
+        parser.add_argument(
+            "--plot", help="write the return-error figure (like the paper's Figs. 8/10) here"
+        )
+        parser.set_defaults(handler=_command_clapper)
 
 
 def build_parser() -> argparse.ArgumentParser:
