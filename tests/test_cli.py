@@ -461,9 +461,8 @@ def test_floor_help_lists_every_floor_each_command_accepts() -> None:
                 accepted = BENCH_FLOORS if name == "odomgym bench" else FLOORS
                 assert all(floor in action.help for floor in accepted), (name, action.help)
                 checked += 1
-    assert checked == 6  # run square, straight, clapper-straight, clapper-rectangle; calibrate; bench
-        checked == 6
-    )  # run square, run straight, calibrate, bench, run clapper-straight/rectangle
+    # run square, straight, clapper-straight and clapper-rectangle; calibrate; bench
+    assert checked == 6
     assert "concrete" in FLOORS  # the README calibrates on it
 
 
