@@ -149,9 +149,9 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         assert trial is not None
         driver = trial.driver
         legs = trial.path.legs
-        k = int(driver._leg[0])
+        k = int(driver.legs_done[0])
         before = sum(leg.length for leg in legs[:k])
-        return before + (float(driver._s[0]) if k < len(legs) else 0.0)
+        return before + (float(driver.reference_arc[0]) if k < len(legs) else 0.0)
 
     def _observation(self) -> NDArray[np.float32]:
         trial = self._trial
@@ -162,7 +162,11 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
                 trial.estimated[0].reshape(-1),
                 [trial.reading.length[0]],
                 trial.reading.psi[0],
-                [self._path_done() / self._total, float(driver._leg[0]), float(driver._v[0])],
+                [
+                    self._path_done() / self._total,
+                    float(driver.legs_done[0]),
+                    float(driver.reference_speed[0]),
+                ],
             ]
         )
         return obs.astype(np.float32)

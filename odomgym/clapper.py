@@ -343,6 +343,21 @@ class VehicleDriver:
         return np.asarray(self._leg >= len(self._path.legs))
 
     @property
+    def legs_done(self) -> NDArray[np.int64]:
+        """Index of the leg each vehicle is on (N,); the number of legs once it has finished."""
+        return self._leg
+
+    @property
+    def reference_arc(self) -> FloatArray:
+        """Arc length of truck A's reference along its current leg (N,) [m]."""
+        return self._s
+
+    @property
+    def reference_speed(self) -> FloatArray:
+        """Speed of truck A's reference (N,) [m/s]."""
+        return self._v
+
+    @property
     def leg(self) -> int:
         """The leg every vehicle is on or has finished (vehicles wait at the end of a leg
         until all have arrived, so that the floor can change between legs)."""
