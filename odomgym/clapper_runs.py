@@ -30,7 +30,7 @@ from odomgym.clapper import (
     straight_path,
 )
 from odomgym.floor import FloorSpec
-from odomgym.io import atomic_writer
+from odomgym.report import save_error_axes
 from odomgym.vehicle import VehicleSpec
 
 __all__ = ["ClapperRun", "format_clapper_runs", "plot_clapper_runs", "run_clapper"]
@@ -181,17 +181,4 @@ def plot_clapper_runs(path: Path, runs: Sequence[ClapperRun], title: str) -> Non
         ax.scatter(
             e[:, 0], e[:, 1], marker=marker, color=colour, label=f"{label}: |θ| avg {mean:.2f}°"
         )
-    ax.axhline(0.0, color="0.7", lw=0.8)
-    ax.axvline(0.0, color="0.7", lw=0.8)
-    ax.set_xlabel("return error x [mm]")
-    ax.set_ylabel("return error y [mm]")
-    ax.set_title(title)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-
-    def write(tmp: Path) -> None:
-        fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png")
-
-    atomic_writer(path, write)
+    save_error_axes(fig, ax, path, title)

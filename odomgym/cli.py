@@ -187,10 +187,10 @@ def _check_methods(methods: Sequence[str] | None) -> None:
         )
 
 
-def _floor_help() -> str:
+def _floor_help(default: str = "smooth") -> str:
     return (
         f"floor: a preset ({', '.join(FLOORS)}; smooth has no wheel noise, concrete is a lab "
-        "floor, bumpy one fixed cable layout) or a floor .toml file (default smooth)"
+        f"floor, bumpy one fixed cable layout) or a floor .toml file (default {default})"
     )
 
 
@@ -721,9 +721,7 @@ def _add_clapper_parsers(routes: Any) -> None:
         parser.add_argument(
             "--vehicle", default="clapper", help="vehicle preset (clapper) or vehicle .toml file"
         )
-        parser.add_argument(
-            "--floor", default="concrete", help=_floor_help() + " (default concrete)"
-        )
+        parser.add_argument("--floor", default="concrete", help=_floor_help("concrete"))
         parser.add_argument(
             "--bumps", type=_seed, default=10, help="10 mm cables to cross, 0 or more (default 10)"
         )

@@ -116,6 +116,12 @@ def plot_return_errors(
             ax.plot(cg[0], cg[1], marker="+", color=colour, markersize=16, mew=2)
         if len(cw) and len(ccw):
             ax.plot([], [], " ", label=f"{label}: E_max,syst = {1e3 * e_max_syst(cw, ccw):.1f} mm")
+    save_error_axes(fig, ax, path, title)
+
+
+def save_error_axes(fig: Any, ax: Any, path: Path, title: str) -> None:
+    """Finish a return-position-error scatter (axes through zero, labels in mm, equal scale,
+    legend) and write the figure to ``path`` atomically, in the format its suffix names."""
     ax.axhline(0.0, color="0.7", lw=0.8)
     ax.axvline(0.0, color="0.7", lw=0.8)
     ax.set_xlabel("return error x [mm]")

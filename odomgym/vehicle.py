@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -134,11 +135,26 @@ class VehicleSpec:
         for key in ("truck_a", "truck_b"):
             value = table.get(key, "labmate")
             if isinstance(value, Mapping):
-                table[key] = RobotSpec.from_dict(value, path=path)
+                try:
+                    table[key] = RobotSpec.from_dict(value)
+                except SpecError as exc:
+                    # Name the truck, and find the line inside its own [vehicle.TRUCK] table.
+                    raise SpecError(
+                        f"{key}.{exc}".replace(f"{key}.{exc.source}: ", f"{key}."),
+                        field=f"{key}.{exc.field}" if exc.field else key,
+                        source=_locate_in_table(path, key, exc.field) if path else None,
+                    ) from None
             elif isinstance(value, str):
                 candidate = Path(value)
                 if path is not None and not candidate.is_absolute() and value not in PRESETS:
                     candidate = path.parent / candidate
+                if value not in PRESETS and candidate.suffix != ".toml":
+                    raise SpecError(
+                        f"{key}: unknown robot preset {value!r}; presets: "
+                        f"{', '.join(sorted(PRESETS))}, or a robot .toml file",
+                        field=key,
+                        source=where(key),
+                    )
                 table[key] = load_robot(value if value in PRESETS else candidate)
             else:
                 raise SpecError(
@@ -168,6 +184,27 @@ class VehicleSpec:
         import tomli_w
 
         atomic_write_text(Path(path), tomli_w.dumps({"vehicle": self.to_dict()}))
+
+
+def _locate_in_table(path: Path, table: str, key: str | None) -> str:
+    """``"file:line"`` of ``key`` inside the ``[vehicle.TABLE]`` (or ``[TABLE]``) table, or of
+    the table's header; the file alone if neither shows."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError:
+        return str(path)
+    header = re.compile(rf"^\s*\[\s*(?:vehicle\.)?{re.escape(table)}\s*\]")
+    start = next((n for n, line in enumerate(lines) if header.match(line)), None)
+    if start is None:
+        return str(path)
+    if key:
+        leaf = re.compile(rf"^\s*{re.escape(key.split('.')[-1])}\s*=")
+        for n in range(start + 1, len(lines)):
+            if lines[n].lstrip().startswith("["):
+                break
+            if leaf.match(lines[n]):
+                return f"{path}:{n + 1}"
+    return f"{path}:{start + 1}"
 
 
 def load_vehicle(spec: str | Path) -> VehicleSpec:

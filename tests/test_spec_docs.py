@@ -4,7 +4,8 @@ and the error messages it quotes are the ones the loaders and the CLI produce.
 
 Conventions of the doc that this test relies on:
 
-* every ```toml block starts with ``# robot spec``, ``# floor spec`` or ``# calibration file``;
+* every ```toml block starts with ``# robot spec``, ``# floor spec``, ``# calibration file`` or
+  ``# vehicle spec``;
   an invalid example adds `` (invalid): FILE.toml`` and is followed by a ```text block holding
   ``odomgym.errors.SpecError: MESSAGE`` for that file name;
 * a ```console block line ``$ odomgym …`` followed by output lines is a command whose stderr is
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 import re
 import shlex
 import tomllib
@@ -30,6 +32,7 @@ from odomgym.errors import SpecError
 from odomgym.floor import FLOORS, CableBump, FloorSpec, FrictionPatch, load_floor
 from odomgym.odometry import Calibration, load_calibration
 from odomgym.robot import PRESETS, RobotSpec, load_robot
+from odomgym.vehicle import VEHICLES, VehicleSpec, load_vehicle
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "specs.md"
 TEXT = DOC.read_text(encoding="utf-8")
@@ -38,9 +41,17 @@ LOADERS: dict[str, Callable[[str], Any]] = {
     "robot spec": load_robot,
     "floor spec": load_floor,
     "calibration file": load_calibration,
+    "vehicle spec": load_vehicle,
 }
-TOP_TABLE = {"robot spec": "robot", "floor spec": "floor", "calibration file": "calibration"}
-MARKER = re.compile(r"# (robot spec|floor spec|calibration file)(?: \(invalid\): (\S+\.toml))?")
+TOP_TABLE = {
+    "robot spec": "robot",
+    "floor spec": "floor",
+    "calibration file": "calibration",
+    "vehicle spec": "vehicle",
+}
+MARKER = re.compile(
+    r"# (robot spec|floor spec|calibration file|vehicle spec)(?: \(invalid\): (\S+\.toml))?"
+)
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```$", re.MULTILINE | re.DOTALL)
 ERROR_PREFIX = f"{SpecError.__module__}.{SpecError.__qualname__}: "
 
@@ -51,6 +62,10 @@ MINIMAL_PATCH = (
     "[[floor.patches]]\nx_min = 0.0\ny_min = 0.0\nx_max = 1.0\ny_max = 1.0\nfriction = 0.5\n"
 )
 REQUIRED_ROBOT = {"wheel_diameter", "wheelbase", "ticks_per_rev"}
+TRUCKS = ("truck_a", "truck_b")
+# One-key vehicle files: link_length must stay strictly inside (link_min, link_max), by default
+# (0.9, 1.1), and link_max above the default link_length 1; other floats take 0.3.
+VEHICLE_VALUES = {"link_length": "1.05", "link_max": "1.3"}
 
 
 # ---------------------------------------------------------------------- parsing the doc
@@ -115,10 +130,19 @@ def _keyed(marker: str) -> dict[str, list[str]]:
 
 
 # ---------------------------------------------------------------------- the examples load
-def _assert_written(spec: Any, table: Mapping[str, Any], kind: str) -> None:
-    """Every value written in ``table`` is what the loaded ``spec`` holds."""
+def _assert_written(spec: Any, table: Mapping[str, Any], kind: str, base: Path) -> None:
+    """Every value written in ``table`` is what the loaded ``spec`` holds (``base``: the
+    directory of the file, against which a vehicle resolves a truck's relative path)."""
     for key, value in table.items():
-        if kind == "robot spec" and key == "effects":
+        if kind == "vehicle spec" and key in TRUCKS:
+            truck = getattr(spec, key)
+            if isinstance(value, Mapping):  # an inline robot spec
+                _assert_written(truck, value, "robot spec", base)
+            elif value in PRESETS:
+                assert truck == PRESETS[value], key
+            else:  # a robot file next to the vehicle file
+                assert truck == load_robot(base / value), key
+        elif kind == "robot spec" and key == "effects":
             for name, values in value.items():
                 stored = EFFECTS[name].read(spec)
                 for param, number in values.items():
@@ -145,7 +169,7 @@ def test_example_loads_with_the_values_written(kind: str, text: str, tmp_path: P
     data = tomllib.loads(text)
     table = data.get(TOP_TABLE[kind], data)
     assert len(table) >= 4, "a worked example should spell out its keys"
-    _assert_written(spec, table, kind)
+    _assert_written(spec, table, kind, tmp_path)
 
 
 def test_every_schema_has_a_worked_example_and_an_error_example() -> None:
@@ -154,7 +178,8 @@ def test_every_schema_has_a_worked_example_and_an_error_example() -> None:
 
 
 def test_the_worked_examples_carry_their_paper_values(tmp_path: Path) -> None:
-    """Spot checks of the complete robot, floor and calibration examples (the first of each)."""
+    """Spot checks of the complete robot, floor, calibration and vehicle examples (the first of
+    each)."""
     spec = {}
     for kind, text in VALID:
         if kind in spec:
@@ -171,6 +196,14 @@ def test_the_worked_examples_carry_their_paper_values(tmp_path: Path) -> None:
     calibration: Calibration = spec["calibration file"]
     # Borenstein & Feng 1994, Eqs. 6.33-6.34 with E_d = 1.00084 (Fig. 6.5).
     assert calibration == Calibration.from_errors(e_d=1.00084, e_b=336.17 / 340.0)
+    vehicle: VehicleSpec = spec["vehicle spec"]
+    assert vehicle.truck_a == PRESETS["labmate"]  # Borenstein 1995, §2: LabMate trucks
+    assert vehicle.truck_b.wheel_diameter == 0.15 and vehicle.truck_b.wheelbase == 0.34  # Table I
+    assert vehicle.link_length == 1.0  # §3.3
+    assert vehicle.sample_period == 0.04  # §4.1
+    assert math.degrees(vehicle.rotary_resolution) == pytest.approx(0.35, abs=0.005)  # §2
+    assert vehicle.linear_resolution == 1e-4  # §2
+    assert vehicle.linear_bias == 0.002  # §5.2
 
 
 # ---------------------------------------------------------------------- the errors are real
@@ -248,6 +281,7 @@ DATACLASS_TABLES = {
     "floor.bumps": CableBump,
     "floor.patches": FrictionPatch,
     "calibration": Calibration,
+    "vehicle": VehicleSpec,
 }
 
 
@@ -255,7 +289,9 @@ def test_robot_table_lists_exactly_the_keys_load_robot_accepts() -> None:
     assert set(_keyed("keys: robot")) == _robot_keys()
 
 
-@pytest.mark.parametrize("marker", ["floor", "floor.bumps", "floor.patches", "calibration"])
+@pytest.mark.parametrize(
+    "marker", ["floor", "floor.bumps", "floor.patches", "calibration", "vehicle"]
+)
 def test_table_lists_exactly_the_dataclass_fields(marker: str) -> None:
     assert set(_keyed(f"keys: {marker}")) == set(_fields(DATACLASS_TABLES[marker]))
 
@@ -264,17 +300,22 @@ def test_table_lists_exactly_the_dataclass_fields(marker: str) -> None:
 def test_documented_defaults_are_the_code_defaults(marker: str) -> None:
     """Column 4 (default): ``required`` for arguments without a default, the literal default
     otherwise (derived defaults, ``None`` in the signature, are described in words and not
-    checked). Defaults come from the constructor's signature, generated or written out."""
+    checked). Defaults come from the constructor's signature, generated or written out; the
+    vehicle's trucks, required by ``VehicleSpec``, get their default from the loader."""
     rows = _keyed(f"keys: {marker}")
     parameters = inspect.signature(DATACLASS_TABLES[marker]).parameters
     for name in _fields(DATACLASS_TABLES[marker]):
         cell = rows[name][3]
         default = parameters[name].default
-        if default is inspect.Parameter.empty:
+        if marker == "vehicle" and name in TRUCKS:
+            truck = getattr(VehicleSpec.from_dict({}), name)
+            assert truck == PRESETS[truck.name], name
+            assert cell == f'`"{truck.name}"`', name
+        elif default is inspect.Parameter.empty:
             assert cell == "required", name
         elif isinstance(default, str):
             assert cell == f'`"{default}"`', name
-        elif isinstance(default, float):
+        elif isinstance(default, int | float) and not isinstance(default, bool):
             assert f"{default:g}" in cell, (name, cell)
 
 
@@ -306,6 +347,8 @@ def test_effects_table_matches_the_catalogue() -> None:
 def _one_key(marker: str, key: str, type_cell: str) -> tuple[Callable[[str], Any], str]:
     """A minimal valid file that sets documented ``key`` (of type ``type_cell``)."""
     value = '"x"' if type_cell == "string" else "0.3"
+    if marker == "vehicle":
+        value = "12" if type_cell == "int" else VEHICLE_VALUES.get(key, value)
     line = f"{key} = {value}\n"
     if marker == "robot":
         return load_robot, MINIMAL_ROBOT + ("" if key in REQUIRED_ROBOT else line)
@@ -315,6 +358,8 @@ def _one_key(marker: str, key: str, type_cell: str) -> tuple[Callable[[str], Any
         return load_floor, MINIMAL_BUMP + ("" if key in ("x", "y") else line)
     if marker == "floor.patches":
         return load_floor, MINIMAL_PATCH  # every patch key is required, so all are set
+    if marker == "vehicle":
+        return load_vehicle, "[vehicle]\n" + line
     return load_calibration, "[calibration]\n" + line
 
 
@@ -322,12 +367,14 @@ def _one_key(marker: str, key: str, type_cell: str) -> tuple[Callable[[str], Any
 def test_every_documented_scalar_key_is_accepted_by_its_loader(marker: str, tmp_path: Path) -> None:
     checked = 0
     for key, row in _keyed(f"keys: {marker}").items():
-        if row[1] not in ("float", "string"):
-            continue  # tables and arrays of tables: the worked examples load them
+        if row[1] not in ("float", "int", "string"):
+            continue  # tables, arrays of tables, trucks: the worked examples load them
         loader, text = _one_key(marker, key, row[1])
         path = tmp_path / f"{marker}-{key}.toml"
         path.write_text(text, encoding="utf-8")
-        loader(str(path))
+        spec = loader(str(path))
+        if marker == "vehicle":
+            assert getattr(spec, key) == tomllib.loads(text)["vehicle"][key], key
         checked += 1
     assert checked >= 4 or marker == "floor"
 
@@ -350,12 +397,39 @@ def test_an_undocumented_key_is_rejected(tmp_path: Path) -> None:
         (load_floor, MINIMAL_BUMP + "width = 1.0\n"),
         (load_calibration, "[calibration]\nc_rigth = 1.0\n"),
         (load_robot, MINIMAL_ROBOT + "[effects.backlash]\nwidth = 0.1\n"),
+        (load_vehicle, "[vehicle]\nlink_lenght = 1.0\n"),
+        (load_vehicle, "[vehicle.truck_b]\n" + MINIMAL_ROBOT + "wheel_base = 0.3\n"),
     ]
     for index, (loader, text) in enumerate(cases):
         path = tmp_path / f"bad{index}.toml"
         path.write_text(text, encoding="utf-8")
         with pytest.raises(SpecError, match="unknown"):
             loader(str(path))
+
+
+def test_a_truck_is_a_preset_a_file_next_to_the_vehicle_or_a_table(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The ``truck_a`` / ``truck_b`` row: a preset name, a robot file relative to the vehicle
+    file (not to the working directory), or an inline robot table."""
+    folder = tmp_path / "vehicles"
+    folder.mkdir()
+    (folder / "rear.toml").write_text(f'[robot]\nname = "rear"\n{MINIMAL_ROBOT}', encoding="utf-8")
+    monkeypatch.chdir(tmp_path)  # rear.toml is not in the working directory
+    cases = {
+        'truck_a = "navbot"\ntruck_b = "rear.toml"\n': ("navbot", "rear"),
+        f'truck_a = "monash"\n[vehicle.truck_b]\nname = "inline"\n{MINIMAL_ROBOT}': (
+            "monash",
+            "inline",
+        ),
+    }
+    for index, (body, names) in enumerate(cases.items()):
+        path = folder / f"vehicle{index}.toml"
+        path.write_text(f"[vehicle]\n{body}", encoding="utf-8")
+        vehicle = load_vehicle(str(path.relative_to(tmp_path)))
+        assert (vehicle.truck_a.name, vehicle.truck_b.name) == names
+        assert vehicle.truck_a == PRESETS[names[0]]
+    assert load_vehicle("vehicles/vehicle0.toml").truck_b == load_robot(folder / "rear.toml")
 
 
 # ---------------------------------------------------------------------- presets
@@ -380,6 +454,27 @@ def test_floor_presets_table_matches_odomgym_floors() -> None:
         assert row[1:4] == [f"{floor.friction:g}", f"{floor.roughness:g}", str(len(floor.bumps))]
 
 
+def test_vehicle_presets_table_matches_odomgym_vehicles() -> None:
+    rows = _keyed("presets: vehicle")
+    assert set(rows) == set(VEHICLES)
+    for name, vehicle in VEHICLES.items():
+        row = rows[name]
+        assert row[1:3] == [f"`{vehicle.truck_a.name}`", f"`{vehicle.truck_b.name}`"], name
+        assert vehicle.trucks == (PRESETS[vehicle.truck_a.name], PRESETS[vehicle.truck_b.name])
+        numbers = (
+            vehicle.link_length,
+            vehicle.link_min,
+            vehicle.link_max,
+            vehicle.sample_period,
+            vehicle.rotary_bits,
+            vehicle.linear_resolution,
+        )
+        assert row[3:9] == [f"{x:g}" for x in numbers], name
+        if "no encoder biases" in row[9]:  # the source column says so
+            biases = (vehicle.rotary_bias_a, vehicle.rotary_bias_b, vehicle.linear_bias)
+            assert biases == (0.0, 0.0, 0.0), name
+
+
 # ---------------------------------------------------------------------- passing a spec
 def test_envs_take_the_example_files_as_strings(tmp_path: Path) -> None:
     """The Python section: ``gymnasium.make(..., robot=, floor=, calibration=)`` with paths."""
@@ -400,5 +495,11 @@ def test_envs_take_the_example_files_as_strings(tmp_path: Path) -> None:
         assert env.unwrapped.robot == load_robot(str(paths["robot spec"]))
         assert env.unwrapped.floor == load_floor(str(paths["floor spec"]))
         assert env.unwrapped.calibration == load_calibration(str(paths["calibration file"]))
+    finally:
+        env.close()
+    # The vehicle section: gymnasium.make("ClapperStraight-v0", vehicle="my_vehicle.toml").
+    env = gymnasium.make("ClapperStraight-v0", vehicle=str(paths["vehicle spec"]))
+    try:
+        assert env.unwrapped.vehicle == load_vehicle(str(paths["vehicle spec"]))
     finally:
         env.close()

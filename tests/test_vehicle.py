@@ -120,3 +120,17 @@ def test_links_are_checked() -> None:
         World([robot, robot], links=[(0, 0, 0.9, 1.1)])
     with pytest.raises(ValueError, match="min < max"):
         World([robot, robot], links=[(0, 1, 1.1, 0.9)])
+
+
+def test_errors_inside_an_inline_truck_name_the_truck_and_its_line(tmp_path: Path) -> None:
+    path = tmp_path / "vehicle.toml"
+    path.write_text(
+        '[vehicle]\nname = "x"\ntruck_a = "labmate"\n\n[vehicle.truck_b]\nwheel_diameter = 0.15\n'
+        "wheelbase = -0.34\nticks_per_rev = 2048\n",
+        encoding="utf-8",
+    )
+    with pytest.raises(SpecError, match=r"vehicle\.toml:7: truck_b\.wheelbase must be > 0"):
+        load_vehicle(path)
+    path.write_text('[vehicle]\ntruck_b = "labmat"\n', encoding="utf-8")
+    with pytest.raises(SpecError, match=r"vehicle\.toml:2: truck_b: unknown robot preset 'labmat'"):
+        load_vehicle(path)
