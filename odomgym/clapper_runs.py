@@ -41,7 +41,8 @@ Experiment = Literal["straight", "rectangle"]
 
 @dataclass(frozen=True)
 class ClapperRun:
-    """One run: its settings and its outcome (a vehicle of one)."""
+    """One run (``index`` from 1, as ``odomgym run square``): its settings and its outcome (a
+    vehicle of one)."""
 
     index: int
     experiment: Experiment
@@ -69,6 +70,7 @@ class ClapperRun:
             "bumps": self.bumps,
             "return_error": pose(vehicle),
             "trucks": {"A": pose(trucks[0]), "B": pose(trucks[1])},
+            "duration_s": self.outcome.time,
             "finished": bool(self.outcome.finished[0]),
         }
 
@@ -108,7 +110,7 @@ def run_clapper(
         outcome = drive_vehicles(
             spec, floor, path, estimator=ipec if mode else None, cables=cables, rng=rng
         )
-        done.append(ClapperRun(r, experiment, mode, direction, side, bumps, outcome))
+        done.append(ClapperRun(r + 1, experiment, mode, direction, side, bumps, outcome))
         if progress is not None:
             progress(k + 1, len(plans))
     return done
