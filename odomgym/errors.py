@@ -25,6 +25,22 @@ class SpecError(ValueError):
         super().__init__(prefix + message)
 
 
+def read_spec_toml(path: Path, kind: str) -> dict[str, object]:
+    """Parse the ``kind`` TOML file at ``path`` (robot, floor, calibration, vehicle): an
+    unreadable file or malformed TOML is a one-line :class:`SpecError` naming the file (and, for
+    TOML, the parser's line and column)."""
+    import tomllib
+
+    try:
+        raw = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SpecError(f"cannot read {kind} file: {exc.strerror}", source=str(path)) from None
+    try:
+        return tomllib.loads(raw)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
+
+
 def locate_key(path: Path, key: str, *, table: str | None = None, index: int = 0) -> str:
     """Return ``"file:line"`` for the line of ``path`` that assigns ``key``.
 

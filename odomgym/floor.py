@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +29,14 @@ from numpy.typing import NDArray
 
 # The crossing geometry lives in odomgym.cables; its two public functions stay importable here.
 from odomgym.cables import bump_extra_rotation, cable_advance
-from odomgym.errors import SpecError, locate_key, require_finite, require_positive, require_range
+from odomgym.errors import (
+    SpecError,
+    locate_key,
+    read_spec_toml,
+    require_finite,
+    require_positive,
+    require_range,
+)
 from odomgym.io import atomic_write_text
 
 __all__ = [
@@ -288,15 +294,7 @@ def load_floor(spec: str | Path) -> FloorSpec:
             f"unknown floor {text!r}; floors: {', '.join(sorted(FLOORS))}, or a .toml file",
             field="floor",
         )
-    try:
-        raw = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SpecError(f"cannot read floor file: {exc.strerror}", source=str(path)) from None
-    try:
-        data = tomllib.loads(raw)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
-    return FloorSpec.from_dict(data, path=path)
+    return FloorSpec.from_dict(read_spec_toml(path, "floor"), path=path)
 
 
 def _bumpy_floor() -> FloorSpec:

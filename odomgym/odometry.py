@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.errors import SpecError, locate_key, require_positive
+from odomgym.errors import SpecError, locate_key, read_spec_toml, require_positive
 from odomgym.io import atomic_write_text
 from odomgym.robot import RobotSpec
 from odomgym.stepping import integrate_odometry
@@ -162,13 +161,7 @@ class Calibration:
 def load_calibration(path: str | Path) -> Calibration:
     """Load a calibration TOML written by ``odomgym calibrate --save`` (or by hand)."""
     file = Path(path)
-    try:
-        data = tomllib.loads(file.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise SpecError(f"cannot read calibration file: {exc.strerror}", source=str(file)) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"malformed TOML: {exc}", source=str(file)) from None
-    return Calibration.from_dict(data, path=file)
+    return Calibration.from_dict(read_spec_toml(file, "calibration"), path=file)
 
 
 class Odometry:

@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from odomgym.errors import SpecError, locate_key, require_positive, require_range
+from odomgym.errors import SpecError, locate_key, read_spec_toml, require_positive, require_range
 from odomgym.io import atomic_write_text
 
 __all__ = ["PRESETS", "EffectTable", "RobotSpec", "load_robot"]
@@ -375,15 +374,7 @@ def load_robot(spec: str | Path) -> RobotSpec:
             "or give a path to a .toml file",
             field="robot",
         )
-    try:
-        raw = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SpecError(f"cannot read robot file: {exc.strerror}", source=str(path)) from None
-    try:
-        data = tomllib.loads(raw)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
-    return RobotSpec.from_dict(data, path=path)
+    return RobotSpec.from_dict(read_spec_toml(path, "robot"), path=path)
 
 
 # Presets. Nominal values are what the robot's designers programmed; the true values are the

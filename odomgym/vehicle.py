@@ -22,7 +22,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.errors import SpecError, locate_key, require_finite, require_positive
+from odomgym.errors import SpecError, locate_key, read_spec_toml, require_finite, require_positive
 from odomgym.internal import LinkReading, link_angles
 from odomgym.io import atomic_write_text
 from odomgym.robot import PRESETS, RobotSpec, load_robot
@@ -218,15 +217,7 @@ def load_vehicle(spec: str | Path) -> VehicleSpec:
             f"unknown vehicle {text!r}; presets: {', '.join(sorted(VEHICLES))}, or a .toml file",
             field="vehicle",
         )
-    try:
-        raw = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SpecError(f"cannot read vehicle file: {exc.strerror}", source=str(path)) from None
-    try:
-        data = tomllib.loads(raw)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
-    return VehicleSpec.from_dict(data, path=path)
+    return VehicleSpec.from_dict(read_spec_toml(path, "vehicle"), path=path)
 
 
 def link_readings(spec: VehicleSpec, poses: FloatArray) -> LinkReading:
