@@ -9,7 +9,11 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar("T")
 
 
 class SpecError(ValueError):
@@ -39,6 +43,25 @@ def read_spec_toml(path: Path, kind: str) -> dict[str, object]:
         return tomllib.loads(raw)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"malformed TOML: {exc}", source=str(path)) from None
+
+
+def load_named(
+    spec: str | Path,
+    presets: Mapping[str, T],
+    kind: str,
+    unknown: Callable[[str], str],
+    build: Callable[..., T],
+) -> T:
+    """The preset called ``spec``, or ``build(data, path=path)`` of the ``kind`` TOML file at
+    ``spec``; a name that is neither is a :class:`SpecError` with the message ``unknown(name)``
+    (which lists the presets), field ``kind``."""
+    text = str(spec)
+    if text in presets:
+        return presets[text]
+    path = Path(text)
+    if path.suffix != ".toml" and not path.exists():
+        raise SpecError(unknown(text), field=kind)
+    return build(read_spec_toml(path, kind), path=path)
 
 
 def locate_key(path: Path, key: str, *, table: str | None = None, index: int = 0) -> str:

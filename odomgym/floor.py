@@ -31,8 +31,8 @@ from numpy.typing import NDArray
 from odomgym.cables import bump_extra_rotation, cable_advance
 from odomgym.errors import (
     SpecError,
+    load_named,
     locate_key,
-    read_spec_toml,
     require_finite,
     require_positive,
     require_range,
@@ -285,16 +285,15 @@ def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path
 
 def load_floor(spec: str | Path) -> FloorSpec:
     """Return a named floor (``smooth``, ``bumpy``, ``slippery``) or load a floor TOML file."""
-    text = str(spec)
-    if text in FLOORS:
-        return FLOORS[text]
-    path = Path(text)
-    if path.suffix != ".toml" and not path.exists():
-        raise SpecError(
-            f"unknown floor {text!r}; floors: {', '.join(sorted(FLOORS))}, or a .toml file",
-            field="floor",
-        )
-    return FloorSpec.from_dict(read_spec_toml(path, "floor"), path=path)
+    return load_named(
+        spec,
+        FLOORS,
+        "floor",
+        lambda text: (
+            f"unknown floor {text!r}; floors: {', '.join(sorted(FLOORS))}, or a .toml file"
+        ),
+        FloorSpec.from_dict,
+    )
 
 
 def _bumpy_floor() -> FloorSpec:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from odomgym.errors import SpecError, locate_key, read_spec_toml, require_positive, require_range
+from odomgym.errors import SpecError, load_named, locate_key, require_positive, require_range
 from odomgym.io import atomic_write_text
 
 __all__ = ["PRESETS", "EffectTable", "RobotSpec", "load_robot"]
@@ -364,17 +364,16 @@ def load_robot(spec: str | Path) -> RobotSpec:
     Raises :class:`SpecError` for an unknown preset, an unreadable file, malformed TOML (with
     its line) or an invalid field (with its line).
     """
-    text = str(spec)
-    if text in PRESETS:
-        return PRESETS[text]
-    path = Path(text)
-    if not path.suffix == ".toml" and not path.exists():
-        raise SpecError(
+    return load_named(
+        spec,
+        PRESETS,
+        "robot",
+        lambda text: (
             f"unknown robot preset {text!r}; presets: {', '.join(sorted(PRESETS))}, "
-            "or give a path to a .toml file",
-            field="robot",
-        )
-    return RobotSpec.from_dict(read_spec_toml(path, "robot"), path=path)
+            "or give a path to a .toml file"
+        ),
+        RobotSpec.from_dict,
+    )
 
 
 # Presets. Nominal values are what the robot's designers programmed; the true values are the

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.errors import SpecError, locate_key, read_spec_toml, require_finite, require_positive
+from odomgym.errors import SpecError, load_named, locate_key, require_finite, require_positive
 from odomgym.internal import LinkReading, link_angles
 from odomgym.io import atomic_write_text
 from odomgym.robot import PRESETS, RobotSpec, load_robot
@@ -208,16 +208,15 @@ def _locate_in_table(path: Path, table: str, key: str | None) -> str:
 
 def load_vehicle(spec: str | Path) -> VehicleSpec:
     """Return the preset called ``spec`` (``clapper``) or load a vehicle TOML file."""
-    text = str(spec)
-    if text in VEHICLES:
-        return VEHICLES[text]
-    path = Path(text)
-    if path.suffix != ".toml" and not path.exists():
-        raise SpecError(
-            f"unknown vehicle {text!r}; presets: {', '.join(sorted(VEHICLES))}, or a .toml file",
-            field="vehicle",
-        )
-    return VehicleSpec.from_dict(read_spec_toml(path, "vehicle"), path=path)
+    return load_named(
+        spec,
+        VEHICLES,
+        "vehicle",
+        lambda text: (
+            f"unknown vehicle {text!r}; presets: {', '.join(sorted(VEHICLES))}, or a .toml file"
+        ),
+        VehicleSpec.from_dict,
+    )
 
 
 def link_readings(spec: VehicleSpec, poses: FloatArray) -> LinkReading:
