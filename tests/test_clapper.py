@@ -17,6 +17,8 @@ from odomgym.baselines.ipec import IPEC, estimate_wheel_diameter_ratio
 from odomgym.cables import bump_extra_rotation
 from odomgym.clapper import (
     CableLayer,
+    VehicleDriver,
+    VehicleTrial,
     circle_path,
     drive_vehicles,
     evenly,
@@ -25,6 +27,7 @@ from odomgym.clapper import (
     straight_path,
 )
 from odomgym.floor import FloorSpec
+from odomgym.internal import DeadReckoning
 from odomgym.vehicle import VEHICLES, VehicleSpec
 
 CLAPPER = VEHICLES["clapper"]
@@ -182,3 +185,40 @@ def test_link_length_bias_costs_a_third_of_a_degree_per_mm_and_turn() -> None:
     first_order = math.degrees(2.0 * math.pi * 1e-3 / spec.link_length)
     assert abs(per_mm["ccw"]) == pytest.approx(first_order, rel=0.10)
     assert per_mm["cw"] == pytest.approx(-per_mm["ccw"], rel=0.05)
+
+
+@pytest.mark.slow
+def test_growth_rate_concept_in_the_world() -> None:
+    """§3.3: at 0.5 m/s and T_s = 40 ms a bump's orientation error α can only grow a lateral
+    error of about U·α in the one interval before IPEC sees it (U = 20 mm; the paper: 0.15 mm
+    for its α = 0.44°), and IPEC measures α itself within a few % (the paper: 2.3 %). One cable
+    under truck A's right wheel; 24-bit rotary encoders, so that the concept is not hidden by
+    the 0.35° counts (which bound the measurement to ±q/2 per reading instead)."""
+    spec = _with(truck_a=IDEAL, truck_b=IDEAL, rotary_bits=24)
+    trial = VehicleTrial(
+        spec,
+        FloorSpec(),
+        straight_path(6.0, back=False),
+        estimator=CLAPPER_IPEC,
+        driver=VehicleDriver(cruise_speed=0.5),
+        cables=CableLayer((3.0,), leg=0, lead=1.0),
+    )
+    plain = DeadReckoning(trial.wheelbase)
+    plain.reset(trial.estimated.copy(), trial.reading)
+    correction, lateral, heading = 0.0, [], []
+    while not trial.done.all():
+        before = trial.world.counts.copy()
+        trial.step()
+        travel = (trial.world.counts - before) * trial.odometry.travel_per_tick
+        unseen = plain.update(travel.reshape(1, 2, 2), trial.reading)
+        correction += float(trial.estimator.correction[0, 0])
+        error = trial.truth[0, 0] - trial.estimated[0, 0]
+        theta = float(trial.truth[0, 0, 2])
+        lateral.append(-math.sin(theta) * error[0] + math.cos(theta) * error[1])
+        heading.append(float(error[2]))
+    alpha = float(trial.truth[0, 0, 2] - unseen[0, 0, 2])  # what dead reckoning missed
+    assert abs(math.degrees(alpha)) == pytest.approx(0.57, rel=0.1)  # one crossing
+    assert correction == pytest.approx(alpha, rel=0.03)
+    assert max(abs(h) for h in heading) < 0.03 * abs(alpha)
+    u_alpha = 0.5 * spec.sample_period * abs(alpha)  # 0.19 mm
+    assert 0.5 * u_alpha < max(abs(v) for v in lateral) < 1.2 * u_alpha
