@@ -14,10 +14,10 @@ Spaces:
         estimated poses and keeps the linkage near its centre; it slows for curves and stops
         at the end of each leg whatever the action asks (a command cannot drive the trucks
         into the bearing's stops).
-    observation: ``Box((12,), float32)`` — the estimated poses of truck A and B in the start
-        frame (x, y [m], θ [rad] each), the internal encoder readings (link length l [m],
-        ψ_A, ψ_B [rad]), the share of the path done, the leg (0, 1, …) and the reference
-        speed [m/s].
+    observation: ``Box((12,), float32)`` — the estimated poses of truck A and B in the frame
+        of the path (x, y [m], θ [rad] each; truck A starts at the path's first point), the
+        internal encoder readings (link length l [m], ψ_A, ψ_B [rad]), the share of the path
+        done, the leg (0, 1, …) and the reference speed [m/s].
 
 Reward: the share of the path completed this step (1 in total), minus 0.001 per step; the
 truth is reported in ``info``, never rewarded (the vehicle cannot know it).
@@ -72,6 +72,13 @@ def ipec_estimator() -> EstimatorFactory:
     return partial(IPEC, heading="midpoint", translation_correction=False)
 
 
+def _whole(name: str, value: object) -> int:
+    """``value`` as a whole number >= 0, or a ValueError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
+    return int(value)
+
+
 class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Base of the CLAPPER envs (module docstring): subclasses give the path and the cables."""
 
@@ -89,7 +96,11 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.floor = floor if isinstance(floor, FloorSpec) else load_floor(str(floor))
         if estimator is not None and not callable(estimator):
             raise ValueError("estimator must build an InternalEstimator from wheelbases (N, 2)")
-        self.ipec = bool(ipec)
+        if estimator is not None and not ipec:
+            raise ValueError(
+                "give ipec=False or an estimator, not both (an estimator replaces IPEC)"
+            )
+        self.ipec = bool(ipec) and estimator is None
         self._estimator: EstimatorFactory | None = estimator or (
             ipec_estimator() if self.ipec else None
         )
@@ -97,7 +108,7 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.action_space = gym.spaces.Box(0.0, 1.0, shape=(1,), dtype=np.float32)
         high = np.array([1e3, 1e3, 1e4, 1e3, 1e3, 1e4, 10.0, 4.0, 4.0, 1.0, 10.0, 10.0])
         low = -high
-        low[[6, 9, 10, 11]] = 0.0
+        low[[9, 10, 11]] = 0.0
         self.observation_space = gym.spaces.Box(
             low.astype(np.float32), high.astype(np.float32), dtype=np.float32
         )
@@ -118,7 +129,12 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         del options
         path = self._path()
         self._trial = VehicleTrial(
-            self.vehicle, self.floor, path, estimator=self._estimator, cables=self._cables(path)
+            self.vehicle,
+            self.floor,
+            path,
+            estimator=self._estimator,
+            cables=self._cables(path),
+            rng=self.np_random,  # a rough floor's wheel noise: the seed makes runs repeat
         )
         self._total = sum(leg.length for leg in path.legs)
         self._done_before = 0.0
@@ -149,7 +165,7 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         assert trial is not None
         driver = trial.driver
         legs = trial.path.legs
-        k = int(driver.legs_done[0])
+        k = int(driver.leg_index[0])
         before = sum(leg.length for leg in legs[:k])
         return before + (float(driver.reference_arc[0]) if k < len(legs) else 0.0)
 
@@ -164,7 +180,7 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
                 trial.reading.psi[0],
                 [
                     self._path_done() / self._total,
-                    float(driver.legs_done[0]),
+                    float(driver.leg_index[0]),
                     float(driver.reference_speed[0]),
                 ],
             ]
@@ -206,11 +222,11 @@ class ClapperStraightEnv(ClapperEnv):
         ipec: bool = True,
         estimator: EstimatorFactory | None = None,
     ) -> None:
-        if isinstance(bumps, bool) or int(bumps) != bumps or bumps < 0:
-            raise ValueError(f"bumps must be a whole number >= 0, got {bumps!r}")
-        if not length > 3.5:
+        bumps = _whole("bumps", bumps)
+        if not isinstance(length, (int, float)) or not 3.5 < length < 1e3:
             raise ValueError(
-                f"length must exceed 3.5 m (cables sit 1.5 m from each end), got {length!r}"
+                f"length must be a number of metres in (3.5, 1000) (cables sit 1.5 m from "
+                f"each end), got {length!r}"
             )
         self.bumps, self.length = int(bumps), float(length)
         super().__init__(vehicle, floor, ipec=ipec, estimator=estimator)
@@ -243,9 +259,8 @@ class ClapperRectangleEnv(ClapperEnv):
             raise ValueError(f"direction must be 'cw' or 'ccw', got {direction!r}")
         if side not in ("left", "right"):
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
-        if isinstance(bumps, bool) or int(bumps) != bumps or bumps < 0:
-            raise ValueError(f"bumps must be a whole number >= 0, got {bumps!r}")
-        self.direction, self.bumps, self.side = direction, int(bumps), side
+        bumps = _whole("bumps", bumps)
+        self.direction, self.bumps, self.side = direction, bumps, side
         super().__init__(vehicle, floor, ipec=ipec, estimator=estimator)
 
     def _path(self) -> VehiclePath:

@@ -123,9 +123,7 @@ def rectangle_path(
     for k in range(1, 5):
         corner = np.array(corners[k % 4])
         before = np.array(corners[k - 1])
-        after = np.array(corners[(k + 1) % 4])
         u_in = (corner - before) / np.linalg.norm(corner - before)
-        u_out = (after - corner) / np.linalg.norm(after - corner)
         start = corner - radius * u_in
         points.append((float(start[0]), float(start[1])))
         centre = start + radius * np.array([-u_in[1], u_in[0]]) * sign
@@ -133,7 +131,6 @@ def rectangle_path(
         for t in np.linspace(0.0, 1.0, max(4, int(radius * math.pi / 2 / spacing)))[1:]:
             a = a0 + sign * t * math.pi / 2
             points.append((centre[0] + radius * math.cos(a), centre[1] + radius * math.sin(a)))
-        del u_out
     points.append((width / 2.0, 0.0))
     dense = _densify(np.array(points), spacing)
     return VehiclePath((Leg(dense, 1.0),), f"rectangle-{width:g}x{height:g}m-{direction}")
@@ -194,10 +191,10 @@ class CableLayer:
     _progress: list[float] = field(default_factory=lambda: [0.0, 0.0])
 
     def __call__(
-        self, leg: int, path: VehiclePath, truth: FloatArray, track: float
+        self, leg: int, path: VehiclePath, truth: FloatArray, tracks: tuple[float, float]
     ) -> tuple[CableBump, ...] | None:
         """Every cable laid so far if a new one is due (``truth``: true truck poses (2, 3);
-        ``track``: the truck's wheel track [m]), else None."""
+        ``tracks``: the trucks' wheel tracks [m]), else None."""
         if leg != self.leg or len(self.laid) >= len(self.at):
             return None
         points = path.legs[leg].points
@@ -226,6 +223,7 @@ class CableLayer:
         heading = truth[lead, 2]
         side = -1.0 if self.side == "right" else 1.0
         left_of_truck = np.array([-math.sin(heading), math.cos(heading)])
+        track = tracks[lead]
         wheel = truth[lead, :2] + side * 0.5 * track * left_of_truck
         forwards = np.array([math.cos(heading), math.sin(heading)])
         if abs(float(forwards @ along)) < 0.7:
@@ -283,13 +281,6 @@ def vehicle_pose(poses: FloatArray) -> FloatArray:
 
 
 @dataclass
-class _LegState:
-    arc: FloatArray
-    s_a: float = 0.0  # reference arc length of truck A [m]
-    v: float = 0.0  # reference speed [m/s]
-
-
-@dataclass
 class VehicleDriver:
     """Kanayama tracking of moving references by both trucks (module docstring).
 
@@ -311,7 +302,6 @@ class VehicleDriver:
     k_theta: float = 3.0
     k_link: float = 1.0
     lateral_accel: float = 0.1
-    _legs: list[_LegState] = field(default_factory=list)
 
     def plan(self, path: VehiclePath, n: int) -> None:
         self._path = path
@@ -343,19 +333,20 @@ class VehicleDriver:
         return np.asarray(self._leg >= len(self._path.legs))
 
     @property
-    def legs_done(self) -> NDArray[np.int64]:
-        """Index of the leg each vehicle is on (N,); the number of legs once it has finished."""
-        return self._leg
+    def leg_index(self) -> NDArray[np.int64]:
+        """Index of the leg each vehicle is on (N,); the number of legs once it has finished
+        (a copy)."""
+        return self._leg.copy()
 
     @property
     def reference_arc(self) -> FloatArray:
-        """Arc length of truck A's reference along its current leg (N,) [m]."""
-        return self._s
+        """Arc length of truck A's reference along its current leg (N,) [m] (a copy)."""
+        return self._s.copy()
 
     @property
     def reference_speed(self) -> FloatArray:
-        """Speed of truck A's reference (N,) [m/s]."""
-        return self._v
+        """Speed of truck A's reference (N,) [m/s] (a copy)."""
+        return self._v.copy()
 
     @property
     def leg(self) -> int:
@@ -504,7 +495,8 @@ class VehicleOutcome:
     the link; heading wrapped), ``truck_errors`` (N, 2, 3) the same per truck. ``link_range``
     (N, 2) the shortest and longest true centre distance seen [m], ``link_force`` (N,) the
     largest force the bearing's end stops passed [N], ``corrections`` (N, 2) the summed
-    orientation corrections of the estimator [rad], ``time`` the simulated duration [s].
+    orientation corrections of the estimator [rad], ``time`` the simulated duration [s],
+    ``finished`` (N,) whether each vehicle drove the whole path.
     """
 
     true_poses: FloatArray
@@ -586,7 +578,10 @@ class VehicleTrial:
         world, n = self.world, self.n
         if self.cables is not None:
             laid = self.cables(
-                self.driver.leg, self.path, world.pose[:2], self.spec.truck_a.true_wheelbase
+                self.driver.leg,
+                self.path,
+                world.pose[:2],
+                (self.spec.truck_a.true_wheelbase, self.spec.truck_b.true_wheelbase),
             )
             if laid is not None:  # the floor as it was, plus the cables laid so far
                 world.lay_floor(dataclasses.replace(self.floor, bumps=self.floor.bumps + laid))

@@ -653,7 +653,7 @@ def _command_clapper(args: argparse.Namespace) -> int:
     floor: FloorSpec = load_floor(args.floor)
     experiment = "straight" if args.path == "clapper-straight" else "rectangle"
     modes = (False, True) if args.ipec is None else (bool(args.ipec),)
-    direction = getattr(args, "direction", "cw")
+    direction = getattr(args, "direction", "-")  # the straight experiment has none
     directions = ("cw", "ccw") if direction == "both" else (direction,)
     side = getattr(args, "side", "right")
     sides = ("right", "left") if side == "both" else (side,)

@@ -30,7 +30,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.errors import SpecError, load_named, locate_key, require_finite, require_positive
+from odomgym.errors import (
+    SpecError,
+    load_named,
+    locate_key,
+    require_finite,
+    require_positive,
+    require_range,
+)
 from odomgym.internal import LinkReading, link_angles
 from odomgym.io import atomic_write_text
 from odomgym.robot import PRESETS, RobotSpec, load_robot
@@ -77,8 +84,12 @@ class VehicleSpec:
     def __post_init__(self) -> None:
         for key in ("link_length", "link_min", "link_max", "sample_period", "linear_resolution"):
             require_positive(key, getattr(self, key))
-        for key in ("rotary_bias_a", "rotary_bias_b", "linear_bias"):
-            require_finite(key, getattr(self, key))
+        # Ranges a real vehicle lies in; beyond them a value is a typo (degrees for radians,
+        # millimetres for metres) or would make a run take forever.
+        require_range("sample_period", self.sample_period, 1e-3, 1.0)
+        require_range("rotary_bias_a", self.rotary_bias_a, -0.5, 0.5)
+        require_range("rotary_bias_b", self.rotary_bias_b, -0.5, 0.5)
+        require_range("linear_bias", self.linear_bias, -0.1, 0.1)
         if not self.link_min < self.link_length < self.link_max:
             raise SpecError(
                 f"link_length must lie strictly between link_min and link_max, got "
@@ -118,7 +129,14 @@ class VehicleSpec:
         """Build from a mapping (e.g. parsed TOML, flat or under ``[vehicle]``); a truck is a
         robot preset name, a robot ``.toml`` path (relative to the vehicle file) or a table.
         Errors name the field and, for a file, the file and line."""
-        table = dict(data.get("vehicle", data))
+        raw = data.get("vehicle", data)
+        if not isinstance(raw, Mapping):
+            raise SpecError(
+                "vehicle must be a table ([vehicle]) of vehicle keys",
+                field="vehicle",
+                source=str(path) if path else None,
+            )
+        table = dict(raw)
 
         def where(key: str) -> str | None:
             return locate_key(path, key) if path else None
@@ -138,8 +156,10 @@ class VehicleSpec:
                     table[key] = RobotSpec.from_dict(value)
                 except SpecError as exc:
                     # Name the truck, and find the line inside its own [vehicle.TRUCK] table.
+                    message = str(exc)
+                    prefixed = message.startswith(exc.field) if exc.field else False
                     raise SpecError(
-                        f"{key}.{exc}".replace(f"{key}.{exc.source}: ", f"{key}."),
+                        f"{key}.{message}" if prefixed else f"{key}: {message}",
                         field=f"{key}.{exc.field}" if exc.field else key,
                         source=_locate_in_table(path, key, exc.field) if path else None,
                     ) from None

@@ -3,6 +3,7 @@ estimator and the §6.1 result through the env."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import gymnasium as gym
@@ -11,6 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import odomgym  # noqa: F401  (registers the envs)
+from odomgym.baselines.ipec import IPEC
 from odomgym.internal import DeadReckoning
 
 
@@ -41,11 +43,36 @@ def test_straight_env_with_ipec_reproduces_section_6_1() -> None:
 
 @pytest.mark.slow
 def test_estimator_is_pluggable_and_ipec_false_is_dead_reckoning() -> None:
-    plain, _ = _episode(gym.make("ClapperStraight-v0", bumps=3, ipec=False))
-    mine, _ = _episode(gym.make("ClapperStraight-v0", bumps=3, estimator=DeadReckoning))
-    np.testing.assert_array_equal(plain["return_error"], mine["return_error"])
+    # A non-default estimator (IPEC with the composite translational correction, Eqs. 14-15,
+    # which the default leaves out) is the one the env runs.
+    mine = gym.make(
+        "ClapperStraight-v0",
+        bumps=3,
+        estimator=functools.partial(IPEC, heading="midpoint", translation_correction=True),
+    )
+    default, _ = _episode(gym.make("ClapperStraight-v0", bumps=3))
+    custom, _ = _episode(mine)
+    estimator = mine.unwrapped._trial.estimator
+    assert isinstance(estimator, IPEC) and estimator.translation_correction
+    assert not np.array_equal(custom["return_error"], default["return_error"])
     # Without correction the estimate is each truck's own wheel odometry.
+    plain, _ = _episode(gym.make("ClapperStraight-v0", bumps=3, ipec=False))
     np.testing.assert_allclose(plain["estimated_poses"], plain["odometry_poses"], atol=1e-9)
+    with pytest.raises(ValueError, match="not both"):
+        gym.make("ClapperStraight-v0", ipec=False, estimator=DeadReckoning)
+
+
+def test_same_seed_same_run_on_a_noisy_floor() -> None:
+    """The concrete floor's wheel noise comes from the env's seed (np_random)."""
+
+    def roll(seed: int) -> list[np.ndarray]:
+        env = gym.make("ClapperRectangle-v0", floor="concrete", bumps=0)
+        env.reset(seed=seed)
+        return [env.step(np.array([1.0], dtype=np.float32))[4]["true_poses"] for _ in range(150)]
+
+    first, again, other = roll(3), roll(3), roll(4)
+    assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+    assert not np.array_equal(first[-1], other[-1])
 
 
 def test_slower_commands_take_longer_and_bad_actions_are_refused() -> None:

@@ -65,7 +65,7 @@ REQUIRED_ROBOT = {"wheel_diameter", "wheelbase", "ticks_per_rev"}
 TRUCKS = ("truck_a", "truck_b")
 # One-key vehicle files: link_length must stay strictly inside (link_min, link_max), by default
 # (0.9, 1.1), and link_max above the default link_length 1; other floats take 0.3.
-VEHICLE_VALUES = {"link_length": "1.05", "link_max": "1.3"}
+VEHICLE_VALUES = {"link_length": "1.05", "link_max": "1.3", "linear_bias": "0.003"}
 
 
 # ---------------------------------------------------------------------- parsing the doc

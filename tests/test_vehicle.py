@@ -134,3 +134,27 @@ def test_errors_inside_an_inline_truck_name_the_truck_and_its_line(tmp_path: Pat
     path.write_text('[vehicle]\ntruck_b = "labmat"\n', encoding="utf-8")
     with pytest.raises(SpecError, match=r"vehicle\.toml:2: truck_b: unknown robot preset 'labmat'"):
         load_vehicle(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("sample_period = 1e-9\n", r"sample_period must lie in \[0.001, 1.0\]"),
+        ("rotary_bias_a = 5.0\n", r"rotary_bias_a must lie in \[-0.5, 0.5\]"),  # degrees?
+        ("linear_bias = -2.0\n", r"linear_bias must lie in \[-0.1, 0.1\]"),  # millimetres?
+    ],
+)
+def test_values_outside_what_a_vehicle_can_be_are_refused(
+    tmp_path: Path, text: str, message: str
+) -> None:
+    path = tmp_path / "vehicle.toml"
+    path.write_text("[vehicle]\n" + text, encoding="utf-8")
+    with pytest.raises(SpecError, match=message):
+        load_vehicle(path)
+
+
+def test_a_vehicle_key_that_is_not_a_table_is_one_error(tmp_path: Path) -> None:
+    path = tmp_path / "vehicle.toml"
+    path.write_text('vehicle = "clapper"\n', encoding="utf-8")
+    with pytest.raises(SpecError, match=r"vehicle must be a table"):
+        load_vehicle(path)
