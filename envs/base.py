@@ -354,11 +354,6 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
             info["return_error"] = info["pose_error"].copy()
         return info
 
-    def _require_trial(self) -> Trial:
-        if self._trial is None:
-            raise RuntimeError("call reset() before step()")
-        return self._trial
-
     # ------------------------------------------------------------------ rendering
     def render(self) -> NDArray[np.uint8] | None:
         """Top-down view: floor bumps, the route, the true path (blue), the odometry path

@@ -27,7 +27,6 @@ __all__ = [
     "integrate_odometry",
     "pose_error_into",
     "route_update",
-    "snapshot",
     "start_frame",
 ]
 
@@ -176,32 +175,6 @@ def pose_error_into(pose: FloatArray, start: FloatArray, odom: FloatArray, out: 
         out[i, 0] -= odom[i, 0]
         out[i, 1] -= odom[i, 1]
         out[i, 2] = (out[i, 2] - odom[i, 2] + math.pi) % two_pi - math.pi
-
-
-@kernel
-def snapshot(
-    true_pose: FloatArray,
-    start_poses: FloatArray,
-    odom_pose: FloatArray,
-    counts: NDArray[np.int64],
-    index: NDArray[np.intp],
-    time: float,
-    start_time: FloatArray,
-    poses: FloatArray,
-    counts_out: NDArray[np.int64],
-    segment: NDArray[np.int64],
-    elapsed: FloatArray,
-) -> None:
-    """The arrays of :meth:`odomgym.trial.Trial.snapshot`, filled in one pass."""
-    pose_error_into(true_pose, start_poses, odom_pose, poses[:, 6:9])
-    for i in range(true_pose.shape[0]):
-        for k in range(3):
-            poses[i, k] = odom_pose[i, k]
-            poses[i, 3 + k] = true_pose[i, k]
-        counts_out[i, 0] = counts[i, 0]
-        counts_out[i, 1] = counts[i, 1]
-        segment[i] = index[i]
-        elapsed[i] = time - start_time[i]
 
 
 @kernel

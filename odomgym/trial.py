@@ -34,7 +34,7 @@ from odomgym.odometry import Calibration, Odometry
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
 from odomgym.routes import Route, RouteProgress
-from odomgym.stepping import after_step, pose_error_into, snapshot, start_frame
+from odomgym.stepping import after_step, pose_error_into, start_frame
 
 __all__ = ["OBSERVATION_NAMES", "Trial"]
 
@@ -91,8 +91,7 @@ class Trial:
         )
         if self.start_poses.shape != (self.n, 3) or not np.isfinite(self.start_poses).all():
             raise ValueError(f"start_poses must be a finite array of shape ({self.n}, 3)")
-        self._offset = bool(np.any(self.start_poses != 0.0))
-        if self._offset:
+        if np.any(self.start_poses != 0.0):
             self.world.reset(self.start_poses)
         self.odometry = Odometry(specs, calibration)
         route_list = [routes] * self.n if isinstance(routes, Route) else list(routes)
@@ -188,33 +187,6 @@ class Trial:
         out = np.empty((self.n, 3))
         start_frame(self.world.pose, self.start_poses, out)
         return out
-
-    def snapshot(
-        self, start_time: FloatArray
-    ) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64], FloatArray]:
-        """Fresh copies, in one compiled pass, of what an env reports after a step: poses
-        (N, 9) = odometry, truth, their error (:meth:`pose_error`); encoder counts (N, 2);
-        route segment (N,); time since ``start_time`` (N,) [s]."""
-        n = self.n
-        poses = np.empty((n, 9))
-        counts = np.empty((n, 2), dtype=np.int64)
-        segment = np.empty(n, dtype=np.int64)
-        elapsed = np.empty(n)
-        world = self.world
-        snapshot(
-            world.pose,
-            self.start_poses,
-            self.odometry.pose,
-            world.counts,
-            self.progress.index,
-            world.time,
-            start_time,
-            poses,
-            counts,
-            segment,
-            elapsed,
-        )
-        return poses, counts, segment, elapsed
 
     def pose_error(self, out: FloatArray | None = None) -> FloatArray:
         """True − odometry (N, 3) in the start frame, heading wrapped to [−π, π) [m, m, rad];
