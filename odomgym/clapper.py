@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.floor import CableBump, FloorSpec
-from odomgym.internal import DeadReckoning, InternalEstimator
+from odomgym.internal import DeadReckoning, InternalEstimator, link_angles, link_length
 from odomgym.odometry import Calibration, Odometry, wrap_angle
 from odomgym.physics import World
 from odomgym.vehicle import VehicleSpec, link_readings
@@ -69,6 +69,11 @@ class Leg:
     @property
     def length(self) -> float:
         return float(self.arc_length[-1])
+
+    @property
+    def headings(self) -> FloatArray:
+        """Direction of each segment (M − 1,) [rad], unwrapped (continuous through turns)."""
+        return np.asarray(np.unwrap(np.arctan2(*np.diff(self.points, axis=0).T[::-1])))
 
     @property
     def arc_length(self) -> FloatArray:
@@ -250,7 +255,7 @@ def rectangle_cable_positions(
     slant by trucks that are turning)."""
     leg = path.legs[0]
     arc = leg.arc_length
-    heading = np.unwrap(np.arctan2(*np.diff(leg.points, axis=0).T[::-1]))
+    heading = leg.headings
     straight = np.abs(np.diff(heading, prepend=heading[0])) < 1e-9
     turning = arc[:-1][~straight]
     candidates = np.linspace(clearance, arc[-1] - clearance, 2000)
@@ -276,8 +281,7 @@ def vehicle_pose(poses: FloatArray) -> FloatArray:
     """The vehicle's pose (N, 3) from truck poses (N, 2, 3): the midpoint of the truck centres
     and the heading of the linkage (from B to A)."""
     mid = 0.5 * (poses[:, 0, :2] + poses[:, 1, :2])
-    d = poses[:, 0, :2] - poses[:, 1, :2]
-    return np.column_stack([mid, np.arctan2(d[:, 1], d[:, 0])])
+    return np.column_stack([mid, link_angles(poses)[0]])
 
 
 @dataclass
@@ -316,7 +320,7 @@ class VehicleDriver:
         """Largest reference speed at each point of ``leg`` [m/s]: the cruise speed, slowed for
         curvature and, braking at ``accel``, for the curves and the stop ahead."""
         arc = leg.arc_length
-        heading = np.unwrap(np.arctan2(*np.diff(leg.points, axis=0).T[::-1]))
+        heading = leg.headings
         curvature = np.zeros(len(arc))
         ds = np.diff(arc)
         curvature[1:-1] = np.abs(np.diff(heading)) / np.maximum(0.5 * (ds[1:] + ds[:-1]), 1e-9)
@@ -551,7 +555,7 @@ class VehicleTrial:
         self.driver.plan(path, n)
         self._rate_per_speed = 1.0 / self.world.nominal_radius[:, None]
         self._last_counts = self.world.counts.copy()
-        length = np.hypot(*(start[:, 0, :2] - start[:, 1, :2]).T)
+        length = link_length(start)
         self.link_range = np.stack([length, length], axis=1)
         self.link_force = np.zeros(n)
         self.corrections = np.zeros((n, 2))
@@ -602,7 +606,7 @@ class VehicleTrial:
         self.reading = link_readings(self.spec, truth)
         self.estimated = self.estimator.update(travel, self.reading)
         self.corrections += self.estimator.correction
-        length = np.hypot(*(truth[:, 0, :2] - truth[:, 1, :2]).T)
+        length = link_length(truth)
         self.link_range[:, 0] = np.minimum(self.link_range[:, 0], length)
         self.link_range[:, 1] = np.maximum(self.link_range[:, 1], length)
         self.link_force = np.maximum(self.link_force, world.link_forces())

@@ -43,6 +43,7 @@ __all__ = [
     "check_wheelbase",
     "dead_reckon",
     "link_angles",
+    "link_length",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -98,6 +99,13 @@ def link_angles(poses: ArrayLike) -> tuple[FloatArray, FloatArray]:
     theta_link = np.arctan2(p[:, 0, 1] - p[:, 1, 1], p[:, 0, 0] - p[:, 1, 0])
     psi = wrap_angle(p[:, :, 2] - theta_link[:, None])
     return theta_link, np.asarray(psi, dtype=np.float64)
+
+
+def link_length(poses: ArrayLike) -> FloatArray:
+    """The centre distance l (N,) [m] of truck poses (N, 2, 3): what an ideal linear encoder
+    reads."""
+    p = _check_poses(poses)
+    return np.asarray(np.hypot(p[:, 0, 0] - p[:, 1, 0], p[:, 0, 1] - p[:, 1, 1]))
 
 
 def check_wheelbase(wheelbase: ArrayLike) -> FloatArray:

@@ -38,7 +38,7 @@ from odomgym.errors import (
     require_positive,
     require_range,
 )
-from odomgym.internal import LinkReading, link_angles
+from odomgym.internal import LinkReading, link_angles, link_length
 from odomgym.io import atomic_write_text
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 
@@ -252,8 +252,7 @@ def link_readings(spec: VehicleSpec, poses: FloatArray) -> LinkReading:
     q = spec.rotary_resolution
     bias = np.array([spec.rotary_bias_a, spec.rotary_bias_b])
     psi_read = q * np.round((psi + bias) / q)
-    centre_a, centre_b = poses[:, 0, :2], poses[:, 1, :2]
-    length = np.hypot(*(centre_a - centre_b).T)
+    length = link_length(poses)
     r = spec.linear_resolution
     length_read = r * np.round((length + spec.linear_bias) / r)
     return LinkReading(length=length_read, psi=psi_read)
