@@ -59,10 +59,12 @@ from odomgym.internal import (
     Heading,
     LinkReading,
     check_heading,
+    check_poses,
     check_reading,
     check_travel,
     check_wheelbase,
     dead_reckon,
+    link_angles,
 )
 from odomgym.odometry import wrap_angle
 
@@ -103,13 +105,10 @@ class IPEC:
     def reset(self, poses: FloatArray, reading: LinkReading) -> None:
         """Start from the known poses (N, 2, 3); ``reading`` is not needed (the poses are
         known, and the first update reconciles them with the encoders)."""
-        p = np.array(poses, dtype=np.float64)
-        if p.shape != (self.n, 2, 3):
-            raise ValueError(f"poses must have shape ({self.n}, 2, 3), got {p.shape}")
-        self._poses = p
+        self._poses = check_poses(poses, self.n)
         self._correction = np.zeros((self.n, 2))
         self._travel = np.zeros((self.n, 2))
-        self._link_direction = np.arctan2(p[:, 0, 1] - p[:, 1, 1], p[:, 0, 0] - p[:, 1, 0])
+        self._link_direction = link_angles(self._poses)[0]
 
     def update(self, wheel_travel: FloatArray, reading: LinkReading) -> FloatArray:
         """One sampling interval of Eqs. 9–16; returns the corrected poses (N, 2, 3)."""

@@ -38,6 +38,7 @@ __all__ = [
     "InternalEstimator",
     "LinkReading",
     "check_heading",
+    "check_poses",
     "check_reading",
     "check_travel",
     "check_wheelbase",
@@ -95,7 +96,7 @@ def link_angles(poses: ArrayLike) -> tuple[FloatArray, FloatArray]:
     ψ_X = θ_X − θ_L wrapped to [−π, π) (Eq. 11). Applied to true poses this is what ideal rotary
     encoders read; a simulator adds bias and quantisation.
     """
-    p = _check_poses(poses)
+    p = check_poses(poses)
     theta_link = np.arctan2(p[:, 0, 1] - p[:, 1, 1], p[:, 0, 0] - p[:, 1, 0])
     psi = wrap_angle(p[:, :, 2] - theta_link[:, None])
     return theta_link, np.asarray(psi, dtype=np.float64)
@@ -104,7 +105,7 @@ def link_angles(poses: ArrayLike) -> tuple[FloatArray, FloatArray]:
 def link_length(poses: ArrayLike) -> FloatArray:
     """The centre distance l (N,) [m] of truck poses (N, 2, 3): what an ideal linear encoder
     reads."""
-    p = _check_poses(poses)
+    p = check_poses(poses)
     return np.asarray(np.hypot(p[:, 0, 0] - p[:, 1, 0], p[:, 0, 1] - p[:, 1, 1]))
 
 
@@ -155,7 +156,8 @@ def check_heading(heading: object) -> Heading:
     raise ValueError(f"heading must be one of {_HEADINGS}, got {heading!r}")
 
 
-def _check_poses(poses: ArrayLike, n: int | None = None) -> FloatArray:
+def check_poses(poses: ArrayLike, n: int | None = None) -> FloatArray:
+    """``poses`` as a (N, 2, 3) float array (N = ``n`` if given), or :class:`ValueError`."""
     p = np.array(poses, dtype=np.float64)
     if p.ndim != 3 or p.shape[1:] != (2, 3) or (n is not None and p.shape[0] != n):
         want = f"({n}, 2, 3)" if n is not None else "(N, 2, 3)"
@@ -203,7 +205,7 @@ class DeadReckoning:
 
     def reset(self, poses: FloatArray, reading: LinkReading) -> None:
         """Start from ``poses`` (N, 2, 3); ``reading`` is not used."""
-        self._poses = _check_poses(poses, self.n)
+        self._poses = check_poses(poses, self.n)
 
     def update(self, wheel_travel: FloatArray, reading: LinkReading) -> FloatArray:
         """Dead-reckon both trucks through one interval; returns the poses (N, 2, 3)."""
