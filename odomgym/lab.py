@@ -45,6 +45,7 @@ __all__ = [
     "experiment_route",
     "free_plan",
     "measure",
+    "perform_many",
     "random_start_poses",
     "simulate_runs",
 ]
@@ -434,6 +435,75 @@ def measure(runs: Sequence[Run], sensor: SensorAccuracy, rng: np.random.Generato
             )
         )
     return measured
+
+
+def perform_many(
+    requests: Sequence[tuple[RobotSpec, Experiment, Calibration, np.random.Generator]],
+    floor: FloorSpec,
+    *,
+    sensor: SensorAccuracy,
+    cruise_speed: float = 0.2,
+    start_region: float | None = None,
+) -> list[list[Run] | RuntimeError]:
+    """Perform several robots' square, straight or spin experiments as *one* batch.
+
+    Each request is ``(robot, experiment, calibration, rng)``; its ``rng`` alone draws the
+    start poses (within ±``start_region`` [m], or the origin), one floor-noise stream per run
+    (``rng.spawn``) and the sensor noise of :func:`measure` — so a robot's runs do not depend
+    on which other robots share the batch. Why one batch: a pymunk space of many robots costs
+    little more per step than one robot (Python overhead per step dominates).
+
+    Returns, per request, its measured runs, or a ``RuntimeError`` if that robot did not finish
+    within the time limit (its batch companions are unaffected). Other errors (an invalid
+    calibration) propagate to the caller.
+    """
+    specs: list[RobotSpec] = []
+    routes: list[Route] = []
+    calibrations: list[Calibration] = []
+    streams: list[np.random.Generator] = []
+    starts: list[FloatArray] = []
+    kinds: list[str] = []
+    directions: list[str | None] = []
+    owners: list[int] = []
+    for index, (robot, experiment, calibration, rng) in enumerate(requests):
+        route = experiment_route(experiment)
+        poses = random_start_poses(rng, experiment.runs, start_region)
+        for k in range(experiment.runs):
+            specs.append(robot)
+            routes.append(route)
+            calibrations.append(calibration)
+            kinds.append(experiment.kind)
+            directions.append(experiment.direction)
+            owners.append(index)
+            starts.append(np.zeros(3) if poses is None else poses[k])
+        streams.extend(rng.spawn(experiment.runs))
+    runs, _ = simulate_runs(
+        specs,
+        floor,
+        routes,
+        calibration=calibrations,
+        rng=streams,
+        cruise_speed=cruise_speed,
+        kind=kinds,
+        direction=directions,
+        start_poses=np.array(starts),
+        on_timeout="keep",
+    )
+    grouped: list[list[Run]] = [[] for _ in requests]
+    for owner, run in zip(owners, runs, strict=True):
+        grouped[owner].append(run)
+    outcome: list[list[Run] | RuntimeError] = []
+    for (_, experiment, _, rng), own in zip(requests, grouped, strict=True):
+        if all(run.meta["finished"] for run in own):
+            outcome.append(measure(own, sensor, rng))
+        else:
+            outcome.append(
+                RuntimeError(
+                    f"the robot did not finish its {experiment.kind} runs within the time "
+                    "limit (a slippery floor, or a calibration that makes it circle?)"
+                )
+            )
+    return outcome
 
 
 class SimLab(BookkeepingLab):

@@ -27,7 +27,7 @@ import numpy as np
 
 from odomgym.experiments import BookkeepingLab, Experiment, Lab, SensorAccuracy
 from odomgym.floor import FloorSpec
-from odomgym.lab import experiment_route, measure, random_start_poses, simulate_runs
+from odomgym.lab import perform_many
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
@@ -121,54 +121,25 @@ class _Coordinator:
     def _simulate(
         self, batch: list[tuple[int, tuple[Experiment, Calibration]]]
     ) -> dict[int, list[Run] | BaseException]:
-        specs: list[RobotSpec] = []
-        routes = []
-        calibrations: list[Calibration] = []
-        streams: list[np.random.Generator] = []
-        starts: list[np.ndarray] = []
-        kinds: list[str] = []
-        directions: list[str | None] = []
-        owners: list[int] = []
-        for index, (experiment, calibration) in batch:
-            rng = self.rngs[index]
-            route = experiment_route(experiment)
-            poses = random_start_poses(rng, experiment.runs, self.start_region)
-            for k in range(experiment.runs):
-                specs.append(self.robots[index])
-                routes.append(route)
-                calibrations.append(calibration)
-                kinds.append(experiment.kind)
-                directions.append(experiment.direction)
-                owners.append(index)
-                starts.append(np.zeros(3) if poses is None else poses[k])
-            streams.extend(rng.spawn(experiment.runs))
+        requests = [
+            (self.robots[index], experiment, calibration, self.rngs[index])
+            for index, (experiment, calibration) in batch
+        ]
         try:
-            runs, _ = simulate_runs(
-                specs,
+            results = perform_many(
+                requests,
                 self.floor,
-                routes,
-                calibration=calibrations,
-                rng=streams,
+                sensor=self.sensor,
                 cruise_speed=self.cruise_speed,
-                kind=kinds,
-                direction=directions,
-                start_poses=np.array(starts),
-                on_timeout="keep",
+                start_region=self.start_region,
             )
         except Exception as exc:  # e.g. an invalid calibration: every requester is told
             return {index: exc for index, _ in batch}
-        grouped: dict[int, list[Run]] = {index: [] for index, _ in batch}
-        for owner, run in zip(owners, runs, strict=True):
-            grouped[owner].append(run)
         outcome: dict[int, list[Run] | BaseException] = {}
-        for index, (experiment, _) in batch:
-            if all(run.meta["finished"] for run in grouped[index]):
-                outcome[index] = measure(grouped[index], self.sensor, self.rngs[index])
-            else:  # only the robot that could not finish fails, not its batch companions
-                outcome[index] = RuntimeError(
-                    f"robot {index} did not finish its {experiment.kind} runs within the time "
-                    "limit (a slippery floor, or a calibration that makes it circle?)"
-                )
+        for (index, _), result in zip(batch, results, strict=True):
+            if isinstance(result, RuntimeError):  # only this robot fails, not its companions
+                result = RuntimeError(f"robot {index}: {result}")
+            outcome[index] = result
         return outcome
 
 
