@@ -4,7 +4,10 @@ Importing ``odomgym`` registers the Gymnasium environments (string entry points,
 module is imported until ``gymnasium.make`` needs it):
 
 * ``UMBmarkSquare-v0`` — the UMBmark bi-directional square (Borenstein & Feng 1994);
-* ``StraightLine-v0`` — straight runs, optionally out and back (Borenstein's CLAPPER paper).
+* ``StraightLine-v0`` — straight runs, optionally out and back (Borenstein's CLAPPER paper);
+* ``ClapperStraight-v0``, ``ClapperRectangle-v0`` — the CLAPPER vehicle with IPEC (Borenstein
+  1995, §6);
+* ``SelfCalibration-v0`` — choose the experiments that calibrate a robot within a budget.
 
 The core API: :class:`~odomgym.robot.RobotSpec`, :class:`~odomgym.floor.FloorSpec`,
 :class:`~odomgym.physics.World`, :class:`~odomgym.odometry.Odometry`,
@@ -57,6 +60,8 @@ _ENVS: dict[str, tuple[str, str | None, int]] = {
     # 7×4 m rectangle ~1500.
     "ClapperStraight-v0": ("odomgym.envs.clapper:ClapperStraightEnv", None, 6000),
     "ClapperRectangle-v0": ("odomgym.envs.clapper:ClapperRectangleEnv", None, 4000),
+    # One step per run: at most MAX_BUDGET (64) runs and the stop.
+    "SelfCalibration-v0": ("odomgym.envs.selfcal:SelfCalibrationEnv", None, 65),
 }
 
 

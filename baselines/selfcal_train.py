@@ -1,0 +1,518 @@
+"""Training the self-calibration policy with stable-baselines3 (the ``rl`` extra).
+
+:class:`SelfCalVecEnv` is an SB3 ``VecEnv`` of ``SelfCalibration-v0`` sessions that simulates
+all their runs of a step as one physics batch per floor (:func:`odomgym.envs.selfcal.
+step_episodes`) — a batch of 8 costs about as much wall time as 2 single runs — and splits the
+sessions over ``workers`` processes so both cores simulate. Sub-env i is seeded ``seed + i``
+and resets itself as SB3's ``DummyVecEnv`` does, so its episodes are the same whatever the
+number of workers, and the same as a ``DummyVecEnv`` of single envs (tests/test_selfcal.py).
+
+:func:`train` reads the hyperparameters from ``odomgym/data/hyperparams/selfcal.toml`` (one
+table per algorithm, keyed by env id, as rl-baselines3-zoo's ``hyperparams/<algo>.yml``),
+logs SB3's progress to ``progress.csv`` (and TensorBoard when it is installed), shows a tqdm
+progress bar, plots the learning curve and exports the policy network to the ``.npz`` file
+that :class:`odomgym.baselines.selfcal.MlpPolicy` runs without torch.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import multiprocessing
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import time
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.baselines.selfcal import OBSERVATION_LAYOUT, OBSERVATION_VERSION, MlpPolicy
+from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
+from odomgym.errors import SpecError
+
+try:
+    from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+except ImportError as exc:  # pragma: no cover - the rl extra is missing
+    raise ImportError(
+        "training needs stable-baselines3 and torch: pip install 'odomgym[rl]'"
+    ) from exc
+
+__all__ = [
+    "ALGORITHMS",
+    "ENV_ID",
+    "SelfCalVecEnv",
+    "TrainResult",
+    "evaluate",
+    "export_policy",
+    "load_hyperparams",
+    "train",
+]
+
+ENV_ID = "SelfCalibration-v0"
+ALGORITHMS = ("ppo", "a2c", "dqn")
+"""SB3 algorithms that accept a ``Discrete`` action space (SAC and TD3 need ``Box``)."""
+
+StepResult = tuple[NDArray[np.float32], float, bool, dict[str, Any]]
+
+
+class _Batch:
+    """Sessions stepped together in this process (SB3 reset semantics)."""
+
+    def __init__(self, count: int, env_kwargs: dict[str, Any]) -> None:
+        self.envs = [SelfCalibrationEnv(**env_kwargs) for _ in range(count)]
+
+    def reset(
+        self, seeds: Sequence[int | None], options: Sequence[dict[str, Any]]
+    ) -> list[NDArray[np.float32]]:
+        out = []
+        for env, seed, opts in zip(self.envs, seeds, options, strict=True):
+            obs, _ = env.reset(seed=seed, options=opts or None)
+            out.append(obs)
+        return out
+
+    def step(self, actions: Sequence[int]) -> list[StepResult]:
+        episodes = []
+        for env in self.envs:
+            assert env.episode is not None, "reset() first"
+            episodes.append(env.episode)
+        results = step_episodes(episodes, [menu_index(a) for a in actions], self.envs[0].shaping)
+        out: list[StepResult] = []
+        for env, (obs, reward, done, info) in zip(self.envs, results, strict=True):
+            info["TimeLimit.truncated"] = False
+            if done:
+                info["terminal_observation"] = obs
+                obs, _ = env.reset()
+            out.append((obs, reward, done, info))
+        return out
+
+    def get_attr(self, name: str, indices: Sequence[int]) -> list[Any]:
+        return [getattr(self.envs[i], name) for i in indices]
+
+    def set_attr(self, name: str, value: Any, indices: Sequence[int]) -> None:
+        for i in indices:
+            setattr(self.envs[i], name, value)
+
+
+def _worker(conn: Connection, count: int, env_kwargs: dict[str, Any]) -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    batch = _Batch(count, env_kwargs)
+    while True:
+        command, payload = conn.recv()
+        if command == "close":
+            conn.close()
+            return
+        try:
+            conn.send(("ok", getattr(batch, command)(*payload)))
+        except Exception as exc:  # reported to the parent, which raises it
+            conn.send(("error", exc))
+
+
+class SelfCalVecEnv(VecEnv):  # type: ignore[misc]
+    """``n_envs`` self-calibration sessions, their runs simulated in batches.
+
+    Args:
+        n_envs: sessions stepped together.
+        workers: processes to split them over (1: this process).
+        env_kwargs: keyword arguments of :class:`~odomgym.envs.selfcal.SelfCalibrationEnv`.
+    """
+
+    def __init__(
+        self, n_envs: int, *, workers: int = 1, env_kwargs: dict[str, Any] | None = None
+    ) -> None:
+        if n_envs < 1 or workers < 1:
+            raise SpecError(f"need n_envs >= 1 and workers >= 1, got {n_envs}, {workers}")
+        kwargs = dict(env_kwargs or {})
+        probe = SelfCalibrationEnv(**kwargs)  # validates the settings here, in one line
+        self._bounds = [
+            (int(a[0]), int(a[-1]) + 1)
+            for a in np.array_split(np.arange(n_envs), min(workers, n_envs))
+        ]
+        self._local: _Batch | None = None
+        self._pipes: list[Connection] = []
+        self._processes: list[Any] = []
+        if len(self._bounds) == 1:
+            self._local = _Batch(n_envs, kwargs)
+        else:
+            context = multiprocessing.get_context("spawn")
+            for lo, hi in self._bounds:
+                parent, child = context.Pipe()
+                process = context.Process(
+                    target=_worker, args=(child, hi - lo, kwargs), daemon=True
+                )
+                process.start()
+                child.close()
+                self._pipes.append(parent)
+                self._processes.append(process)
+        self._actions: list[int] = []
+        self.closed = False
+        super().__init__(n_envs, probe.observation_space, probe.action_space)
+
+    # ---------------------------------------------------------------- plumbing
+    def _call(self, command: str, per_shard: Callable[[int, int], tuple[Any, ...]]) -> list[Any]:
+        """Run ``command`` on every shard with its slice of the arguments; concatenated."""
+        if self._local is not None:
+            lo, hi = self._bounds[0]
+            return list(getattr(self._local, command)(*per_shard(lo, hi)))
+        for pipe, (lo, hi) in zip(self._pipes, self._bounds, strict=True):
+            pipe.send((command, per_shard(lo, hi)))
+        out: list[Any] = []
+        for pipe in self._pipes:
+            status, value = pipe.recv()
+            if status == "error":
+                raise value
+            out.extend(value or [])
+        return out
+
+    def _indices(self, indices: Any) -> list[int]:
+        return list(self._get_indices(indices))
+
+    # ---------------------------------------------------------------- VecEnv API
+    def reset(self) -> NDArray[np.float32]:
+        seeds, options = list(self._seeds), list(self._options)
+        obs = self._call("reset", lambda lo, hi: (seeds[lo:hi], options[lo:hi]))
+        self._reset_seeds()
+        self._reset_options()
+        return np.stack(obs)
+
+    def step_async(self, actions: NDArray[Any]) -> None:
+        self._actions = [int(a) for a in np.asarray(actions).reshape(self.num_envs)]
+
+    def step_wait(
+        self,
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:
+        actions = self._actions
+        results = self._call("step", lambda lo, hi: (actions[lo:hi],))
+        obs = np.stack([r[0] for r in results])
+        rewards = np.array([r[1] for r in results], dtype=np.float32)
+        dones = np.array([r[2] for r in results], dtype=bool)
+        return obs, rewards, dones, [r[3] for r in results]
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        for pipe in self._pipes:
+            try:
+                pipe.send(("close", ()))
+            except (BrokenPipeError, OSError):
+                pass
+        for process in self._processes:
+            process.join(timeout=5)
+            if process.is_alive():
+                process.terminate()
+        self.closed = True
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        wanted = self._indices(indices)
+        return [
+            value
+            for value, i in zip(
+                self._call("get_attr", lambda lo, hi: (attr_name, list(range(hi - lo)))),
+                range(self.num_envs),
+                strict=True,
+            )
+            if i in wanted
+        ]
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        wanted = set(self._indices(indices))
+        self._call(
+            "set_attr",
+            lambda lo, hi: (attr_name, value, [i - lo for i in range(lo, hi) if i in wanted]),
+        )
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+    ) -> list[Any]:
+        raise NotImplementedError(
+            "SelfCalVecEnv steps its sessions together; call methods on SelfCalibrationEnv"
+        )
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False for _ in self._indices(indices)]
+
+
+# -------------------------------------------------------------------------------- training
+
+
+def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any]:
+    """The hyperparameters of ``algo`` for ``SelfCalibration-v0``: the table
+    ``[<algo>."SelfCalibration-v0"]`` of ``path`` (default: the shipped
+    ``odomgym/data/hyperparams/selfcal.toml``)."""
+    if algo not in ALGORITHMS:
+        raise SpecError(
+            f"unknown algorithm {algo!r}; algorithms for a Discrete action space: "
+            f"{', '.join(ALGORITHMS)}",
+            field="algo",
+        )
+    if path is None:
+        text = (resources.files("odomgym.data.hyperparams") / "selfcal.toml").read_text()
+        source = "selfcal.toml"
+    else:
+        source = str(path)
+        try:
+            text = Path(path).read_text()
+        except OSError as exc:
+            raise SpecError(f"{path}: cannot read ({exc.strerror})", field="hyperparams") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{source}: {exc}", field="hyperparams") from exc
+    table = data.get(algo, {}).get(ENV_ID)
+    if not isinstance(table, dict):
+        raise SpecError(f'{source}: no table [{algo}."{ENV_ID}"]', field=algo)
+    return dict(table)
+
+
+def export_policy(model: Any, meta: dict[str, Any]) -> MlpPolicy:
+    """The deterministic policy of an SB3 PPO/A2C (tanh MLP + action head) or DQN (ReLU
+    Q-network) model as a numpy :class:`MlpPolicy`."""
+    import torch
+
+    policy = model.policy
+    if hasattr(policy, "q_net"):  # DQN: the greedy action of the Q-network
+        layers = [m for m in policy.q_net.q_net if isinstance(m, torch.nn.Linear)]
+        activation = "relu"
+    else:
+        layers = [m for m in policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+        layers.append(policy.action_net)
+        name = type(policy.activation_fn()).__name__.lower() if policy.activation_fn else "tanh"
+        activation = "relu" if name == "relu" else "tanh"
+    weights = tuple(
+        (
+            layer.weight.detach().cpu().numpy().astype(np.float64),
+            layer.bias.detach().cpu().numpy().astype(np.float64),
+        )
+        for layer in layers
+    )
+    return MlpPolicy(weights, {**meta, "activation": activation})
+
+
+def evaluate(
+    policy: Callable[[NDArray[np.float32]], NDArray[np.int64]],
+    *,
+    seeds: Sequence[int],
+    env_kwargs: dict[str, Any] | None = None,
+) -> dict[str, float]:
+    """Mean terminal reward, validation improvement and runs of ``policy`` (a batch of
+    observations → a batch of actions) on one session per seed (in one batch)."""
+    venv = SelfCalVecEnv(len(seeds), env_kwargs=env_kwargs)
+    try:
+        venv.seed(0)
+        venv._seeds = list(seeds)
+        obs = venv.reset()
+        done = np.zeros(len(seeds), dtype=bool)
+        totals = np.zeros(len(seeds))
+        finals: list[dict[str, Any]] = [{} for _ in seeds]
+        while not done.all():
+            actions = np.asarray(policy(obs)).reshape(-1)
+            obs, rewards, dones, infos = venv.step(actions)
+            for i in np.flatnonzero(~done):
+                totals[i] += rewards[i]
+                if dones[i]:
+                    finals[i] = infos[i]
+            done |= dones
+    finally:
+        venv.close()
+    improvement = [math.log(f["improvement"]) for f in finals if "improvement" in f]
+    return {
+        "reward_mean": float(totals.mean()),
+        "log_improvement_mean": float(np.mean(improvement)) if improvement else float("nan"),
+        "runs_mean": float(np.mean([f["runs_used"] for f in finals])),
+        "stop_first_rate": float(np.mean([f["runs_used"] == 0 for f in finals])),
+    }
+
+
+@dataclass
+class TrainResult:
+    """What :func:`train` wrote and measured."""
+
+    out: Path
+    policy_file: Path
+    model_file: Path
+    wall_time_s: float
+    steps: int
+    evaluation: dict[str, float]
+
+
+def _git_commit() -> str:
+    try:
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).resolve().parent,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def train(
+    *,
+    algo: str = "ppo",
+    steps: int | None = None,
+    envs: int | None = None,
+    workers: int = 2,
+    seed: int = 0,
+    out: str | Path = "runs/selfcal",
+    hyperparams: str | Path | None = None,
+    progress: bool = True,
+    eval_seeds: Sequence[int] = tuple(range(10_000, 10_032)),
+    command: str | None = None,
+) -> TrainResult:
+    """Train a self-calibration policy and write it to ``out``.
+
+    Writes ``model.zip`` (SB3), ``policy.npz`` (the numpy policy ``--policy`` accepts, with
+    the command, versions and wall time in its metadata), ``policy.json`` (the same metadata),
+    ``progress.csv`` and ``learning_curve.png``. ``steps``/``envs`` override the data file's
+    ``n_timesteps``/``n_envs``.
+    """
+    import stable_baselines3 as sb3
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.vec_env import VecMonitor
+    from tqdm import tqdm
+
+    params = load_hyperparams(algo, hyperparams)
+    total = int(steps if steps is not None else params.pop("n_timesteps", 100_000))
+    params.pop("n_timesteps", None)
+    n_envs = int(envs if envs is not None else params.pop("n_envs", 8))
+    params.pop("n_envs", None)
+    env_kwargs = dict(params.pop("env_kwargs", {}))
+    policy_name = params.pop("policy", "MlpPolicy")
+    if total < 1:
+        raise SpecError(f"steps must be >= 1, got {total}", field="steps")
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(1)  # the physics workers need the cores, the MLP does not
+    venv = VecMonitor(SelfCalVecEnv(n_envs, workers=workers, env_kwargs=env_kwargs))
+    venv.seed(seed)
+    algorithm = getattr(sb3, algo.upper())
+    model = algorithm(policy_name, venv, seed=seed, verbose=0, device="cpu", **params)
+    formats = ["csv"] + (["tensorboard"] if importlib.util.find_spec("tensorboard") else [])
+    model.set_logger(configure(str(folder), formats))
+
+    class Progress(BaseCallback):  # type: ignore[misc]
+        """A tqdm bar, and the sessions' terminal outcomes in the log."""
+
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(total=total, unit="step", desc=f"train {algo}", disable=not progress)
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            for info in self.locals.get("infos", []):
+                if "improvement" in info:
+                    self.logger.record_mean(
+                        "selfcal/log_improvement", math.log(max(info["improvement"], 1e-9))
+                    )
+                    self.logger.record_mean("selfcal/runs_used", info["runs_used"])
+                    self.logger.record_mean("selfcal/travel_m", info["travel_m"])
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    start = time.perf_counter()
+    try:
+        model.learn(total_timesteps=total, callback=Progress())
+    finally:
+        venv.close()
+    wall = time.perf_counter() - start
+    model_file = folder / "model.zip"
+    model.save(model_file)
+    meta = {
+        "env_id": ENV_ID,
+        "algo": algo,
+        "command": command or "odomgym train selfcal " + shlex.join(sys.argv[1:]),
+        "steps": total,
+        "n_envs": n_envs,
+        "workers": workers,
+        "seed": seed,
+        "wall_time_s": round(wall, 1),
+        "cpus": os.cpu_count(),
+        "machine": platform.platform(),
+        "git_commit": _git_commit(),
+        "versions": {
+            "stable_baselines3": sb3.__version__,
+            "torch": torch.__version__,
+            "numpy": np.__version__,
+        },
+        "hyperparams": {k: v for k, v in params.items() if k != "policy_kwargs"}
+        | {"policy_kwargs": json.loads(json.dumps(params.get("policy_kwargs", {})))},
+        "env_kwargs": env_kwargs,
+        "observation_version": OBSERVATION_VERSION,
+        "observation_layout": list(OBSERVATION_LAYOUT),
+    }
+    exported = export_policy(model, meta)
+
+    def predict(obs: NDArray[np.float32]) -> NDArray[np.int64]:
+        return np.argmax(exported.logits(obs), axis=-1)
+
+    evaluation = evaluate(predict, seeds=eval_seeds, env_kwargs=env_kwargs)
+    exported = MlpPolicy(exported.weights, {**exported.meta, "evaluation": evaluation})
+    policy_file = folder / "policy.npz"
+    exported.save(policy_file)
+    _write_json(folder / "policy.json", exported.meta)
+    plot_learning_curve(folder / "progress.csv", folder / "learning_curve.png")
+    return TrainResult(folder, policy_file, model_file, wall, total, evaluation)
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    tmp.replace(path)
+
+
+def plot_learning_curve(csv_path: Path, png_path: Path) -> None:
+    """Mean episode reward and log-improvement against environment steps, from SB3's
+    ``progress.csv``."""
+    import csv
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with csv_path.open() as f:
+        rows = list(csv.DictReader(f))
+
+    def column(name: str) -> tuple[list[float], list[float]]:
+        xs, ys = [], []
+        for row in rows:
+            if row.get(name) and row.get("time/total_timesteps"):
+                xs.append(float(row["time/total_timesteps"]))
+                ys.append(float(row[name]))
+        return xs, ys
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    for name, label in (
+        ("rollout/ep_rew_mean", "episode reward"),
+        ("selfcal/log_improvement", "ln(E_max before / after), validation"),
+    ):
+        xs, ys = column(name)
+        if xs:
+            ax.plot(xs, ys, label=label)
+    ax.set_xlabel("environment steps (runs and stops)")
+    ax.set_ylabel("nats")
+    ax.set_title("SelfCalibration-v0 learning curve")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    tmp = png_path.with_name(png_path.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(png_path)

@@ -1,0 +1,493 @@
+"""``SelfCalibration-v0``: choose the experiments that calibrate a robot, within a budget of runs.
+
+An episode is one calibration session (:class:`odomgym.baselines.selfcal.SelfCalSession`) on a
+freshly sampled robot: systematic errors drawn over the benchmark's ranges
+(:class:`~odomgym.baselines.benchmark.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
+E_s ∈ [0.98, 1.02], on the LabMate) and a floor drawn from ``floors`` (the benchmark's
+``concrete``, ``rough`` and ``cables``; on ``cables`` every run starts at a random pose on one
+of eight cable fields, so cables are met at random).
+
+Spaces:
+    action: ``Discrete(10)`` — an index into :data:`~odomgym.baselines.selfcal.MENU`: 0 stops
+        the session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or
+        out and back, in-place spins of 360° either way or 720°) with the reference driver and
+        the current corrections in the odometry.
+    observation: ``Box(-10, 10, (31,), float32)`` — :data:`~odomgym.baselines.selfcal.
+        OBSERVATION_LAYOUT`: budget left and size, how often each item was driven, the
+        estimated E_d, E_b, E_s and their posterior spreads, the floor-roughness estimate, the
+        last run's normalised innovation and which item it was. Everything a person at the home
+        position could know — never the truth.
+
+Each run is measured as a person at the home position would (the end pose with the sensor's
+noise, σ = 2 mm and 0.4°; Borenstein & Feng 1994, §6.3), and the estimator refits the
+corrections (iterative compensation).
+
+Reward: at the end of the session, the final corrections are validated on fresh runs the agent
+never sees — a 4×4 m square each way and a 4 m straight run, driven on the noiseless ``smooth``
+floor by the true robot with the final corrections and without any (same start, same floor, so
+the comparison is exact and free of luck). With E the square family's E_max,syst (Borenstein &
+Feng 1994, Eq. 3.3) and the straight run's position error, per family
+t_f = clip(ln((E_ref,f + 1 mm) / (E_after,f + 1 mm)), −3, ln 300), and
+
+    r_T = t_square + 0.25·t_straight − 2·(max(0, −t_square) + max(0, −t_straight)),
+
+so corrections that close the squares while wrecking straight runs (or the reverse) lose.
+Stopping at once keeps the uncalibrated robot: r_T = 0 exactly. A session whose robot cannot
+finish a run (corrections so wrong that it circles) ends with :data:`FAILED_REWARD`.
+Shaping (``shaping`` = c, default 0.1): every step also pays c·(Φ(s′) − Φ(s)) with Φ the
+estimator's information gain (½·ln det Σ_prior/Σ_posterior) and Φ = 0 at the end — potential-
+based (Ng, Harada & Russell 1999), so it sums to exactly zero over an episode and cannot change
+which policy is best; it only credits informative runs early.
+
+Episode end: terminated when the agent stops or the budget is spent (the last run's step
+carries the terminal reward); the registered step limit (budget + 1 ≤ 65) never truncates.
+
+``info``: ``runs_used``, ``budget``, ``travel_m`` (true path length driven so far [m]),
+``floor``, ``item`` (the menu item's name); at the end also ``reward_terms``,
+``e_max_before_mm``/``e_max_after_mm`` (validation squares), ``improvement`` (their ratio),
+``true_errors``/``estimated_errors`` (E_d, E_b, E_s), ``calibration`` and ``experiments``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.baselines.benchmark import (
+    CABLES_START_REGION,
+    Population,
+    check_bench_floor,
+)
+from odomgym.baselines.selfcal import (
+    MAX_BUDGET,
+    MENU,
+    OBSERVATION_BOUND,
+    OBSERVATION_LAYOUT,
+    SelfCalSession,
+)
+from odomgym.errors import SpecError
+from odomgym.experiments import SensorAccuracy
+from odomgym.floor import FLOORS, FloorSpec
+from odomgym.lab import experiment_route, measure, random_start_poses, simulate_runs
+from odomgym.metrics import e_max_syst
+from odomgym.odometry import Calibration
+from odomgym.robot import RobotSpec
+from odomgym.routes import Route, square_route, straight_route
+from odomgym.runs import Run, end_error
+
+__all__ = [
+    "FAILED_REWARD",
+    "STRAIGHT_WEIGHT",
+    "WORSE_PENALTY",
+    "Episode",
+    "SelfCalibrationEnv",
+    "menu_index",
+    "new_episode",
+    "step_episodes",
+    "validation_terms",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Weight of the straight-run family in the terminal reward [-].
+STRAIGHT_WEIGHT = 0.25
+#: Extra weight on every family the corrections made worse than uncalibrated [-].
+WORSE_PENALTY = 2.0
+#: Clip of each family's log improvement [nats].
+TERM_CLIP = (-3.0, math.log(300.0))
+#: Added to every validation error before the ratio, so a robot that is nearly right already
+#: cannot make the ratio explode [m].
+ERROR_FLOOR = 0.001
+#: The terminal reward of a session that could not finish a run: the lowest reward any
+#: finished session can get.
+FAILED_REWARD = (1.0 + STRAIGHT_WEIGHT) * TERM_CLIP[0] + WORSE_PENALTY * 2.0 * TERM_CLIP[0]
+
+_VALIDATION_ROUTES: tuple[tuple[Route, str, str | None], ...] = (
+    (square_route(4.0, "cw"), "square", "cw"),
+    (square_route(4.0, "ccw"), "square", "ccw"),
+    (straight_route(4.0, False), "straight", None),
+)
+
+
+@dataclass(frozen=True)
+class _FloorSetup:
+    roughness: float  # k of the floor under this session's wheels [m^½]
+    cables: bool  # runs start at random poses on the cable field
+
+
+_FLOOR_SETUPS: dict[str, _FloorSetup] = {
+    # As BENCH_FLOORS builds them: the concrete and rough presets, and concrete with cables.
+    "concrete": _FloorSetup(FLOORS["concrete"].roughness, False),
+    "rough": _FloorSetup(FLOORS["rough"].roughness, False),
+    "cables": _FloorSetup(FLOORS["concrete"].roughness, True),
+}
+#: Where runs on the cable-free floors start, and where validation runs start [m]: far enough
+#: from the cable field (±18 m) that no wheel ever meets a cable.
+_PLAIN_ORIGIN = np.array([100.0, 0.0, 0.0])
+_VALIDATION_ORIGIN = np.array([-100.0, 0.0, 0.0])
+
+
+@functools.cache
+def _shared_floor() -> FloorSpec:
+    """The one floor every session of a step shares: the benchmark's cable field geometry
+    (10 mm cables, 1.5 per m², over ±18 m; a fixed layout, not the benchmark's own) with no
+    roughness of its own — each robot carries its floor's roughness as the
+    ``floor_roughness`` effect (variances add, Chong & Kleeman 1997, Eq. 4), so sessions on
+    different floors and the noiseless validation runs share one physics batch."""
+    rng = np.random.default_rng(np.random.SeedSequence([0, 1995]))
+    return FloorSpec.scattered_cables(
+        rng,
+        half_size=CABLES_START_REGION + 6.0,
+        per_square_metre=1.5,
+        roughness=0.0,
+        name="selfcal-shared",
+    )
+
+
+@dataclass
+class Episode:
+    """One session in progress on a hidden true robot (shared by the env and its batched
+    vector env)."""
+
+    robot: RobotSpec
+    floor_name: str
+    session: SelfCalSession
+    rng: np.random.Generator
+    sensor: SensorAccuracy
+    potential: float = 0.0
+    travel: float = 0.0
+    done: bool = False
+    driven: RobotSpec = field(init=False)
+
+    def __post_init__(self) -> None:
+        k = _FLOOR_SETUPS[self.floor_name].roughness
+        self.driven = self.robot.with_effect("floor_roughness", {"k_left": k, "k_right": k})
+
+
+def new_episode(
+    rng: np.random.Generator,
+    floors: Sequence[str],
+    budgets: Sequence[int],
+    population: Population,
+    sensor: SensorAccuracy,
+    options: Mapping[str, Any] | None = None,
+) -> Episode:
+    """A new session: robot, floor, budget and run stream all drawn from ``rng``.
+
+    ``options`` may fix ``floor`` (a benchmark floor name) and ``budget`` (runs).
+    """
+    opts = dict(options or {})
+    unknown = set(opts) - {"floor", "budget"}
+    if unknown:
+        raise SpecError(
+            f"unknown reset option(s) {', '.join(sorted(unknown))}; options: floor, budget",
+            field="options",
+        )
+    robot_rng, run_rng = rng.spawn(2)
+    floor_name = str(opts.get("floor", floors[int(rng.integers(len(floors)))]))
+    check_bench_floor(floor_name)
+    budget = opts.get("budget", budgets[int(rng.integers(len(budgets)))])
+    robot = population.sample(robot_rng, "selfcal-robot")
+    session = SelfCalSession(robot, budget, sensor)  # it reads only the nominal parameters
+    return Episode(robot, floor_name, session, run_rng, sensor)
+
+
+class _Batch:
+    """The runs of one step: every session's experiment run and the validation runs."""
+
+    def __init__(self) -> None:
+        self.specs: list[RobotSpec] = []
+        self.routes: list[Route] = []
+        self.calibrations: list[Calibration] = []
+        self.streams: list[np.random.Generator] = []
+        self.starts: list[FloatArray] = []
+        self.kinds: list[str] = []
+        self.directions: list[str | None] = []
+
+    def add(
+        self,
+        spec: RobotSpec,
+        route: Route,
+        calibration: Calibration,
+        stream: np.random.Generator,
+        start: FloatArray,
+        kind: str,
+        direction: str | None,
+    ) -> int:
+        self.specs.append(spec)
+        self.routes.append(route)
+        self.calibrations.append(calibration)
+        self.streams.append(stream)
+        self.starts.append(start)
+        self.kinds.append(kind)
+        self.directions.append(direction)
+        return len(self.specs) - 1
+
+    def run(self) -> tuple[list[Run], FloatArray]:
+        if not self.specs:
+            return [], np.zeros((0, 3))
+        return simulate_runs(
+            self.specs,
+            _shared_floor(),
+            self.routes,
+            calibration=self.calibrations,
+            rng=self.streams,
+            kind=self.kinds,
+            direction=self.directions,
+            start_poses=np.array(self.starts),
+            on_timeout="keep",
+        )
+
+
+def _add_validation(batch: _Batch, robot: RobotSpec, calibration: Calibration) -> list[int]:
+    """A 4 m square each way and a 4 m straight run, with ``calibration`` and without, on a
+    noiseless patch of floor (the robot without any roughness); returns their batch slots."""
+    slots = []
+    for cal in (calibration, Calibration()):
+        for route, kind, direction in _VALIDATION_ROUTES:
+            quiet = np.random.default_rng(0)  # never drawn from: k = 0 on these wheels
+            slots.append(batch.add(robot, route, cal, quiet, _VALIDATION_ORIGIN, kind, direction))
+    return slots
+
+
+def validation_terms(
+    robots: Sequence[RobotSpec], calibrations: Sequence[Calibration]
+) -> list[dict[str, float]]:
+    """Validate each calibration on its robot: a 4 m square each way and a 4 m straight run,
+    with it and without any, on noiseless floor from the same start (one batch).
+
+    Returns per robot the errors [m] (``e_max_before``/``after``, ``straight_before``/
+    ``after``), the family terms ``t_square``/``t_straight`` [nats], ``reward`` and
+    ``finished`` (1.0 or 0.0).
+    """
+    batch = _Batch()
+    slots = [_add_validation(batch, r, c) for r, c in zip(robots, calibrations, strict=True)]
+    runs, odom = batch.run()
+    return [_verdict(runs, odom, own) for own in slots]
+
+
+def _verdict(runs: Sequence[Run], odom: FloatArray, slots: Sequence[int]) -> dict[str, float]:
+    finished = all(bool(runs[i].meta["finished"]) for i in slots)
+    errors = [end_error(runs[i], odom[i]) for i in slots]
+    after_sq = e_max_syst(errors[0][None], errors[1][None])
+    before_sq = e_max_syst(errors[3][None], errors[4][None])
+    after_st = float(np.hypot(*errors[2][:2]))
+    before_st = float(np.hypot(*errors[5][:2]))
+    t_sq = _term(before_sq, after_sq)
+    t_st = _term(before_st, after_st)
+    reward = t_sq + STRAIGHT_WEIGHT * t_st - WORSE_PENALTY * (max(0.0, -t_sq) + max(0.0, -t_st))
+    return {
+        "e_max_before": before_sq,
+        "e_max_after": after_sq,
+        "straight_before": before_st,
+        "straight_after": after_st,
+        "t_square": t_sq,
+        "t_straight": t_st,
+        "reward": reward if finished else FAILED_REWARD,
+        "finished": 1.0 if finished else 0.0,
+    }
+
+
+def _term(before: float, after: float) -> float:
+    value = math.log((before + ERROR_FLOOR) / (after + ERROR_FLOOR))
+    return min(max(value, TERM_CLIP[0]), TERM_CLIP[1])
+
+
+def step_episodes(
+    episodes: Sequence[Episode], actions: Sequence[int], shaping: float
+) -> list[tuple[NDArray[np.float32], float, bool, dict[str, Any]]]:
+    """Advance every episode by one action, all their runs simulated as one physics batch:
+    the experiment runs of the sessions that go on and the validation runs of those that stop.
+
+    A session whose budget is spent stops whatever the action (its observation says so: no
+    runs left). Returns ``(observation, reward, terminated, info)`` per episode.
+    """
+    batch = _Batch()
+    experiment_slot: dict[int, int] = {}
+    validation_slots: dict[int, list[int]] = {}
+    for i, (episode, action) in enumerate(zip(episodes, actions, strict=True)):
+        if episode.done:
+            raise RuntimeError("the session has ended: call reset() before step()")
+        session = episode.session
+        experiment = session.experiment(int(action))
+        if experiment is None or session.runs_left <= 0:
+            validation_slots[i] = _add_validation(batch, episode.robot, session.calibration)
+            continue
+        if _FLOOR_SETUPS[episode.floor_name].cables:
+            poses = random_start_poses(episode.rng, 1, CABLES_START_REGION)
+            assert poses is not None
+            start = poses[0]
+        else:
+            start = _PLAIN_ORIGIN
+        experiment_slot[i] = batch.add(
+            episode.driven,
+            experiment_route(experiment),
+            session.calibration,
+            episode.rng.spawn(1)[0],
+            start,
+            experiment.kind,
+            experiment.direction,
+        )
+    runs, odom = batch.run()
+    results = []
+    for i, episode in enumerate(episodes):
+        session = episode.session
+        info: dict[str, Any] = {
+            "floor": episode.floor_name,
+            "budget": session.budget,
+            "item": MENU[int(actions[i])].name if i in experiment_slot else "stop",
+        }
+        reward = 0.0
+        terminated = False
+        if i in experiment_slot:
+            run = runs[experiment_slot[i]]
+            if run.meta["finished"]:
+                session.record(int(actions[i]), measure([run], episode.sensor, episode.rng))
+                episode.travel += run.distance
+                gain = session.estimator.information_gain
+                reward = shaping * (gain - episode.potential)
+                episode.potential = gain
+            else:
+                terminated = True
+                reward = FAILED_REWARD - shaping * episode.potential
+                info["failed"] = (
+                    f"the robot did not finish its {MENU[int(actions[i])].name} run (a "
+                    "slippery floor, or corrections that make it circle?)"
+                )
+        else:
+            terminated = True
+            verdict = _verdict(runs, odom, validation_slots[i])
+            final = -shaping * episode.potential  # Φ = 0 at the end: the shaping telescopes
+            reward = verdict["reward"] + final
+            if not verdict["finished"]:
+                info["failed"] = "the validation runs did not finish with these corrections"
+            info["reward_terms"] = {
+                "square": verdict["t_square"],
+                "straight": verdict["t_straight"],
+                "shaping": final,
+            }
+            info["e_max_before_mm"] = 1e3 * verdict["e_max_before"]
+            info["e_max_after_mm"] = 1e3 * verdict["e_max_after"]
+            after = verdict["e_max_after"]
+            info["improvement"] = verdict["e_max_before"] / after if after > 0 else math.inf
+        info["runs_used"] = session.runs_used
+        info["travel_m"] = episode.travel
+        if terminated:
+            episode.done = True
+            robot = episode.robot
+            info["true_errors"] = (robot.e_d, robot.e_b, robot.e_s)
+            info["estimated_errors"] = tuple(float(v) for v in session.estimator.errors)
+            info["calibration"] = session.calibration.to_dict()
+            info["experiments"] = list(session.history)
+        results.append((session.observation(), float(reward), terminated, info))
+    return results
+
+
+def menu_index(action: object) -> int:
+    """``action`` as a menu index, or :class:`SpecError` (field ``action``): a whole number
+    (Python or numpy, or a 0-d array of one) in 0..len(MENU)−1."""
+    value = action.item() if isinstance(action, np.ndarray) and action.shape == () else action
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise SpecError(
+            f"action must be a whole menu index 0..{len(MENU) - 1}, got {action!r}",
+            field="action",
+        )
+    if not 0 <= int(value) < len(MENU):
+        raise SpecError(
+            f"action must be a menu index 0..{len(MENU) - 1}, got {int(value)}", field="action"
+        )
+    return int(value)
+
+
+def _budgets(budget: int | Sequence[int]) -> tuple[int, ...]:
+    values = (budget,) if isinstance(budget, (int, np.integer)) else tuple(budget)
+    if not values:
+        raise SpecError("budget needs at least one value", field="budget")
+    for value in values:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise SpecError(f"budget must be whole numbers of runs, got {value!r}", field="budget")
+        if not 1 <= value <= MAX_BUDGET:
+            raise SpecError(f"budget must be 1..{MAX_BUDGET} runs, got {value}", field="budget")
+    return tuple(int(v) for v in values)
+
+
+class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
+    """One self-calibration session per episode (see the module docs).
+
+    Args:
+        floors: benchmark floor names to draw each episode's floor from.
+        budget: the session's budget in runs, or several to draw from per episode (training
+            uses (4, 8, 16) so one policy serves every budget; the budget is observed).
+        shaping: coefficient c of the potential-based shaping (0 turns it off).
+        population: the ranges the robots' systematic errors are drawn from.
+        sensor: the end-pose sensor's accuracy.
+        render_mode: only ``None`` (a session is a list of runs, not a scene).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (Gymnasium's convention)
+
+    def __init__(
+        self,
+        floors: Sequence[str] = ("concrete", "rough", "cables"),
+        budget: int | Sequence[int] = 16,
+        shaping: float = 0.1,
+        population: Population | None = None,
+        sensor: SensorAccuracy | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None:
+            raise SpecError("SelfCalibration-v0 has no render modes", field="render_mode")
+        self.floors = (floors,) if isinstance(floors, str) else tuple(floors)
+        if not self.floors:
+            raise SpecError("floors needs at least one floor", field="floors")
+        for name in self.floors:
+            check_bench_floor(name)
+        self.budgets = _budgets(budget)
+        if not (math.isfinite(shaping) and shaping >= 0.0):
+            raise SpecError(f"shaping must be finite and >= 0, got {shaping}", field="shaping")
+        self.shaping = float(shaping)
+        self.population = population or Population()
+        self.sensor = sensor or SensorAccuracy()
+        self.render_mode = render_mode
+        self.action_space = gym.spaces.Discrete(len(MENU))
+        bound = OBSERVATION_BOUND
+        self.observation_space = gym.spaces.Box(
+            -bound, bound, (len(OBSERVATION_LAYOUT),), dtype=np.float32
+        )
+        self.episode: Episode | None = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        """Start a session; ``options`` may fix ``floor`` and ``budget``."""
+        super().reset(seed=seed)
+        opts = dict(options or {})
+        if "budget" in opts:
+            opts["budget"] = _budgets(opts["budget"])[0]
+        self.episode = new_episode(
+            self.np_random, self.floors, self.budgets, self.population, self.sensor, opts
+        )
+        info = {
+            "runs_used": 0,
+            "budget": self.episode.session.budget,
+            "travel_m": 0.0,
+            "floor": self.episode.floor_name,
+        }
+        return self.episode.session.observation(), info
+
+    def step(
+        self, action: np.int64 | int
+    ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        """Drive one run of menu item ``action`` (or stop) and refit."""
+        if self.episode is None:
+            raise RuntimeError("call reset() before step()")
+        index = menu_index(action)
+        obs, reward, terminated, info = step_episodes([self.episode], [index], self.shaping)[0]
+        return obs, reward, terminated, False, info

@@ -1,0 +1,1 @@
+"""Hyperparameters of the learned policies, one table per algorithm keyed by env id."""
