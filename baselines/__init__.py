@@ -8,7 +8,9 @@
 * ``lee`` — Lee et al., UMBmark without the "E_d does not affect turns" assumption;
 * ``ivanjko`` — Ivanjko et al., straight runs and in-place spins, nonlinear least squares;
 * ``least_squares`` — Antonelli et al. style linear least squares over whole runs;
-* ``trajectory`` — OptiOdom-style optimisation over whole trajectories.
+* ``trajectory`` — OptiOdom-style optimisation over whole trajectories;
+* ``selfcal`` — a learned policy that chooses the experiments, with an end-pose estimator
+  (``SelfCalibration-v0``; the shipped policy runs in numpy, no torch needed).
 """
 
 from __future__ import annotations
@@ -18,11 +20,12 @@ from odomgym.baselines.ivanjko import Ivanjko
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.least_squares import LeastSquares
 from odomgym.baselines.lee import Lee
+from odomgym.baselines.selfcal import SelfCal
 from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.umbmark import UMBmark
 
 CALIBRATORS: dict[str, type[Calibrator]] = {
-    cls.name: cls for cls in (UMBmark, JungChung, Lee, Ivanjko, LeastSquares, Trajectory)
+    cls.name: cls for cls in (UMBmark, JungChung, Lee, Ivanjko, LeastSquares, Trajectory, SelfCal)
 }
 
 __all__ = [
@@ -33,6 +36,7 @@ __all__ = [
     "JungChung",
     "LeastSquares",
     "Lee",
+    "SelfCal",
     "Trajectory",
     "UMBmark",
 ]

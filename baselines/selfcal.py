@@ -211,7 +211,8 @@ class EndPoseEstimator:
     def relative_std(self) -> FloatArray:
         """Posterior standard deviations of (ln E_s, ln E_d, ln E_b) over the prior's [-]."""
         cov = _FROM_X @ self.covariance @ _FROM_X.T
-        return np.sqrt(np.clip(np.diag(cov), 1e-30, None)) / np.array(PRIOR_STD)
+        out: FloatArray = np.sqrt(np.clip(np.diag(cov), 1e-30, None)) / np.array(PRIOR_STD)
+        return out
 
     @property
     def information_gain(self) -> float:
@@ -325,7 +326,7 @@ class SelfCalSession:
     @property
     def runs_left(self) -> int:
         """Runs the budget still allows."""
-        return self.budget - self.runs_used
+        return int(self.budget - self.runs_used)
 
     @property
     def calibration(self) -> Calibration:
@@ -369,7 +370,10 @@ class SelfCalSession:
             ]
         )
         bound = OBSERVATION_BOUND
-        return np.clip(np.nan_to_num(values, nan=0.0), -bound, bound).astype(np.float32)
+        obs: NDArray[np.float32] = np.clip(np.nan_to_num(values, nan=0.0), -bound, bound).astype(
+            np.float32
+        )
+        return obs
 
 
 # ---------------------------------------------------------------------------------- policies
@@ -385,7 +389,8 @@ def scripted_policy(observation: NDArray[np.float32], budget: int, runs_used: in
         return STOP
     if runs_used % 8 == 2 and budget >= 8:
         return 5  # straight4
-    squares_before = runs_used - (runs_used + 5) // 8
+    straights_before = (runs_used + 5) // 8 if budget >= 8 else 0  # runs 2, 10, 18, ...
+    squares_before = runs_used - straights_before
     return 1 + squares_before % 2  # square4-cw / square4-ccw
 
 

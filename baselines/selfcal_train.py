@@ -120,7 +120,7 @@ def _worker(conn: Connection, count: int, env_kwargs: dict[str, Any]) -> None:
             conn.send(("error", exc))
 
 
-class SelfCalVecEnv(VecEnv):  # type: ignore[misc]
+class SelfCalVecEnv(VecEnv):
     """``n_envs`` self-calibration sessions, their runs simulated in batches.
 
     Args:
@@ -312,13 +312,14 @@ def evaluate(
     try:
         venv.seed(0)
         venv._seeds = list(seeds)
-        obs = venv.reset()
+        obs = np.asarray(venv.reset(), dtype=np.float32)
         done = np.zeros(len(seeds), dtype=bool)
         totals = np.zeros(len(seeds))
         finals: list[dict[str, Any]] = [{} for _ in seeds]
         while not done.all():
             actions = np.asarray(policy(obs)).reshape(-1)
-            obs, rewards, dones, infos = venv.step(actions)
+            stepped, rewards, dones, infos = venv.step(actions)
+            obs = np.asarray(stepped, dtype=np.float32)
             for i in np.flatnonzero(~done):
                 totals[i] += rewards[i]
                 if dones[i]:
@@ -401,12 +402,15 @@ def train(
     torch.set_num_threads(1)  # the physics workers need the cores, the MLP does not
     venv = VecMonitor(SelfCalVecEnv(n_envs, workers=workers, env_kwargs=env_kwargs))
     venv.seed(seed)
+    rollout = int(params.get("n_steps", 0)) * n_envs
+    if rollout and int(params.get("batch_size", 0)) > rollout:
+        params["batch_size"] = rollout  # a short test run with few sessions: one mini-batch
     algorithm = getattr(sb3, algo.upper())
     model = algorithm(policy_name, venv, seed=seed, verbose=0, device="cpu", **params)
     formats = ["csv"] + (["tensorboard"] if importlib.util.find_spec("tensorboard") else [])
     model.set_logger(configure(str(folder), formats))
 
-    class Progress(BaseCallback):  # type: ignore[misc]
+    class Progress(BaseCallback):
         """A tqdm bar, and the sessions' terminal outcomes in the log."""
 
         def _on_training_start(self) -> None:
@@ -460,7 +464,8 @@ def train(
     exported = export_policy(model, meta)
 
     def predict(obs: NDArray[np.float32]) -> NDArray[np.int64]:
-        return np.argmax(exported.logits(obs), axis=-1)
+        actions: NDArray[np.int64] = np.argmax(exported.logits(obs), axis=-1)
+        return actions
 
     evaluation = evaluate(predict, seeds=eval_seeds, env_kwargs=env_kwargs)
     exported = MlpPolicy(exported.weights, {**exported.meta, "evaluation": evaluation})

@@ -95,18 +95,22 @@ SQUARE_SIZING: dict[str, SquareSizing] = {
     "least_squares": lambda side, runs: {"side": side, "squares_per_direction": runs},
     "trajectory": _square_side_and_runs,
     "ivanjko": lambda side, runs: {},  # straight runs and spins: no squares to size
+    # The policy chooses its runs from a fixed menu: it gets UMBmark's budget for these
+    # settings (2N squares and the 6 straight runs of its E_s phases; 16 for the defaults).
+    "selfcal": lambda side, runs: {"budget": 2 * runs + 6},
 }
 """How the command line's square settings — side L [m] and squares per direction — apply to
 each method (constructor options). A method missing here runs with its defaults."""
 
 
 def calibrator_for_squares(
-    cls: type[Calibrator], *, side: float, runs_per_direction: int
+    cls: type[Calibrator], *, side: float, runs_per_direction: int, **options: object
 ) -> Calibrator:
     """``cls`` with the square side [m] and squares per direction of :data:`SQUARE_SIZING`
-    (what ``odomgym calibrate METHOD --side L --runs N`` means for each method)."""
+    (what ``odomgym calibrate METHOD --side L --runs N`` means for each method), and any
+    further ``options`` (each of which the method must take)."""
     sizing = SQUARE_SIZING.get(cls.name)
-    return make_calibrator(cls, **(sizing(side, runs_per_direction) if sizing else {}))
+    return make_calibrator(cls, **(sizing(side, runs_per_direction) if sizing else {}), **options)
 
 
 @dataclass(frozen=True)
@@ -173,6 +177,13 @@ def _trajectory_from(held: Holdings) -> dict[str, object]:
     return {}
 
 
+def _selfcal_from(held: Holdings) -> dict[str, object]:
+    raise LookupError(
+        "selfcal chooses each next run as it goes, which needs a simulated lab; a recorded "
+        "session holds only the runs that were driven"
+    )
+
+
 SESSION_SIZING: dict[str, SessionSizing] = {
     "umbmark": _squares_from,
     "jung_chung": _squares_from,
@@ -180,6 +191,7 @@ SESSION_SIZING: dict[str, SessionSizing] = {
     "ivanjko": _ivanjko_from,
     "least_squares": _least_squares_from,
     "trajectory": _trajectory_from,
+    "selfcal": _selfcal_from,
 }
 """How each method is sized from what a recorded session holds (constructor options): counts
 the session lacks keep the method's defaults, and the method then says what is missing. A

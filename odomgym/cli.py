@@ -370,7 +370,8 @@ def _command_calibrate(args: argparse.Namespace) -> int:
         )
     robot = _robot_from(args)
     floor = load_floor(args.floor)
-    calibrator = calibrator_for_squares(cls, side=args.side, runs_per_direction=args.runs)
+    extra = {"policy": args.policy} if args.policy is not None else {}
+    calibrator = calibrator_for_squares(cls, side=args.side, runs_per_direction=args.runs, **extra)
     report_sim = calibrate_in_simulation(
         calibrator,
         robot,
@@ -757,6 +758,106 @@ def _add_clapper_parsers(routes: Any) -> None:
         parser.set_defaults(handler=_command_clapper)
 
 
+def _command_train(args: argparse.Namespace) -> int:
+    import importlib.util
+
+    if importlib.util.find_spec("stable_baselines3") is None:
+        raise SpecError(
+            "training needs stable-baselines3 and torch: pip install 'odomgym[rl]'",
+            field="train",
+        )
+    _check_output(args.out, option="--out", folder=True)
+    from odomgym.baselines.selfcal_train import load_hyperparams, train
+
+    params = load_hyperparams(args.algo, args.hyperparams)  # one-line errors before any work
+    steps = args.steps or int(params.get("n_timesteps", 100_000))
+    envs = args.envs or int(params.get("n_envs", 8))
+    command = (
+        f"odomgym train selfcal --algo {args.algo} --steps {steps} --envs {envs} "
+        f"--workers {args.workers} --seed {args.seed} --out {args.out}"
+        + (f" --hyperparams {args.hyperparams}" if args.hyperparams else "")
+    )
+    result = train(
+        algo=args.algo,
+        steps=steps,
+        envs=envs,
+        workers=args.workers,
+        seed=args.seed,
+        out=args.out,
+        hyperparams=args.hyperparams,
+        progress=not args.json and sys.stderr.isatty(),
+        command=command,
+    )
+    summary = {
+        "algo": args.algo,
+        "steps": result.steps,
+        "wall_time_s": round(result.wall_time_s, 1),
+        "evaluation": result.evaluation,
+        "policy": str(result.policy_file),
+        "model": str(result.model_file),
+    }
+    if args.json:
+        print(to_json(summary))
+    else:
+        ev = result.evaluation
+        print(
+            f"trained {args.algo} for {result.steps} steps in {result.wall_time_s / 60:.1f} min; "
+            f"on {len(range(10_000, 10_032))} held-out sessions: mean reward "
+            f"{ev['reward_mean']:.2f}, mean ln(E_max before/after) "
+            f"{ev['log_improvement_mean']:.2f}, {ev['runs_mean']:.1f} runs"
+        )
+    _say(args, f"use it: odomgym calibrate selfcal --policy {result.policy_file}")
+    _report_written(
+        args,
+        [
+            str(result.policy_file),
+            str(result.model_file),
+            str(Path(args.out) / "policy.json"),
+            str(Path(args.out) / "progress.csv"),
+            str(Path(args.out) / "learning_curve.png"),
+        ],
+    )
+    return 0
+
+
+def _add_train_parser(commands: Any) -> None:
+    from odomgym.baselines.selfcal import MENU
+
+    train = commands.add_parser(
+        "train",
+        help="train a self-calibration policy (needs the rl extra)",
+        description="Train a policy in SelfCalibration-v0 with stable-baselines3: each step it "
+        f"picks one of {len(MENU) - 1} experiments or stops; the reward is the validated "
+        "improvement of the final corrections. Writes the SB3 model, the numpy policy that "
+        "odomgym calibrate selfcal --policy takes, progress.csv and a learning-curve plot.",
+    )
+    train.add_argument("what", choices=["selfcal"], help="what to train: selfcal")
+    train.add_argument(
+        "--algo",
+        choices=["ppo", "a2c", "dqn"],
+        default="ppo",
+        help="SB3 algorithm (Discrete actions: ppo, a2c, dqn; default ppo)",
+    )
+    train.add_argument(
+        "--steps", type=_count, help="environment steps (default: the data file's n_timesteps)"
+    )
+    train.add_argument(
+        "--envs", type=_count, help="sessions stepped together (default: the data file's n_envs)"
+    )
+    train.add_argument(
+        "--workers", type=_count, default=2, help="processes simulating them (default 2)"
+    )
+    train.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    train.add_argument("--out", default="runs/selfcal", help="output folder (default runs/selfcal)")
+    train.add_argument(
+        "--hyperparams",
+        help='a TOML file with [<algo>."SelfCalibration-v0"] tables (default: the shipped '
+        "odomgym/data/hyperparams/selfcal.toml)",
+    )
+    train.add_argument("--json", action="store_true", help="one JSON object instead of text")
+    train.set_defaults(handler=_command_train)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command (every option has a help text: tested)."""
     from odomgym.baselines.benchmark import BENCH_FLOORS, Backend
@@ -800,6 +901,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="optiodom: reproduce the published OptiOdom conventions (with --data)",
     )
+    calibrate.add_argument(
+        "--policy",
+        help="selfcal only: learned (the shipped policy, default), scripted (alternate 4 m "
+        "squares) or a policy .npz file written by odomgym train selfcal",
+    )
     calibrate.add_argument("--save", help="write the calibration as TOML here")
     calibrate.add_argument(
         "--export", choices=["ros2"], help="also export the calibration (ros2: diff_drive YAML)"
@@ -829,7 +935,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="benchmark floors (default: all): "
         + "; ".join(f"{name}: {floor.description}" for name, floor in BENCH_FLOORS.items()),
     )
-    bench.add_argument("--methods", nargs="+", help="calibrators (default: all)")
+    bench.add_argument(
+        "--methods",
+        nargs="+",
+        help="calibrators (default: all, selfcal included: its shipped policy runs in numpy)",
+    )
     bench.add_argument(
         "--budget",
         type=_count,
@@ -851,6 +961,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--json", action="store_true", help="print the summary as JSON")
     bench.set_defaults(handler=_command_bench)
+
+    _add_train_parser(commands)
 
     board = commands.add_parser(
         "leaderboard",

@@ -1,0 +1,160 @@
+"""Training the self-calibration policy (the rl extra): the batched vector env, the export of
+the policy network to numpy, the command, a short training run, and the shipped policy
+against UMBmark."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from stable_baselines3 import PPO  # noqa: E402
+from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
+
+from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize  # noqa: E402
+from odomgym.baselines.selfcal import MENU, load_policy  # noqa: E402
+from odomgym.baselines.selfcal_train import (  # noqa: E402
+    SelfCalVecEnv,
+    evaluate,
+    export_policy,
+    load_hyperparams,
+)
+from odomgym.cli import main  # noqa: E402
+from odomgym.envs.selfcal import SelfCalibrationEnv  # noqa: E402
+from odomgym.errors import SpecError  # noqa: E402
+
+KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
+
+
+def _rollout(venv, steps: int) -> list[np.ndarray]:
+    venv.seed(40)
+    obs = venv.reset()
+    rng = np.random.default_rng(0)
+    out = [obs]
+    for _ in range(steps):
+        actions = rng.integers(0, len(MENU), size=venv.num_envs)
+        obs, rewards, dones, infos = venv.step(actions)
+        terminal = [info.get("terminal_observation", np.zeros(1)).sum() for info in infos]
+        out += [obs, rewards, dones.astype(float), np.array(terminal)]
+    venv.close()
+    return out
+
+
+def test_batched_vector_env_equals_single_envs_and_ignores_the_worker_count() -> None:
+    """Sub-env i of the batched env plays exactly the episodes a DummyVecEnv of single envs
+    plays (same seeds, same actions, SB3's auto-reset), whether its sessions live in one
+    process or two: each session's randomness is its own."""
+    n, steps = 4, 10
+    reference = _rollout(
+        DummyVecEnv([lambda: SelfCalibrationEnv(**KWARGS) for _ in range(n)]), steps
+    )
+    for workers in (1, 2):
+        batched = _rollout(SelfCalVecEnv(n, workers=workers, env_kwargs=KWARGS), steps)
+        for a, b in zip(reference, batched, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_exported_policy_acts_as_sb3_predicts() -> None:
+    env = SelfCalibrationEnv(budget=2)
+    model = PPO(
+        "MlpPolicy", env, seed=3, n_steps=32, batch_size=32, policy_kwargs={"net_arch": [16, 16]}
+    )
+    model.learn(64)
+    policy = export_policy(model, {"observation_version": 1})
+    rng = np.random.default_rng(1)
+    obs = rng.uniform(-3, 3, size=(200, env.observation_space.shape[0])).astype(np.float32)
+    expected, _ = model.predict(obs, deterministic=True)
+    np.testing.assert_array_equal(np.argmax(policy.logits(obs), axis=1), expected)
+
+
+def test_hyperparameters_come_from_the_data_file_keyed_by_env_id(tmp_path) -> None:
+    params = load_hyperparams("ppo")
+    assert params["policy"] == "MlpPolicy" and params["gamma"] == 1.0
+    with pytest.raises(SpecError, match="unknown algorithm 'sac'"):
+        load_hyperparams("sac")
+    (tmp_path / "h.toml").write_text("[ppo.Other-v0]\nn_envs = 2\n")
+    with pytest.raises(SpecError, match='no table \\[ppo."SelfCalibration-v0"\\]'):
+        load_hyperparams("ppo", tmp_path / "h.toml")
+
+
+def test_train_command_writes_the_policy_and_its_record(tmp_path, capsys) -> None:
+    out = tmp_path / "run"
+    code = main(
+        [
+            "train",
+            "selfcal",
+            "--steps",
+            "64",
+            "--envs",
+            "4",
+            "--workers",
+            "1",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
+    assert code == 0, capsys.readouterr().err
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["steps"] == 64
+    for name in ("policy.npz", "model.zip", "policy.json", "progress.csv", "learning_curve.png"):
+        assert (out / name).stat().st_size > 0
+    meta = json.loads((out / "policy.json").read_text())
+    assert meta["command"].startswith("odomgym train selfcal --algo ppo --steps 64 --envs 4")
+    assert load_policy(str(out / "policy.npz")).meta["steps"] == 64
+    code = main(
+        ["calibrate", "selfcal", "--policy", str(out / "policy.npz"), "--runs", "1", "--json"]
+    )
+    assert code == 0
+    assert json.loads(capsys.readouterr().out)["runs_used"] <= 2 * 1 + 6
+
+
+@pytest.mark.slow
+def test_short_training_improves_on_the_untrained_policy() -> None:
+    """PPO from scratch, 3 072 steps on budget-4 sessions: the deterministic policy's mean
+    reward on 16 held-out sessions rises by more than 0.5 nats over the untrained network's."""
+    kwargs = {"budget": 4, "floors": ["concrete"]}
+    venv = SelfCalVecEnv(16, workers=1, env_kwargs=kwargs)
+    venv.seed(0)
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        seed=0,
+        n_steps=16,
+        batch_size=64,
+        gamma=1.0,
+        learning_rate=1e-3,
+        policy_kwargs={"net_arch": [64, 64]},
+        device="cpu",
+    )
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        actions, _ = model.predict(obs, deterministic=True)
+        return actions
+
+    seeds = range(500, 516)
+    before = evaluate(act, seeds=seeds, env_kwargs=kwargs)
+    model.learn(3072)
+    after = evaluate(act, seeds=seeds, env_kwargs=kwargs)
+    venv.close()
+    assert after["reward_mean"] > before["reward_mean"] + 0.5, (before, after)
+
+
+@pytest.mark.slow
+def test_shipped_policy_against_umbmark_on_twenty_robots() -> None:
+    """The shipped policy, on the benchmark's first 20 robots (concrete floor, budget 16, the
+    benchmark's own noisy validation squares): its median improvement is at least MARGIN of
+    UMBmark's."""
+    config = BenchConfig(robots=20, floors=("concrete",), methods=("selfcal", "umbmark"))
+    summary = {s["method"]: s for s in summarize(run_benchmark(config, jobs=2))}
+    ratio = summary["selfcal"]["improvement_median"] / summary["umbmark"]["improvement_median"]
+    assert summary["selfcal"]["failures"] == 0
+    assert ratio >= MARGIN, summary
+
+
+MARGIN = 0.8
+"""Stated margin: selfcal's median improvement over 20 robots is at least 0.8 of UMBmark's
+(the medians of 20 paired robots scatter by about ±15 %)."""
