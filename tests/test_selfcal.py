@@ -122,7 +122,7 @@ def test_same_seed_same_session_bit_for_bit() -> None:
 
 
 def test_bad_settings_and_actions_are_one_line_errors() -> None:
-    with pytest.raises(SpecError, match="budget must be 1..64"):
+    with pytest.raises(SpecError, match=r"budget must be 1\.\.64"):
         SelfCalibrationEnv(budget=0)
     with pytest.raises(SpecError, match="now called 'cables'"):
         SelfCalibrationEnv(floors=("bumpy",))

@@ -11,20 +11,20 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from stable_baselines3 import PPO  # noqa: E402
-from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv
 
-from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize  # noqa: E402
-from odomgym.baselines.selfcal import MENU, load_policy  # noqa: E402
-from odomgym.baselines.selfcal_train import (  # noqa: E402
+from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
+from odomgym.baselines.selfcal import MENU, load_policy
+from odomgym.baselines.selfcal_train import (
     SelfCalVecEnv,
     evaluate,
     export_policy,
     load_hyperparams,
 )
-from odomgym.cli import main  # noqa: E402
-from odomgym.envs.selfcal import SelfCalibrationEnv  # noqa: E402
-from odomgym.errors import SpecError  # noqa: E402
+from odomgym.cli import main
+from odomgym.envs.selfcal import SelfCalibrationEnv
+from odomgym.errors import SpecError
 
 KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
 
@@ -76,7 +76,7 @@ def test_hyperparameters_come_from_the_data_file_keyed_by_env_id(tmp_path) -> No
     with pytest.raises(SpecError, match="unknown algorithm 'sac'"):
         load_hyperparams("sac")
     (tmp_path / "h.toml").write_text("[ppo.Other-v0]\nn_envs = 2\n")
-    with pytest.raises(SpecError, match='no table \\[ppo."SelfCalibration-v0"\\]'):
+    with pytest.raises(SpecError, match=r'no table \[ppo\."SelfCalibration-v0"\]'):
         load_hyperparams("ppo", tmp_path / "h.toml")
 
 
