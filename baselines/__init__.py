@@ -10,7 +10,8 @@
 * ``least_squares`` — Antonelli et al. style linear least squares over whole runs;
 * ``trajectory`` — OptiOdom-style optimisation over whole trajectories;
 * ``selfcal`` — a learned policy that chooses the experiments, with an end-pose estimator
-  (``SelfCalibration-v0``; the shipped policy runs in numpy, no torch needed).
+  (``SelfCalibration-v0``; the shipped policy runs in numpy, no torch needed);
+* ``selfcal_scripted`` — the same estimator with a fixed schedule (the ablation).
 """
 
 from __future__ import annotations
@@ -20,12 +21,22 @@ from odomgym.baselines.ivanjko import Ivanjko
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.least_squares import LeastSquares
 from odomgym.baselines.lee import Lee
-from odomgym.baselines.selfcal import SelfCal
+from odomgym.baselines.selfcal import SelfCal, SelfCalScripted
 from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.umbmark import UMBmark
 
 CALIBRATORS: dict[str, type[Calibrator]] = {
-    cls.name: cls for cls in (UMBmark, JungChung, Lee, Ivanjko, LeastSquares, Trajectory, SelfCal)
+    cls.name: cls
+    for cls in (
+        UMBmark,
+        JungChung,
+        Lee,
+        Ivanjko,
+        LeastSquares,
+        Trajectory,
+        SelfCal,
+        SelfCalScripted,
+    )
 }
 
 __all__ = [
@@ -37,6 +48,7 @@ __all__ = [
     "LeastSquares",
     "Lee",
     "SelfCal",
+    "SelfCalScripted",
     "Trajectory",
     "UMBmark",
 ]

@@ -206,7 +206,7 @@ def _least_squares_budget(runs: int) -> dict[str, Any]:
     return {"straight_runs": straight, "squares_per_direction": max(1, (runs - straight) // 2)}
 
 
-MIN_BUDGET: dict[str, int] = {"ivanjko": 3, "least_squares": 3, "selfcal": 1}
+MIN_BUDGET: dict[str, int] = {"ivanjko": 3, "least_squares": 3, "selfcal": 1, "selfcal_scripted": 1}
 """Fewest runs a method can calibrate with (2 for the rest: one square each way)."""
 
 METHOD_BUDGETS: dict[str, Callable[[int], dict[str, Any]]] = {

@@ -60,6 +60,8 @@ __all__ = [
     "MlpPolicy",
     "SelfCal",
     "SelfCalOptions",
+    "SelfCalScripted",
+    "SelfCalScriptedOptions",
     "SelfCalSession",
     "load_policy",
     "scripted_policy",
@@ -563,3 +565,26 @@ class SelfCal(Calibrator):
             distance_used=lab.distance_used,
             notes=[f"experiments: {', '.join(session.history) or 'none'}"],
         )
+
+
+@dataclass(frozen=True)
+class SelfCalScriptedOptions(SelfCalOptions):
+    """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy."""
+
+    policy: str = "scripted"
+
+
+class SelfCalScripted(SelfCal):
+    """The ablation of ``selfcal``: the same estimator with the fixed schedule of
+    :func:`scripted_policy` — what the estimator achieves without a learned policy."""
+
+    name: ClassVar[str] = "selfcal_scripted"
+    reference: ClassVar[str] = (
+        "odomgym's end-pose Gauss-Newton estimator with a fixed schedule of 4 m squares "
+        "(Borenstein & Feng 1994's experiment) and straight runs"
+    )
+    options_type: ClassVar[type[Any]] = SelfCalScriptedOptions
+
+    def __init__(self, budget: int = 16, policy: str = "scripted") -> None:
+        super().__init__(budget, policy)
+        self.options = SelfCalScriptedOptions(budget, policy)

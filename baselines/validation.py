@@ -98,6 +98,7 @@ SQUARE_SIZING: dict[str, SquareSizing] = {
     # The policy chooses its runs from a fixed menu: it gets UMBmark's budget for these
     # settings (2N squares and the 6 straight runs of its E_s phases; 16 for the defaults).
     "selfcal": lambda side, runs: {"budget": 2 * runs + 6},
+    "selfcal_scripted": lambda side, runs: {"budget": 2 * runs + 6},
 }
 """How the command line's square settings — side L [m] and squares per direction — apply to
 each method (constructor options). A method missing here runs with its defaults."""
@@ -192,6 +193,7 @@ SESSION_SIZING: dict[str, SessionSizing] = {
     "least_squares": _least_squares_from,
     "trajectory": _trajectory_from,
     "selfcal": _selfcal_from,
+    "selfcal_scripted": _selfcal_from,
 }
 """How each method is sized from what a recorded session holds (constructor options): counts
 the session lacks keep the method's defaults, and the method then says what is missing. A
