@@ -518,7 +518,7 @@ class SelfCal(Calibrator):
     options_type: ClassVar[type[Any]] = SelfCalOptions
 
     def __init__(self, budget: int = 16, policy: str = "learned") -> None:
-        self.options = SelfCalOptions(budget, policy)
+        self.options = self.options_type(budget, policy)
         self._policy: MlpPolicy | None = None
 
     @classmethod
@@ -587,4 +587,3 @@ class SelfCalScripted(SelfCal):
 
     def __init__(self, budget: int = 16, policy: str = "scripted") -> None:
         super().__init__(budget, policy)
-        self.options = SelfCalScriptedOptions(budget, policy)
