@@ -179,7 +179,7 @@ class EndPoseEstimator:
         self._prior_info = np.linalg.inv(prior_cov)
         self._prior_logdet = float(np.linalg.slogdet(prior_cov)[1])
         self._x0 = self._to_x(initial) if initial is not None else np.zeros(3)
-        self._limit = CLIP_PRIORS * np.abs(_TO_X) @ np.array(PRIOR_STD)
+        self._limit = CLIP_PRIORS * np.array(PRIOR_STD)  # on (ln E_s, ln E_d, ln E_b)
         self.x = self._x0.copy()
         self.covariance = prior_cov
         self.roughness = 1.0
@@ -224,7 +224,8 @@ class EndPoseEstimator:
 
     def residual(self, run: Run) -> tuple[FloatArray, FloatArray]:
         """Measured − predicted end pose of ``run`` in its start frame (x, y [m], θ [rad]) at
-        the current estimate, and its Jacobian (3, 3) with respect to x."""
+        the current estimate, and the Jacobian (3, 3) of the *predicted* end pose with respect
+        to x (the residual's is its negative; Gauss–Newton steps by (JᵀWJ)⁻¹JᵀWr)."""
         poses, jac = replay_with_jacobian(run, self.robot, self.calibration)
         theta0 = float(run.true_pose[0, 2])
         c, s = math.cos(theta0), math.sin(theta0)
@@ -266,7 +267,8 @@ class EndPoseEstimator:
                 excess += float(np.sum((r**2 - self._sensor_var)[floor_dominated]))
                 floor_total += float(np.sum(floor_var[floor_dominated]))
             self.covariance = np.linalg.inv(info)
-            self.x = np.clip(self.x + self.covariance @ grad, -self._limit, self._limit)
+            step = _FROM_X @ (self.x + self.covariance @ grad)
+            self.x = _TO_X @ np.clip(step, -self._limit, self._limit)
             if floor_total > 0.0:
                 self.roughness = float(
                     np.clip(math.sqrt(max(excess, 0.0) / floor_total), 1.0, 20.0)
@@ -398,9 +400,10 @@ def scripted_policy(observation: NDArray[np.float32], budget: int, runs_used: in
 
 @dataclass(frozen=True)
 class MlpPolicy:
-    """A trained policy network evaluated in numpy: tanh layers, then the action logits;
-    the deterministic action is the arg-max (what SB3's ``predict(deterministic=True)`` does
-    for a ``Discrete`` space).
+    """A trained policy network evaluated in numpy: hidden layers with ``meta["activation"]``
+    (``"tanh"``, SB3's default for PPO and A2C, or ``"relu"``, DQN's), then the action logits
+    or Q-values; the deterministic action is the arg-max (what SB3's
+    ``predict(deterministic=True)`` does for a ``Discrete`` space).
 
     Attributes:
         weights: (W, b) of every layer, the last one giving the logits; W has shape (out, in).
@@ -411,10 +414,12 @@ class MlpPolicy:
     meta: dict[str, Any]
 
     def logits(self, observation: NDArray[np.floating[Any]]) -> FloatArray:
-        """The action logits for one observation (or a batch)."""
+        """The action logits (PPO, A2C) or Q-values (DQN) for one observation or a batch."""
         h = np.asarray(observation, dtype=np.float64)
+        relu = self.meta.get("activation", "tanh") == "relu"
         for w, b in self.weights[:-1]:
-            h = np.tanh(h @ w.T + b)
+            h = h @ w.T + b
+            h = np.maximum(h, 0.0) if relu else np.tanh(h)
         w, b = self.weights[-1]
         out: FloatArray = h @ w.T + b
         return out
@@ -436,16 +441,27 @@ class MlpPolicy:
         """Read a policy written by :meth:`save`; refuse one trained on another observation
         layout."""
         source = Path(path)
+
+        def refuse(why: str) -> SpecError:
+            return SpecError(f"{source}: not a selfcal policy file ({why})", field="policy")
+
         try:
-            with np.load(source, allow_pickle=False) as data:
+            data = np.load(source, allow_pickle=False)
+            if not isinstance(data, np.lib.npyio.NpzFile):
+                raise refuse("a single array, not an .npz archive")
+            with data:
                 meta = json.loads(str(data["meta"]))
                 layers = sum(1 for key in data.files if key.startswith("w"))
                 weights = tuple(
                     (np.asarray(data[f"w{k}"], float), np.asarray(data[f"b{k}"], float))
                     for k in range(layers)
                 )
-        except (OSError, KeyError, ValueError) as exc:
-            raise SpecError(f"{source}: not a selfcal policy file ({exc})", field="policy") from exc
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise refuse(str(exc)) from exc
+        if not isinstance(meta, dict):
+            raise refuse("its metadata is not a table")
+        if meta.get("activation", "tanh") not in ("tanh", "relu"):
+            raise refuse(f"unknown activation {meta.get('activation')!r}")
         version = meta.get("observation_version")
         if version != OBSERVATION_VERSION:
             raise SpecError(
@@ -453,7 +469,12 @@ class MlpPolicy:
                 f"{OBSERVATION_VERSION}; retrain with odomgym train selfcal",
                 field="policy",
             )
-        if weights[0][0].shape[1] != len(OBSERVATION_LAYOUT) or len(weights[-1][1]) != len(MENU):
+        width = len(OBSERVATION_LAYOUT)
+        for k, (w, b) in enumerate(weights):
+            if w.ndim != 2 or b.shape != (w.shape[0],) or w.shape[1] != width:
+                raise refuse(f"layer {k} has weights {w.shape} and biases {b.shape}")
+            width = w.shape[0]
+        if not weights or width != len(MENU):
             raise SpecError(
                 f"{source}: network shape does not match {len(OBSERVATION_LAYOUT)} observations "
                 f"and {len(MENU)} actions",
@@ -505,6 +526,12 @@ class SelfCalOptions:
             )
         if not isinstance(self.policy, str) or not self.policy:
             raise SpecError(f"policy must be a name or a path, got {self.policy!r}", field="policy")
+        if self.policy not in ("learned", "scripted") and not Path(self.policy).is_file():
+            raise SpecError(
+                f"policy must be 'learned', 'scripted' or a policy .npz file; {self.policy!r} "
+                "is none",
+                field="policy",
+            )
 
 
 class SelfCal(Calibrator):
@@ -541,7 +568,8 @@ class SelfCal(Calibrator):
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Run a session in ``lab``: choose, drive with the current estimate, measure, refit."""
-        session = SelfCalSession(lab.robot, self.options.budget, initial=initial)
+        sensor = getattr(lab, "sensor", None)  # a SimLab's; else the default sonar calibrator
+        session = SelfCalSession(lab.robot, self.options.budget, sensor, initial)
         while (action := self._choose(session)) != STOP:
             experiment = session.experiment(action)
             assert experiment is not None
@@ -572,6 +600,15 @@ class SelfCalScriptedOptions(SelfCalOptions):
     """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy."""
 
     policy: str = "scripted"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.policy != "scripted":
+            raise SpecError(
+                "selfcal_scripted always drives the scripted schedule; for another policy use "
+                f"selfcal --policy {self.policy}",
+                field="policy",
+            )
 
 
 class SelfCalScripted(SelfCal):

@@ -2,10 +2,12 @@
 
 :class:`SelfCalVecEnv` is an SB3 ``VecEnv`` of ``SelfCalibration-v0`` sessions that simulates
 all their runs of a step as one physics batch per floor (:func:`odomgym.envs.selfcal.
-step_episodes`) — a batch of 8 costs about as much wall time as 2 single runs — and splits the
-sessions over ``workers`` processes so both cores simulate. Sub-env i is seeded ``seed + i``
+step_episodes`; one physics batch per shard and step) — a batch of 8 costs about as much wall
+time as 2 single runs — and splits the sessions over ``workers`` processes (shards) so both
+cores simulate. Sub-env i is seeded ``seed + i``
 and resets itself as SB3's ``DummyVecEnv`` does, so its episodes are the same whatever the
-number of workers, and the same as a ``DummyVecEnv`` of single envs (tests/test_selfcal.py).
+number of workers, and the same as a ``DummyVecEnv`` of single envs
+(tests/test_selfcal_training.py).
 
 :func:`train` reads the hyperparameters from ``odomgym/data/hyperparams/selfcal.toml`` (one
 table per algorithm, keyed by env id, as rl-baselines3-zoo's ``hyperparams/<algo>.yml``),
@@ -17,6 +19,7 @@ that :class:`odomgym.baselines.selfcal.MlpPolicy` runs without torch.
 from __future__ import annotations
 
 import importlib.util
+import inspect
 import json
 import math
 import multiprocessing
@@ -132,9 +135,18 @@ class SelfCalVecEnv(VecEnv):
     def __init__(
         self, n_envs: int, *, workers: int = 1, env_kwargs: dict[str, Any] | None = None
     ) -> None:
-        if n_envs < 1 or workers < 1:
-            raise SpecError(f"need n_envs >= 1 and workers >= 1, got {n_envs}, {workers}")
+        for name, value in (("n_envs", n_envs), ("workers", workers)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise SpecError(f"{name} must be a whole number >= 1, got {value!r}", field=name)
         kwargs = dict(env_kwargs or {})
+        known = set(inspect.signature(SelfCalibrationEnv).parameters)
+        unknown = sorted(set(kwargs) - known)
+        if unknown:
+            raise SpecError(
+                f"unknown env_kwargs {', '.join(unknown)}; SelfCalibration-v0 takes "
+                f"{', '.join(sorted(known))}",
+                field="env_kwargs",
+            )
         probe = SelfCalibrationEnv(**kwargs)  # validates the settings here, in one line
         self._bounds = [
             (int(a[0]), int(a[-1]) + 1)
@@ -165,15 +177,19 @@ class SelfCalVecEnv(VecEnv):
         """Run ``command`` on every shard with its slice of the arguments; concatenated."""
         if self._local is not None:
             lo, hi = self._bounds[0]
-            return list(getattr(self._local, command)(*per_shard(lo, hi)))
+            return list(getattr(self._local, command)(*per_shard(lo, hi)) or [])
         for pipe, (lo, hi) in zip(self._pipes, self._bounds, strict=True):
             pipe.send((command, per_shard(lo, hi)))
         out: list[Any] = []
-        for pipe in self._pipes:
+        error: BaseException | None = None
+        for pipe in self._pipes:  # every reply, so the pipes stay in step after an error
             status, value = pipe.recv()
             if status == "error":
-                raise value
-            out.extend(value or [])
+                error = error or value
+            else:
+                out.extend(value or [])
+        if error is not None:
+            raise error
         return out
 
     def _indices(self, indices: Any) -> list[int]:
@@ -188,7 +204,12 @@ class SelfCalVecEnv(VecEnv):
         return np.stack(obs)
 
     def step_async(self, actions: NDArray[Any]) -> None:
-        self._actions = [int(a) for a in np.asarray(actions).reshape(self.num_envs)]
+        flat = np.asarray(actions).reshape(-1)
+        if flat.size != self.num_envs:
+            raise SpecError(
+                f"need one action per session ({self.num_envs}), got {flat.size}", field="action"
+            )
+        self._actions = [menu_index(a) for a in flat]  # checked here, before any shard steps
 
     def step_wait(
         self,
@@ -215,16 +236,8 @@ class SelfCalVecEnv(VecEnv):
         self.closed = True
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        wanted = self._indices(indices)
-        return [
-            value
-            for value, i in zip(
-                self._call("get_attr", lambda lo, hi: (attr_name, list(range(hi - lo)))),
-                range(self.num_envs),
-                strict=True,
-            )
-            if i in wanted
-        ]
+        values = self._call("get_attr", lambda lo, hi: (attr_name, list(range(hi - lo))))
+        return [values[i] for i in self._indices(indices)]  # in the order asked for
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         wanted = set(self._indices(indices))
@@ -332,7 +345,9 @@ def evaluate(
         "reward_mean": float(totals.mean()),
         "log_improvement_mean": float(np.mean(improvement)) if improvement else float("nan"),
         "runs_mean": float(np.mean([f["runs_used"] for f in finals])),
+        "travel_m_mean": float(np.mean([f["travel_m"] for f in finals])),
         "stop_first_rate": float(np.mean([f["runs_used"] == 0 for f in finals])),
+        "failures": float(sum(1 for f in finals if "failed" in f)),
     }
 
 
@@ -397,18 +412,22 @@ def train(
     policy_name = params.pop("policy", "MlpPolicy")
     if total < 1:
         raise SpecError(f"steps must be >= 1, got {total}", field="steps")
+    algorithm = getattr(sb3, algo.upper())
+    takes = set(inspect.signature(algorithm).parameters) - {"self", "policy", "env"}
+    unknown = sorted(set(params) - takes)
+    if unknown:
+        raise SpecError(
+            f"{hyperparams or 'selfcal.toml'}: {algo} takes no hyperparameter {', '.join(unknown)}",
+            field="hyperparams",
+        )
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)  # the physics workers need the cores, the MLP does not
-    venv = VecMonitor(SelfCalVecEnv(n_envs, workers=workers, env_kwargs=env_kwargs))
-    venv.seed(seed)
     rollout = int(params.get("n_steps", 0)) * n_envs
     if rollout and int(params.get("batch_size", 0)) > rollout:
         params["batch_size"] = rollout  # a short test run with few sessions: one mini-batch
-    algorithm = getattr(sb3, algo.upper())
-    model = algorithm(policy_name, venv, seed=seed, verbose=0, device="cpu", **params)
-    formats = ["csv"] + (["tensorboard"] if importlib.util.find_spec("tensorboard") else [])
-    model.set_logger(configure(str(folder), formats))
+    venv = VecMonitor(SelfCalVecEnv(n_envs, workers=workers, env_kwargs=env_kwargs))
+    venv.seed(seed)
 
     class Progress(BaseCallback):
         """A tqdm bar, and the sessions' terminal outcomes in the log."""
@@ -421,7 +440,7 @@ def train(
             for info in self.locals.get("infos", []):
                 if "improvement" in info:
                     self.logger.record_mean(
-                        "selfcal/log_improvement", math.log(max(info["improvement"], 1e-9))
+                        "selfcal/log_improvement", math.log(info["improvement"])
                     )
                     self.logger.record_mean("selfcal/runs_used", info["runs_used"])
                     self.logger.record_mean("selfcal/travel_m", info["travel_m"])
@@ -432,6 +451,9 @@ def train(
 
     start = time.perf_counter()
     try:
+        model = algorithm(policy_name, venv, seed=seed, verbose=0, device="cpu", **params)
+        formats = ["csv"] + (["tensorboard"] if importlib.util.find_spec("tensorboard") else [])
+        model.set_logger(configure(str(folder), formats))
         model.learn(total_timesteps=total, callback=Progress())
     finally:
         venv.close()

@@ -4,8 +4,9 @@ An episode is one calibration session (:class:`odomgym.baselines.selfcal.SelfCal
 freshly sampled robot: systematic errors drawn over the benchmark's ranges
 (:class:`~odomgym.baselines.benchmark.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
 E_s ∈ [0.98, 1.02], on the LabMate) and a floor drawn from ``floors`` (the benchmark's
-``concrete``, ``rough`` and ``cables``; on ``cables`` every run starts at a random pose on one
-of eight cable fields, so cables are met at random).
+``concrete``, ``rough`` and ``cables``; on ``cables`` every run starts at a random pose on a
+field of random cables, so cables are met at random — one fixed field, not the benchmark's own,
+so the benchmark evaluates on cables the agent never trained on).
 
 Spaces:
     action: ``Discrete(10)`` — an index into :data:`~odomgym.baselines.selfcal.MENU`: 0 stops
@@ -37,15 +38,19 @@ finish a run (corrections so wrong that it circles) ends with :data:`FAILED_REWA
 Shaping (``shaping`` = c, default 0.1): every step also pays c·(Φ(s′) − Φ(s)) with Φ the
 estimator's information gain (½·ln det Σ_prior/Σ_posterior) and Φ = 0 at the end — potential-
 based (Ng, Harada & Russell 1999), so it sums to exactly zero over an episode and cannot change
-which policy is best; it only credits informative runs early.
+which policy is best; it only credits informative runs early. (With γ = 1, which the shipped
+hyperparameters use: for γ < 1 the potential difference would have to be c·(γΦ′ − Φ).)
 
-Episode end: terminated when the agent stops or the budget is spent (the last run's step
-carries the terminal reward); the registered step limit (budget + 1 ≤ 65) never truncates.
+Episode end: terminated when the agent stops, or on the step after the budget is spent (any
+action then stops; that step validates and carries the terminal reward), or when a run cannot
+finish; the registered step limit (66 ≥ budget + 1) never truncates.
 
 ``info``: ``runs_used``, ``budget``, ``travel_m`` (true path length driven so far [m]),
 ``floor``, ``item`` (the menu item's name); at the end also ``reward_terms``,
 ``e_max_before_mm``/``e_max_after_mm`` (validation squares), ``improvement`` (their ratio),
-``true_errors``/``estimated_errors`` (E_d, E_b, E_s), ``calibration`` and ``experiments``.
+``true_errors``/``estimated_errors`` (E_d, E_b, E_s), ``calibration`` and ``experiments``;
+a session whose run could not finish ends with ``failed`` (the reason) instead of the
+validation entries.
 """
 
 from __future__ import annotations
@@ -376,7 +381,7 @@ def step_episodes(
             info["e_max_before_mm"] = 1e3 * verdict["e_max_before"]
             info["e_max_after_mm"] = 1e3 * verdict["e_max_after"]
             after = verdict["e_max_after"]
-            info["improvement"] = verdict["e_max_before"] / after if after > 0 else math.inf
+            info["improvement"] = verdict["e_max_before"] / max(after, 1e-9)
         info["runs_used"] = session.runs_used
         info["travel_m"] = episode.travel
         if terminated:
@@ -406,8 +411,16 @@ def menu_index(action: object) -> int:
     return int(value)
 
 
-def _budgets(budget: int | Sequence[int]) -> tuple[int, ...]:
-    values = (budget,) if isinstance(budget, (int, np.integer)) else tuple(budget)
+def _budgets(budget: object) -> tuple[int, ...]:
+    if isinstance(budget, (int, np.integer)):
+        values: tuple[object, ...] = (budget,)
+    elif isinstance(budget, (list, tuple)):
+        values = tuple(budget)
+    else:
+        raise SpecError(
+            f"budget must be a whole number of runs or a list of them, got {budget!r}",
+            field="budget",
+        )
     if not values:
         raise SpecError("budget needs at least one value", field="budget")
     for value in values:
@@ -415,7 +428,7 @@ def _budgets(budget: int | Sequence[int]) -> tuple[int, ...]:
             raise SpecError(f"budget must be whole numbers of runs, got {value!r}", field="budget")
         if not 1 <= value <= MAX_BUDGET:
             raise SpecError(f"budget must be 1..{MAX_BUDGET} runs, got {value}", field="budget")
-    return tuple(int(v) for v in values)
+    return tuple(int(v) for v in values)  # type: ignore[call-overload]
 
 
 class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
@@ -444,13 +457,21 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
     ) -> None:
         if render_mode is not None:
             raise SpecError("SelfCalibration-v0 has no render modes", field="render_mode")
-        self.floors = (floors,) if isinstance(floors, str) else tuple(floors)
+        if isinstance(floors, str):
+            floors = (floors,)
+        if not isinstance(floors, (list, tuple)):
+            raise SpecError(f"floors must be a list of floor names, got {floors!r}", field="floors")
+        self.floors = tuple(floors)
         if not self.floors:
             raise SpecError("floors needs at least one floor", field="floors")
         for name in self.floors:
             check_bench_floor(name)
         self.budgets = _budgets(budget)
-        if not (math.isfinite(shaping) and shaping >= 0.0):
+        if (
+            isinstance(shaping, bool)
+            or not isinstance(shaping, (int, float))
+            or not (math.isfinite(shaping) and shaping >= 0.0)
+        ):
             raise SpecError(f"shaping must be finite and >= 0, got {shaping}", field="shaping")
         self.shaping = float(shaping)
         self.population = population or Population()
@@ -468,8 +489,15 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         """Start a session; ``options`` may fix ``floor`` and ``budget``."""
         super().reset(seed=seed)
+        if options is not None and not isinstance(options, Mapping):
+            raise SpecError(f"reset options must be a dict, got {options!r}", field="options")
         opts = dict(options or {})
         if "budget" in opts:
+            if not isinstance(opts["budget"], (int, np.integer)):
+                raise SpecError(
+                    f"options['budget'] must be a whole number of runs, got {opts['budget']!r}",
+                    field="budget",
+                )
             opts["budget"] = _budgets(opts["budget"])[0]
         self.episode = new_episode(
             self.np_random, self.floors, self.budgets, self.population, self.sensor, opts

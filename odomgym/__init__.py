@@ -60,8 +60,9 @@ _ENVS: dict[str, tuple[str, str | None, int]] = {
     # 7×4 m rectangle ~1500.
     "ClapperStraight-v0": ("odomgym.envs.clapper:ClapperStraightEnv", None, 6000),
     "ClapperRectangle-v0": ("odomgym.envs.clapper:ClapperRectangleEnv", None, 4000),
-    # One step per run: at most MAX_BUDGET (64) runs and the stop.
-    "SelfCalibration-v0": ("odomgym.envs.selfcal:SelfCalibrationEnv", None, 65),
+    # One step per run: at most MAX_BUDGET (64) runs and the stop (a margin of one, so the
+    # limit never truncates a session).
+    "SelfCalibration-v0": ("odomgym.envs.selfcal:SelfCalibrationEnv", None, 66),
 }
 
 

@@ -136,6 +136,18 @@ def test_bad_settings_and_actions_are_one_line_errors() -> None:
         assert caught.value.field == "action"
     with pytest.raises(SpecError, match="unknown reset option"):
         env.reset(seed=0, options={"floors": "rough"})
+    with pytest.raises(SpecError, match="reset options must be a dict"):
+        env.reset(seed=0, options=["floor"])  # type: ignore[arg-type]
+    with pytest.raises(SpecError, match=r"options\['budget'\] must be a whole number"):
+        env.reset(seed=0, options={"budget": [8, 4]})
+    for kwargs, field in (
+        ({"budget": 4.0}, "budget"),
+        ({"shaping": "0.1"}, "shaping"),
+        ({"floors": None}, "floors"),
+    ):
+        with pytest.raises(SpecError) as caught:
+            SelfCalibrationEnv(**kwargs)  # type: ignore[arg-type]
+        assert caught.value.field == field
     env.reset(seed=0)
     env.step(STOP)
     with pytest.raises(RuntimeError, match="reset"):
@@ -246,10 +258,28 @@ def test_guard_corrections_that_wreck_another_path_lose() -> None:
 def test_guard_absurd_corrections_score_low_without_an_exception() -> None:
     robot = Population().sample(np.random.default_rng(0), "r")
     verdict = validation_terms([robot], [Calibration(c_left=0.5, c_right=1.5)])[0]
-    assert math.isfinite(verdict["reward"])
+    assert verdict["finished"] == 1.0 and math.isfinite(verdict["reward"])
     assert verdict["t_straight"] == -3.0  # clipped: the straight run ends metres away
     assert verdict["reward"] < -(1.0 + WORSE_PENALTY) * 3.0
-    assert FAILED_REWARD <= verdict["reward"]
+
+
+def test_a_run_that_cannot_finish_ends_the_session_with_the_lowest_reward(monkeypatch) -> None:
+    """Simulated here by a time limit too short for a 4 m square: the session ends at once,
+    says why, and scores FAILED_REWARD (minus the shaping collected, which telescopes)."""
+    import odomgym.envs.selfcal as selfcal_env
+
+    real = selfcal_env.simulate_runs
+
+    def hurried(*args, **kwargs):
+        return real(*args, **{**kwargs, "max_time": 30.0})
+
+    env = SelfCalibrationEnv(budget=4, shaping=0.0)
+    env.reset(seed=2)
+    monkeypatch.setattr(selfcal_env, "simulate_runs", hurried)
+    _, reward, terminated, _, info = env.step(ITEM["square4-cw"])
+    assert terminated and reward == FAILED_REWARD
+    assert "did not finish its square4-cw run" in info["failed"]
+    assert "improvement" not in info and info["runs_used"] == 0
 
 
 # ---------------------------------------------------------------------------- sessions, policies
@@ -276,7 +306,8 @@ def test_scripted_schedule() -> None:
 def test_policy_files_are_checked(tmp_path) -> None:
     shipped = load_policy("learned")
     assert shipped.meta["observation_version"] == 1
-    assert "odomgym train selfcal" in shipped.meta["command"]
+    assert shipped.meta["command"].startswith("odomgym train selfcal --algo ppo --steps ")
+    assert shipped.meta["steps"] >= 100_000
     bad = MlpPolicy(shipped.weights, {**shipped.meta, "observation_version": 0})
     bad.save(tmp_path / "old.npz")
     with pytest.raises(SpecError, match="observation layout 0"):

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from stable_baselines3 import PPO
+from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
@@ -57,17 +57,53 @@ def test_batched_vector_env_equals_single_envs_and_ignores_the_worker_count() ->
             np.testing.assert_array_equal(a, b)
 
 
-def test_exported_policy_acts_as_sb3_predicts() -> None:
+@pytest.mark.parametrize("algo", ["ppo", "dqn"])
+def test_exported_policy_acts_as_sb3_predicts(algo: str, tmp_path) -> None:
+    """The numpy policy (tanh for PPO, ReLU for DQN) picks SB3's deterministic action, also
+    after a round trip through its file."""
     env = SelfCalibrationEnv(budget=2)
-    model = PPO(
-        "MlpPolicy", env, seed=3, n_steps=32, batch_size=32, policy_kwargs={"net_arch": [16, 16]}
-    )
+    if algo == "ppo":
+        model = PPO(
+            "MlpPolicy",
+            env,
+            seed=3,
+            n_steps=32,
+            batch_size=32,
+            policy_kwargs={"net_arch": [16, 16]},
+        )
+    else:
+        model = DQN(
+            "MlpPolicy", env, seed=3, learning_starts=16, policy_kwargs={"net_arch": [16, 16]}
+        )
     model.learn(64)
     policy = export_policy(model, {"observation_version": 1})
+    policy.save(tmp_path / "p.npz")
+    loaded = load_policy(str(tmp_path / "p.npz"))
+    assert loaded.meta["activation"] == ("tanh" if algo == "ppo" else "relu")
     rng = np.random.default_rng(1)
     obs = rng.uniform(-3, 3, size=(200, env.observation_space.shape[0])).astype(np.float32)
     expected, _ = model.predict(obs, deterministic=True)
-    np.testing.assert_array_equal(np.argmax(policy.logits(obs), axis=1), expected)
+    np.testing.assert_array_equal(np.argmax(loaded.logits(obs), axis=1), expected)
+
+
+def test_vector_env_attributes_and_errors_keep_the_workers_in_step() -> None:
+    venv = SelfCalVecEnv(4, workers=2, env_kwargs={"budget": 2})
+    try:
+        assert venv.get_attr("budgets", [2, 0]) == [(2,), (2,)]
+        venv.set_attr("shaping", 0.5, [1, 3])
+        assert venv.get_attr("shaping") == [0.1, 0.5, 0.1, 0.5]
+        venv.seed(0)
+        venv.reset()
+        with pytest.raises(SpecError, match="menu index"):
+            venv.step(np.array([1, 10, 0, 0]))
+        with pytest.raises(SpecError, match="one action per session"):
+            venv.step(np.array([1, 2]))
+        obs, *_ = venv.step(np.array([0, 0, 0, 0]))  # the shards still answer in step
+        assert obs.shape == (4, 31)
+    finally:
+        venv.close()
+    with pytest.raises(SpecError, match="unknown env_kwargs budgte"):
+        SelfCalVecEnv(2, env_kwargs={"budgte": 4})
 
 
 def test_hyperparameters_come_from_the_data_file_keyed_by_env_id(tmp_path) -> None:
