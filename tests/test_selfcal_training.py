@@ -194,3 +194,25 @@ def test_shipped_policy_against_umbmark_on_twenty_robots() -> None:
 MARGIN = 0.8
 """Stated margin: selfcal's median improvement over 20 robots is at least 0.8 of UMBmark's
 (the medians of 20 paired robots scatter by about ±15 %)."""
+
+
+def test_training_is_reproducible_from_its_command(tmp_path) -> None:
+    """The same command twice (two worker processes each time) gives bit-identical weights:
+    the shipped policy's recorded command reproduces it."""
+    from odomgym.baselines.selfcal_train import train
+
+    weights = []
+    for k in range(2):
+        result = train(
+            steps=128,
+            envs=4,
+            workers=2,
+            seed=5,
+            out=tmp_path / f"r{k}",
+            progress=False,
+            eval_seeds=range(2),
+        )
+        weights.append(load_policy(str(result.policy_file)).weights)
+    for (w0, b0), (w1, b1) in zip(*weights, strict=True):
+        np.testing.assert_array_equal(w0, w1)
+        np.testing.assert_array_equal(b0, b1)
