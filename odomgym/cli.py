@@ -126,6 +126,10 @@ def _check_output(
         fail("exists and is not a folder; give a folder (created if missing)")
     if not folder and target.is_dir():
         fail("is a folder; give a file name")
+    if not folder and target.exists() and not target.is_file():
+        # A device (/dev/full, /dev/null), FIFO or socket: replacing it by a rename would
+        # destroy it, and writing into it is not what an output file means.
+        fail("is not a regular file (a device, pipe or socket); give a file name")
     where = target if folder and target.is_dir() and not swap else target.absolute().parent
     while not where.exists():
         where = where.parent

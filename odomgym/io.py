@@ -7,6 +7,7 @@ the target, which POSIX guarantees is atomic on one filesystem.
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from collections.abc import Callable
@@ -18,6 +19,13 @@ __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_writer"]
 def atomic_writer(path: Path, write: Callable[[Path], None]) -> None:
     """Call ``write(tmp_path)`` and rename ``tmp_path`` over ``path`` only if it succeeded."""
     path = Path(path)
+    if path.exists() and not path.is_file():
+        raise OSError(
+            errno.EINVAL,
+            "not a regular file (odomgym writes by renaming a new file over the target, which "
+            "would replace this device, pipe, socket or folder)",
+            str(path),
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
     os.close(fd)

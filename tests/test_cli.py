@@ -306,10 +306,12 @@ def _output_cases(tmp: Path) -> list[tuple[list[str], str, str]]:
         (["run", "square", "--runs", "1", "--log", "/proc/runs.csv"], "--log", "cannot create"),
         (["run", "square", "--runs", "1", "--plot", str(plot_folder)], "--plot", "is a folder"),
         (["run", "straight", "--runs", "1", "--log", str(folder)], "--log", "is a folder"),
+        ([*calibrate, "--save", "/dev/full"], "--save", "is not a regular file"),
+        (["leaderboard", "--data", "optiodom:", "--out", "/dev/null"], "--out", "not a regular"),
     ]
 
 
-@pytest.mark.parametrize("case", range(15))
+@pytest.mark.parametrize("case", range(17))
 def test_unwritable_outputs_fail_before_the_work_in_one_line(
     case: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -317,13 +319,43 @@ def test_unwritable_outputs_fail_before_the_work_in_one_line(
     exit 2, nothing created. (/proc stands for an unwritable place: it refuses new files even
     to root, for whom a read-only folder would still be writable.)"""
     cases = _output_cases(tmp_path)
-    assert len(cases) == 15
+    assert len(cases) == 17
     argv, option, reason = cases[case]
     monkeypatch.chdir(Path(__file__).resolve().parents[1])  # examples/ for diagnose
     before = sorted(tmp_path.rglob("*"))
     assert main(argv) == 2
     _one_line_error(capsys, f"error: {option} ", reason)
     assert sorted(tmp_path.rglob("*")) == before
+
+
+def test_a_full_disk_is_one_line_and_leaves_no_partial_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Writing fails with ENOSPC (what /dev/full or a full disk gives): exit 1, one line, and
+    neither the target nor a temporary file is left behind."""
+    import errno
+
+    real = Path.write_text
+
+    def full(self: Path, *args: object, **kwargs: object) -> int:
+        if self.parent == tmp_path:
+            raise OSError(errno.ENOSPC, "No space left on device", str(self))
+        return real(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Path, "write_text", full)
+    target = tmp_path / "calib.toml"
+    assert main(["calibrate", "umbmark", "--side", "1", "--runs", "1", "--save", str(target)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "No space left on device" in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_writer_refuses_to_replace_a_device(tmp_path: Path) -> None:
+    from odomgym.io import atomic_write_text
+
+    with pytest.raises(OSError, match="not a regular file"):
+        atomic_write_text(Path("/dev/null"), "x")
+    assert Path("/dev/null").is_char_device()
 
 
 def test_output_check_accepts_new_nested_paths_and_leaves_nothing(tmp_path: Path) -> None:
