@@ -31,11 +31,16 @@ chunking or the order, and the comparison between methods is paired.
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
+import os
+import signal
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -60,9 +65,11 @@ __all__ = [
     "Backend",
     "BenchConfig",
     "BenchFloor",
+    "Journal",
     "Population",
     "check_bench_floor",
     "configure",
+    "failed_rows",
     "population",
     "run_benchmark",
     "run_chunk",
@@ -304,12 +311,6 @@ def population(config: BenchConfig) -> list[RobotSpec]:
     ]
 
 
-def chunks(count: int, parts: int) -> list[list[int]]:
-    """Split robot indices 0..count-1 into ``parts`` contiguous, nearly equal chunks."""
-    bounds = np.linspace(0, count, max(1, min(parts, count)) + 1).astype(int)
-    return [list(range(bounds[k], bounds[k + 1])) for k in range(len(bounds) - 1)]
-
-
 def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any]]:
     """Calibrate robots ``indices`` with every method on every floor and validate them.
 
@@ -447,46 +448,265 @@ def _validate(
     return out
 
 
+class Journal:
+    """Each finished chunk of robots, recorded as it completes (JSON lines), so an interrupted
+    benchmark can resume where it stopped.
+
+    Line 1 is the configuration (a resume under another configuration is refused), every further
+    line one finished chunk: ``{"robots": [...], "rows": [...]}``, appended, flushed and synced
+    before the next is started. A last line cut short by the interruption is ignored.
+    """
+
+    VERSION = 1
+
+    def __init__(self, path: Path, config: BenchConfig) -> None:
+        self.path = Path(path)
+        self.config = config
+
+    def _header(self) -> dict[str, Any]:
+        return {"journal": self.VERSION, "config": _config_record(self.config)}
+
+    def start(self) -> None:
+        """Begin a new journal (replacing any earlier one)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("w", encoding="utf-8") as f:
+            f.write(json.dumps(self._header()) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+
+    def read(self) -> dict[int, list[dict[str, Any]]]:
+        """The recorded rows per robot (empty if there is no journal yet)."""
+        if not self.path.exists():
+            return {}
+        lines = self.path.read_text(encoding="utf-8").splitlines()
+        if not lines:
+            return {}
+        try:
+            header = json.loads(lines[0])
+        except json.JSONDecodeError as exc:
+            raise SpecError(
+                f"{self.path}:1: not a benchmark journal ({exc})", field="resume"
+            ) from None
+        if header != self._header():
+            raise SpecError(
+                f"{self.path}:1: recorded for another benchmark configuration "
+                f"({header.get('config') if isinstance(header, dict) else header}); run "
+                "without --resume to start over",
+                field="resume",
+            )
+        done: dict[int, list[dict[str, Any]]] = {}
+        for number, line in enumerate(lines[1:], start=2):
+            try:
+                entry = json.loads(line)
+                robots, rows = list(entry["robots"]), list(entry["rows"])
+            except (json.JSONDecodeError, KeyError, TypeError) as exc:
+                if number == len(lines):  # cut short by the interruption: run it again
+                    break
+                raise SpecError(
+                    f"{self.path}:{number}: damaged entry ({exc})", field="resume"
+                ) from None
+            for robot in robots:
+                done[int(robot)] = [r for r in rows if r["robot"] == robot]
+        return done
+
+    def record(self, robots: Sequence[int], rows: Sequence[dict[str, Any]]) -> None:
+        """Append one finished chunk."""
+        with self.path.open("a", encoding="utf-8") as f:
+            f.write(json.dumps({"robots": list(robots), "rows": list(rows)}) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def _config_record(config: BenchConfig) -> dict[str, Any]:
+    return {
+        "robots": config.robots,
+        "floors": list(config.floors),
+        "methods": list(config.methods),
+        "budget": config.budget,
+        "extra_budgets": list(config.extra_budgets),
+        "seed": config.seed,
+        "validation_runs": config.validation_runs,
+        "population": [
+            config.population.base,
+            *config.population.e_d,
+            *config.population.e_b,
+            *config.population.e_s,
+        ],
+    }
+
+
+def failed_rows(config: BenchConfig, robots: Sequence[int], reason: str) -> list[dict[str, Any]]:
+    """Rows for robots whose worker died twice: every entry marked failed with ``reason``,
+    its numbers NaN, so the tables count them as failures and the run still finishes."""
+    nan = math.nan
+    truth = population(config)
+    out = []
+    for floor in config.floors:
+        for robot in robots:
+            for label, _, budget in config.entries():
+                spec = truth[robot]
+                row: dict[str, Any] = {
+                    "method": label,
+                    "budget": budget,
+                    "floor": floor,
+                    "robot": robot,
+                    "true_E_d": spec.e_d,
+                    "true_E_b": spec.e_b,
+                    "true_E_s": spec.e_s,
+                    "runs_used": 0,
+                    "distance_m": 0.0,
+                    "wall_time_s": 0.0,
+                    "failed": reason,
+                    "e_max_before_mm": nan,
+                    "e_max_after_mm": nan,
+                    "improvement": nan,
+                }
+                for name in ("E_d", "E_b", "E_s"):
+                    row[f"est_{name}"] = nan
+                    row[f"err_{name}"] = nan
+                out.append(row)
+    return out
+
+
+FAULT_VARIABLE = "ODOMGYM_BENCH_FAULT"
+"""Fault injection for tests: ``exit-once:N`` makes the worker that holds robot N exit hard on
+its first attempt, ``exit-always:N`` on every attempt."""
+
+
+def _chunk_worker(conn: Connection, config: BenchConfig, part: list[int], attempt: int) -> None:
+    """A worker process: one chunk, its rows sent back through ``conn``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops its workers itself
+    fault = os.environ.get(FAULT_VARIABLE, "")
+    if ":" in fault:
+        mode, robot = fault.split(":", 1)
+        if robot.isdigit() and int(robot) in part:
+            if mode == "exit-always" or (mode == "exit-once" and attempt == 0):
+                os._exit(86)
+    try:
+        conn.send(("ok", run_chunk(config, part)))
+    except Exception as exc:  # a bug, not a death: the parent raises it
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+    finally:
+        conn.close()
+
+
+def _run_processes(
+    config: BenchConfig,
+    parts: list[list[int]],
+    jobs: int,
+    finished: Callable[[list[int], list[dict[str, Any]]], None],
+    notify: Callable[[str], None],
+) -> None:
+    """Run the chunks in at most ``jobs`` worker processes. A worker that dies (killed, out of
+    memory) is reported and its chunk retried once; if it dies again, its robots are recorded
+    as failed. Whatever ends this function early (an error, Ctrl-C, SIGTERM) terminates every
+    worker before it returns."""
+    import multiprocessing
+    from multiprocessing.connection import wait
+
+    context = multiprocessing.get_context("spawn")
+    queue = [(part, 0) for part in parts]
+    running: dict[Any, tuple[Any, Connection, list[int], int]] = {}
+    try:
+        while queue or running:
+            while queue and len(running) < jobs:
+                part, attempt = queue.pop(0)
+                parent, child = context.Pipe(duplex=False)
+                process = context.Process(
+                    target=_chunk_worker, args=(child, config, part, attempt), daemon=True
+                )
+                process.start()
+                child.close()
+                running[parent] = (process, parent, part, attempt)
+            # A result arrives on the connection; a death shows as end-of-file there.
+            for ready in wait(list(running)):
+                process, conn, part, attempt = running.pop(ready)
+                payload: Any = None
+                try:
+                    status, payload = conn.recv()
+                except (EOFError, OSError):
+                    status = "died"
+                conn.close()
+                process.join()
+                if status == "ok":
+                    finished(part, payload)
+                elif status == "error":
+                    raise RuntimeError(f"benchmark worker for robots {part} failed: {payload}")
+                elif attempt == 0:
+                    notify(
+                        f"worker for robots {part[0]}-{part[-1]} died (exit code "
+                        f"{process.exitcode}); retrying once"
+                    )
+                    queue.append((part, 1))
+                else:
+                    reason = f"worker died twice (exit code {process.exitcode})"
+                    notify(f"worker for robots {part[0]}-{part[-1]} died again; marked failed")
+                    finished(part, failed_rows(config, part, reason))
+    finally:
+        for process, _, _, _ in running.values():
+            process.terminate()
+        for process, conn, _, _ in running.values():
+            process.join(timeout=3)
+            if process.is_alive():
+                process.kill()
+                process.join(timeout=3)
+            conn.close()
+
+
 def run_benchmark(
     config: BenchConfig,
     *,
     jobs: int = 1,
     backend: Backend | str = Backend.LOCAL,
     progress: Callable[[int, int], None] | None = None,
+    journal: Path | str | None = None,
+    resume: bool = False,
+    chunk: int | None = None,
+    notify: Callable[[str], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run the benchmark; rows do not depend on ``jobs`` or ``backend``.
+    """Run the benchmark; rows do not depend on ``jobs``, ``backend``, ``chunk`` or on being
+    interrupted and resumed.
 
     ``backend`` (a :class:`Backend` or its spelling): ``local`` uses ``jobs`` worker processes
     (1: this process); ``ray`` submits the chunks as Ray tasks (``ray.init`` must have been
     called, or a local Ray is started with ``jobs`` CPUs). An unknown or unavailable backend
     raises :class:`SpecError` (field ``backend``) before any work.
+
+    ``journal``: record every finished chunk there (:class:`Journal`); with ``resume``, the
+    robots it holds are not run again. ``chunk``: robots per unit of work (default: as many as
+    spread the robots over the jobs, at most 16, so a long run records progress often; larger
+    chunks batch more robots together). ``notify`` receives one-line reports (a worker died).
     """
     backend = parse_choice(Backend, backend, field="backend")
     backend.check_available()
-    # One chunk per worker: the larger a lockstep batch, the cheaper each robot.
-    parts = chunks(config.robots, max(1, jobs))
-    rows: list[dict[str, Any]] = []
-    done = 0
-    if backend is Backend.RAY:
-        rows = _run_ray(config, parts, jobs, progress)
-    elif jobs <= 1:
-        for part in parts:
-            rows.extend(run_chunk(config, part))
-            done += len(part)
-            if progress is not None:
-                progress(done, config.robots)
-    else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+    book = Journal(Path(journal), config) if journal is not None else None
+    done = book.read() if book is not None and resume else {}
+    if book is not None and not done:
+        book.start()
+    todo = [i for i in range(config.robots) if i not in done]
+    size = chunk or min(16, max(1, math.ceil(len(todo) / max(1, jobs))))
+    parts = [todo[k : k + size] for k in range(0, len(todo), size)]
+    rows: list[dict[str, Any]] = [row for robot in sorted(done) for row in done[robot]]
+    count = len(done)
 
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-            futures = {pool.submit(run_chunk, config, part): part for part in parts}
-            for future in as_completed(futures):
-                rows.extend(future.result())
-                done += len(futures[future])
-                if progress is not None:
-                    progress(done, config.robots)
+    def finished(part: list[int], part_rows: list[dict[str, Any]]) -> None:
+        nonlocal count
+        if book is not None:
+            book.record(part, part_rows)
+        rows.extend(part_rows)
+        count += len(part)
+        if progress is not None:
+            progress(count, config.robots)
+
+    if progress is not None and count:
+        progress(count, config.robots)
+    if backend is Backend.RAY:
+        _run_ray(config, parts, jobs, finished)
+    elif jobs <= 1 or len(parts) <= 1:
+        for part in parts:
+            finished(part, run_chunk(config, part))
+    else:
+        _run_processes(config, parts, jobs, finished, notify or (lambda text: None))
     order = [label for label, _, _ in config.entries()]
     rows.sort(key=lambda r: (config.floors.index(r["floor"]), r["robot"], order.index(r["method"])))
     return rows
@@ -496,24 +716,22 @@ def _run_ray(
     config: BenchConfig,
     parts: list[list[int]],
     jobs: int,
-    progress: Callable[[int, int], None] | None,
-) -> list[dict[str, Any]]:
+    finished: Callable[[list[int], list[dict[str, Any]]], None],
+) -> None:
     import ray  # Backend.RAY.check_available() has looked for it
 
     if not ray.is_initialized():
         ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
-    remote = ray.remote(num_cpus=1)(run_chunk)
-    pending = {remote.remote(config, part): len(part) for part in parts}
-    rows: list[dict[str, Any]] = []
-    done = 0
-    while pending:
-        ready, _ = ray.wait(list(pending), num_returns=1)
-        for ref in ready:
-            rows.extend(ray.get(ref))
-            done += pending.pop(ref)
-            if progress is not None:
-                progress(done, config.robots)
-    return rows
+    remote = ray.remote(num_cpus=1, max_retries=1)(run_chunk)  # a dead worker: retried once
+    pending = {remote.remote(config, part): part for part in parts}
+    try:
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            for ref in ready:
+                finished(pending.pop(ref), ray.get(ref))
+    finally:
+        for ref in pending:  # interrupted: stop what still runs
+            ray.cancel(ref, force=True)
 
 
 def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:

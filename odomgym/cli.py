@@ -438,13 +438,31 @@ def _command_bench(args: argparse.Namespace) -> int:
         bar.n = done
         bar.refresh()
 
+    journal = Path(args.out) / JOURNAL_NAME
     start = time.perf_counter()
     try:
-        rows = run_benchmark(config, jobs=jobs, backend=backend, progress=progress)
+        rows = run_benchmark(
+            config,
+            jobs=jobs,
+            backend=backend,
+            progress=progress,
+            journal=journal,
+            resume=args.resume,
+            chunk=args.chunk,
+            notify=lambda text: print(f"odomgym: {text}", file=sys.stderr),
+        )
+    except (KeyboardInterrupt, Interrupted) as exc:
+        bar.close()
+        code = exc.code if isinstance(exc, Interrupted) else 130
+        raise Interrupted(
+            code,
+            f"stopped; the finished robots are recorded in {journal}: add --resume to continue",
+        ) from None
     finally:
         bar.close()
     elapsed = time.perf_counter() - start
     written = write_outputs(config, rows, Path(args.out), elapsed)
+    journal.unlink(missing_ok=True)  # finished: the outputs hold everything
     if args.json:
         print(to_json({"elapsed_s": elapsed, "jobs": jobs, "summary": summarize(rows)}))
     else:
@@ -964,6 +982,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", default="bench-out", help="output folder, created if missing (default bench-out)"
     )
     bench.add_argument("--json", action="store_true", help="print the summary as JSON")
+    bench.add_argument(
+        "--resume",
+        action="store_true",
+        help=f"continue an interrupted run: robots recorded in OUT/{JOURNAL_NAME} are not run "
+        "again (the same options are required); the tables equal an uninterrupted run's",
+    )
+    bench.add_argument(
+        "--chunk",
+        type=_count,
+        help="robots per unit of work, recorded as each finishes (default: up to 16)",
+    )
     bench.set_defaults(handler=_command_bench)
 
     _add_train_parser(commands)
@@ -1117,13 +1146,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+JOURNAL_NAME = "journal.jsonl"
+
+
+class Interrupted(Exception):
+    """Ctrl-C (exit code 130) or SIGTERM (143): the command stops its workers and says so."""
+
+    def __init__(self, code: int, message: str = "stopped") -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    raise Interrupted(143, "stopped by SIGTERM")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``odomgym`` command."""
+    import signal
+    import threading
+
     parser = build_parser()
     args = parser.parse_args(argv)
     handler: Callable[[argparse.Namespace], int] = args.handler
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return handler(args)
+    except Interrupted as exc:
+        print(f"odomgym: {exc}", file=sys.stderr)
+        return exc.code
+    except KeyboardInterrupt:
+        print("odomgym: interrupted", file=sys.stderr)
+        return 130
     except SpecError as exc:
         print(f"odomgym: error: {exc}", file=sys.stderr)
         return 2
@@ -1131,6 +1187,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Checked up front (_check_output); what is left is the machine's (a full disk).
         print(f"odomgym: error: {exc}", file=sys.stderr)
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":
