@@ -29,6 +29,14 @@ class SpecError(ValueError):
         super().__init__(prefix + message)
 
 
+def raw_line(path: Path, offset: int) -> int:
+    """The 1-based line of byte ``offset`` in ``path`` (for errors about raw bytes)."""
+    try:
+        return path.read_bytes()[:offset].count(b"\n") + 1
+    except OSError:
+        return 1
+
+
 def read_spec_toml(path: Path, kind: str) -> dict[str, object]:
     """Parse the ``kind`` TOML file at ``path`` (robot, floor, calibration, vehicle): an
     unreadable file or malformed TOML is a one-line :class:`SpecError` naming the file (and, for
@@ -39,6 +47,13 @@ def read_spec_toml(path: Path, kind: str) -> dict[str, object]:
         raw = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise SpecError(f"cannot read {kind} file: {exc.strerror}", source=str(path)) from None
+    except UnicodeDecodeError as exc:
+        line = raw_line(path, exc.start)
+        raise SpecError(
+            f"line {line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x}); a {kind} file "
+            "is TOML, which is UTF-8",
+            source=str(path),
+        ) from None
     try:
         return tomllib.loads(raw)
     except tomllib.TOMLDecodeError as exc:
