@@ -459,7 +459,9 @@ def train(
         venv.close()
     wall = time.perf_counter() - start
     model_file = folder / "model.zip"
-    model.save(model_file)
+    partial = folder / "model.tmp.zip"
+    model.save(partial)  # SB3 writes the zip in place: rename it when it is whole
+    partial.replace(model_file)
     meta = {
         "env_id": ENV_ID,
         "algo": algo,

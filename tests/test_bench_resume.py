@@ -140,3 +140,44 @@ def test_a_journal_of_another_configuration_is_refused(tmp_path: Path) -> None:
         f.write("\n{}\n")
     with pytest.raises(SpecError, match=r"journal.jsonl:2: damaged entry"):
         Journal(path, CONFIG).read()
+
+
+@pytest.mark.slow
+def test_sigterm_stops_diagnose_and_its_workers(tmp_path: Path) -> None:
+    """``diagnose --jobs 2`` killed while fitting: exit 143 within seconds, its forked workers
+    gone, no output folder."""
+    repo = Path(__file__).resolve().parents[1]
+    out = tmp_path / "diag"
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "odomgym",
+            "diagnose",
+            "optiodom:square/230620202042",
+            "--robot",
+            "examples/optiodom_nominal.toml",
+            "--out",
+            str(out),
+            "--jobs",
+            "2",
+        ],
+        cwd=repo,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    workers: set[int] = set()
+    deadline = time.monotonic() + 60
+    while len(workers) < 2 and time.monotonic() < deadline:  # until both workers fit
+        workers |= set(_children(process.pid)) if _alive(process.pid) else set()
+        time.sleep(0.1)
+    assert len(workers) >= 2, "diagnose never started its workers"
+    process.send_signal(signal.SIGTERM)
+    start = time.monotonic()
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 143, err
+    assert time.monotonic() - start < 10
+    time.sleep(1.0)
+    assert not [pid for pid in workers if _alive(pid)]
+    assert not out.exists()

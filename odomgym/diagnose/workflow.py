@@ -366,10 +366,20 @@ def _score_candidates(
     fits: list[CandidateFit] = []
     if cfg.jobs > 1 and len(effects) > 1 and "fork" in mp.get_all_start_methods():
         # Forked workers share the registry (user effects included) and the compiled kernels.
-        with ProcessPoolExecutor(cfg.jobs, mp_context=mp.get_context("fork")) as pool:
+        pool = ProcessPoolExecutor(cfg.jobs, mp_context=mp.get_context("fork"))
+        try:
             for k, fit in enumerate(pool.map(_fit_and_score, jobs)):
                 report(f"round {number}: {effects[k].name}", (k + 1) / len(effects))
                 fits.append(fit)
+        except BaseException:
+            # Ctrl-C, SIGTERM or an error: stop the workers now rather than wait for their
+            # fits (the executor's own shutdown would); ``_processes`` is the executor's map
+            # of its worker processes (CPython's concurrent.futures).
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
     else:
         for k, job in enumerate(jobs):
             report(f"round {number}: {effects[k].name}", k / len(effects))
