@@ -49,6 +49,29 @@ def _normalise_effects(effects: Any) -> EffectTable:
     return tuple(sorted(table.items()))
 
 
+ROBOT_RANGES: dict[str, tuple[float, float]] = {
+    # What a wheeled mobile robot can physically be; beyond these the physics (a 10-step
+    # controller, Chipmunk's solver) is not meant to work, so a spec outside is refused.
+    "wheel_diameter": (0.005, 2.0),  # [m]
+    "wheelbase": (0.02, 5.0),  # [m]
+    "ticks_per_rev": (1.0, 1e7),  # [counts/rev]
+    "true_left_diameter": (0.005, 2.0),  # [m]
+    "true_right_diameter": (0.005, 2.0),  # [m]
+    "true_wheelbase": (0.02, 5.0),  # [m]
+    "mass": (0.05, 10_000.0),  # [kg]
+    "chassis_length": (0.01, 20.0),  # [m]
+    "chassis_width": (0.01, 20.0),  # [m]
+    "drive_load_fraction": (1e-3, 1.0),  # [-]
+    "max_wheel_speed": (1e-3, 10.0),  # [m/s]
+    "max_wheel_accel": (1e-3, 100.0),  # [m/s²]
+}
+"""Allowed range [low, high] of each robot key (docs/specs.md, "allowed")."""
+
+TRUE_TO_NOMINAL: tuple[float, float] = (0.5, 2.0)
+"""A true diameter or wheelbase lies within this factor of its nominal value [-]: a robot
+whose odometry is off by more is not miscalibrated but misdescribed."""
+
+
 @dataclass(frozen=True, init=False)
 class RobotSpec:
     """A differential-drive robot: nominal (believed) and true (hidden) parameters.
@@ -149,21 +172,21 @@ class RobotSpec:
     # ------------------------------------------------------------------ validation
     def validate(self, source: str | None = None) -> None:
         """Raise :class:`SpecError` naming the first invalid field."""
-        for name in (
-            "wheel_diameter",
-            "wheelbase",
-            "ticks_per_rev",
-            "true_left_diameter",
-            "true_right_diameter",
-            "true_wheelbase",
-            "mass",
-            "chassis_length",
-            "chassis_width",
-            "max_wheel_speed",
-            "max_wheel_accel",
+        for name, (low, high) in ROBOT_RANGES.items():
+            require_range(name, getattr(self, name), low, high, source=source)
+        for true, nominal in (
+            ("true_left_diameter", "wheel_diameter"),
+            ("true_right_diameter", "wheel_diameter"),
+            ("true_wheelbase", "wheelbase"),
         ):
-            require_positive(name, getattr(self, name), source=source)
-        require_range("drive_load_fraction", self.drive_load_fraction, 1e-3, 1.0, source=source)
+            ratio = float(getattr(self, true)) / float(getattr(self, nominal))
+            if not TRUE_TO_NOMINAL[0] <= ratio <= TRUE_TO_NOMINAL[1]:
+                raise SpecError(
+                    f"{true} must lie within {TRUE_TO_NOMINAL[0]}–{TRUE_TO_NOMINAL[1]} × "
+                    f"{nominal} ({getattr(self, nominal)}), got {getattr(self, true)!r}",
+                    field=true,
+                    source=source,
+                )
         if self.chassis_width < 0.5 * self.true_wheelbase:
             raise SpecError(
                 "chassis_width must be at least half the wheelbase, got "
@@ -303,8 +326,8 @@ class RobotSpec:
                     raise SpecError(f"{key} must be a string", field=key, source=where)
                 continue
             where = locate_key(path, key) if path else None
-            if key == "drive_load_fraction":
-                require_range(key, value, 1e-3, 1.0, source=where)
+            if key in ROBOT_RANGES:  # the line of the offending key, not just the file
+                require_range(key, value, *ROBOT_RANGES[key], source=where)
             else:
                 require_positive(key, value, source=where)
         for key, value in errors.items():
