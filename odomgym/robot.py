@@ -58,7 +58,7 @@ ROBOT_RANGES: dict[str, tuple[float, float]] = {
     "true_left_diameter": (0.005, 2.0),  # [m]
     "true_right_diameter": (0.005, 2.0),  # [m]
     "true_wheelbase": (0.02, 5.0),  # [m]
-    "mass": (0.05, 10_000.0),  # [kg]
+    "mass": (0.01, 10_000.0),  # [kg] (the default mass of the smallest robot is 0.04 kg)
     "chassis_length": (0.01, 20.0),  # [m]
     "chassis_width": (0.01, 20.0),  # [m]
     "drive_load_fraction": (1e-3, 1.0),  # [-]
