@@ -6,7 +6,7 @@
 Robots at the edges of ``odomgym.robot.ROBOT_RANGES`` (the smallest and the largest robot, the
 fastest wheels with the hardest accelerations, wheel diameters and wheelbase 0.5 and 2 × their
 nominal values), on floors at the edges of ``FloorSpec`` (μ = 0.05, the largest roughness
-k = 1 m^½, dense random cables), driven by random wheel commands through the native vector env
+k = 0.1 m^½, dense random cables), driven by random wheel commands through the native vector env
 of ``UMBmarkSquare-v0``. Printed per configuration, and as totals:
 
 * NaN or infinite values in observations, rewards and ``info`` poses (must be 0);
@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import odomgym
-from odomgym.floor import FloorSpec
+from odomgym.floor import MAX_ROUGHNESS, FloorSpec
 from odomgym.robot import ROBOT_RANGES, RobotSpec
 
 
@@ -81,7 +81,7 @@ def floors() -> dict[str, FloorSpec]:
     )
     return {
         "ice+cables": FloorSpec(friction=0.05, bumps=cables.bumps, name="ice+cables"),
-        "roughest": FloorSpec(friction=0.8, roughness=1.0, name="roughest"),
+        "roughest": FloorSpec(friction=0.8, roughness=MAX_ROUGHNESS, name="roughest"),
         "ice+rough": FloorSpec(friction=0.05, roughness=0.05, name="ice+rough"),
     }
 

@@ -52,6 +52,11 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 
+MAX_ROUGHNESS = 0.1
+"""Largest floor roughness k [m^½]: 50 × the ``rough`` preset, a wheel-travel noise of ±10 cm
+per metre; the ``floor_roughness`` effect has the same limit."""
+
+
 @dataclass(frozen=True)
 class CableBump:
     """A straight cable of circular cross-section lying on the floor.
@@ -123,7 +128,7 @@ class FloorSpec:
 
     def __post_init__(self) -> None:
         require_positive("friction", self.friction)
-        require_range("roughness", self.roughness, 0.0, 1.0)
+        require_range("roughness", self.roughness, 0.0, MAX_ROUGHNESS)
         object.__setattr__(self, "bumps", tuple(self.bumps))
         object.__setattr__(self, "patches", tuple(self.patches))
 
@@ -192,7 +197,7 @@ class FloorSpec:
             )
         if "roughness" in table:
             kwargs["roughness"] = require_range(
-                "roughness", table["roughness"], 0.0, 1.0, source=where("roughness")
+                "roughness", table["roughness"], 0.0, MAX_ROUGHNESS, source=where("roughness")
             )
         kwargs["bumps"] = tuple(
             _build_item(CableBump, f"bumps[{i}]", item, path)

@@ -351,6 +351,8 @@ def _one_key(marker: str, key: str, type_cell: str) -> tuple[Callable[[str], Any
         value = "12" if type_cell == "int" else VEHICLE_VALUES.get(key, value)
     if marker == "robot":  # a systematic error is a factor near 1 (true/nominal within 0.5–2)
         value = {"e_d": "1.01", "e_b": "0.98", "e_s": "1.02"}.get(key, value)
+    if marker == "floor" and key == "roughness":
+        value = "0.002"  # the rough preset (at most MAX_ROUGHNESS = 0.1)
     line = f"{key} = {value}\n"
     if marker == "robot":
         return load_robot, MINIMAL_ROBOT + ("" if key in REQUIRED_ROBOT else line)
