@@ -12,8 +12,9 @@ of ``UMBmarkSquare-v0``. Printed per configuration, and as totals:
 * NaN or infinite values in observations, rewards and ``info`` poses (must be 0);
 * observations outside the observation space (must be 0);
 * the largest body speed seen over what the wheels can give (max_wheel_speed × the larger true
-  over nominal diameter): above 1 means energy from nowhere, except the roughness noise, which
-  adds k·√(v·h) of ground travel per substep by design (Chong & Kleeman 1997, Eq. 4);
+  over nominal diameter): above 1 means energy from nowhere, except on rough floors, whose
+  noise adds k·√(|v|·h)·ξ of ground travel per step by design (Chong & Kleeman 1997, Eq. 4;
+  ±1.0 m/s of body speed at 10 m/s with k = 0.1 m^½ and h = 50 ms);
 * the largest distance from the start over what that speed allows in the time driven;
 
 then the memory growth over the resets (``ru_maxrss`` after the first 10 % and at the end).
