@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.baselines.benchmark import BENCH_FLOORS, BenchConfig, summarize
+from odomgym.baselines.benchmark import BENCH_FLOORS, BenchConfig, config_record, summarize
 from odomgym.io import atomic_write_text, atomic_writer
 from odomgym.report import plot_return_errors
 
@@ -111,15 +111,7 @@ def write_outputs(
     atomic_write_text(written[1], _csv(summary))
     atomic_write_text(written[2], _csv(plain))
     document = {
-        "config": {
-            "robots": config.robots,
-            "floors": list(config.floors),
-            "methods": list(config.methods),
-            "budget": config.budget,
-            "extra_budgets": list(config.extra_budgets),
-            "seed": config.seed,
-            "validation_runs": config.validation_runs,
-        },
+        "config": config_record(config),
         "elapsed_s": elapsed,
         "summary": summary,
         "rows": plain,

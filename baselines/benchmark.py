@@ -68,6 +68,7 @@ __all__ = [
     "Journal",
     "Population",
     "check_bench_floor",
+    "config_record",
     "configure",
     "failed_rows",
     "population",
@@ -464,7 +465,7 @@ class Journal:
         self.config = config
 
     def _header(self) -> dict[str, Any]:
-        return {"journal": self.VERSION, "config": _config_record(self.config)}
+        return {"journal": self.VERSION, "config": config_record(self.config)}
 
     def start(self) -> None:
         """Begin a new journal (replacing any earlier one)."""
@@ -517,7 +518,8 @@ class Journal:
             os.fsync(f.fileno())
 
 
-def _config_record(config: BenchConfig) -> dict[str, Any]:
+def config_record(config: BenchConfig) -> dict[str, Any]:
+    """The configuration as JSON-ready data (results.json, the journal's first line)."""
     return {
         "robots": config.robots,
         "floors": list(config.floors),
