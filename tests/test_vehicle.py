@@ -129,7 +129,9 @@ def test_errors_inside_an_inline_truck_name_the_truck_and_its_line(tmp_path: Pat
         "wheelbase = -0.34\nticks_per_rev = 2048\n",
         encoding="utf-8",
     )
-    with pytest.raises(SpecError, match=r"vehicle\.toml:7: truck_b\.wheelbase must be > 0"):
+    with pytest.raises(
+        SpecError, match=r"vehicle\.toml:7: truck_b\.wheelbase must lie in \[0\.02, 5\.0\]"
+    ):
         load_vehicle(path)
     path.write_text('[vehicle]\ntruck_b = "labmat"\n', encoding="utf-8")
     with pytest.raises(SpecError, match=r"vehicle\.toml:2: truck_b: unknown robot preset 'labmat'"):
