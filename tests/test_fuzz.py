@@ -306,3 +306,99 @@ def test_regression_a_spec_file_that_is_not_utf8(tmp_path: Path) -> None:
         odomgym.load_robot(path)
     message = str(caught.value)
     assert str(path) in message and "line 2: not UTF-8 text (byte 0xe9)" in message
+
+
+REQUIRED = ("wheel_diameter", "wheelbase", "ticks_per_rev")  # Python's own TypeError if absent
+
+
+@given(
+    _mutated(ROBOT, ROBOT_KEYS).map(
+        lambda d: (
+            {k: d.get(k, ROBOT[k]) for k in REQUIRED} | {k: v for k, v in d.items() if k in ROBOT}
+        )
+    )
+)
+def test_robot_constructor(fields: dict[str, Any]) -> None:
+    from odomgym.robot import RobotSpec
+
+    try:
+        robot = RobotSpec(**fields)
+    except SpecError as exc:
+        assert exc.field is not None
+        _one_line(exc)
+        return
+    _finite(robot.to_dict())
+
+
+@given(
+    _mutated(CALIBRATION, list(CALIBRATION)).map(
+        lambda d: {k: v for k, v in d.items() if k in CALIBRATION}
+    ),
+    _mutated(FLOOR, ["friction", "roughness"]).map(
+        lambda d: {k: v for k, v in d.items() if k in ("friction", "roughness")}
+    ),
+)
+def test_calibration_and_floor_constructors(cal: dict[str, Any], floor: dict[str, Any]) -> None:
+    from odomgym.floor import FloorSpec
+    from odomgym.odometry import Calibration
+
+    for build, fields in ((Calibration, cal), (FloorSpec, floor)):
+        try:
+            build(**fields)
+        except SpecError as exc:
+            assert exc.field is not None
+            _one_line(exc)
+
+
+def _session_copy() -> Path:
+    """A scratch copy of a shipped OptiOdom session (square, 6 runs)."""
+    import shutil
+
+    from odomgym.data import resolve_data
+
+    target = SCRATCH / "optiodom" / "square" / "230620202042"
+    if not target.exists():
+        shutil.copytree(resolve_data("optiodom:square/230620202042", session=True), target)
+    return target
+
+
+@given(
+    st.lists(st.tuples(st.integers(0, 6), st.integers(0, 10_000), CELLS), max_size=3),
+    st.lists(st.tuples(st.integers(0, 6), st.integers(0, 10_000), CELLS), max_size=3),
+    st.sampled_from(["utf-8", "latin-1", "utf-16"]),
+)
+def test_optiodom_sessions(
+    meta_edits: list[tuple[int, int, str]], run_edits: list[tuple[int, int, str]], encoding: str
+) -> None:
+    """The OptiOdom reader on a session whose metadata and first run file are mutated."""
+    from odomgym.data import read_session
+
+    folder = _session_copy()
+    meta = folder / "230620202042_metadata.csv"
+    run = folder / "230620202042_run-01.csv"
+    originals = {path: path.read_bytes() for path in (meta, run)}
+    try:
+        for path, edits in ((meta, meta_edits), (run, run_edits)):
+            lines = originals[path].decode("utf-8").splitlines()
+            path.write_bytes(_mutate_csv(lines, edits).encode(encoding, errors="replace"))
+        try:
+            session = read_session(folder)
+        except SpecError as exc:
+            _one_line(exc)
+            assert folder.name in str(exc), exc
+            return
+        for one in session.runs:
+            assert np.all(np.isfinite(one.time)) and np.all(np.diff(one.time) > 0)
+    finally:
+        for path, data in originals.items():
+            path.write_bytes(data)
+
+
+def test_regression_a_huge_wheelbase_is_named_not_overflowed() -> None:
+    """Found by test_robot_constructor: RobotSpec(wheelbase=1e154) overflowed computing the
+    default mass (OverflowError); now the wheelbase is named."""
+    from odomgym.robot import RobotSpec
+
+    with pytest.raises(SpecError) as caught:
+        RobotSpec(wheel_diameter=0.15, wheelbase=1e154, ticks_per_rev=2048)
+    assert caught.value.field == "wheelbase"
