@@ -493,23 +493,46 @@ def _command_leaderboard(args: argparse.Namespace) -> int:
     return 0
 
 
+def _all_finite(value: object) -> bool:
+    """Whether every number inside ``value`` (nested dicts, lists, arrays) is finite."""
+    if isinstance(value, dict):
+        return all(_all_finite(v) for v in value.values())
+    if isinstance(value, list | tuple):
+        return all(_all_finite(v) for v in value)
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind not in "fc" or bool(np.all(np.isfinite(value)))
+    if isinstance(value, float | np.floating):
+        return bool(np.isfinite(value))
+    return True
+
+
 def _command_covariance(args: argparse.Namespace) -> int:
     from odomgym.montecarlo import covariance_report, format_report
 
+    too_large = SpecError(
+        "the distances, wheelbase or noise constants are too large for the closed forms (the "
+        "covariance overflows a double); use metres and m^½ of a real robot",
+        field="covariance",
+    )
     try:
-        report = covariance_report(
-            args.left,
-            args.right,
-            args.wheelbase,
-            args.kl,
-            args.kr,
-            init_std=tuple(args.init_std),
-            montecarlo_runs=args.montecarlo,
-            partitions=args.partitions,
-            rng=np.random.default_rng(args.seed),
-        )
+        with np.errstate(over="raise", invalid="raise"):
+            report = covariance_report(
+                args.left,
+                args.right,
+                args.wheelbase,
+                args.kl,
+                args.kr,
+                init_std=tuple(args.init_std),
+                montecarlo_runs=args.montecarlo,
+                partitions=args.partitions,
+                rng=np.random.default_rng(args.seed),
+            )
+    except (ArithmeticError, FloatingPointError):
+        raise too_large from None
     except ValueError as exc:
         raise SpecError(str(exc)) from None
+    if not _all_finite(report):
+        raise too_large
     print(to_json(report) if args.json else format_report(report))
     return 0
 

@@ -181,3 +181,49 @@ def test_sigterm_stops_diagnose_and_its_workers(tmp_path: Path) -> None:
     time.sleep(1.0)
     assert not [pid for pid in workers if _alive(pid)]
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_sigterm_stops_training_and_its_workers(tmp_path: Path) -> None:
+    """``train selfcal --workers 2`` killed while training: exit 143 within seconds, both
+    simulation workers gone, no policy or model written."""
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path / "train"
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "odomgym",
+            "train",
+            "selfcal",
+            "--steps",
+            "100000",
+            "--envs",
+            "4",
+            "--workers",
+            "2",
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    workers: set[int] = set()
+    deadline = time.monotonic() + 90
+    while time.monotonic() < deadline:  # until the first rollout is logged
+        workers |= set(_children(process.pid)) if _alive(process.pid) else set()
+        if (out / "progress.csv").exists() and (out / "progress.csv").stat().st_size > 0:
+            break
+        time.sleep(0.2)
+    else:
+        process.kill()
+        pytest.fail("training logged nothing within 90 s")
+    process.send_signal(signal.SIGTERM)
+    start = time.monotonic()
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 143, err
+    assert time.monotonic() - start < 10
+    time.sleep(1.0)
+    assert not [pid for pid in workers if _alive(pid)]
+    assert not (out / "policy.npz").exists() and not (out / "model.zip").exists()

@@ -402,3 +402,78 @@ def test_regression_a_huge_wheelbase_is_named_not_overflowed() -> None:
     with pytest.raises(SpecError) as caught:
         RobotSpec(wheel_diameter=0.15, wheelbase=1e154, ticks_per_rev=2048)
     assert caught.value.field == "wheelbase"
+
+
+NUMBERS = st.one_of(
+    st.sampled_from(["0", "-1", "nan", "inf", "-inf", "1e309", "1e-320", "abc", "", "3", "0.4"]),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+)
+
+
+@given(NUMBERS, NUMBERS, NUMBERS, NUMBERS, st.sampled_from(["1", "0", "-5", "10", "x"]))
+def test_command_line_end_to_end(
+    left: str, right: str, wheelbase: str, k: str, partitions: str
+) -> None:
+    """``odomgym covariance`` (the Chong & Kleeman closed forms) with arbitrary numbers: it
+    prints its result (exit 0) or one error line (exit 2), never a traceback."""
+    import contextlib
+    import io
+
+    from odomgym.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    argv = [
+        "covariance",
+        "--left",
+        left,
+        "--right",
+        right,
+        "--wheelbase",
+        wheelbase,
+        "--kl",
+        k,
+        "--kr",
+        k,
+        "--partitions",
+        partitions,
+        "--json",
+    ]
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse: an option's type refused the text
+            code = int(exc.code or 0)
+    if code == 0:
+        assert "nan" not in out.getvalue().lower().replace("nan_", ""), out.getvalue()
+    else:
+        assert code == 2, (argv, err.getvalue())
+        lines = [line for line in err.getvalue().splitlines() if line.strip()]
+        assert lines and "Traceback" not in err.getvalue(), err.getvalue()
+        assert lines[-1].startswith(("odomgym: error:", "odomgym covariance: error:")), lines
+
+
+def test_regression_covariance_with_huge_numbers_is_one_line(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Found by test_command_line_end_to_end: ``covariance --right 1.34e154`` raised
+    OverflowError; now exit 2 and one line."""
+    from odomgym.cli import main
+
+    argv = [
+        "covariance",
+        "--left",
+        "0",
+        "--right",
+        "1.3407807929942597e+154",
+        "--wheelbase",
+        "3",
+        "--kl",
+        "0",
+        "--kr",
+        "0",
+        "--partitions",
+        "1",
+    ]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "too large for the closed forms" in err[0]
