@@ -54,6 +54,7 @@ except ImportError as exc:  # pragma: no cover - the rl extra is missing
 __all__ = [
     "ALGORITHMS",
     "ENV_ID",
+    "EVAL_SEEDS",
     "SelfCalVecEnv",
     "TrainResult",
     "evaluate",
@@ -65,6 +66,10 @@ __all__ = [
 ENV_ID = "SelfCalibration-v0"
 ALGORITHMS = ("ppo", "a2c", "dqn")
 """SB3 algorithms that accept a ``Discrete`` action space (SAC and TD3 need ``Box``)."""
+
+EVAL_SEEDS: tuple[int, ...] = tuple(range(10_000, 10_032))
+"""The held-out sessions every trained policy is evaluated on (seeds never used in training,
+which seeds sub-env i with seed + i for small seeds)."""
 
 StepResult = tuple[NDArray[np.float32], float, bool, dict[str, Any]]
 
@@ -89,7 +94,8 @@ class _Batch:
         for env in self.envs:
             assert env.episode is not None, "reset() first"
             episodes.append(env.episode)
-        results = step_episodes(episodes, [menu_index(a) for a in actions], self.envs[0].shaping)
+        # SelfCalVecEnv.step_async has checked every action (menu_index) before any shard steps.
+        results = step_episodes(episodes, list(actions), self.envs[0].shaping)
         out: list[StepResult] = []
         for env, (obs, reward, done, info) in zip(self.envs, results, strict=True):
             info["TimeLimit.truncated"] = False
@@ -386,7 +392,7 @@ def train(
     out: str | Path = "runs/selfcal",
     hyperparams: str | Path | None = None,
     progress: bool = True,
-    eval_seeds: Sequence[int] = tuple(range(10_000, 10_032)),
+    eval_seeds: Sequence[int] = EVAL_SEEDS,
     command: str | None = None,
 ) -> TrainResult:
     """Train a self-calibration policy and write it to ``out``.

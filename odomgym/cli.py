@@ -452,7 +452,6 @@ def _command_bench(args: argparse.Namespace) -> int:
             notify=lambda text: print(f"odomgym: {text}", file=sys.stderr),
         )
     except (KeyboardInterrupt, Interrupted) as exc:
-        bar.close()
         code = exc.code if isinstance(exc, Interrupted) else 130
         raise Interrupted(
             code,
@@ -812,7 +811,7 @@ def _command_train(args: argparse.Namespace) -> int:
             field="train",
         )
     _check_output(args.out, option="--out", folder=True)
-    from odomgym.baselines.selfcal_train import load_hyperparams, train
+    from odomgym.baselines.selfcal_train import EVAL_SEEDS, load_hyperparams, train
 
     params = load_hyperparams(args.algo, args.hyperparams)  # one-line errors before any work
     steps = args.steps or int(params.get("n_timesteps", 100_000))
@@ -847,7 +846,7 @@ def _command_train(args: argparse.Namespace) -> int:
         ev = result.evaluation
         print(
             f"trained {args.algo} for {result.steps} steps in {result.wall_time_s / 60:.1f} min; "
-            f"on {len(range(10_000, 10_032))} held-out sessions: mean reward "
+            f"on {len(EVAL_SEEDS)} held-out sessions: mean reward "
             f"{ev['reward_mean']:.2f}, mean ln(E_max before/after) "
             f"{ev['log_improvement_mean']:.2f}, {ev['runs_mean']:.1f} runs"
         )

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import pytest
@@ -61,6 +62,20 @@ def _alive(pid: int) -> bool:
     return status.exists() and "State:\tZ" not in status.read_text()
 
 
+def _terminate(process: subprocess.Popen[str], workers: Iterable[int], timeout: float) -> str:
+    """SIGTERM ``process``: it must exit 143 within 10 s and leave none of ``workers`` alive.
+    Returns its stderr."""
+    process.send_signal(signal.SIGTERM)
+    start = time.monotonic()
+    _, err = process.communicate(timeout=timeout)
+    assert process.returncode == 143, err
+    assert time.monotonic() - start < 10
+    time.sleep(1.0)  # multiprocessing's resource tracker exits when it sees the parent gone
+    survivors = {pid: _cmdline(pid) for pid in workers if _alive(pid)}
+    assert not survivors, f"outlived the command: {survivors}"
+    return err
+
+
 @pytest.mark.slow
 def test_sigterm_stops_the_workers_and_resume_gives_the_same_tables(
     tmp_path: Path, reference: list[dict], capsys: pytest.CaptureFixture[str]
@@ -85,15 +100,8 @@ def test_sigterm_stops_the_workers_and_resume_gives_the_same_tables(
         process.kill()
         pytest.fail("no robot finished within 120 s")
     workers = _children(process.pid) or workers
-    process.send_signal(signal.SIGTERM)
-    start = time.monotonic()
-    _, err = process.communicate(timeout=20)
-    assert process.returncode == 143, err
-    assert time.monotonic() - start < 10
+    err = _terminate(process, workers, timeout=20)
     assert "--resume" in err.strip().splitlines()[-1]
-    time.sleep(1.0)  # multiprocessing's resource tracker exits when it sees the parent gone
-    survivors = {pid: _cmdline(pid) for pid in workers if _alive(pid)}
-    assert not survivors, f"outlived the benchmark: {survivors}"
     assert not (out / "results.json").exists()  # no half-written outputs
     recorded = len(journal.read_text().splitlines()) - 1
     assert 1 <= recorded < 4
@@ -173,13 +181,7 @@ def test_sigterm_stops_diagnose_and_its_workers(tmp_path: Path) -> None:
         workers |= set(_children(process.pid)) if _alive(process.pid) else set()
         time.sleep(0.1)
     assert len(workers) >= 2, "diagnose never started its workers"
-    process.send_signal(signal.SIGTERM)
-    start = time.monotonic()
-    _, err = process.communicate(timeout=30)
-    assert process.returncode == 143, err
-    assert time.monotonic() - start < 10
-    time.sleep(1.0)
-    assert not [pid for pid in workers if _alive(pid)]
+    _terminate(process, workers, timeout=30)
     assert not out.exists()
 
 
@@ -219,11 +221,5 @@ def test_sigterm_stops_training_and_its_workers(tmp_path: Path) -> None:
     else:
         process.kill()
         pytest.fail("training logged nothing within 90 s")
-    process.send_signal(signal.SIGTERM)
-    start = time.monotonic()
-    _, err = process.communicate(timeout=30)
-    assert process.returncode == 143, err
-    assert time.monotonic() - start < 10
-    time.sleep(1.0)
-    assert not [pid for pid in workers if _alive(pid)]
+    _terminate(process, workers, timeout=30)
     assert not (out / "policy.npz").exists() and not (out / "model.zip").exists()
