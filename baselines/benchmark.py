@@ -30,13 +30,14 @@ chunking or the order, and the comparison between methods is paired.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import json
 import math
 import os
 import signal
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from multiprocessing.connection import Connection
@@ -592,6 +593,21 @@ def _chunk_worker(conn: Connection, config: BenchConfig, part: list[int], attemp
         conn.close()
 
 
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back for the block (delivered when it ends); a no-op where the
+    platform cannot (no ``pthread_sigmask``)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def _run_processes(
     config: BenchConfig,
     parts: list[list[int]],
@@ -617,9 +633,13 @@ def _run_processes(
                 process = context.Process(
                     target=_chunk_worker, args=(child, config, part, attempt), daemon=True
                 )
-                process.start()
-                child.close()
-                running[parent] = (process, parent, part, attempt)
+                # Ctrl-C/SIGTERM wait until the worker is started and registered: interrupted
+                # inside start(), it would be left half-started (spawn's bootstrap then dies
+                # with an EOFError traceback) and unknown to the clean-up below.
+                with _signals_deferred():
+                    process.start()
+                    child.close()
+                    running[parent] = (process, parent, part, attempt)
             # A result arrives on the connection; a death shows as end-of-file there.
             for ready in wait(list(running)):
                 process, conn, part, attempt = running.pop(ready)
