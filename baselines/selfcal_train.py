@@ -53,8 +53,10 @@ except ImportError as exc:  # pragma: no cover - the rl extra is missing
 
 __all__ = [
     "ALGORITHMS",
+    "CHECKPOINT_EVERY",
     "ENV_ID",
     "EVAL_SEEDS",
+    "Checkpoints",
     "SelfCalVecEnv",
     "TrainResult",
     "evaluate",
@@ -65,6 +67,8 @@ __all__ = [
 
 ENV_ID = "SelfCalibration-v0"
 ALGORITHMS = ("ppo", "a2c", "dqn")
+CHECKPOINT_EVERY = 10_000
+"""Default environment steps between checkpoints: about two minutes of training on two cores."""
 """SB3 algorithms that accept a ``Discrete`` action space (SAC and TD3 need ``Box``)."""
 
 EVAL_SEEDS: tuple[int, ...] = tuple(range(10_000, 10_032))
@@ -369,6 +373,128 @@ class TrainResult:
     evaluation: dict[str, float]
 
 
+class Checkpoints:
+    """The checkpoint of an interrupted training in its output folder, and the resume.
+
+    Every ``every`` environment steps (at the start of a rollout, when the last update is
+    done) the model — weights, optimizer state, step count, and for DQN the replay buffer —
+    is written to ``checkpoint.zip`` (``checkpoint_replay.pkl``) and its record to
+    ``checkpoint.json``, each whole by a rename. ``--resume`` loads them and trains on to the
+    same total; the settings that shape the model (algorithm, sessions, seed, hyperparameters)
+    must match the record. The learning-curve rows logged before the checkpoint are kept in
+    ``progress.prev.csv`` and joined with the new ones at the end.
+
+    A resumed run is not bit-identical to an uninterrupted one: the sessions in flight at the
+    checkpoint are started afresh (seeded ``seed + steps``), as SB3 keeps no env state.
+    """
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.model = folder / "checkpoint.zip"
+        self.record = folder / "checkpoint.json"
+        self.replay = folder / "checkpoint_replay.pkl"
+        self.progress = folder / "progress.csv"
+        self.previous = folder / "progress.prev.csv"
+
+    def read(self, settings: dict[str, Any]) -> dict[str, Any]:
+        """The record of the checkpoint to resume from; one-line errors when there is none or
+        it was made with other settings."""
+        if not self.record.exists() or not self.model.exists():
+            raise SpecError(
+                f"{self.folder}: no checkpoint to resume from (checkpoint.json and "
+                "checkpoint.zip); start without --resume",
+                field="resume",
+            )
+        try:
+            record = json.loads(self.record.read_text(encoding="utf-8"))
+            steps = int(record["steps"])
+            saved = dict(record["settings"])
+            record["wall_time_s"] = float(record["wall_time_s"])
+            record["resumed_at"] = [int(k) for k in record["resumed_at"]]
+        except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+            raise SpecError(
+                f"{self.record}: not a checkpoint record odomgym wrote ({exc})", field="resume"
+            ) from exc
+        differ = sorted(k for k in set(saved) | set(settings) if saved.get(k) != settings.get(k))
+        if differ:
+            shown = "; ".join(f"{k} {saved.get(k)!r} then, {settings.get(k)!r} now" for k in differ)
+            raise SpecError(
+                f"{self.record}: the checkpoint was made with other settings ({shown}); "
+                "resume with the same --algo, --envs, --seed and --hyperparams",
+                field="resume",
+            )
+        if steps < 0:
+            raise SpecError(f"{self.record}: steps {steps} is negative", field="resume")
+        return dict(record)
+
+    def save(self, model: Any, settings: dict[str, Any], extra: dict[str, Any]) -> None:
+        """Write the checkpoint of ``model`` now (each file whole, the record last, with
+        ``extra`` in it)."""
+        partial = self.folder / "checkpoint.tmp.zip"
+        model.save(partial)
+        partial.replace(self.model)
+        if hasattr(model, "save_replay_buffer"):  # off-policy (DQN): its buffer is its data
+            partial = self.folder / "checkpoint_replay.tmp.pkl"
+            model.save_replay_buffer(partial)
+            partial.replace(self.replay)
+        record = {"steps": int(model.num_timesteps), **extra, "settings": settings}
+        _write_json(self.record, record)
+
+    def keep_progress(self, steps: int) -> None:
+        """Before a resume: the learning-curve rows logged up to ``steps`` (of every earlier
+        attempt) go to ``progress.prev.csv``; SB3 starts ``progress.csv`` afresh."""
+        rows, fields = _csv_rows([self.previous, self.progress])
+        rows = [r for r in rows if _timesteps(r) <= steps]
+        _write_csv(self.previous, rows, fields)
+
+    def finish(self) -> None:
+        """After the final model is written: one ``progress.csv`` of every attempt, and no
+        checkpoint left to resume from."""
+        if self.previous.exists():
+            rows, fields = _csv_rows([self.previous, self.progress])
+            _write_csv(self.progress, rows, fields)
+        for path in (self.record, self.model, self.replay, self.previous):
+            path.unlink(missing_ok=True)
+
+    def clear(self) -> None:
+        """A fresh start in a folder an earlier training left a checkpoint in."""
+        for path in (self.record, self.model, self.replay, self.previous):
+            path.unlink(missing_ok=True)
+
+
+def _timesteps(row: dict[str, str]) -> float:
+    try:
+        return float(row.get("time/total_timesteps") or "inf")
+    except ValueError:
+        return math.inf
+
+
+def _csv_rows(paths: Sequence[Path]) -> tuple[list[dict[str, str]], list[str]]:
+    import csv
+
+    rows: list[dict[str, str]] = []
+    fields: list[str] = []
+    for path in paths:
+        if not path.exists():
+            continue
+        with path.open(newline="", encoding="utf-8") as f:
+            reader = csv.DictReader(f)
+            fields += [k for k in reader.fieldnames or [] if k not in fields]
+            rows += list(reader)
+    return rows, fields
+
+
+def _write_csv(path: Path, rows: list[dict[str, str]], fields: list[str]) -> None:
+    import csv
+
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=fields, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+    tmp.replace(path)
+
+
 def _git_commit() -> str:
     try:
         return subprocess.run(
@@ -394,6 +520,8 @@ def train(
     progress: bool = True,
     eval_seeds: Sequence[int] = EVAL_SEEDS,
     command: str | None = None,
+    checkpoint_every: int = CHECKPOINT_EVERY,
+    resume: bool = False,
 ) -> TrainResult:
     """Train a self-calibration policy and write it to ``out``.
 
@@ -401,6 +529,9 @@ def train(
     the command, versions and wall time in its metadata), ``policy.json`` (the same metadata),
     ``progress.csv`` and ``learning_curve.png``. ``steps``/``envs`` override the data file's
     ``n_timesteps``/``n_envs``.
+
+    Every ``checkpoint_every`` steps a checkpoint is written (:class:`Checkpoints`); with
+    ``resume`` the training goes on from the one in ``out`` to ``steps`` in all.
     """
     import stable_baselines3 as sb3
     import torch
@@ -426,20 +557,53 @@ def train(
             f"{hyperparams or 'selfcal.toml'}: {algo} takes no hyperparameter {', '.join(unknown)}",
             field="hyperparams",
         )
+    if checkpoint_every < 1:
+        raise SpecError(
+            f"checkpoint_every must be >= 1, got {checkpoint_every}", field="checkpoint"
+        )
     folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)  # the physics workers need the cores, the MLP does not
     rollout = int(params.get("n_steps", 0)) * n_envs
     if rollout and int(params.get("batch_size", 0)) > rollout:
         params["batch_size"] = rollout  # a short test run with few sessions: one mini-batch
+    checkpoints = Checkpoints(folder)
+    settings = json.loads(
+        json.dumps(
+            {"algo": algo, "n_envs": n_envs, "seed": seed, "policy": policy_name}
+            | {"hyperparams": params, "env_kwargs": env_kwargs}
+        )
+    )
+    record = checkpoints.read(settings) if resume else None
+    folder.mkdir(parents=True, exist_ok=True)
+    done = int(record["steps"]) if record else 0
+    wall_before = float(record["wall_time_s"]) if record else 0.0
+    resumed = [*record.get("resumed_at", []), done] if record else []
+    if record:
+        checkpoints.keep_progress(done)
+    else:
+        checkpoints.clear()
     venv = VecMonitor(SelfCalVecEnv(n_envs, workers=workers, env_kwargs=env_kwargs))
-    venv.seed(seed)
+    venv.seed(seed + done)  # a resumed run: fresh sessions, not the first attempt's again
+    start = time.perf_counter()
+
+    def save_checkpoint(model: Any) -> None:
+        wall_time_s = wall_before + time.perf_counter() - start
+        checkpoints.save(model, settings, {"wall_time_s": wall_time_s, "resumed_at": resumed})
 
     class Progress(BaseCallback):
-        """A tqdm bar, and the sessions' terminal outcomes in the log."""
+        """A tqdm bar, the sessions' terminal outcomes in the log, and the checkpoints."""
 
         def _on_training_start(self) -> None:
-            self.bar = tqdm(total=total, unit="step", desc=f"train {algo}", disable=not progress)
+            self.bar = tqdm(
+                total=total, initial=done, unit="step", desc=f"train {algo}", disable=not progress
+            )
+            self.saved = done
+
+        def _on_rollout_start(self) -> None:
+            # The last update is done here: the model is whole and its step count exact.
+            if self.model.num_timesteps - self.saved >= checkpoint_every:
+                save_checkpoint(self.model)
+                self.saved = self.model.num_timesteps
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs)
@@ -455,15 +619,23 @@ def train(
         def _on_training_end(self) -> None:
             self.bar.close()
 
-    start = time.perf_counter()
     try:
-        model = algorithm(policy_name, venv, seed=seed, verbose=0, device="cpu", **params)
+        if record:
+            model = algorithm.load(checkpoints.model, env=venv, device="cpu")
+            model.set_random_seed(seed + done)
+            if checkpoints.replay.exists():
+                model.load_replay_buffer(checkpoints.replay)
+        else:
+            model = algorithm(policy_name, venv, seed=seed, verbose=0, device="cpu", **params)
         formats = ["csv"] + (["tensorboard"] if importlib.util.find_spec("tensorboard") else [])
         model.set_logger(configure(str(folder), formats))
-        model.learn(total_timesteps=total, callback=Progress())
+        if done < total:
+            model.learn(
+                total_timesteps=total - done, callback=Progress(), reset_num_timesteps=not record
+            )
     finally:
         venv.close()
-    wall = time.perf_counter() - start
+    wall = wall_before + time.perf_counter() - start
     model_file = folder / "model.zip"
     partial = folder / "model.tmp.zip"
     model.save(partial)  # SB3 writes the zip in place: rename it when it is whole
@@ -477,6 +649,7 @@ def train(
         "workers": workers,
         "seed": seed,
         "wall_time_s": round(wall, 1),
+        "resumed_at_steps": resumed,
         "cpus": os.cpu_count(),
         "machine": platform.platform(),
         "git_commit": _git_commit(),
@@ -502,6 +675,7 @@ def train(
     policy_file = folder / "policy.npz"
     exported.save(policy_file)
     _write_json(folder / "policy.json", exported.meta)
+    checkpoints.finish()
     plot_learning_curve(folder / "progress.csv", folder / "learning_curve.png")
     return TrainResult(folder, policy_file, model_file, wall, total, evaluation)
 

@@ -575,7 +575,7 @@ def _command_diagnose(args: argparse.Namespace) -> int:
     from odomgym.data.logs import read_log
     from odomgym.data.samples import resolve_data
     from odomgym.diagnose.report import format_markdown, report_json, write_outputs
-    from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
+    from odomgym.diagnose.workflow import DiagnoseConfig, FitJournal, diagnose
 
     data = resolve_data(args.data, field="DATA")
     robot = load_robot(args.robot) if args.robot else None
@@ -609,15 +609,21 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         bar.n = int(100 * fraction)
         bar.refresh()
 
+    # Every finished candidate fit is kept beside the output (which is replaced whole), so an
+    # interrupted diagnosis resumes with --resume; it is removed once the outputs are written.
+    journal = FitJournal(out.with_name(out.name + ".journal"), resume=args.resume)
     try:
-        diagnosis = diagnose(runs, model, config, progress=progress)
+        diagnosis = diagnose(runs, model, config, progress=progress, journal=journal)
     except ValueError as exc:
         if isinstance(exc, SpecError):
             raise
         raise SpecError(str(exc)) from None
     finally:
         bar.close()
+    if journal.reused:
+        _say(args, f"resumed: {journal.reused} candidate fits taken from {journal.folder}")
     written = write_outputs(diagnosis, out, str(data))
+    journal.clear()
     if args.json:
         print(report_json(diagnosis))
     else:
@@ -811,7 +817,12 @@ def _command_train(args: argparse.Namespace) -> int:
             field="train",
         )
     _check_output(args.out, option="--out", folder=True)
-    from odomgym.baselines.selfcal_train import EVAL_SEEDS, load_hyperparams, train
+    from odomgym.baselines.selfcal_train import (
+        CHECKPOINT_EVERY,
+        EVAL_SEEDS,
+        load_hyperparams,
+        train,
+    )
 
     params = load_hyperparams(args.algo, args.hyperparams)  # one-line errors before any work
     steps = args.steps or int(params.get("n_timesteps", 100_000))
@@ -831,6 +842,8 @@ def _command_train(args: argparse.Namespace) -> int:
         hyperparams=args.hyperparams,
         progress=not args.json and sys.stderr.isatty(),
         command=command,
+        checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY,
+        resume=args.resume,
     )
     summary = {
         "algo": args.algo,
@@ -897,6 +910,19 @@ def _add_train_parser(commands: Any) -> None:
         "--hyperparams",
         help='a TOML file with [<algo>."SelfCalibration-v0"] tables (default: the shipped '
         "odomgym/data/hyperparams/selfcal.toml)",
+    )
+    train.add_argument(
+        "--checkpoint-every",
+        type=_count,
+        metavar="STEPS",
+        help="write a checkpoint (OUT/checkpoint.zip) every STEPS environment steps "
+        "(default 10000, about two minutes)",
+    )
+    train.add_argument(
+        "--resume",
+        action="store_true",
+        help="go on from the checkpoint an interrupted training left in --out (same --algo, "
+        "--envs, --seed and --hyperparams) to --steps in all",
     )
     train.add_argument("--json", action="store_true", help="one JSON object instead of text")
     train.set_defaults(handler=_command_train)
@@ -1150,6 +1176,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     diag.add_argument("--candidates", nargs="+", help="effects to consider (default: all)")
     diag.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
+    diag.add_argument(
+        "--resume",
+        action="store_true",
+        help="take the candidate fits an interrupted diagnose stored in OUT.journal (the "
+        "result is the same as an uninterrupted run's); without it the journal starts afresh",
+    )
     diag.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
     diag.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
     diag.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")

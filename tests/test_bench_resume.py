@@ -150,76 +150,121 @@ def test_a_journal_of_another_configuration_is_refused(tmp_path: Path) -> None:
         Journal(path, CONFIG).read()
 
 
+DIAGNOSE = [
+    "diagnose",
+    "optiodom:square/230620202042",
+    "--robot",
+    "examples/optiodom_nominal.toml",
+    "--jobs",
+    "2",
+    "--json",
+]
+
+
 @pytest.mark.slow
-def test_sigterm_stops_diagnose_and_its_workers(tmp_path: Path) -> None:
+def test_sigterm_stops_diagnose_and_resume_gives_the_same_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """``diagnose --jobs 2`` killed while fitting: exit 143 within seconds, its forked workers
-    gone, no output folder."""
+    gone, no output folder, the finished fits kept in OUT.journal; ``--resume`` takes them and
+    writes the report an uninterrupted run writes."""
     repo = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(repo)
     out = tmp_path / "diag"
+    journal = tmp_path / "diag.journal"
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "odomgym",
-            "diagnose",
-            "optiodom:square/230620202042",
-            "--robot",
-            "examples/optiodom_nominal.toml",
-            "--out",
-            str(out),
-            "--jobs",
-            "2",
-        ],
-        cwd=repo,
+        [sys.executable, "-m", "odomgym", *DIAGNOSE, "--out", str(out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
     workers: set[int] = set()
-    deadline = time.monotonic() + 60
-    while len(workers) < 2 and time.monotonic() < deadline:  # until both workers fit
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:  # until the workers have finished two fits
         workers |= set(_children(process.pid)) if _alive(process.pid) else set()
+        if len(list(journal.glob("*.pkl"))) >= 2:
+            break
         time.sleep(0.1)
+    else:
+        process.kill()
+        pytest.fail("diagnose stored no fit within 120 s")
     assert len(workers) >= 2, "diagnose never started its workers"
     _terminate(process, workers, timeout=30)
     assert not out.exists()
+    assert not list(journal.glob("*.tmp")), "a half-written fit was left"
+    kept = len(list(journal.glob("*.pkl")))
+
+    assert main([*DIAGNOSE, "--out", str(out), "--resume"]) == 0
+    assert not journal.exists(), "the journal outlived the finished diagnosis"
+    fresh = tmp_path / "fresh"
+    assert main([*DIAGNOSE, "--out", str(fresh)]) == 0
+    resumed = json.loads((out / "report.json").read_text())
+    assert resumed == json.loads((fresh / "report.json").read_text())
+    assert kept >= 2 and resumed["rounds"], resumed
 
 
 @pytest.mark.slow
-def test_sigterm_stops_training_and_its_workers(tmp_path: Path) -> None:
+def test_sigterm_stops_training_and_resume_goes_on_from_the_checkpoint(tmp_path: Path) -> None:
     """``train selfcal --workers 2`` killed while training: exit 143 within seconds, both
-    simulation workers gone, no policy or model written."""
+    simulation workers gone, no policy or model written, the last checkpoint whole;
+    ``--resume`` trains on from it to the total, and one learning curve covers both."""
     pytest.importorskip("stable_baselines3")
     out = tmp_path / "train"
+    args = ["train", "selfcal", "--envs", "4", "--workers", "2", "--checkpoint-every", "128"]
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "odomgym",
-            "train",
-            "selfcal",
-            "--steps",
-            "100000",
-            "--envs",
-            "4",
-            "--workers",
-            "2",
-            "--out",
-            str(out),
-        ],
+        [sys.executable, "-m", "odomgym", *args, "--steps", "100000", "--out", str(out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+    record = out / "checkpoint.json"
     workers: set[int] = set()
-    deadline = time.monotonic() + 90
-    while time.monotonic() < deadline:  # until the first rollout is logged
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:  # until a checkpoint is written
         workers |= set(_children(process.pid)) if _alive(process.pid) else set()
-        if (out / "progress.csv").exists() and (out / "progress.csv").stat().st_size > 0:
+        if record.exists():
             break
         time.sleep(0.2)
     else:
         process.kill()
-        pytest.fail("training logged nothing within 90 s")
+        pytest.fail("training wrote no checkpoint within 120 s")
+    time.sleep(1.0)  # into the next rollout
     _terminate(process, workers, timeout=30)
     assert not (out / "policy.npz").exists() and not (out / "model.zip").exists()
+    assert not list(out.glob("*.tmp*")), "a half-written file was left"
+    steps = json.loads(record.read_text())["steps"]
+    assert steps >= 128 and steps % 128 == 0
+
+    total = steps + 128
+    assert main([*args, "--steps", str(total), "--out", str(out), "--resume", "--json"]) == 0
+    meta = json.loads((out / "policy.json").read_text())
+    assert meta["steps"] == total and meta["resumed_at_steps"] == [steps]
+    curve = (out / "progress.csv").read_text().splitlines()[1:]
+    header = (out / "progress.csv").read_text().splitlines()[0].split(",")
+    logged = [int(row.split(",")[header.index("time/total_timesteps")]) for row in curve]
+    assert logged == list(range(128, total + 1, 128))
+    assert not record.exists() and not (out / "checkpoint.zip").exists()
+
+
+def test_resume_refuses_a_missing_or_different_checkpoint(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--resume`` with no checkpoint, or one made with another seed: one line, no work."""
+    pytest.importorskip("stable_baselines3")
+    from odomgym.baselines.selfcal_train import Checkpoints
+
+    out = tmp_path / "train"
+    args = ["train", "selfcal", "--steps", "256", "--envs", "4", "--out", str(out), "--resume"]
+    assert main(args) == 2
+    assert "no checkpoint to resume from" in capsys.readouterr().err
+    out.mkdir()
+    (out / "checkpoint.zip").write_bytes(b"")
+    settings = {"algo": "ppo", "n_envs": 4, "seed": 7, "policy": "MlpPolicy"}
+    record = {"steps": 128, "wall_time_s": 1.0, "resumed_at": [], "settings": settings}
+    (out / "checkpoint.json").write_text(json.dumps(record))
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "seed 7 then, 0 now" in err[0], err
+    (out / "checkpoint.json").write_text("{not json")
+    with pytest.raises(SpecError, match="not a checkpoint record"):
+        Checkpoints(out).read(settings)

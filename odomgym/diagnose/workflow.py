@@ -35,11 +35,15 @@ a :class:`Diagnosis`:
 
 from __future__ import annotations
 
+import hashlib
 import math
 import multiprocessing as mp
+import pickle
+import shutil
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -72,7 +76,7 @@ from odomgym.errors import SpecError
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["NUISANCE", "DiagnoseConfig", "Diagnosis", "diagnose", "split_runs"]
+__all__ = ["NUISANCE", "DiagnoseConfig", "Diagnosis", "FitJournal", "diagnose", "split_runs"]
 
 NUISANCE = "floor_roughness"
 """The noise effect fitted as a nuisance beside every systematic candidate (see the module
@@ -329,9 +333,61 @@ def _bootstrap(
     return [float(low), float(high)]
 
 
-def _fit_and_score(
-    job: tuple[Dataset, RobotSpec, SensorNoise, str, str | None, Sequence[Sequence[int]]],
-) -> CandidateFit:
+Job = tuple[Dataset, RobotSpec, SensorNoise, str, str | None, Sequence[Sequence[int]]]
+
+
+class FitJournal:
+    """The candidate fits a diagnosis has finished, one file each, so that an interrupted
+    diagnosis (``odomgym diagnose --resume``) goes on where it stopped.
+
+    A fit is a deterministic function of its job (the fit runs, the current model and sensor
+    noise, the candidate's and nuisance's names, the folds), so a fit is stored under the
+    SHA-256 of the pickled job and odomgym's version, and a resumed diagnosis is identical to
+    an uninterrupted one (tests/test_bench_resume.py). Each file is written whole (a temporary
+    file renamed). A changed dataset or setting only misses the stored fits. The files are
+    pickles: resume only from a journal you wrote. An effect is known by its name: after
+    changing the code of an effect you registered, start afresh rather than resume.
+    """
+
+    def __init__(self, folder: str | Path, *, resume: bool = False) -> None:
+        self.folder = Path(folder)
+        self.reused = 0
+        if not resume:
+            self.clear()
+
+    def key(self, job: Job) -> str:
+        from odomgym import __version__
+
+        return hashlib.sha256(pickle.dumps((__version__, job), protocol=5)).hexdigest()
+
+    def get(self, key: str) -> CandidateFit | None:
+        """The stored fit, or ``None`` (none stored, or a file that does not load)."""
+        path = self.folder / f"{key}.pkl"
+        try:
+            fit = pickle.loads(path.read_bytes())
+        except FileNotFoundError:
+            return None
+        except Exception:  # a damaged entry (any unpickling error) is refitted, not fatal
+            path.unlink(missing_ok=True)
+            return None
+        if not isinstance(fit, CandidateFit):
+            return None
+        self.reused += 1
+        return fit
+
+    def record(self, key: str, fit: CandidateFit) -> None:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        path = self.folder / f"{key}.pkl"
+        partial = path.with_name(path.name + ".tmp")
+        partial.write_bytes(pickle.dumps(fit, protocol=5))
+        partial.replace(path)
+
+    def clear(self) -> None:
+        """Forget every stored fit (after a finished diagnosis, or at a fresh start)."""
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def _fit_and_score(job: Job) -> CandidateFit:
     """Fit one candidate and cross-validate it (a unit of work for a worker process)."""
     data, spec, sensor, name, nuisance_name, folds = job
     effect = EFFECTS[name]
@@ -352,6 +408,7 @@ def _score_candidates(
     cfg: DiagnoseConfig,
     rng: np.random.Generator,
     report: Callable[[str, float], None],
+    journal: FitJournal | None = None,
 ) -> tuple[list[Candidate], list[CandidateFit]]:
     """Fit, cross-validate and test ``effects`` against the current model ``spec`` (in round and
     stage ``where``)."""
@@ -360,17 +417,26 @@ def _score_candidates(
         "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
     )
     base_cv = cross_validate(data, base, None, folds)
-    jobs = [
+    jobs: list[Job] = [
         (data, spec, sensor, e.name, nuisance.name if nuisance else None, folds) for e in effects
     ]
-    fits: list[CandidateFit] = []
-    if cfg.jobs > 1 and len(effects) > 1 and "fork" in mp.get_all_start_methods():
+    keys = [journal.key(job) for job in jobs] if journal is not None else []
+    stored = {k: journal.get(keys[k]) for k in range(len(jobs))} if journal is not None else {}
+    done = {k: fit for k, fit in stored.items() if fit is not None}
+    todo = [k for k in range(len(jobs)) if k not in done]
+
+    def finished(k: int, fit: CandidateFit) -> None:
+        if journal is not None:
+            journal.record(keys[k], fit)
+        done[k] = fit
+        report(f"round {number}: {effects[k].name}", len(done) / len(effects))
+
+    if cfg.jobs > 1 and len(todo) > 1 and "fork" in mp.get_all_start_methods():
         # Forked workers share the registry (user effects included) and the compiled kernels.
         pool = ProcessPoolExecutor(cfg.jobs, mp_context=mp.get_context("fork"))
         try:
-            for k, fit in enumerate(pool.map(_fit_and_score, jobs)):
-                report(f"round {number}: {effects[k].name}", (k + 1) / len(effects))
-                fits.append(fit)
+            for k, fit in zip(todo, pool.map(_fit_and_score, [jobs[k] for k in todo]), strict=True):
+                finished(k, fit)
         except BaseException:
             # Ctrl-C, SIGTERM or an error: stop the workers now rather than wait for their
             # fits (the executor's own shutdown would); ``_processes`` is the executor's map
@@ -381,9 +447,9 @@ def _score_candidates(
             raise
         pool.shutdown()
     else:
-        for k, job in enumerate(jobs):
-            report(f"round {number}: {effects[k].name}", k / len(effects))
-            fits.append(_fit_and_score(job))
+        for k in todo:
+            finished(k, _fit_and_score(jobs[k]))
+    fits = [done[k] for k in range(len(jobs))]
     improvements = np.array([f.cv_loglik - base_cv for f in fits])
     t, p_flip = max_t_test(improvements, rng)
     candidates = []
@@ -417,8 +483,12 @@ def diagnose(
     config: DiagnoseConfig | None = None,
     *,
     progress: Callable[[str, float], None] | None = None,
+    journal: FitJournal | None = None,
 ) -> Diagnosis:
-    """Run the workflow of the module docstring on ``runs`` with the model ``robot``."""
+    """Run the workflow of the module docstring on ``runs`` with the model ``robot``.
+
+    ``journal``: store every finished candidate fit there, and take the fits it already holds
+    (:class:`FitJournal`: an interrupted diagnosis resumed gives the same result)."""
     cfg = config if config is not None else DiagnoseConfig()
     report = progress if progress is not None else (lambda stage, fraction: None)
     if len(runs) < 3:
@@ -475,6 +545,7 @@ def diagnose(
                 cfg,
                 rng,
                 report,
+                journal,
             )
             round_candidates.extend(candidates)
             if any(c.significant for c in candidates):
