@@ -742,8 +742,17 @@ def _run_ray(
 ) -> None:
     import ray  # Backend.RAY.check_available() has looked for it
 
-    if not ray.is_initialized():
+    started = not ray.is_initialized()
+    if started:
+        # ray.init replaces the SIGTERM handler with one that calls sys.exit, and Ray's C++
+        # core installs absl's failure-signal handler, which prints a stack dump for a plain
+        # SIGTERM. Keep the caller's handler (the command line's: stop cleanly, exit 143) and
+        # no dump; Ray's own processes still end with the driver (ray.shutdown at exit).
+        previous = signal.getsignal(signal.SIGTERM)
+        os.environ.setdefault("RAY_DISABLE_FAILURE_SIGNAL_HANDLER", "1")
         ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
+        if callable(previous) and signal.getsignal(signal.SIGTERM) is not previous:
+            signal.signal(signal.SIGTERM, previous)
     remote = ray.remote(num_cpus=1, max_retries=1)(run_chunk)  # a dead worker: retried once
     pending = {remote.remote(config, part): part for part in parts}
     try:
@@ -752,8 +761,13 @@ def _run_ray(
             for ref in ready:
                 finished(pending.pop(ref), ray.get(ref))
     finally:
-        for ref in pending:  # interrupted: stop what still runs
-            ray.cancel(ref, force=True)
+        if pending and started:
+            # Interrupted on the local Ray this call started: shutting it down stops every
+            # worker now (force-cancelling first made Ray's task manager abort at exit).
+            ray.shutdown()
+        elif pending:  # on the caller's cluster: stop this benchmark's tasks, nothing else
+            for ref in pending:
+                ray.cancel(ref, force=True)
 
 
 def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -41,8 +41,23 @@ def reference() -> list[dict]:
 def _children(pid: int) -> list[int]:
     found = []
     for task in Path(f"/proc/{pid}/task").glob("*"):
-        text = (task / "children").read_text().split()
+        try:
+            text = (task / "children").read_text().split()
+        except OSError:  # the thread or process has just ended
+            continue
         found += [int(t) for t in text]
+    return found
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (Ray's are grandchildren: the raylet starts the workers)."""
+    found: list[int] = []
+    todo = [pid]
+    while todo:
+        for child in _children(todo.pop()):
+            if child not in found:
+                found.append(child)
+                todo.append(child)
     return found
 
 
@@ -111,6 +126,48 @@ def test_sigterm_stops_the_workers_and_resume_gives_the_same_tables(
     rows = json.loads((out / "results.json").read_text())["rows"]
     assert _comparable(rows) == [{k: v for k, v in r.items() if k != "scatter"} for r in reference]
     assert not journal.exists()
+
+
+@pytest.mark.slow
+def test_sigterm_stops_the_ray_workers_and_resume_gives_the_same_tables(
+    tmp_path: Path, reference: list[dict], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same on ``--backend ray``: exit 143 within seconds (not Ray's own exit or its
+    stack dump), every process of the local Ray it started gone (GCS, raylet, agents, the
+    workers running chunks), and the resumed tables equal an uninterrupted run's."""
+    ray = pytest.importorskip("ray")
+    out = tmp_path / "bench"
+    command = [sys.executable, "-m", "odomgym", "bench", "calibrators", *ARGS, "--backend", "ray"]
+    process = subprocess.Popen(
+        [*command, "--jobs", "2", "--chunk", "1", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    journal = out / "journal.jsonl"
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:  # wait for the first finished robot
+        if journal.exists() and len(journal.read_text().splitlines()) >= 2:
+            break
+        time.sleep(0.1)
+    else:
+        process.kill()
+        pytest.fail("no robot finished within 180 s")
+    ray_processes = _descendants(process.pid)
+    assert any("raylet" in _cmdline(pid) for pid in ray_processes), ray_processes
+    err = _terminate(process, ray_processes, timeout=20)
+    assert "--resume" in err.strip().splitlines()[-1] and "SIGTERM received" not in err
+    assert not (out / "results.json").exists()
+    assert 1 <= len(journal.read_text().splitlines()) - 1 < 4
+
+    resume = ["bench", "calibrators", *ARGS, "--backend", "ray", "--jobs", "2", "--resume"]
+    try:
+        assert main([*resume, "--out", str(out)]) == 0
+    finally:
+        ray.shutdown()
+    capsys.readouterr()
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    assert _comparable(rows) == [{k: v for k, v in r.items() if k != "scatter"} for r in reference]
 
 
 @pytest.mark.slow
