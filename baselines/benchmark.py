@@ -471,10 +471,7 @@ class Journal:
     def start(self) -> None:
         """Begin a new journal (replacing any earlier one)."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        with self.path.open("w", encoding="utf-8") as f:
-            f.write(json.dumps(self._header()) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+        self._write(json.dumps(self._header()) + "\n", "w")
 
     def read(self) -> dict[int, list[dict[str, Any]]]:
         """The recorded rows per robot (empty if there is no journal yet)."""
@@ -513,10 +510,21 @@ class Journal:
 
     def record(self, robots: Sequence[int], rows: Sequence[dict[str, Any]]) -> None:
         """Append one finished chunk."""
-        with self.path.open("a", encoding="utf-8") as f:
-            f.write(json.dumps({"robots": list(robots), "rows": list(rows)}) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+        self._write(json.dumps({"robots": list(robots), "rows": list(rows)}) + "\n", "a")
+
+    def _write(self, line: str, mode: str) -> None:
+        """Write ``line`` to the disk now; if that fails (a full disk), cut the journal back to
+        its whole lines and name it in the error."""
+        size = self.path.stat().st_size if mode == "a" and self.path.exists() else 0
+        try:
+            with self.path.open(mode, encoding="utf-8") as f:
+                f.write(line)
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                os.truncate(self.path, size)
+            raise OSError(exc.errno, exc.strerror or str(exc), str(self.path)) from exc
 
 
 def config_record(config: BenchConfig) -> dict[str, Any]:

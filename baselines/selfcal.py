@@ -429,12 +429,16 @@ class MlpPolicy:
 
     def save(self, path: str | Path) -> None:
         """Write the weights and ``meta`` to an ``.npz`` file (atomically)."""
-        target = Path(path)
-        tmp = target.with_name(target.name + ".tmp.npz")
+        from odomgym.io import atomic_writer
+
         arrays = {f"w{k}": w for k, (w, _) in enumerate(self.weights)}
         arrays.update({f"b{k}": b for k, (_, b) in enumerate(self.weights)})
-        np.savez(tmp, meta=np.array(json.dumps(self.meta)), **arrays)  # type: ignore[arg-type]
-        tmp.replace(target)
+        meta = np.array(json.dumps(self.meta))
+
+        def write(tmp: Path) -> None:  # tmp ends in .npz: numpy adds no suffix
+            np.savez(tmp, meta=meta, **arrays)  # type: ignore[arg-type]
+
+        atomic_writer(Path(path), write)
 
     @classmethod
     def load(cls, path: str | Path) -> MlpPolicy:

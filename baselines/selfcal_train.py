@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 from odomgym.baselines.selfcal import OBSERVATION_LAYOUT, OBSERVATION_VERSION, MlpPolicy
 from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
 from odomgym.errors import SpecError
+from odomgym.io import atomic_write_text, atomic_writer
 
 try:
     from stable_baselines3.common.vec_env.base_vec_env import VecEnv
@@ -430,13 +431,9 @@ class Checkpoints:
     def save(self, model: Any, settings: dict[str, Any], extra: dict[str, Any]) -> None:
         """Write the checkpoint of ``model`` now (each file whole, the record last, with
         ``extra`` in it)."""
-        partial = self.folder / "checkpoint.tmp.zip"
-        model.save(partial)
-        partial.replace(self.model)
+        atomic_writer(self.model, model.save)  # the temporary name ends in .zip, as SB3 needs
         if hasattr(model, "save_replay_buffer"):  # off-policy (DQN): its buffer is its data
-            partial = self.folder / "checkpoint_replay.tmp.pkl"
-            model.save_replay_buffer(partial)
-            partial.replace(self.replay)
+            atomic_writer(self.replay, model.save_replay_buffer)
         record = {"steps": int(model.num_timesteps), **extra, "settings": settings}
         _write_json(self.record, record)
 
@@ -487,12 +484,13 @@ def _csv_rows(paths: Sequence[Path]) -> tuple[list[dict[str, str]], list[str]]:
 def _write_csv(path: Path, rows: list[dict[str, str]], fields: list[str]) -> None:
     import csv
 
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=fields, restval="")
-        writer.writeheader()
-        writer.writerows(rows)
-    tmp.replace(path)
+    def write(tmp: Path) -> None:
+        with tmp.open("w", newline="", encoding="utf-8") as f:
+            writer = csv.DictWriter(f, fieldnames=fields, restval="")
+            writer.writeheader()
+            writer.writerows(rows)
+
+    atomic_writer(path, write)
 
 
 def _git_commit() -> str:
@@ -633,13 +631,16 @@ def train(
             model.learn(
                 total_timesteps=total - done, callback=Progress(), reset_num_timesteps=not record
             )
+    except OSError as exc:
+        if exc.filename is not None:
+            raise
+        # SB3's logger (progress.csv, TensorBoard) names no file when a write fails.
+        raise OSError(exc.errno, exc.strerror or str(exc), str(folder)) from exc
     finally:
         venv.close()
     wall = wall_before + time.perf_counter() - start
     model_file = folder / "model.zip"
-    partial = folder / "model.tmp.zip"
-    model.save(partial)  # SB3 writes the zip in place: rename it when it is whole
-    partial.replace(model_file)
+    atomic_writer(model_file, model.save)  # SB3 writes the zip in place: renamed when whole
     meta = {
         "env_id": ENV_ID,
         "algo": algo,
@@ -681,9 +682,7 @@ def train(
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    tmp.replace(path)
+    atomic_write_text(path, json.dumps(data, indent=2) + "\n")
 
 
 def plot_learning_curve(csv_path: Path, png_path: Path) -> None:
@@ -721,7 +720,7 @@ def plot_learning_curve(csv_path: Path, png_path: Path) -> None:
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     fig.tight_layout()
-    tmp = png_path.with_name(png_path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(png_path)
+    try:
+        atomic_writer(png_path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    finally:
+        plt.close(fig)

@@ -1239,7 +1239,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except OSError as exc:
         # Checked up front (_check_output); what is left is the machine's (a full disk).
-        print(f"odomgym: error: {exc}", file=sys.stderr)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"odomgym: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     finally:
         if previous is not None:

@@ -26,8 +26,13 @@ def atomic_writer(path: Path, write: Callable[[Path], None]) -> None:
             "would replace this device, pipe, socket or folder)",
             str(path),
         )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent
+        )
+    except OSError as exc:
+        raise _naming(exc, path) from exc
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -39,9 +44,20 @@ def atomic_writer(path: Path, write: Callable[[Path], None]) -> None:
         with open(tmp, "rb") as handle:  # the data must be on disk before the rename
             os.fsync(handle.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise _naming(exc, path) from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _naming(exc: OSError, path: Path) -> OSError:
+    """``exc`` naming the file the caller asked for: a failed write() names no file, and a
+    temporary file's name means nothing to the user."""
+    if exc.errno is None or (exc.filename is not None and Path(exc.filename).parent != path.parent):
+        return exc
+    return OSError(exc.errno, exc.strerror or str(exc), str(path))
 
 
 def atomic_write_text(path: Path, text: str) -> None:

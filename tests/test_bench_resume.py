@@ -248,7 +248,7 @@ def test_sigterm_stops_diagnose_and_resume_gives_the_same_report(
     assert len(workers) >= 2, "diagnose never started its workers"
     _terminate(process, workers, timeout=30)
     assert not out.exists()
-    assert not list(journal.glob("*.tmp")), "a half-written fit was left"
+    assert not [p.name for p in journal.iterdir() if p.name.startswith(".")], "a temporary left"
     kept = len(list(journal.glob("*.pkl")))
 
     assert main([*DIAGNOSE, "--out", str(out), "--resume"]) == 0
@@ -288,7 +288,7 @@ def test_sigterm_stops_training_and_resume_goes_on_from_the_checkpoint(tmp_path:
     time.sleep(1.0)  # into the next rollout
     _terminate(process, workers, timeout=30)
     assert not (out / "policy.npz").exists() and not (out / "model.zip").exists()
-    assert not list(out.glob("*.tmp*")), "a half-written file was left"
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")], "a temporary was left"
     steps = json.loads(record.read_text())["steps"]
     assert steps >= 128 and steps % 128 == 0
 

@@ -73,6 +73,7 @@ from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.where import Finding, localise, run_residuals
 from odomgym.effects import EFFECTS, Effect
 from odomgym.errors import SpecError
+from odomgym.io import atomic_write_bytes
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
@@ -376,11 +377,7 @@ class FitJournal:
         return fit
 
     def record(self, key: str, fit: CandidateFit) -> None:
-        self.folder.mkdir(parents=True, exist_ok=True)
-        path = self.folder / f"{key}.pkl"
-        partial = path.with_name(path.name + ".tmp")
-        partial.write_bytes(pickle.dumps(fit, protocol=5))
-        partial.replace(path)
+        atomic_write_bytes(self.folder / f"{key}.pkl", pickle.dumps(fit, protocol=5))
 
     def clear(self) -> None:
         """Forget every stored fit (after a finished diagnosis, or at a fresh start)."""
