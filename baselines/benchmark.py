@@ -584,19 +584,27 @@ FAULT_VARIABLE = "ODOMGYM_BENCH_FAULT"
 its first attempt, ``exit-always:N`` on every attempt."""
 
 
-def _chunk_worker(conn: Connection, config: BenchConfig, part: list[int], attempt: int) -> None:
-    """A worker process: one chunk, its rows sent back through ``conn``."""
+def _chunk_worker(conn: Connection, config: BenchConfig) -> None:
+    """A worker process: it runs the chunks ``(robots, attempt)`` it receives through ``conn``
+    and sends back each one's rows, until it receives ``None``. One process serves many
+    chunks, so the start-up (imports, loading the compiled kernels: ~2 s) is paid once per
+    worker, not per chunk."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops its workers itself
     fault = os.environ.get(FAULT_VARIABLE, "")
-    if ":" in fault:
-        mode, robot = fault.split(":", 1)
-        if robot.isdigit() and int(robot) in part:
-            if mode == "exit-always" or (mode == "exit-once" and attempt == 0):
-                os._exit(86)
     try:
-        conn.send(("ok", run_chunk(config, part)))
-    except Exception as exc:  # a bug, not a death: the parent raises it
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        while (job := conn.recv()) is not None:
+            part, attempt = job
+            if ":" in fault:
+                mode, robot = fault.split(":", 1)
+                if robot.isdigit() and int(robot) in part:
+                    if mode == "exit-always" or (mode == "exit-once" and attempt == 0):
+                        os._exit(86)
+            try:
+                conn.send(("ok", run_chunk(config, part)))
+            except Exception as exc:  # a bug, not a death: the parent raises it
+                conn.send(("error", f"{type(exc).__name__}: {exc}"))
+    except EOFError:  # the parent has gone
+        pass
     finally:
         conn.close()
 
@@ -623,46 +631,58 @@ def _run_processes(
     finished: Callable[[list[int], list[dict[str, Any]]], None],
     notify: Callable[[str], None],
 ) -> None:
-    """Run the chunks in at most ``jobs`` worker processes. A worker that dies (killed, out of
-    memory) is reported and its chunk retried once; if it dies again, its robots are recorded
-    as failed. Whatever ends this function early (an error, Ctrl-C, SIGTERM) terminates every
-    worker before it returns."""
+    """Run the chunks in at most ``jobs`` worker processes, each serving chunk after chunk.
+    A worker that dies (killed, out of memory) is reported, replaced, and its chunk retried
+    once; if it dies again, its robots are recorded as failed. Whatever ends this function
+    early (an error, Ctrl-C, SIGTERM) terminates every worker before it returns."""
     import multiprocessing
     from multiprocessing.connection import wait
 
     context = multiprocessing.get_context("spawn")
     queue = [(part, 0) for part in parts]
-    running: dict[Any, tuple[Any, Connection, list[int], int]] = {}
+    workers: dict[Any, Any] = {}  # connection -> process
+    busy: dict[Any, tuple[list[int], int]] = {}  # connection -> the chunk it runs
+
+    def start() -> None:
+        parent, child = context.Pipe()
+        process = context.Process(target=_chunk_worker, args=(child, config), daemon=True)
+        # Ctrl-C/SIGTERM wait until the worker is started and registered: interrupted inside
+        # start(), it would be left half-started (spawn's bootstrap then dies with an
+        # EOFError traceback) and unknown to the clean-up below.
+        with _signals_deferred():
+            process.start()
+            child.close()
+            workers[parent] = process
+
     try:
-        while queue or running:
-            while queue and len(running) < jobs:
-                part, attempt = queue.pop(0)
-                parent, child = context.Pipe(duplex=False)
-                process = context.Process(
-                    target=_chunk_worker, args=(child, config, part, attempt), daemon=True
-                )
-                # Ctrl-C/SIGTERM wait until the worker is started and registered: interrupted
-                # inside start(), it would be left half-started (spawn's bootstrap then dies
-                # with an EOFError traceback) and unknown to the clean-up below.
-                with _signals_deferred():
-                    process.start()
-                    child.close()
-                    running[parent] = (process, parent, part, attempt)
+        while queue or busy:
+            for conn in [c for c in workers if c not in busy]:
+                if not queue:
+                    break
+                busy[conn] = queue.pop(0)
+                conn.send(busy[conn])
+            while queue and len(workers) < jobs:
+                start()
+                conn = next(c for c in workers if c not in busy)
+                busy[conn] = queue.pop(0)
+                conn.send(busy[conn])
             # A result arrives on the connection; a death shows as end-of-file there.
-            for ready in wait(list(running)):
-                process, conn, part, attempt = running.pop(ready)
+            for ready in wait(list(busy)):
+                part, attempt = busy.pop(ready)
                 payload: Any = None
                 try:
-                    status, payload = conn.recv()
+                    status, payload = ready.recv()
                 except (EOFError, OSError):
                     status = "died"
-                conn.close()
-                process.join()
                 if status == "ok":
                     finished(part, payload)
-                elif status == "error":
+                    continue
+                if status == "error":
                     raise RuntimeError(f"benchmark worker for robots {part} failed: {payload}")
-                elif attempt == 0:
+                process = workers.pop(ready)
+                ready.close()
+                process.join()
+                if attempt == 0:
                     notify(
                         f"worker for robots {part[0]}-{part[-1]} died (exit code "
                         f"{process.exitcode}); retrying once"
@@ -672,10 +692,16 @@ def _run_processes(
                     reason = f"worker died twice (exit code {process.exitcode})"
                     notify(f"worker for robots {part[0]}-{part[-1]} died again; marked failed")
                     finished(part, failed_rows(config, part, reason))
+        for conn in workers:  # done: each worker ends after its loop
+            with contextlib.suppress(OSError):
+                conn.send(None)
+        for process in workers.values():
+            process.join(timeout=5)
     finally:
-        for process, _, _, _ in running.values():
-            process.terminate()
-        for process, conn, _, _ in running.values():
+        for process in workers.values():
+            if process.is_alive():
+                process.terminate()
+        for conn, process in workers.items():
             process.join(timeout=3)
             if process.is_alive():
                 process.kill()
