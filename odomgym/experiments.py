@@ -13,6 +13,7 @@ give every calibrator the same budget.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Protocol, TypeVar
@@ -20,6 +21,7 @@ from typing import Protocol, TypeVar
 from odomgym.errors import SpecError
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
+from odomgym.routes import check_extent
 from odomgym.runs import Direction, Run
 
 __all__ = [
@@ -123,6 +125,15 @@ class Experiment:
             )
         if not self.laps > 0:
             raise SpecError(f"laps must be > 0, got {self.laps}", field="laps")
+        if kind is ExperimentKind.SPIN:
+            check_extent("size", self.size, self.size, turn=True)
+        else:
+            length = {
+                ExperimentKind.SQUARE: 4.0 * self.size,
+                ExperimentKind.STRAIGHT: self.size * (2.0 if self.return_trip else 1.0),
+                ExperimentKind.CIRCULAR: 2.0 * math.pi * self.size * self.laps,
+            }.get(kind, self.size)
+            check_extent("size", self.size, length)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.errors import SpecError
 from odomgym.stepping import route_update
 
 __all__ = [
@@ -80,11 +81,33 @@ class Route:
         )
 
 
+MAX_RUN_LENGTH = 1000.0
+"""The longest path one run may drive [m]. A run's poses and counts are recorded at every step,
+so memory grows with its length (1 km at 0.3 m/s is ~67 000 steps of 50 ms per robot); UMBmark's
+square is 16 m, the CLAPPER's longest run 36 m. Longer asks are refused in one line rather than
+failing deep inside numpy's allocator."""
+MAX_RUN_TURN = 20.0 * math.pi
+"""The largest turn in place of one run [rad]: ten revolutions."""
+
+
+def check_extent(field: str, given: float, total: float, turn: bool = False) -> None:
+    """Refuse a run whose path (or turn, with ``turn``) ``total``, from ``field`` = ``given``,
+    exceeds :data:`MAX_RUN_LENGTH` [m] (or :data:`MAX_RUN_TURN` [rad])."""
+    limit, unit, what = (MAX_RUN_TURN, "rad", "turn") if turn else (MAX_RUN_LENGTH, "m", "path")
+    if total > limit:
+        raise SpecError(
+            f"{field} {given:g} makes a run's {what} {total:g} {unit}; one run may have at most "
+            f"{limit:g} {unit}",
+            field=field,
+        )
+
+
 def square_route(side: float = 4.0, direction: Literal["cw", "ccw"] = "cw") -> Route:
     """The UMBmark square: four legs of ``side`` metres, a 90° turn in place after each (the
     fourth turn restores the starting heading, Borenstein & Feng 1994, §6.3)."""
     if not side > 0:
         raise ValueError(f"side must be > 0, got {side!r}")
+    check_extent("side", side, 4.0 * side)
     if direction not in ("cw", "ccw"):
         raise ValueError(f"direction must be 'cw' or 'ccw', got {direction!r}")
     sign = -1.0 if direction == "cw" else 1.0
@@ -108,6 +131,7 @@ def straight_route(distance: float = 10.0, return_trip: bool = False) -> Route:
     start *backwards* (no turn), as the CLAPPER did (Borenstein 1995, §6.1: 18 m out and back)."""
     if not distance > 0:
         raise ValueError(f"distance must be > 0, got {distance!r}")
+    check_extent("distance", distance, distance * (2 if return_trip else 1))
     out = Segment("drive", (0.0, 0.0), (distance, 0.0), 0.0)
     segments = [out]
     if return_trip:
@@ -120,6 +144,7 @@ def spin_route(angle: float = math.pi, direction: Literal["cw", "ccw"] = "ccw") 
     """Turn in place by ``angle`` radians (Ivanjko et al.'s ±180° spins)."""
     if not angle > 0:
         raise ValueError(f"angle must be > 0, got {angle!r}")
+    check_extent("angle", angle, angle, turn=True)
     sign = -1.0 if direction == "cw" else 1.0
     turn = Segment("turn", (0.0, 0.0), (0.0, 0.0), sign * angle, turn=sign * angle)
     return Route(f"spin-{direction}-{math.degrees(angle):g}deg", (turn,))

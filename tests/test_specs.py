@@ -152,3 +152,31 @@ def test_calibration_toml_and_ros2_mapping(tmp_path: Path) -> None:
     with pytest.raises(SpecError) as info:
         load_calibration(path)
     assert f"{path}:3" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("argv", "field"),
+    [
+        (["run", "square", "--side", "1e9"], "side"),
+        (["run", "straight", "--distance", "1e7"], "distance"),
+    ],
+)
+def test_a_run_longer_than_a_kilometre_is_refused_in_one_line(
+    argv: list[str], field: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``run square --side 1e9`` asked numpy for 87 TiB to record the run (ArrayMemoryError
+    traceback); one run now drives at most MAX_RUN_LENGTH = 1 km (and turns at most 10
+    revolutions), checked where routes and experiments are made."""
+    from odomgym.cli import main
+    from odomgym.experiments import Experiment
+    from odomgym.routes import MAX_RUN_LENGTH, spin_route, square_route
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"odomgym: error: {field} "), err
+    square_route(MAX_RUN_LENGTH / 4)  # the limit itself is allowed
+    with pytest.raises(SpecError, match="at most 62.8319 rad"):
+        spin_route(100.0)
+    with pytest.raises(SpecError) as caught:
+        Experiment("circular", "ccw", runs=1, size=200.0, laps=1.0)  # 1257 m around
+    assert caught.value.field == "size"
