@@ -22,6 +22,7 @@ the truth is reported in ``info`` for evaluation, never rewarded.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from dataclasses import dataclass
 from os import PathLike
@@ -77,18 +78,39 @@ def action_space(shape: tuple[int, ...] = (2,)) -> gym.spaces.Box:
     return gym.spaces.Box(-1.0, 1.0, shape=shape, dtype=np.float32)
 
 
+def describe_action(action: Any) -> str:
+    """``action`` in one short line, for error messages (an array's repr spans lines)."""
+    text = " ".join(repr(action).split())
+    return text if len(text) <= 80 else f"{text[:77]}..."
+
+
+_REAL = (numbers.Real, np.bool_)
+
+
+def real_array(action: Any, expected: str) -> FloatArray:
+    """``action`` as a new float64 array if it holds real numbers only (booleans, integers,
+    floats); text, None, complex numbers, other objects and integers too large for a float
+    raise a one-line ValueError ("action must be ``expected``, got …")."""
+    try:
+        raw = np.asarray(action)
+        kind = raw.dtype.kind
+        if kind not in "biufO" or (kind == "O" and not all(isinstance(v, _REAL) for v in raw.flat)):
+            raise TypeError(kind)
+        return raw.astype(np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"action must be {expected}, got {describe_action(action)}") from None
+    except OverflowError:
+        raise ValueError(f"action must be finite, got {describe_action(action)}") from None
+
+
 def validate_actions(action: Any, shape: tuple[int, ...]) -> FloatArray:
-    """Check and clip actions: NaN/inf or a wrong shape raise ValueError; values outside
-    [−1, 1] are clipped (the documented rule: a motor controller saturates).
+    """Check and clip actions: NaN/inf, anything but real numbers or a wrong shape raise
+    ValueError; values outside [−1, 1] are clipped (the documented rule: a motor controller
+    saturates).
 
     Returns a new float64 array (never the caller's array, which is left untouched).
     """
-    try:
-        array = np.array(action, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"action must be numbers of shape {shape}, got {type(action).__name__}"
-        ) from None
+    array = real_array(action, f"numbers of shape {shape}")
     if array.shape != shape:
         raise ValueError(f"action must have shape {shape}, got {array.shape}")
     if not _clip_unit(array.reshape(-1)):

@@ -53,6 +53,7 @@ from odomgym.clapper import (
     rectangle_path,
     straight_path,
 )
+from odomgym.envs.base import describe_action, real_array
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.vehicle import VehicleSpec, load_vehicle
 
@@ -72,10 +73,17 @@ def ipec_estimator() -> EstimatorFactory:
     return partial(IPEC, heading="midpoint", translation_correction=False)
 
 
+MAX_BUMPS = 1000
+"""The most cables an env lays (one every 36 mm of the 36 m straight run)."""
+
+
 def _whole(name: str, value: object) -> int:
-    """``value`` as a whole number >= 0, or a ValueError naming ``name``."""
+    """``value`` as a whole number from 0 to :data:`MAX_BUMPS`, or a ValueError naming
+    ``name``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
         raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
+    if value > MAX_BUMPS:
+        raise ValueError(f"{name} must be at most {MAX_BUMPS}, got {value!r}")
     return int(value)
 
 
@@ -148,9 +156,11 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise RuntimeError("call reset() before step()")
         if trial.done.all():
             raise RuntimeError("the episode has terminated; call reset() first")
-        command = np.array(action, dtype=np.float64).reshape(-1)
+        command = real_array(action, "one finite number in [0, 1]").reshape(-1)
         if command.shape != (1,) or not np.isfinite(command).all():
-            raise ValueError(f"action must be one finite number in [0, 1], got {action!r}")
+            raise ValueError(
+                f"action must be one finite number in [0, 1], got {describe_action(action)}"
+            )
         trial.step(np.clip(command, 0.0, 1.0))
         done_now = self._path_done()
         reward = (done_now - self._done_before) / self._total - 0.001

@@ -77,6 +77,7 @@ from odomgym.baselines.selfcal import (
     OBSERVATION_LAYOUT,
     SelfCalSession,
 )
+from odomgym.envs.base import describe_action
 from odomgym.errors import SpecError
 from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FLOORS, FloorSpec
@@ -401,7 +402,7 @@ def menu_index(action: object) -> int:
     value = action.item() if isinstance(action, np.ndarray) and action.shape == () else action
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise SpecError(
-            f"action must be a whole menu index 0..{len(MENU) - 1}, got {action!r}",
+            f"action must be a whole menu index 0..{len(MENU) - 1}, got {describe_action(action)}",
             field="action",
         )
     if not 0 <= int(value) < len(MENU):

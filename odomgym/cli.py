@@ -75,13 +75,37 @@ def _nonnegative(text: str) -> float:
     return value
 
 
-def _count(text: str) -> int:
+MAX_COUNT = 10**9
+"""The largest count an option takes (runs, robots, steps): beyond it a run would not end in a
+lifetime, and numbers past 2**63 overflow numpy's and the OS's integers."""
+MAX_PROCESSES = 1024
+"""The most worker processes (``--jobs``, ``--workers``) or batched sessions (``--envs``)."""
+
+
+def _count(text: str, limit: int = MAX_COUNT) -> int:
+    """An argparse type: a whole number from 1 to ``limit``."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    if value > limit:
+        raise argparse.ArgumentTypeError(f"must be at most {limit}, got {text!r}")
+    return value
+
+
+def _processes(text: str) -> int:
+    """An argparse type: a number of worker processes or batched sessions, 1 to 1024."""
+    return _count(text, MAX_PROCESSES)
+
+
+def _bumps(text: str) -> int:
+    """An argparse type: a number of cables, 0 to 1000 (more than one every 4 cm of the
+    CLAPPER's 36 m)."""
+    value = _seed(text)
+    if value > 1000:
+        raise argparse.ArgumentTypeError(f"must be at most 1000, got {text!r}")
     return value
 
 
@@ -774,7 +798,10 @@ def _add_clapper_parsers(routes: Any) -> None:
         )
         parser.add_argument("--floor", default="concrete", help=_floor_help("concrete"))
         parser.add_argument(
-            "--bumps", type=_seed, default=10, help="10 mm cables to cross, 0 or more (default 10)"
+            "--bumps",
+            type=_bumps,
+            default=10,
+            help="10 mm cables to cross, 0 to 1000 (default 10)",
         )
         parser.add_argument(
             "--ipec",
@@ -899,10 +926,12 @@ def _add_train_parser(commands: Any) -> None:
         "--steps", type=_count, help="environment steps (default: the data file's n_timesteps)"
     )
     train.add_argument(
-        "--envs", type=_count, help="sessions stepped together (default: the data file's n_envs)"
+        "--envs",
+        type=_processes,
+        help="sessions stepped together (default: the data file's n_envs)",
     )
     train.add_argument(
-        "--workers", type=_count, default=2, help="processes simulating them (default 2)"
+        "--workers", type=_processes, default=2, help="processes simulating them (default 2)"
     )
     train.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     train.add_argument("--out", default="runs/selfcal", help="output folder (default runs/selfcal)")
@@ -1017,7 +1046,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=[16],
         help="runs per calibration (16); several values compare budgets, e.g. --budget 16 4",
     )
-    bench.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
+    bench.add_argument("--jobs", type=_processes, help="worker processes (default: all cores)")
     bench.add_argument(
         "--backend",
         choices=[b.value for b in Backend],
@@ -1175,7 +1204,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-rounds", type=_count, default=8, help="most rounds of adding an effect (8)"
     )
     diag.add_argument("--candidates", nargs="+", help="effects to consider (default: all)")
-    diag.add_argument("--jobs", type=_count, help="worker processes (default: all cores)")
+    diag.add_argument("--jobs", type=_processes, help="worker processes (default: all cores)")
     diag.add_argument(
         "--resume",
         action="store_true",

@@ -88,16 +88,25 @@ square is 16 m, the CLAPPER's longest run 36 m. Longer asks are refused in one l
 failing deep inside numpy's allocator."""
 MAX_RUN_TURN = 20.0 * math.pi
 """The largest turn in place of one run [rad]: ten revolutions."""
+MIN_RUN_LENGTH = 1e-3
+"""The shortest path one run may drive [m]: below a millimetre a route's direction is lost to
+rounding (a side of 1e-308 m divided by zero)."""
+MIN_RUN_TURN = 1e-3
+"""The smallest turn in place of one run [rad] (0.057°)."""
 
 
 def check_extent(field: str, given: float, total: float, turn: bool = False) -> None:
     """Refuse a run whose path (or turn, with ``turn``) ``total``, from ``field`` = ``given``,
-    exceeds :data:`MAX_RUN_LENGTH` [m] (or :data:`MAX_RUN_TURN` [rad])."""
-    limit, unit, what = (MAX_RUN_TURN, "rad", "turn") if turn else (MAX_RUN_LENGTH, "m", "path")
-    if total > limit:
+    lies outside :data:`MIN_RUN_LENGTH`..:data:`MAX_RUN_LENGTH` [m] (or the turn limits [rad])."""
+    low, high, unit, what = (
+        (MIN_RUN_TURN, MAX_RUN_TURN, "rad", "turn")
+        if turn
+        else (MIN_RUN_LENGTH, MAX_RUN_LENGTH, "m", "path")
+    )
+    if not low <= total <= high:
         raise SpecError(
-            f"{field} {given:g} makes a run's {what} {total:g} {unit}; one run may have at most "
-            f"{limit:g} {unit}",
+            f"{field} {given:g} makes a run's {what} {total:g} {unit}; one run may have "
+            f"{low:g} to {high:g} {unit}",
             field=field,
         )
 

@@ -82,6 +82,15 @@ class VehicleSpec:
     name: str = "vehicle"
 
     def __post_init__(self) -> None:
+        for key in ("truck_a", "truck_b"):
+            truck = getattr(self, key)
+            if not isinstance(truck, RobotSpec):
+                shown = f" {truck!r}" if isinstance(truck, str) else ""
+                raise SpecError(
+                    f"{key} must be a RobotSpec (odomgym.PRESETS[name] or load_robot(path)), got "
+                    f"{type(truck).__name__}{shown}",
+                    field=key,
+                )
         for key in ("link_length", "link_min", "link_max", "sample_period", "linear_resolution"):
             require_positive(key, getattr(self, key))
         # Ranges a real vehicle lies in; beyond them a value is a typo (degrees for radians,

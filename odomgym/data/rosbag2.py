@@ -50,6 +50,7 @@ POSE_TYPES = (
     "nav_msgs/msg/Odometry",
 )
 _STORAGE_SUFFIXES = (".mcap", ".db3")
+_MAX_COUNT = 2**62  # |counts| from here on cannot be a wheel's travel (native.py's bound)
 _INSTALL = "reading ROS 2 bags needs the 'rosbags' package: pip install odomgym[ros]"
 
 
@@ -98,9 +99,10 @@ def read_rosbag(
         SpecError: naming the bag and topic: not both or neither of ``joint_topic`` and
             ``encoder_topic``; no bag at ``path``; an unreadable bag; a missing topic (listing
             the bag's topics); a wrong message type; a topic without messages; wheel joints
-            absent from the JointState (listing those present); a malformed message; repeated
-            time stamps; fewer than two wheel samples; no pose at the first wheel sample; the
-            ``rosbags`` package not installed.
+            absent from the JointState (listing those present); a malformed message; counts of
+            ±2⁶² or more; repeated time stamps; fewer than two wheel samples; no pose at the
+            first wheel sample; poses too large to interpolate; the ``rosbags`` package not
+            installed.
     """
     if (joint_topic is None) == (encoder_topic is None):
         raise SpecError(
@@ -196,8 +198,11 @@ def _read_bag(
                 raw[connection.topic].append((received, data))
     except SpecError:
         raise
-    except (api.reader_error, OSError, ValueError, KeyError) as exc:
-        raise SpecError(f"cannot read bag: {exc}", source=source) from None
+    except Exception as exc:  # a damaged file may fail anywhere in rosbags, YAML, SQLite or MCAP
+        detail = " ".join(str(exc).split())  # one line: YAML errors span several
+        if not isinstance(exc, api.reader_error | OSError):
+            detail = f"{type(exc).__name__}: {detail}" if detail else type(exc).__name__
+        raise SpecError(f"cannot read bag: {detail}", source=source) from None
 
     if joint_topic is not None:
         wheels = _decode(
@@ -213,11 +218,14 @@ def _read_bag(
                 source=f"{source} {wheel_topic}",
             )
         wheel_times = wheels.times[keep]
-        ticks = np.rint(wheels.values[keep] * (robot.ticks_per_rev / (2.0 * math.pi)))
+        with np.errstate(over="ignore"):  # a huge angle: inf counts, refused just below
+            ticks = np.rint(wheels.values[keep] * (robot.ticks_per_rev / (2.0 * math.pi)))
+        _check_counts(ticks, wheel_times, wheel_topic, source)
         counts = ticks.astype(np.int64)
     else:
         wheels = _decode(raw[wheel_topic], wheel_type, api, wheel_topic, source, _encoder_values)
         wheel_times = wheels.times
+        _check_counts(wheels.values, wheel_times, wheel_topic, source)
         counts = wheels.values.astype(np.int64)
         if wheel_type == ENCODER_TYPES[0]:  # a 32-bit counter wraps around at ±2³¹
             steps = np.diff(counts, axis=0)
@@ -327,6 +335,21 @@ def _check_distinct(times: NDArray[np.int64], topic: str, source: str) -> None:
         )
 
 
+def _check_counts(counts: NDArray[Any], times: NDArray[np.int64], topic: str, source: str) -> None:
+    """Refuse counts of ±2⁶² or more, as the native reader does: not a wheel's travel, and
+    counts relative to the first would overflow int64."""
+    inside = (counts > -_MAX_COUNT) & (counts < _MAX_COUNT)  # also False for inf counts
+    if not inside.all():
+        row, column = np.argwhere(~inside)[0]
+        stamp = int(times[row])
+        raise SpecError(
+            f"the {('left', 'right')[column]} wheel's count {float(counts[row, column]):.6g} in "
+            f"the message at {_seconds(stamp)} s is out of range (beyond ±2^62 counts)",
+            field="position" if counts.dtype.kind == "f" else "data",
+            source=f"{source} {topic}",
+        )
+
+
 def _joint_reader(left: str, right: str) -> Callable[[Any, str], list[float]]:
     def read(message: Any, where: str) -> list[float]:
         names = list(message.name)
@@ -426,6 +449,16 @@ def _interpolate(
     values = np.asarray(poses.values, dtype=np.float64)
     yaw = np.unwrap(values[:, 2])
     result = np.empty((len(times), 3), dtype=np.float64)
-    for column, series in enumerate((values[:, 0], values[:, 1], yaw)):
-        result[:, column] = np.interp(at, pose_at, series, left=np.nan, right=np.nan)
+    with np.errstate(over="ignore", invalid="ignore"):  # refused just below
+        for column, series in enumerate((values[:, 0], values[:, 1], yaw)):
+            result[:, column] = np.interp(at, pose_at, series, left=np.nan, right=np.nan)
+    overflowed = np.flatnonzero((times <= last) & ~np.isfinite(result).all(axis=1))
+    if overflowed.size:
+        stamp = int(times[overflowed[0]])
+        raise SpecError(
+            f"the {poses.topic} pose interpolated at {_seconds(stamp)} s is not finite: the "
+            "positions around it are too large (near 1e308 m)",
+            field=poses.topic,
+            source=source,
+        )
     return result
