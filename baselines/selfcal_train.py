@@ -581,7 +581,7 @@ def train(
     else:
         checkpoints.clear()
     venv = VecMonitor(SelfCalVecEnv(n_envs, workers=workers, env_kwargs=env_kwargs))
-    venv.seed(seed + done)  # a resumed run: fresh sessions, not the first attempt's again
+    venv.seed((seed + done) % 2**32)  # a resumed run: fresh sessions, not the first attempt's again
     start = time.perf_counter()
 
     def save_checkpoint(model: Any) -> None:
@@ -620,7 +620,7 @@ def train(
     try:
         if record:
             model = algorithm.load(checkpoints.model, env=venv, device="cpu")
-            model.set_random_seed(seed + done)
+            model.set_random_seed((seed + done) % 2**32)
             if checkpoints.replay.exists():
                 model.load_replay_buffer(checkpoints.replay)
         else:

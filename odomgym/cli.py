@@ -120,6 +120,14 @@ def _seed(text: str) -> int:
     return value
 
 
+def _seed32(text: str) -> int:
+    """An argparse type: a seed from 0 to 2**32 - 1 (what torch and SB3 take)."""
+    value = _seed(text)
+    if value > 2**32 - 1:
+        raise argparse.ArgumentTypeError(f"must be at most 2**32 - 1, got {text!r}")
+    return value
+
+
 def _check_output(
     path: str | Path, *, option: str, folder: bool = False, swap: bool = False
 ) -> None:
@@ -933,7 +941,9 @@ def _add_train_parser(commands: Any) -> None:
     train.add_argument(
         "--workers", type=_processes, default=2, help="processes simulating them (default 2)"
     )
-    train.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    train.add_argument(
+        "--seed", type=_seed32, default=0, help="random seed, 0 to 2**32 - 1 (default 0)"
+    )
     train.add_argument("--out", default="runs/selfcal", help="output folder (default runs/selfcal)")
     train.add_argument(
         "--hyperparams",

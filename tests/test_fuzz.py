@@ -1225,6 +1225,8 @@ def test_regression_a_selfcal_action_error_is_one_line() -> None:
         (["run", "clapper-straight", "--bumps", "99999999999999999999"], "at most 1000"),
         (["train", "selfcal", "--envs", "99999999999999999999"], "at most 1024"),
         (["diagnose", "x", "--jobs", "99999999999999999999"], "at most 1024"),
+        (["train", "selfcal", "--seed", "-1"], "must be >= 0"),
+        (["train", "selfcal", "--seed", "4294967296"], "at most 2**32 - 1"),
     ],
 )
 def test_regression_absurd_command_line_numbers_are_one_line(
@@ -1232,7 +1234,8 @@ def test_regression_absurd_command_line_numbers_are_one_line(
 ) -> None:
     """Found by benchmarks/fuzz_cli.py: ``--runs 1e20`` raised OverflowError (an index-sized
     integer), ``--side 1e-308`` ZeroDivisionError, ``--bumps 1e20`` and ``--envs 1e20`` numpy's
-    "Maximum allowed size exceeded", ``diagnose --jobs 1e20`` OverflowError (a C int). Now
+    "Maximum allowed size exceeded", ``diagnose --jobs 1e20`` OverflowError (a C int),
+    ``train selfcal --seed -1`` SB3's ValueError. Now seeds for training are 0..2**32 - 1,
     counts are at most 10^9, processes and sessions 1024, cables 1000, a run's path 1 mm to
     1 km: exit 2 and one line."""
     from odomgym.cli import main
