@@ -37,7 +37,7 @@ import math
 import os
 import signal
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from multiprocessing.connection import Connection
@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym import interrupt
 from odomgym.baselines.base import CalibrationResult, Calibrator
 from odomgym.errors import SpecError
 from odomgym.experiments import Lab, parse_choice
@@ -609,21 +610,6 @@ def _chunk_worker(conn: Connection, config: BenchConfig) -> None:
         conn.close()
 
 
-@contextlib.contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back for the block (delivered when it ends); a no-op where the
-    platform cannot (no ``pthread_sigmask``)."""
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    held = {signal.SIGINT, signal.SIGTERM}
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
-
-
 def _run_processes(
     config: BenchConfig,
     parts: list[list[int]],
@@ -649,25 +635,40 @@ def _run_processes(
         # Ctrl-C/SIGTERM wait until the worker is started and registered: interrupted inside
         # start(), it would be left half-started (spawn's bootstrap then dies with an
         # EOFError traceback) and unknown to the clean-up below.
-        with _signals_deferred():
+        with interrupt.deferred():
             process.start()
             child.close()
             workers[parent] = process
 
+    def hand_out() -> None:
+        """Give queued chunks to idle workers, starting workers up to ``jobs``. A worker that
+        died while idle (its pipe is broken) is dropped and replaced; the chunk it was
+        offered goes back to the queue as it was (it never ran)."""
+        while queue:
+            idle = [c for c in workers if c not in busy]
+            if not idle:
+                if len(workers) >= jobs:
+                    return
+                start()
+                continue
+            conn, job = idle[0], queue.pop(0)
+            try:
+                conn.send(job)
+            except OSError:
+                queue.insert(0, job)
+                process = workers.pop(conn)
+                conn.close()
+                process.join(timeout=3)
+                continue
+            busy[conn] = job
+
     try:
         while queue or busy:
-            for conn in [c for c in workers if c not in busy]:
-                if not queue:
-                    break
-                busy[conn] = queue.pop(0)
-                conn.send(busy[conn])
-            while queue and len(workers) < jobs:
-                start()
-                conn = next(c for c in workers if c not in busy)
-                busy[conn] = queue.pop(0)
-                conn.send(busy[conn])
+            hand_out()
             # A result arrives on the connection; a death shows as end-of-file there.
-            for ready in wait(list(busy)):
+            ready_now = wait(list(busy), timeout=1.0)
+            interrupt.check()  # at least once a second, even while every worker is busy
+            for ready in ready_now:
                 part, attempt = busy.pop(ready)
                 payload: Any = None
                 try:
@@ -749,6 +750,7 @@ def run_benchmark(
         nonlocal count
         if book is not None:
             book.record(part, part_rows)
+        interrupt.check()  # a stop request a finalizer swallowed: recorded, now stop
         rows.extend(part_rows)
         count += len(part)
         if progress is not None:
@@ -791,7 +793,8 @@ def _run_ray(
     pending = {remote.remote(config, part): part for part in parts}
     try:
         while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            interrupt.check()
             for ref in ready:
                 finished(pending.pop(ref), ray.get(ref))
     finally:

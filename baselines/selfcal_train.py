@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym import interrupt
 from odomgym.baselines.selfcal import OBSERVATION_LAYOUT, OBSERVATION_VERSION, MlpPolicy
 from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
 from odomgym.errors import SpecError
@@ -431,11 +432,14 @@ class Checkpoints:
     def save(self, model: Any, settings: dict[str, Any], extra: dict[str, Any]) -> None:
         """Write the checkpoint of ``model`` now (each file whole, the record last, with
         ``extra`` in it)."""
-        atomic_writer(self.model, model.save)  # the temporary name ends in .zip, as SB3 needs
-        if hasattr(model, "save_replay_buffer"):  # off-policy (DQN): its buffer is its data
-            atomic_writer(self.replay, model.save_replay_buffer)
-        record = {"steps": int(model.num_timesteps), **extra, "settings": settings}
-        _write_json(self.record, record)
+        # The three files are one checkpoint: a stop between them would pair a new model with
+        # an old record, so Ctrl-C/SIGTERM wait until all are written.
+        with interrupt.deferred():
+            atomic_writer(self.model, model.save)  # the temporary name ends in .zip, as SB3 needs
+            if hasattr(model, "save_replay_buffer"):  # off-policy (DQN): its buffer is its data
+                atomic_writer(self.replay, model.save_replay_buffer)
+            record = {"steps": int(model.num_timesteps), **extra, "settings": settings}
+            _write_json(self.record, record)
 
     def keep_progress(self, steps: int) -> None:
         """Before a resume: the learning-curve rows logged up to ``steps`` (of every earlier
@@ -604,6 +608,7 @@ def train(
                 self.saved = self.model.num_timesteps
 
         def _on_step(self) -> bool:
+            interrupt.check()  # a stop request a finalizer swallowed (odomgym.interrupt)
             self.bar.update(self.training_env.num_envs)
             for info in self.locals.get("infos", []):
                 if "improvement" in info:
@@ -620,6 +625,12 @@ def train(
     try:
         if record:
             model = algorithm.load(checkpoints.model, env=venv, device="cpu")
+            if int(model.num_timesteps) != done:  # files mixed from two checkpoints by hand
+                raise SpecError(
+                    f"{checkpoints.record}: records {done} steps but checkpoint.zip holds "
+                    f"{model.num_timesteps}; start without --resume",
+                    field="resume",
+                )
             model.set_random_seed((seed + done) % 2**32)
             if checkpoints.replay.exists():
                 model.load_replay_buffer(checkpoints.replay)

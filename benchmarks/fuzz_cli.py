@@ -81,14 +81,15 @@ def main() -> int:
 
     import odomgym.baselines.benchmark
     import odomgym.diagnose.workflow
-    from odomgym.cli import Interrupted, build_parser
+    from odomgym import interrupt
+    from odomgym.cli import build_parser
     from odomgym.cli import main as odomgym_main
 
     with contextlib.suppress(ImportError):
         import odomgym.baselines.selfcal_train  # noqa: F401
 
     def alarm(signum: int, frame: Any) -> None:
-        raise Interrupted(143, "time budget over")
+        interrupt.stop(143, "time budget over")  # as the command line's SIGTERM handler
 
     signal.signal(signal.SIGALRM, alarm)
     options = [

@@ -21,6 +21,7 @@ the truth is reported in ``info`` for evaluation, never rewarded.
 
 from __future__ import annotations
 
+import decimal
 import math
 import numbers
 import os
@@ -84,7 +85,7 @@ def describe_action(action: Any) -> str:
     return text if len(text) <= 80 else f"{text[:77]}..."
 
 
-_REAL = (numbers.Real, np.bool_)
+_REAL = (numbers.Real, np.bool_, decimal.Decimal)
 
 
 def real_array(action: Any, expected: str) -> FloatArray:

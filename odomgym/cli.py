@@ -31,8 +31,10 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from odomgym import interrupt
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS, FloorSpec, load_floor
+from odomgym.interrupt import Interrupted
 from odomgym.io import atomic_write_text
 from odomgym.odometry import Calibration, load_calibration
 from odomgym.planning import drive_plans, ros2_yaml, square_plans, straight_plans
@@ -162,6 +164,8 @@ def _check_output(
         # A device (/dev/full, /dev/null), FIFO or socket: replacing it by a rename would
         # destroy it, and writing into it is not what an output file means.
         fail("is not a regular file (a device, pipe or socket); give a file name")
+    if swap and Path.cwd().resolve().is_relative_to(target.resolve()):
+        fail("is replaced whole at the end and holds the working folder; give a folder of its own")
     where = target if folder and target.is_dir() and not swap else target.absolute().parent
     while not where.exists():
         where = where.parent
@@ -643,7 +647,7 @@ def _command_diagnose(args: argparse.Namespace) -> int:
 
     # Every finished candidate fit is kept beside the output (which is replaced whole), so an
     # interrupted diagnosis resumes with --resume; it is removed once the outputs are written.
-    journal = FitJournal(out.with_name(out.name + ".journal"), resume=args.resume)
+    journal = FitJournal(out.parent / f"{out.name}.journal", resume=args.resume)
     try:
         diagnosis = diagnose(runs, model, config, progress=progress, journal=journal)
     except ValueError as exc:
@@ -1242,16 +1246,12 @@ def build_parser() -> argparse.ArgumentParser:
 JOURNAL_NAME = "journal.jsonl"
 
 
-class Interrupted(Exception):
-    """Ctrl-C (exit code 130) or SIGTERM (143): the command stops its workers and says so."""
+def _on_signal(signum: int, frame: object) -> None:
+    import signal
 
-    def __init__(self, code: int, message: str = "stopped") -> None:
-        super().__init__(message)
-        self.code = code
-
-
-def _on_sigterm(signum: int, frame: object) -> None:
-    raise Interrupted(143, "stopped by SIGTERM")
+    if signum == signal.SIGINT:
+        interrupt.stop(130, "interrupted")
+    interrupt.stop(143, "stopped by SIGTERM")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -1262,11 +1262,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     handler: Callable[[argparse.Namespace], int] = args.handler
-    previous = None
+    previous: dict[signal.Signals, Any] = {}
+    interrupt.reset()
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+        for number in (signal.SIGINT, signal.SIGTERM):
+            previous[number] = signal.signal(number, _on_signal)
     try:
-        return handler(args)
+        code = handler(args)
+        late = interrupt.pending()
+        if late is None:
+            return code
+        raise late  # the signal's own raise was swallowed after the last check
     except Interrupted as exc:
         print(f"odomgym: {exc}", file=sys.stderr)
         return exc.code
@@ -1282,8 +1288,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"odomgym: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        interrupt.reset()
+        for number, handler_before in previous.items():
+            signal.signal(number, handler_before)
 
 
 if __name__ == "__main__":

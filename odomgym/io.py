@@ -12,6 +12,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_writer"]
 
@@ -32,7 +33,7 @@ def atomic_writer(path: Path, write: Callable[[Path], None]) -> None:
             prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent
         )
     except OSError as exc:
-        raise _naming(exc, path) from exc
+        _raise_naming(exc, path)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -46,18 +47,19 @@ def atomic_writer(path: Path, write: Callable[[Path], None]) -> None:
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        raise _naming(exc, path) from exc
+        _raise_naming(exc, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
 
 
-def _naming(exc: OSError, path: Path) -> OSError:
-    """``exc`` naming the file the caller asked for: a failed write() names no file, and a
-    temporary file's name means nothing to the user."""
+def _raise_naming(exc: OSError, path: Path) -> NoReturn:
+    """Raise ``exc`` naming the file the caller asked for: a failed write() names no file, and
+    a temporary file's name means nothing to the user. (Another file's error is raised as it
+    is.)"""
     if exc.errno is None or (exc.filename is not None and Path(exc.filename).parent != path.parent):
-        return exc
-    return OSError(exc.errno, exc.strerror or str(exc), str(path))
+        raise exc
+    raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
 
 
 def atomic_write_text(path: Path, text: str) -> None:

@@ -219,8 +219,13 @@ DIAGNOSE = [
 
 
 @pytest.mark.slow
+def _fits(journal: Path) -> list[Path]:
+    """The stored fits (not the writer's hidden temporaries)."""
+    return [p for p in journal.glob("*.pkl") if not p.name.startswith(".")]
+
+
 def test_sigterm_stops_diagnose_and_resume_gives_the_same_report(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """``diagnose --jobs 2`` killed while fitting: exit 143 within seconds, its forked workers
     gone, no output folder, the finished fits kept in OUT.journal; ``--resume`` takes them and
@@ -239,7 +244,7 @@ def test_sigterm_stops_diagnose_and_resume_gives_the_same_report(
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:  # until the workers have finished two fits
         workers |= set(_children(process.pid)) if _alive(process.pid) else set()
-        if len(list(journal.glob("*.pkl"))) >= 2:
+        if len(_fits(journal)) >= 2:
             break
         time.sleep(0.1)
     else:
@@ -249,9 +254,11 @@ def test_sigterm_stops_diagnose_and_resume_gives_the_same_report(
     _terminate(process, workers, timeout=30)
     assert not out.exists()
     assert not [p.name for p in journal.iterdir() if p.name.startswith(".")], "a temporary left"
-    kept = len(list(journal.glob("*.pkl")))
+    kept = len(_fits(journal))
 
+    capsys.readouterr()
     assert main([*DIAGNOSE, "--out", str(out), "--resume"]) == 0
+    assert f"resumed: {kept} candidate fits taken from" in capsys.readouterr().err
     assert not journal.exists(), "the journal outlived the finished diagnosis"
     fresh = tmp_path / "fresh"
     assert main([*DIAGNOSE, "--out", str(fresh)]) == 0
@@ -325,3 +332,51 @@ def test_resume_refuses_a_missing_or_different_checkpoint(
     (out / "checkpoint.json").write_text("{not json")
     with pytest.raises(SpecError, match="not a checkpoint record"):
         Checkpoints(out).read(settings)
+
+
+class _Swallowing:
+    """What a finalizer does to an exception: a stop raised in ``__del__`` is printed and
+    dropped (pymunk frees its bodies from such callbacks, where a SIGTERM was lost)."""
+
+    def __del__(self) -> None:
+        from odomgym import interrupt
+
+        interrupt.stop(143, "stopped by SIGTERM")
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the dropped raise
+def test_a_stop_swallowed_by_a_finalizer_still_stops_the_command(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The request is recorded: the next unit of progress raises it again (diagnose stops at
+    its next candidate, exit 143), and one that comes after the last check is still reported
+    as 143 (covariance, which has no loop)."""
+    import odomgym.diagnose.workflow as workflow
+
+    real = workflow.localise
+
+    def localise_then_signal(*args: object, **kwargs: object) -> object:
+        _Swallowing()  # created and collected at once: its raise is dropped
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(workflow, "localise", localise_then_signal)
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    out = tmp_path / "diag"
+    assert main([*DIAGNOSE[:4], "--jobs", "1", "--out", str(out)]) == 143
+    err = capsys.readouterr().err
+    assert err.strip().endswith("odomgym: stopped by SIGTERM")
+    assert not out.exists()
+
+    import odomgym.cli as cli
+
+    real_covariance = cli._command_covariance
+
+    def covariance_then_signal(args: object) -> int:
+        code = real_covariance(args)  # type: ignore[arg-type]
+        _Swallowing()
+        return code
+
+    monkeypatch.setattr(cli, "_command_covariance", covariance_then_signal)
+    argv = ["covariance", "--left", "1", "--right", "1", "--wheelbase", "0.5", "--kl", "0.01"]
+    assert main([*argv, "--kr", "0.01"]) == 143
+    assert capsys.readouterr().err.strip().endswith("odomgym: stopped by SIGTERM")

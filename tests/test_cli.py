@@ -358,6 +358,21 @@ def test_atomic_writer_refuses_to_replace_a_device(tmp_path: Path) -> None:
     assert Path("/dev/null").is_char_device()
 
 
+@pytest.mark.parametrize("out", [".", "..", "/"])
+def test_diagnose_refuses_to_replace_the_working_folder(
+    out: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``diagnose --out .`` raised ValueError (PosixPath('.') has an empty name) building the
+    journal's path, and ``--out ..`` would have replaced the folder holding the working one:
+    now one line before any work."""
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    session = "optiodom:square/230620202042"
+    assert main(["diagnose", session, "--robot", "optiodom", "--out", out]) == 2
+    _one_line_error(capsys, "error: --out ", "holds the working folder")
+
+
 def test_output_check_accepts_new_nested_paths_and_leaves_nothing(tmp_path: Path) -> None:
     """A path whose folders do not exist yet is fine (they are created when writing); the
     check's probe file is removed again."""

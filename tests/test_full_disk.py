@@ -12,12 +12,13 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-DISK = "/mnt/odomgym-full"
+DISK = f"{tempfile.gettempdir()}/odomgym-full-disk"  # mounted over only inside the namespace
 SESSION = "optiodom:square/230620202042"
 ROBOT = str(REPO / "examples" / "optiodom_nominal.toml")
 

@@ -41,7 +41,7 @@ import multiprocessing as mp
 import pickle
 import shutil
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from odomgym import interrupt
 from odomgym.diagnose.experiments import separating_experiment
 from odomgym.diagnose.fit import (
     CandidateFit,
@@ -432,8 +433,10 @@ def _score_candidates(
         # Forked workers share the registry (user effects included) and the compiled kernels.
         pool = ProcessPoolExecutor(cfg.jobs, mp_context=mp.get_context("fork"))
         try:
-            for k, fit in zip(todo, pool.map(_fit_and_score, [jobs[k] for k in todo]), strict=True):
-                finished(k, fit)
+            # Each fit is recorded as soon as it is done, in whatever order they finish.
+            futures = {pool.submit(_fit_and_score, jobs[k]): k for k in todo}
+            for future in as_completed(futures):
+                finished(futures[future], future.result())
         except BaseException:
             # Ctrl-C, SIGTERM or an error: stop the workers now rather than wait for their
             # fits (the executor's own shutdown would); ``_processes`` is the executor's map
@@ -487,7 +490,12 @@ def diagnose(
     ``journal``: store every finished candidate fit there, and take the fits it already holds
     (:class:`FitJournal`: an interrupted diagnosis resumed gives the same result)."""
     cfg = config if config is not None else DiagnoseConfig()
-    report = progress if progress is not None else (lambda stage, fraction: None)
+
+    def report(stage: str, fraction: float) -> None:
+        interrupt.check()  # a stop request a finalizer swallowed (odomgym.interrupt)
+        if progress is not None:
+            progress(stage, fraction)
+
     if len(runs) < 3:
         raise SpecError(f"diagnose needs at least 3 runs, got {len(runs)}", field="runs")
     for run in runs:
