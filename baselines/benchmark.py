@@ -666,7 +666,7 @@ def _run_processes(
         while queue or busy:
             hand_out()
             # A result arrives on the connection; a death shows as end-of-file there.
-            ready_now = wait(list(busy), timeout=1.0)
+            ready_now: list[Any] = wait(list(busy), timeout=1.0)
             interrupt.check()  # at least once a second, even while every worker is busy
             for ready in ready_now:
                 part, attempt = busy.pop(ready)
