@@ -91,12 +91,12 @@ def _terminate(process: subprocess.Popen[str], workers: Iterable[int], timeout: 
     return err
 
 
-@pytest.mark.slow
-def test_sigterm_stops_the_workers_and_resume_gives_the_same_tables(
-    tmp_path: Path, reference: list[dict], capsys: pytest.CaptureFixture[str]
-) -> None:
-    out = tmp_path / "bench"
-    command = [sys.executable, "-m", "odomgym", "bench", "calibrators", *ARGS]
+def _bench_until_a_robot_is_recorded(
+    out: Path, extra: list[str], timeout: float
+) -> tuple[subprocess.Popen[str], list[int]]:
+    """Start ``bench calibrators`` (2 jobs, chunks of one robot) and return it, with its worker
+    processes, once the journal records a finished robot."""
+    command = [sys.executable, "-m", "odomgym", "bench", "calibrators", *ARGS, *extra]
     process = subprocess.Popen(
         [*command, "--jobs", "2", "--chunk", "1", "--out", str(out)],
         stdout=subprocess.PIPE,
@@ -104,17 +104,24 @@ def test_sigterm_stops_the_workers_and_resume_gives_the_same_tables(
         text=True,
     )
     journal = out / "journal.jsonl"
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + timeout
     workers: list[int] = []
-    while time.monotonic() < deadline:  # wait for the first finished robot
+    while time.monotonic() < deadline:
         if journal.exists() and len(journal.read_text().splitlines()) >= 2:
-            break
+            return process, _children(process.pid) or workers
         workers = _children(process.pid) or workers
         time.sleep(0.1)
-    else:
-        process.kill()
-        pytest.fail("no robot finished within 120 s")
-    workers = _children(process.pid) or workers
+    process.kill()
+    pytest.fail(f"no robot finished within {timeout:g} s")
+
+
+@pytest.mark.slow
+def test_sigterm_stops_the_workers_and_resume_gives_the_same_tables(
+    tmp_path: Path, reference: list[dict], capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bench"
+    process, workers = _bench_until_a_robot_is_recorded(out, [], timeout=120)
+    journal = out / "journal.jsonl"
     err = _terminate(process, workers, timeout=20)
     assert "--resume" in err.strip().splitlines()[-1]
     assert not (out / "results.json").exists()  # no half-written outputs
@@ -137,22 +144,8 @@ def test_sigterm_stops_the_ray_workers_and_resume_gives_the_same_tables(
     workers running chunks), and the resumed tables equal an uninterrupted run's."""
     ray = pytest.importorskip("ray")
     out = tmp_path / "bench"
-    command = [sys.executable, "-m", "odomgym", "bench", "calibrators", *ARGS, "--backend", "ray"]
-    process = subprocess.Popen(
-        [*command, "--jobs", "2", "--chunk", "1", "--out", str(out)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    process, _ = _bench_until_a_robot_is_recorded(out, ["--backend", "ray"], timeout=180)
     journal = out / "journal.jsonl"
-    deadline = time.monotonic() + 180
-    while time.monotonic() < deadline:  # wait for the first finished robot
-        if journal.exists() and len(journal.read_text().splitlines()) >= 2:
-            break
-        time.sleep(0.1)
-    else:
-        process.kill()
-        pytest.fail("no robot finished within 180 s")
     ray_processes = _descendants(process.pid)
     assert any("raylet" in _cmdline(pid) for pid in ray_processes), ray_processes
     err = _terminate(process, ray_processes, timeout=20)
@@ -214,6 +207,8 @@ DIAGNOSE = [
     "examples/optiodom_nominal.toml",
     "--jobs",
     "2",
+    "--max-rounds",
+    "2",  # two rounds: a resumed second round, at half the time of the full diagnosis
     "--json",
 ]
 

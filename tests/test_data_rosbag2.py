@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 
 pytest.importorskip("rosbags")
 
-from rosbags.rosbag2 import StoragePlugin, Writer
+from bag_writer import write_bag as shared_write_bag
+from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
 from odomgym.data.rosbag2 import read_rosbag
@@ -106,19 +107,7 @@ def write_bag(
     storage: StoragePlugin = StoragePlugin.MCAP,
 ) -> Path:
     """Write ``{topic: (msgtype, [(receive ns, message), …])}`` as one bag at ``path``."""
-    with Writer(path, version=9, storage_plugin=storage) as writer:
-        connections = {
-            topic: writer.add_connection(topic, msgtype, typestore=TS)
-            for topic, (msgtype, _) in topics.items()
-        }
-        queue = [
-            (received, topic, msgtype, message)
-            for topic, (msgtype, messages) in topics.items()
-            for received, message in messages
-        ]
-        for received, topic, msgtype, message in sorted(queue, key=lambda q: (q[0], q[1])):
-            writer.write(connections[topic], received, TS.serialize_cdr(message, msgtype))
-    return path
+    return shared_write_bag(path, topics, storage, TS)
 
 
 def joint_times() -> list[int]:

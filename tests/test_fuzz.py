@@ -626,25 +626,13 @@ def _write_bag(
     """Write ``{topic: (msgtype, [(receive ns, message), …])}`` as one bag folder at ``path``."""
     import shutil
 
-    from rosbags.rosbag2 import StoragePlugin, Writer
+    from bag_writer import write_bag
+    from rosbags.rosbag2 import StoragePlugin
 
-    store = _typestore()
     if path.exists():
         shutil.rmtree(path)
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    with Writer(path, version=9, storage_plugin=plugin) as writer:
-        connections = {
-            topic: writer.add_connection(topic, msgtype, typestore=store)
-            for topic, (msgtype, _) in topics.items()
-        }
-        queue = [
-            (received, topic, msgtype, message)
-            for topic, (msgtype, messages) in topics.items()
-            for received, message in messages
-        ]
-        for received, topic, msgtype, message in sorted(queue, key=lambda q: (q[0], q[1])):
-            writer.write(connections[topic], received, store.serialize_cdr(message, msgtype))
-    return path
+    return write_bag(path, topics, plugin, _typestore())
 
 
 def _stamp_ns(step: int | None) -> int:
