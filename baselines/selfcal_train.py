@@ -454,11 +454,11 @@ class Checkpoints:
         if self.previous.exists():
             rows, fields = _csv_rows([self.previous, self.progress])
             _write_csv(self.progress, rows, fields)
-        for path in (self.record, self.model, self.replay, self.previous):
-            path.unlink(missing_ok=True)
+        self.clear()
 
     def clear(self) -> None:
-        """A fresh start in a folder an earlier training left a checkpoint in."""
+        """No checkpoint left: after a finished training, or at a fresh start in a folder an
+        earlier training left one in."""
         for path in (self.record, self.model, self.replay, self.previous):
             path.unlink(missing_ok=True)
 
