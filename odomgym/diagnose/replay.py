@@ -58,10 +58,17 @@ def replay_run(run: Run, spec: RobotSpec) -> Replay:
     effects = _effects_of(spec)
     dt = np.diff(run.time)
     motor = np.diff(run.counts, axis=0).astype(np.float64) * (2.0 * np.pi / spec.ticks_per_rev)
-    arrays = ReplayArrays(dt=dt, wheel=motor, wheelbase=float(spec.true_wheelbase))
+    radius = 0.5 * np.array([spec.true_left_diameter, spec.true_right_diameter], dtype=float)
+    arrays = ReplayArrays(
+        dt=dt,
+        wheel=motor,
+        wheelbase=float(spec.true_wheelbase),
+        radius=radius,
+        angle=_wheel_angles(run, motor),
+        time=_session_time(run),
+    )
     for name, values in effects:
         EFFECTS[name].replay("transmission", values, arrays)
-    radius = 0.5 * np.array([spec.true_left_diameter, spec.true_right_diameter], dtype=float)
     travel = arrays.wheel * radius
     wheelbase = float(spec.true_wheelbase)
     arrays.travel = travel
@@ -80,6 +87,25 @@ def replay_run(run: Run, spec: RobotSpec) -> Replay:
     pose[:, 2] = theta
     tracked = _measure(pose, effects, arrays)
     return Replay(pose, tracked, travel, ds, dtheta, wheelbase)
+
+
+def _wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
+    """Each wheel's angle at the middle of every interval [rad], from the session's start when
+    the run records where its wheels began (``meta["wheel_angle0"]``), else from the run's."""
+    start = np.zeros(2)
+    given = run.meta.get("wheel_angle0")
+    if given is not None:
+        start = np.asarray(given, dtype=float).reshape(2)
+    before = np.concatenate([np.zeros((1, 2)), np.cumsum(motor, axis=0)[:-1]])
+    angles: FloatArray = start + before + 0.5 * motor
+    return angles
+
+
+def _session_time(run: Run) -> FloatArray:
+    """Time since the session started at the middle of every interval [s]."""
+    t0 = float(run.meta.get("session_time", 0.0))  # type: ignore[arg-type]
+    middle: FloatArray = t0 + 0.5 * (run.time[1:] + run.time[:-1]) - run.time[0]
+    return middle
 
 
 def _measure(

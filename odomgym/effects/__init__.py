@@ -18,6 +18,8 @@ name                      parameters             what it is
 ``floor_roughness``       ``k_left``,            Chong & Kleeman wheel noise
                           ``k_right`` [m^½]
 ``gt_sensor_offset``      ``dx``, ``dy`` [m]     tracked point offset from the axle midpoint
+``discovered``            ``CHANNEL_MODULATOR``  terms of the error grammar found by sparse
+                                                 regression (:mod:`odomgym.effects.discovered`)
 ========================  =====================  ============================================
 """
 
@@ -32,6 +34,7 @@ from odomgym.effects.base import (
     get_effect,
     register_effect,
 )
+from odomgym.effects.discovered import TERMS, Discovered, DiscoveredTerms, Term
 from odomgym.effects.geometry import DistanceScale, Wheelbase, WheelDiameterRatio
 from odomgym.effects.motion import TurnSkid, WheelToe
 from odomgym.effects.noise import FloorBumps, FloorRoughness
@@ -40,7 +43,10 @@ from odomgym.effects.transmission import Backlash, play_operator
 
 __all__ = [
     "EFFECTS",
+    "TERMS",
     "Backlash",
+    "Discovered",
+    "DiscoveredTerms",
     "DistanceScale",
     "Effect",
     "FloorBumps",
@@ -48,6 +54,7 @@ __all__ = [
     "GroundTruthOffset",
     "Parameter",
     "ReplayArrays",
+    "Term",
     "TurnSkid",
     "WheelDiameterRatio",
     "WheelToe",
@@ -69,6 +76,7 @@ for _effect in (
     FloorBumps(),
     FloorRoughness(),
     GroundTruthOffset(),
+    Discovered(),
 ):
     if _effect.name not in EFFECTS:
         register_effect(_effect)

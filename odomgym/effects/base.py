@@ -183,12 +183,20 @@ class ReplayArrays:
     ``"measurement"``   ``tracked`` (T, 3): the pose the ground-truth system reports, initially the
                         axle-midpoint ``pose`` (T, 3) [m, m, rad].
 
-    ``dt`` (n,) [s] holds the sample intervals, ``wheelbase`` the model's true wheelbase [m].
+    ``dt`` (n,) [s] holds the sample intervals, ``wheelbase`` the model's true wheelbase [m],
+    ``radius`` (2,) the model's true wheel radii [m] (left, right), ``angle`` (n, 2) each wheel's
+    angle at the interval's middle [rad] (from the session's start when the run says where it
+    began, ``Run.meta["wheel_angle0"]``, else from the run's start) and ``time`` (n,) the time at
+    the interval's middle since the session started [s] (``Run.meta["session_time"]`` at the
+    run's first sample, else 0).
     """
 
     dt: FloatArray
     wheel: FloatArray
     wheelbase: float = 0.0
+    radius: FloatArray = field(default_factory=lambda: np.zeros(2))
+    angle: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    time: FloatArray = field(default_factory=lambda: np.zeros(0))
     travel: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     ds: FloatArray = field(default_factory=lambda: np.zeros(0))
     dtheta: FloatArray = field(default_factory=lambda: np.zeros(0))
