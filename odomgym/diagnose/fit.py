@@ -245,6 +245,21 @@ class CandidateFit:
     whitened: list[FloatArray] = field(default_factory=list)  # per run (m,)
 
 
+def _least_squares_step(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
+) -> RobotSpec:
+    """``effect``'s parameters fitted by generalised least squares at fixed noise."""
+    u0, low, high, build = _systematic_vector(spec, effect)
+
+    def residual(u: FloatArray) -> FloatArray:
+        return _whitened_stack(data, build(u), sensor)[0]
+
+    result = least_squares(
+        residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=30
+    )
+    return build(result.x)
+
+
 def fit_candidate(
     data: Dataset,
     spec: RobotSpec,
@@ -257,21 +272,20 @@ def fit_candidate(
     current_spec, current_sensor = spec, sensor
     if effect.noise:
         current_spec, current_sensor, _ = fit_noise(data, spec, sensor, effect, nuisance)
+        for partner in (EFFECTS[name] for name in effect.partners):
+            # Joint fit: the partner's mean parameters by least squares at the noise fit, then
+            # the noise again (twice), so the noise effect carries no systematic part.
+            for _ in range(2):
+                current_spec = _least_squares_step(data, current_spec, current_sensor, partner)
+                current_spec, current_sensor, _ = fit_noise(
+                    data, current_spec, current_sensor, effect, nuisance
+                )
         ev = evaluate(data, current_spec, current_sensor, whitened=False)
         return CandidateFit(
             effect.name, current_spec, current_sensor, effect.read(current_spec), ev.loglik
         )
     for _ in range(2):
-        u0, low, high, build = _systematic_vector(current_spec, effect)
-        fixed_sensor = current_sensor
-
-        def residual(u: FloatArray, build=build, noise=fixed_sensor) -> FloatArray:  # type: ignore[no-untyped-def]
-            return _whitened_stack(data, build(u), noise)[0]
-
-        result = least_squares(
-            residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=30
-        )
-        current_spec = build(result.x)
+        current_spec = _least_squares_step(data, current_spec, current_sensor, effect)
         current_spec, current_sensor, _ = fit_noise(data, current_spec, current_sensor, nuisance)
     fit = CandidateFit(
         effect.name,

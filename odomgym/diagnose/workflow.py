@@ -51,6 +51,13 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from odomgym import interrupt
+from odomgym.diagnose.discover import (
+    Discovery,
+    StructureTest,
+    discover,
+    library_jacobian,
+    structure_test,
+)
 from odomgym.diagnose.experiments import separating_experiment
 from odomgym.diagnose.fit import (
     CandidateFit,
@@ -72,17 +79,28 @@ from odomgym.diagnose.likelihood import (
 )
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.where import Finding, localise, run_residuals
-from odomgym.effects import EFFECTS, Effect
+from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_bytes
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["NUISANCE", "DiagnoseConfig", "Diagnosis", "FitJournal", "diagnose", "split_runs"]
+__all__ = [
+    "DISCOVERED",
+    "NUISANCE",
+    "DiagnoseConfig",
+    "Diagnosis",
+    "FitJournal",
+    "diagnose",
+    "split_runs",
+]
 
 NUISANCE = "floor_roughness"
 """The noise effect fitted as a nuisance beside every systematic candidate (see the module
 docstring, step 3)."""
+
+DISCOVERED = "discovered"
+"""The grammar's effect: never a catalogue candidate, only the discovery pass adds to it."""
 
 FloatArray = NDArray[np.float64]
 GAP_METRIC = (
@@ -116,6 +134,8 @@ class DiagnoseConfig:
             [nats] are tied (2·3 = 6 on the deviance scale: below "strong" evidence in Kass &
             Raftery 1995, §3.2).
         jobs: worker processes fitting candidates side by side (results do not depend on it).
+        discover: run the discovery pass (:mod:`odomgym.diagnose.discover`) when the catalogue
+            leaves structure.
     """
 
     holdout: float = 0.3
@@ -128,6 +148,7 @@ class DiagnoseConfig:
     initial_sensor: tuple[float, float] = (0.002, 0.005)
     tie_nats: float = 3.0
     jobs: int = 1
+    discover: bool = True
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:
@@ -175,6 +196,7 @@ class Round:
     separating: dict[str, Any] | None
     candidates: list[Candidate]
     consistency_p: float
+    structure: dict[str, Any] | None = None
 
 
 @dataclass
@@ -200,11 +222,27 @@ class Diagnosis:
     holdout_runs: list[str]
     holdout_gaps: dict[str, list[float]] = field(default_factory=dict)
     physical: dict[str, list[float]] = field(default_factory=dict)
+    discovered: list[dict[str, Any]] = field(default_factory=list)
+    discovery: dict[str, Any] | None = None
+    final_test: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def systematic_effects(self) -> list[str]:
+        """The named catalogue effects that move the mean (in the order named)."""
+        return [n for n in self.named_effects if not EFFECTS[n].noise]
+
+    @property
+    def noise_model(self) -> list[str]:
+        """The named noise effects (zero-mean; named only once no systematic structure is left)."""
+        return [n for n in self.named_effects if EFFECTS[n].noise]
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON report (``report.json``)."""
         return {
             "verdict": self.verdict,
+            "systematic_effects": self.systematic_effects,
+            "discovered": self.discovered,
+            "noise_model": self.noise_model,
             "named_effects": self.named_effects,
             "parameters": self.parameters,
             "gap_metric": GAP_METRIC,
@@ -224,9 +262,12 @@ class Diagnosis:
                     "tied": r.tied,
                     "separating_experiment": r.separating,
                     "consistency_p": r.consistency_p,
+                    "structure": r.structure,
                 }
                 for r in self.rounds
             ],
+            "final_test": self.final_test,
+            "discovery": self.discovery,
             "where": [f.as_dict() for f in self.findings],
             "fit_runs": self.fit_runs,
             "holdout_runs": self.holdout_runs,
@@ -416,7 +457,15 @@ def _score_candidates(
     )
     base_cv = cross_validate(data, base, None, folds)
     jobs: list[Job] = [
-        (data, spec, sensor, e.name, nuisance.name if nuisance else None, folds) for e in effects
+        (
+            data,
+            spec,
+            sensor,
+            e.name,
+            nuisance.name if nuisance and nuisance is not e else None,
+            folds,
+        )
+        for e in effects
     ]
     keys = [journal.key(job) for job in jobs] if journal is not None else []
     stored = {k: journal.get(keys[k]) for k in range(len(jobs))} if journal is not None else {}
@@ -455,7 +504,9 @@ def _score_candidates(
     candidates = []
     for k, f in enumerate(fits):
         lr = max(0.0, 2.0 * float(np.sum(f.loglik - base.loglik)))
-        dof = len(EFFECTS[f.name].parameters)
+        dof = len(EFFECTS[f.name].parameters) + sum(
+            len(EFFECTS[p].parameters) for p in EFFECTS[f.name].partners
+        )
         p_family = min(1.0, len(fits) * float(stats.chi2.sf(lr, dof)))  # Bonferroni
         gain = float(improvements[k].sum())
         candidates.append(
@@ -475,6 +526,22 @@ def _score_candidates(
             )
         )
     return candidates, fits
+
+
+def _discovery_record(discovery: Discovery | None) -> dict[str, Any] | None:
+    """The discovery pass for ``report.json`` (None if the structure never called for one)."""
+    if discovery is None:
+        return None
+    return {
+        "structure": discovery.structure.as_dict(),
+        "threshold": discovery.threshold,
+        "cv_sse_by_threshold": discovery.cv_path,
+        "selected": discovery.selected,
+        "rejected": discovery.rejected,
+        "kept": discovery.terms,
+        "cv_gain": discovery.cv_gain,
+        "not_identifiable": discovery.dropped,
+    }
 
 
 def diagnose(
@@ -524,18 +591,54 @@ def diagnose(
     parameters: dict[str, dict[str, dict[str, float]]] = {}
     folds = folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng)
     nuisance = EFFECTS.get(NUISANCE)
+    discovery: Discovery | None = None
+    systematic = [
+        e.name for e in candidate_effects((NUISANCE, DISCOVERED)) if not e.noise and e.name in names
+    ]
+    noise = [
+        e.name for e in candidate_effects((NUISANCE, DISCOVERED)) if e.noise and e.name in names
+    ]
+    # Systematic effects first, then (once their structure is exhausted) discovery, then the
+    # noise model: a noise effect may stand for nothing a systematic term explains.
+    stages: list[tuple[str, list[str], Effect | None]] = [
+        ("mean", systematic, nuisance),
+        ("noise", noise, nuisance),
+        ("noise", [NUISANCE] if NUISANCE in names else [], None),
+    ]
     for number in range(1, cfg.max_rounds + 1):
         candidates: list[Candidate] = []
         fits: list[CandidateFit] = []
         round_candidates: list[Candidate] = []
         base_spec, base_sensor = spec, sensor
-        for stage in ("mean", "noise"):
-            if stage == "mean":
-                effects = [e for e in candidate_effects((NUISANCE,)) if e.name in names]
-                helper = nuisance
-            else:
-                effects = [e for e in candidate_effects() if e.name == NUISANCE and e.name in names]
-                helper = None
+        structure: StructureTest | None = None
+        stopped: str | None = None
+        for stage, stage_names, helper in stages:
+            if stage == "noise" and structure is None:
+                # Is the systematic structure exhausted? Score test of the whole grammar on the
+                # innovations of the model with its wheel noise (the nuisance) fitted.
+                report(f"round {number}: structure", 0.0)
+                lib_spec, lib_sensor, _ = fit_noise(data, spec, sensor, nuisance)
+                library = library_jacobian(data, lib_spec, lib_sensor)
+                structure = structure_test(library)
+                if structure.p_value < 0.5 * cfg.alpha and cfg.discover and discovery is None:
+                    report(f"round {number}: discovery", 0.0)
+                    discovery = discover(
+                        data,
+                        lib_spec,
+                        lib_sensor,
+                        folds,
+                        alpha=cfg.alpha,
+                        nuisance=nuisance,
+                        library=library,
+                        structure=structure,
+                    )
+                    if discovery.terms and discovery.fit is not None:
+                        stopped = "discovered"
+                        break
+                if structure.p_value < 0.5 * cfg.alpha:
+                    stopped = "structured"  # no noise effect may stand in for structure
+                    break
+            effects = [EFFECTS[n] for n in stage_names]
             if not effects:
                 continue
             base_spec, base_sensor, _ = fit_noise(data, spec, sensor, helper)
@@ -556,11 +659,35 @@ def diagnose(
             if any(c.significant for c in candidates):
                 break
         all_candidates.extend(round_candidates)
-        significant = [k for k, c in enumerate(candidates) if c.significant]
         consistency = _consistency(data, base_spec, base_sensor)
-        if not significant:
-            verdict = "none" if consistency >= 0.5 * cfg.alpha else "unexplained"
-            rounds.append(Round(number, verdict, None, [], None, round_candidates, consistency))
+        structure_info = structure.as_dict() if structure is not None else None
+        if stopped == "discovered" and discovery is not None and discovery.fit is not None:
+            effect = DiscoveredTerms(discovery.terms)
+            spec = effect.write(spec, discovery.fit.values)
+            spec, sensor, _ = fit_noise(data, spec, sensor)
+            rounds.append(
+                Round(
+                    number,
+                    "discovered",
+                    DISCOVERED,
+                    [],
+                    None,
+                    round_candidates,
+                    consistency,
+                    structure_info,
+                )
+            )
+            continue
+        significant = [k for k, c in enumerate(candidates) if c.significant]
+        if stopped == "structured" or not significant:
+            p_struct = structure.p_value if structure is not None else 1.0
+            p_left = min(1.0, 2.0 * min(consistency, p_struct))
+            verdict = "none" if p_left >= 0.5 * cfg.alpha else "unexplained"
+            rounds.append(
+                Round(
+                    number, verdict, None, [], None, round_candidates, consistency, structure_info
+                )
+            )
             break
         best = max(significant, key=lambda k: candidates[k].cv_gain)
         tied = [best] + [
@@ -587,6 +714,7 @@ def diagnose(
                     separating,
                     round_candidates,
                     consistency,
+                    structure_info,
                 )
             )
             break
@@ -600,14 +728,53 @@ def diagnose(
             for key, value in winner.values.items()
         }
         rounds.append(
-            Round(number, "explained", winner.name, [], None, round_candidates, consistency)
+            Round(
+                number,
+                "explained",
+                winner.name,
+                [],
+                None,
+                round_candidates,
+                consistency,
+                structure_info,
+            )
         )
         # Only the named effect joins the model (not the nuisance wheel noise fitted beside a
-        # systematic effect); the sensor noise is refitted for it.
+        # systematic effect); the sensor noise is refitted for it. A noise effect fitted jointly
+        # with a systematic partner (bumps with the distance scale) brings the partner's refit.
         spec = EFFECTS[winner.name].write(spec, winner.values)
+        for partner_name in EFFECTS[winner.name].partners:
+            partner = EFFECTS[partner_name]
+            refit = partner.read(winner.spec)
+            spec = partner.write(spec, refit)
+            if partner_name in parameters:
+                parameters[partner_name] = {
+                    key: {"value": value, "stderr": parameters[partner_name][key]["stderr"]}
+                    for key, value in refit.items()
+                }
         spec, sensor, _ = fit_noise(data, spec, sensor)
+    # The final model on runs the fit never saw: does any structure remain?
+    report("held-out test", 1.0)
+    held_data = Dataset.of(held_runs, cfg.checkpoint_interval)
+    held_structure = structure_test(library_jacobian(held_data, spec, sensor))
+    held_white = _consistency(held_data, spec, sensor)
+    held_p = min(1.0, 2.0 * min(held_structure.p_value, held_white))
+    found_anything = bool(named) or bool(discovery is not None and discovery.terms)
+    last = rounds[-1].verdict if rounds else "none"
+    if not found_anything:
+        verdict = last
+    elif held_p >= 0.5 * cfg.alpha and last not in ("unexplained", "ambiguous"):
+        verdict = "explained"
+    else:
+        verdict = "partly explained"
+    final_test = {
+        "held_out_structure": held_structure.as_dict(),
+        "held_out_whiteness_p": held_white,
+        "held_out_p": held_p,
+        "residual_follows": held_structure.follows,
+        "residual_follows_z": held_structure.z,
+    }
     report("shrink", 1.0)
-    verdict = "explained" if named else rounds[-1].verdict
     # The model as given keeps its own noise effects; both are filtered with the sensor noise
     # fitted last (the best estimate of the measurement's own noise).
     before = _gaps(held_runs, robot, sensor, cfg.checkpoint_interval)
@@ -646,6 +813,9 @@ def diagnose(
         rounds=rounds,
         candidates=all_candidates,
         findings=findings,
+        discovered=discovery.entries() if discovery is not None else [],
+        discovery=_discovery_record(discovery),
+        final_test=final_test,
         fit_runs=[_run_id(runs[j], j) for j in fit_index],
         holdout_runs=[_run_id(runs[j], j) for j in held_index],
         holdout_gaps={

@@ -81,6 +81,11 @@ class Effect:
     summary: ClassVar[str] = ""
     reveals: ClassVar[str] = ""
     """Which experiments make it visible (for reports and the docs)."""
+    partners: ClassVar[tuple[str, ...]] = ()
+    """Systematic effects whose parameters are fitted jointly with this one, because its replay
+    moves the mean along the same direction (bumps shorten the travel as a distance scale
+    does): the workflow refits them beside it, so each named value is right, not only their
+    sum."""
     confounded: ClassVar[str] = ""
     """What else, outside the catalogue, produces exactly the same logs (the report repeats it
     whenever the effect is named, so a reader does not take the name for more than the data

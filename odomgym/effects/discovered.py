@@ -281,7 +281,9 @@ def wheel_modulator(
     raise KeyError(modulator)
 
 
-def body_modulator(modulator: str, v: FloatArray, omega: FloatArray, time: FloatArray) -> FloatArray:
+def body_modulator(
+    modulator: str, v: FloatArray, omega: FloatArray, time: FloatArray
+) -> FloatArray:
     """A body modulator per interval (n,); ``v`` [m/s], ``omega`` [rad/s], ``time`` [s]."""
     if modulator == "one":
         return np.ones_like(v)

@@ -72,6 +72,7 @@ class FloorBumps(Effect):
 
     name = "floor_bumps"
     noise = True
+    partners = ("distance_scale",)
     parameters = (
         Parameter("rate", "1/m", 0.0, 0.0, 10.0, 0.05, "bumps per metre of one wheel's travel"),
         Parameter("heading_jump", "rad", 0.0, 0.0, 0.2, 2e-3, "heading jump per bump"),

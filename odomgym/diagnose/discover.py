@@ -1,0 +1,330 @@
+"""Discovery: effects the catalogue does not hold, found by sparse regression on the residuals.
+
+When the best catalogue model still leaves structure in its whitened innovations, the workflow
+regresses them on a library of candidate terms, the grammar of :mod:`odomgym.effects.discovered`
+(each channel — left/right wheel travel, crab angle, yaw increment — times each modulator —
+1, |v|, v², |ω|, |v·ω|, direction, acceleration, the wheels' angles, session time):
+
+1. **Library.** Each term's column is the derivative of every run's whitened innovations with
+   respect to its coefficient at the current model (central differences through the replay and
+   the Kalman filter), so the regression is generalised least squares on the pose disagreement,
+   not on numerically differentiated states. Columns that the runs cannot tell apart from
+   earlier ones (a modulator that never varies, e.g. the direction of travel when the robot
+   never reverses) are dropped and listed.
+2. **Sparse selection.** Sequentially thresholded ridge regression (STLSQ, Brunton, Proctor &
+   Kutz 2016, as implemented by PySINDy's ``STLSQ`` optimizer, ridge weight :data:`RIDGE`) on
+   unit-norm columns, where a well-resolved coefficient's noise is one whitened unit. The threshold is chosen by K-fold
+   cross-validation over **whole runs** (the folds of the catalogue fits): the held-out sum of
+   squared whitened innovations, never an in-sample fit.
+3. **Test.** The selected terms are fitted jointly (non-linear least squares, the sensor and
+   wheel noise refitted beside them, as a catalogue candidate) and each kept only if its Wald
+   statistic passes α/2 after a Bonferroni correction over the whole library, and the set must
+   raise the cross-validated log-likelihood.
+
+:func:`structure_test` is the Lagrange-multiplier (score) test of the same library: do the
+whitened innovations depend on any term? It decides whether the systematic structure is
+exhausted (before a noise effect may be named) and, on held-out runs, whether the final model
+is ``explained``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from odomgym.diagnose.fit import (
+    CandidateFit,
+    Dataset,
+    _whitened_stack,
+    cross_validate,
+    evaluate,
+    fit_candidate,
+)
+from odomgym.diagnose.likelihood import SensorNoise
+from odomgym.effects import Effect
+from odomgym.effects.discovered import (
+    CATALOGUE_POINTS,
+    TERMS,
+    DiscoveredTerms,
+    describe_term,
+    term_by_name,
+)
+from odomgym.robot import RobotSpec
+
+__all__ = [
+    "THRESHOLDS",
+    "Discovery",
+    "StructureTest",
+    "discover",
+    "library_jacobian",
+    "structure_test",
+]
+
+FloatArray = NDArray[np.float64]
+
+THRESHOLDS = (3.0, 4.0, 5.0, 6.5, 8.0, 10.0, 13.0, 16.0, 20.0, 25.0, 32.0, 40.0, 50.0, 64.0)
+"""STLSQ thresholds tried, in whitened units of a unit-norm column (a coefficient's noise is 1)."""
+RIDGE = 0.1
+"""STLSQ's ridge weight on unit-norm columns: it damps the directions the runs barely resolve
+(near-collinear terms such as v² and |v·ω| on arcs of one radius, whose least-squares
+coefficients cancel each other at large values and fail on held-out runs), and shrinks a
+well-resolved term by only ~10 % before the threshold; the kept terms are refitted unbiased."""
+_STEP = 0.5  # finite-difference step in units of a term's scale
+
+
+@dataclass
+class Library:
+    """Whitened innovations and their derivatives with respect to the library's terms."""
+
+    terms: list[str]
+    residual: list[FloatArray]  # per run (m_j,)
+    jacobian: list[FloatArray]  # per run (m_j, K), per unit of coefficient
+    dropped: list[str] = field(default_factory=list)  # not identifiable from these runs
+
+
+def library_jacobian(
+    data: Dataset,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    terms: Sequence[str] | None = None,
+) -> Library:
+    """Every run's whitened innovations at ``spec`` and their derivatives with respect to each
+    term's coefficient (central differences about the spec's current value); columns the runs
+    cannot separate from earlier ones are dropped (relative residual norm below 1e-3 after
+    projecting on the kept columns)."""
+    names = list(terms) if terms is not None else [t.name for t in TERMS]
+    _, base = _whitened_stack(data, spec, sensor)
+    columns: list[list[FloatArray]] = [[] for _ in data.runs]
+    kept: list[str] = []
+    dropped: list[str] = []
+    basis: list[FloatArray] = []
+    for name in names:
+        effect = DiscoveredTerms([name])
+        current = effect.read(spec)[name]
+        h = _STEP * term_by_name(name).scale
+        _, plus = _whitened_stack(data, effect.write(spec, {name: current + h}), sensor)
+        _, minus = _whitened_stack(data, effect.write(spec, {name: current - h}), sensor)
+        per_run = [(p - m) / (2.0 * h) for p, m in zip(plus, minus, strict=True)]
+        stacked = np.concatenate(per_run)
+        norm = float(np.linalg.norm(stacked))
+        residual = stacked.copy()
+        for q in basis:
+            residual -= (q @ residual) * q
+        if (
+            norm == 0.0
+            or not np.all(np.isfinite(stacked))
+            or np.linalg.norm(residual) < 1e-3 * norm
+        ):
+            dropped.append(name)
+            continue
+        basis.append(residual / np.linalg.norm(residual))
+        kept.append(name)
+        for j, col in enumerate(per_run):
+            columns[j].append(col)
+    jac = [np.stack(c, axis=1) if c else np.zeros((len(base[j]), 0)) for j, c in enumerate(columns)]
+    return Library(kept, base, jac, dropped)
+
+
+@dataclass(frozen=True)
+class StructureTest:
+    """The score test of the library on a model's whitened innovations.
+
+    Attributes:
+        statistic: g·I⁻¹·g with g = Jᵀr, I = JᵀJ (χ² with ``dof`` degrees of freedom if the
+            innovations do not depend on any term).
+        dof: rank of I.
+        p_value: its χ² p-value.
+        follows: the term whose own score is largest (what the residuals follow most).
+        z: that term's standardised score g_k/√I_kk.
+        scores: every term's standardised score.
+    """
+
+    statistic: float
+    dof: int
+    p_value: float
+    follows: str | None
+    z: float
+    scores: dict[str, float]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "statistic": self.statistic,
+            "dof": self.dof,
+            "p_value": self.p_value,
+            "follows": self.follows,
+            "z": self.z,
+        }
+
+
+def structure_test(library: Library) -> StructureTest:
+    """Do the whitened innovations depend on any term of the library? (Lagrange-multiplier test:
+    under the model, r is white with unit variance, so Jᵀr has covariance JᵀJ.)"""
+    if not library.terms:
+        return StructureTest(0.0, 0, 1.0, None, 0.0, {})
+    r = np.concatenate(library.residual)
+    jac = np.concatenate(library.jacobian, axis=0)
+    g = jac.T @ r
+    info = jac.T @ jac
+    eig, vec = np.linalg.eigh(info)
+    keep = eig > eig.max() * 1e-9
+    proj = vec[:, keep].T @ g
+    statistic = float(np.sum(proj**2 / eig[keep]))
+    dof = int(keep.sum())
+    p = float(stats.chi2.sf(statistic, dof)) if dof else 1.0
+    diag = np.sqrt(np.maximum(np.diag(info), 1e-300))
+    z = g / diag
+    best = int(np.argmax(np.abs(z)))
+    scores = {name: float(v) for name, v in zip(library.terms, z, strict=True)}
+    return StructureTest(statistic, dof, p, library.terms[best], float(z[best]), scores)
+
+
+def _stlsq(x: FloatArray, y: FloatArray, threshold: float) -> FloatArray:
+    """PySINDy's STLSQ on (x, y): coefficients with those below ``threshold`` set to 0."""
+    import pysindy as ps
+
+    if x.shape[1] == 0:
+        return np.zeros(0)
+    optimizer = ps.STLSQ(threshold=threshold, alpha=RIDGE, max_iter=30, unbias=True)
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "sparsity parameter is too big", convergence
+            optimizer.fit(x, y[:, None])
+    coef: FloatArray = np.asarray(optimizer.coef_, dtype=float).reshape(-1)
+    return coef
+
+
+@dataclass
+class Discovery:
+    """What one discovery pass found.
+
+    Attributes:
+        terms: the discovered terms (names), empty if none survived the tests.
+        fit: the joint fit of those terms (None if none).
+        threshold: the STLSQ threshold chosen by cross-validation (None: no term helped).
+        cv_path: held-out sum of squared whitened innovations per threshold, and without terms.
+        selected: the terms STLSQ selected before the tests.
+        rejected: selected terms that failed the Wald test, with their p-values.
+        cv_gain: the held-out log-likelihood gain of the discovered set [nats].
+        dropped: library terms not identifiable from these runs.
+        structure: the score test that triggered the pass.
+    """
+
+    terms: list[str]
+    fit: CandidateFit | None
+    threshold: float | None
+    cv_path: dict[str, float]
+    selected: list[str]
+    rejected: dict[str, float]
+    cv_gain: float
+    dropped: list[str]
+    structure: StructureTest
+
+    def entries(self) -> list[dict[str, Any]]:
+        """``report.json``'s ``discovered`` list."""
+        if self.fit is None:
+            return []
+        out = []
+        for name in self.terms:
+            term = term_by_name(name)
+            value = float(self.fit.values[name])
+            err = float(self.fit.stderr.get(name, math.nan))
+            same = [k for k, v in CATALOGUE_POINTS.items() if v.startswith(name + " ")]
+            out.append(
+                {
+                    "term": name,
+                    "channel": term.channel,
+                    "modulator": term.modulator,
+                    "coefficient": value,
+                    "stderr": err,
+                    "unit": term.unit,
+                    "sentence": describe_term(name, value, err),
+                    "catalogue_equivalent": same[0] if same else None,
+                }
+            )
+        return out
+
+
+def discover(
+    data: Dataset,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    folds: Sequence[Sequence[int]],
+    *,
+    alpha: float,
+    nuisance: Effect | None,
+    library: Library | None = None,
+    structure: StructureTest | None = None,
+) -> Discovery:
+    """One discovery pass on the fit runs ``data`` at the current model (module docstring).
+
+    ``alpha`` is the family-wise level of the Wald tests (Bonferroni over the library's terms).
+    """
+    lib = library if library is not None else library_jacobian(data, spec, sensor)
+    test = structure if structure is not None else structure_test(lib)
+    empty = Discovery([], None, None, {}, [], {}, 0.0, lib.dropped, test)
+    if not lib.terms:
+        return empty
+    norms = np.linalg.norm(np.concatenate(lib.jacobian, axis=0), axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    xs = [j / norms for j in lib.jacobian]
+    ys = [-r for r in lib.residual]
+    path: dict[str, float] = {"none": float(sum(float(y @ y) for y in ys))}
+    for threshold in THRESHOLDS:
+        sse = 0.0
+        for fold in folds:
+            held = set(fold)
+            train = [j for j in range(len(xs)) if j not in held]
+            coef = _stlsq(
+                np.concatenate([xs[j] for j in train]),
+                np.concatenate([ys[j] for j in train]),
+                threshold,
+            )
+            for j in fold:
+                e = ys[j] - xs[j] @ coef
+                sse += float(e @ e)
+        path[f"{threshold:g}"] = sse
+    best_key = min(path, key=lambda k: path[k])
+    if best_key == "none":
+        return Discovery([], None, None, path, [], {}, 0.0, lib.dropped, test)
+    threshold = float(best_key)
+    coef = _stlsq(np.concatenate(xs), np.concatenate(ys), threshold)
+    selected = [lib.terms[k] for k in np.flatnonzero(coef)]
+    if not selected:
+        return Discovery([], None, threshold, path, [], {}, 0.0, lib.dropped, test)
+    family = len(lib.terms)
+    rejected: dict[str, float] = {}
+    terms = list(selected)
+    fit: CandidateFit | None = None
+    for _ in range(len(selected)):
+        effect = DiscoveredTerms(terms)
+        fit = fit_candidate(data, spec, sensor, effect, nuisance)
+        p = {}
+        for name in terms:
+            err = fit.stderr.get(name, math.nan)
+            value = fit.values[name] - effect.read(spec)[name]
+            zval = abs(value) / err if err > 0 and math.isfinite(err) else 0.0
+            p[name] = min(1.0, family * 2.0 * float(stats.norm.sf(zval)))
+        worst = max(terms, key=lambda n: p[n])
+        if p[worst] < 0.5 * alpha:
+            break
+        rejected[worst] = p[worst]
+        terms.remove(worst)
+        fit = None
+        if not terms:
+            break
+    if fit is None or not terms:
+        return Discovery([], None, threshold, path, selected, rejected, 0.0, lib.dropped, test)
+    base_loglik = evaluate(data, spec, sensor, whitened=False).loglik
+    cv = cross_validate(data, fit, DiscoveredTerms(terms), folds)
+    gain = float(np.sum(cv - base_loglik))
+    if gain <= 0.0:
+        return Discovery([], None, threshold, path, selected, rejected, gain, lib.dropped, test)
+    return Discovery(terms, fit, threshold, path, selected, rejected, gain, lib.dropped, test)
