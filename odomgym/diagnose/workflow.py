@@ -528,6 +528,30 @@ def _score_candidates(
     return candidates, fits
 
 
+def _backward_check(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, named: Sequence[str], alpha: float
+) -> list[str]:
+    """Named systematic effects that the final model no longer needs: the likelihood-ratio test
+    of the final model against it without the effect (sensor noise refitted) does not pass α/2
+    after a Bonferroni correction over the named effects."""
+    systematic = [n for n in named if not EFFECTS[n].noise]
+    if len(systematic) + (1 if spec.effect_values(DISCOVERED) else 0) < 2:
+        return []
+    full = float(evaluate(data, spec, sensor, whitened=False).loglik.sum())
+    out = []
+    for name in systematic:
+        effect = EFFECTS[name]
+        reduced, reduced_sensor, _ = fit_noise(
+            data, effect.write(spec, effect.absent_values()), sensor
+        )
+        without = float(evaluate(data, reduced, reduced_sensor, whitened=False).loglik.sum())
+        lr = max(0.0, 2.0 * (full - without))
+        p = min(1.0, len(systematic) * float(stats.chi2.sf(lr, len(effect.parameters))))
+        if p >= 0.5 * alpha:
+            out.append(name)
+    return out
+
+
 def _discovery_record(discovery: Discovery | None) -> dict[str, Any] | None:
     """The discovery pass for ``report.json`` (None if the structure never called for one)."""
     if discovery is None:
@@ -753,6 +777,15 @@ def diagnose(
                     for key, value in refit.items()
                 }
         spec, sensor, _ = fit_noise(data, spec, sensor)
+    # Backward check: a systematic effect named early may have stood in for what a later one
+    # (or a discovered term) explains better; each must still be significant in the final model.
+    absorbed = _backward_check(data, spec, sensor, named, cfg.alpha)
+    for name in absorbed:
+        spec = EFFECTS[name].write(spec, EFFECTS[name].absent_values())
+        named.remove(name)
+        parameters.pop(name, None)
+    if absorbed:
+        spec, sensor, _ = fit_noise(data, spec, sensor)
     # The final model on runs the fit never saw: does any structure remain?
     report("held-out test", 1.0)
     held_data = Dataset.of(held_runs, cfg.checkpoint_interval)
@@ -773,6 +806,7 @@ def diagnose(
         "held_out_p": held_p,
         "residual_follows": held_structure.follows,
         "residual_follows_z": held_structure.z,
+        "absorbed": absorbed,
     }
     report("shrink", 1.0)
     # The model as given keeps its own noise effects; both are filtered with the sensor noise
