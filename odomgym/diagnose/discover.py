@@ -13,9 +13,9 @@ regresses them on a library of candidate terms, the grammar of :mod:`odomgym.eff
    never reverses) are dropped and listed.
 2. **Sparse selection.** Sequentially thresholded ridge regression (STLSQ, Brunton, Proctor &
    Kutz 2016, as implemented by PySINDy's ``STLSQ`` optimizer, ridge weight :data:`RIDGE`) on
-   unit-norm columns, where a well-resolved coefficient's noise is one whitened unit. The threshold is chosen by K-fold
-   cross-validation over **whole runs** (the folds of the catalogue fits): the held-out sum of
-   squared whitened innovations, never an in-sample fit.
+   unit-norm columns, where a well-resolved coefficient's noise is one whitened unit. The
+   threshold is chosen by K-fold cross-validation over **whole runs** (the folds of the
+   catalogue fits): the held-out sum of squared whitened innovations, never an in-sample fit.
 3. **Test.** The selected terms are fitted jointly (non-linear least squares, the sensor and
    wheel noise refitted beside them, as a catalogue candidate) and each kept only if its Wald
    statistic passes α/2 after a Bonferroni correction over the whole library, and the set must
@@ -56,11 +56,13 @@ from odomgym.effects.discovered import (
     term_by_name,
 )
 from odomgym.robot import RobotSpec
+from odomgym.runs import Run
 
 __all__ = [
     "THRESHOLDS",
     "Discovery",
     "StructureTest",
+    "channel_evidence",
     "discover",
     "library_jacobian",
     "structure_test",
@@ -245,11 +247,36 @@ class Discovery:
                     "coefficient": value,
                     "stderr": err,
                     "unit": term.unit,
-                    "sentence": describe_term(name, value, err),
+                    "sentence": _sentence(name, self.fit),
                     "catalogue_equivalent": same[0] if same else None,
                 }
             )
         return out
+
+
+def _sentence(name: str, fit: CandidateFit) -> str:
+    """The term's sentence; a sin/cos pair of the same channel and harmonic is one sinusoid,
+    described once with its amplitude √(a² + b²) and phase (standard error by propagation)."""
+    term = term_by_name(name)
+    value = float(fit.values[name])
+    err = float(fit.stderr.get(name, math.nan))
+    if term.modulator[:3] in ("sin", "cos"):
+        other = term.channel + "_" + ("cos" if term.modulator.startswith("sin") else "sin")
+        other += term.modulator[-1]
+        if other in fit.values:
+            a = value if term.modulator.startswith("sin") else float(fit.values[other])
+            b = float(fit.values[other]) if term.modulator.startswith("sin") else value
+            amplitude = math.hypot(a, b)
+            ea = float(fit.stderr.get(f"{term.channel}_sin{term.modulator[-1]}", math.nan))
+            eb = float(fit.stderr.get(f"{term.channel}_cos{term.modulator[-1]}", math.nan))
+            se = math.hypot(a * ea, b * eb) / amplitude if amplitude > 0 else math.nan
+            phase = math.degrees(math.atan2(b, a))
+            return (
+                describe_term(f"{term.channel}_sin{term.modulator[-1]}", amplitude, se)
+                + f" (phase {phase:.0f}°; {term.channel}_sin{term.modulator[-1]} and "
+                f"{term.channel}_cos{term.modulator[-1]} together)"
+            )
+    return describe_term(name, value, err)
 
 
 def discover(
@@ -328,3 +355,90 @@ def discover(
     if gain <= 0.0:
         return Discovery([], None, threshold, path, selected, rejected, gain, lib.dropped, test)
     return Discovery(terms, fit, threshold, path, selected, rejected, gain, lib.dropped, test)
+
+
+def channel_evidence(
+    runs: Sequence[Run], spec: RobotSpec, name: str, bins: int = 10
+) -> dict[str, Any] | None:
+    """The data behind a discovered term, for a person to look at: the term's channel measured
+    interval by interval (from consecutive measured poses, against the replay of ``spec``, the
+    model *without* the term) binned by the term's modulator.
+
+    Channels: a wheel's relative travel error (along-track error ± b/2 × heading error, over
+    the predicted travel), the crab angle (cross-track error over the predicted translation),
+    the relative yaw error (heading error over the predicted yaw). Intervals that barely move
+    the channel (travel < 2 mm, yaw < 0.01 rad) carry only sensor noise and are left out.
+    Returns bin centres ``x``, mean channel error ``y`` and its standard error ``se`` (NaN-free),
+    or None without dense ground truth.
+    """
+    from odomgym.diagnose.replay import _session_time, _wheel_angles, replay_run
+    from odomgym.effects.discovered import body_modulator, wheel_modulator
+
+    term = term_by_name(name)
+    xs: list[FloatArray] = []
+    ys: list[FloatArray] = []
+    for run in runs:
+        rep = replay_run(run, spec)
+        measured = run.true_pose
+        ok = np.all(np.isfinite(measured), axis=1)
+        both = ok[1:] & ok[:-1]
+        if not np.any(both):
+            continue
+        d_meas = np.diff(measured, axis=0)
+        d_pred = np.diff(rep.tracked, axis=0)
+        theta = rep.pose[:-1, 2] + 0.5 * rep.dtheta
+        c, s = np.cos(theta), np.sin(theta)
+        along = c * (d_meas[:, 0] - d_pred[:, 0]) + s * (d_meas[:, 1] - d_pred[:, 1])
+        cross = -s * (d_meas[:, 0] - d_pred[:, 0]) + c * (d_meas[:, 1] - d_pred[:, 1])
+        heading = d_meas[:, 2] - d_pred[:, 2]
+        dt = np.diff(run.time)
+        safe = np.where(dt > 0, dt, np.inf)
+        if term.wheel:
+            w = 0 if term.channel == "left" else 1
+            side = -1.0 if w == 0 else 1.0
+            error = along + side * 0.5 * rep.wheelbase * heading
+            base = rep.travel[:, w]
+            use = both & (np.abs(base) > 2e-3)
+            value = error / np.where(use, base, 1.0)
+            motor = np.diff(run.counts, axis=0).astype(float) * (2 * np.pi / spec.ticks_per_rev)
+            speed = rep.travel / safe[:, None]
+            accel = np.gradient(np.abs(speed), np.cumsum(dt), axis=0) if len(dt) > 1 else 0 * speed
+            mod = wheel_modulator(
+                term.modulator, speed, accel, _wheel_angles(run, motor), _session_time(run)
+            )[:, w]
+        elif term.channel == "crab":
+            use = both & (np.abs(rep.ds) > 2e-3)
+            value = cross / np.where(use, rep.ds, 1.0)
+            mod = body_modulator(
+                term.modulator, rep.ds / safe, rep.dtheta / safe, _session_time(run)
+            )
+        else:
+            use = both & (np.abs(rep.dtheta) > 0.01)
+            value = heading / np.where(use, rep.dtheta, 1.0)
+            mod = body_modulator(
+                term.modulator, rep.ds / safe, rep.dtheta / safe, _session_time(run)
+            )
+        xs.append(mod[use])
+        ys.append(value[use])
+    if not xs or sum(len(x) for x in xs) < 3 * bins:
+        return None
+    x = np.concatenate(xs)
+    y = np.concatenate(ys)
+    # Robust to the heavy tails of per-interval differences: clip at 5 median deviations.
+    centre = float(np.median(y))
+    spread = 1.4826 * float(np.median(np.abs(y - centre))) or 1.0
+    keep = np.abs(y - centre) < 5 * spread
+    x, y = x[keep], y[keep]
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
+    if len(edges) < 3:
+        return None
+    which = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+    out_x, out_y, out_se = [], [], []
+    for b in range(len(edges) - 1):
+        sel = which == b
+        if np.count_nonzero(sel) < 3:
+            continue
+        out_x.append(float(np.mean(x[sel])))
+        out_y.append(float(np.mean(y[sel])))
+        out_se.append(float(np.std(y[sel], ddof=1) / math.sqrt(np.count_nonzero(sel))))
+    return {"x": out_x, "y": out_y, "se": out_se, "intervals": len(x)}

@@ -35,6 +35,20 @@ def _clean(value: Any) -> Any:
     return value
 
 
+def _found(d: Diagnosis) -> str:
+    """What the diagnosis added, in words: systematic, discovered, noise."""
+    parts = []
+    if d.systematic_effects:
+        parts.append(", then ".join(f"**{n}**" for n in d.systematic_effects))
+    if d.discovered:
+        parts.append(
+            "the discovered term(s) " + ", ".join(f"**{e['term']}**" for e in d.discovered)
+        )
+    if d.noise_model:
+        parts.append("the noise model " + ", ".join(f"**{n}**" for n in d.noise_model))
+    return "; ".join(parts) or "nothing"
+
+
 def report_json(diagnosis: Diagnosis) -> str:
     """``report.json`` as text (strict JSON)."""
     return json.dumps(_clean(diagnosis.as_dict()), indent=2, allow_nan=False)
@@ -44,19 +58,48 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
     """``report.md``: what a person reads first."""
     d = diagnosis
     lines = [f"# odomgym diagnose: {data}", ""]
+    final = d.final_test
+    left = final.get("residual_follows")
+    found = _found(d)
     verdicts = {
-        "explained": "the model was missing " + ", then ".join(f"**{n}**" for n in d.named_effects),
+        "explained": f"the model was missing {found}; on the held-out runs the residuals of the "
+        "updated model show no dependence on any term of the grammar and look white",
+        "partly explained": f"the model was missing {found}, but structure is left on the "
+        f"held-out runs: the residuals follow **{left}** most (score z = "
+        f"{final.get('residual_follows_z', math.nan):.1f}; held-out test p = "
+        f"{final.get('held_out_p', math.nan):.2g})",
         "ambiguous": "several effects explain the data equally well (see below)",
-        "unexplained": "the model disagrees with the data beyond noise, but no effect of the "
-        "catalogue explains it",
+        "unexplained": "the model disagrees with the data beyond noise, and neither the catalogue "
+        f"nor the grammar's terms explain it (the residuals follow **{left}** most)",
         "none": "the model already matches the data within noise",
     }
-    lines += [f"**Verdict: {d.verdict}** — {verdicts[d.verdict]}.", ""]
-    if d.named_effects:
-        lines += ["| effect (in the order added) | parameter | value | standard error |"]
-        lines += ["|---|---|---|---|"]
-        bounded: list[str] = []
-        for name in d.named_effects:
+    lines += [f"**Verdict: {d.verdict}** — {verdicts.get(d.verdict, d.verdict)}.", ""]
+    lines += [
+        f"- **Systematic effects:** {', '.join(d.systematic_effects) or 'none'}",
+        f"- **Discovered (outside the catalogue):** "
+        f"{'; '.join(e['sentence'] for e in d.discovered) or 'none'}",
+        f"- **Noise model:** {', '.join(d.noise_model) or 'sensor noise only'}",
+    ]
+    if final.get("absorbed"):
+        lines.append(
+            f"- Named on the way but not needed by the final model (backward check): "
+            f"{', '.join(final['absorbed'])}"
+        )
+    lines.append("")
+    bounded: list[str] = []
+    for title, group in (
+        ("Systematic effects", d.systematic_effects),
+        ("Noise model", d.noise_model),
+    ):
+        if not group:
+            continue
+        lines += [
+            f"## {title}",
+            "",
+            "| effect (in the order added) | parameter | value | standard error |",
+            "|---|---|---|---|",
+        ]
+        for name in group:
             limits = {p.name: (p.low, p.high) for p in EFFECTS[name].parameters}
             for key, entry in d.parameters[name].items():
                 value = entry["value"]
@@ -68,16 +111,55 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
                     f"{entry['stderr']:.2g} |"
                 )
         lines.append("")
-        if bounded:
-            lines += [
-                f"At the edge of its allowed range: {', '.join(bounded)}. The effect stands in "
-                "for something the catalogue describes only roughly: read its name as the "
-                "closest mechanism, not a measurement.",
-                "",
-            ]
-        for name in d.named_effects:
-            if EFFECTS[name].confounded:
-                lines += [f"Also consistent with `{name}`: {EFFECTS[name].confounded}.", ""]
+    if d.discovered:
+        lines += [
+            "## Discovered terms",
+            "",
+            "Terms of the error grammar (channel × modulator, `docs/diagnose.md`) found by sparse "
+            "regression on the residuals the catalogue left, kept only if each passes its "
+            "family-wise test and together they raise the held-out likelihood; saved in "
+            "`model.toml` as `[robot.effects.discovered]`, so the envs apply them.",
+            "",
+            "| term | channel | modulator | coefficient | standard error | reading |",
+            "|---|---|---|---|---|---|",
+        ]
+        for e in d.discovered:
+            lines.append(
+                f"| `{e['term']}` | {e['channel']} | {e['modulator']} | {e['coefficient']:.4g} "
+                f"{'' if e['unit'] == '1' else e['unit']} | {e['stderr']:.2g} | {e['sentence']} |"
+            )
+        lines.append("")
+    if d.session_frames:
+        lines += [
+            "## Session frames (nuisances of the measurement, not robot effects)",
+            "",
+            "| session | runs | tracked point dx [mm] | dy [mm] | yaw misalignment [°] |",
+            "|---|---|---|---|---|",
+        ]
+        for f in d.session_frames:
+            lines.append(
+                f"| {f.session} | {f.runs} | {1e3 * f.dx:.2f} ± {1e3 * f.dx_se:.2f} | "
+                f"{1e3 * f.dy:.2f} ± {1e3 * f.dy_se:.2f} | {math.degrees(f.yaw):.3f} ± "
+                f"{math.degrees(f.yaw_se):.3f} |"
+            )
+        yaws = np.array([math.degrees(f.yaw) for f in d.session_frames])
+        lines += [
+            "",
+            f"Common to all sessions: a yaw misalignment of {yaws.mean():.3f}° (sessions spread "
+            f"{yaws.std(ddof=1) if len(yaws) > 1 else 0.0:.3f}°): a wheel toe of the opposite "
+            "angle produces identical pose logs, so a shared part may be either.",
+            "",
+        ]
+    if bounded:
+        lines += [
+            f"At the edge of its allowed range: {', '.join(bounded)}. The effect stands in "
+            "for something the catalogue describes only roughly: read its name as the "
+            "closest mechanism, not a measurement.",
+            "",
+        ]
+    for name in d.named_effects:
+        if EFFECTS[name].confounded:
+            lines += [f"Also consistent with `{name}`: {EFFECTS[name].confounded}.", ""]
     last = d.rounds[-1]
     if last.verdict == "ambiguous" and last.separating:
         sep = last.separating
@@ -127,6 +209,15 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
                 f"| {r.number} | {c.stage} | {c.name}{mark} | {c.cv_gain:.1f} | {c.lr:.1f} | "
                 f"{c.p_family:.2g} | {c.p_sign_flip:.2g} | {fitted} |"
             )
+    lines += ["", "Rounds:", ""]
+    for r in d.rounds:
+        st = r.structure
+        extra = (
+            f"; structure test p = {st['p_value']:.2g}, residuals follow {st['follows']}"
+            if st
+            else ""
+        )
+        lines.append(f"- round {r.number}: {r.verdict} {r.winner or ''}{extra}")
     lines += ["", "## Where the model as given disagrees (Holm-corrected tests)", ""]
     lines += [
         "| view | group | component | n | mean | 95 % interval | p |",
@@ -171,28 +262,97 @@ def _plot(diagnosis: Diagnosis, folder: Path) -> list[str]:
     fig.savefig(folder / "gap_before_after.png", dpi=110)
     written.append("gap_before_after.png")
 
-    findings = [f for f in d.findings]
+    findings = list(d.findings)
     if findings:
-        fig = Figure(figsize=(7, 0.28 * len(findings) + 1.2))
-        ax = fig.add_subplot(1, 1, 1)
-        y = np.arange(len(findings))
-        scale = [1e3 if f.unit in ("m", "m/m") else math.degrees(1) for f in findings]
-        means = [f.mean * s for f, s in zip(findings, scale, strict=True)]
-        lows = [
-            (f.mean - f.low) * s if math.isfinite(f.low) else 0
-            for f, s in zip(findings, scale, strict=True)
-        ]
-        colours = ["tab:red" if f.significant else "tab:gray" for f in findings]
-        ax.barh(y, means, xerr=lows, color=colours)
-        ax.set_yticks(
-            y, [f"{f.group}: {f.component} [{_unit(f.unit)}]" for f in findings], fontsize=7
-        )
-        ax.axvline(0, color="k", lw=0.5)
-        ax.set_title("where the model as given disagrees (red: significant)")
-        fig.tight_layout()
-        fig.savefig(folder / "where.png", dpi=110)
-        written.append("where.png")
+        written.append(_where_plot(findings, folder))
+    for entry in d.discovered:
+        if entry.get("evidence"):
+            written.append(_evidence_plot(entry, folder))
     return written
+
+
+def _panel_key(unit: str, component: str) -> tuple[str, str, float]:
+    """(panel title, axis unit, SI → plot factor) of a finding: one panel per component, with
+    rates per metre or per radian apart from the final disagreements."""
+    factor = 1e3 if unit in ("m", "m/m") else math.degrees(1.0)
+    axis = _unit(unit)
+    rate = unit in ("rad/m", "m/m", "rad/rad")
+    title = f"{component} ({'rate' if rate else 'final'})"
+    return title, axis, factor
+
+
+def _where_plot(findings: list[Any], folder: Path) -> str:
+    """``where.png``: one panel per component (along, cross, heading; rates apart), each in its
+    own unit."""
+    from matplotlib.figure import Figure
+
+    panels: dict[tuple[str, str], list[Any]] = {}
+    factors: dict[tuple[str, str], float] = {}
+    for f in findings:
+        title, axis, factor = _panel_key(f.unit, f.component)
+        panels.setdefault((title, axis), []).append(f)
+        factors[(title, axis)] = factor
+    keys = sorted(panels)
+    heights = [0.26 * len(panels[k]) + 0.9 for k in keys]
+    fig = Figure(figsize=(7.5, sum(heights) + 0.6))
+    grid = fig.add_gridspec(len(keys), 1, height_ratios=heights)
+    for row, key in enumerate(keys):
+        ax = fig.add_subplot(grid[row, 0])
+        group = panels[key]
+        factor = factors[key]
+        y = np.arange(len(group))
+        means = [f.mean * factor for f in group]
+        errs = [(f.mean - f.low) * factor if math.isfinite(f.low) else 0.0 for f in group]
+        colours = ["tab:red" if f.significant else "tab:gray" for f in group]
+        ax.barh(y, means, xerr=errs, color=colours)
+        ax.set_yticks(y, [f"{f.view}: {f.group}" for f in group], fontsize=7)
+        ax.axvline(0, color="k", lw=0.5)
+        # Intervals of two-run groups can be huge: keep the means readable.
+        reach = 3.0 * max([abs(m) for m in means] + [1e-9])
+        ax.set_xlim(-reach, reach)
+        ax.set_xlabel(f"{key[0]} [{key[1]}]", fontsize=8)
+        ax.tick_params(axis="x", labelsize=7)
+    fig.suptitle("where the model as given disagrees (red: significant, Holm)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(folder / "where.png", dpi=110)
+    return "where.png"
+
+
+def _evidence_plot(entry: dict[str, Any], folder: Path) -> str:
+    """``discovered-TERM.png``: the term's channel against its modulator (binned means with
+    standard errors) and the fitted term."""
+    from matplotlib.figure import Figure
+
+    ev = entry["evidence"]
+    crab = entry["channel"] == "crab"
+    factor = math.degrees(1.0) if crab else 100.0
+    fig = Figure(figsize=(5.5, 3.6))
+    ax = fig.add_subplot(1, 1, 1)
+    x = np.array(ev["x"])
+    ax.errorbar(
+        x,
+        np.array(ev["y"]) * factor,
+        yerr=np.array(ev["se"]) * factor,
+        fmt="o",
+        label=f"measured, binned ({ev['intervals']} intervals)",
+    )
+    line = np.linspace(float(x.min()), float(x.max()), 50)
+    ax.plot(line, entry["coefficient"] * line * factor, "-", label="discovered term")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel(f"modulator: {entry['modulator']}")
+    channel = {
+        "left": "left wheel travel error [%]",
+        "right": "right wheel travel error [%]",
+        "crab": "crab angle [°]",
+        "yaw": "yaw error [%]",
+    }[entry["channel"]]
+    ax.set_ylabel(channel)
+    ax.set_title(entry["sentence"][:90] + ("…" if len(entry["sentence"]) > 90 else ""), fontsize=7)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    name = f"discovered-{entry['term']}.png"
+    fig.savefig(folder / name, dpi=110)
+    return name
 
 
 def write_outputs(diagnosis: Diagnosis, out: Path, data: str) -> list[Path]:

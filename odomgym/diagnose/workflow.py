@@ -54,6 +54,7 @@ from odomgym import interrupt
 from odomgym.diagnose.discover import (
     Discovery,
     StructureTest,
+    channel_evidence,
     discover,
     library_jacobian,
     structure_test,
@@ -78,6 +79,13 @@ from odomgym.diagnose.likelihood import (
     run_likelihood,
 )
 from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.sessions import (
+    SESSION_EFFECTS,
+    SessionFrame,
+    correct_runs,
+    fit_session_frames,
+    sessions_of,
+)
 from odomgym.diagnose.where import Finding, localise, run_residuals
 from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
 from odomgym.errors import SpecError
@@ -134,6 +142,9 @@ class DiagnoseConfig:
             [nats] are tied (2·3 = 6 on the deviance scale: below "strong" evidence in Kass &
             Raftery 1995, §3.2).
         jobs: worker processes fitting candidates side by side (results do not depend on it).
+        session_frames: fit a tracked-point offset and a yaw misalignment per session
+            (:mod:`odomgym.diagnose.sessions`); None: when the runs come from two or more
+            sessions (``Run.meta["session"]``).
         discover: run the discovery pass (:mod:`odomgym.diagnose.discover`) when the catalogue
             leaves structure.
     """
@@ -149,6 +160,7 @@ class DiagnoseConfig:
     tie_nats: float = 3.0
     jobs: int = 1
     discover: bool = True
+    session_frames: bool | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:
@@ -225,6 +237,7 @@ class Diagnosis:
     discovered: list[dict[str, Any]] = field(default_factory=list)
     discovery: dict[str, Any] | None = None
     final_test: dict[str, Any] = field(default_factory=dict)
+    session_frames: list[SessionFrame] = field(default_factory=list)
 
     @property
     def systematic_effects(self) -> list[str]:
@@ -267,6 +280,7 @@ class Diagnosis:
                 for r in self.rounds
             ],
             "final_test": self.final_test,
+            "session_frames": [f.as_dict() for f in self.session_frames],
             "discovery": self.discovery,
             "where": [f.as_dict() for f in self.findings],
             "fit_runs": self.fit_runs,
@@ -552,6 +566,20 @@ def _backward_check(
     return out
 
 
+def _with_evidence(
+    discovery: Discovery | None, runs: Sequence[Run], spec: RobotSpec
+) -> list[dict[str, Any]]:
+    """The discovered terms, each with the binned channel data behind it
+    (:func:`odomgym.diagnose.discover.channel_evidence`, on the fit runs, under the model before
+    the terms joined)."""
+    if discovery is None:
+        return []
+    entries = discovery.entries()
+    for entry in entries:
+        entry["evidence"] = channel_evidence(runs, spec, entry["term"])
+    return entries
+
+
 def _discovery_record(discovery: Discovery | None) -> dict[str, Any] | None:
     """The discovery pass for ``report.json`` (None if the structure never called for one)."""
     if discovery is None:
@@ -603,12 +631,26 @@ def diagnose(
     if len(fit_runs) < 2:
         raise SpecError("too few runs left to fit after the hold-out split", field="holdout")
     data = Dataset.of(fit_runs, cfg.checkpoint_interval)
-    report("where", 0.0)
-    findings = localise(run_residuals(runs, robot), cfg.alpha)
     names = cfg.candidates or tuple(EFFECTS)
     spec = robot
     sensor = SensorNoise(*cfg.initial_sensor)
     spec, sensor, _ = fit_noise(data, spec, sensor)
+    frames: list[SessionFrame] = []
+    use_frames = cfg.session_frames
+    if use_frames is None:
+        use_frames = len(set(sessions_of(runs))) >= 2
+    if use_frames:
+        # Per-session tracked point and yaw: fitted on the fit runs, removed from every run.
+        report("session frames", 0.0)
+        frames, _ = fit_session_frames(data, spec, sensor)
+        runs = correct_runs(runs, frames)
+        fit_runs = [runs[j] for j in fit_index]
+        held_runs = [runs[j] for j in held_index]
+        data = Dataset.of(fit_runs, cfg.checkpoint_interval)
+        names = tuple(n for n in names if n not in SESSION_EFFECTS)
+        spec, sensor, _ = fit_noise(data, spec, sensor)
+    report("where", 0.0)
+    findings = localise(run_residuals(runs, robot), cfg.alpha)
     rounds: list[Round] = []
     all_candidates: list[Candidate] = []
     named: list[str] = []
@@ -616,6 +658,7 @@ def diagnose(
     folds = folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng)
     nuisance = EFFECTS.get(NUISANCE)
     discovery: Discovery | None = None
+    before_discovery = spec
     systematic = [
         e.name for e in candidate_effects((NUISANCE, DISCOVERED)) if not e.noise and e.name in names
     ]
@@ -686,6 +729,7 @@ def diagnose(
         consistency = _consistency(data, base_spec, base_sensor)
         structure_info = structure.as_dict() if structure is not None else None
         if stopped == "discovered" and discovery is not None and discovery.fit is not None:
+            before_discovery = spec
             effect = DiscoveredTerms(discovery.terms)
             spec = effect.write(spec, discovery.fit.values)
             spec, sensor, _ = fit_noise(data, spec, sensor)
@@ -847,9 +891,10 @@ def diagnose(
         rounds=rounds,
         candidates=all_candidates,
         findings=findings,
-        discovered=discovery.entries() if discovery is not None else [],
+        discovered=_with_evidence(discovery, fit_runs, before_discovery),
         discovery=_discovery_record(discovery),
         final_test=final_test,
+        session_frames=frames,
         fit_runs=[_run_id(runs[j], j) for j in fit_index],
         holdout_runs=[_run_id(runs[j], j) for j in held_index],
         holdout_gaps={
