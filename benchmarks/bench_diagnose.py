@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from odomgym.diagnose.generate import hidden_effect_trial
-from odomgym.effects import EFFECTS
+from odomgym.effects import catalogue
 
 SPEED_TARGET_S = 60.0
 
@@ -40,12 +40,12 @@ def _trial(job: tuple[str | None, str, int]) -> dict[str, Any]:
 def accuracy(
     trials: int, protocol: str, jobs: int, only: list[str] | None = None
 ) -> dict[str, Any]:
-    classes: list[str | None] = [*EFFECTS, None]
+    classes: list[str | None] = [*catalogue(), None]
     if only:
         classes = [c for c in classes if (c or "none") in only]
     # Seeds depend on the class's place in the whole catalogue, so a --classes subset repeats
     # exactly the trials of the full run.
-    everything: list[str | None] = [*EFFECTS, None]
+    everything: list[str | None] = [*catalogue(), None]
     work = [
         (name, protocol, 1000 * everything.index(name) + i)
         for name in classes
@@ -55,7 +55,7 @@ def accuracy(
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         rows = list(pool.map(_trial, work))
     elapsed = time.perf_counter() - start
-    columns = [*EFFECTS, "ambiguous", "unexplained", "none"]
+    columns = [*catalogue(), "ambiguous", "partly explained", "unexplained", "none"]
     matrix = {str(n or "none"): dict.fromkeys(columns, 0) for n in classes}
     for row in rows:
         matrix[row["truth"]][row["top1"]] += 1
@@ -142,7 +142,7 @@ def main() -> None:
     parser.add_argument(
         "--classes",
         nargs="+",
-        choices=[*EFFECTS, "none"],
+        choices=[*catalogue(), "none"],
         help="only these rows (hidden effects, or 'none' for false alarms); default all",
     )
     parser.add_argument(

@@ -14,7 +14,9 @@ runs ``diagnose`` against the nominal model, blind. Scored:
 * out-of-catalogue effects: a discovered term has the right channel and modulator
   (``EXPECTED_TERMS``); a trial **fails honesty** if the verdict is ``explained`` without it;
 * no effect: any verdict but ``none`` is a **false alarm**;
-* pairs: both named (the catalogue name and the expected discovered term).
+* pairs: both named (the catalogue name and the expected discovered term);
+* beyond the grammar (three lobes per wheel revolution): right when the verdict is not
+  ``explained`` and no noise effect stands in.
 """
 
 from __future__ import annotations
@@ -50,8 +52,9 @@ OUTSIDE = [
     "spin_scrub",
     "reverse_scale",
 ]
+BEYOND = ["three_lobes"]
 PAIRS = ["wheelbase+out_of_round", "wheel_diameter_ratio+sideslip"]
-CLASSES = [*CATALOGUE_FORMS, *OUTSIDE, *PAIRS, "none"]
+CLASSES = [*CATALOGUE_FORMS, *OUTSIDE, *BEYOND, *PAIRS, "none"]
 
 
 def trial(job: tuple[str, int]) -> dict[str, Any]:
@@ -74,7 +77,9 @@ def trial(job: tuple[str, int]) -> dict[str, Any]:
     terms = [e["term"] for e in d.discovered]
     right: dict[str, bool] = {}
     for n in names:
-        if n in EXPECTED_TERMS:
+        if n in BEYOND:  # no term can name it: right is an honest verdict, no stand-in
+            right[n] = d.verdict != "explained" and not d.noise_model
+        elif n in EXPECTED_TERMS:
             right[n] = any(t in EXPECTED_TERMS[n] for t in terms)
         elif EFFECTS[n].noise:
             right[n] = bool(d.noise_model) and d.noise_model[0] == n
@@ -108,6 +113,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     catalogue = [r for r in rows if r["class"] in CATALOGUE_FORMS]
     outside = [r for r in rows if r["class"] in OUTSIDE]
     pairs = [r for r in rows if r["class"] in PAIRS]
+    beyond = [r for r in rows if r["class"] in BEYOND]
     none = [r for r in rows if r["class"] == "none"]
     dishonest = [
         r
@@ -118,6 +124,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "top1_catalogue_forms": rate(catalogue),
         "discovered_right_outside": rate(outside),
         "pairs_both_named": rate(pairs),
+        "honest_beyond_grammar": rate(beyond),
         "false_alarm_rate": sum(r["verdict"] != "none" for r in none) / max(len(none), 1),
         "explained_on_wrong_name": len(dishonest),
         "trials": len(rows),
@@ -143,7 +150,8 @@ def markdown(rows: list[dict[str, Any]], summary: dict[str, Any], elapsed: float
         f"Top-1 on catalogue effects in other forms: {summary['top1_catalogue_forms']:.0%}; "
         f"discovered term right (channel and modulator) outside the catalogue: "
         f"{summary['discovered_right_outside']:.0%}; pairs both named: "
-        f"{summary['pairs_both_named']:.0%}; false alarms: {summary['false_alarm_rate']:.0%}; "
+        f"{summary['pairs_both_named']:.0%}; honest verdict beyond the grammar: "
+        f"{summary['honest_beyond_grammar']:.0%}; false alarms: {summary['false_alarm_rate']:.0%}; "
         f"'explained' on a wrong or missing name: {summary['explained_on_wrong_name']}.",
     ]
     return "\n".join(lines)

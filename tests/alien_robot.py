@@ -33,6 +33,8 @@ Effects outside the catalogue (the grammar term that should be discovered):
 ``traction_slip``        ground = rim·(1 − c·d|v_w|/dt)            ``left|right_accel``
 ``spin_scrub``           dθ = dθ₀(1 − c|ω₀|)                       ``yaw_rate``
 ``reverse_scale``        left travel × (1 + c) when reversing      ``left_direction``
+``three_lobes``          r_L(φ) = r(1 + a·sin 3φ)                  none: the grammar stops
+                                                                   at twice per revolution
 =======================  ========================================  =======================
 
 Runs carry ``meta["session_time"]`` (their start since the session began; runs follow one
@@ -82,6 +84,8 @@ ALIEN_EFFECTS: dict[str, tuple[float, float]] = {
     "traction_slip": (0.15, 0.3),  # c [s²/m]
     "spin_scrub": (0.008, 0.02),  # c [s/rad]
     "reverse_scale": (0.008, 0.02),  # c
+    # outside the catalogue *and* the grammar (three lobes per revolution): no term can name it
+    "three_lobes": (0.006, 0.015),  # a
 }
 """Every effect of this generator and the range its magnitude is drawn from."""
 
@@ -184,6 +188,8 @@ def _simulate(
         radius[:, 1] *= 1.0 + value("out_of_round") * np.sin(
             angle[:, 1] + effects["out_of_round"]["phase"]
         )
+    if "three_lobes" in effects:
+        radius[:, 0] *= 1.0 + value("three_lobes") * np.sin(3.0 * angle[:, 0])
     if "ratio_drift" in effects:
         radius[:, 1] *= 1.0 + value("ratio_drift") * t_mid
     ground = step * radius

@@ -30,7 +30,7 @@ from odomgym.cli import main
 from odomgym.data.native import write_native
 from odomgym.diagnose.generate import NOMINAL_ROBOT, hidden_effect_trial
 from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
-from odomgym.effects import EFFECTS
+from odomgym.effects import EFFECTS, catalogue
 from odomgym.robot import RobotSpec, load_robot
 
 MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8, max_wheel_speed=0.6)
@@ -72,11 +72,11 @@ def test_independent_generator_without_effect_is_none() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [*EFFECTS, None])
+@pytest.mark.parametrize("name", [*catalogue(), None])
 def test_world_hidden_effect_at_three_times_the_detection_limit(name: str | None) -> None:
     """One blind trial per effect (and one without) at 3-10 x the detection limit."""
     trial = hidden_effect_trial(
-        name, "rich", seed=100 + (sorted(EFFECTS).index(name) if name else 99)
+        name, "rich", seed=100 + (sorted(catalogue()).index(name) if name else 99)
     )
     if name is None:
         assert trial["verdict"] == "none", trial

@@ -171,10 +171,14 @@ def structure_test(library: Library) -> StructureTest:
         return StructureTest(0.0, 0, 1.0, None, 0.0, {})
     r = np.concatenate(library.residual)
     jac = np.concatenate(library.jacobian, axis=0)
+    # Unit-norm columns: the statistic does not depend on the terms' units, and the rank
+    # decision compares correlations, not coefficients per second with coefficients per m/s.
+    norms = np.linalg.norm(jac, axis=0)
+    jac = jac / np.where(norms > 0, norms, 1.0)
     g = jac.T @ r
     info = jac.T @ jac
     eig, vec = np.linalg.eigh(info)
-    keep = eig > eig.max() * 1e-9
+    keep = eig > eig.max() * 1e-8
     proj = vec[:, keep].T @ g
     statistic = float(np.sum(proj**2 / eig[keep]))
     dof = int(keep.sum())

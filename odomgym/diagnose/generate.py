@@ -15,7 +15,7 @@ World under one of two documented protocols and returns runs as a tracking syste
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -212,6 +212,16 @@ NOMINAL_ROBOT = RobotSpec(
 """The robot the generator's hidden effects are added to."""
 
 
+def _top1(name: str | None, result: Any) -> str:
+    from odomgym.effects import EFFECTS
+
+    noise = name is not None and EFFECTS[name].noise
+    group = result.noise_model if noise else result.systematic_effects
+    if group:
+        return str(group[0])
+    return str(result.named_effects[0]) if result.named_effects else str(result.verdict)
+
+
 def hidden_effect_trial(
     name: str | None,
     protocol: Protocol,
@@ -242,7 +252,9 @@ def hidden_effect_trial(
         "factor": factor if name else 0.0,
         "values": values,
         "verdict": result.verdict,
-        "top1": result.named_effects[0] if result.named_effects else result.verdict,
+        # The report names systematic effects before the noise model: a noise effect's trial
+        # is scored on the first noise effect named, any other on the first systematic one.
+        "top1": _top1(name, result),
         "named": result.named_effects,
         "tied": last.tied,
         "fitted": result.parameters,

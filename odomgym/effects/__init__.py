@@ -60,6 +60,7 @@ __all__ = [
     "WheelToe",
     "Wheelbase",
     "WorldHook",
+    "catalogue",
     "get_effect",
     "offset_point",
     "play_operator",
@@ -80,3 +81,9 @@ for _effect in (
 ):
     if _effect.name not in EFFECTS:
         register_effect(_effect)
+
+
+def catalogue() -> list[str]:
+    """The catalogue's effect names, in registry order: every registered effect except the
+    grammar's ``discovered`` (which only the discovery pass fills)."""
+    return [name for name in EFFECTS if name != "discovered"]
