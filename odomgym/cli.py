@@ -621,6 +621,8 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         max_rounds=args.max_rounds,
         candidates=tuple(args.candidates) if args.candidates else None,
         jobs=args.jobs or os.cpu_count() or 1,
+        discover=not args.no_discover,
+        session_frames={"auto": None, "on": True, "off": False}[args.session_frames],
     )
     out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
     _check_output(out, option="--out", folder=True, swap=True)
@@ -1196,8 +1198,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="find where a robot model and measured logs disagree and which effect is missing",
         description="Replay measured runs through the robot model, localise the disagreement, "
         "fit every catalogue effect, name the one the data support (or say the data cannot tell "
-        "them apart, or that none explains it), write the updated robot TOML, and report the "
-        "gap before and after on held-out runs.",
+        "them apart), discover terms outside the catalogue by sparse regression when structure "
+        "is left, name noise effects last, write the updated robot TOML, and report the gap "
+        "before and after and whether structure remains on held-out runs.",
     )
     diag.add_argument(
         "data",
@@ -1218,6 +1221,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-rounds", type=_count, default=8, help="most rounds of adding an effect (8)"
     )
     diag.add_argument("--candidates", nargs="+", help="effects to consider (default: all)")
+    diag.add_argument(
+        "--no-discover",
+        action="store_true",
+        help="catalogue effects only: no sparse regression over the error grammar when the "
+        "catalogue leaves structure",
+    )
+    diag.add_argument(
+        "--session-frames",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="fit a tracked-point offset and yaw misalignment per session (auto: when the runs "
+        "come from two or more sessions)",
+    )
     diag.add_argument("--jobs", type=_processes, help="worker processes (default: all cores)")
     diag.add_argument(
         "--resume",

@@ -119,13 +119,15 @@ def draw_effect(name: str, rng: np.random.Generator) -> dict[str, float]:
 
 
 def _ar1(n: int, dt: FloatArray, tau: float, rng: np.random.Generator) -> FloatArray:
-    """Unit-variance AR(1) samples with correlation time ``tau`` on steps ``dt``."""
+    """AR(1) samples with correlation time ``tau`` on steps ``dt``, scaled so that their sum
+    over many steps has the variance of as many independent unit draws: the slip is correlated
+    over ``tau`` but k keeps its meaning on long runs (variance k²|d|, Chong & Kleeman 1997)."""
     out = np.empty(n)
     x = float(rng.standard_normal())
     for i in range(n):
         rho = math.exp(-float(dt[i]) / tau)
         x = rho * x + math.sqrt(1.0 - rho * rho) * float(rng.standard_normal())
-        out[i] = x
+        out[i] = x * math.sqrt((1.0 - rho) / (1.0 + rho))
     return out
 
 

@@ -30,7 +30,7 @@ from odomgym.cli import main
 from odomgym.data.native import write_native
 from odomgym.diagnose.generate import NOMINAL_ROBOT, hidden_effect_trial
 from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
-from odomgym.effects import EFFECTS, catalogue
+from odomgym.effects import catalogue
 from odomgym.robot import RobotSpec, load_robot
 
 MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8, max_wheel_speed=0.6)

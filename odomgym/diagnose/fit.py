@@ -22,10 +22,11 @@ over candidates forms the null distribution.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,7 @@ from odomgym.runs import Run
 __all__ = [
     "CandidateFit",
     "Dataset",
+    "Joint",
     "evaluate",
     "fit_candidate",
     "fit_noise",
@@ -431,3 +433,43 @@ def max_t_test(
 def candidate_effects(exclude: Sequence[str] = ()) -> list[Effect]:
     """Every registered effect, in registry order, less ``exclude``."""
     return [e for name, e in EFFECTS.items() if name not in exclude]
+
+
+class Joint(Effect):
+    """Several systematic effects fitted as one (their parameters side by side, each named
+    ``EFFECT.PARAMETER``): the refit of every named effect after another one joined, so that
+    an effect fitted first is not left where it stood before the others explained their part.
+    Not registered; only the fit uses it."""
+
+    name = "(joint)"
+
+    def __init__(self, effects: Sequence[Effect]) -> None:
+        self.effects = list(effects)
+        self.parameters = tuple(  # type: ignore[misc]
+            dataclasses.replace(p, name=f"{e.name}.{p.name}")
+            for e in self.effects
+            for p in e.parameters
+        )
+
+    def read(self, spec: RobotSpec) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for e in self.effects:
+            out.update({f"{e.name}.{k}": v for k, v in e.read(spec).items()})
+        return out
+
+    def write(self, spec: RobotSpec, values: Mapping[str, float]) -> RobotSpec:
+        out = spec
+        for e in self.effects:
+            prefix = f"{e.name}."
+            own = {k[len(prefix) :]: v for k, v in values.items() if k.startswith(prefix)}
+            if own:
+                out = e.write(out, {**e.read(out), **own})
+        return out
+
+    def split(self, values: Mapping[str, float]) -> dict[str, dict[str, float]]:
+        """``{effect: {parameter: value}}`` of joint values."""
+        out: dict[str, dict[str, float]] = {}
+        for key, value in values.items():
+            effect, parameter = key.split(".", 1)
+            out.setdefault(effect, {})[parameter] = value
+        return out

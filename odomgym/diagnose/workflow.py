@@ -63,6 +63,7 @@ from odomgym.diagnose.experiments import separating_experiment
 from odomgym.diagnose.fit import (
     CandidateFit,
     Dataset,
+    Joint,
     candidate_effects,
     cross_validate,
     evaluate,
@@ -542,6 +543,30 @@ def _score_candidates(
     return candidates, fits
 
 
+def _refit_named(
+    data: Dataset,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    named: Sequence[str],
+    parameters: dict[str, dict[str, dict[str, float]]],
+    nuisance: Effect | None,
+) -> RobotSpec:
+    """Every named systematic effect refitted jointly (``fit.Joint``; the wheel noise as
+    nuisance beside them) once a second one has joined: each keeps its own share, not what it
+    absorbed while it was alone. ``parameters`` takes the joint values and standard errors."""
+    systematic = [EFFECTS[n] for n in named if not EFFECTS[n].noise]
+    if len(systematic) < 2:
+        return spec
+    joint = Joint(systematic)
+    fit = fit_candidate(data, spec, sensor, joint, nuisance)
+    for name, values in joint.split(fit.values).items():
+        parameters[name] = {
+            key: {"value": value, "stderr": fit.stderr.get(f"{name}.{key}", math.nan)}
+            for key, value in values.items()
+        }
+    return joint.write(spec, fit.values)
+
+
 def _backward_check(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, named: Sequence[str], alpha: float
 ) -> list[str]:
@@ -811,6 +836,7 @@ def diagnose(
         # systematic effect); the sensor noise is refitted for it. A noise effect fitted jointly
         # with a systematic partner (bumps with the distance scale) brings the partner's refit.
         spec = EFFECTS[winner.name].write(spec, winner.values)
+        spec = _refit_named(data, spec, sensor, named, parameters, nuisance)
         for partner_name in EFFECTS[winner.name].partners:
             partner = EFFECTS[partner_name]
             refit = partner.read(winner.spec)
