@@ -711,7 +711,7 @@ def diagnose(
                 report(f"round {number}: structure", 0.0)
                 lib_spec, lib_sensor, _ = fit_noise(data, spec, sensor, nuisance)
                 library = library_jacobian(data, lib_spec, lib_sensor)
-                structure = structure_test(library)
+                structure = structure_test(library, seed=cfg.seed + number)
                 if structure.p_value < 0.5 * cfg.alpha and cfg.discover and discovery is None:
                     report(f"round {number}: discovery", 0.0)
                     discovery = discover(
@@ -859,7 +859,7 @@ def diagnose(
     # The final model on runs the fit never saw: does any structure remain?
     report("held-out test", 1.0)
     held_data = Dataset.of(held_runs, cfg.checkpoint_interval)
-    held_structure = structure_test(library_jacobian(held_data, spec, sensor))
+    held_structure = structure_test(library_jacobian(held_data, spec, sensor), seed=cfg.seed)
     held_white = _consistency(held_data, spec, sensor)
     held_p = min(1.0, 2.0 * min(held_structure.p_value, held_white))
     found_anything = bool(named) or bool(discovery is not None and discovery.terms)
