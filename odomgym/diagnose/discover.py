@@ -73,6 +73,12 @@ FloatArray = NDArray[np.float64]
 
 THRESHOLDS = (3.0, 4.0, 5.0, 6.5, 8.0, 10.0, 13.0, 16.0, 20.0, 25.0, 32.0, 40.0, 50.0, 64.0)
 """STLSQ thresholds tried, in whitened units of a unit-norm column (a coefficient's noise is 1)."""
+BLOCK = 60
+"""Whitened innovations per block of the sign-flip test: 60 values are 20 checkpoints of the
+likelihood (5 s at the default 0.25 s), longer than the few samples the filter needs to absorb
+a jump, shorter than an arc or a straight, so an effect shown by a few runs still spans many
+blocks."""
+
 RIDGE = 0.1
 """STLSQ's ridge weight on unit-norm columns: it damps the directions the runs barely resolve
 (near-collinear terms such as v² and |v·ω| on arcs of one radius, whose least-squares
@@ -142,8 +148,11 @@ class StructureTest:
         statistic: g·I⁻¹·g/s² with g = Jᵀr, I = JᵀJ, s² the innovations' mean square (χ²
             with ``dof`` degrees of freedom if the innovations do not depend on any term).
         dof: rank of I.
-        p_value: the larger of the parametric and the sign-flip p-values
-            (:func:`structure_test`).
+        p_value: the larger of the parametric and the block sign-flip p-values
+            (:func:`structure_test`): is there structure at all?
+        p_consistent: the larger of the parametric and a sign-flip test of *whole runs*: is
+            the structure shared by the runs? (A noise effect differs from run to run; it may be
+            named only when this one finds nothing.)
         follows: the term whose own score is largest (what the residuals follow most).
         z: that term's standardised score g_k/√I_kk.
         scores: every term's standardised score.
@@ -157,6 +166,7 @@ class StructureTest:
     scores: dict[str, float]
     p_parametric: float = 1.0
     p_sign_flip: float = 1.0
+    p_consistent: float = 1.0
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -165,6 +175,7 @@ class StructureTest:
             "p_value": self.p_value,
             "p_parametric": self.p_parametric,
             "p_sign_flip": self.p_sign_flip,
+            "p_consistent_across_runs": self.p_consistent,
             "follows": self.follows,
             "z": self.z,
         }
@@ -180,12 +191,16 @@ def structure_test(library: Library, seed: int = 0, draws: int = 4000) -> Struct
       χ² with rank(I) degrees of freedom; T is divided by the innovations' mean square when that
       exceeds 1 (a noise model that is only roughly right — heavy-tailed bump jumps under a
       Gaussian filter — inflates the spread, which must not count as dependence);
-    * **sign flips of whole runs**: under no dependence each run's score g_j is symmetric about
-      0 and runs are independent, so flipping the signs of whole runs gives T's null
-      distribution whatever the noise within a run (exact for up to 12 runs, else ``draws``
-      random flips from ``seed``). A jump that the filter has not absorbed correlates a run's
-      innovations with whatever is constant in that run; only a dependence shared by the runs
-      survives the flips.
+    * **sign flips of blocks**: under no dependence the score of each block of :data:`BLOCK`
+      consecutive innovations is symmetric about 0 and blocks are nearly independent, so
+      flipping the signs of whole blocks gives T's null distribution whatever the shape of the
+      noise (exact for up to 12 blocks, else ``draws`` random flips from ``seed``). A heavy
+      jump that a Gaussian filter absorbs over a few samples makes the parametric test reject;
+      it stays inside one block, and only a dependence shared by many blocks survives the
+      flips;
+    * **sign flips of whole runs** (``p_consistent``): the same with runs as the units; weak
+      when an effect shows in a few runs only (its p cannot fall below 2^(1−k) for k runs),
+      robust to anything a run does on its own.
     """
     if not library.terms:
         return StructureTest(0.0, 0, 1.0, None, 0.0, {})
@@ -196,10 +211,17 @@ def structure_test(library: Library, seed: int = 0, draws: int = 4000) -> Struct
     norms = np.linalg.norm(jac, axis=0)
     scale = np.where(norms > 0, norms, 1.0)
     jac = jac / scale
-    per_run = np.stack(
+    blocks = np.stack(
+        [
+            (j[k : k + BLOCK] / scale).T @ res[k : k + BLOCK]
+            for j, res in zip(library.jacobian, library.residual, strict=True)
+            for k in range(0, len(res), BLOCK)
+        ]
+    )
+    runs = np.stack(
         [(j / scale).T @ res for j, res in zip(library.jacobian, library.residual, strict=True)]
     )
-    g = per_run.sum(axis=0)
+    g = runs.sum(axis=0)
     info = jac.T @ jac
     eig, vec = np.linalg.eigh(info)
     keep = eig > eig.max() * 1e-8
@@ -208,14 +230,9 @@ def structure_test(library: Library, seed: int = 0, draws: int = 4000) -> Struct
     statistic = float(np.sum((basis.T @ g) ** 2)) / variance
     dof = int(keep.sum())
     p_param = float(stats.chi2.sf(statistic, dof)) if dof else 1.0
-    n = per_run.shape[0]
-    if n <= 12:
-        signs = np.array(list(itertools.product((1.0, -1.0), repeat=n)))
-    else:
-        signs = np.random.default_rng(seed).choice([1.0, -1.0], size=(draws, n))
-        signs[0] = 1.0
-    null = np.sum(((signs @ per_run) @ basis) ** 2, axis=1) / variance
-    p_flip = float(np.mean(null >= statistic - 1e-9))
+    rng = np.random.default_rng(seed)
+    p_blocks = _sign_flip_p(blocks, basis, statistic * variance, rng, draws)
+    p_runs = _sign_flip_p(runs, basis, statistic * variance, rng, draws)
     diag = np.sqrt(np.maximum(np.diag(info), 1e-300))
     z = g / diag / math.sqrt(variance)
     best = int(np.argmax(np.abs(z)))
@@ -223,13 +240,28 @@ def structure_test(library: Library, seed: int = 0, draws: int = 4000) -> Struct
     return StructureTest(
         statistic,
         dof,
-        max(p_param, p_flip),
+        max(p_param, p_blocks),
         library.terms[best],
         float(z[best]),
         scores,
         p_param,
-        p_flip,
+        p_blocks,
+        max(p_param, p_runs),
     )
+
+
+def _sign_flip_p(
+    parts: FloatArray, basis: FloatArray, observed: float, rng: np.random.Generator, draws: int
+) -> float:
+    """p-value of ‖basisᵀ Σ parts‖² ≥ ``observed`` under random signs of the parts."""
+    n = parts.shape[0]
+    if n <= 12:
+        signs = np.array(list(itertools.product((1.0, -1.0), repeat=n)))
+    else:
+        signs = rng.choice([1.0, -1.0], size=(draws, n))
+        signs[0] = 1.0
+    null = np.sum(((signs @ parts) @ basis) ** 2, axis=1)
+    return float(np.mean(null >= observed * (1 - 1e-12)))
 
 
 def _stlsq(x: FloatArray, y: FloatArray, threshold: float) -> FloatArray:

@@ -236,7 +236,7 @@ class Diagnosis:
     holdout_gaps: dict[str, list[float]] = field(default_factory=dict)
     physical: dict[str, list[float]] = field(default_factory=dict)
     discovered: list[dict[str, Any]] = field(default_factory=list)
-    discovery: dict[str, Any] | None = None
+    discovery: list[dict[str, Any]] = field(default_factory=list)
     final_test: dict[str, Any] = field(default_factory=dict)
     session_frames: list[SessionFrame] = field(default_factory=list)
 
@@ -592,33 +592,37 @@ def _backward_check(
 
 
 def _with_evidence(
-    discovery: Discovery | None, runs: Sequence[Run], spec: RobotSpec
+    passes: Sequence[Discovery], runs: Sequence[Run], spec: RobotSpec
 ) -> list[dict[str, Any]]:
-    """The discovered terms, each with the binned channel data behind it
+    """The discovered terms of every discovery pass (a later pass's refit of a term replaces
+    the earlier one), each with the binned channel data behind it
     (:func:`odomgym.diagnose.discover.channel_evidence`, on the fit runs, under the model before
-    the terms joined)."""
-    if discovery is None:
-        return []
-    entries = discovery.entries()
+    the first term joined)."""
+    merged: dict[str, dict[str, Any]] = {}
+    for found in passes:
+        for entry in found.entries():
+            merged[entry["term"]] = entry
+    entries = list(merged.values())
     for entry in entries:
         entry["evidence"] = channel_evidence(runs, spec, entry["term"])
     return entries
 
 
-def _discovery_record(discovery: Discovery | None) -> dict[str, Any] | None:
-    """The discovery pass for ``report.json`` (None if the structure never called for one)."""
-    if discovery is None:
-        return None
-    return {
-        "structure": discovery.structure.as_dict(),
-        "threshold": discovery.threshold,
-        "cv_sse_by_threshold": discovery.cv_path,
-        "selected": discovery.selected,
-        "rejected": discovery.rejected,
-        "kept": discovery.terms,
-        "cv_gain": discovery.cv_gain,
-        "not_identifiable": discovery.dropped,
-    }
+def _discovery_record(passes: Sequence[Discovery]) -> list[dict[str, Any]]:
+    """Every discovery pass for ``report.json`` (empty if the structure never called for one)."""
+    return [
+        {
+            "structure": found.structure.as_dict(),
+            "threshold": found.threshold,
+            "cv_sse_by_threshold": found.cv_path,
+            "selected": found.selected,
+            "rejected": found.rejected,
+            "kept": found.terms,
+            "cv_gain": found.cv_gain,
+            "not_identifiable": found.dropped,
+        }
+        for found in passes
+    ]
 
 
 def diagnose(
@@ -683,6 +687,9 @@ def diagnose(
     folds = folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng)
     nuisance = EFFECTS.get(NUISANCE)
     discovery: Discovery | None = None
+    discovered_terms: list[str] = []
+    passes: list[Discovery] = []
+    discover_again = True
     before_discovery = spec
     systematic = [
         e.name for e in candidate_effects((NUISANCE, DISCOVERED)) if not e.noise and e.name in names
@@ -712,7 +719,7 @@ def diagnose(
                 lib_spec, lib_sensor, _ = fit_noise(data, spec, sensor, nuisance)
                 library = library_jacobian(data, lib_spec, lib_sensor)
                 structure = structure_test(library, seed=cfg.seed + number)
-                if structure.p_value < 0.5 * cfg.alpha and cfg.discover and discovery is None:
+                if structure.p_value < 0.5 * cfg.alpha and cfg.discover and discover_again:
                     report(f"round {number}: discovery", 0.0)
                     discovery = discover(
                         data,
@@ -724,11 +731,14 @@ def diagnose(
                         library=library,
                         structure=structure,
                     )
+                    passes.append(discovery)
+                    discover_again = bool(discovery.terms)
                     if discovery.terms and discovery.fit is not None:
                         stopped = "discovered"
                         break
-                if structure.p_value < 0.5 * cfg.alpha:
-                    stopped = "structured"  # no noise effect may stand in for structure
+                if structure.p_consistent < 0.5 * cfg.alpha:
+                    # Structure shared by the runs: no noise effect may stand in for it.
+                    stopped = "structured"
                     break
             effects = [EFFECTS[n] for n in stage_names]
             if not effects:
@@ -754,9 +764,11 @@ def diagnose(
         consistency = _consistency(data, base_spec, base_sensor)
         structure_info = structure.as_dict() if structure is not None else None
         if stopped == "discovered" and discovery is not None and discovery.fit is not None:
-            before_discovery = spec
+            if not discovered_terms:
+                before_discovery = spec
             effect = DiscoveredTerms(discovery.terms)
             spec = effect.write(spec, discovery.fit.values)
+            discovered_terms += [t for t in discovery.terms if t not in discovered_terms]
             spec, sensor, _ = fit_noise(data, spec, sensor)
             rounds.append(
                 Round(
@@ -862,7 +874,7 @@ def diagnose(
     held_structure = structure_test(library_jacobian(held_data, spec, sensor), seed=cfg.seed)
     held_white = _consistency(held_data, spec, sensor)
     held_p = min(1.0, 2.0 * min(held_structure.p_value, held_white))
-    found_anything = bool(named) or bool(discovery is not None and discovery.terms)
+    found_anything = bool(named) or bool(discovered_terms)
     last = rounds[-1].verdict if rounds else "none"
     if not found_anything:
         verdict = last
@@ -917,8 +929,8 @@ def diagnose(
         rounds=rounds,
         candidates=all_candidates,
         findings=findings,
-        discovered=_with_evidence(discovery, fit_runs, before_discovery),
-        discovery=_discovery_record(discovery),
+        discovered=_with_evidence(passes, fit_runs, before_discovery),
+        discovery=_discovery_record(passes),
         final_test=final_test,
         session_frames=frames,
         fit_runs=[_run_id(runs[j], j) for j in fit_index],
