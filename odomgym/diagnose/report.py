@@ -136,13 +136,13 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
             "| session | runs | tracked point dx [mm] | dy [mm] | yaw misalignment [°] |",
             "|---|---|---|---|---|",
         ]
-        for f in d.session_frames:
+        for frame in d.session_frames:
             lines.append(
-                f"| {f.session} | {f.runs} | {1e3 * f.dx:.2f} ± {1e3 * f.dx_se:.2f} | "
-                f"{1e3 * f.dy:.2f} ± {1e3 * f.dy_se:.2f} | {math.degrees(f.yaw):.3f} ± "
-                f"{math.degrees(f.yaw_se):.3f} |"
+                f"| {frame.session} | {frame.runs} | {1e3 * frame.dx:.2f} ± "
+                f"{1e3 * frame.dx_se:.2f} | {1e3 * frame.dy:.2f} ± {1e3 * frame.dy_se:.2f} | "
+                f"{math.degrees(frame.yaw):.3f} ± {math.degrees(frame.yaw_se):.3f} |"
             )
-        yaws = np.array([math.degrees(f.yaw) for f in d.session_frames])
+        yaws = np.array([math.degrees(frame.yaw) for frame in d.session_frames])
         lines += [
             "",
             f"Common to all sessions: a yaw misalignment of {yaws.mean():.3f}° (sessions spread "
