@@ -117,9 +117,12 @@ def library_jacobian(
         effect = DiscoveredTerms([name])
         current = effect.read(spec)[name]
         h = _STEP * term_by_name(name).scale
-        _, plus = _whitened_stack(data, effect.write(spec, {name: current + h}), sensor)
-        _, minus = _whitened_stack(data, effect.write(spec, {name: current - h}), sensor)
-        per_run = [(p - m) / (2.0 * h) for p, m in zip(plus, minus, strict=True)]
+        bound = effect.parameters[0]
+        high = min(current + h, bound.high)
+        low = max(current - h, bound.low)
+        _, plus = _whitened_stack(data, effect.write(spec, {name: high}), sensor)
+        _, minus = _whitened_stack(data, effect.write(spec, {name: low}), sensor)
+        per_run = [(p - m) / (high - low) for p, m in zip(plus, minus, strict=True)]
         stacked = np.concatenate(per_run)
         norm = float(np.linalg.norm(stacked))
         residual = stacked.copy()
@@ -417,6 +420,9 @@ def discover(
             value = fit.values[name] - effect.read(spec)[name]
             zval = abs(value) / err if err > 0 and math.isfinite(err) else 0.0
             p[name] = min(1.0, family * 2.0 * float(stats.norm.sf(zval)))
+            limits = next(q for q in effect.parameters if q.name == name)
+            if fit.values[name] in (limits.low, limits.high):
+                p[name] = 1.0  # at the edge of its range: a stand-in, not a measurement
         worst = max(terms, key=lambda n: p[n])
         if p[worst] < 0.5 * alpha:
             break
