@@ -22,6 +22,7 @@ misaligned the same way every time: pose logs cannot tell).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -150,16 +151,6 @@ def correct_runs(runs: Sequence[Run], frames: Sequence[SessionFrame]) -> list[Ru
         pose[:, 0] -= c * frame.dx - s * frame.dy
         pose[:, 1] -= s * frame.dx + c * frame.dy
         pose[:, 2] = theta
-        out.append(
-            Run(
-                run.kind,
-                run.time,
-                run.counts,
-                pose,
-                run.direction,
-                run.side,
-                run.source,
-                {**run.meta, "session_frame": frame.as_dict()},
-            )
-        )
+        meta = {**run.meta, "session_frame": frame.as_dict()}
+        out.append(dataclasses.replace(run, true_pose=pose, meta=meta))
     return out
