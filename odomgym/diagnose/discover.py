@@ -267,6 +267,17 @@ def _sign_flip_p(
     return float(np.mean(null >= observed * (1 - 1e-12)))
 
 
+def _stlsq_normal(gram: FloatArray, moment: FloatArray, threshold: float) -> FloatArray:
+    """:func:`_stlsq` on the system with Gram matrix ``gram`` (XᵀX) and moments ``moment``
+    (Xᵀy): R with RᵀR = XᵀX (a tiny diagonal jitter keeps it positive definite) and z with
+    Rᵀz = Xᵀy give ‖y − Xw‖² = ‖z − Rw‖² + const for every w."""
+    k = gram.shape[0]
+    jitter = 1e-12 * max(float(np.trace(gram)), 1e-300) / max(k, 1)
+    upper = np.linalg.cholesky(gram + jitter * np.eye(k)).T
+    z = np.linalg.solve(upper.T, moment)
+    return _stlsq(upper, z, threshold)
+
+
 def _stlsq(x: FloatArray, y: FloatArray, threshold: float) -> FloatArray:
     """PySINDy's STLSQ on (x, y): coefficients with those below ``threshold`` set to 0."""
     import pysindy as ps
@@ -384,26 +395,32 @@ def discover(
     norms = np.where(norms > 0, norms, 1.0)
     xs = [j / norms for j in lib.jacobian]
     ys = [-r for r in lib.residual]
-    path: dict[str, float] = {"none": float(sum(float(y @ y) for y in ys))}
+    # Least squares (ridge included) depends on the rows only through XᵀX and Xᵀy: each run's
+    # Gram matrix and moment vector are summed per fold and STLSQ runs on the equivalent
+    # K-row system (Cholesky factor R, Rᵀz = Xᵀy) — the same coefficients as on every row,
+    # at a cost that no longer grows with the length of the logs.
+    grams = [x.T @ x for x in xs]
+    moments = [x.T @ y for x, y in zip(xs, ys, strict=True)]
+    squares = [float(y @ y) for y in ys]
+    path: dict[str, float] = {"none": float(sum(squares))}
     for threshold in THRESHOLDS:
         sse = 0.0
         for fold in folds:
             held = set(fold)
             train = [j for j in range(len(xs)) if j not in held]
-            coef = _stlsq(
-                np.concatenate([xs[j] for j in train]),
-                np.concatenate([ys[j] for j in train]),
+            coef = _stlsq_normal(
+                np.sum([grams[j] for j in train], axis=0),
+                np.sum([moments[j] for j in train], axis=0),
                 threshold,
             )
             for j in fold:
-                e = ys[j] - xs[j] @ coef
-                sse += float(e @ e)
+                sse += squares[j] - 2.0 * float(coef @ moments[j]) + float(coef @ grams[j] @ coef)
         path[f"{threshold:g}"] = sse
     best_key = min(path, key=lambda k: path[k])
     if best_key == "none":
         return Discovery([], None, None, path, [], {}, 0.0, lib.dropped, test)
     threshold = float(best_key)
-    coef = _stlsq(np.concatenate(xs), np.concatenate(ys), threshold)
+    coef = _stlsq_normal(np.sum(grams, axis=0), np.sum(moments, axis=0), threshold)
     selected = [lib.terms[k] for k in np.flatnonzero(coef)]
     if not selected:
         return Discovery([], None, threshold, path, [], {}, 0.0, lib.dropped, test)
