@@ -274,7 +274,7 @@ def _stlsq_normal(gram: FloatArray, moment: FloatArray, threshold: float) -> Flo
     k = gram.shape[0]
     jitter = 1e-12 * max(float(np.trace(gram)), 1e-300) / max(k, 1)
     upper = np.linalg.cholesky(gram + jitter * np.eye(k)).T
-    z = np.linalg.solve(upper.T, moment)
+    z: FloatArray = np.asarray(np.linalg.solve(upper.T, moment), dtype=np.float64)
     return _stlsq(upper, z, threshold)
 
 
