@@ -33,33 +33,22 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-CATALOGUE_FORMS = [
-    "wheel_diameter_ratio",
-    "wheelbase",
-    "distance_scale",
-    "wheel_toe",
-    "turn_skid",
-    "backlash",
-    "floor_bumps",
-    "floor_roughness",
-]
-OUTSIDE = [
-    "speed_shrink",
-    "out_of_round",
-    "sideslip",
-    "ratio_drift",
-    "traction_slip",
-    "spin_scrub",
-    "reverse_scale",
-]
-BEYOND = ["three_lobes"]
+from alien_robot import ALIEN_EFFECTS, EXPECTED_TERMS
+
+from odomgym.effects import catalogue
+
+# The generator's effects, grouped: its forms of catalogue effects, those outside the catalogue
+# (each with the grammar terms that describe it), and those outside the grammar too.
+CATALOGUE_FORMS = [n for n in ALIEN_EFFECTS if n in catalogue()]
+OUTSIDE = list(EXPECTED_TERMS)
+BEYOND = [n for n in ALIEN_EFFECTS if n not in CATALOGUE_FORMS and n not in OUTSIDE]
 PAIRS = ["wheelbase+out_of_round", "wheel_diameter_ratio+sideslip"]
 CLASSES = [*CATALOGUE_FORMS, *OUTSIDE, *BEYOND, *PAIRS, "none"]
 
 
 def trial(job: tuple[str, int]) -> dict[str, Any]:
     """One blind trial of class ``job[0]`` with seed ``job[1]``."""
-    from alien_robot import EXPECTED_TERMS, draw_effect, generate_session
+    from alien_robot import draw_effect, generate_session
 
     from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
     from odomgym.effects import EFFECTS

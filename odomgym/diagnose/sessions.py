@@ -87,12 +87,10 @@ def _spec_for(spec: RobotSpec, geometry: FloatArray, frame: FloatArray) -> Robot
     return EFFECTS["wheel_toe"].write(out, {"angle": -delta})
 
 
-def fit_session_frames(
-    data: Dataset, spec: RobotSpec, sensor: SensorNoise
-) -> tuple[list[SessionFrame], list[str]]:
+def fit_session_frames(data: Dataset, spec: RobotSpec, sensor: SensorNoise) -> list[SessionFrame]:
     """Per-session (dx, dy, δ) fitted jointly with E_d, E_b, E_s on ``data`` (module docstring).
 
-    Returns the frames (one per session, in order of first appearance) and each run's session.
+    Returns the frames, one per session, in order of first appearance.
     """
     labels = sessions_of(data.runs)
     order = list(dict.fromkeys(labels))
@@ -132,7 +130,7 @@ def fit_session_frames(
                 float(e[2]),
             )
         )
-    return frames, labels
+    return frames
 
 
 def correct_runs(runs: Sequence[Run], frames: Sequence[SessionFrame]) -> list[Run]:

@@ -671,7 +671,7 @@ def diagnose(
     if use_frames:
         # Per-session tracked point and yaw: fitted on the fit runs, removed from every run.
         report("session frames", 0.0)
-        frames, _ = fit_session_frames(data, spec, sensor)
+        frames = fit_session_frames(data, spec, sensor)
         runs = correct_runs(runs, frames)
         fit_runs = [runs[j] for j in fit_index]
         held_runs = [runs[j] for j in held_index]
@@ -686,10 +686,7 @@ def diagnose(
     parameters: dict[str, dict[str, dict[str, float]]] = {}
     folds = folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng)
     nuisance = EFFECTS.get(NUISANCE)
-    discovery: Discovery | None = None
-    discovered_terms: list[str] = []
     passes: list[Discovery] = []
-    discover_again = True
     before_discovery = spec
     systematic = [
         e.name for e in candidate_effects((NUISANCE, DISCOVERED)) if not e.noise and e.name in names
@@ -719,9 +716,11 @@ def diagnose(
                 lib_spec, lib_sensor, _ = fit_noise(data, spec, sensor, nuisance)
                 library = library_jacobian(data, lib_spec, lib_sensor)
                 structure = structure_test(library, seed=cfg.seed + number)
-                if structure.p_value < 0.5 * cfg.alpha and cfg.discover and discover_again:
+                # Discovery runs again only after a pass that found terms.
+                again = not passes or bool(passes[-1].terms)
+                if structure.p_value < 0.5 * cfg.alpha and cfg.discover and again:
                     report(f"round {number}: discovery", 0.0)
-                    discovery = discover(
+                    latest = discover(
                         data,
                         lib_spec,
                         lib_sensor,
@@ -731,9 +730,8 @@ def diagnose(
                         library=library,
                         structure=structure,
                     )
-                    passes.append(discovery)
-                    discover_again = bool(discovery.terms)
-                    if discovery.terms and discovery.fit is not None:
+                    passes.append(latest)
+                    if latest.terms and latest.fit is not None:
                         stopped = "discovered"
                         break
                 if structure.p_consistent < 0.5 * cfg.alpha:
@@ -763,12 +761,10 @@ def diagnose(
         all_candidates.extend(round_candidates)
         consistency = _consistency(data, base_spec, base_sensor)
         structure_info = structure.as_dict() if structure is not None else None
-        if stopped == "discovered" and discovery is not None and discovery.fit is not None:
-            if not discovered_terms:
+        if stopped == "discovered" and passes[-1].fit is not None:
+            if not spec.effect_values(DISCOVERED):
                 before_discovery = spec
-            effect = DiscoveredTerms(discovery.terms)
-            spec = effect.write(spec, discovery.fit.values)
-            discovered_terms += [t for t in discovery.terms if t not in discovered_terms]
+            spec = DiscoveredTerms(passes[-1].terms).write(spec, passes[-1].fit.values)
             spec, sensor, _ = fit_noise(data, spec, sensor)
             rounds.append(
                 Round(
@@ -874,7 +870,7 @@ def diagnose(
     held_structure = structure_test(library_jacobian(held_data, spec, sensor), seed=cfg.seed)
     held_white = _consistency(held_data, spec, sensor)
     held_p = min(1.0, 2.0 * min(held_structure.p_value, held_white))
-    found_anything = bool(named) or bool(discovered_terms)
+    found_anything = bool(named) or bool(spec.effect_values(DISCOVERED))
     last = rounds[-1].verdict if rounds else "none"
     if not found_anything:
         verdict = last
