@@ -438,7 +438,7 @@ def discover(
             zval = abs(value) / err if err > 0 and math.isfinite(err) else 0.0
             p[name] = min(1.0, family * 2.0 * float(stats.norm.sf(zval)))
             limits = next(q for q in effect.parameters if q.name == name)
-            if fit.values[name] in (limits.low, limits.high):
+            if limits.at_limit(fit.values[name]):
                 p[name] = 1.0  # at the edge of its range: a stand-in, not a measurement
         worst = max(terms, key=lambda n: p[n])
         if p[worst] < 0.5 * alpha:

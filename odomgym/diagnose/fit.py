@@ -25,8 +25,10 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 import re
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,6 +38,7 @@ from scipy.optimize import least_squares, minimize
 from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_likelihood
 from odomgym.diagnose.replay import Replay, replay_run
 from odomgym.effects import EFFECTS, Effect
+from odomgym.errors import SpecError
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
@@ -91,32 +94,92 @@ def evaluate(
     whitened: bool = True,
     replays: list[Replay] | None = None,
 ) -> Evaluation:
-    """Replay every run through ``spec`` and filter it."""
-    reps = replays if replays is not None else [replay_run(r, spec) for r in data.runs]
-    logs = np.empty(len(data))
-    white: list[FloatArray] = []
-    for j, (run, rep, mask) in enumerate(zip(data.runs, reps, data.masks, strict=True)):
-        logs[j] = run_likelihood(run, rep, spec, sensor, mask).loglik
-        if whitened:
-            white.append(run_likelihood(run, rep, spec, sensor, mask, gaussian_jumps=True).whitened)
-    return Evaluation(logs, white, reps)
+    """Replay every run through ``spec`` and filter it.
+
+    The runs are independent, and the filter (compiled, releasing the GIL) takes most of the
+    time, so they are shared among :func:`_threads` threads; each run's numbers do not depend on
+    which thread computed them, and they are gathered in run order (bit-identical results)."""
+
+    def one(j: int) -> tuple[Replay, float, FloatArray | None]:
+        run, mask = data.runs[j], data.masks[j]
+        rep = replays[j] if replays is not None else replay_run(run, spec)
+        loglik = run_likelihood(run, rep, spec, sensor, mask).loglik
+        white = (
+            run_likelihood(run, rep, spec, sensor, mask, gaussian_jumps=True).whitened
+            if whitened
+            else None
+        )
+        return rep, loglik, white
+
+    def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
+        return [one(j) for j in index]
+
+    pool = _pool()
+    n = len(data)
+    if pool is None or n < 2:
+        results = chunk(range(n))
+    else:  # one contiguous share per thread: few hand-overs of the GIL
+        count = pool._max_workers
+        shares = [range(n * k // count, n * (k + 1) // count) for k in range(count)]
+        results = [r for part in pool.map(chunk, shares) for r in part]
+    logs = np.array([r[1] for r in results], dtype=float)
+    white = [r[2] for r in results if r[2] is not None]
+    return Evaluation(logs, white, [r[0] for r in results])
+
+
+def _threads() -> int:
+    """Threads per process for :func:`evaluate`: ``ODOMGYM_THREADS`` if set, else the CPU count.
+
+    Why threads inside the worker processes of the candidate pool: the candidates of a round
+    take very different times (a wheel-jump fit ~10× a systematic one), so the last of them
+    runs alone on one core while the other idles; threads let it use both. When every worker
+    is busy the threads merely share the cores."""
+    raw = os.environ.get("ODOMGYM_THREADS", "")
+    try:
+        return max(1, int(raw)) if raw else max(1, os.cpu_count() or 1)
+    except ValueError:
+        raise SpecError(f"ODOMGYM_THREADS must be a whole number, got {raw!r}") from None
+
+
+_POOL: tuple[int, ThreadPoolExecutor | None] | None = None
+
+
+def _pool() -> ThreadPoolExecutor | None:
+    """This process's thread pool for :func:`evaluate` (``None``: one thread); created on first
+    use, so a forked worker makes its own rather than inheriting its parent's threads."""
+    global _POOL
+    pid = os.getpid()
+    if _POOL is None or _POOL[0] != pid:
+        count = _threads()
+        _POOL = (
+            pid,
+            ThreadPoolExecutor(count, thread_name_prefix="odomgym-eval") if count > 1 else None,
+        )
+    return _POOL[1]
 
 
 def _noise_vector(
-    spec: RobotSpec, sensor: SensorNoise, effects: Sequence[Effect]
+    spec: RobotSpec, sensor: SensorNoise, effects: Sequence[Effect], *, at_current: bool = False
 ) -> tuple[
     FloatArray, FloatArray, FloatArray, Callable[[FloatArray], tuple[RobotSpec, SensorNoise]]
 ]:
     """Log-parametrisation of the sensor σ and the noise effects' parameters (floors at a tenth
     of their scale, so 'absent' is approached continuously; ceilings at the parameters' own
-    upper limits); returns start, lower and upper bounds and the map back to (spec, sensor)."""
+    upper limits); returns start, lower and upper bounds and the map back to (spec, sensor).
+
+    The start is each parameter's current value, raised to its scale when below it (a fresh
+    fit: a value near the floor is a flat place to start from) unless ``at_current``: then the
+    current value itself (within the bounds), i.e. the point of an existing fit — for a warm
+    restart and for derivatives taken at the fit."""
     start = [math.log(max(sensor.position, _MIN_SIGMA)), math.log(max(sensor.heading, _MIN_SIGMA))]
     low = [math.log(_MIN_SIGMA)] * 2
     high = [0.0, 0.0]  # σ < 1 m, 1 rad
     for effect in effects:
         current = effect.read(spec)
         for p in effect.parameters:
-            start.append(math.log(max(current[p.name], p.scale)))
+            value = current[p.name]
+            floor = 0.1 * p.scale if at_current else p.scale
+            start.append(math.log(min(p.high, max(value, floor))))
             low.append(math.log(0.1 * p.scale))
             high.append(math.log(p.high))
 
@@ -147,18 +210,25 @@ def fit_noise(
     spec: RobotSpec,
     sensor: SensorNoise,
     *effects: Effect | None,
+    warm: bool = False,
 ) -> tuple[RobotSpec, SensorNoise, float]:
     """Maximum-likelihood sensor σ (and the noise parameters of ``effects``); returns the spec,
-    the sensor noise and the total log-likelihood."""
+    the sensor noise and the total log-likelihood.
+
+    ``warm``: ``spec`` and ``sensor`` already hold a fit of the same effects to nearly the same
+    model (the joint refits of :func:`fit_candidate`): start exactly there, without the
+    multi-start of a fresh fit."""
     chosen = [e for e in effects if e is not None]
     reps = None if _moves_mean(chosen) else [replay_run(r, spec) for r in data.runs]
-    x0, low, high, build = _noise_vector(spec, sensor, chosen)
+    x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
 
     def objective(x: FloatArray) -> float:
         s, n = build(x)
         return -float(evaluate(data, s, n, whitened=False, replays=reps).loglik.sum())
 
-    start = _best_start(objective, np.clip(x0, low, high), low, high, spec, chosen)
+    start = np.clip(x0, low, high)
+    if not warm:
+        start = _best_start(objective, start, low, high, spec, chosen)
     result = minimize(
         objective,
         start,
@@ -213,7 +283,7 @@ def noise_curvature(
     """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
     log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
     reps = None if _moves_mean(effects) else [replay_run(r, spec) for r in data.runs]
-    x0, _, _, build = _noise_vector(spec, sensor, effects)
+    x0, _, _, build = _noise_vector(spec, sensor, effects, at_current=True)
     step = 0.05
 
     def per_run(x: FloatArray) -> FloatArray:
@@ -281,6 +351,8 @@ class CandidateFit:
     loglik: FloatArray  # per run, at the full fit
     cv_loglik: FloatArray = field(default_factory=lambda: np.zeros(0))  # per run, held out
     stderr: dict[str, float] = field(default_factory=dict)
+    stderr_runs: dict[str, float] = field(default_factory=dict)  # run-clustered (sandwich)
+    stderr_sessions: dict[str, float] = field(default_factory=dict)  # session-clustered
     jacobian: list[FloatArray] = field(default_factory=list)  # per run (m, p), whitened
     whitened: list[FloatArray] = field(default_factory=list)  # per run (m,)
 
@@ -316,9 +388,15 @@ def fit_candidate(
             # Joint fit: the partner's mean parameters by least squares at the noise fit, then
             # the noise again (twice), so the noise effect carries no systematic part.
             for _ in range(2):
+                before = partner.read(current_spec)
                 current_spec = _least_squares_step(data, current_spec, current_sensor, partner)
+                after = partner.read(current_spec)
+                if all(
+                    abs(after[q.name] - before[q.name]) < 0.01 * q.scale for q in partner.parameters
+                ):
+                    break  # converged: the partner stayed put, so would the noise fit
                 current_spec, current_sensor, _ = fit_noise(
-                    data, current_spec, current_sensor, effect, nuisance
+                    data, current_spec, current_sensor, effect, nuisance, warm=True
                 )
         ev = evaluate(data, current_spec, current_sensor, whitened=False)
         return CandidateFit(
@@ -340,7 +418,14 @@ def fit_candidate(
 
 def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
     """Per-run whitened residuals and Jacobians at the fit (central differences), and the
-    parameters' standard errors from the Gauss–Newton curvature."""
+    parameters' standard errors: from the Gauss–Newton curvature (``stderr``: right when the
+    whitened innovations are independent, as the noise model says) and run-clustered
+    (``stderr_runs``: the sandwich I⁻¹·(Σ_runs g·gᵀ)·I⁻¹·G/(G−1) with g = Jᵀw each run's score,
+    Liang & Zeger 1986), which stays right when samples within a run are correlated by
+    something the model lacks — on real data the honest one to compare two data sets by — and
+    session-clustered (``stderr_sessions``, the same with each session's runs summed into one
+    score; NaN with fewer than two sessions), which also holds when the robot itself changed
+    between sessions (tyre wear, load, floor)."""
     u0, _, _, build = _systematic_vector(fit.spec, effect)
     _, base = _whitened_stack(data, fit.spec, fit.sensor)
     columns: list[list[FloatArray]] = [[] for _ in data.runs]
@@ -356,11 +441,30 @@ def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
     fit.jacobian = [np.stack(c, axis=1) for c in columns]
     info = sum(j.T @ j for j in fit.jacobian)
     try:
-        cov = np.linalg.inv(info)
+        cov: FloatArray = np.asarray(np.linalg.inv(info), dtype=float)
     except np.linalg.LinAlgError:
         cov = np.full((len(u0), len(u0)), np.inf)
+    scores = np.array([j.T @ w for j, w in zip(fit.jacobian, base, strict=True)])
+    by_run = _clustered(cov, scores, list(range(len(scores))))
+    by_session = _clustered(cov, scores, [str(r.meta.get("session", "")) for r in data.runs])
     for k, p in enumerate(effect.parameters):
         fit.stderr[p.name] = float(math.sqrt(max(cov[k, k], 0.0)) * p.scale)
+        fit.stderr_runs[p.name] = float(math.sqrt(max(by_run[k, k], 0.0)) * p.scale)
+        fit.stderr_sessions[p.name] = float(math.sqrt(max(by_session[k, k], 0.0)) * p.scale)
+
+
+def _clustered(cov: FloatArray, scores: FloatArray, labels: Sequence[object]) -> FloatArray:
+    """Cluster-robust covariance cov·(Σ_c s_c·s_cᵀ)·cov·G/(G−1), s_c the summed scores of a
+    cluster (Liang & Zeger 1986); NaN with fewer than two clusters."""
+    groups: dict[object, FloatArray] = {}
+    for label, score in zip(labels, scores, strict=True):
+        groups[label] = groups.get(label, 0.0) + score
+    count = len(groups)
+    if count < 2 or not np.all(np.isfinite(cov)):
+        return np.full_like(cov, math.nan)
+    summed = np.array(list(groups.values()))
+    out: FloatArray = cov @ (summed.T @ summed) @ cov * (count / (count - 1))
+    return out
 
 
 def strata(runs: Sequence[Run]) -> dict[str, list[int]]:
@@ -406,7 +510,7 @@ def cross_validate(
         # limited to a factor e^±1; the held-out runs are then evaluated exactly there.
         chosen = [effect] + ([nuisance] if nuisance is not None and nuisance is not effect else [])
         _, grad, hess = noise_curvature(data, fit.spec, fit.sensor, chosen)
-        x0, _, _, build = _noise_vector(fit.spec, fit.sensor, chosen)
+        x0, _, _, build = _noise_vector(fit.spec, fit.sensor, chosen, at_current=True)
         for fold in folds:
             held = set(fold)
             train = [j for j in range(len(data)) if j not in held]

@@ -96,19 +96,21 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
         lines += [
             f"## {title}",
             "",
-            "| effect (in the order added) | parameter | value | standard error |",
-            "|---|---|---|---|",
+            "| effect (in the order added) | parameter | value | standard error "
+            "| run-clustered | session-clustered |",
+            "|---|---|---|---|---|---|",
         ]
         for name in group:
-            limits = {p.name: (p.low, p.high) for p in EFFECTS[name].parameters}
+            limits = {p.name: p for p in EFFECTS[name].parameters}
             for key, entry in d.parameters[name].items():
                 value = entry["value"]
-                edge = value in limits.get(key, ())
+                edge = key in limits and limits[key].at_limit(value)
                 if edge:
                     bounded.append(f"{name}.{key}")
                 lines.append(
                     f"| {name} | {key} | {value:.6g}{' (bound)' if edge else ''} | "
-                    f"{entry['stderr']:.2g} |"
+                    f"{entry['stderr']:.2g} | {entry.get('stderr_runs', math.nan):.2g} | "
+                    f"{entry.get('stderr_sessions', math.nan):.2g} |"
                 )
         lines.append("")
     if d.discovered:

@@ -561,7 +561,12 @@ def _refit_named(
     fit = fit_candidate(data, spec, sensor, joint, nuisance)
     for name, values in joint.split(fit.values).items():
         parameters[name] = {
-            key: {"value": value, "stderr": fit.stderr.get(f"{name}.{key}", math.nan)}
+            key: {
+                "value": value,
+                "stderr": fit.stderr.get(f"{name}.{key}", math.nan),
+                "stderr_runs": fit.stderr_runs.get(f"{name}.{key}", math.nan),
+                "stderr_sessions": fit.stderr_sessions.get(f"{name}.{key}", math.nan),
+            }
             for key, value in values.items()
         }
     return joint.write(spec, fit.values)
@@ -825,7 +830,12 @@ def diagnose(
         if winner.name not in named:
             named.append(winner.name)
         parameters[winner.name] = {
-            key: {"value": value, "stderr": winner.stderr.get(key, math.nan)}
+            key: {
+                "value": value,
+                "stderr": winner.stderr.get(key, math.nan),
+                "stderr_runs": winner.stderr_runs.get(key, math.nan),
+                "stderr_sessions": winner.stderr_sessions.get(key, math.nan),
+            }
             for key, value in winner.values.items()
         }
         rounds.append(
@@ -851,7 +861,7 @@ def diagnose(
             spec = partner.write(spec, refit)
             if partner_name in parameters:
                 parameters[partner_name] = {
-                    key: {"value": value, "stderr": parameters[partner_name][key]["stderr"]}
+                    key: {**parameters[partner_name][key], "value": value}
                     for key, value in refit.items()
                 }
         spec, sensor, _ = fit_noise(data, spec, sensor)

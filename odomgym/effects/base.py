@@ -69,6 +69,13 @@ class Parameter:
     scale: float
     doc: str = ""
 
+    def at_limit(self, value: float) -> bool:
+        """True if ``value`` sits on ``low`` or ``high`` (within a millionth of ``scale``: a fit
+        clipped to a limit comes back through a change of units, not always bit-exact) — a fit
+        that ran into a limit is a stand-in for something else, not a measurement."""
+        tolerance = 1e-6 * self.scale
+        return abs(value - self.low) <= tolerance or abs(value - self.high) <= tolerance
+
 
 class Effect:
     """Base class of the catalogue's entries; subclasses set the class attributes and override
