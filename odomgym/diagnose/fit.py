@@ -46,6 +46,7 @@ __all__ = [
     "CandidateFit",
     "Dataset",
     "Joint",
+    "close_thread_pool",
     "evaluate",
     "fit_candidate",
     "fit_noise",
@@ -142,6 +143,15 @@ def _threads() -> int:
 
 
 _POOL: tuple[int, ThreadPoolExecutor | None] | None = None
+
+
+def close_thread_pool() -> None:
+    """Stop this process's evaluation threads (before a fork: a child must not inherit threads
+    that may hold a lock); the next :func:`evaluate` starts new ones."""
+    global _POOL
+    if _POOL is not None and _POOL[1] is not None:
+        _POOL[1].shutdown(wait=True)
+    _POOL = None
 
 
 def _pool() -> ThreadPoolExecutor | None:

@@ -65,6 +65,7 @@ from odomgym.diagnose.fit import (
     Dataset,
     Joint,
     candidate_effects,
+    close_thread_pool,
     cross_validate,
     evaluate,
     fit_candidate,
@@ -495,6 +496,8 @@ def _score_candidates(
 
     if cfg.jobs > 1 and len(todo) > 1 and "fork" in mp.get_all_start_methods():
         # Forked workers share the registry (user effects included) and the compiled kernels.
+        # No thread of this process's evaluation pool may be alive across the fork.
+        close_thread_pool()
         pool = ProcessPoolExecutor(cfg.jobs, mp_context=mp.get_context("fork"))
         try:
             # Each fit is recorded as soon as it is done, in whatever order they finish.
