@@ -51,6 +51,9 @@ from the corrections IPEC makes during straight travel on a smooth floor.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -68,7 +71,40 @@ from odomgym.internal import (
 )
 from odomgym.odometry import wrap_angle
 
-__all__ = ["IPEC", "estimate_wheel_diameter_ratio"]
+__all__ = ["CONFIGURATIONS", "IPEC", "estimate_wheel_diameter_ratio", "ipec_configuration"]
+
+
+CONFIGURATIONS: dict[str, dict[str, object]] = {
+    "paper": {"heading": "current", "translation_correction": True},
+    "recommended": {
+        "heading": "midpoint",
+        "translation_correction": True,
+        "translation_gate": "one count",
+        "straight_only": True,
+    },
+    "heading-only": {"heading": "midpoint", "translation_correction": False},
+}
+"""Named IPEC configurations. ``paper``: Eqs. 9–16 as printed (Eq. 9 along the orientation at
+the end of the interval; Eq. 15 whenever Δ_A ≠ 0). ``recommended``: Eq. 9 along the mid-interval
+heading, Eq. 15 only for a correction of at least one count of the rotary encoder while truck A
+drives straight. ``heading-only``: the mid-interval heading without Eq. 15 (the paper: it has
+"only minimal effect on the overall accuracy", §4.2). ``docs/clapper.md`` compares them."""
+
+
+def ipec_configuration(
+    name: str, rotary_resolution: float = 2.0 * np.pi / 1024
+) -> Callable[[ArrayLike], IPEC]:
+    """An estimator factory (wheelbases (N, 2) → :class:`IPEC`) for the configuration ``name``
+    of :data:`CONFIGURATIONS`; ``rotary_resolution`` [rad] is one count of the vehicle's rotary
+    encoders (the ``recommended`` gate; default the CLAPPER's 10 bits)."""
+    if name not in CONFIGURATIONS:
+        raise ValueError(
+            f"unknown IPEC configuration {name!r}; choose from {', '.join(CONFIGURATIONS)}"
+        )
+    options = dict(CONFIGURATIONS[name])
+    if options.get("translation_gate") == "one count":
+        options["translation_gate"] = float(rotary_resolution)
+    return functools.partial(IPEC, **options)  # type: ignore[arg-type]
 
 
 class IPEC:
@@ -84,6 +120,15 @@ class IPEC:
             ``"midpoint"``.
         translation_correction: apply Eqs. 14–15 (the composite translational correction of
             truck A) [default True].
+        translation_gate: Eq. 15 fires only when |Δ_A| is at least this [rad] (default 0:
+            whenever Δ_A ≠ 0, as printed). With quantised readings Δ_A is (nearly) a whole
+            number of counts, and a count that flips because ψ drifted across a step boundary
+            looks like a bump: one count (``2π/2^bits``) is the gate of the ``recommended``
+            configuration, which with ``straight_only`` keeps the printed rule where it holds.
+        straight_only: Eq. 15 fires only while truck A drives straight (its dead-reckoned turn
+            in the interval is under ``translation_gate``, both wheels rolling the same way):
+            the paper derives it for a bump under one wheel in straight travel (§4.2, Fig. 5);
+            in a turn every count change of ψ_A would move A backwards.
     """
 
     def __init__(
@@ -92,10 +137,17 @@ class IPEC:
         *,
         heading: Heading = "current",
         translation_correction: bool = True,
+        translation_gate: float = 0.0,
+        straight_only: bool = False,
     ) -> None:
         self._wheelbase = check_wheelbase(wheelbase)
         self.heading: Heading = check_heading(heading)
         self.translation_correction = bool(translation_correction)
+        gate = float(translation_gate)
+        if not (gate >= 0.0 and gate < np.pi):
+            raise ValueError(f"translation_gate must be in [0, π) rad, got {translation_gate!r}")
+        self.translation_gate = gate
+        self.straight_only = bool(straight_only)
         self.n = self._wheelbase.shape[0]
         self._poses = np.zeros((self.n, 2, 3))
         self._correction = np.zeros((self.n, 2))
@@ -131,6 +183,13 @@ class IPEC:
             left = travel[:, 0, 0]
             right = travel[:, 0, 1]
             same_way = left * right >= 0.0
+            if self.translation_gate > 0.0:
+                same_way &= np.abs(delta_a) >= self.translation_gate * (1.0 - 1e-9)
+            if self.straight_only:
+                turn = (right - left) / b[:, 0]
+                same_way &= (np.abs(turn) < max(self.translation_gate, 1e-12)) & (
+                    left * right > 0.0
+                )
             right_lagged = same_way & (delta_a * right < 0.0)  # pivot: the left wheel
             left_lagged = same_way & (delta_a * left > 0.0)  # pivot: the right wheel
             side = right_lagged.astype(np.float64) - left_lagged.astype(np.float64)

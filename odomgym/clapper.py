@@ -7,12 +7,19 @@ stop at its end: the straight experiment of Borenstein 1995, §6.1 (18 m out, th
 
 :class:`VehicleDriver` is the low-level controller. The paper does not give its control law; it
 says the controller holds both rotary encoders at 0° when driving straight (§5.2) and that the
-compliant linkage absorbs its momentary errors (§2). Here each truck tracks a moving reference
-point with Kanayama et al.'s (1990) tracking law, using the vehicle's *estimated* poses (IPEC's
-or plain dead reckoning's), as the real vehicle does: truck A's reference moves along the path
-with a trapezoidal speed profile; truck B's is the path point a straight-line distance l₀ behind
-A's (so turns do not compress the link), and B's speed is corrected by the measured link length
-so the linear bearing stays near the middle of its range.
+compliant linkage absorbs its momentary errors (§2). Here (``steering="psi"``, the default,
+in both modes, with and without IPEC) the truck that leads in the direction of travel (A
+forwards, B when reversing) tracks a moving reference point with Kanayama et al.'s (1990)
+tracking law using its *estimated* pose (IPEC's or plain dead reckoning's), as the real vehicle
+does, and the other truck holds its rotary encoder at the angle the path expects — 0° on a
+straight, as §5.2 says — with its speed regulated by the linear encoder: it follows the leader
+through the linkage, never by its own dead reckoning, so the two trucks cannot drift apart
+whatever their odometry does. ``steering="pose"`` lets each truck track its own reference by
+its own estimate (the earlier controller: without IPEC the trucks then drift apart until the
+linkage's end stop drags them). The leader's reference moves along the path with a trapezoidal
+speed profile; the follower's is the path point a straight-line distance l₀ behind A's (so
+turns do not compress the link), and B's speed is corrected by the measured link length so the
+linear bearing stays near the middle of its range.
 
 :func:`drive_vehicles` runs N vehicles in one :class:`~odomgym.physics.World` (2N trucks, N
 links), sampling the encoders every T_s and feeding the estimator, and returns each vehicle's
@@ -23,7 +30,9 @@ Units: metres, radians, seconds.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
+import functools
 import itertools
 import math
 from collections.abc import Callable
@@ -75,11 +84,39 @@ class Leg:
         """Direction of each segment (M − 1,) [rad], unwrapped (continuous through turns)."""
         return np.asarray(np.unwrap(np.arctan2(*np.diff(self.points, axis=0).T[::-1])))
 
-    @property
+    @functools.cached_property
     def arc_length(self) -> FloatArray:
-        """Cumulative length at each point (M,) [m]."""
+        """Cumulative length at each point (M,) [m] (computed once: the driver and the cable
+        layer look it up every control step)."""
         steps = np.hypot(*np.diff(self.points, axis=0).T)
-        return np.concatenate([[0.0], np.cumsum(steps)])
+        arc = np.concatenate([[0.0], np.cumsum(steps)])
+        arc.flags.writeable = False
+        return arc
+
+    @functools.cached_property
+    def polyline(self) -> _Polyline:
+        """The points, arc lengths and segment headings as Python floats, for the per-step
+        look-ups of :func:`_point` (scalar arithmetic: numpy's per-call overhead on scalars
+        was three quarters of a CLAPPER run's time)."""
+        points = np.asarray(self.points, dtype=float)
+        d = np.diff(points, axis=0)
+        return _Polyline(
+            x=points[:, 0].tolist(),
+            y=points[:, 1].tolist(),
+            arc=self.arc_length.tolist(),
+            heading=[math.atan2(dy, dx) for dx, dy in d.tolist()],
+        )
+
+
+@dataclass(frozen=True)
+class _Polyline:
+    """A leg's polyline in Python floats: point coordinates (M,), cumulative arc length (M,)
+    [m] and the heading of each segment (M − 1,) [rad]."""
+
+    x: list[float]
+    y: list[float]
+    arc: list[float]
+    heading: list[float]
 
 
 @dataclass(frozen=True)
@@ -218,7 +255,7 @@ class CableLayer:
             reached.append(self._progress[k])
         if max(reached) < target - self.lead:
             return None
-        x_t, y_t, tangent_heading, _ = _point(points, arc, target)
+        x_t, y_t, tangent_heading, _ = _point(path.legs[leg].polyline, target)
         at_point = np.array([x_t, y_t])
         along = np.array([math.cos(tangent_heading), math.sin(tangent_heading)])
         normal = np.array([-along[1], along[0]])
@@ -294,6 +331,11 @@ class VehicleDriver:
         k_x, k_y, k_theta: Kanayama et al. 1990 gains (along-track [1/s], cross-track [1/m²],
             heading [1/m]).
         k_link: link-length feedback on truck B's speed [1/s].
+        steering: ``"psi"`` (the follower holds its rotary encoder at the path's expected
+            angle, §5.2) or ``"pose"`` (each truck tracks its own reference by its own
+            estimate); see the module docstring.
+        k_psi: the follower's turn rate per radian of rotary-encoder error, per metre per
+            second of speed [1/m] (as Kanayama's heading gain).
         lateral_accel: the reference slows for curves to keep v²·κ below this [m/s²], so that
             the rear truck, whose reference sweeps faster than the front's through a turn,
             stays within its wheels' speed limit.
@@ -306,6 +348,12 @@ class VehicleDriver:
     k_theta: float = 3.0
     k_link: float = 1.0
     lateral_accel: float = 0.1
+    steering: Literal["psi", "pose"] = "psi"
+    k_psi: float = 6.0
+
+    def __post_init__(self) -> None:
+        if self.steering not in ("psi", "pose"):
+            raise ValueError(f"steering must be 'psi' or 'pose', got {self.steering!r}")
 
     def plan(self, path: VehiclePath, n: int) -> None:
         self._path = path
@@ -366,11 +414,14 @@ class VehicleDriver:
         half_track: FloatArray,
         dt: float,
         speed: FloatArray | None = None,
+        psi: FloatArray | None = None,
     ) -> FloatArray:
         """Wheel speeds (N, 2, 2) [m/s] for the trucks from the estimated poses (N, 2, 3) and
         the measured link lengths (N,). ``speed`` (N,), if given, asks for a reference speed
         as a fraction of the cruise speed (an env's action); the curve and stop limits and the
-        acceleration limit still apply."""
+        acceleration limit still apply. ``psi`` (N, 2): the rotary encoders' readings [rad],
+        which the ``"psi"`` steering needs (without them each truck tracks its own
+        reference)."""
         n = estimate.shape[0]
         out = np.zeros((n, 2, 2))
         for i in range(n):
@@ -396,16 +447,38 @@ class VehicleDriver:
                 continue
             # Truck A leads forwards and trails backwards: B's reference is l0 behind A's in
             # the direction the trucks face, i.e. ahead in the direction of travel when reversing.
-            ref_a = _point(leg.points, arc, self._s[i])
-            s_b = _offset(leg.points, arc, self._s[i], l0, -leg.direction)
-            ref_b = _reference(leg.points, arc, s_b)
+            line = leg.polyline
+            ref_a = _point(line, float(self._s[i]))
+            s_b = _offset(line, float(self._s[i]), l0, -leg.direction)
+            ref_b = _reference(line, s_b)
             # B's reference moves at its own rate (slower than A's where A turns away from it);
             # a link longer than l0 makes the trailing truck speed up, the leading one slow down.
             previous = self._s_b[i]
             v_b_ref = v if np.isnan(previous) else (s_b - previous) / dt
             self._s_b[i] = s_b
             v_b = v_b_ref + leg.direction * self.k_link * (float(link_length[i]) - l0)
-            for truck, ref, v_truck in ((0, ref_a, v), (1, ref_b, v_b)):
+            refs = ((0, ref_a, v), (1, ref_b, v_b))
+            if self.steering == "psi" and psi is not None:
+                # The leader in the direction of travel tracks its reference by its estimate;
+                # the follower holds its rotary encoder at the angle the path expects.
+                leader = 0 if leg.direction > 0 else 1
+                truck, ref, v_lead = refs[leader]
+                out[i, truck] = self._track(
+                    estimate[i, truck], ref, v_lead, leg.direction, float(half_track[i, truck])
+                )
+                follower = 1 - leader
+                _, ref_f, v_f = refs[follower]
+                link = math.atan2(ref_a[1] - ref_b[1], ref_a[0] - ref_b[0])
+                facing = ref_f[2] + (math.pi if leg.direction < 0 else 0.0)
+                expected = _wrap(facing - link)
+                error = _wrap(expected - float(psi[i, follower]))
+                omega = v_f * ref_f[3] + abs(v_f) * self.k_psi * error
+                ahead = v_f if leg.direction > 0 else -v_f
+                h = float(half_track[i, follower])
+                out[i, follower, 0] = ahead - omega * h
+                out[i, follower, 1] = ahead + omega * h
+                continue
+            for truck, ref, v_truck in refs:
                 out[i, truck] = self._track(
                     estimate[i, truck], ref, v_truck, leg.direction, float(half_track[i, truck])
                 )
@@ -425,7 +498,7 @@ class VehicleDriver:
         dx, dy = x_r - pose[0], y_r - pose[1]
         e_x = c * dx + s * dy
         e_y = -s * dx + c * dy
-        e_theta = float(wrap_angle(heading_r - theta))
+        e_theta = _wrap(heading_r - theta)
         v = v_ref * math.cos(e_theta) + self.k_x * e_x
         omega = v_ref * curvature + v_ref * (self.k_y * e_y + self.k_theta * math.sin(e_theta))
         if direction < 0:
@@ -433,55 +506,82 @@ class VehicleDriver:
         return np.array([v - omega * half_track, v + omega * half_track])
 
 
-def _reference(points: FloatArray, arc: FloatArray, s: float) -> tuple[float, float, float, float]:
+def _wrap(angle: float) -> float:
+    """:func:`odomgym.odometry.wrap_angle` for one float (the same IEEE result: Python's ``%``
+    and ``np.mod`` both take the divisor's sign)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _reference(line: _Polyline, s: float) -> tuple[float, float, float, float]:
     """:func:`_point`, continued straight (zero curvature) beyond the polyline's ends."""
-    if 0.0 <= s <= arc[-1]:
-        return _point(points, arc, s)
-    x, y = _extended(points, arc, s)
-    end = (points[0], points[1]) if s < 0.0 else (points[-2], points[-1])
-    heading = math.atan2(*(end[1] - end[0])[::-1])
-    return float(x), float(y), heading, 0.0
+    if 0.0 <= s <= line.arc[-1]:
+        return _point(line, s)
+    x, y = _extended(line, s)
+    heading = line.heading[0] if s < 0.0 else line.heading[-1]
+    return x, y, heading, 0.0
 
 
-def _point(points: FloatArray, arc: FloatArray, s: float) -> tuple[float, float, float, float]:
+def _point(line: _Polyline, s: float) -> tuple[float, float, float, float]:
     """Position, tangent heading and curvature of the polyline at arc length ``s``."""
-    k = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(arc) - 2))
+    arc = line.arc
+    last = len(arc) - 2
+    k = min(max(bisect.bisect_right(arc, s) - 1, 0), last)
     t = (s - arc[k]) / max(arc[k + 1] - arc[k], 1e-12)
-    p = points[k] + t * (points[k + 1] - points[k])
-    heading = math.atan2(*(points[k + 1] - points[k])[::-1])
-    j = min(k + 1, len(arc) - 2)
-    next_heading = math.atan2(*(points[j + 1] - points[j])[::-1])
-    step = max(arc[j + 1] - arc[k], 1e-9) / 2.0 if j > k else 1.0
-    curvature = float(wrap_angle(next_heading - heading)) / step if j > k else 0.0
-    return float(p[0]), float(p[1]), heading, curvature
+    x = line.x[k] + t * (line.x[k + 1] - line.x[k])
+    y = line.y[k] + t * (line.y[k + 1] - line.y[k])
+    heading = line.heading[k]
+    j = min(k + 1, last)
+    if j > k:
+        step = max(arc[j + 1] - arc[k], 1e-9) / 2.0
+        curvature = _wrap(line.heading[j] - heading) / step
+    else:
+        curvature = 0.0
+    return x, y, heading, curvature
 
 
-def _offset(points: FloatArray, arc: FloatArray, s: float, distance: float, side: float) -> float:
+def _offset(line: _Polyline, s: float, distance: float, side: float) -> float:
     """Arc length of the path point at straight-line ``distance`` [m] from the point at ``s``:
     behind it (``side`` −1) or ahead of it (+1) along the polyline, on the straight extension
-    of its first or last segment beyond the ends."""
-    anchor = _extended(points, arc, s)
+    of its first or last segment beyond the ends.
+
+    Found by marching along the path by the chord's shortfall: a chord is never longer than
+    its arc, so each step lands short of (or on) the point and the shortfall shrinks — one step
+    on a straight, a few in a turn — to 1e-10 m; bisection takes over should a path fold back
+    on itself so that the march stalls."""
+    ax, ay = _extended(line, s)
+    t = s
+    for _ in range(64):
+        x, y = _extended(line, t)
+        gap = distance - math.hypot(ax - x, ay - y)
+        if gap <= 1e-10:
+            return t
+        t += side * gap
     near, far = s, s + side * 3.0 * distance
-    for _ in range(
-        32
-    ):  # bisection (to ~1 nm): the chord grows monotonically from ``near`` to ``far``
+    for _ in range(64):  # the chord grows monotonically from ``near`` to ``far``
         mid = 0.5 * (near + far)
-        if float(np.hypot(*(anchor - _extended(points, arc, mid)))) < distance:
+        x, y = _extended(line, mid)
+        if math.hypot(ax - x, ay - y) < distance:
             near = mid
         else:
             far = mid
     return 0.5 * (near + far)
 
 
-def _extended(points: FloatArray, arc: FloatArray, s: float) -> FloatArray:
+def _extended(line: _Polyline, s: float) -> tuple[float, float]:
     """The polyline point at arc length ``s``, continued straight beyond either end."""
+    arc = line.arc
     if s < 0.0:
-        d = (points[1] - points[0]) / max(arc[1], 1e-12)
-        return np.asarray(points[0] + s * d)
+        scale = s / max(arc[1], 1e-12)
+        return line.x[0] + scale * (line.x[1] - line.x[0]), line.y[0] + scale * (
+            line.y[1] - line.y[0]
+        )
     if s > arc[-1]:
-        d = (points[-1] - points[-2]) / max(arc[-1] - arc[-2], 1e-12)
-        return np.asarray(points[-1] + (s - arc[-1]) * d)
-    return np.array(_point(points, arc, s)[:2])
+        scale = (s - arc[-1]) / max(arc[-1] - arc[-2], 1e-12)
+        return line.x[-1] + scale * (line.x[-1] - line.x[-2]), line.y[-1] + scale * (
+            line.y[-1] - line.y[-2]
+        )
+    x, y, _, _ = _point(line, s)
+    return x, y
 
 
 EstimatorFactory = Callable[[FloatArray], InternalEstimator]
@@ -596,6 +696,7 @@ class VehicleTrial:
             0.5 * self.wheelbase,
             self.dt,
             speed,
+            self.reading.psi,
         )
         world.step(speeds.reshape(2 * n, 2) * self._rate_per_speed)
         counts = world.counts.copy()
