@@ -10,8 +10,9 @@ passed as ``estimator``.
 Spaces:
     action: ``Box(0, 1, (1,))`` — the vehicle-level motion command: the speed along the
         programmed path as a fraction of the cruise speed (0.45 m/s, §6: "slightly below
-        0.5 m/sec"). The low-level controller steers both trucks along the path by their
-        estimated poses and keeps the linkage near its centre; it slows for curves and stops
+        0.5 m/sec"). The low-level controller steers the leading truck along the path by its
+        estimated pose, holds the other's rotary encoder at the path's expected angle and
+        keeps the linkage near its centre; it slows for curves and stops
         at the end of each leg whatever the action asks (a command cannot drive the trucks
         into the bearing's stops).
     observation: ``Box((12,), float32)`` — the estimated poses of truck A and B in the frame
@@ -30,12 +31,20 @@ the registered step limit (``max_episode_steps``).
 ``link_length`` [m] and ``psi`` (2,) [rad], the internal encoder readings;
 ``correction`` (2,), the estimator's orientation corrections this step [rad];
 ``vehicle_error`` (3,), true minus estimated pose of the vehicle (midpoint of the truck centres,
-heading of the link), and, on the last step, ``return_error`` (the same) and
+heading of the link); ``truck_errors`` (2, 3), the same for each truck's own pose;
+``link_force`` [N], the force the bearing's end stops pass now, and ``link_force_max`` the
+largest so far; ``cable_crossings`` (2,), how many times the wheels of truck A and of truck B
+have passed over a cable; and, on the last step, ``return_error`` (the vehicle's) and
 ``truck_return_errors`` (2, 3).
+
+Defaults: the ``clapper`` vehicle (two calibrated LabMates), the ``concrete`` floor
+(:data:`odomgym.clapper.CLAPPER_FLOOR`, the same as the CLI's and the tests') and the
+``recommended`` IPEC configuration.
 """
 
 from __future__ import annotations
 
+import math
 from os import PathLike
 from typing import Any, Literal
 
@@ -44,6 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.clapper import (
+    CLAPPER_FLOOR,
     CableLayer,
     EstimatorFactory,
     VehiclePath,
@@ -62,15 +72,20 @@ __all__ = ["ClapperEnv", "ClapperRectangleEnv", "ClapperStraightEnv", "ipec_esti
 FloatArray = NDArray[np.float64]
 
 
-def ipec_estimator() -> EstimatorFactory:
-    """The CLAPPER's IPEC: Borenstein 1995, Eqs. 9-16, dead reckoning along the mid-interval
-    heading, without the composite translational correction (Eqs. 14-15), which with 10-bit
-    readings fires at every count change of ψ_A in a turn (tests/test_clapper.py)."""
-    from functools import partial
+DEFAULT_IPEC = "recommended"
+"""The IPEC configuration every CLAPPER run uses unless told otherwise
+(:data:`odomgym.baselines.ipec.CONFIGURATIONS`; ``docs/clapper.md`` says why)."""
 
-    from odomgym.baselines.ipec import IPEC
 
-    return partial(IPEC, heading="midpoint", translation_correction=False)
+def ipec_estimator(
+    configuration: str = DEFAULT_IPEC, rotary_resolution: float = 2.0 * math.pi / 1024
+) -> EstimatorFactory:
+    """The CLAPPER's IPEC (Borenstein 1995, Eqs. 9-16) in one of the named configurations
+    ``paper``, ``recommended`` (the default) or ``heading-only``; ``rotary_resolution`` [rad]
+    is one count of the vehicle's rotary encoders (the recommended gate of Eq. 15)."""
+    from odomgym.baselines.ipec import ipec_configuration
+
+    return ipec_configuration(configuration, rotary_resolution)
 
 
 MAX_BUMPS = 1000
@@ -95,7 +110,7 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def __init__(
         self,
         vehicle: VehicleSpec | str | PathLike[str] = "clapper",
-        floor: FloorSpec | str | PathLike[str] = "smooth",
+        floor: FloorSpec | str | PathLike[str] = CLAPPER_FLOOR,
         *,
         ipec: bool = True,
         estimator: EstimatorFactory | None = None,
@@ -110,7 +125,7 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             )
         self.ipec = bool(ipec) and estimator is None
         self._estimator: EstimatorFactory | None = estimator or (
-            ipec_estimator() if self.ipec else None
+            ipec_estimator(rotary_resolution=self.vehicle.rotary_resolution) if self.ipec else None
         )
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.vehicle.sample_period}
         self.action_space = gym.spaces.Box(0.0, 1.0, shape=(1,), dtype=np.float32)
@@ -209,6 +224,10 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "psi": trial.reading.psi[0].copy(),
             "correction": np.asarray(correction, dtype=np.float64).copy(),
             "vehicle_error": vehicle[0],
+            "truck_errors": trucks[0].copy(),
+            "link_force": float(trial.world.link_forces()[0]),
+            "link_force_max": float(trial.link_force[0]),
+            "cable_crossings": trial.cable_crossings[0].copy(),
             "time": trial.time,
         }
         if final:
@@ -225,7 +244,7 @@ class ClapperStraightEnv(ClapperEnv):
     def __init__(
         self,
         vehicle: VehicleSpec | str | PathLike[str] = "clapper",
-        floor: FloorSpec | str | PathLike[str] = "smooth",
+        floor: FloorSpec | str | PathLike[str] = CLAPPER_FLOOR,
         *,
         bumps: int = 10,
         length: float = 18.0,
@@ -257,7 +276,7 @@ class ClapperRectangleEnv(ClapperEnv):
     def __init__(
         self,
         vehicle: VehicleSpec | str | PathLike[str] = "clapper",
-        floor: FloorSpec | str | PathLike[str] = "smooth",
+        floor: FloorSpec | str | PathLike[str] = CLAPPER_FLOOR,
         *,
         direction: Literal["cw", "ccw"] = "cw",
         bumps: int = 10,

@@ -49,6 +49,7 @@ from odomgym.physics import World
 from odomgym.vehicle import VehicleSpec, link_readings
 
 __all__ = [
+    "CLAPPER_FLOOR",
     "CableLayer",
     "EstimatorFactory",
     "Leg",
@@ -65,6 +66,11 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+CLAPPER_FLOOR = "concrete"
+"""The one floor of the CLAPPER experiments — the CLI's, the envs' and the tests' default: the
+paper ran on "fairly smooth concrete floors" (Borenstein 1995, §6), and the ``concrete``
+floor's wheel noise is what makes runs of one condition differ (``odomgym.floor``)."""
 
 
 @dataclass(frozen=True)
@@ -584,6 +590,17 @@ def _extended(line: _Polyline, s: float) -> tuple[float, float]:
     return x, y
 
 
+def _cable_arrays(cables: tuple[CableBump, ...]) -> tuple[FloatArray, ...]:
+    """Centres, unit axes and half lengths (K,) of ``cables`` [m], for crossing counts."""
+    return (
+        np.array([c.x for c in cables]),
+        np.array([c.y for c in cables]),
+        np.array([math.cos(c.angle) for c in cables]),
+        np.array([math.sin(c.angle) for c in cables]),
+        np.array([0.5 * c.length for c in cables]),
+    )
+
+
 EstimatorFactory = Callable[[FloatArray], InternalEstimator]
 """Builds an estimator from the odometry's wheelbases (N, 2) [m] (e.g. ``DeadReckoning`` or
 ``odomgym.baselines.ipec.IPEC``)."""
@@ -600,7 +617,8 @@ class VehicleOutcome:
     (N, 2) the shortest and longest true centre distance seen [m], ``link_force`` (N,) the
     largest force the bearing's end stops passed [N], ``corrections`` (N, 2) the summed
     orientation corrections of the estimator [rad], ``time`` the simulated duration [s],
-    ``finished`` (N,) whether each vehicle drove the whole path.
+    ``finished`` (N,) whether each vehicle drove the whole path, ``cable_crossings`` (N, 2)
+    how many times the wheels of truck A and of truck B passed over a laid cable.
     """
 
     true_poses: FloatArray
@@ -613,6 +631,9 @@ class VehicleOutcome:
     corrections: FloatArray
     time: float
     finished: NDArray[np.bool_]
+    cable_crossings: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros((0, 2), dtype=np.int64)
+    )
 
 
 class VehicleTrial:
@@ -648,7 +669,15 @@ class VehicleTrial:
         self.odometry.reset(start.reshape(2 * n, 3))
         self.wheelbase = self.odometry.effective_wheelbase.reshape(n, 2)
         self.estimator = (estimator or DeadReckoning)(self.wheelbase)
-        self.reading = link_readings(spec, self.world.pose.reshape(n, 2, 3))
+        # The internal encoders' jitter has its own stream, so that switching it on does not
+        # change the floor's noise of the same seed.
+        self._reading_rng = (
+            np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])  # type: ignore[attr-defined]
+            if rng is not None
+            else np.random.default_rng(0)
+        )
+        self._previous_truth = self.world.pose.reshape(n, 2, 3).copy()
+        self.reading = link_readings(spec, self._previous_truth, self._reading_rng)
         self.estimator.reset(start.copy(), self.reading)
         self.estimated = start.copy()
         self.driver = driver or VehicleDriver()
@@ -659,6 +688,9 @@ class VehicleTrial:
         self.link_range = np.stack([length, length], axis=1)
         self.link_force = np.zeros(n)
         self.corrections = np.zeros((n, 2))
+        self.cable_crossings = np.zeros((n, 2), dtype=np.int64)
+        self._cable_geometry: tuple[FloatArray, ...] | None = None
+        self._cable_side: FloatArray | None = None
         self.steps = 0
 
     @property
@@ -689,6 +721,8 @@ class VehicleTrial:
             )
             if laid is not None:  # the floor as it was, plus the cables laid so far
                 world.lay_floor(dataclasses.replace(self.floor, bumps=self.floor.bumps + laid))
+                self._cable_geometry = _cable_arrays(laid)
+                self._cable_side = None
         speeds = self.driver.act(
             self.estimated,
             self.reading.length,
@@ -704,14 +738,50 @@ class VehicleTrial:
         self._last_counts = counts
         self.odometry.update(counts, self.dt)
         truth = self.truth
-        self.reading = link_readings(self.spec, truth)
+        shown = truth
+        if self.spec.read_skew > 0.0:  # the link encoders read read_skew before the wheels
+            f = self.spec.read_skew / self.dt
+            shown = truth + f * (self._previous_truth - truth)
+            shown[:, :, 2] = truth[:, :, 2] + f * wrap_angle(
+                self._previous_truth[:, :, 2] - truth[:, :, 2]
+            )
+        self._previous_truth = truth
+        self.reading = link_readings(self.spec, shown, self._reading_rng)
         self.estimated = self.estimator.update(travel, self.reading)
+        if self._cable_geometry is not None:
+            self._count_crossings(truth)
         self.corrections += self.estimator.correction
         length = link_length(truth)
         self.link_range[:, 0] = np.minimum(self.link_range[:, 0], length)
         self.link_range[:, 1] = np.maximum(self.link_range[:, 1], length)
         self.link_force = np.maximum(self.link_force, world.link_forces())
         self.steps += 1
+
+    def _count_crossings(self, truth: FloatArray) -> None:
+        """Count each truck's wheels passing a laid cable this interval: a wheel's contact point
+        changed sides of a cable's axis while within the cable's length."""
+        assert self._cable_geometry is not None
+        cx, cy, ax, ay, half = self._cable_geometry
+        half_tracks = (
+            0.5 * self.spec.truck_a.true_wheelbase,
+            0.5 * self.spec.truck_b.true_wheelbase,
+        )
+        points = []
+        for k in (0, 1):
+            x, y, th = truth[0, k]
+            nx, ny = -math.sin(th), math.cos(th)
+            for sign in (1.0, -1.0):
+                points.append((x + sign * half_tracks[k] * nx, y + sign * half_tracks[k] * ny))
+        px = np.array([p[0] for p in points])[:, None] - cx[None, :]
+        py = np.array([p[1] for p in points])[:, None] - cy[None, :]
+        side = np.sign(px * -ay[None, :] + py * ax[None, :])
+        within = np.abs(px * ax[None, :] + py * ay[None, :]) <= half[None, :]
+        if self._cable_side is not None:
+            crossed = (side != self._cable_side) & (side != 0) & within
+            per_wheel = crossed.sum(axis=1)
+            self.cable_crossings[0, 0] += int(per_wheel[:2].sum())
+            self.cable_crossings[0, 1] += int(per_wheel[2:].sum())
+        self._cable_side = side
 
     def errors(self) -> tuple[FloatArray, FloatArray]:
         """(vehicle error (N, 3), truck errors (N, 2, 3)): true minus estimated, headings
@@ -737,6 +807,7 @@ class VehicleTrial:
             corrections=self.corrections.copy(),
             time=self.time,
             finished=self.done.copy(),
+            cable_crossings=self.cable_crossings.copy(),
         )
 
 

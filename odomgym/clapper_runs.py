@@ -1,10 +1,14 @@
-"""The CLAPPER experiments of Borenstein 1995, §6, as repeated runs with and without IPEC: the
-records, the table of average absolute orientation errors and a figure like the paper's
-Figs. 8 and 10 (``odomgym run clapper-straight|clapper-rectangle``).
+"""The CLAPPER experiments of Borenstein 1995, §6, as seeded Monte-Carlo sets: the records,
+the distributions the paper's figures show (mean ± sd and the worst run, per condition, for the
+vehicle and for each truck) and a figure like the paper's Figs. 8 and 10
+(``odomgym run clapper-straight|clapper-rectangle``).
 
-Runs differ by the floor's wheel noise (the ``concrete`` floor by default, each run from its
-own seed) and, on the rectangle, by the side the cables lie under (half the runs right, half
-left, as in §6.2).
+The paper's conditions (:data:`PAPER_CONDITIONS`): the 18 m straight out and back (§6.1)
+a. without IPEC, without bumps; b. without IPEC, ten bumps; c. with IPEC, without bumps;
+d. with IPEC, twenty bumps (on the return leg, under the right-side wheels); the 7×4 m
+rectangle (§6.2) with ten bumps, with and without IPEC, cw and ccw, the cables under the right
+wheels in half the runs and the left in the other half. Runs differ by the floor's wheel noise
+(:data:`CLAPPER_FLOOR`, each run from its own seed) and, on the rectangle, the cables' side.
 
 Every file is written atomically (:mod:`odomgym.io`).
 """
@@ -20,8 +24,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.clapper import (
+    CLAPPER_FLOOR,
     CableLayer,
     EstimatorFactory,
+    VehicleDriver,
     VehicleOutcome,
     drive_vehicles,
     evenly,
@@ -33,10 +39,40 @@ from odomgym.floor import FloorSpec
 from odomgym.report import save_error_axes
 from odomgym.vehicle import VehicleSpec
 
-__all__ = ["ClapperRun", "format_clapper_runs", "plot_clapper_runs", "run_clapper"]
+__all__ = [
+    "CLAPPER_FLOOR",
+    "PAPER_CONDITIONS",
+    "ClapperRun",
+    "Condition",
+    "format_clapper_runs",
+    "plot_clapper_runs",
+    "run_clapper",
+    "summarize",
+]
 
 FloatArray = NDArray[np.float64]
 Experiment = Literal["straight", "rectangle"]
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One experimental condition: a label, IPEC on or off and the number of cables."""
+
+    label: str
+    ipec: bool
+    bumps: int
+
+
+PAPER_CONDITIONS: dict[str, tuple[Condition, ...]] = {
+    "straight": (
+        Condition("a", False, 0),
+        Condition("b", False, 10),
+        Condition("c", True, 0),
+        Condition("d", True, 20),
+    ),
+    "rectangle": (Condition("without IPEC", False, 10), Condition("with IPEC", True, 10)),
+}
+"""Borenstein 1995, §6.1 (a–d, three runs each) and §6.2 (10 cw + 10 ccw runs, ten bumps)."""
 
 
 @dataclass(frozen=True)
@@ -51,6 +87,7 @@ class ClapperRun:
     side: str
     bumps: int
     outcome: VehicleOutcome
+    condition: str = ""
 
     def record(self) -> dict[str, Any]:
         """A JSON-ready record: ``return_error`` {x, y [m], theta [rad]} of the vehicle (true
@@ -61,17 +98,29 @@ class ClapperRun:
         def pose(e: FloatArray) -> dict[str, float]:
             return {"x": float(e[0]), "y": float(e[1]), "theta": float(e[2])}
 
+        outcome = self.outcome
         return {
             "run": self.index,
             "experiment": self.experiment,
+            "condition": self.condition,
             "ipec": self.ipec,
             "direction": self.direction,
             "side": self.side,
             "bumps": self.bumps,
             "return_error": pose(vehicle),
             "trucks": {"A": pose(trucks[0]), "B": pose(trucks[1])},
-            "duration_s": self.outcome.time,
-            "finished": bool(self.outcome.finished[0]),
+            "link_force_max_n": float(outcome.link_force[0]),
+            "link_range_m": [float(v) for v in outcome.link_range[0]],
+            "cable_crossings": {
+                "A": int(outcome.cable_crossings[0, 0]) if len(outcome.cable_crossings) else 0,
+                "B": int(outcome.cable_crossings[0, 1]) if len(outcome.cable_crossings) else 0,
+            },
+            "corrections_rad": {
+                "A": float(outcome.corrections[0, 0]),
+                "B": float(outcome.corrections[0, 1]),
+            },
+            "duration_s": outcome.time,
+            "finished": bool(outcome.finished[0]),
         }
 
 
@@ -88,16 +137,26 @@ def run_clapper(
     seed: int = 0,
     ipec: EstimatorFactory | None = None,
     progress: Callable[[int, int], None] | None = None,
+    conditions: Sequence[Condition] | None = None,
+    driver: Callable[[], VehicleDriver] | None = None,
 ) -> list[ClapperRun]:
-    """Drive ``runs`` runs per (IPEC mode, direction); run r lays its cables under
+    """Drive ``runs`` runs per (condition, direction); run r lays its cables under
     ``sides[r % len(sides)]`` and draws its floor noise from ``SeedSequence([seed, r])``, so
-    the runs with and without IPEC meet the same floor. ``ipec`` builds the IPEC estimator
-    (e.g. :func:`odomgym.envs.clapper.ipec_estimator`; the core does not import baselines)."""
-    if ipec is None and any(ipec_modes):
+    the runs of every condition meet the same floors. ``conditions`` (e.g.
+    ``PAPER_CONDITIONS["straight"]``) replace ``ipec_modes`` × ``bumps``. ``ipec`` builds the
+    IPEC estimator (e.g. :func:`odomgym.envs.clapper.ipec_estimator`; the core does not import
+    baselines); ``driver`` builds the controller (default :class:`VehicleDriver`)."""
+    chosen = (
+        list(conditions)
+        if conditions is not None
+        else [Condition("with IPEC" if m else "without IPEC", bool(m), bumps) for m in ipec_modes]
+    )
+    if ipec is None and any(c.ipec for c in chosen):
         raise ValueError("runs with IPEC need ipec= (e.g. odomgym.envs.clapper.ipec_estimator())")
-    plans = [(mode, d, r) for mode in ipec_modes for d in directions for r in range(runs)]
+    plans = [(c, d, r) for c in chosen for d in directions for r in range(runs)]
     done: list[ClapperRun] = []
-    for k, (mode, direction, r) in enumerate(plans):
+    for k, (condition, direction, r) in enumerate(plans):
+        mode, bumps = condition.ipec, condition.bumps
         side = sides[r % len(sides)]
         if experiment == "straight":
             path = straight_path(18.0)
@@ -108,9 +167,17 @@ def run_clapper(
             cables = CableLayer(positions, leg=0, side=side) if bumps else None  # type: ignore[arg-type]
         rng = np.random.default_rng(np.random.SeedSequence([seed, r]))
         outcome = drive_vehicles(
-            spec, floor, path, estimator=ipec if mode else None, cables=cables, rng=rng
+            spec,
+            floor,
+            path,
+            estimator=ipec if mode else None,
+            cables=cables,
+            rng=rng,
+            driver=driver() if driver is not None else None,
         )
-        done.append(ClapperRun(r + 1, experiment, mode, direction, side, bumps, outcome))
+        done.append(
+            ClapperRun(r + 1, experiment, mode, direction, side, bumps, outcome, condition.label)
+        )
         if progress is not None:
             progress(k + 1, len(plans))
     return done
@@ -120,49 +187,120 @@ def _mean_abs_theta(runs: Sequence[ClapperRun]) -> float:
     return float(np.mean([abs(run.outcome.return_error[0, 2]) for run in runs]))
 
 
+def _spread(values: Sequence[float]) -> dict[str, float]:
+    """Mean of the absolute values, their sample standard deviation and the worst one."""
+    a = np.abs(np.asarray(values, dtype=float))
+    return {
+        "mean_abs": float(a.mean()),
+        "sd": float(a.std(ddof=1)) if len(a) > 1 else 0.0,
+        "worst": float(a.max()),
+    }
+
+
+def _group(runs: Sequence[ClapperRun]) -> dict[str, Any]:
+    """The distributions of one group of runs: orientation errors [rad] of the vehicle and of
+    each truck, position errors [m], the largest end-stop force [N] and the cable crossings."""
+    vehicle = [r.outcome.return_error[0] for r in runs]
+    trucks = [r.outcome.truck_errors[0] for r in runs]
+    crossings = np.array(
+        [r.outcome.cable_crossings[0] if len(r.outcome.cable_crossings) else (0, 0) for r in runs]
+    )
+    return {
+        "runs": len(runs),
+        "ipec": runs[0].ipec,
+        "bumps": runs[0].bumps,
+        "theta_vehicle": _spread([e[2] for e in vehicle]),
+        "theta_truck_a": _spread([t[0, 2] for t in trucks]),
+        "theta_truck_b": _spread([t[1, 2] for t in trucks]),
+        "position": _spread([float(np.hypot(e[0], e[1])) for e in vehicle]),
+        "mean_abs_theta": _mean_abs_theta(runs),
+        "link_force_max_n": float(max(r.outcome.link_force[0] for r in runs)),
+        "cable_crossings_mean": {
+            "A": float(crossings[:, 0].mean()),
+            "B": float(crossings[:, 1].mean()),
+        },
+    }
+
+
 def summarize(runs: Sequence[ClapperRun]) -> dict[str, Any]:
-    """Average absolute return orientation error [rad] (Borenstein 1995, Eq. 17, as recovered
-    in docs/clapper_design_notes.md) with and without IPEC, per direction and overall, and the
-    fold reduction."""
-    out: dict[str, Any] = {"runs": len(runs)}
-    for label, mode in (("without_ipec", False), ("with_ipec", True)):
-        chosen = [r for r in runs if r.ipec == mode]
-        if chosen:
-            out[label] = {"mean_abs_theta": _mean_abs_theta(chosen)}
-            for d in sorted({r.direction for r in chosen}):
-                out[label][d] = _mean_abs_theta([r for r in chosen if r.direction == d])
-    if "with_ipec" in out and "without_ipec" in out:
-        ratio = out["without_ipec"]["mean_abs_theta"] / max(
-            out["with_ipec"]["mean_abs_theta"], 1e-12
-        )
-        out["reduction"] = ratio
+    """Per condition (and, with two directions, per direction): mean ± sd and worst of the
+    absolute return orientation error [rad] of the vehicle (link heading, Borenstein 1995,
+    Eq. 17 as recovered in docs/clapper_design_notes.md) and of each truck's own heading, of the
+    position error [m], the largest end-stop force and the mean cable crossings; and the fold
+    reduction of the mean absolute orientation error by IPEC — vehicle and per truck — between
+    the runs without IPEC with the most bumps and those with IPEC with the most bumps (§6.1:
+    b vs d; §6.2: without vs with)."""
+    out: dict[str, Any] = {"runs": len(runs), "conditions": {}}
+    labels = list(
+        dict.fromkeys(r.condition or ("with IPEC" if r.ipec else "without IPEC") for r in runs)
+    )
+    for label in labels:
+        chosen = [
+            r for r in runs if (r.condition or ("with IPEC" if r.ipec else "without IPEC")) == label
+        ]
+        group = _group(chosen)
+        directions = sorted({r.direction for r in chosen})
+        if len(directions) > 1:
+            group["by_direction"] = {
+                d: _group([r for r in chosen if r.direction == d]) for d in directions
+            }
+        out["conditions"][label] = group
+    groups = out["conditions"].values()
+    without = [g for g in groups if not g["ipec"]]
+    with_ipec = [g for g in groups if g["ipec"]]
+    if without and with_ipec:
+        a = max(without, key=lambda g: g["bumps"])
+        b = max(with_ipec, key=lambda g: g["bumps"])
+        out["reduction"] = {
+            key: a[key]["mean_abs"] / max(b[key]["mean_abs"], 1e-12)
+            for key in ("theta_vehicle", "theta_truck_a", "theta_truck_b")
+        }
     return out
 
 
 def format_clapper_runs(runs: Sequence[ClapperRun]) -> str:
-    """The runs as a table (mm, degrees) and the average absolute orientation errors."""
-    lines = ["run  IPEC  dir  side   bumps  x [mm]    y [mm]   theta [deg]"]
+    """The runs as a table (mm, degrees) and the distributions per condition."""
+    lines = [
+        "run  cond.         dir  side   bumps  x [mm]    y [mm]   θ veh [°]  θ A [°]  θ B [°]  "
+        "F [N]"
+    ]
     for run in runs:
         e = run.outcome.return_error[0]
+        t = run.outcome.truck_errors[0]
         lines.append(
-            f"{run.index:3d}  {'yes' if run.ipec else 'no ':3}  {run.direction:3}  "
+            f"{run.index:3d}  {run.condition[:12]:12}  {run.direction:3}  "
             f"{run.side:5}  {run.bumps:5d}  {1e3 * e[0]:8.1f}  {1e3 * e[1]:8.1f}  "
-            f"{np.degrees(e[2]):9.3f}"
+            f"{np.degrees(e[2]):9.3f}  {np.degrees(t[0, 2]):7.3f}  {np.degrees(t[1, 2]):7.3f}  "
+            f"{run.outcome.link_force[0]:5.0f}"
         )
     summary = summarize(runs)
-    lines.append("")
-    lines.append("average absolute return orientation error [deg]")
-    for label in ("without_ipec", "with_ipec"):
-        if label in summary:
-            parts = [f"all {np.degrees(summary[label]['mean_abs_theta']):.3f}"]
-            parts += [
-                f"{d} {np.degrees(v):.3f}"
-                for d, v in summary[label].items()
-                if d != "mean_abs_theta"
-            ]
-            lines.append(f"  {label.replace('_', ' ')}: " + ", ".join(parts))
+    lines += ["", "absolute return errors per condition: mean ± sd (worst run)"]
+    lines.append(
+        f"  {'condition':14} {'runs':>4}  {'vehicle θ [°]':>20}  {'truck A θ [°]':>20}  "
+        f"{'truck B θ [°]':>20}  {'position [mm]':>20}"
+    )
+
+    def cell(d: dict[str, float], scale: float, digits: int) -> str:
+        mean, sd, worst = (scale * d[k] for k in ("mean_abs", "sd", "worst"))
+        return f"{mean:.{digits}f} ± {sd:.{digits}f} ({worst:.{digits}f})"
+
+    for label, g in summary["conditions"].items():
+        rows = [(label, g)] + [(f"  {d}", gd) for d, gd in g.get("by_direction", {}).items()]
+        for name, gr in rows:
+            deg = 180.0 / np.pi
+            lines.append(
+                f"  {name:14} {gr['runs']:4d}  {cell(gr['theta_vehicle'], deg, 2):>20}  "
+                f"{cell(gr['theta_truck_a'], deg, 2):>20}  "
+                f"{cell(gr['theta_truck_b'], deg, 2):>20}  "
+                f"{cell(gr['position'], 1e3, 1):>20}"
+            )
     if "reduction" in summary:
-        lines.append(f"  IPEC reduces it {summary['reduction']:.1f}-fold")
+        r = summary["reduction"]
+        lines.append(
+            f"  IPEC reduces the mean absolute orientation error {r['theta_truck_a']:.1f}-fold "
+            f"(truck A), {r['theta_truck_b']:.1f}-fold (truck B), {r['theta_vehicle']:.1f}-fold "
+            "(vehicle, link heading)"
+        )
     return "\n".join(lines)
 
 

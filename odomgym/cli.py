@@ -21,6 +21,7 @@ driven, which calibration it applied.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import errno
 import os
 import sys
@@ -733,19 +734,36 @@ def _add_run_parsers(commands: Any) -> None:
 
 
 def _command_clapper(args: argparse.Namespace) -> int:
-    from odomgym.clapper_runs import format_clapper_runs, plot_clapper_runs, run_clapper, summarize
+    from odomgym.clapper import VehicleDriver
+    from odomgym.clapper_runs import (
+        PAPER_CONDITIONS,
+        Condition,
+        format_clapper_runs,
+        plot_clapper_runs,
+        run_clapper,
+        summarize,
+    )
     from odomgym.envs.clapper import ipec_estimator
-    from odomgym.vehicle import load_vehicle
+    from odomgym.vehicle import PAPER_ERRORS, load_vehicle
 
     _check_plot_path(args.plot)
     spec = load_vehicle(args.vehicle)
+    if args.errors == "paper":
+        spec = dataclasses.replace(spec, **PAPER_ERRORS)  # type: ignore[arg-type]
     floor: FloorSpec = load_floor(args.floor)
     experiment = "straight" if args.path == "clapper-straight" else "rectangle"
-    modes = (False, True) if args.ipec is None else (bool(args.ipec),)
+    custom = args.bumps is not None or args.ipec is not None
+    if custom:
+        bumps = 10 if args.bumps is None else args.bumps
+        modes = (False, True) if args.ipec is None else (bool(args.ipec),)
+        conditions = [Condition("with IPEC" if m else "without IPEC", m, bumps) for m in modes]
+    else:
+        conditions = list(PAPER_CONDITIONS[experiment])
     direction = getattr(args, "direction", "-")  # the straight experiment has none
     directions = ("cw", "ccw") if direction == "both" else (direction,)
     side = getattr(args, "side", "right")
     sides = ("right", "left") if side == "both" else (side,)
+    runs_each = args.runs if args.runs is not None else (3 if experiment == "straight" else 10)
     bar = _progress_bar(not args.json and sys.stderr.isatty())
 
     def progress(done: int, total: int) -> None:
@@ -757,31 +775,40 @@ def _command_clapper(args: argparse.Namespace) -> int:
             spec,
             floor,
             experiment,  # type: ignore[arg-type]
-            ipec_modes=modes,
+            conditions=conditions,
             directions=directions,
-            bumps=args.bumps,
             sides=sides,
-            runs=args.runs,
+            runs=runs_each,
             seed=args.seed,
-            ipec=ipec_estimator(),
+            ipec=ipec_estimator(args.ipec_config, spec.rotary_resolution),
+            driver=lambda: VehicleDriver(steering=args.steering),
             progress=progress,
         )
     finally:
         bar.close()
+    settings = (
+        f"vehicle {spec.name}: trucks {spec.truck_a.name}/{spec.truck_b.name}, link "
+        f"{spec.link_length:g} m; floor {floor.name}; {experiment}; IPEC {args.ipec_config}; "
+        f"steering {args.steering}; error sources {args.errors}; {runs_each} runs per "
+        f"condition{' and direction' if len(directions) > 1 else ''}, seed {args.seed}"
+    )
     if args.json:
         for run in runs:
             print(to_json(run.record()))
-        print(to_json({"summary": summarize(runs)}))
+        print(to_json({"settings": settings, "summary": summarize(runs)}))
     else:
+        print(settings)
         print(
-            f"vehicle {spec.name}: trucks {spec.truck_a.name}/{spec.truck_b.name}, link "
-            f"{spec.link_length:g} m; floor {floor.name}; {experiment}, {args.bumps} bumps"
+            "conditions: "
+            + "; ".join(
+                f"{c.label}: IPEC {'on' if c.ipec else 'off'}, {c.bumps} cables" for c in conditions
+            )
         )
         print("return errors (true - estimated; vehicle = midpoint of the trucks, link heading)")
         print(format_clapper_runs(runs))
     written: list[str] = []
     if args.plot:
-        title = f"CLAPPER {experiment}: return errors, {args.bumps} bumps, {floor.name} floor"
+        title = f"CLAPPER {experiment}: return errors, {floor.name} floor"
         plot_clapper_runs(Path(args.plot), runs, title)
         written.append(args.plot)
     _report_written(args, written)
@@ -814,14 +841,37 @@ def _add_clapper_parsers(routes: Any) -> None:
         parser.add_argument(
             "--bumps",
             type=_bumps,
-            default=10,
-            help="10 mm cables to cross, 0 to 1000 (default 10)",
+            default=None,
+            help="10 mm cables to cross, 0 to 1000, in every run (default: the paper's "
+            "conditions — straight: a/b/c/d with 0/10/0/20 cables; rectangle: 10)",
         )
         parser.add_argument(
             "--ipec",
             action=argparse.BooleanOptionalAction,
             default=None,
-            help="only runs with (--ipec) or without (--no-ipec) IPEC (default: both)",
+            help="only runs with (--ipec) or without (--no-ipec) IPEC (default: the paper's "
+            "conditions)",
+        )
+        parser.add_argument(
+            "--ipec-config",
+            choices=["recommended", "paper", "heading-only"],
+            default="recommended",
+            help="IPEC configuration (docs/clapper.md): recommended (default), paper (Eqs. "
+            "9-16 as printed), heading-only (without Eq. 15)",
+        )
+        parser.add_argument(
+            "--steering",
+            choices=["psi", "pose"],
+            default="psi",
+            help="psi (default): the follower truck holds its rotary encoder at the path's "
+            "angle (the paper's §5.2); pose: each truck tracks its own estimate",
+        )
+        parser.add_argument(
+            "--errors",
+            choices=["none", "paper"],
+            default="none",
+            help="error sources of the internal encoders: none (default) or paper (link bias "
+            "2 mm, jitter 0.1°, eccentricity 1 mm, read skew 4 ms; docs/clapper.md)",
         )
         if name == "clapper-rectangle":
             parser.add_argument(
@@ -837,7 +887,11 @@ def _add_clapper_parsers(routes: Any) -> None:
                 help="cables under the right or left wheels (default both: alternating runs)",
             )
         parser.add_argument(
-            "--runs", type=_count, default=3, help="runs per mode and direction (default 3)"
+            "--runs",
+            type=_count,
+            default=None,
+            help="runs per condition (and direction) (default: the paper's — 3 on the "
+            "straight, 10 per direction on the rectangle)",
         )
         parser.add_argument("--seed", type=_seed, default=0, help="seed of the floor noise")
         parser.add_argument(

@@ -42,7 +42,7 @@ from odomgym.internal import LinkReading, link_angles, link_length
 from odomgym.io import atomic_write_text
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 
-__all__ = ["VEHICLES", "VehicleSpec", "link_readings", "load_vehicle"]
+__all__ = ["PAPER_ERRORS", "VEHICLES", "VehicleSpec", "calibrated", "link_readings", "load_vehicle"]
 
 FloatArray = NDArray[np.float64]
 
@@ -65,6 +65,16 @@ class VehicleSpec:
         linear_resolution: resolution of the linear encoder [m] (§2: 0.1 mm).
         linear_bias: constant bias of the link-length measurement [m] (§5.2: about 2 mm was
             suspected in the prototype, whose accuracy was ±3 mm).
+        linear_eccentricity: the linear encoder's eccentricity [m] (§5.2 names it, "which
+            changes the bias when the two trucks rotate relative to the compliant linkage", but
+            gives no size): the length is read from a point this far off truck B's pivot,
+            across the truck, so the reading gains −e·sin ψ_B. A model of ours.
+        rotary_jitter: standard deviation of vibration jitter on each rotary-encoder reading,
+            added before quantisation [rad] (not in the paper: a model addition; it dithers
+            the 10-bit counts).
+        read_skew: how long before the wheel encoders the link encoders are read [s] (not in
+            the paper: a model addition); the readings then show the trucks where they were
+            ``read_skew`` earlier (linear interpolation within the interval, so at most T_s).
         name: a label for reports.
     """
 
@@ -79,6 +89,9 @@ class VehicleSpec:
     rotary_bias_b: float = 0.0
     linear_resolution: float = 1e-4
     linear_bias: float = 0.0
+    linear_eccentricity: float = 0.0
+    rotary_jitter: float = 0.0
+    read_skew: float = 0.0
     name: str = "vehicle"
 
     def __post_init__(self) -> None:
@@ -99,6 +112,9 @@ class VehicleSpec:
         require_range("rotary_bias_a", self.rotary_bias_a, -0.5, 0.5)
         require_range("rotary_bias_b", self.rotary_bias_b, -0.5, 0.5)
         require_range("linear_bias", self.linear_bias, -0.1, 0.1)
+        require_range("linear_eccentricity", self.linear_eccentricity, -0.1, 0.1)
+        require_range("rotary_jitter", self.rotary_jitter, 0.0, 0.1)
+        require_range("read_skew", self.read_skew, 0.0, self.sample_period)
         if not self.link_min < self.link_length < self.link_max:
             raise SpecError(
                 f"link_length must lie strictly between link_min and link_max, got "
@@ -248,23 +264,63 @@ def load_vehicle(spec: str | Path) -> VehicleSpec:
     )
 
 
-def link_readings(spec: VehicleSpec, poses: FloatArray) -> LinkReading:
+def link_readings(
+    spec: VehicleSpec, poses: FloatArray, rng: np.random.Generator | None = None
+) -> LinkReading:
     """What the internal encoders report for true truck poses (N, 2, 3) [m, m, rad].
 
-    Rotary encoders: ψ + bias, rounded to the nearest count of 2π/2^bits (an absolute encoder
-    reports the count its code disc shows). Linear encoder: the centre distance + bias,
-    rounded to its resolution. Rounding to the nearest count keeps a zero angle at zero;
-    truncation would add half a count to every reading.
+    Rotary encoders: ψ + bias (+ jitter, drawn from ``rng``, if the spec has any), rounded to
+    the nearest count of 2π/2^bits (an absolute encoder reports the count its code disc
+    shows). Linear encoder: the centre distance + bias − eccentricity·sin ψ_B, rounded to its
+    resolution. Rounding to the nearest count keeps a zero angle at zero; truncation would add
+    half a count to every reading.
     """
     poses = np.asarray(poses, dtype=np.float64)
     _, psi = link_angles(poses)
     q = spec.rotary_resolution
     bias = np.array([spec.rotary_bias_a, spec.rotary_bias_b])
-    psi_read = q * np.round((psi + bias) / q)
-    length = link_length(poses)
+    shown = psi + bias
+    if spec.rotary_jitter > 0.0:
+        if rng is None:
+            raise ValueError("a vehicle with rotary_jitter needs rng= for its readings")
+        shown = shown + spec.rotary_jitter * rng.standard_normal(psi.shape)
+    psi_read = q * np.round(shown / q)
+    length = link_length(poses) + spec.linear_bias
+    if spec.linear_eccentricity:
+        length = length - spec.linear_eccentricity * np.sin(psi[:, 1])
     r = spec.linear_resolution
-    length_read = r * np.round((length + spec.linear_bias) / r)
+    length_read = r * np.round(length / r)
     return LinkReading(length=length_read, psi=psi_read)
+
+
+def calibrated(truck: RobotSpec) -> RobotSpec:
+    """``truck`` as a well-calibrated one: its odometry believes its true wheelbase and its
+    true mean wheel diameter, and the diameter ratio is corrected (the true diameters both set
+    to the mean), so no systematic odometry error is left (Borenstein 1995, §6: the CLAPPER
+    was "well calibrated")."""
+    mean = 0.5 * (truck.true_left_diameter + truck.true_right_diameter)
+    return dataclasses.replace(
+        truck,
+        name=f"{truck.name}-calibrated",
+        wheelbase=truck.true_wheelbase,
+        wheel_diameter=mean,
+        true_left_diameter=mean,
+        true_right_diameter=mean,
+        source=f"{truck.source}; calibrated: nominal = true, equal diameters",
+    )
+
+
+PAPER_ERRORS: dict[str, float] = {
+    "linear_bias": 0.002,
+    "rotary_jitter": math.radians(0.1),
+    "linear_eccentricity": 0.001,
+    "read_skew": 0.004,
+}
+"""The error sources at the magnitudes the paper gives or, where it gives none, a stated
+assumption (``docs/clapper.md``, "Error sources"): link-length bias 2 mm (Borenstein 1995,
+§5.2: "on the order of 2 mm"); vibration jitter 0.1° (assumed, under one 0.35° count);
+eccentricity 1 mm (named in §5.2 without a size; assumed); read skew 4 ms (a tenth of T_s,
+assumed). The rotary biases are left at 0: §5.3 says simple calibration removes them."""
 
 
 #: Vehicle presets.
@@ -272,8 +328,15 @@ VEHICLES: dict[str, VehicleSpec] = {
     # Borenstein 1995, §2-§3: two LabMate trucks 1 m apart, 10-bit rotary encoders, 0.1 mm
     # linear encoder, 40 ms sampling; the bearing range (±0.1 m) is assumed.
     "clapper": VehicleSpec(
+        truck_a=calibrated(PRESETS["labmate"]),
+        truck_b=calibrated(PRESETS["labmate"]),
+        name="clapper",
+    ),
+    # The same vehicle with the LabMates as they come (b 340 mm believed, 336.17 mm true;
+    # D_R/D_L = 1.00084: Borenstein & Feng 1994, Fig. 6.5).
+    "clapper-uncalibrated": VehicleSpec(
         truck_a=PRESETS["labmate"],
         truck_b=PRESETS["labmate"],
-        name="clapper",
+        name="clapper-uncalibrated",
     ),
 }
