@@ -52,11 +52,13 @@ from the corrections IPEC makes during straight travel on a smooth floor.
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from odomgym._jit import kernel
 from odomgym.internal import (
     FloatArray,
     Heading,
@@ -66,10 +68,8 @@ from odomgym.internal import (
     check_reading,
     check_travel,
     check_wheelbase,
-    dead_reckon,
     link_angles,
 )
-from odomgym.odometry import wrap_angle
 
 __all__ = ["CONFIGURATIONS", "IPEC", "estimate_wheel_diameter_ratio", "ipec_configuration"]
 
@@ -79,16 +79,32 @@ CONFIGURATIONS: dict[str, dict[str, object]] = {
     "recommended": {
         "heading": "midpoint",
         "translation_correction": True,
+        "quantum": "one count",
+        "straight_only": True,
+    },
+    "gated": {
+        "heading": "midpoint",
+        "translation_correction": True,
         "translation_gate": "one count",
         "straight_only": True,
     },
     "heading-only": {"heading": "midpoint", "translation_correction": False},
 }
-"""Named IPEC configurations. ``paper``: Eqs. 9–16 as printed (Eq. 9 along the orientation at
-the end of the interval; Eq. 15 whenever Δ_A ≠ 0). ``recommended``: Eq. 9 along the mid-interval
-heading, Eq. 15 only for a correction of at least one count of the rotary encoder while truck A
-drives straight. ``heading-only``: the mid-interval heading without Eq. 15 (the paper: it has
-"only minimal effect on the overall accuracy", §4.2). ``docs/clapper.md`` compares them."""
+"""Named IPEC configurations (``docs/clapper.md`` compares them on the paper's experiments).
+
+* ``paper``: Eqs. 9–16 as printed (Eq. 9 along the orientation at the end of the interval,
+  Eq. 15 whenever Δ_A ≠ 0). Every one-count flip of ψ_A moves truck A back by b·sin(q/2), so
+  the rectangle ends centimetres and degrees off.
+* ``gated``: Eq. 9 along the mid-interval heading; Eq. 15 only for |Δ_A| of at least one count
+  while truck A drives straight. A follower that holds its encoder at a count boundary still
+  flips it, so Eq. 15 still over-corrects.
+* ``heading-only``: the mid-interval heading without Eq. 15 (which, the paper found, has "only
+  minimal effect on the overall accuracy", §4.2): each cable's travel loss stays.
+* ``recommended`` (the default of the runs and envs): the mid-interval heading, corrections
+  consistent with the quantised readings (``quantum``: a flip corrects nothing, a bump is
+  corrected to within half a count) and Eq. 15, with Eq. 12's full Δ_A, only when the reading
+  is inconsistent with the dead reckoning while truck A drives straight.
+"""
 
 
 def ipec_configuration(
@@ -102,8 +118,9 @@ def ipec_configuration(
             f"unknown IPEC configuration {name!r}; choose from {', '.join(CONFIGURATIONS)}"
         )
     options = dict(CONFIGURATIONS[name])
-    if options.get("translation_gate") == "one count":
-        options["translation_gate"] = float(rotary_resolution)
+    for key in ("translation_gate", "quantum"):
+        if options.get(key) == "one count":
+            options[key] = float(rotary_resolution)
     return functools.partial(IPEC, **options)  # type: ignore[arg-type]
 
 
@@ -125,6 +142,13 @@ class IPEC:
             number of counts, and a count that flips because ψ drifted across a step boundary
             looks like a bump: one count (``2π/2^bits``) is the gate of the ``recommended``
             configuration, which with ``straight_only`` keeps the printed rule where it holds.
+        quantum: one count of the rotary encoders [rad] (default 0: the readings are taken as
+            exact, Eq. 13 as printed). When given, a reading says only that ψ lies within half
+            a count of it, so Eq. 12's Δ_X is the *least* correction that brings the expected
+            angle into that interval (0 when it already lies inside): a reading that flips
+            because ψ drifted across a count boundary corrects nothing, while a bump's turn is
+            corrected down to half a count. The estimate's heading then no longer equals
+            θ_L + ψ_act exactly but stays within half a count of it.
         straight_only: Eq. 15 fires only while truck A drives straight (its dead-reckoned turn
             in the interval is under ``translation_gate``, both wheels rolling the same way):
             the paper derives it for a bump under one wheel in straight travel (§4.2, Fig. 5);
@@ -139,6 +163,7 @@ class IPEC:
         translation_correction: bool = True,
         translation_gate: float = 0.0,
         straight_only: bool = False,
+        quantum: float = 0.0,
     ) -> None:
         self._wheelbase = check_wheelbase(wheelbase)
         self.heading: Heading = check_heading(heading)
@@ -148,6 +173,10 @@ class IPEC:
             raise ValueError(f"translation_gate must be in [0, π) rad, got {translation_gate!r}")
         self.translation_gate = gate
         self.straight_only = bool(straight_only)
+        step = float(quantum)
+        if not (step >= 0.0 and step < np.pi):
+            raise ValueError(f"quantum must be in [0, π) rad, got {quantum!r}")
+        self.quantum = step
         self.n = self._wheelbase.shape[0]
         self._poses = np.zeros((self.n, 2, 3))
         self._correction = np.zeros((self.n, 2))
@@ -166,40 +195,26 @@ class IPEC:
         """One sampling interval of Eqs. 9–16; returns the corrected poses (N, 2, 3)."""
         travel = check_travel(wheel_travel, self.n)
         length, psi = check_reading(reading, self.n)
-        b = self._wheelbase
-        # Eq. 9: each truck's own dead reckoning.
-        poses, centre_travel = dead_reckon(self._poses, travel, b, self.heading)
-        x, y = poses[:, :, 0], poses[:, :, 1]  # views: Eq. 15 moves A's in place
-        theta = poses[:, :, 2].copy()  # Eq. 9's θ_A, θ_B (Eq. 15 rotates about θ_A)
-        # Eq. 10: the link direction from B to A.
-        theta_link = np.arctan2(y[:, 0] - y[:, 1], x[:, 0] - x[:, 1])
-        # Eqs. 11–12: expected angles and corrections; Eq. 13: corrected orientations.
-        expected = theta - theta_link[:, None]
-        delta = np.asarray(wrap_angle(psi - expected), dtype=np.float64)
-        poses[:, :, 2] = theta + delta
-        # Eqs. 14–15: truck A rotated by Δ_A about the non-slipping wheel's contact point.
-        if self.translation_correction:
-            delta_a = delta[:, 0]
-            left = travel[:, 0, 0]
-            right = travel[:, 0, 1]
-            same_way = left * right >= 0.0
-            if self.translation_gate > 0.0:
-                same_way &= np.abs(delta_a) >= self.translation_gate * (1.0 - 1e-9)
-            if self.straight_only:
-                turn = (right - left) / b[:, 0]
-                same_way &= (np.abs(turn) < max(self.translation_gate, 1e-12)) & (
-                    left * right > 0.0
-                )
-            right_lagged = same_way & (delta_a * right < 0.0)  # pivot: the left wheel
-            left_lagged = same_way & (delta_a * left > 0.0)  # pivot: the right wheel
-            side = right_lagged.astype(np.float64) - left_lagged.astype(np.float64)
-            shift = side * b[:, 0] * np.sin(0.5 * delta_a)  # signed chord, Eq. 14 [m]
-            along = theta[:, 0] + 0.5 * delta_a
-            poses[:, 0, 0] += shift * np.cos(along)
-            poses[:, 0, 1] += shift * np.sin(along)
-        # Eq. 16: truck B re-placed l behind the corrected truck A.
-        poses[:, 1, 0] = poses[:, 0, 0] - length * np.cos(theta_link)
-        poses[:, 1, 1] = poses[:, 0, 1] - length * np.sin(theta_link)
+        poses = np.empty_like(self._poses)
+        delta = np.empty((self.n, 2))
+        centre_travel = np.empty((self.n, 2))
+        theta_link = np.empty(self.n)
+        _update(
+            self._poses,
+            travel,
+            length,
+            psi,
+            self._wheelbase,
+            self.heading == "current",
+            self.translation_correction,
+            self.translation_gate,
+            self.straight_only,
+            self.quantum,
+            poses,
+            delta,
+            centre_travel,
+            theta_link,
+        )
         self._poses = poses
         self._correction = delta
         self._travel = centre_travel
@@ -225,6 +240,84 @@ class IPEC:
     def link_direction(self) -> FloatArray:
         """θ_L of the last interval (N,) [rad] (Eq. 10), from the dead-reckoned positions."""
         return self._link_direction.copy()
+
+
+@kernel
+def _update(
+    previous: FloatArray,
+    travel: FloatArray,
+    length: FloatArray,
+    psi: FloatArray,
+    b: FloatArray,
+    current: bool,
+    translation: bool,
+    gate: float,
+    straight_only: bool,
+    quantum: float,
+    poses: FloatArray,
+    delta: FloatArray,
+    centre_travel: FloatArray,
+    theta_link: FloatArray,
+) -> None:
+    """Eqs. 9–16 for every vehicle (the class docstring's options), in place into ``poses``
+    (N, 2, 3), ``delta`` (N, 2), ``centre_travel`` (N, 2) and ``theta_link`` (N,): one compiled
+    loop, because the per-interval arithmetic on a few numbers is all interpreter overhead in
+    numpy (a CLAPPER run calls it 25 times per simulated second)."""
+    two_pi = 2.0 * math.pi
+    for i in range(previous.shape[0]):
+        # Eq. 9: each truck's own dead reckoning.
+        for k in range(2):
+            left = travel[i, k, 0]
+            right = travel[i, k, 1]
+            u = 0.5 * (left + right)
+            turn = (right - left) / b[i, k]
+            heading = previous[i, k, 2] + turn
+            along = heading if current else previous[i, k, 2] + 0.5 * turn
+            poses[i, k, 0] = previous[i, k, 0] + u * math.cos(along)
+            poses[i, k, 1] = previous[i, k, 1] + u * math.sin(along)
+            poses[i, k, 2] = heading
+            centre_travel[i, k] = u
+        # Eq. 10: the link direction from B to A.
+        link = math.atan2(poses[i, 0, 1] - poses[i, 1, 1], poses[i, 0, 0] - poses[i, 1, 0])
+        theta_link[i] = link
+        theta_a = poses[i, 0, 2]  # Eq. 9's θ_A: Eq. 15 rotates about it
+        raw_a = 0.0
+        # Eqs. 11–13 (Δ as the least consistent correction when ``quantum`` > 0).
+        for k in range(2):
+            d = (psi[i, k] - (poses[i, k, 2] - link) + math.pi) % two_pi - math.pi
+            raw = d
+            if quantum > 0.0:
+                excess = abs(d) - 0.5 * quantum
+                d = math.copysign(excess, d) if excess > 0.0 else 0.0
+                if d == 0.0:
+                    raw = 0.0
+            delta[i, k] = d
+            poses[i, k, 2] += d
+            if k == 0:
+                raw_a = raw
+        # Eqs. 14–15: truck A rotated by Δ_A about the non-slipping wheel's contact point.
+        if translation:
+            left = travel[i, 0, 0]
+            right = travel[i, 0, 1]
+            fire = left * right >= 0.0
+            if gate > 0.0:
+                fire = fire and abs(raw_a) >= gate * (1.0 - 1e-9)
+            if straight_only:
+                bound = max(gate, quantum, 1e-12)
+                fire = fire and abs((right - left) / b[i, 0]) < bound and left * right > 0.0
+            side = 0.0
+            if fire:
+                if raw_a * right < 0.0:
+                    side += 1.0  # the right wheel lagged: pivot on the left one
+                if raw_a * left > 0.0:
+                    side -= 1.0  # the left wheel lagged: pivot on the right one
+            shift = side * b[i, 0] * math.sin(0.5 * raw_a)  # signed chord, Eq. 14 [m]
+            along = theta_a + 0.5 * raw_a
+            poses[i, 0, 0] += shift * math.cos(along)
+            poses[i, 0, 1] += shift * math.sin(along)
+        # Eq. 16: truck B re-placed l behind the corrected truck A.
+        poses[i, 1, 0] = poses[i, 0, 0] - length[i] * math.cos(link)
+        poses[i, 1, 1] = poses[i, 0, 1] - length[i] * math.sin(link)
 
 
 def estimate_wheel_diameter_ratio(

@@ -8,7 +8,10 @@ Figures (the project's targets in brackets):
 2. env steps per second of ``UMBmarkSquare-v0`` against Gymnasium's ``LunarLander-v3``, both
    through ``gymnasium.make`` with random actions [ratio ≥ 2.0];
 3. robot-steps per second of the native vector env, and against ``SyncVectorEnv`` over the
-   single env, at N robots [≥ 1 M robot-steps/s and ratio ≥ 20 at 256].
+   single env, at N robots [≥ 1 M robot-steps/s and ratio ≥ 20 at 256];
+4. the CLAPPER's 36 m straight out and back (Borenstein 1995, §6.1) with IPEC on and twenty
+   cables on the concrete floor, simulated time / wall time [≥ 500× real time], beside the
+   same run with IPEC off.
 
 Compilation of the numba kernels happens once, before timing; its cost is printed separately.
 """
@@ -49,6 +52,41 @@ def umbmark_run(repeats: int = 5) -> dict[str, float]:
         "wall_s": best,
         "real_time_factor": simulated / best,
     }
+
+
+def clapper_run(repeats: int = 5) -> dict[str, float]:
+    """The 36 m straight out and back with IPEC (``recommended``) and 20 cables, best of
+    ``repeats``, and the same without IPEC (the estimator's share of the time)."""
+    from odomgym.clapper import CLAPPER_FLOOR, CableLayer, drive_vehicles, evenly, straight_path
+    from odomgym.envs.clapper import ipec_estimator
+    from odomgym.vehicle import load_vehicle
+
+    spec = load_vehicle("clapper")
+    floor = FLOORS[CLAPPER_FLOOR]
+    out: dict[str, float] = {}
+    for label, estimator in (
+        ("ipec", ipec_estimator(rotary_resolution=spec.rotary_resolution)),
+        ("no_ipec", None),
+    ):
+        best, simulated = float("inf"), 0.0
+        for k in range(repeats + 1):  # the first run compiles and warms up
+            start = time.perf_counter()
+            outcome = drive_vehicles(
+                spec,
+                floor,
+                straight_path(18.0),
+                estimator=estimator,
+                cables=CableLayer(evenly(20)),
+                rng=np.random.default_rng(k),
+            )
+            wall = time.perf_counter() - start
+            if k:
+                best = min(best, wall)
+            simulated = outcome.time
+        out[f"{label}_wall_s"] = best
+        out[f"{label}_real_time_factor"] = simulated / best
+        out["simulated_s"] = simulated
+    return out
 
 
 def env_steps_per_second(env_id: str, seconds: float, **kwargs: Any) -> float:
@@ -105,6 +143,7 @@ def main() -> None:
     lunar = env_steps_per_second("LunarLander-v3", args.seconds)
     native = vector_robot_steps_per_second(args.robots, "vector_entry_point", args.seconds)
     sync = vector_robot_steps_per_second(args.robots, "sync", args.seconds)
+    clapper = clapper_run()
     result = {
         "machine": {"cpu_count": os.cpu_count(), "python": platform.python_version()},
         "umbmark_run": run,
@@ -119,6 +158,7 @@ def main() -> None:
             "sync": sync,
             "ratio": native / sync,
         },
+        "clapper_straight": clapper,
     }
     if args.json:
         print(json.dumps(result, indent=2))
@@ -137,6 +177,12 @@ def main() -> None:
         f"robot-steps/s at {args.robots} robots: native vector env {native:,.0f} vs "
         f"SyncVectorEnv {sync:,.0f} -> ratio {native / sync:.1f}   "
         "[targets >= 1,000,000 and >= 20 at 256]"
+    )
+    print(
+        f"CLAPPER 36 m straight, 20 cables, concrete: {clapper['simulated_s']:.1f} s simulated "
+        f"in {1e3 * clapper['ipec_wall_s']:.0f} ms with IPEC -> "
+        f"{clapper['ipec_real_time_factor']:.0f}x real time (without IPEC "
+        f"{clapper['no_ipec_real_time_factor']:.0f}x)   [target >= 500x]"
     )
 
 

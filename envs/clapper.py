@@ -80,9 +80,9 @@ DEFAULT_IPEC = "recommended"
 def ipec_estimator(
     configuration: str = DEFAULT_IPEC, rotary_resolution: float = 2.0 * math.pi / 1024
 ) -> EstimatorFactory:
-    """The CLAPPER's IPEC (Borenstein 1995, Eqs. 9-16) in one of the named configurations
-    ``paper``, ``recommended`` (the default) or ``heading-only``; ``rotary_resolution`` [rad]
-    is one count of the vehicle's rotary encoders (the recommended gate of Eq. 15)."""
+    """The CLAPPER's IPEC (Borenstein 1995, Eqs. 9-16) in one of the named configurations of
+    :data:`odomgym.baselines.ipec.CONFIGURATIONS` (``recommended`` by default);
+    ``rotary_resolution`` [rad] is one count of the vehicle's rotary encoders."""
     from odomgym.baselines.ipec import ipec_configuration
 
     return ipec_configuration(configuration, rotary_resolution)

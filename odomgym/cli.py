@@ -854,10 +854,11 @@ def _add_clapper_parsers(routes: Any) -> None:
         )
         parser.add_argument(
             "--ipec-config",
-            choices=["recommended", "paper", "heading-only"],
+            choices=["recommended", "paper", "gated", "heading-only"],
             default="recommended",
-            help="IPEC configuration (docs/clapper.md): recommended (default), paper (Eqs. "
-            "9-16 as printed), heading-only (without Eq. 15)",
+            help="IPEC configuration (docs/clapper.md): recommended (default: corrections "
+            "consistent with the 10-bit readings), paper (Eqs. 9-16 as printed), gated (Eq. 15 "
+            "only for one count or more in straight travel), heading-only (without Eq. 15)",
         )
         parser.add_argument(
             "--steering",
