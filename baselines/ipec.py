@@ -80,6 +80,7 @@ CONFIGURATIONS: dict[str, dict[str, object]] = {
         "heading": "midpoint",
         "translation_correction": True,
         "quantum": "one count",
+        "translation_gate": "one count",
         "straight_only": True,
     },
     "gated": {

@@ -745,7 +745,7 @@ class VehicleTrial:
             shown[:, :, 2] = truth[:, :, 2] + f * wrap_angle(
                 self._previous_truth[:, :, 2] - truth[:, :, 2]
             )
-        self._previous_truth = truth
+        self._previous_truth = truth.copy()
         self.reading = link_readings(self.spec, shown, self._reading_rng)
         self.estimated = self.estimator.update(travel, self.reading)
         if self._cable_geometry is not None:

@@ -1,19 +1,18 @@
-"""The CLAPPER driven in the World, with and without IPEC (Borenstein 1995, §6).
-
-Work in progress for issue 9: the straight experiment of §6.1 and the smooth-floor rectangle of
-§6.2; the rectangle with bumps, the envs and the command line are still to come.
+"""The CLAPPER driven in the World, with and without IPEC (Borenstein 1995, §§5–6): single
+deterministic runs on a smooth floor, for the physics (per-bump error, §5.1 auto-calibration,
+§5.2 encoder and link biases, the §3.3 growth rate). The paper's experiments as distributions
+on the stated floor are in tests/test_clapper_paper.py.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 
 import numpy as np
 import pytest
 
-from odomgym.baselines.ipec import IPEC, estimate_wheel_diameter_ratio
+from odomgym.baselines.ipec import estimate_wheel_diameter_ratio, ipec_configuration
 from odomgym.cables import bump_extra_rotation
 from odomgym.clapper import (
     CableLayer,
@@ -27,7 +26,7 @@ from odomgym.clapper import (
     straight_path,
 )
 from odomgym.floor import FloorSpec
-from odomgym.internal import DeadReckoning
+from odomgym.internal import DeadReckoning, growth_rate
 from odomgym.vehicle import VEHICLES, VehicleSpec
 
 CLAPPER = VEHICLES["clapper"]
@@ -35,13 +34,11 @@ TRUCK = CLAPPER.truck_a
 # One crossing turns a truck by the cable's excess rim travel over its true wheelbase: 0.58°
 # for a LabMate over a 10 mm cable (Borenstein 1995 measured "approximately 0.6°", §6.1).
 PER_BUMP = bump_extra_rotation(0.5 * TRUCK.true_right_diameter, 0.010) / TRUCK.true_wheelbase
-# The estimator the CLAPPER runs here: IPEC with midpoint dead reckoning (Eq. 9 moves along the
-# heading at the end of the interval, a first-order error on arcs that IPEC then reads as link
-# motion: ±1.9° after a smooth-floor rectangle, against ±0.5° with the midpoint), without the
-# composite translational correction (Eqs. 14-15): with 10-bit readings it fires at every
-# count change of ψ_A, moving truck A back 1.04 mm each time, which through a rectangle's turns
-# adds up to 6 cm; the paper found the correction had "only minimal effect" (§4.2).
-CLAPPER_IPEC = functools.partial(IPEC, heading="midpoint", translation_correction=False)
+# The estimator of these physics tests: IPEC's "heading-only" configuration (midpoint dead
+# reckoning, Eqs. 9-13 and 16 without the composite translational correction of Eqs. 14-15),
+# so that each test sees only the effect it is about; the configurations are compared in
+# tests/test_clapper_paper.py and docs/clapper.md.
+CLAPPER_IPEC = ipec_configuration("heading-only")
 
 
 @pytest.mark.slow
@@ -220,5 +217,6 @@ def test_growth_rate_concept_in_the_world() -> None:
     assert abs(math.degrees(alpha)) == pytest.approx(0.57, rel=0.1)  # one crossing
     assert correction == pytest.approx(alpha, rel=0.03)
     assert max(abs(h) for h in heading) < 0.03 * abs(alpha)
-    u_alpha = 0.5 * spec.sample_period * abs(alpha)  # 0.19 mm
+    # Eq. 6 at 0.5 m/s and T_s = 40 ms (D_s = 20 mm): 0.19 mm for this α.
+    u_alpha = growth_rate(abs(alpha), 0.5 * spec.sample_period, spec.link_length).lateral
     assert 0.5 * u_alpha < max(abs(v) for v in lateral) < 1.2 * u_alpha

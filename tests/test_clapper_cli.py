@@ -27,7 +27,8 @@ def test_clapper_straight_json_lines_and_plot(
         assert set(record["trucks"]) == {"A", "B"} and record["finished"]
     # Four bumps: without IPEC ~4 x 0.58 deg of heading error, with IPEC a small fraction.
     assert abs(runs[0]["return_error"]["theta"]) > 0.03
-    assert summary["reduction"] > 5.0
+    assert summary["reduction"]["theta_truck_a"] > 5.0
+    assert runs[0]["cable_crossings"] == {"A": 4, "B": 4}
     assert plot.stat().st_size > 0
 
 
@@ -38,5 +39,18 @@ def test_clapper_rectangle_no_ipec_table(capsys: pytest.CaptureFixture[str]) -> 
     )  # fmt: skip
     assert code == 0
     out = capsys.readouterr().out
-    assert "without ipec: all" in out and "with ipec" not in out
+    assert "without IPEC" in out and "with IPEC" not in out
     assert "IPEC reduces" not in out
+
+
+@pytest.mark.slow
+def test_clapper_straight_runs_the_papers_conditions(capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --bumps/--ipec the command runs §6.1's conditions a–d (three runs each by
+    default; one here) and prints each one's distribution and the reduction per truck."""
+    code = main(["run", "clapper-straight", "--runs", "1"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "floor concrete" in out and "IPEC recommended" in out and "steering psi" in out
+    for label in ("a: IPEC off, 0 cables", "b: IPEC off, 10 cables", "d: IPEC on, 20 cables"):
+        assert label in out
+    assert "fold (truck A)" in out

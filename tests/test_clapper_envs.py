@@ -39,6 +39,13 @@ def test_straight_env_with_ipec_reproduces_section_6_1() -> None:
     assert abs(math.degrees(float(info["return_error"][2]))) < 1.0
     assert info["truck_return_errors"].shape == (2, 3)
     assert {"true_poses", "estimated_poses", "odometry_poses", "psi", "link_length"} <= set(info)
+    # Every truck crossed every cable, the linkage never reached its end stops, and each
+    # truck's own heading is within the paper's ±1.0° too.
+    assert list(info["cable_crossings"]) == [20, 20]
+    assert info["link_force"] == 0.0 and info["link_force_max"] == 0.0
+    assert np.all(np.abs(np.degrees(info["truck_errors"][:, 2])) < 1.0)
+    env = gym.make("ClapperStraight-v0")
+    assert env.unwrapped.floor.name == "concrete"  # the one stated floor (odomgym.clapper)
 
 
 @pytest.mark.slow

@@ -18,12 +18,13 @@ import pytest
 from numpy.typing import NDArray
 
 from odomgym.baselines.ipec import IPEC, estimate_wheel_diameter_ratio
-from odomgym.cables import bump_extra_rotation, cable_advance
+from odomgym.cables import bump_extra_rotation, cable_advance, paper_bump_error
 from odomgym.internal import (
     DeadReckoning,
     Heading,
     InternalEstimator,
     LinkReading,
+    growth_rate,
     link_angles,
 )
 from odomgym.odometry import Odometry, wrap_angle
@@ -138,47 +139,42 @@ def along_track(error: FloatArray, theta: FloatArray) -> FloatArray:
 
 
 # ---------------------------------------------------------------------- Table I and §3.3
-def step_overcount(radius: float, height: float) -> float:
-    """Borenstein 1995, Eqs. 1–3 [m]: a wheel of radius R over a step of height h rotates about
-    the step's edge; the encoder reports the chord D_meas ≈ √(2Rh) (Eq. 3, R >> h) for the
-    horizontal D_hor = √(2Rh − h²) (Eq. 2), up and down: ΔD = 2·(D_meas − D_hor) (Eq. 1)."""
-    d_hor = math.sqrt(2.0 * radius * height - height**2)
-    d_meas = math.sqrt(2.0 * radius * height)
-    return 2.0 * (d_meas - d_hor)
-
-
 def test_table_1_bump_errors() -> None:
-    """Table I: ΔD = 2.63 mm, α = 0.44°, e_lat(10 m) = 77 mm, matched to the digits printed
-    (the paper rounds; nothing tighter can be asserted). odomgym's exact rigid-cylinder
-    geometry gives 3.40 mm, 0.57°, within 5 % of the paper's measured ≈ 0.6° per bump (§6.1)."""
-    over = step_overcount(WHEEL_RADIUS, CABLE)
-    alpha = math.asin(over / WHEELBASE)  # Eq. 4
-    e_lat = 10.0 * math.sin(alpha)  # Eq. 5, D = 10 m
-    assert round(over * 1e3, 2) == 2.63
-    assert round(math.degrees(alpha), 2) == 0.44
-    assert round(e_lat * 1e3) == 77
+    """Table I: ΔD = 2.63 mm, α = 0.44°, e_lat(10 m) = 77 mm, from the package's Eqs. 1–5
+    (:func:`odomgym.cables.paper_bump_error`), matched to the digits printed (the paper rounds;
+    nothing tighter can be asserted). The World's exact rigid-cylinder geometry
+    (:func:`bump_extra_rotation`) gives 3.40 mm, 0.57°, within 5 % of the paper's measured
+    ≈ 0.6° per bump (§6.1)."""
+    table = paper_bump_error(WHEEL_RADIUS, CABLE, WHEELBASE, 10.0)
+    assert round(table.overcount * 1e3, 2) == 2.63
+    assert round(math.degrees(table.heading), 2) == 0.44
+    assert round(table.lateral * 1e3) == 77
     exact = bump_extra_rotation(WHEEL_RADIUS, CABLE)
     assert round(exact * 1e3, 2) == 3.40
     assert round(math.degrees(exact / WHEELBASE), 2) == 0.57
     assert math.degrees(exact / WHEELBASE) == pytest.approx(0.6, rel=0.05)
+    # The chord of Eq. 3 under-counts the exact arc: the two agree as the cable shrinks.
+    small = paper_bump_error(WHEEL_RADIUS, 1e-4, WHEELBASE, 10.0)
+    assert small.overcount == pytest.approx(bump_extra_rotation(WHEEL_RADIUS, 1e-4), rel=0.35)
 
 
 def test_growth_rates_section_3_3() -> None:
-    """Eqs. 6–8 with D_s = 20 mm, L = 1 m: 0.15 mm lateral error per interval, δ = 0.01°,
-    θ_m = 0.43°, matched to the digits printed. The paper's 2.3 % and 4.5 % divide its
-    *rounded* values (0.01/0.43, 0.02/0.44); unrounded they are 2.0 % and 4.0 %."""
-    alpha = math.asin(step_overcount(WHEEL_RADIUS, CABLE) / WHEELBASE)
-    e_lat = D_S * math.sin(alpha)  # Eq. 6: largest lateral error within one interval
-    delta = math.asin(e_lat / LINK)  # Eq. 7: its effect on the link direction
-    theta_m = alpha - delta  # Eq. 8: the orientation error IPEC measures
-    assert round(e_lat * 1e3, 2) == 0.15
-    assert round(math.degrees(delta), 2) == 0.01
-    assert round(math.degrees(theta_m), 2) == 0.43
-    delta_2, theta_m_2, alpha_2 = (round(math.degrees(a), 2) for a in (delta, theta_m, alpha))
+    """Eqs. 6–8 (:func:`odomgym.internal.growth_rate`) with D_s = 20 mm, L = 1 m and Table I's
+    α: 0.15 mm lateral error per interval, δ = 0.01°, θ_m = 0.43°, matched to the digits
+    printed. The paper's 2.3 % and 4.5 % divide its *rounded* values (0.01/0.43, 0.02/0.44);
+    unrounded they are 2.0 % and 4.0 %."""
+    alpha = paper_bump_error(WHEEL_RADIUS, CABLE, WHEELBASE, 10.0).heading
+    rate = growth_rate(alpha, D_S, LINK)
+    assert round(rate.lateral * 1e3, 2) == 0.15
+    assert round(math.degrees(rate.link), 2) == 0.01
+    assert round(math.degrees(rate.measured), 2) == 0.43
+    delta_2, theta_m_2, alpha_2 = (
+        round(math.degrees(a), 2) for a in (rate.link, rate.measured, alpha)
+    )
     assert round(100.0 * delta_2 / theta_m_2, 1) == 2.3
     assert round(100.0 * 2.0 * delta_2 / alpha_2, 1) == 4.5
-    assert round(100.0 * delta / theta_m, 1) == 2.0
-    assert round(100.0 * 2.0 * delta / alpha, 1) == 4.0
+    assert round(100.0 * rate.link / rate.measured, 1) == 2.0
+    assert round(100.0 * 2.0 * rate.link / alpha, 1) == 4.0
 
 
 # ---------------------------------------------------------------------- the equations

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -14,7 +15,14 @@ from odomgym.floor import FLOORS
 from odomgym.internal import link_angles
 from odomgym.physics import World
 from odomgym.robot import PRESETS
-from odomgym.vehicle import VEHICLES, VehicleSpec, link_readings, load_vehicle
+from odomgym.vehicle import (
+    PAPER_ERRORS,
+    VEHICLES,
+    VehicleSpec,
+    calibrated,
+    link_readings,
+    load_vehicle,
+)
 
 CLAPPER = VEHICLES["clapper"]
 
@@ -25,7 +33,12 @@ def test_clapper_preset_has_the_papers_encoders() -> None:
     assert CLAPPER.linear_resolution == 1e-4
     assert CLAPPER.sample_period == 0.04
     assert CLAPPER.link_length == 1.0
-    assert CLAPPER.truck_a == PRESETS["labmate"]
+    # The paper's vehicle was "well calibrated" (§6): LabMates with their odometry calibrated.
+    assert CLAPPER.truck_a == calibrated(PRESETS["labmate"]) == CLAPPER.truck_b
+    truck = CLAPPER.truck_a
+    assert truck.wheelbase == truck.true_wheelbase == PRESETS["labmate"].true_wheelbase
+    assert truck.true_left_diameter == truck.true_right_diameter == truck.wheel_diameter
+    assert VEHICLES["clapper-uncalibrated"].truck_a == PRESETS["labmate"]
 
 
 def test_toml_round_trip_and_file_relative_truck(tmp_path: Path) -> None:
@@ -79,6 +92,51 @@ def test_readings_are_quantised_and_biased() -> None:
     assert np.all(np.abs(reading.psi[:, 1] - psi[:, 1] - math.radians(1.0)) <= q / 2 + 1e-12)
     true_length = np.hypot(*(poses[:, 0, :2] - poses[:, 1, :2]).T)
     assert np.all(np.abs(reading.length - true_length) <= r / 2 + 1e-12)
+
+
+def test_error_sources_in_the_readings() -> None:
+    """Eccentricity shifts the length by −e·sin ψ_B; jitter moves the counts (and needs a
+    generator: every random draw flows from one); the paper's magnitudes load as spec
+    fields, and out-of-range values are refused with the field's name."""
+    poses = np.zeros((1, 2, 3))
+    poses[0, 0, :2] = (1.0, 0.0)
+    poses[0, 1, 2] = 0.3  # ψ_B = 0.3 rad
+    plain = VehicleSpec(PRESETS["labmate"], PRESETS["labmate"], linear_resolution=1e-6)
+    eccentric = dataclasses.replace(plain, linear_eccentricity=0.002)
+    shift = link_readings(eccentric, poses).length - link_readings(plain, poses).length
+    assert shift[0] == pytest.approx(-0.002 * math.sin(0.3), abs=2e-6)
+    jittery = dataclasses.replace(plain, rotary_jitter=math.radians(0.5))
+    with pytest.raises(ValueError, match="rng"):
+        link_readings(jittery, poses)
+    draws = {
+        float(link_readings(jittery, poses, np.random.default_rng(k)).psi[0, 1]) for k in range(20)
+    }
+    assert len(draws) > 1  # the count moves with the jitter
+    same = [link_readings(jittery, poses, np.random.default_rng(7)).psi for _ in range(2)]
+    np.testing.assert_array_equal(*same)
+    with_errors = dataclasses.replace(CLAPPER, **PAPER_ERRORS)  # type: ignore[arg-type]
+    assert with_errors.linear_bias == 0.002 and with_errors.read_skew < with_errors.sample_period
+    for field, value in (("rotary_jitter", -0.1), ("read_skew", 0.05)):
+        with pytest.raises(SpecError, match=field):
+            dataclasses.replace(CLAPPER, **{field: value})  # type: ignore[arg-type]
+
+
+def test_read_skew_shows_the_trucks_where_they_were() -> None:
+    """Link encoders read ``read_skew`` before the wheels: a truck turning at a steady rate
+    shows ψ behind the truth by rate × skew (to within a count)."""
+    from odomgym.clapper import VehicleTrial, circle_path
+
+    spec = dataclasses.replace(CLAPPER, rotary_bits=24, read_skew=0.02)
+    trial = VehicleTrial(spec, FLOORS["smooth"], circle_path(direction="ccw"))
+    for _ in range(200):
+        before = trial.truth.copy()
+        trial.step()
+    f = 0.02 / spec.sample_period
+    where = trial.truth + f * (before - trial.truth)  # positions and headings, 20 ms ago
+    _, expected = link_angles(where)
+    np.testing.assert_allclose(trial.reading.psi, expected, atol=spec.rotary_resolution)
+    _, now = link_angles(trial.truth)
+    assert np.all(np.abs(trial.reading.psi - now) > 100 * spec.rotary_resolution)
 
 
 def _two_trucks(rates_a: float, rates_b: float, steps: int) -> tuple[World, list[float]]:
