@@ -2,7 +2,7 @@
 side, and which error source brings what.
 
     python benchmarks/bench_clapper.py [--straight-runs 6] [--rectangle-runs 10] [--floor concrete]
-                                      [--table configurations|sources|both] [--json]
+                                      [--table configurations|sources|vehicles|all] [--json]
 
 Every row runs the paper's conditions on one floor with the same seeds: the 36 m straight
 (§6.1; conditions c and d: with IPEC, 0 and 20 cables; ``--straight-runs`` runs each) and the
@@ -13,6 +13,9 @@ return position along the path relative to c [mm] (what the cables' travel loss 
 rectangle — the vehicle's mean absolute return heading with IPEC [°] (the paper: 0.3°), its
 worst position error [mm] (the paper: none over 50 mm), and IPEC's fold reduction of the mean
 absolute heading error for the vehicle and each truck (the paper: more than 20-fold).
+``--table vehicles`` compares the CLAPPER with the encoder trailer of §7 (the ``trailer``
+preset: a LabMate towing a free-rolling two-wheel trailer on a 1 m tongue, one rotary encoder
+at the hitch) on the same runs, with the hitch encoder at the CLAPPER's 10 bits and at 16.
 """
 
 from __future__ import annotations
@@ -55,6 +58,16 @@ def sources() -> dict[str, VehicleSpec]:
     rows["wheel scale E_s 0.995"] = dataclasses.replace(base, truck_a=truck, truck_b=truck)
     rows["uncalibrated LabMates"] = VEHICLES["clapper-uncalibrated"]
     return rows
+
+
+def vehicles() -> dict[str, VehicleSpec]:
+    """The CLAPPER and the encoder trailer (10-bit and 16-bit hitch encoder)."""
+    trailer = VEHICLES["trailer"]
+    return {
+        "CLAPPER (two 10-bit encoders, compliant link)": VEHICLES["clapper"],
+        "encoder trailer, 10-bit hitch encoder": trailer,
+        "encoder trailer, 16-bit hitch encoder": dataclasses.replace(trailer, rotary_bits=16),
+    }
 
 
 def measure(
@@ -128,22 +141,29 @@ def main() -> None:
     parser.add_argument("--straight-runs", type=int, default=6)
     parser.add_argument("--rectangle-runs", type=int, default=10)
     parser.add_argument("--floor", default=CLAPPER_FLOOR)
-    parser.add_argument("--table", choices=["configurations", "sources", "both"], default="both")
+    parser.add_argument(
+        "--table", choices=["configurations", "sources", "vehicles", "all"], default="all"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     start = time.perf_counter()
     out: dict[str, Any] = {"floor": args.floor}
-    if args.table in ("configurations", "both"):
+    if args.table in ("configurations", "all"):
         out["configurations"] = {
             name: measure(
                 VEHICLES["clapper"], name, args.floor, args.straight_runs, args.rectangle_runs
             )
             for name in CONFIGURATIONS
         }
-    if args.table in ("sources", "both"):
+    if args.table in ("sources", "all"):
         out["sources"] = {
             name: measure(spec, DEFAULT_IPEC, args.floor, args.straight_runs, args.rectangle_runs)
             for name, spec in sources().items()
+        }
+    if args.table in ("vehicles", "all"):
+        out["vehicles"] = {
+            name: measure(spec, DEFAULT_IPEC, args.floor, args.straight_runs, args.rectangle_runs)
+            for name, spec in vehicles().items()
         }
     out["elapsed_s"] = time.perf_counter() - start
     if args.json:
@@ -160,6 +180,9 @@ def main() -> None:
     if "sources" in out:
         print(f"\nError sources, one at a time (IPEC {DEFAULT_IPEC})\n")
         print(markdown(out["sources"], "error source"))
+    if "vehicles" in out:
+        print(f"\nThe CLAPPER and the encoder trailer (IPEC {DEFAULT_IPEC})\n")
+        print(markdown(out["vehicles"], "vehicle"))
 
 
 if __name__ == "__main__":

@@ -32,10 +32,10 @@ the registered step limit (``max_episode_steps``).
 ``correction`` (2,), the estimator's orientation corrections this step [rad];
 ``vehicle_error`` (3,), true minus estimated pose of the vehicle (midpoint of the truck centres,
 heading of the link); ``truck_errors`` (2, 3), the same for each truck's own pose;
-``link_force`` [N], the force the bearing's end stops pass now, and ``link_force_max`` the
-largest so far; ``cable_crossings`` (2,), how many times the wheels of truck A and of truck B
-have passed over a cable; and, on the last step, ``return_error`` (the vehicle's) and
-``truck_return_errors`` (2, 3).
+``link_force`` [N], the force the bearing's end stops pass now (a trailer's: the hitch's
+towing force), and ``link_force_max`` the largest so far; ``cable_crossings`` (2,), how
+many times the wheels of truck A and of truck B have passed over a cable; and, on the last
+step, ``return_error`` (the vehicle's) and ``truck_return_errors`` (2, 3).
 
 Defaults: the ``clapper`` vehicle (two calibrated LabMates), the ``concrete`` floor
 (:data:`odomgym.clapper.CLAPPER_FLOOR`, the same as the CLI's and the tests') and the
@@ -225,7 +225,7 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "correction": np.asarray(correction, dtype=np.float64).copy(),
             "vehicle_error": vehicle[0],
             "truck_errors": trucks[0].copy(),
-            "link_force": float(trial.world.link_forces()[0]),
+            "link_force": float(trial.current_link_force()[0]),
             "link_force_max": float(trial.link_force[0]),
             "cable_crossings": trial.cable_crossings[0].copy(),
             "time": trial.time,

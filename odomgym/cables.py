@@ -30,6 +30,7 @@ __all__ = [
     "cable_advance",
     "cable_advance_scalar",
     "paper_bump_error",
+    "rim_travel_for_advance",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -122,6 +123,29 @@ def cable_advance_scalar(
     else:
         x1 = big_r * math.sin(min(max((s1 + half_width) / big_r - psi0, -psi0), psi0))
     return x1 - x0
+
+
+def rim_travel_for_advance(
+    offset: float, advance: float, wheel_radius: float, cable_radius: float
+) -> float:
+    """The rim travel that moves a wheel centre horizontally by ``advance`` across a cable [m]:
+    the inverse of :func:`cable_advance_scalar` (same arguments and map s(x): rim travel
+    s(x₀ + advance) − s(x₀)). A free-rolling wheel — an encoder trailer's (Borenstein 1995,
+    §7) — is pulled across the cable and turns through the arc over it, so its encoder
+    over-counts the horizontal advance by the cable's excess, as a driven wheel's does."""
+    big_r = wheel_radius + cable_radius
+    half_width = 2.0 * math.sqrt(wheel_radius * cable_radius)
+    psi0 = math.asin(half_width / big_r)
+    excess = 2.0 * big_r * psi0 - 2.0 * half_width
+
+    def rim(x: float) -> float:
+        if x <= -half_width:
+            return x
+        if x >= half_width:
+            return x + excess
+        return -half_width + big_r * (math.asin(min(max(x / big_r, -1.0), 1.0)) + psi0)
+
+    return rim(offset + advance) - rim(offset)
 
 
 @kernel

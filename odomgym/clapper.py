@@ -42,6 +42,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.cables import rim_travel_for_advance
 from odomgym.floor import CableBump, FloorSpec
 from odomgym.internal import DeadReckoning, InternalEstimator, link_angles, link_length
 from odomgym.odometry import Calibration, Odometry, wrap_angle
@@ -421,13 +422,17 @@ class VehicleDriver:
         dt: float,
         speed: FloatArray | None = None,
         psi: FloatArray | None = None,
+        towed: bool = False,
     ) -> FloatArray:
         """Wheel speeds (N, 2, 2) [m/s] for the trucks from the estimated poses (N, 2, 3) and
         the measured link lengths (N,). ``speed`` (N,), if given, asks for a reference speed
         as a fraction of the cruise speed (an env's action); the curve and stop limits and the
         acceleration limit still apply. ``psi`` (N, 2): the rotary encoders' readings [rad],
         which the ``"psi"`` steering needs (without them each truck tracks its own
-        reference)."""
+        reference). ``towed``: truck B is an unpowered trailer (its row of the result is left
+        at zero for the caller to fill): A tracks the path going forwards and, reversing,
+        holds the hitch angle ψ_A at the path's expected angle, which keeps a pushed trailer
+        from jack-knifing."""
         n = estimate.shape[0]
         out = np.zeros((n, 2, 2))
         for i in range(n):
@@ -464,16 +469,26 @@ class VehicleDriver:
             self._s_b[i] = s_b
             v_b = v_b_ref + leg.direction * self.k_link * (float(link_length[i]) - l0)
             refs = ((0, ref_a, v), (1, ref_b, v_b))
-            if self.steering == "psi" and psi is not None:
+            if towed and leg.direction > 0:
+                out[i, 0] = self._track(
+                    estimate[i, 0], ref_a, v, leg.direction, float(half_track[i, 0])
+                )
+                continue
+            if towed or (self.steering == "psi" and psi is not None):
                 # The leader in the direction of travel tracks its reference by its estimate;
                 # the follower holds its rotary encoder at the angle the path expects.
                 leader = 0 if leg.direction > 0 else 1
                 truck, ref, v_lead = refs[leader]
-                out[i, truck] = self._track(
-                    estimate[i, truck], ref, v_lead, leg.direction, float(half_track[i, truck])
-                )
+                if not towed:
+                    out[i, truck] = self._track(
+                        estimate[i, truck], ref, v_lead, leg.direction, float(half_track[i, truck])
+                    )
                 follower = 1 - leader
                 _, ref_f, v_f = refs[follower]
+                if towed:
+                    v_f = v  # the robot pushes its trailer at the reference speed
+                if psi is None:
+                    raise ValueError("a towed trailer needs the hitch encoder's reading (psi)")
                 link = math.atan2(ref_a[1] - ref_b[1], ref_a[0] - ref_b[0])
                 facing = ref_f[2] + (math.pi if leg.direction < 0 else 0.0)
                 expected = _wrap(facing - link)
@@ -590,6 +605,36 @@ def _extended(line: _Polyline, s: float) -> tuple[float, float]:
     return x, y
 
 
+def _free_wheel_rim(
+    cables: tuple[CableBump, ...],
+    px: float,
+    py: float,
+    hx: float,
+    hy: float,
+    advance: float,
+    radius: float,
+) -> float:
+    """Rim travel [m] of a free-rolling wheel whose contact point (px, py) advances by
+    ``advance`` along its heading (hx, hy) in one interval: the advance itself on the flat,
+    the arc over a cable where it crosses one (:func:`odomgym.cables.rim_travel_for_advance`
+    across the cable's axis; the first cable in reach)."""
+    for cable in cables:
+        ax, ay = math.cos(cable.angle), math.sin(cable.angle)
+        rx, ry = px - cable.x, py - cable.y
+        if abs(rx * ax + ry * ay) > 0.5 * cable.length:
+            continue
+        nx, ny = -ay, ax
+        offset = rx * nx + ry * ny
+        facing = hx * nx + hy * ny
+        across = advance * facing
+        reach = 2.0 * math.sqrt(radius * 0.5 * cable.diameter) + abs(across)
+        if abs(offset) > reach or abs(facing) < 1e-3:
+            continue
+        rim_across = rim_travel_for_advance(offset, across, radius, 0.5 * cable.diameter)
+        return advance + (rim_across - across) / facing
+    return advance
+
+
 def _cable_arrays(cables: tuple[CableBump, ...]) -> tuple[FloatArray, ...]:
     """Centres, unit axes and half lengths (K,) of ``cables`` [m], for crossing counts."""
     return (
@@ -661,8 +706,16 @@ class VehicleTrial:
         self.spec, self.floor, self.path, self.n, self.cables = spec, floor, path, n, cables
         trucks = [spec.truck_a, spec.truck_b] * n
         links = [(2 * k, 2 * k + 1, spec.link_min, spec.link_max) for k in range(n)]
+        hitches = [(2 * k, 2 * k + 1, spec.link_length) for k in range(n)]
         self.dt = spec.sample_period
-        self.world = World(trucks, floor, dt=self.dt, links=links, rng=rng)
+        self.world = World(
+            trucks,
+            floor,
+            dt=self.dt,
+            links=[] if spec.trailer else links,
+            hitches=hitches if spec.trailer else [],
+            rng=rng,
+        )
         start = np.tile(path.start_poses(spec.link_length), (n, 1, 1))
         self.world.reset(start.reshape(2 * n, 3))
         self.odometry = Odometry(trucks, calibration)
@@ -731,8 +784,12 @@ class VehicleTrial:
             self.dt,
             speed,
             self.reading.psi,
+            towed=self.spec.trailer,
         )
-        world.step(speeds.reshape(2 * n, 2) * self._rate_per_speed)
+        rates = speeds.reshape(2 * n, 2) * self._rate_per_speed
+        if self.spec.trailer:
+            rates[1::2] = self._free_rolling()
+        world.step(rates)
         counts = world.counts.copy()
         travel = ((counts - self._last_counts) * self.odometry.travel_per_tick).reshape(n, 2, 2)
         self._last_counts = counts
@@ -754,8 +811,42 @@ class VehicleTrial:
         length = link_length(truth)
         self.link_range[:, 0] = np.minimum(self.link_range[:, 0], length)
         self.link_range[:, 1] = np.maximum(self.link_range[:, 1], length)
-        self.link_force = np.maximum(self.link_force, world.link_forces())
+        self.link_force = np.maximum(self.link_force, self.current_link_force())
         self.steps += 1
+
+    def current_link_force(self) -> FloatArray:
+        """The force each vehicle's linkage passed in the last interval (N,) [N]: the end stops'
+        for the CLAPPER (0 inside its range), the hitch's towing force for a trailer."""
+        world = self.world
+        return np.asarray(world.hitch_forces() if self.spec.trailer else world.link_forces())
+
+    def _free_rolling(self) -> FloatArray:
+        """Wheel rates (N, 2) [rad/s] of the trailers' free-rolling wheels: each rolls at the
+        ground speed its contact point has along the trailer's heading. The World drives every
+        wheel at a commanded rate through a friction-limited contact, so a wheel commanded to
+        its own rolling speed passes no traction: the trailer moves only as its hitch pulls it
+        (the speed is the one at the start of the interval, so within one interval of 40 ms
+        the wheels lag a change of speed)."""
+        world = self.world
+        pose = world.pose[1::2]
+        velocity = world.velocity[1::2]
+        along = velocity[:, 0] * np.cos(pose[:, 2]) + velocity[:, 1] * np.sin(pose[:, 2])
+        turn = velocity[:, 2] * world.half_track[1::2]
+        ground = np.stack([along - turn, along + turn], axis=1)
+        cables = self.world.floor.bumps
+        if cables:  # over a cable the rim turns through the arc, not the horizontal advance
+            radius = world.true_radius[1::2]
+            for k in range(len(pose)):
+                x, y, th = (float(v) for v in pose[k])
+                c, s = math.cos(th), math.sin(th)
+                for w, side in ((0, 1.0), (1, -1.0)):
+                    half = float(world.half_track[2 * k + 1])
+                    px, py = x - side * half * s, y + side * half * c
+                    step = float(ground[k, w]) * self.dt
+                    ground[k, w] = (
+                        _free_wheel_rim(cables, px, py, c, s, step, float(radius[k, w])) / self.dt
+                    )
+        return np.asarray(ground / world.true_radius[1::2])
 
     def _count_crossings(self, truth: FloatArray) -> None:
         """Count each truck's wheels passing a laid cable this interval: a wheel's contact point

@@ -100,6 +100,10 @@ class World:
             free while the centre distance lies in [min, max] [m], a hard stop at either end
             (a pymunk ``SlideJoint``): the CLAPPER's linear bearing (Borenstein 1995, §2;
             :mod:`odomgym.vehicle`). Without links the robots do not interact.
+        hitches: towing hitches ``(i, j, length)``: robot j's point ``length`` [m] ahead of
+            its axle midpoint (the end of a rigid tongue) pinned to robot i's axle midpoint, a
+            free rotary joint (a pymunk ``PivotJoint``): the encoder trailer of Borenstein
+            1995, §7, towed by robot i.
 
     State arrays (read them, do not write them; shapes use N robots):
         ``pose`` (N, 3) true x, y [m], θ [rad] of the axle midpoint;
@@ -127,6 +131,7 @@ class World:
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
         track_slip: bool = False,
         links: Sequence[tuple[int, int, float, float]] = (),
+        hitches: Sequence[tuple[int, int, float]] = (),
     ) -> None:
         specs = [robots] if isinstance(robots, RobotSpec) else list(robots)
         if not specs:
@@ -137,6 +142,12 @@ class World:
                 raise ValueError(f"a link joins two different robots of the batch, got {i}, {j}")
             if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
                 raise ValueError(f"a link's range needs 0 <= min < max [m], got {lo}, {hi}")
+        self.hitches = tuple((int(i), int(j), float(length)) for i, j, length in hitches)
+        for i, j, length in self.hitches:
+            if not (0 <= i < len(specs) and 0 <= j < len(specs) and i != j):
+                raise ValueError(f"a hitch joins two different robots of the batch, got {i}, {j}")
+            if not (math.isfinite(length) and length > 0.0):
+                raise ValueError(f"a hitch's tongue must be a positive length [m], got {length}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
         if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
@@ -310,6 +321,12 @@ class World:
             link.collide_bodies = False
             space.add(link)
             self._links.append(link)
+        self._hitches: list[pymunk.PivotJoint] = []
+        for i, j, length in self.hitches:
+            hitch = pymunk.PivotJoint(self._chassis[i], self._chassis[j], (0, 0), (length, 0))
+            hitch.collide_bodies = False
+            space.add(hitch)
+            self._hitches.append(hitch)
         self._friction = np.full((self.n, 2), np.nan)
         self._set_friction(np.full((self.n, 2), self.floor.friction))
         self._use_batch_io = self.n >= _BATCH_IO_MIN_ROBOTS
@@ -633,6 +650,11 @@ class World:
         """Force of each link's last step [N] (zero while the linkage is inside its range)."""
         h = self.dt / self.substeps
         return np.array([link.impulse / h for link in self._links])
+
+    def hitch_forces(self) -> FloatArray:
+        """Force each hitch passed in the last step [N] (the towing force)."""
+        h = self.dt / self.substeps
+        return np.array([abs(hitch.impulse) / h for hitch in self._hitches])
 
     def friction_limits(self) -> FloatArray:
         """Current friction force limit μ·N of each wheel [N], (N, 2)."""

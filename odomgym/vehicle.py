@@ -42,7 +42,15 @@ from odomgym.internal import LinkReading, link_angles, link_length
 from odomgym.io import atomic_write_text
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 
-__all__ = ["PAPER_ERRORS", "VEHICLES", "VehicleSpec", "calibrated", "link_readings", "load_vehicle"]
+__all__ = [
+    "ENCODER_TRAILER",
+    "PAPER_ERRORS",
+    "VEHICLES",
+    "VehicleSpec",
+    "calibrated",
+    "link_readings",
+    "load_vehicle",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -75,6 +83,11 @@ class VehicleSpec:
         read_skew: how long before the wheel encoders the link encoders are read [s] (not in
             the paper: a model addition); the readings then show the trucks where they were
             ``read_skew`` earlier (linear interpolation within the interval, so at most T_s).
+        trailer: truck B is an unpowered encoder trailer (Borenstein 1995, §7): its rigid
+            tongue of length ``link_length`` is pinned to truck A's centre by one rotary joint,
+            whose encoder reads ψ_A; the tongue fixes ψ_B at 0 and the length at
+            ``link_length`` (no second rotary encoder, no linear encoder); its free-rolling
+            wheels carry encoders. ``link_min``/``link_max`` are then unused.
         name: a label for reports.
     """
 
@@ -92,6 +105,7 @@ class VehicleSpec:
     linear_eccentricity: float = 0.0
     rotary_jitter: float = 0.0
     read_skew: float = 0.0
+    trailer: bool = False
     name: str = "vehicle"
 
     def __post_init__(self) -> None:
@@ -213,6 +227,10 @@ class VehicleSpec:
                 if not isinstance(value, str):
                     raise SpecError("name must be a string", field=key, source=where(key))
                 continue
+            if key == "trailer":
+                if not isinstance(value, bool):
+                    raise SpecError("trailer must be true or false", field=key, source=where(key))
+                continue
             if key == "rotary_bits":
                 continue  # checked whole in __post_init__
             require_finite(key, value, source=where(key))
@@ -285,6 +303,9 @@ def link_readings(
             raise ValueError("a vehicle with rotary_jitter needs rng= for its readings")
         shown = shown + spec.rotary_jitter * rng.standard_normal(psi.shape)
     psi_read = q * np.round(shown / q)
+    if spec.trailer:  # one rotary encoder (ψ_A); the rigid tongue fixes ψ_B = 0 and l
+        psi_read[:, 1] = 0.0
+        return LinkReading(length=np.full(len(poses), spec.link_length), psi=psi_read)
     length = link_length(poses) + spec.linear_bias
     if spec.linear_eccentricity:
         length = length - spec.linear_eccentricity * np.sin(psi[:, 1])
@@ -323,6 +344,23 @@ eccentricity 1 mm (named in §5.2 without a size; assumed); read skew 4 ms (a te
 assumed). The rotary biases are left at 0: §5.3 says simple calibration removes them."""
 
 
+ENCODER_TRAILER = RobotSpec(
+    name="encoder-trailer",
+    wheel_diameter=0.10,
+    wheelbase=0.30,
+    ticks_per_rev=2048.0,
+    mass=8.0,
+    chassis_length=0.30,
+    chassis_width=0.35,
+    drive_load_fraction=1.0,
+    max_wheel_speed=10.0,  # free-rolling: no motor limits its wheels
+    max_wheel_accel=100.0,
+    source="assumed: Borenstein 1995, §7 gives no geometry (one rotary joint, towed); a "
+    "two-wheeled trailer with wheel encoders as in Chong & Kleeman 1997 (Andros)",
+)
+"""The encoder trailer's body: two free-rolling 100 mm wheels 0.3 m apart, 8 kg (assumed)."""
+
+
 #: Vehicle presets.
 VEHICLES: dict[str, VehicleSpec] = {
     # Borenstein 1995, §2-§3: two LabMate trucks 1 m apart, 10-bit rotary encoders, 0.1 mm
@@ -338,5 +376,13 @@ VEHICLES: dict[str, VehicleSpec] = {
         truck_a=PRESETS["labmate"],
         truck_b=PRESETS["labmate"],
         name="clapper-uncalibrated",
+    ),
+    # Borenstein 1995, §7: a conventional robot (a calibrated LabMate) towing an encoder trailer
+    # on a 1 m tongue, one rotary encoder at the hitch (the CLAPPER's 10 bits).
+    "trailer": VehicleSpec(
+        truck_a=calibrated(PRESETS["labmate"]),
+        truck_b=ENCODER_TRAILER,
+        trailer=True,
+        name="trailer",
     ),
 }

@@ -23,6 +23,16 @@ def test_envs_pass_gymnasiums_checker(env_id: str) -> None:
     env.close()
 
 
+def test_the_encoder_trailer_is_a_vehicle_option() -> None:
+    """Borenstein 1995, §7: the same envs drive the ``trailer`` vehicle (a LabMate towing an
+    encoder trailer, one rotary encoder at the hitch)."""
+    env = gym.make("ClapperRectangle-v0", vehicle="trailer", bumps=2)
+    check_env(env.unwrapped, skip_render_check=True)
+    _, info = env.reset(seed=1)
+    assert info["psi"][1] == 0.0  # the rigid tongue: no second rotary encoder
+    env.close()
+
+
 def _episode(env: gym.Env, speed: float = 1.0) -> tuple[dict, int]:  # type: ignore[type-arg]
     env.reset(seed=0)
     steps = 0

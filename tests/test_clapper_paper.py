@@ -151,3 +151,47 @@ def test_run_records_carry_force_crossings_and_trucks() -> None:
     assert record["link_force_max_n"] == 0.0 and len(record["link_range_m"]) == 2
     assert set(record["trucks"]) == {"A", "B"}
     assert np.isfinite(record["corrections_rad"]["A"])
+
+
+# ---------------------------------------------------------------------- the encoder trailer (§7)
+def test_trailer_readings_come_from_one_rotary_encoder() -> None:
+    """The trailer's rigid tongue fixes ψ_B at 0 and the length at the tongue's; only the hitch
+    encoder (ψ_A) reads anything."""
+    from odomgym.vehicle import link_readings
+
+    spec = VEHICLES["trailer"]
+    poses = np.array([[[1.0, 0.0, 0.2], [0.0, 0.05, 0.1]]])
+    reading = link_readings(spec, poses)
+    assert reading.psi[0, 1] == 0.0 and reading.length[0] == spec.link_length
+    assert reading.psi[0, 0] != 0.0
+
+
+@pytest.mark.slow
+def test_trailer_is_towed_and_its_free_wheels_count_the_arc_over_a_cable() -> None:
+    """The towed trailer follows the robot out and back (the hitch passes the towing force),
+    and its free-rolling wheels, pulled over ten cables on the return leg, over-count like a
+    driven wheel: its own dead reckoning turns by ten rigid-cylinder crossings of its 100 mm
+    wheels on its 0.3 m track (7.9°, :func:`bump_extra_rotation`)."""
+    spec = VEHICLES["trailer"]
+    trailer = spec.truck_b
+    out = drive_vehicles(spec, FloorSpec(), straight_path(18.0), cables=CableLayer(evenly(10)))
+    assert out.finished[0] and out.link_force[0] > 0.0  # the hitch pulled
+    assert abs(float(out.link_range[0, 1]) - spec.link_length) < 0.01  # a rigid tongue
+    per_cable = bump_extra_rotation(0.5 * trailer.true_left_diameter, 0.010)
+    expected = 10 * per_cable / trailer.true_wheelbase
+    assert abs(float(out.truck_errors[0, 1, 2])) == pytest.approx(expected, rel=0.05)
+    assert list(out.cable_crossings[0]) == [10, 10]
+    # With IPEC and a fine hitch encoder the trailer's heading is corrected.
+    import dataclasses
+
+    fine = dataclasses.replace(spec, rotary_bits=16)
+    corrected = drive_vehicles(
+        fine,
+        FloorSpec(),
+        straight_path(18.0),
+        cables=CableLayer(evenly(10)),
+        estimator=ipec_estimator("recommended", fine.rotary_resolution),
+    )
+    assert np.all(
+        np.abs(np.degrees(corrected.truck_errors[0, :, 2])) < 0.1 * math.degrees(expected)
+    )
