@@ -32,7 +32,7 @@ from odomgym.errors import SpecError
 from odomgym.floor import FLOORS, CableBump, FloorSpec, FrictionPatch, load_floor
 from odomgym.odometry import Calibration, load_calibration
 from odomgym.robot import PRESETS, RobotSpec, load_robot
-from odomgym.vehicle import VEHICLES, VehicleSpec, load_vehicle
+from odomgym.vehicle import ENCODER_TRAILER, VEHICLES, VehicleSpec, calibrated, load_vehicle
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "specs.md"
 TEXT = DOC.read_text(encoding="utf-8")
@@ -65,7 +65,14 @@ REQUIRED_ROBOT = {"wheel_diameter", "wheelbase", "ticks_per_rev"}
 TRUCKS = ("truck_a", "truck_b")
 # One-key vehicle files: link_length must stay strictly inside (link_min, link_max), by default
 # (0.9, 1.1), and link_max above the default link_length 1; other floats take 0.3.
-VEHICLE_VALUES = {"link_length": "1.05", "link_max": "1.3", "linear_bias": "0.003"}
+VEHICLE_VALUES = {
+    "link_length": "1.05",
+    "link_max": "1.3",
+    "linear_bias": "0.003",
+    "linear_eccentricity": "0.001",
+    "rotary_jitter": "0.002",
+    "read_skew": "0.004",
+}
 
 
 # ---------------------------------------------------------------------- parsing the doc
@@ -464,7 +471,9 @@ def test_vehicle_presets_table_matches_odomgym_vehicles() -> None:
     for name, vehicle in VEHICLES.items():
         row = rows[name]
         assert row[1:3] == [f"`{vehicle.truck_a.name}`", f"`{vehicle.truck_b.name}`"], name
-        assert vehicle.trucks == (PRESETS[vehicle.truck_a.name], PRESETS[vehicle.truck_b.name])
+        known = {**PRESETS, "encoder-trailer": ENCODER_TRAILER}
+        known.update({f"{k}-calibrated": calibrated(v) for k, v in PRESETS.items()})
+        assert vehicle.trucks == (known[vehicle.truck_a.name], known[vehicle.truck_b.name])
         numbers = (
             vehicle.link_length,
             vehicle.link_min,
