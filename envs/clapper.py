@@ -298,4 +298,5 @@ class ClapperRectangleEnv(ClapperEnv):
     def _cables(self, path: VehiclePath) -> CableLayer | None:
         if not self.bumps:
             return None
-        return CableLayer(rectangle_cable_positions(path, self.bumps), leg=0, side=self.side)
+        positions = rectangle_cable_positions(path, self.bumps, trailing=self.vehicle.link_length)
+        return CableLayer(positions, leg=0, side=self.side)

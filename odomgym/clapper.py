@@ -292,17 +292,18 @@ class CableLayer:
 
 
 def rectangle_cable_positions(
-    path: VehiclePath, count: int, clearance: float = 0.8
+    path: VehiclePath, count: int, clearance: float = 0.8, trailing: float = 1.0
 ) -> tuple[float, ...]:
     """``count`` arc lengths evenly spread over the straight parts of a rectangle path, at
-    least ``clearance`` [m] from its turns and ends (cables in turns would be crossed at a
-    slant by trucks that are turning)."""
+    least ``clearance`` [m] from its turns and its start, and ``clearance + trailing`` from its
+    end: the rear truck stops ``trailing`` [m] (the link) behind the front one, and must cross
+    every cable too (cables in turns would be crossed at a slant by trucks that are turning)."""
     leg = path.legs[0]
     arc = leg.arc_length
     heading = leg.headings
     straight = np.abs(np.diff(heading, prepend=heading[0])) < 1e-9
     turning = arc[:-1][~straight]
-    candidates = np.linspace(clearance, arc[-1] - clearance, 2000)
+    candidates = np.linspace(clearance, arc[-1] - clearance - trailing, 2000)
     if turning.size:
         gap = np.min(np.abs(candidates[:, None] - turning[None, :]), axis=1)
         candidates = candidates[gap >= clearance]
@@ -361,6 +362,8 @@ class VehicleDriver:
     def __post_init__(self) -> None:
         if self.steering not in ("psi", "pose"):
             raise ValueError(f"steering must be 'psi' or 'pose', got {self.steering!r}")
+        if not (math.isfinite(self.k_psi) and self.k_psi > 0.0):
+            raise ValueError(f"k_psi must be a positive number [1/m], got {self.k_psi!r}")
 
     def plan(self, path: VehiclePath, n: int) -> None:
         self._path = path
@@ -775,7 +778,9 @@ class VehicleTrial:
             if laid is not None:  # the floor as it was, plus the cables laid so far
                 world.lay_floor(dataclasses.replace(self.floor, bumps=self.floor.bumps + laid))
                 self._cable_geometry = _cable_arrays(laid)
-                self._cable_side = None
+                # Which side of every cable each wheel is on before this interval's motion,
+                # so that a crossing in the interval a cable is laid counts too.
+                self._cable_side = self._wheel_sides(self.truth)[0]
         speeds = self.driver.act(
             self.estimated,
             self.reading.length,
@@ -788,7 +793,7 @@ class VehicleTrial:
         )
         rates = speeds.reshape(2 * n, 2) * self._rate_per_speed
         if self.spec.trailer:
-            rates[1::2] = self._free_rolling()
+            rates[1::2] = self._free_rolling(speeds[:, 0])
         world.step(rates)
         counts = world.counts.copy()
         travel = ((counts - self._last_counts) * self.odometry.travel_per_tick).reshape(n, 2, 2)
@@ -820,18 +825,26 @@ class VehicleTrial:
         world = self.world
         return np.asarray(world.hitch_forces() if self.spec.trailer else world.link_forces())
 
-    def _free_rolling(self) -> FloatArray:
-        """Wheel rates (N, 2) [rad/s] of the trailers' free-rolling wheels: each rolls at the
-        ground speed its contact point has along the trailer's heading. The World drives every
-        wheel at a commanded rate through a friction-limited contact, so a wheel commanded to
-        its own rolling speed passes no traction: the trailer moves only as its hitch pulls it
-        (the speed is the one at the start of the interval, so within one interval of 40 ms
-        the wheels lag a change of speed)."""
+    def _free_rolling(self, towing: FloatArray) -> FloatArray:
+        """Wheel rates (N, 2) [rad/s] of the trailers' free-rolling wheels in the coming
+        interval. The World drives every wheel at a commanded rate through a friction-limited
+        contact, which resists any other speed along the wheel as well as across it; a wheel
+        commanded to the speed the tow gives it passes (nearly) no force along itself. That
+        speed is the trailer's kinematics under the hitch (robot A's centre) moving at the
+        robot's commanded speed ``towing`` (N, 2) [m/s, left and right wheel] along its heading:
+        the trailer moves along its own heading at v·cos φ and turns at v·sin φ / L about its
+        axle, φ the hitch angle, L the tongue. A limitation, measured: the hitch passes ≈ 0 N
+        on a straight at steady speed, but up to ~60 N in and after the rectangle's tight turns,
+        where the commanded and the actual motion of the 40 ms interval differ and the
+        velocity-controlled contacts (not truly free wheels) take up the difference."""
         world = self.world
+        robot = world.pose[0::2]
         pose = world.pose[1::2]
-        velocity = world.velocity[1::2]
-        along = velocity[:, 0] * np.cos(pose[:, 2]) + velocity[:, 1] * np.sin(pose[:, 2])
-        turn = velocity[:, 2] * world.half_track[1::2]
+        v = 0.5 * (towing[:, 0] + towing[:, 1])
+        phi = robot[:, 2] - pose[:, 2]
+        along = v * np.cos(phi)
+        omega = v * np.sin(phi) / self.spec.link_length
+        turn = omega * world.half_track[1::2]
         ground = np.stack([along - turn, along + turn], axis=1)
         cables = self.world.floor.bumps
         if cables:  # over a cable the rim turns through the arc, not the horizontal advance
@@ -851,6 +864,18 @@ class VehicleTrial:
     def _count_crossings(self, truth: FloatArray) -> None:
         """Count each truck's wheels passing a laid cable this interval: a wheel's contact point
         changed sides of a cable's axis while within the cable's length."""
+        side, within = self._wheel_sides(truth)
+        if self._cable_side is not None:
+            crossed = (side != self._cable_side) & (side != 0) & within
+            per_wheel = crossed.sum(axis=1)
+            self.cable_crossings[0, 0] += int(per_wheel[:2].sum())
+            self.cable_crossings[0, 1] += int(per_wheel[2:].sum())
+        self._cable_side = side
+
+    def _wheel_sides(self, truth: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """For each wheel (A left, A right, B left, B right) and laid cable: the side of the
+        cable's axis its contact point is on (±1) and whether it lies within the cable's
+        length."""
         assert self._cable_geometry is not None
         cx, cy, ax, ay, half = self._cable_geometry
         half_tracks = (
@@ -867,12 +892,7 @@ class VehicleTrial:
         py = np.array([p[1] for p in points])[:, None] - cy[None, :]
         side = np.sign(px * -ay[None, :] + py * ax[None, :])
         within = np.abs(px * ax[None, :] + py * ay[None, :]) <= half[None, :]
-        if self._cable_side is not None:
-            crossed = (side != self._cable_side) & (side != 0) & within
-            per_wheel = crossed.sum(axis=1)
-            self.cable_crossings[0, 0] += int(per_wheel[:2].sum())
-            self.cable_crossings[0, 1] += int(per_wheel[2:].sum())
-        self._cable_side = side
+        return side, within
 
     def errors(self) -> tuple[FloatArray, FloatArray]:
         """(vehicle error (N, 3), truck errors (N, 2, 3)): true minus estimated, headings

@@ -816,6 +816,8 @@ def _command_clapper(args: argparse.Namespace) -> int:
 
 
 def _add_clapper_parsers(routes: Any) -> None:
+    from odomgym.clapper import CLAPPER_FLOOR
+
     for name, what in (
         (
             "clapper-straight",
@@ -835,9 +837,11 @@ def _add_clapper_parsers(routes: Any) -> None:
             "and the average absolute orientation errors.",
         )
         parser.add_argument(
-            "--vehicle", default="clapper", help="vehicle preset (clapper) or vehicle .toml file"
+            "--vehicle",
+            default="clapper",
+            help="vehicle preset (clapper, clapper-uncalibrated, trailer) or vehicle .toml file",
         )
-        parser.add_argument("--floor", default="concrete", help=_floor_help("concrete"))
+        parser.add_argument("--floor", default=CLAPPER_FLOOR, help=_floor_help(CLAPPER_FLOOR))
         parser.add_argument(
             "--bumps",
             type=_bumps,

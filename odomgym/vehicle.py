@@ -135,6 +135,18 @@ class VehicleSpec:
                 f"{self.link_min} < {self.link_length} < {self.link_max}",
                 field="link_length",
             )
+        if self.trailer:
+            unused = [
+                key
+                for key in ("linear_bias", "linear_eccentricity", "rotary_bias_b")
+                if getattr(self, key) != 0.0
+            ]
+            if unused:
+                raise SpecError(
+                    f"a trailer has no linear encoder and no rotary encoder on truck B: "
+                    f"{', '.join(unused)} must be 0",
+                    field=unused[0],
+                )
         bits = self.rotary_bits
         if isinstance(bits, bool) or not isinstance(bits, int) or not 1 <= bits <= 32:
             raise SpecError(

@@ -61,7 +61,10 @@ def diagnose_sessions(sessions: list[str], folder: Path) -> Diagnosis:
         archive = SET_B_ARCHIVES / f"{kind}-{session}.tar.xz"
         if archive.is_file():
             with tarfile.open(archive) as tar:
-                tar.extractall(target, filter="data")
+                if hasattr(tarfile, "data_filter"):  # Python >= 3.11.4
+                    tar.extractall(target, filter="data")
+                else:  # our own archives, written by this repository
+                    tar.extractall(target)
         else:  # the reader does not follow symbolic links: copy
             shutil.copytree(sample_session(name), target / session)
     model = load_robot(ROOT / "examples" / "optiodom_nominal.toml")

@@ -147,17 +147,21 @@ def test_parallel_evaluation_is_bit_identical(monkeypatch: pytest.MonkeyPatch) -
     data = Dataset.of(runs, 0.25)
     spec = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
     results = []
-    for threads in ("1", "2"):
-        monkeypatch.setenv("ODOMGYM_THREADS", threads)
-        monkeypatch.setattr(fit, "_POOL", None)
-        results.append(fit.evaluate(data, spec, SensorNoise(0.002, 0.005)))
+    try:
+        for threads in ("1", "2"):
+            monkeypatch.setenv("ODOMGYM_THREADS", threads)
+            fit.close_thread_pool()
+            results.append(fit.evaluate(data, spec, SensorNoise(0.002, 0.005)))
+        for bad in ("many", "0", "-2"):
+            monkeypatch.setenv("ODOMGYM_THREADS", bad)
+            fit.close_thread_pool()
+            with pytest.raises(SpecError, match="ODOMGYM_THREADS"):
+                fit.evaluate(data, spec, SensorNoise(0.002, 0.005))
+    finally:
+        fit.close_thread_pool()  # no thread of this test may outlive it into a later fork
     one, two = results
     assert one.loglik.tobytes() == two.loglik.tobytes()
     assert all(a.tobytes() == b.tobytes() for a, b in zip(one.whitened, two.whitened, strict=True))
-    monkeypatch.setenv("ODOMGYM_THREADS", "many")
-    monkeypatch.setattr(fit, "_POOL", None)
-    with pytest.raises(SpecError, match="ODOMGYM_THREADS"):
-        fit.evaluate(data, spec, SensorNoise(0.002, 0.005))
 
 
 def test_clustered_standard_errors() -> None:

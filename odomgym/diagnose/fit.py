@@ -120,7 +120,7 @@ def evaluate(
     if pool is None or n < 2:
         results = chunk(range(n))
     else:  # one contiguous share per thread: few hand-overs of the GIL
-        count = pool._max_workers
+        count = _pool_size()
         shares = [range(n * k // count, n * (k + 1) // count) for k in range(count)]
         results = [r for part in pool.map(chunk, shares) for r in part]
     logs = np.array([r[1] for r in results], dtype=float)
@@ -136,13 +136,21 @@ def _threads() -> int:
     runs alone on one core while the other idles; threads let it use both. When every worker
     is busy the threads merely share the cores."""
     raw = os.environ.get("ODOMGYM_THREADS", "")
+    if not raw:
+        try:
+            return max(1, len(os.sched_getaffinity(0)))  # the CPUs this process may use
+        except AttributeError:  # not on every platform
+            return max(1, os.cpu_count() or 1)
     try:
-        return max(1, int(raw)) if raw else max(1, os.cpu_count() or 1)
+        count = int(raw)
     except ValueError:
-        raise SpecError(f"ODOMGYM_THREADS must be a whole number, got {raw!r}") from None
+        count = 0
+    if count < 1:
+        raise SpecError(f"ODOMGYM_THREADS must be a whole number >= 1, got {raw!r}")
+    return count
 
 
-_POOL: tuple[int, ThreadPoolExecutor | None] | None = None
+_POOL: tuple[int, ThreadPoolExecutor | None, int] | None = None
 
 
 def close_thread_pool() -> None:
@@ -161,11 +169,14 @@ def _pool() -> ThreadPoolExecutor | None:
     pid = os.getpid()
     if _POOL is None or _POOL[0] != pid:
         count = _threads()
-        _POOL = (
-            pid,
-            ThreadPoolExecutor(count, thread_name_prefix="odomgym-eval") if count > 1 else None,
-        )
+        pool = ThreadPoolExecutor(count, thread_name_prefix="odomgym-eval") if count > 1 else None
+        _POOL = (pid, pool, count)
     return _POOL[1]
+
+
+def _pool_size() -> int:
+    """Threads of this process's evaluation pool (1 without one)."""
+    return _POOL[2] if _POOL is not None and _POOL[1] is not None else 1
 
 
 def _noise_vector(
