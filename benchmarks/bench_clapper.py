@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from odomgym.clapper import CLAPPER_FLOOR
-from odomgym.clapper_runs import PAPER_CONDITIONS, run_clapper, summarize
+from odomgym.clapper_runs import PAPER_CONDITIONS, SONAR, run_clapper, summarize
 from odomgym.envs.clapper import DEFAULT_IPEC, ipec_estimator
 from odomgym.floor import load_floor
 from odomgym.vehicle import PAPER_ERRORS, VEHICLES, VehicleSpec
@@ -54,6 +54,7 @@ def sources() -> dict[str, VehicleSpec]:
     rows["all of the above"] = dataclasses.replace(
         base, rotary_bias_a=leftover, rotary_bias_b=-leftover, **PAPER_ERRORS
     )  # type: ignore[arg-type]
+    rows["tyre_compression 2 mm"] = dataclasses.replace(base, tyre_compression=0.002)
     truck = base.truck_a.with_errors(1.0, 1.0, 0.995)
     rows["wheel scale E_s 0.995"] = dataclasses.replace(base, truck_a=truck, truck_b=truck)
     rows["uncalibrated LabMates"] = VEHICLES["clapper-uncalibrated"]
@@ -71,7 +72,12 @@ def vehicles() -> dict[str, VehicleSpec]:
 
 
 def measure(
-    spec: VehicleSpec, configuration: str, floor_name: str, straight_runs: int, rect_runs: int
+    spec: VehicleSpec,
+    configuration: str,
+    floor_name: str,
+    straight_runs: int,
+    rect_runs: int,
+    sonar: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
     floor = load_floor(floor_name)
     ipec = ipec_estimator(configuration, spec.rotary_resolution)
@@ -83,12 +89,11 @@ def measure(
         runs=straight_runs,
         seed=0,
         ipec=ipec,
+        sonar=sonar,
     )
     s = summarize(straight)["conditions"]
     along = {
-        label: float(
-            np.mean([r.outcome.return_error[0, 0] for r in straight if r.condition == label])
-        )
+        label: float(np.mean([r.measured()[0][0] for r in straight if r.condition == label]))
         for label in ("c", "d")
     }
     rectangle = run_clapper(
@@ -101,6 +106,7 @@ def measure(
         runs=rect_runs,
         seed=0,
         ipec=ipec,
+        sonar=sonar,
     )
     r = summarize(rectangle)
     w = r["conditions"]["with IPEC"]
@@ -160,6 +166,14 @@ def main() -> None:
             name: measure(spec, DEFAULT_IPEC, args.floor, args.straight_runs, args.rectangle_runs)
             for name, spec in sources().items()
         }
+        out["sources"]["sonar measurement ±2 mm, ±0.25°"] = measure(
+            VEHICLES["clapper"],
+            DEFAULT_IPEC,
+            args.floor,
+            args.straight_runs,
+            args.rectangle_runs,
+            sonar=SONAR,
+        )
     if args.table in ("vehicles", "all"):
         out["vehicles"] = {
             name: measure(spec, DEFAULT_IPEC, args.floor, args.straight_runs, args.rectangle_runs)

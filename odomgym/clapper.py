@@ -776,7 +776,11 @@ class VehicleTrial:
                 (self.spec.truck_a.true_wheelbase, self.spec.truck_b.true_wheelbase),
             )
             if laid is not None:  # the floor as it was, plus the cables laid so far
-                world.lay_floor(dataclasses.replace(self.floor, bumps=self.floor.bumps + laid))
+                squeeze = self.spec.tyre_compression
+                felt = tuple(  # a compliant tyre swallows part of the cable's height
+                    dataclasses.replace(c, diameter=max(c.diameter - squeeze, 1e-4)) for c in laid
+                )
+                world.lay_floor(dataclasses.replace(self.floor, bumps=self.floor.bumps + felt))
                 self._cable_geometry = _cable_arrays(laid)
                 # Which side of every cable each wheel is on before this interval's motion,
                 # so that a crossing in the interval a cable is laid counts too.

@@ -42,6 +42,7 @@ from odomgym.vehicle import VehicleSpec
 __all__ = [
     "CLAPPER_FLOOR",
     "PAPER_CONDITIONS",
+    "SONAR",
     "ClapperRun",
     "Condition",
     "format_clapper_runs",
@@ -52,6 +53,10 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 Experiment = Literal["straight", "rectangle"]
+
+
+SONAR = (0.002, float(np.radians(0.25)))
+"""The paper's measurement of the return pose: ±2 mm in x and y, ±0.25° (Borenstein 1995, §6)."""
 
 
 @dataclass(frozen=True)
@@ -88,12 +93,22 @@ class ClapperRun:
     bumps: int
     outcome: VehicleOutcome
     condition: str = ""
+    sonar: FloatArray | None = None  # the return-pose measurement's error (x, y [m], θ [rad])
+
+    def measured(self) -> tuple[FloatArray, FloatArray]:
+        """(vehicle (3,), trucks (2, 3)) return errors as measured: true minus estimated, plus
+        the sonar's measurement error when the run had one (``run_clapper(sonar=...)``)."""
+        vehicle = self.outcome.return_error[0].copy()
+        trucks = self.outcome.truck_errors[0].copy()
+        if self.sonar is not None:
+            vehicle += self.sonar
+            trucks += self.sonar[None, :]
+        return vehicle, trucks
 
     def record(self) -> dict[str, Any]:
         """A JSON-ready record: ``return_error`` {x, y [m], theta [rad]} of the vehicle (true
         minus estimated; midpoint of the truck centres, heading of the link) and per truck."""
-        vehicle = self.outcome.return_error[0]
-        trucks = self.outcome.truck_errors[0]
+        vehicle, trucks = self.measured()
 
         def pose(e: FloatArray) -> dict[str, float]:
             return {"x": float(e[0]), "y": float(e[1]), "theta": float(e[2])}
@@ -119,6 +134,7 @@ class ClapperRun:
                 "A": float(outcome.corrections[0, 0]),
                 "B": float(outcome.corrections[0, 1]),
             },
+            "sonar_error": pose(self.sonar) if self.sonar is not None else None,
             "duration_s": outcome.time,
             "finished": bool(outcome.finished[0]),
         }
@@ -139,13 +155,19 @@ def run_clapper(
     progress: Callable[[int, int], None] | None = None,
     conditions: Sequence[Condition] | None = None,
     driver: Callable[[], VehicleDriver] | None = None,
+    sonar: tuple[float, float] | None = None,
 ) -> list[ClapperRun]:
     """Drive ``runs`` runs per (condition, direction); run r lays its cables under
     ``sides[r % len(sides)]`` and draws its floor noise from ``SeedSequence([seed, r])``, so
     the runs of every condition meet the same floors. ``conditions`` (e.g.
     ``PAPER_CONDITIONS["straight"]``) replace ``ipec_modes`` × ``bumps``. ``ipec`` builds the
     IPEC estimator (e.g. :func:`odomgym.envs.clapper.ipec_estimator`; the core does not import
-    baselines); ``driver`` builds the controller (default :class:`VehicleDriver`)."""
+    baselines); ``driver`` builds the controller (default :class:`VehicleDriver`). ``sonar``
+    = (position, heading) half-widths [m, rad]: the return pose is measured as the paper's
+    sonars did, "within ±2 millimeters in the x and y directions, and to about ±0.25° in
+    orientation" (§6; ``SONAR``), a uniform error added to every reported return error, drawn
+    from its own stream (``SeedSequence([seed, r, 1, k])``, k the run's place in the set), so
+    the runs themselves do not change."""
     chosen = (
         list(conditions)
         if conditions is not None
@@ -175,8 +197,14 @@ def run_clapper(
             rng=rng,
             driver=driver() if driver is not None else None,
         )
+        error = None
+        if sonar is not None:
+            measuring = np.random.default_rng(np.random.SeedSequence([seed, r, 1, k]))
+            error = measuring.uniform(-1.0, 1.0, 3) * np.array([sonar[0], sonar[0], sonar[1]])
         done.append(
-            ClapperRun(r + 1, experiment, mode, direction, side, bumps, outcome, condition.label)
+            ClapperRun(
+                r + 1, experiment, mode, direction, side, bumps, outcome, condition.label, error
+            )
         )
         if progress is not None:
             progress(k + 1, len(plans))
@@ -184,7 +212,7 @@ def run_clapper(
 
 
 def _mean_abs_theta(runs: Sequence[ClapperRun]) -> float:
-    return float(np.mean([abs(run.outcome.return_error[0, 2]) for run in runs]))
+    return float(np.mean([abs(run.measured()[0][2]) for run in runs]))
 
 
 def _spread(values: Sequence[float]) -> dict[str, float]:
@@ -200,8 +228,8 @@ def _spread(values: Sequence[float]) -> dict[str, float]:
 def _group(runs: Sequence[ClapperRun]) -> dict[str, Any]:
     """The distributions of one group of runs: orientation errors [rad] of the vehicle and of
     each truck, position errors [m], the largest end-stop force [N] and the cable crossings."""
-    vehicle = [r.outcome.return_error[0] for r in runs]
-    trucks = [r.outcome.truck_errors[0] for r in runs]
+    vehicle = [r.measured()[0] for r in runs]
+    trucks = [r.measured()[1] for r in runs]
     crossings = np.array(
         [r.outcome.cable_crossings[0] if len(r.outcome.cable_crossings) else (0, 0) for r in runs]
     )
@@ -265,7 +293,7 @@ def format_clapper_runs(runs: Sequence[ClapperRun]) -> str:
         "F [N]"
     ]
     for run in runs:
-        e = run.outcome.return_error[0]
+        e = run.measured()[0]
         t = run.outcome.truck_errors[0]
         lines.append(
             f"{run.index:3d}  {run.condition[:12]:12}  {run.direction:3}  "
@@ -316,7 +344,7 @@ def plot_clapper_runs(path: Path, runs: Sequence[ClapperRun], title: str) -> Non
         chosen = [r for r in runs if r.ipec == mode]
         if not chosen:
             continue
-        e = 1e3 * np.array([r.outcome.return_error[0, :2] for r in chosen])
+        e = 1e3 * np.array([r.measured()[0][:2] for r in chosen])
         mean = np.degrees(_mean_abs_theta(chosen))
         ax.scatter(
             e[:, 0], e[:, 1], marker=marker, color=colour, label=f"{label}: |θ| avg {mean:.2f}°"

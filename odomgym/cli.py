@@ -737,6 +737,7 @@ def _command_clapper(args: argparse.Namespace) -> int:
     from odomgym.clapper import VehicleDriver
     from odomgym.clapper_runs import (
         PAPER_CONDITIONS,
+        SONAR,
         Condition,
         format_clapper_runs,
         plot_clapper_runs,
@@ -782,6 +783,7 @@ def _command_clapper(args: argparse.Namespace) -> int:
             seed=args.seed,
             ipec=ipec_estimator(args.ipec_config, spec.rotary_resolution),
             driver=lambda: VehicleDriver(steering=args.steering),
+            sonar=SONAR if args.errors == "paper" else None,
             progress=progress,
         )
     finally:
@@ -875,8 +877,9 @@ def _add_clapper_parsers(routes: Any) -> None:
             "--errors",
             choices=["none", "paper"],
             default="none",
-            help="error sources of the internal encoders: none (default) or paper (link bias "
-            "2 mm, jitter 0.1°, eccentricity 1 mm, read skew 4 ms; docs/clapper.md)",
+            help="error sources: none (default) or paper (link bias 2 mm, jitter 0.1°, "
+            "eccentricity 1 mm, read skew 4 ms, and the return pose measured to ±2 mm, ±0.25° "
+            "as the paper's sonars did; docs/clapper.md)",
         )
         if name == "clapper-rectangle":
             parser.add_argument(

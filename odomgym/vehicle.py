@@ -83,6 +83,10 @@ class VehicleSpec:
         read_skew: how long before the wheel encoders the link encoders are read [s] (not in
             the paper: a model addition); the readings then show the trucks where they were
             ``read_skew`` earlier (linear interpolation within the interval, so at most T_s).
+        tyre_compression: how far a compliant tyre flattens over a cable [m] (not in the paper,
+            which assumes rigid wheels, §3.1): the wheel centre then climbs only the cable's
+            diameter less this, so the cable acts as a thinner one for the crossing geometry
+            (``odomgym.cables.bump_extra_rotation``). A model of ours.
         trailer: truck B is an unpowered encoder trailer (Borenstein 1995, §7): its rigid
             tongue of length ``link_length`` is pinned to truck A's centre by one rotary joint,
             whose encoder reads ψ_A; the tongue fixes ψ_B at 0 and the length at
@@ -105,6 +109,7 @@ class VehicleSpec:
     linear_eccentricity: float = 0.0
     rotary_jitter: float = 0.0
     read_skew: float = 0.0
+    tyre_compression: float = 0.0
     trailer: bool = False
     name: str = "vehicle"
 
@@ -129,6 +134,7 @@ class VehicleSpec:
         require_range("linear_eccentricity", self.linear_eccentricity, -0.1, 0.1)
         require_range("rotary_jitter", self.rotary_jitter, 0.0, 0.1)
         require_range("read_skew", self.read_skew, 0.0, self.sample_period)
+        require_range("tyre_compression", self.tyre_compression, 0.0, 0.05)
         if not self.link_min < self.link_length < self.link_max:
             raise SpecError(
                 f"link_length must lie strictly between link_min and link_max, got "

@@ -215,3 +215,45 @@ def test_trailer_is_towed_and_its_free_wheels_count_the_arc_over_a_cable() -> No
     assert np.all(
         np.abs(np.degrees(corrected.truck_errors[0, :, 2])) < 0.1 * math.degrees(expected)
     )
+
+
+# ---------------------------------------------------------------------- more error sources
+@pytest.mark.slow
+def test_a_compliant_tyre_feels_a_thinner_cable() -> None:
+    """``tyre_compression`` δ: the wheel climbs only d − δ, so ten crossings turn a truck by
+    ten rigid-cylinder crossings of a (d − δ) cable."""
+    import dataclasses
+
+    spec = dataclasses.replace(CLAPPER, tyre_compression=0.002)
+    out = drive_vehicles(spec, FloorSpec(), straight_path(18.0), cables=CableLayer(evenly(10)))
+    thinner = bump_extra_rotation(0.5 * TRUCK.true_right_diameter, 0.008) / TRUCK.true_wheelbase
+    assert abs(float(out.truck_errors[0, 0, 2])) == pytest.approx(10 * thinner, rel=0.05)
+    assert thinner < PER_BUMP
+
+
+def test_the_sonar_measures_the_return_pose_within_its_accuracy() -> None:
+    """``sonar=SONAR``: every reported return error is the true one plus at most ±2 mm and
+    ±0.25° (Borenstein 1995, §6), drawn from its own stream: the runs themselves are the
+    same as without it."""
+    from odomgym.clapper_runs import SONAR
+
+    plain, measured = (
+        run_clapper(
+            CLAPPER,
+            FloorSpec(),
+            "straight",
+            conditions=PAPER_CONDITIONS["straight"][2:3],
+            runs=2,
+            ipec=_ipec(),
+            sonar=sonar,
+        )
+        for sonar in (None, SONAR)
+    )
+    for a, b in zip(plain, measured, strict=True):
+        np.testing.assert_array_equal(a.outcome.return_error, b.outcome.return_error)
+        vehicle, trucks = b.measured()
+        shift = vehicle - a.outcome.return_error[0]
+        assert np.all(np.abs(shift[:2]) <= SONAR[0]) and abs(shift[2]) <= SONAR[1]
+        assert np.any(shift != 0.0)
+        np.testing.assert_allclose(trucks - a.outcome.truck_errors[0], shift[None, :].repeat(2, 0))
+        assert b.record()["sonar_error"] is not None and a.record()["sonar_error"] is None

@@ -72,6 +72,7 @@ VEHICLE_VALUES = {
     "linear_eccentricity": "0.001",
     "rotary_jitter": "0.002",
     "read_skew": "0.004",
+    "tyre_compression": "0.002",
 }
 
 
