@@ -251,10 +251,15 @@ class RobotSpec:
         """A copy carrying effect ``name`` with ``values`` (None or absent values remove it).
 
         Values are stored as given; :meth:`odomgym.effects.Effect.write` validates them first.
+        An effect whose values live in the spec's own fields (``wheel_diameter_ratio``,
+        ``wheelbase``, ``distance_scale``: the true geometry) is written there, through the
+        effect's :meth:`~odomgym.effects.Effect.write`, never as an inert table.
         """
         from odomgym.effects import get_effect
 
         effect = get_effect(name)
+        if not effect.in_table:
+            return effect.write(self, values if values is not None else effect.absent_values())
         table = {k: dict(v) for k, v in self.effects if k != name}
         if values is not None and not effect.is_absent(values):
             table[name] = dict(values)

@@ -196,3 +196,16 @@ def test_a_user_registered_effect_works_without_editing_the_workflow() -> None:
         assert np.abs(replay_run(run, spec).tracked - run.true_pose).max() < 1e-3
     finally:
         REGISTRY.pop("heading_bias_test")
+
+
+def test_with_effect_of_a_geometric_effect_changes_the_geometry(tmp_path: Path) -> None:
+    """Regression: ``with_effect("wheel_diameter_ratio", {"e_d": 1.05})`` stored an inert table
+    while ``e_d`` stayed at the preset's 1.00084, so a save/load round trip changed the robot.
+    There is one write path: the geometry itself."""
+    robot = PRESETS["labmate"].with_effect("wheel_diameter_ratio", {"e_d": 1.05})
+    assert robot.e_d == pytest.approx(1.05)
+    assert "wheel_diameter_ratio" not in robot.effect_dict()
+    path = tmp_path / "robot.toml"
+    robot.save(path)
+    assert load_robot(path) == robot
+    assert PRESETS["labmate"].with_effect("wheelbase", None).e_b == pytest.approx(1.0)

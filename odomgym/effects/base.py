@@ -88,6 +88,10 @@ class Effect:
     summary: ClassVar[str] = ""
     reveals: ClassVar[str] = ""
     """Which experiments make it visible (for reports and the docs)."""
+    in_table: ClassVar[bool] = True
+    """False for effects whose values live in the spec's own fields (the true geometry: E_d,
+    E_b, E_s) rather than in ``spec.effects``; :meth:`RobotSpec.with_effect` then hands them to
+    :meth:`write`, so there is one way for a value to reach a spec."""
     partners: ClassVar[tuple[str, ...]] = ()
     """Systematic effects whose parameters are fitted jointly with this one, because its replay
     moves the mean along the same direction (bumps shorten the travel as a distance scale

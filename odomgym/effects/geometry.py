@@ -24,6 +24,7 @@ class _Geometric(Effect):
     """An effect stored in the spec's true geometry rather than in ``spec.effects``."""
 
     error: ClassVar[str] = ""  # "e_d", "e_b" or "e_s": RobotSpec property and with_errors name
+    in_table: ClassVar[bool] = False
 
     def read(self, spec: RobotSpec) -> dict[str, float]:
         return {self.error: float(getattr(spec, self.error))}
