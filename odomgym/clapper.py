@@ -487,9 +487,7 @@ class VehicleDriver:
                         estimate[i, truck], ref, v_lead, leg.direction, float(half_track[i, truck])
                     )
                 follower = 1 - leader
-                _, ref_f, v_f = refs[follower]
-                if towed:
-                    v_f = v  # the robot pushes its trailer at the reference speed
+                _, ref_f, v_f = refs[follower]  # towed, reversing: A at the reference speed
                 if psi is None:
                     raise ValueError("a towed trailer needs the hitch encoder's reading (psi)")
                 link = math.atan2(ref_a[1] - ref_b[1], ref_a[0] - ref_b[0])
@@ -606,6 +604,13 @@ def _extended(line: _Polyline, s: float) -> tuple[float, float]:
         )
     x, y, _, _ = _point(line, s)
     return x, y
+
+
+def _wheel_contacts(pose: FloatArray, half_track: FloatArray) -> FloatArray:
+    """Contact points (M, 2, 2) [m] of the left and right wheels of bodies at ``pose`` (M, 3),
+    ``half_track`` (M,) [m] to either side of the heading (left at +y in the body frame)."""
+    left = np.stack([-np.sin(pose[:, 2]), np.cos(pose[:, 2])], axis=1) * half_track[:, None]
+    return np.stack([pose[:, :2] + left, pose[:, :2] - left], axis=1)
 
 
 def _free_wheel_rim(
@@ -853,12 +858,11 @@ class VehicleTrial:
         cables = self.world.floor.bumps
         if cables:  # over a cable the rim turns through the arc, not the horizontal advance
             radius = world.true_radius[1::2]
+            contacts = _wheel_contacts(pose, world.half_track[1::2])
             for k in range(len(pose)):
-                x, y, th = (float(v) for v in pose[k])
-                c, s = math.cos(th), math.sin(th)
-                for w, side in ((0, 1.0), (1, -1.0)):
-                    half = float(world.half_track[2 * k + 1])
-                    px, py = x - side * half * s, y + side * half * c
+                c, s = math.cos(float(pose[k, 2])), math.sin(float(pose[k, 2]))
+                for w in (0, 1):
+                    px, py = (float(v) for v in contacts[k, w])
                     step = float(ground[k, w]) * self.dt
                     ground[k, w] = (
                         _free_wheel_rim(cables, px, py, c, s, step, float(radius[k, w])) / self.dt
@@ -882,18 +886,9 @@ class VehicleTrial:
         length."""
         assert self._cable_geometry is not None
         cx, cy, ax, ay, half = self._cable_geometry
-        half_tracks = (
-            0.5 * self.spec.truck_a.true_wheelbase,
-            0.5 * self.spec.truck_b.true_wheelbase,
-        )
-        points = []
-        for k in (0, 1):
-            x, y, th = truth[0, k]
-            nx, ny = -math.sin(th), math.cos(th)
-            for sign in (1.0, -1.0):
-                points.append((x + sign * half_tracks[k] * nx, y + sign * half_tracks[k] * ny))
-        px = np.array([p[0] for p in points])[:, None] - cx[None, :]
-        py = np.array([p[1] for p in points])[:, None] - cy[None, :]
+        points = _wheel_contacts(truth[0], self.world.half_track[:2]).reshape(4, 2)
+        px = points[:, 0:1] - cx[None, :]
+        py = points[:, 1:2] - cy[None, :]
         side = np.sign(px * -ay[None, :] + py * ax[None, :])
         within = np.abs(px * ax[None, :] + py * ay[None, :]) <= half[None, :]
         return side, within

@@ -228,20 +228,20 @@ def _spread(values: Sequence[float]) -> dict[str, float]:
 def _group(runs: Sequence[ClapperRun]) -> dict[str, Any]:
     """The distributions of one group of runs: orientation errors [rad] of the vehicle and of
     each truck, position errors [m], the largest end-stop force [N] and the cable crossings."""
-    vehicle = [r.measured()[0] for r in runs]
-    trucks = [r.measured()[1] for r in runs]
+    vehicle, trucks = zip(*(r.measured() for r in runs), strict=True)
     crossings = np.array(
         [r.outcome.cable_crossings[0] if len(r.outcome.cable_crossings) else (0, 0) for r in runs]
     )
+    theta_vehicle = _spread([e[2] for e in vehicle])
     return {
         "runs": len(runs),
         "ipec": runs[0].ipec,
         "bumps": runs[0].bumps,
-        "theta_vehicle": _spread([e[2] for e in vehicle]),
+        "theta_vehicle": theta_vehicle,
         "theta_truck_a": _spread([t[0, 2] for t in trucks]),
         "theta_truck_b": _spread([t[1, 2] for t in trucks]),
         "position": _spread([float(np.hypot(e[0], e[1])) for e in vehicle]),
-        "mean_abs_theta": _mean_abs_theta(runs),
+        "mean_abs_theta": theta_vehicle["mean_abs"],
         "link_force_max_n": float(max(r.outcome.link_force[0] for r in runs)),
         "cable_crossings_mean": {
             "A": float(crossings[:, 0].mean()),
@@ -259,20 +259,19 @@ def summarize(runs: Sequence[ClapperRun]) -> dict[str, Any]:
     the runs without IPEC with the most bumps and those with IPEC with the most bumps (§6.1:
     b vs d; §6.2: without vs with)."""
     out: dict[str, Any] = {"runs": len(runs), "conditions": {}}
-    labels = list(
-        dict.fromkeys(r.condition or ("with IPEC" if r.ipec else "without IPEC") for r in runs)
-    )
-    for label in labels:
-        chosen = [
-            r for r in runs if (r.condition or ("with IPEC" if r.ipec else "without IPEC")) == label
-        ]
+
+    def label(run: ClapperRun) -> str:
+        return run.condition or ("with IPEC" if run.ipec else "without IPEC")
+
+    for name in dict.fromkeys(label(r) for r in runs):
+        chosen = [r for r in runs if label(r) == name]
         group = _group(chosen)
         directions = sorted({r.direction for r in chosen})
         if len(directions) > 1:
             group["by_direction"] = {
                 d: _group([r for r in chosen if r.direction == d]) for d in directions
             }
-        out["conditions"][label] = group
+        out["conditions"][name] = group
     groups = out["conditions"].values()
     without = [g for g in groups if not g["ipec"]]
     with_ipec = [g for g in groups if g["ipec"]]
@@ -293,8 +292,7 @@ def format_clapper_runs(runs: Sequence[ClapperRun]) -> str:
         "F [N]"
     ]
     for run in runs:
-        e = run.measured()[0]
-        t = run.outcome.truck_errors[0]
+        e, t = run.measured()
         lines.append(
             f"{run.index:3d}  {run.condition[:12]:12}  {run.direction:3}  "
             f"{run.side:5}  {run.bumps:5d}  {1e3 * e[0]:8.1f}  {1e3 * e[1]:8.1f}  "

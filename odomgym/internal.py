@@ -47,6 +47,7 @@ __all__ = [
     "dead_reckon",
     "growth_rate",
     "link_angles",
+    "link_geometry",
     "link_length",
 ]
 
@@ -118,10 +119,19 @@ def link_angles(poses: ArrayLike) -> tuple[FloatArray, FloatArray]:
     ψ_X = θ_X − θ_L wrapped to [−π, π) (Eq. 11). Applied to true poses this is what ideal rotary
     encoders read; a simulator adds bias and quantisation.
     """
+    theta_link, psi, _ = link_geometry(poses)
+    return theta_link, psi
+
+
+def link_geometry(poses: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`link_angles` and the centre distance l (N,) [m] in one pass over poses
+    (N, 2, 3): what a simulator's encoders read every sampling interval."""
     p = check_poses(poses)
-    theta_link = np.arctan2(p[:, 0, 1] - p[:, 1, 1], p[:, 0, 0] - p[:, 1, 0])
+    dx = p[:, 0, 0] - p[:, 1, 0]
+    dy = p[:, 0, 1] - p[:, 1, 1]
+    theta_link = np.arctan2(dy, dx)
     psi = wrap_angle(p[:, :, 2] - theta_link[:, None])
-    return theta_link, np.asarray(psi, dtype=np.float64)
+    return theta_link, np.asarray(psi, dtype=np.float64), np.asarray(np.hypot(dx, dy))
 
 
 def link_length(poses: ArrayLike) -> FloatArray:

@@ -38,7 +38,7 @@ from odomgym.errors import (
     require_positive,
     require_range,
 )
-from odomgym.internal import LinkReading
+from odomgym.internal import LinkReading, link_geometry
 from odomgym.io import atomic_write_text
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 
@@ -311,14 +311,7 @@ def link_readings(
     resolution. Rounding to the nearest count keeps a zero angle at zero; truncation would add
     half a count to every reading.
     """
-    poses = np.asarray(poses, dtype=np.float64)
-    if poses.ndim != 3 or poses.shape[1:] != (2, 3):
-        raise ValueError(f"poses must have shape (N, 2, 3), got {poses.shape}")
-    # link_angles and link_length in one pass (this runs every sampling interval).
-    dx = poses[:, 0, 0] - poses[:, 1, 0]
-    dy = poses[:, 0, 1] - poses[:, 1, 1]
-    theta_link = np.arctan2(dy, dx)
-    psi = np.mod(poses[:, :, 2] - theta_link[:, None] + math.pi, 2.0 * math.pi) - math.pi
+    _, psi, true_length = link_geometry(poses)
     q = spec.rotary_resolution
     bias = np.array([spec.rotary_bias_a, spec.rotary_bias_b])
     shown = psi + bias
@@ -329,8 +322,8 @@ def link_readings(
     psi_read = q * np.round(shown / q)
     if spec.trailer:  # one rotary encoder (ψ_A); the rigid tongue fixes ψ_B = 0 and l
         psi_read[:, 1] = 0.0
-        return LinkReading(length=np.full(len(poses), spec.link_length), psi=psi_read)
-    length = np.hypot(dx, dy) + spec.linear_bias
+        return LinkReading(length=np.full(len(psi), spec.link_length), psi=psi_read)
+    length = true_length + spec.linear_bias
     if spec.linear_eccentricity:
         length = length - spec.linear_eccentricity * np.sin(psi[:, 1])
     r = spec.linear_resolution

@@ -377,6 +377,16 @@ class CandidateFit:
     jacobian: list[FloatArray] = field(default_factory=list)  # per run (m, p), whitened
     whitened: list[FloatArray] = field(default_factory=list)  # per run (m,)
 
+    def entry(self, name: str, value: float) -> dict[str, float]:
+        """The report's entry of parameter ``name`` at ``value``: the value and its three
+        standard errors (model-based, run- and session-clustered; NaN when not computed)."""
+        return {
+            "value": value,
+            "stderr": self.stderr.get(name, math.nan),
+            "stderr_runs": self.stderr_runs.get(name, math.nan),
+            "stderr_sessions": self.stderr_sessions.get(name, math.nan),
+        }
+
 
 def _least_squares_step(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect

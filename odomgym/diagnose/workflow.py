@@ -563,15 +563,7 @@ def _refit_named(
     joint = Joint(systematic)
     fit = fit_candidate(data, spec, sensor, joint, nuisance)
     for name, values in joint.split(fit.values).items():
-        parameters[name] = {
-            key: {
-                "value": value,
-                "stderr": fit.stderr.get(f"{name}.{key}", math.nan),
-                "stderr_runs": fit.stderr_runs.get(f"{name}.{key}", math.nan),
-                "stderr_sessions": fit.stderr_sessions.get(f"{name}.{key}", math.nan),
-            }
-            for key, value in values.items()
-        }
+        parameters[name] = {key: fit.entry(f"{name}.{key}", value) for key, value in values.items()}
     return joint.write(spec, fit.values)
 
 
@@ -833,13 +825,7 @@ def diagnose(
         if winner.name not in named:
             named.append(winner.name)
         parameters[winner.name] = {
-            key: {
-                "value": value,
-                "stderr": winner.stderr.get(key, math.nan),
-                "stderr_runs": winner.stderr_runs.get(key, math.nan),
-                "stderr_sessions": winner.stderr_sessions.get(key, math.nan),
-            }
-            for key, value in winner.values.items()
+            key: winner.entry(key, value) for key, value in winner.values.items()
         }
         rounds.append(
             Round(
