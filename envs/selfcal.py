@@ -174,7 +174,7 @@ class Episode:
 
     def __post_init__(self) -> None:
         k = _FLOOR_SETUPS[self.floor_name].roughness
-        self.driven = self.robot.with_effect("floor_roughness", {"k_left": k, "k_right": k})
+        self.driven = self.robot.apply_effect("floor_roughness", {"k_left": k, "k_right": k})
 
 
 def new_episode(

@@ -12,15 +12,22 @@ Units: metres, radians.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from odomgym._jit import kernel
 
-if TYPE_CHECKING:
-    from odomgym.floor import FloorSpec
+
+class HasCables(Protocol):
+    """What :meth:`CableGrid.build` needs of a floor (:class:`odomgym.floor.FloorSpec` is one):
+    cables are geometry, and the floor's description imports nothing from here."""
+
+    def bump_arrays(self) -> tuple[NDArray[np.float64], ...]:
+        """Cable centres, unit axes, normals, half-lengths and radii as arrays of shape (M,)."""
+        ...
+
 
 __all__ = [
     "BumpError",
@@ -200,7 +207,7 @@ class CableGrid(NamedTuple):
     items: NDArray[np.int64]
 
     @classmethod
-    def build(cls, floor: FloorSpec, max_wheel_radius: float, max_step: float) -> CableGrid:
+    def build(cls, floor: HasCables, max_wheel_radius: float, max_step: float) -> CableGrid:
         """Index ``floor``'s cables for wheels of radius up to ``max_wheel_radius`` [m] that
         travel at most ``max_step`` [m] per physics step (a step starting outside a cable's
         contact zone may end inside it, so the reach includes one step)."""

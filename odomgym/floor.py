@@ -27,8 +27,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-# The crossing geometry lives in odomgym.cables; its two public functions stay importable here.
-from odomgym.cables import bump_extra_rotation, cable_advance
 from odomgym.errors import (
     SpecError,
     load_named,
@@ -44,8 +42,6 @@ __all__ = [
     "CableBump",
     "FloorSpec",
     "FrictionPatch",
-    "bump_extra_rotation",
-    "cable_advance",
     "load_floor",
 ]
 

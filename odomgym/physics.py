@@ -272,6 +272,11 @@ class World:
                 self._noise_block[i, start:] = stream.standard_normal((_NOISE_BLOCK - start, 2))
 
     @property
+    def substep(self) -> float:
+        """Length of one physics substep [s] (``dt / substeps``)."""
+        return self._h
+
+    @property
     def rim_speed(self) -> FloatArray:
         """Rim speed of each wheel during the current substep (N, 2) [m/s]."""
         return self._rim_speed

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from odomgym.effects import get_effect
 from odomgym.errors import SpecError, load_named, locate_key, require_positive, require_range
 from odomgym.io import atomic_write_text
 
@@ -247,21 +248,30 @@ class RobotSpec:
                 return dict(values)
         return None
 
-    def with_effect(self, name: str, values: Mapping[str, float] | None) -> RobotSpec:
+    def apply_effect(
+        self, name: str, values: Mapping[str, float] | None, *, source: str | None = None
+    ) -> RobotSpec:
         """A copy carrying effect ``name`` with ``values`` (None or absent values remove it).
 
-        Values are stored as given; :meth:`odomgym.effects.Effect.write` validates them first.
-        An effect whose values live in the spec's own fields (``wheel_diameter_ratio``,
-        ``wheelbase``, ``distance_scale``: the true geometry) is written there, through the
-        effect's :meth:`~odomgym.effects.Effect.write`, never as an inert table.
+        The one way a value reaches a spec: the registered effect validates ``values`` (a
+        :class:`SpecError` names ``effects.NAME.PARAM`` and ``source``) and writes them where it
+        keeps them — the true geometry for ``wheel_diameter_ratio``, ``wheelbase`` and
+        ``distance_scale``, a table in :attr:`effects` for the others.
         """
-        from odomgym.effects import get_effect
+        effect = get_effect(name, source=source)
+        if values is None:
+            values = effect.absent_values()
+        effect.validate(values, source=source)
+        return effect.write(self, values)
 
-        effect = get_effect(name)
-        if not effect.in_table:
-            return effect.write(self, values if values is not None else effect.absent_values())
+    def store_effect_table(self, name: str, values: Mapping[str, float] | None) -> RobotSpec:
+        """A copy whose table for effect ``name`` holds ``values`` as given (None removes it).
+
+        Storage only, for :meth:`odomgym.effects.Effect.write` (which validated them); use
+        :meth:`apply_effect`.
+        """
         table = {k: dict(v) for k, v in self.effects if k != name}
-        if values is not None and not effect.is_absent(values):
+        if values is not None:
             table[name] = dict(values)
         return dataclasses.replace(self, effects=_normalise_effects(table))
 
@@ -347,8 +357,6 @@ class RobotSpec:
         if errors:
             spec = spec.with_errors(errors.get("e_d"), errors.get("e_b"), errors.get("e_s"))
         if effect_tables:
-            from odomgym.effects import get_effect
-
             for name, values in effect_tables.items():
                 where = _locate_table(path, f"effects.{name}") if path else None
                 effect = get_effect(name, source=where)
@@ -356,7 +364,7 @@ class RobotSpec:
                     if path is not None:
                         where = _locate_table(path, f"effects.{name}", key)
                     effect.validate({key: values[key]}, source=where)
-                spec = effect.write(spec, effect.validate(values, source=where))
+                spec = spec.apply_effect(name, values, source=where)
         return spec
 
     def save(self, path: str | Path) -> None:

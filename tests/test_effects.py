@@ -19,7 +19,7 @@ import pytest
 from odomgym.diagnose.generate import _arc
 from odomgym.diagnose.replay import replay_run
 from odomgym.effects import EFFECTS, Effect, Parameter, ReplayArrays, WorldHook, register_effect
-from odomgym.effects.base import EFFECTS as REGISTRY
+from odomgym.effects.registry import EFFECTS as REGISTRY
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.lab import simulate_runs
@@ -80,7 +80,7 @@ def test_world_matches_replay(name: str, values: dict[str, float]) -> None:
 
 
 def test_turn_skid_world_matches_replay_on_arcs_and_spares_spins() -> None:
-    spec = NOMINAL.with_effect("turn_skid", {"gain": 2.0})
+    spec = NOMINAL.apply_effect("turn_skid", {"gain": 2.0})
     run = _arc(spec, 1.0, 0.35, 1.0, np.random.default_rng(0))
     agree = np.abs(replay_run(run, spec).tracked - run.true_pose).max(axis=0)
     assert agree[:2].max() < 1e-3
@@ -94,7 +94,7 @@ def test_roughness_effect_spreads_headings_like_chong_kleeman() -> None:
     """Heading spread after a 3 m straight ≈ √(k_L² + k_R²)·√d / b (Chong & Kleeman 1997,
     Eq. 4 through Eq. 26); 200 robots, limit 4 standard errors of a standard deviation."""
     k = 0.002
-    spec = NOMINAL.with_effect("floor_roughness", {"k_left": k, "k_right": k})
+    spec = NOMINAL.apply_effect("floor_roughness", {"k_left": k, "k_right": k})
     runs, _ = simulate_runs(
         spec, FloorSpec(), straight_route(3.0), repeats=200, rng=np.random.default_rng(4)
     )
@@ -105,7 +105,7 @@ def test_roughness_effect_spreads_headings_like_chong_kleeman() -> None:
 
 def test_bumps_make_discrete_heading_jumps() -> None:
     jump = 0.02
-    spec = NOMINAL.with_effect("floor_bumps", {"rate": 0.5, "heading_jump": jump})
+    spec = NOMINAL.apply_effect("floor_bumps", {"rate": 0.5, "heading_jump": jump})
     runs, _ = simulate_runs(
         spec, FloorSpec(), straight_route(3.0), repeats=100, rng=np.random.default_rng(5)
     )
@@ -118,9 +118,9 @@ def test_bumps_make_discrete_heading_jumps() -> None:
 
 
 def test_effects_are_deterministic_and_batch_independent() -> None:
-    spec = NOMINAL.with_effect("floor_bumps", {"rate": 1.0, "heading_jump": 0.01})
+    spec = NOMINAL.apply_effect("floor_bumps", {"rate": 1.0, "heading_jump": 0.01})
     alone, _ = simulate_runs(spec, FloorSpec(), straight_route(2.0), rng=[np.random.default_rng(9)])
-    other = NOMINAL.with_effect("floor_bumps", {"rate": 2.0, "heading_jump": 0.01})
+    other = NOMINAL.apply_effect("floor_bumps", {"rate": 2.0, "heading_jump": 0.01})
     both, _ = simulate_runs(
         [spec, other],
         FloorSpec(),
@@ -131,7 +131,7 @@ def test_effects_are_deterministic_and_batch_independent() -> None:
 
 
 def test_robot_toml_round_trip_and_errors(tmp_path: Path) -> None:
-    spec = NOMINAL.with_effect("backlash", {"angle": 0.01}).with_errors(e_b=1.02)
+    spec = NOMINAL.apply_effect("backlash", {"angle": 0.01}).with_errors(e_b=1.02)
     path = tmp_path / "robot.toml"
     spec.save(path)
     assert load_robot(path) == spec
@@ -189,7 +189,7 @@ class _BiasHook(WorldHook):
 def test_a_user_registered_effect_works_without_editing_the_workflow() -> None:
     register_effect(HeadingBias())
     try:
-        spec = NOMINAL.with_effect("heading_bias_test", {"rate": 0.01})
+        spec = NOMINAL.apply_effect("heading_bias_test", {"rate": 0.01})
         runs, _ = simulate_runs(spec, FloorSpec(), straight_route(3.0))
         run = runs[0]
         assert abs(run.true_pose[-1, 2] - 0.03) < 2e-3
@@ -198,14 +198,27 @@ def test_a_user_registered_effect_works_without_editing_the_workflow() -> None:
         REGISTRY.pop("heading_bias_test")
 
 
-def test_with_effect_of_a_geometric_effect_changes_the_geometry(tmp_path: Path) -> None:
-    """Regression: ``with_effect("wheel_diameter_ratio", {"e_d": 1.05})`` stored an inert table
-    while ``e_d`` stayed at the preset's 1.00084, so a save/load round trip changed the robot.
-    There is one write path: the geometry itself."""
-    robot = PRESETS["labmate"].with_effect("wheel_diameter_ratio", {"e_d": 1.05})
+def test_apply_effect_of_a_geometric_effect_changes_the_geometry(tmp_path: Path) -> None:
+    """Regression: ``with_effect("wheel_diameter_ratio", {"e_d": 1.05})`` (the old second write
+    path) stored an inert table while ``e_d`` stayed at the preset's 1.00084, so a save/load
+    round trip changed the robot. There is one write path, ``apply_effect``, through the
+    effect's own ``write``: here the geometry itself."""
+    robot = PRESETS["labmate"].apply_effect("wheel_diameter_ratio", {"e_d": 1.05})
     assert robot.e_d == pytest.approx(1.05)
     assert "wheel_diameter_ratio" not in robot.effect_dict()
     path = tmp_path / "robot.toml"
     robot.save(path)
     assert load_robot(path) == robot
-    assert PRESETS["labmate"].with_effect("wheelbase", None).e_b == pytest.approx(1.0)
+    assert PRESETS["labmate"].apply_effect("wheelbase", None).e_b == pytest.approx(1.0)
+
+
+def test_apply_effect_validates_and_names_the_parameter() -> None:
+    """The one write path checks values the way a TOML load does: a value out of range is a
+    SpecError naming ``effects.NAME.PARAM``, not a silently stored table."""
+    with pytest.raises(SpecError, match=r"effects\.floor_roughness\.k_left"):
+        NOMINAL.apply_effect("floor_roughness", {"k_left": -1.0, "k_right": 0.0})
+    with pytest.raises(SpecError, match="unknown effect 'no_such_effect'"):
+        NOMINAL.apply_effect("no_such_effect", {"x": 1.0})
+    spec = NOMINAL.apply_effect("floor_roughness", {"k_left": 0.001})
+    assert spec.effect_dict() == {"floor_roughness": {"k_left": 0.001, "k_right": 0.0}}
+    assert NOMINAL.apply_effect("floor_roughness", {"k_left": 0.0}).effect_dict() == {}

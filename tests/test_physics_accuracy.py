@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from odomgym.floor import CableBump, FloorSpec, bump_extra_rotation, cable_advance
+from odomgym.cables import bump_extra_rotation, cable_advance
+from odomgym.floor import CableBump, FloorSpec
 from odomgym.lab import simulate_runs
 from odomgym.robot import PRESETS
 from odomgym.routes import square_route, straight_route

@@ -25,19 +25,21 @@ name                      parameters             what it is
 
 from __future__ import annotations
 
-from odomgym.effects.base import (
-    EFFECTS,
-    Effect,
-    Parameter,
-    ReplayArrays,
-    WorldHook,
-    get_effect,
-    register_effect,
-)
 from odomgym.effects.discovered import TERMS, Discovered, DiscoveredTerms, Term
 from odomgym.effects.geometry import DistanceScale, Wheelbase, WheelDiameterRatio
 from odomgym.effects.motion import TurnSkid, WheelToe
 from odomgym.effects.noise import FloorBumps, FloorRoughness
+from odomgym.effects.registry import (
+    EFFECTS,
+    Effect,
+    Parameter,
+    ReplayArrays,
+    SpecView,
+    WorldHook,
+    WorldView,
+    get_effect,
+    register_effect,
+)
 from odomgym.effects.sensor import GroundTruthOffset, offset_point
 from odomgym.effects.transmission import Backlash, play_operator
 
@@ -54,12 +56,14 @@ __all__ = [
     "GroundTruthOffset",
     "Parameter",
     "ReplayArrays",
+    "SpecView",
     "Term",
     "TurnSkid",
     "WheelDiameterRatio",
     "WheelToe",
     "Wheelbase",
     "WorldHook",
+    "WorldView",
     "catalogue",
     "get_effect",
     "offset_point",

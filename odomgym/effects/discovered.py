@@ -48,17 +48,21 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.effects.base import Effect, Parameter, ReplayArrays, WorldHook
-
-if TYPE_CHECKING:
-    from odomgym.physics import World
-    from odomgym.robot import RobotSpec
+from odomgym.effects.registry import (
+    Effect,
+    Parameter,
+    ReplayArrays,
+    Spec,
+    SpecView,
+    WorldHook,
+    WorldView,
+)
 
 __all__ = [
     "BODY_MODULATORS",
@@ -356,15 +360,15 @@ class DiscoveredTerms(Effect):
         self.terms = tuple(_BY_NAME[n] for n in names)
         self.parameters = tuple(_parameter(t) for t in self.terms)  # type: ignore[misc]
 
-    def read(self, spec: RobotSpec) -> dict[str, float]:
+    def read(self, spec: SpecView) -> dict[str, float]:
         stored = spec.effect_values(self.name) or {}
         return {p.name: float(stored.get(p.name, 0.0)) for p in self.parameters}
 
-    def write(self, spec: RobotSpec, values: Mapping[str, float]) -> RobotSpec:
+    def write(self, spec: Spec, values: Mapping[str, float]) -> Spec:
         merged = dict(spec.effect_values(self.name) or {})
         merged.update(self.validate(values))
         nonzero = {k: v for k, v in merged.items() if v != 0.0}
-        return spec.with_effect(self.name, nonzero or None)
+        return spec.store_effect_table(self.name, nonzero or None)
 
     @classmethod
     def validate(cls, values: Mapping[str, Any], *, source: str | None = None) -> dict[str, float]:
@@ -413,7 +417,7 @@ class DiscoveredTerms(Effect):
             arrays.dtheta = arrays.dtheta * yaw
 
     # ------------------------------------------------------------------ world
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         coefficients = np.zeros((values.shape[0], len(TERMS)))
         index = {t.name: k for k, t in enumerate(TERMS)}
         for j, p in enumerate(self.parameters):
@@ -441,7 +445,7 @@ class _DiscoveredHook(WorldHook):
     has_transmission = True
     has_shape = True
 
-    def __init__(self, world: World, coefficients: FloatArray) -> None:
+    def __init__(self, world: WorldView, coefficients: FloatArray) -> None:
         self.world = world
         nw = len(WHEEL_MODULATORS)
         nb = len(BODY_MODULATORS)
@@ -458,10 +462,16 @@ class _DiscoveredHook(WorldHook):
         if self.has_wheel:
             w = self.world
             _wheel_terms(
-                motor_step, w.true_radius, w.wheel_angle, w._h, w.time, self.wheel, self.previous
+                motor_step,
+                w.true_radius,
+                w.wheel_angle,
+                w.substep,
+                w.time,
+                self.wheel,
+                self.previous,
             )
 
-    def shape(self, world: World, h: float) -> None:
+    def shape(self, world: WorldView, h: float) -> None:
         if self.has_body:
             _body_terms(
                 world.ground_velocity, world.rim_speed, world.half_track, world.time, self.body

@@ -10,12 +10,9 @@ replay takes the geometry from the spec).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
-from odomgym.effects.base import Effect, Parameter
-
-if TYPE_CHECKING:
-    from odomgym.robot import RobotSpec
+from odomgym.effects.registry import Effect, Parameter, Spec, SpecView
 
 __all__ = ["DistanceScale", "WheelDiameterRatio", "Wheelbase"]
 
@@ -26,10 +23,10 @@ class _Geometric(Effect):
     error: ClassVar[str] = ""  # "e_d", "e_b" or "e_s": RobotSpec property and with_errors name
     in_table: ClassVar[bool] = False
 
-    def read(self, spec: RobotSpec) -> dict[str, float]:
+    def read(self, spec: SpecView) -> dict[str, float]:
         return {self.error: float(getattr(spec, self.error))}
 
-    def write(self, spec: RobotSpec, values: Mapping[str, float]) -> RobotSpec:
+    def write(self, spec: Spec, values: Mapping[str, float]) -> Spec:
         value = self.validate(values)[self.error]
         return spec.with_errors(**{self.error: value})
 

@@ -17,16 +17,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.effects.base import Effect, Parameter, ReplayArrays, WorldHook
-
-if TYPE_CHECKING:
-    from odomgym.physics import World
+from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
 
 __all__ = ["TurnSkid", "WheelToe"]
 
@@ -52,7 +48,7 @@ class WheelToe(Effect):
         "a check of the rigid-body alignment can"
     )
 
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _ToeHook(values[:, 0].copy())
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
@@ -67,7 +63,7 @@ class _ToeHook(WorldHook):
         self.cos = np.cos(angle)
         self.sin = np.sin(angle)
 
-    def shape(self, world: World, h: float) -> None:
+    def shape(self, world: WorldView, h: float) -> None:
         _rotate_translation(world.ground_velocity, self.cos, self.sin)
 
 
@@ -93,7 +89,7 @@ class TurnSkid(Effect):
     summary = "the robot under-turns on fast arcs (yaw lost grows with v·ω)"
     reveals = "arcs at two speeds (the loss grows with speed); absent in in-place turns"
 
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _SkidHook(values[:, 0].copy())
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
@@ -109,7 +105,7 @@ class _SkidHook(WorldHook):
     def __init__(self, gain: FloatArray) -> None:
         self.gain = gain
 
-    def shape(self, world: World, h: float) -> None:
+    def shape(self, world: WorldView, h: float) -> None:
         _scale_rotation(world.ground_velocity, world.rim_speed, world.half_track, self.gain)
 
 

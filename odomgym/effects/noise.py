@@ -19,16 +19,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.effects.base import Effect, Parameter, ReplayArrays, WorldHook
-
-if TYPE_CHECKING:
-    from odomgym.physics import World
+from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
 
 __all__ = ["BUMP_SPREAD", "FloorBumps", "FloorRoughness"]
 
@@ -50,7 +46,7 @@ class FloorRoughness(Effect):
     summary = "wheel-travel noise growing with distance (variance k²·|d| per wheel)"
     reveals = "repeated runs with ground truth along the track; spread growing with distance"
 
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _RoughnessHook(values.copy())
 
     def wheel_variance(self, values: Mapping[str, float], travel: FloatArray) -> FloatArray | None:
@@ -63,7 +59,7 @@ class _RoughnessHook(WorldHook):
     def __init__(self, k: FloatArray) -> None:
         self.k = k
 
-    def configure(self, world: World) -> None:
+    def configure(self, world: WorldView) -> None:
         world.wheel_roughness[:] = np.sqrt(np.square(world.wheel_roughness) + np.square(self.k))
 
 
@@ -84,7 +80,7 @@ class FloorBumps(Effect):
     def is_absent(cls, values: Mapping[str, float]) -> bool:
         return float(values.get("rate", 0.0)) == 0.0 or float(values.get("heading_jump", 0.0)) == 0
 
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _BumpHook(values[:, 0].copy(), values[:, 1] * 2.0 * world.half_track)
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
@@ -140,7 +136,7 @@ class _BumpHook(WorldHook):
                 self._draw(int(i), 0)
                 self._draw(int(i), 1)
 
-    def perturb(self, world: World, h: float) -> None:
+    def perturb(self, world: WorldView, h: float) -> None:
         if _bump_step(
             world.rim_speed,
             world.pose,

@@ -9,15 +9,11 @@ in-place turn, and a displacement of 2·√(dx² + dy²) after a 180° spin.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.effects.base import Effect, Parameter, ReplayArrays, WorldHook
-
-if TYPE_CHECKING:
-    from odomgym.physics import World
+from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
 
 __all__ = ["GroundTruthOffset", "offset_point"]
 
@@ -44,7 +40,7 @@ class GroundTruthOffset(Effect):
     summary = "the ground-truth system tracks a point offset from the axle midpoint"
     reveals = "in-place turns (the tracked point circles the axle; 180° spins show 2·offset)"
 
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _OffsetHook(values[:, 0].copy(), values[:, 1].copy())
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:

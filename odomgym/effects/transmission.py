@@ -13,16 +13,12 @@ same operator to the motor angles the logged counts give (``docs/effects.md`` st
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.effects.base import Effect, Parameter, ReplayArrays, WorldHook
-
-if TYPE_CHECKING:
-    from odomgym.physics import World
+from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
 
 __all__ = ["Backlash", "play_operator"]
 
@@ -40,7 +36,7 @@ class Backlash(Effect):
         "angle) and out-and-back runs"
     )
 
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _BacklashHook(values[:, 0].copy())
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:

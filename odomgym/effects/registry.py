@@ -1,4 +1,9 @@
-"""The effect interface and its registry.
+"""The effect interface and its registry — dependency-free (numpy and :mod:`odomgym.errors`).
+
+The robot spec and the World both consult this registry, so it must not import either: it
+reaches them through two small protocols, :class:`SpecView` (what an effect reads from and writes
+to a robot spec) and :class:`WorldView` (what a hook reads and changes in the World's step). That
+keeps the dependencies one way — ``robot`` and ``physics`` import ``effects``, never the reverse.
 
 An :class:`Effect` is a named physical mechanism with a few named :class:`Parameter` s. It has up
 to four faces, each optional:
@@ -23,28 +28,88 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.errors import SpecError, require_finite
 
-if TYPE_CHECKING:
-    from odomgym.physics import World
-    from odomgym.robot import RobotSpec
-
 __all__ = [
     "EFFECTS",
     "Effect",
     "Parameter",
     "ReplayArrays",
+    "SpecView",
     "WorldHook",
+    "WorldView",
     "get_effect",
     "register_effect",
 ]
 
 FloatArray = NDArray[np.float64]
+
+Spec = TypeVar("Spec", bound="SpecView")
+
+
+class SpecView(Protocol):
+    """What an effect needs of a robot spec (:class:`odomgym.robot.RobotSpec` is one).
+
+    ``e_d``, ``e_b``, ``e_s`` are the true geometry's systematic errors (Borenstein & Feng 1994,
+    Eqs. 6.24–6.32), where the geometric effects keep their values; every other effect keeps a
+    table of its parameters, stored with :meth:`store_effect_table` by :meth:`Effect.write` only.
+    """
+
+    @property
+    def e_d(self) -> float: ...
+
+    @property
+    def e_b(self) -> float: ...
+
+    @property
+    def e_s(self) -> float: ...
+
+    def effect_values(self, name: str) -> dict[str, float] | None: ...
+
+    def with_errors(
+        self: Spec, e_d: float | None = None, e_b: float | None = None, e_s: float | None = None
+    ) -> Spec: ...
+
+    def store_effect_table(self: Spec, name: str, values: Mapping[str, float] | None) -> Spec: ...
+
+
+class WorldView(Protocol):
+    """What a :class:`WorldHook` reads and changes in the World's step
+    (:class:`odomgym.physics.World` is one). Arrays are per robot, N rows."""
+
+    n: int
+    time: float
+    """Simulated time since the World's start [s]."""
+    pose: FloatArray
+    """True axle-midpoint poses (N, 3) [m, m, rad]."""
+    half_track: FloatArray
+    """Half the true wheelbase (N,) [m]."""
+    true_radius: FloatArray
+    """True wheel radii (N, 2) [m] (left, right)."""
+    wheel_angle: FloatArray
+    """Each wheel's rotation since the robot's reset (N, 2) [rad]."""
+    wheel_roughness: FloatArray
+    """Each wheel's Chong & Kleeman noise constant k (N, 2) [m^½]; hooks may raise it."""
+
+    @property
+    def substep(self) -> float:
+        """Length of one physics substep [s]."""
+        ...
+
+    @property
+    def rim_speed(self) -> FloatArray:
+        """Rim speed of each wheel in the current substep (N, 2) [m/s]."""
+        ...
+
+    @property
+    def ground_velocity(self) -> FloatArray:
+        """No-slip velocity of each wheel contact (N, 2, 2) [m/s], changed in place by hooks."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -90,8 +155,7 @@ class Effect:
     """Which experiments make it visible (for reports and the docs)."""
     in_table: ClassVar[bool] = True
     """False for effects whose values live in the spec's own fields (the true geometry: E_d,
-    E_b, E_s) rather than in ``spec.effects``; :meth:`RobotSpec.with_effect` then hands them to
-    :meth:`write`, so there is one way for a value to reach a spec."""
+    E_b, E_s) rather than in ``spec.effects``."""
     partners: ClassVar[tuple[str, ...]] = ()
     """Systematic effects whose parameters are fitted jointly with this one, because its replay
     moves the mean along the same direction (bumps shorten the travel as a distance scale
@@ -147,17 +211,20 @@ class Effect:
         return out
 
     # ------------------------------------------------------------------ spec face
-    def read(self, spec: RobotSpec) -> dict[str, float]:
+    def read(self, spec: SpecView) -> dict[str, float]:
         """The effect's current values in ``spec`` (absent values if it does not carry it)."""
         stored = spec.effect_values(self.name)
         return dict(stored) if stored is not None else self.absent_values()
 
-    def write(self, spec: RobotSpec, values: Mapping[str, float]) -> RobotSpec:
-        """A copy of ``spec`` carrying ``values`` (dropping the effect if they are absent)."""
-        return spec.with_effect(self.name, self.validate(values))
+    def write(self, spec: Spec, values: Mapping[str, float]) -> Spec:
+        """A copy of ``spec`` carrying ``values``, validated (dropping the effect if they are
+        absent). The one way a value reaches a spec: :meth:`RobotSpec.apply_effect` calls it,
+        and an effect that keeps its values elsewhere (the true geometry) overrides it."""
+        clean = self.validate(values)
+        return spec.store_effect_table(self.name, None if self.is_absent(clean) else clean)
 
     # ------------------------------------------------------------------ world face
-    def world_hook(self, world: World, values: FloatArray) -> WorldHook | None:
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         """The hook the World installs; ``values`` (N, P) holds every robot's parameters in
         :attr:`parameters` order (absent values for robots that lack the effect)."""
         del world, values
@@ -245,7 +312,7 @@ class WorldHook:
     has_tracked: ClassVar[bool] = False
     needs_rng: ClassVar[bool] = False
 
-    def configure(self, world: World) -> None:
+    def configure(self, world: WorldView) -> None:
         """Adjust the World's per-robot parameter arrays once, before the first step."""
         del world
 
@@ -266,11 +333,11 @@ class WorldHook:
         """Motor rotation → wheel rotation this substep, in place (N, 2) [rad]."""
         del motor_step
 
-    def shape(self, world: World, h: float) -> None:
+    def shape(self, world: WorldView, h: float) -> None:
         """Change the no-slip contact velocities before the floor acts."""
         del world, h
 
-    def perturb(self, world: World, h: float) -> None:
+    def perturb(self, world: WorldView, h: float) -> None:
         """Change the contact velocities after the floor acted."""
         del world, h
 
