@@ -19,13 +19,12 @@ take is an error, never silently dropped.
 from __future__ import annotations
 
 import dataclasses
-import numbers
 from abc import ABC, abstractmethod
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Self
 
-from odomgym.errors import SpecError, require_positive
+from odomgym.errors import SpecError, require_count, require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
 from odomgym.runs import Run
@@ -42,17 +41,6 @@ __all__ = [
     "require_count",
     "square_experiments",
 ]
-
-
-def require_count(name: str, value: object, minimum: int = 0) -> int:
-    """``value`` as a whole number >= ``minimum``, or :class:`SpecError` naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise SpecError(
-            f"{name} must be a whole number, got {type(value).__name__} {value!r}", field=name
-        )
-    if int(value) < minimum:
-        raise SpecError(f"{name} must be >= {minimum}, got {value}", field=name)
-    return int(value)
 
 
 def require_choice(name: str, value: object, choices: Collection[str]) -> None:

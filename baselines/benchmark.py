@@ -6,21 +6,9 @@ samples a population of simulated robots with systematic errors drawn uniformly 
 and floor (same random streams), then validates each result on fresh UMBmark squares it has not
 seen (5 cw + 5 ccw, 4×4 m, true return errors; E_max,syst of Borenstein & Feng 1994, Eq. 3.3).
 
-Floors (:data:`BENCH_FLOORS`; their names never mean another floor elsewhere in odomgym):
-
-* ``concrete`` — the ``concrete`` preset of :data:`odomgym.floor.FLOORS`, a smooth lab floor
-  with roughness k = 0.0004 m^½, which gives the LabMate return-error scatter σ ≈ 25 mm that
-  Borenstein & Feng 1994, §6.3, report (the noiseless ``smooth`` preset would make every method
-  look 100× better than any real lab allows);
-* ``rough`` — the ``rough`` preset, k = 0.002 m^½ (five times rougher);
-* ``cables`` — the concrete floor strewn with 10 mm cables (1.5 per m², 0.3 m long, laid out
-  once per benchmark seed) and every run started at a random pose, so cables are met at random
-  (≈ 0.29 crossings per metre per wheel, about 5 per wheel on a 4×4 m square; Borenstein 1995,
-  §6.1, laid 10 cables along 18 m). Unlike the ``bumpy`` preset (one fixed layout under the
-  4×4 m squares), no two runs meet the same cables.
-
-Earlier versions called ``concrete`` "smooth" and ``cables`` "bumpy"; those names now give an
-error naming the new one (:data:`RENAMED_BENCH_FLOORS`).
+Floors are :data:`odomgym.population.BENCH_FLOORS` (``concrete``, ``rough``, ``cables``) and the
+robots are drawn from :class:`odomgym.population.Population`: the self-calibration env draws
+from the same ones, so they live in the core below both.
 
 Randomness: robot i on floor f draws everything (its errors, sensor noise, start poses, floor
 roughness) from ``SeedSequence([seed, i, f, purpose])``, and every method sees the same streams
@@ -51,25 +39,21 @@ from odomgym import interrupt
 from odomgym.baselines.base import CalibrationResult, Calibrator
 from odomgym.errors import SpecError
 from odomgym.experiments import Lab, parse_choice
-from odomgym.floor import FLOORS, FloorSpec
+from odomgym.floor import FloorSpec
 from odomgym.lab import random_start_poses, simulate_runs
 from odomgym.lockstep import run_lockstep
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
-from odomgym.robot import PRESETS, RobotSpec
+from odomgym.population import BENCH_FLOORS, Population, check_bench_floor
+from odomgym.robot import RobotSpec
 from odomgym.routes import square_route
 from odomgym.runs import Direction, end_error
 
 __all__ = [
-    "BENCH_FLOORS",
     "METHOD_BUDGETS",
-    "RENAMED_BENCH_FLOORS",
     "Backend",
     "BenchConfig",
-    "BenchFloor",
     "Journal",
-    "Population",
-    "check_bench_floor",
     "config_record",
     "configure",
     "failed_rows",
@@ -80,73 +64,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-
-CABLES_START_REGION = 12.0  # [m]: runs start anywhere in a 24 × 24 m area of cable-strewn floor
-
-
-@dataclass(frozen=True)
-class BenchFloor:
-    """A benchmark floor.
-
-    Attributes:
-        description: one line for reports and ``--help``.
-        make: the floor, laid out from a generator (a benchmark draws it once per seed), and
-            the half-width [m] of the square area runs start in at random poses (``None``:
-            every run starts at the origin).
-    """
-
-    description: str
-    make: Callable[[np.random.Generator], tuple[FloorSpec, float | None]]
-
-
-def _preset(name: str) -> Callable[[np.random.Generator], tuple[FloorSpec, float | None]]:
-    def make(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
-        del rng  # a preset is a fixed fact, not a draw
-        return FLOORS[name], None
-
-    return make
-
-
-def _cables(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
-    floor = FloorSpec.scattered_cables(
-        rng,
-        half_size=CABLES_START_REGION + 6.0,
-        per_square_metre=1.5,
-        roughness=FLOORS["concrete"].roughness,
-        name="cables",
-    )
-    return floor, CABLES_START_REGION
-
-
-# The order fixes each floor's random streams (its index): keep it, append new floors.
-BENCH_FLOORS: dict[str, BenchFloor] = {
-    "concrete": BenchFloor("the concrete preset, roughness k = 0.0004 m^0.5", _preset("concrete")),
-    "rough": BenchFloor("the rough preset, k = 0.002 m^0.5", _preset("rough")),
-    "cables": BenchFloor(
-        "concrete strewn with random 10 mm cables, runs started at random poses", _cables
-    ),
-}
-
-RENAMED_BENCH_FLOORS: dict[str, str] = {"smooth": "concrete", "bumpy": "cables"}
-"""Old benchmark floor names → today's (the old ones collided with different presets)."""
-
-
-def check_bench_floor(name: str) -> None:
-    """Raise :class:`SpecError` (field ``floor``) unless ``name`` is a benchmark floor; an old
-    name is answered with its new one."""
-    if name in BENCH_FLOORS:
-        return
-    if name in RENAMED_BENCH_FLOORS:
-        new = RENAMED_BENCH_FLOORS[name]
-        what = BENCH_FLOORS[new].description
-        raise SpecError(
-            f"the benchmark floor {name!r} is now called {new!r} ({what}); "
-            f"{name!r} names a different preset floor of run and calibrate",
-            field="floor",
-        )
-    raise SpecError(
-        f"unknown benchmark floor {name!r}; floors: {', '.join(BENCH_FLOORS)}", field="floor"
-    )
 
 
 class Backend(StrEnum):
@@ -169,26 +86,6 @@ class Backend(StrEnum):
                 "pip install 'odomgym[distributed]'",
                 field="backend",
             )
-
-
-@dataclass(frozen=True)
-class Population:
-    """Ranges of the true systematic errors, drawn uniformly and independently [-].
-
-    Defaults: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05], E_s ∈ [0.98, 1.02] on the LabMate.
-    """
-
-    base: str = "labmate"
-    e_d: tuple[float, float] = (0.99, 1.01)
-    e_b: tuple[float, float] = (0.95, 1.05)
-    e_s: tuple[float, float] = (0.98, 1.02)
-
-    def sample(self, rng: np.random.Generator, name: str) -> RobotSpec:
-        """One robot with errors drawn from ``rng``."""
-        robot = PRESETS[self.base].ideal()
-        errors = [rng.uniform(*bounds) for bounds in (self.e_d, self.e_b, self.e_s)]
-        spec = robot.with_errors(*errors)
-        return RobotSpec(**{**spec.to_dict(), "name": name})
 
 
 def _umbmark_budget(runs: int) -> dict[str, Any]:
@@ -266,7 +163,7 @@ class BenchConfig:
     extra_budgets: tuple[int, ...] = ()
     seed: int = 0
     validation_runs: int = 5
-    population: Population = Population()
+    population: Population = Population()  # noqa: RUF009  (frozen, so one shared default is safe)
 
     def __post_init__(self) -> None:
         for floor in self.floors:

@@ -18,7 +18,7 @@ parameters and the corrections are fitted to the measured end poses by nonlinear
 
 Each fit is :func:`scipy.optimize.least_squares` (Levenberg–Marquardt, as the authors'
 ``lsqnonlin``) with the analytic Jacobian of
-:func:`odomgym.baselines.trajectory.replay_with_jacobian`. With ``residuals="samples"`` every
+:func:`odomgym.runs.replay_with_jacobian`. With ``residuals="samples"`` every
 sample of the runs enters the cost instead of the end pose only.
 
 On the OptiOdom authors' four straight-and-spin sessions (nominal b = 0.2 m, D = 0.084 m, all
@@ -58,12 +58,12 @@ from odomgym.baselines.base import (
     require_choice,
     require_count,
 )
-from odomgym.baselines.trajectory import replay_with_jacobian, sample_indices
+from odomgym.baselines.trajectory import sample_indices
 from odomgym.errors import require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
+from odomgym.runs import Run, replay_with_jacobian
 
 __all__ = [
     "Ivanjko",

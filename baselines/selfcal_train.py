@@ -41,10 +41,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym import interrupt
-from odomgym.baselines.selfcal import OBSERVATION_LAYOUT, OBSERVATION_VERSION, MlpPolicy
+from odomgym.baselines.selfcal import MlpPolicy
 from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_text, atomic_writer
+from odomgym.selfcal_session import OBSERVATION_LAYOUT, OBSERVATION_VERSION
 
 try:
     from stable_baselines3.common.vec_env.base_vec_env import VecEnv

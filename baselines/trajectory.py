@@ -14,7 +14,7 @@ ground-truth pose, as the authors' ``simulateRobot_diff.m``) and k over the samp
 (every sample by default; the authors sample every ``sampleDist`` = 0.5 m of travel, available
 as ``sample_distance``). The authors minimise it with iRprop−; here it is
 :func:`scipy.optimize.least_squares` (trust-region reflective) with the analytic Jacobian of
-:func:`replay_with_jacobian`, which converges in a handful of evaluations.
+:func:`odomgym.runs.replay_with_jacobian`, which converges in a handful of evaluations.
 
 **Parameters and units.** The fit works on the logarithms of the three effective parameters the
 odometry uses, x = (ln D_L/D_L0, ln D_R/D_R0, ln b/b0), starting at the calibration in place
@@ -59,79 +59,20 @@ from odomgym.errors import SpecError, require_finite, require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab, parse_choice
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
+from odomgym.runs import Run, replay_with_jacobian
 
 __all__ = [
-    "PARAMETER_NAMES",
     "POOR_CONDITION",
     "TRAJECTORY_PATHS",
     "Trajectory",
     "TrajectoryFit",
     "TrajectoryOptions",
     "fit_trajectories",
-    "replay_with_jacobian",
     "sample_indices",
 ]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-
-#: The order of the columns of :func:`replay_with_jacobian`'s Jacobian.
-PARAMETER_NAMES: tuple[str, str, str] = ("left_diameter", "right_diameter", "wheelbase")
-
-
-def replay_with_jacobian(
-    run: Run, robot: RobotSpec, calibration: Calibration | None = None
-) -> tuple[FloatArray, FloatArray]:
-    """Dead-reckon ``run`` like :func:`odomgym.runs.replay_odometry`, with the pose's
-    sensitivity to *relative* changes of the left diameter, right diameter and wheelbase.
-
-    With Δs_L = k_L·N_L, Δs_R = k_R·N_R (k the calibrated travel per count [m]), Δs = (Δs_R +
-    Δs_L)/2, Δθ = (Δs_R − Δs_L)/B and the midpoint heading μ_j = θ_j + Δθ_j/2, the derivatives
-    with respect to x = ln k_L, ln k_R, ln B are cumulative sums over the samples:
-
-        ∂θ_k/∂x = Σ_{j<k} ∂Δθ_j/∂x,      ∂μ_j/∂x = ∂θ_j/∂x + ½·∂Δθ_j/∂x
-        ∂x_k/∂x = Σ_{j<k} (∂Δs_j/∂x·cos μ_j − Δs_j·sin μ_j·∂μ_j/∂x)
-        ∂y_k/∂x = Σ_{j<k} (∂Δs_j/∂x·sin μ_j + Δs_j·cos μ_j·∂μ_j/∂x)
-
-    with ∂(Δs, Δθ)/∂ln k_L = (Δs_L/2, −Δs_L/B), ∂/∂ln k_R = (Δs_R/2, Δs_R/B) and
-    ∂/∂ln B = (0, −Δθ). A relative change of a diameter is a relative change of its k.
-
-    Returns:
-        ``(poses, jacobian)``: poses (T, 3) — x, y [m], θ [rad] — identical to
-        :func:`~odomgym.runs.replay_odometry`; jacobian (T, 3, 3) with
-        ``jacobian[k, i, j]`` = ∂pose_i/∂ln(parameter_j) at sample k, parameters in the order
-        of :data:`PARAMETER_NAMES` ([m] or [rad] per unit relative change).
-    """
-    cal = calibration if calibration is not None else Calibration()
-    per_tick = robot.metres_per_tick * cal.distance_scale
-    increments = np.diff(run.counts, axis=0).astype(float)
-    left = increments[:, 0] * (cal.c_left * per_tick)
-    right = increments[:, 1] * (cal.c_right * per_tick)
-    wheelbase = cal.wheelbase_scale * robot.wheelbase
-    ds = 0.5 * (left + right)
-    dtheta = (right - left) / wheelbase
-    x0, y0, th0 = run.true_pose[0]
-    theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
-    mid = theta[:-1] + 0.5 * dtheta
-    cos_mid, sin_mid = np.cos(mid), np.sin(mid)
-
-    d_ds = np.stack([0.5 * left, 0.5 * right, np.zeros_like(ds)], axis=1)  # (n, 3)
-    d_dtheta = np.stack([-left / wheelbase, right / wheelbase, -dtheta], axis=1)
-    d_theta_before = np.cumsum(d_dtheta, axis=0) - d_dtheta  # ∂θ_j, j = 0..n−1
-    d_mid = d_theta_before + 0.5 * d_dtheta
-    d_x = d_ds * cos_mid[:, None] - (ds * sin_mid)[:, None] * d_mid
-    d_y = d_ds * sin_mid[:, None] + (ds * cos_mid)[:, None] * d_mid
-
-    poses = np.empty_like(run.true_pose)
-    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * cos_mid)])
-    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * sin_mid)])
-    poses[:, 2] = theta
-    jacobian = np.zeros((len(run.time), 3, 3))
-    jacobian[1:, 0] = np.cumsum(d_x, axis=0)
-    jacobian[1:, 1] = np.cumsum(d_y, axis=0)
-    jacobian[1:, 2] = np.cumsum(d_dtheta, axis=0)
-    return poses, jacobian
 
 
 def sample_indices(run: Run, sample_distance: float | None = None) -> IntArray:

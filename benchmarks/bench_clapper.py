@@ -31,8 +31,8 @@ import numpy as np
 
 from odomgym.clapper import CLAPPER_FLOOR
 from odomgym.clapper_runs import PAPER_CONDITIONS, SONAR, run_clapper, summarize
-from odomgym.envs.clapper import DEFAULT_IPEC, ipec_estimator
 from odomgym.floor import load_floor
+from odomgym.ipec import DEFAULT_IPEC, ipec_estimator
 from odomgym.vehicle import PAPER_ERRORS, VEHICLES, VehicleSpec
 
 CONFIGURATIONS = ("paper", "gated", "heading-only", "recommended")

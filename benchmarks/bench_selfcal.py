@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 from scipy.stats import wilcoxon
 
-from odomgym.baselines.benchmark import BENCH_FLOORS, BenchConfig, run_benchmark, summarize
+from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
+from odomgym.population import BENCH_FLOORS
 
 METHODS = ("selfcal", "selfcal_scripted", "umbmark", "jung_chung", "least_squares", "trajectory")
 
@@ -74,11 +75,11 @@ def paired(rows: list[dict[str, Any]], a: str, b: str) -> list[dict[str, Any]]:
 
 def measure_noise(runs: int = 24) -> None:
     """The end-pose scatter of every menu item on the concrete floor (MenuItem.floor_std)."""
-    from odomgym.baselines.selfcal import MENU
     from odomgym.floor import FLOORS
     from odomgym.lab import experiment_route, random_start_poses, simulate_runs
     from odomgym.robot import PRESETS
     from odomgym.runs import end_error
+    from odomgym.selfcal_session import MENU
 
     robot = PRESETS["labmate"].ideal()
     print(f"{'item':<16} {'σx [mm]':>8} {'σy [mm]':>8} {'σθ [°]':>7}   (concrete, {runs} runs)")

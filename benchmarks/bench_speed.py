@@ -58,7 +58,7 @@ def clapper_run(repeats: int = 5) -> dict[str, float]:
     """The 36 m straight out and back with IPEC (``recommended``) and 20 cables, best of
     ``repeats``, and the same without IPEC (the estimator's share of the time)."""
     from odomgym.clapper import CLAPPER_FLOOR, CableLayer, drive_vehicles, evenly, straight_path
-    from odomgym.envs.clapper import ipec_estimator
+    from odomgym.ipec import ipec_estimator
     from odomgym.vehicle import load_vehicle
 
     spec = load_vehicle("clapper")

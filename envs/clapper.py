@@ -3,7 +3,7 @@
 
 The vehicle (:mod:`odomgym.vehicle`) is two LabMate trucks joined by a compliant linkage; it
 drives a programmed path (:mod:`odomgym.clapper`) and knows where it is only through its
-estimator: IPEC (``ipec=True``, :class:`odomgym.baselines.ipec.IPEC`) or each truck's plain
+estimator: IPEC (``ipec=True``, :class:`odomgym.ipec.IPEC`) or each truck's plain
 wheel odometry (``ipec=False``), or any :class:`odomgym.internal.InternalEstimator` factory
 passed as ``estimator``.
 
@@ -44,7 +44,6 @@ Defaults: the ``clapper`` vehicle (two calibrated LabMates), the ``concrete`` fl
 
 from __future__ import annotations
 
-import math
 from os import PathLike
 from typing import Any, Literal
 
@@ -65,27 +64,12 @@ from odomgym.clapper import (
 )
 from odomgym.envs.base import describe_action, real_array
 from odomgym.floor import FloorSpec, load_floor
+from odomgym.ipec import ipec_estimator
 from odomgym.vehicle import VehicleSpec, load_vehicle
 
-__all__ = ["ClapperEnv", "ClapperRectangleEnv", "ClapperStraightEnv", "ipec_estimator"]
+__all__ = ["ClapperEnv", "ClapperRectangleEnv", "ClapperStraightEnv"]
 
 FloatArray = NDArray[np.float64]
-
-
-DEFAULT_IPEC = "recommended"
-"""The IPEC configuration every CLAPPER run uses unless told otherwise
-(:data:`odomgym.baselines.ipec.CONFIGURATIONS`; ``docs/clapper.md`` says why)."""
-
-
-def ipec_estimator(
-    configuration: str = DEFAULT_IPEC, rotary_resolution: float = 2.0 * math.pi / 1024
-) -> EstimatorFactory:
-    """The CLAPPER's IPEC (Borenstein 1995, Eqs. 9-16) in one of the named configurations of
-    :data:`odomgym.baselines.ipec.CONFIGURATIONS` (``recommended`` by default);
-    ``rotary_resolution`` [rad] is one count of the vehicle's rotary encoders."""
-    from odomgym.baselines.ipec import ipec_configuration
-
-    return ipec_configuration(configuration, rotary_resolution)
 
 
 MAX_BUMPS = 1000

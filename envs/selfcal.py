@@ -1,15 +1,15 @@
 """``SelfCalibration-v0``: choose the experiments that calibrate a robot, within a budget of runs.
 
-An episode is one calibration session (:class:`odomgym.baselines.selfcal.SelfCalSession`) on a
+An episode is one calibration session (:class:`odomgym.selfcal_session.SelfCalSession`) on a
 freshly sampled robot: systematic errors drawn over the benchmark's ranges
-(:class:`~odomgym.baselines.benchmark.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
+(:class:`~odomgym.population.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
 E_s ∈ [0.98, 1.02], on the LabMate) and a floor drawn from ``floors`` (the benchmark's
 ``concrete``, ``rough`` and ``cables``; on ``cables`` every run starts at a random pose on a
 field of random cables, so cables are met at random — one fixed field, not the benchmark's own,
 so the benchmark evaluates on cables the agent never trained on).
 
 Spaces:
-    action: ``Discrete(10)`` — an index into :data:`~odomgym.baselines.selfcal.MENU`: 0 stops
+    action: ``Discrete(10)`` — an index into :data:`~odomgym.selfcal_session.MENU`: 0 stops
         the session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or
         out and back, in-place spins of 360° either way or 720°) with the reference driver and
         the current corrections in the odometry.
@@ -65,18 +65,6 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.baselines.benchmark import (
-    CABLES_START_REGION,
-    Population,
-    check_bench_floor,
-)
-from odomgym.baselines.selfcal import (
-    MAX_BUDGET,
-    MENU,
-    OBSERVATION_BOUND,
-    OBSERVATION_LAYOUT,
-    SelfCalSession,
-)
 from odomgym.envs.base import describe_action
 from odomgym.errors import SpecError
 from odomgym.experiments import SensorAccuracy
@@ -84,9 +72,17 @@ from odomgym.floor import FLOORS, FloorSpec
 from odomgym.lab import experiment_route, measure, random_start_poses, simulate_runs
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
+from odomgym.population import CABLES_START_REGION, Population, check_bench_floor
 from odomgym.robot import RobotSpec
 from odomgym.routes import Route, square_route, straight_route
 from odomgym.runs import Run, end_error
+from odomgym.selfcal_session import (
+    MAX_BUDGET,
+    MENU,
+    OBSERVATION_BOUND,
+    OBSERVATION_LAYOUT,
+    SelfCalSession,
+)
 
 __all__ = [
     "FAILED_REWARD",

@@ -656,7 +656,7 @@ def _cable_arrays(cables: tuple[CableBump, ...]) -> tuple[FloatArray, ...]:
 
 EstimatorFactory = Callable[[FloatArray], InternalEstimator]
 """Builds an estimator from the odometry's wheelbases (N, 2) [m] (e.g. ``DeadReckoning`` or
-``odomgym.baselines.ipec.IPEC``)."""
+``odomgym.ipec.IPEC``)."""
 
 
 @dataclass(frozen=True)

@@ -161,7 +161,7 @@ def run_clapper(
     ``sides[r % len(sides)]`` and draws its floor noise from ``SeedSequence([seed, r])``, so
     the runs of every condition meet the same floors. ``conditions`` (e.g.
     ``PAPER_CONDITIONS["straight"]``) replace ``ipec_modes`` × ``bumps``. ``ipec`` builds the
-    IPEC estimator (e.g. :func:`odomgym.envs.clapper.ipec_estimator`; the core does not import
+    IPEC estimator (e.g. :func:`odomgym.ipec.ipec_estimator`; the core does not import
     baselines); ``driver`` builds the controller (default :class:`VehicleDriver`). ``sonar``
     = (position, heading) half-widths [m, rad]: the return pose is measured as the paper's
     sonars did, "within ±2 millimeters in the x and y directions, and to about ±0.25° in
@@ -174,7 +174,7 @@ def run_clapper(
         else [Condition("with IPEC" if m else "without IPEC", bool(m), bumps) for m in ipec_modes]
     )
     if ipec is None and any(c.ipec for c in chosen):
-        raise ValueError("runs with IPEC need ipec= (e.g. odomgym.envs.clapper.ipec_estimator())")
+        raise ValueError("runs with IPEC need ipec= (e.g. odomgym.ipec.ipec_estimator())")
     plans = [(c, d, r) for c in chosen for d in directions for r in range(runs)]
     done: list[ClapperRun] = []
     for k, (condition, direction, r) in enumerate(plans):

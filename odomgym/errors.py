@@ -8,6 +8,7 @@ Every loader raises :class:`SpecError` (a ``ValueError``), whose message carries
 from __future__ import annotations
 
 import math
+import numbers
 import re
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -143,3 +144,14 @@ def require_range(
             f"{name} must lie in [{low}, {high}], got {number!r}", field=name, source=source
         )
     return number
+
+
+def require_count(name: str, value: object, minimum: int = 0) -> int:
+    """``value`` as a whole number >= ``minimum``, or :class:`SpecError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise SpecError(
+            f"{name} must be a whole number, got {type(value).__name__} {value!r}", field=name
+        )
+    if int(value) < minimum:
+        raise SpecError(f"{name} must be >= {minimum}, got {value}", field=name)
+    return int(value)

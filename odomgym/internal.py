@@ -19,7 +19,7 @@ vehicles. Array conventions (all float64, world frame, metres and radians, θ co
 
 :class:`DeadReckoning` is the estimator without internal correction (two independent odometries,
 the readings ignored); Internal Position Error Correction is
-:class:`odomgym.baselines.ipec.IPEC`. :func:`link_angles` gives the true link direction and
+:class:`odomgym.ipec.IPEC`. :func:`link_angles` gives the true link direction and
 angles from true poses, for a simulator to quantise into readings.
 """
 

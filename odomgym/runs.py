@@ -24,10 +24,12 @@ from odomgym.odometry import Calibration, wrap_angle
 from odomgym.robot import RobotSpec
 
 __all__ = [
+    "PARAMETER_NAMES",
     "Direction",
     "Run",
     "end_error",
     "replay_odometry",
+    "replay_with_jacobian",
     "return_error",
     "to_start_frame",
 ]
@@ -144,3 +146,61 @@ def end_error(run: Run, odometry_end: FloatArray) -> FloatArray:
     error: FloatArray = to_start_frame(run, run.true_pose[-1:])[0] - np.asarray(odometry_end)
     error[2] = float(wrap_angle(error[2]))
     return error
+
+
+#: The order of the columns of :func:`replay_with_jacobian`'s Jacobian.
+PARAMETER_NAMES: tuple[str, str, str] = ("left_diameter", "right_diameter", "wheelbase")
+
+
+def replay_with_jacobian(
+    run: Run, robot: RobotSpec, calibration: Calibration | None = None
+) -> tuple[FloatArray, FloatArray]:
+    """Dead-reckon ``run`` like :func:`odomgym.runs.replay_odometry`, with the pose's
+    sensitivity to *relative* changes of the left diameter, right diameter and wheelbase.
+
+    With Δs_L = k_L·N_L, Δs_R = k_R·N_R (k the calibrated travel per count [m]), Δs = (Δs_R +
+    Δs_L)/2, Δθ = (Δs_R − Δs_L)/B and the midpoint heading μ_j = θ_j + Δθ_j/2, the derivatives
+    with respect to x = ln k_L, ln k_R, ln B are cumulative sums over the samples:
+
+        ∂θ_k/∂x = Σ_{j<k} ∂Δθ_j/∂x,      ∂μ_j/∂x = ∂θ_j/∂x + ½·∂Δθ_j/∂x
+        ∂x_k/∂x = Σ_{j<k} (∂Δs_j/∂x·cos μ_j − Δs_j·sin μ_j·∂μ_j/∂x)
+        ∂y_k/∂x = Σ_{j<k} (∂Δs_j/∂x·sin μ_j + Δs_j·cos μ_j·∂μ_j/∂x)
+
+    with ∂(Δs, Δθ)/∂ln k_L = (Δs_L/2, −Δs_L/B), ∂/∂ln k_R = (Δs_R/2, Δs_R/B) and
+    ∂/∂ln B = (0, −Δθ). A relative change of a diameter is a relative change of its k.
+
+    Returns:
+        ``(poses, jacobian)``: poses (T, 3) — x, y [m], θ [rad] — identical to
+        :func:`~odomgym.runs.replay_odometry`; jacobian (T, 3, 3) with
+        ``jacobian[k, i, j]`` = ∂pose_i/∂ln(parameter_j) at sample k, parameters in the order
+        of :data:`PARAMETER_NAMES` ([m] or [rad] per unit relative change).
+    """
+    cal = calibration if calibration is not None else Calibration()
+    per_tick = robot.metres_per_tick * cal.distance_scale
+    increments = np.diff(run.counts, axis=0).astype(float)
+    left = increments[:, 0] * (cal.c_left * per_tick)
+    right = increments[:, 1] * (cal.c_right * per_tick)
+    wheelbase = cal.wheelbase_scale * robot.wheelbase
+    ds = 0.5 * (left + right)
+    dtheta = (right - left) / wheelbase
+    x0, y0, th0 = run.true_pose[0]
+    theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
+    mid = theta[:-1] + 0.5 * dtheta
+    cos_mid, sin_mid = np.cos(mid), np.sin(mid)
+
+    d_ds = np.stack([0.5 * left, 0.5 * right, np.zeros_like(ds)], axis=1)  # (n, 3)
+    d_dtheta = np.stack([-left / wheelbase, right / wheelbase, -dtheta], axis=1)
+    d_theta_before = np.cumsum(d_dtheta, axis=0) - d_dtheta  # ∂θ_j, j = 0..n−1
+    d_mid = d_theta_before + 0.5 * d_dtheta
+    d_x = d_ds * cos_mid[:, None] - (ds * sin_mid)[:, None] * d_mid
+    d_y = d_ds * sin_mid[:, None] + (ds * cos_mid)[:, None] * d_mid
+
+    poses = np.empty_like(run.true_pose)
+    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * cos_mid)])
+    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * sin_mid)])
+    poses[:, 2] = theta
+    jacobian = np.zeros((len(run.time), 3, 3))
+    jacobian[1:, 0] = np.cumsum(d_x, axis=0)
+    jacobian[1:, 1] = np.cumsum(d_y, axis=0)
+    jacobian[1:, 2] = np.cumsum(d_dtheta, axis=0)
+    return poses, jacobian

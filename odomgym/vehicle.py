@@ -5,7 +5,7 @@ that lets them move almost force-free within its range: an absolute rotary encod
 centre measures the angle between the truck and the link, a linear encoder measures the distance
 between the centres (Borenstein 1995, §2, Figs. 1-2). Comparing these internal measurements with
 what each truck's wheel odometry says is Internal Position Error Correction (IPEC,
-:mod:`odomgym.baselines.ipec`).
+:mod:`odomgym.ipec`).
 
 :class:`VehicleSpec` describes such a vehicle (two robot specs, the link and its encoders) and
 loads from TOML like the robot specs (``[vehicle]``, docs/specs.md). :func:`link_readings` turns

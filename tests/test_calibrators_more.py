@@ -26,7 +26,7 @@ from odomgym.baselines.base import CalibrationResult, Calibrator
 from odomgym.baselines.ivanjko import Ivanjko
 from odomgym.baselines.least_squares import LeastSquares
 from odomgym.baselines.lee import Lee, lee_alpha_d, lee_estimates
-from odomgym.baselines.trajectory import Trajectory, fit_trajectories, replay_with_jacobian
+from odomgym.baselines.trajectory import Trajectory, fit_trajectories
 from odomgym.baselines.umbmark import (
     UMBmark,
     alpha_from_e_b,
@@ -41,7 +41,7 @@ from odomgym.lab import SimLab
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
 from odomgym.robot import PRESETS, RobotSpec
-from odomgym.runs import replay_odometry, return_error
+from odomgym.runs import replay_odometry, replay_with_jacobian, return_error
 
 TRUTH = PRESETS["labmate"].with_errors(e_d=1.004, e_b=1.02, e_s=0.995)
 START_REGION = 2.0  # [m]

@@ -12,7 +12,6 @@ import math
 import numpy as np
 import pytest
 
-from odomgym.baselines.ipec import estimate_wheel_diameter_ratio, ipec_configuration
 from odomgym.cables import bump_extra_rotation
 from odomgym.clapper import (
     CableLayer,
@@ -27,6 +26,7 @@ from odomgym.clapper import (
 )
 from odomgym.floor import FloorSpec
 from odomgym.internal import DeadReckoning, growth_rate
+from odomgym.ipec import estimate_wheel_diameter_ratio, ipec_configuration
 from odomgym.vehicle import VEHICLES, VehicleSpec
 
 CLAPPER = VEHICLES["clapper"]

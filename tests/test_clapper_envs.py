@@ -12,8 +12,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import odomgym  # noqa: F401  (registers the envs)
-from odomgym.baselines.ipec import IPEC
 from odomgym.internal import DeadReckoning
+from odomgym.ipec import IPEC
 
 
 @pytest.mark.parametrize("env_id", ["ClapperStraight-v0", "ClapperRectangle-v0"])

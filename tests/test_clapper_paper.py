@@ -17,8 +17,8 @@ import pytest
 from odomgym.cables import bump_extra_rotation
 from odomgym.clapper import CLAPPER_FLOOR, CableLayer, drive_vehicles, evenly, straight_path
 from odomgym.clapper_runs import PAPER_CONDITIONS, run_clapper, summarize
-from odomgym.envs.clapper import ipec_estimator
 from odomgym.floor import FloorSpec, load_floor
+from odomgym.ipec import ipec_estimator
 from odomgym.vehicle import VEHICLES
 
 CLAPPER = VEHICLES["clapper"]

@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from odomgym.baselines.ipec import IPEC, estimate_wheel_diameter_ratio
 from odomgym.cables import bump_extra_rotation, cable_advance, paper_bump_error
 from odomgym.internal import (
     DeadReckoning,
@@ -27,6 +26,7 @@ from odomgym.internal import (
     growth_rate,
     link_angles,
 )
+from odomgym.ipec import IPEC, estimate_wheel_diameter_ratio
 from odomgym.odometry import Odometry, wrap_angle
 from odomgym.robot import PRESETS
 

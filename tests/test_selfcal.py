@@ -14,17 +14,7 @@ import numpy as np
 import pytest
 
 import odomgym  # noqa: F401  (registers the envs)
-from odomgym.baselines.benchmark import Population
-from odomgym.baselines.selfcal import (
-    MENU,
-    OBSERVATION_LAYOUT,
-    STOP,
-    MlpPolicy,
-    SelfCal,
-    SelfCalSession,
-    load_policy,
-    scripted_policy,
-)
+from odomgym.baselines.selfcal import MlpPolicy, SelfCal, load_policy, scripted_policy
 from odomgym.baselines.validation import calibrate_in_simulation
 from odomgym.envs.selfcal import (
     FAILED_REWARD,
@@ -40,7 +30,9 @@ from odomgym.errors import SpecError
 from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FLOORS
 from odomgym.odometry import Calibration
+from odomgym.population import Population
 from odomgym.robot import PRESETS
+from odomgym.selfcal_session import MENU, OBSERVATION_LAYOUT, STOP, SelfCalSession
 
 ITEM = {item.name: k for k, item in enumerate(MENU)}
 

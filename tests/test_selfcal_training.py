@@ -15,7 +15,7 @@ from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
-from odomgym.baselines.selfcal import MENU, load_policy
+from odomgym.baselines.selfcal import load_policy
 from odomgym.baselines.selfcal_train import (
     SelfCalVecEnv,
     evaluate,
@@ -25,6 +25,7 @@ from odomgym.baselines.selfcal_train import (
 from odomgym.cli import main
 from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
+from odomgym.selfcal_session import MENU
 
 KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
 

@@ -71,7 +71,14 @@ from odomgym.internal import (
     link_angles,
 )
 
-__all__ = ["CONFIGURATIONS", "IPEC", "estimate_wheel_diameter_ratio", "ipec_configuration"]
+__all__ = [
+    "CONFIGURATIONS",
+    "DEFAULT_IPEC",
+    "IPEC",
+    "estimate_wheel_diameter_ratio",
+    "ipec_configuration",
+    "ipec_estimator",
+]
 
 
 CONFIGURATIONS: dict[str, dict[str, object]] = {
@@ -106,6 +113,11 @@ CONFIGURATIONS: dict[str, dict[str, object]] = {
   corrected to within half a count) and Eq. 15, with Eq. 12's full Δ_A, only when the reading
   is inconsistent with the dead reckoning while truck A drives straight.
 """
+
+
+DEFAULT_IPEC = "recommended"
+"""The IPEC configuration every CLAPPER run and env uses unless told otherwise
+(:data:`CONFIGURATIONS`; ``docs/clapper.md`` says why)."""
 
 
 def ipec_configuration(
@@ -367,3 +379,13 @@ def estimate_wheel_diameter_ratio(
     if np.any(d <= 0.0):
         raise ValueError("distance must be positive: no straight travel was monitored")
     return np.asarray(e0 * (d + 0.5 * b * c) / (d - 0.5 * b * c), dtype=np.float64)
+
+
+def ipec_estimator(
+    configuration: str = DEFAULT_IPEC, rotary_resolution: float = 2.0 * math.pi / 1024
+) -> Callable[[ArrayLike], IPEC]:
+    """The CLAPPER's IPEC (Borenstein 1995, Eqs. 9-16) in one of the named configurations of
+    :data:`CONFIGURATIONS` (``recommended`` by default), as the estimator factory a
+    :class:`~odomgym.clapper.VehicleTrial` takes; ``rotary_resolution`` [rad] is one count of
+    the vehicle's rotary encoders."""
+    return ipec_configuration(configuration, rotary_resolution)
