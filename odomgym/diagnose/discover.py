@@ -29,7 +29,6 @@ is ``explained``.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -48,6 +47,7 @@ from odomgym.diagnose.fit import (
     fit_candidate,
 )
 from odomgym.diagnose.likelihood import SensorNoise
+from odomgym.diagnose.stats import sign_flip_p, wald_p
 from odomgym.effects import Effect
 from odomgym.effects.discovered import (
     CATALOGUE_POINTS,
@@ -234,8 +234,8 @@ def structure_test(library: Library, seed: int = 0, draws: int = 4000) -> Struct
     dof = int(keep.sum())
     p_param = float(stats.chi2.sf(statistic, dof)) if dof else 1.0
     rng = np.random.default_rng(seed)
-    p_blocks = _sign_flip_p(blocks, basis, statistic * variance, rng, draws)
-    p_runs = _sign_flip_p(runs, basis, statistic * variance, rng, draws)
+    p_blocks = sign_flip_p(blocks, basis, statistic * variance, rng, draws)
+    p_runs = sign_flip_p(runs, basis, statistic * variance, rng, draws)
     diag = np.sqrt(np.maximum(np.diag(info), 1e-300))
     z = g / diag / math.sqrt(variance)
     best = int(np.argmax(np.abs(z)))
@@ -251,20 +251,6 @@ def structure_test(library: Library, seed: int = 0, draws: int = 4000) -> Struct
         p_blocks,
         max(p_param, p_runs),
     )
-
-
-def _sign_flip_p(
-    parts: FloatArray, basis: FloatArray, observed: float, rng: np.random.Generator, draws: int
-) -> float:
-    """p-value of ‖basisᵀ Σ parts‖² ≥ ``observed`` under random signs of the parts."""
-    n = parts.shape[0]
-    if n <= 12:
-        signs = np.array(list(itertools.product((1.0, -1.0), repeat=n)))
-    else:
-        signs = rng.choice([1.0, -1.0], size=(draws, n))
-        signs[0] = 1.0
-    null = np.sum(((signs @ parts) @ basis) ** 2, axis=1)
-    return float(np.mean(null >= observed * (1 - 1e-12)))
 
 
 def _stlsq_normal(gram: FloatArray, moment: FloatArray, threshold: float) -> FloatArray:
@@ -436,7 +422,7 @@ def discover(
             err = fit.stderr.get(name, math.nan)
             value = fit.values[name] - effect.read(spec)[name]
             zval = abs(value) / err if err > 0 and math.isfinite(err) else 0.0
-            p[name] = min(1.0, family * 2.0 * float(stats.norm.sf(zval)))
+            p[name] = wald_p(zval, family)
             limits = next(q for q in effect.parameters if q.name == name)
             if limits.at_limit(fit.values[name]):
                 p[name] = 1.0  # at the edge of its range: a stand-in, not a measurement

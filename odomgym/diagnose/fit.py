@@ -17,7 +17,13 @@ rule, so the per-run differences to the base model compare candidates honestly.
 **Test.** The best candidate's improvement is tested against the family of all candidates with
 a max-T sign-flip test over runs (Westfall & Young 1993): the sign of every run's improvements is
 flipped together, which keeps the dependence between candidates, and the largest studentised mean
-over candidates forms the null distribution.
+over candidates forms the null distribution. The tests themselves are in
+:mod:`odomgym.diagnose.stats` (numbers in, p-values out); this module fits and scores. It
+imports neither the workflow nor anything above it: workflow → fit → stats.
+
+**Run.** :class:`FitJob` is one candidate's fit and cross-validation, a deterministic function of
+its fields; :func:`run_fit_jobs` runs several, side by side in forked worker processes or one
+after the other.
 """
 
 from __future__ import annotations
@@ -25,10 +31,11 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import multiprocessing as mp
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,7 +44,9 @@ from scipy.optimize import least_squares, minimize
 
 from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_likelihood
 from odomgym.diagnose.replay import Replay, replay_run
+from odomgym.diagnose.stats import clustered_covariance, max_t_test
 from odomgym.effects import EFFECTS, Effect
+from odomgym.effects.registry import Spec, SpecView
 from odomgym.errors import SpecError
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
@@ -45,19 +54,39 @@ from odomgym.runs import Run
 __all__ = [
     "CandidateFit",
     "Dataset",
+    "FitJob",
     "Joint",
+    "Model",
     "close_thread_pool",
     "evaluate",
     "fit_candidate",
     "fit_noise",
+    "fit_noise_model",
     "folds_for",
     "max_t_test",
     "noise_curvature",
+    "run_fit_jobs",
     "strata",
 ]
 
 FloatArray = NDArray[np.float64]
 _MIN_SIGMA = 1e-5  # [m] / [rad]: floor of the sensor σ a fit may reach
+
+
+@dataclass(frozen=True)
+class Model:
+    """A model as the workflow fits it: the robot and the sensor that measured it.
+
+    The two travel together (every fit, test and replay of the workflow needs both), so they
+    are one value rather than two parallel arguments that could be mixed up between rounds.
+
+    Attributes:
+        spec: the robot model, its effects included (geometry in m, angles in rad).
+        sensor: the ground-truth sensor's white noise, position σ [m] and heading σ [rad].
+    """
+
+    spec: RobotSpec
+    sensor: SensorNoise
 
 
 @dataclass
@@ -219,6 +248,15 @@ def _noise_vector(
         return out, noise
 
     return np.array(start), np.array(low), np.array(high), build
+
+
+def fit_noise_model(
+    data: Dataset, model: Model, *effects: Effect | None, warm: bool = False
+) -> Model:
+    """:func:`fit_noise` on a :class:`Model`, returning the refitted model (the workflow never
+    needs the log-likelihood it also returns)."""
+    spec, sensor, _ = fit_noise(data, model.spec, model.sensor, *effects, warm=warm)
+    return Model(spec, sensor)
 
 
 def _moves_mean(effects: Sequence[Effect]) -> bool:
@@ -476,26 +514,18 @@ def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
     except np.linalg.LinAlgError:
         cov = np.full((len(u0), len(u0)), np.inf)
     scores = np.array([j.T @ w for j, w in zip(fit.jacobian, base, strict=True)])
-    by_run = _clustered(cov, scores, list(range(len(scores))))
-    by_session = _clustered(cov, scores, [str(r.meta.get("session", "")) for r in data.runs])
+    by_run = clustered_covariance(cov, scores, list(range(len(scores))))
+    labels = [str(r.meta.get("session", "")) for r in data.runs]
+    by_session = clustered_covariance(cov, scores, labels)
     for k, p in enumerate(effect.parameters):
         fit.stderr[p.name] = float(math.sqrt(max(cov[k, k], 0.0)) * p.scale)
         fit.stderr_runs[p.name] = float(math.sqrt(max(by_run[k, k], 0.0)) * p.scale)
         fit.stderr_sessions[p.name] = float(math.sqrt(max(by_session[k, k], 0.0)) * p.scale)
 
 
-def _clustered(cov: FloatArray, scores: FloatArray, labels: Sequence[object]) -> FloatArray:
-    """Cluster-robust covariance cov·(Σ_c s_c·s_cᵀ)·cov·G/(G−1), s_c the summed scores of a
-    cluster (Liang & Zeger 1986); NaN with fewer than two clusters."""
-    groups: dict[object, FloatArray] = {}
-    for label, score in zip(labels, scores, strict=True):
-        groups[label] = groups.get(label, 0.0) + score
-    count = len(groups)
-    if count < 2 or not np.all(np.isfinite(cov)):
-        return np.full_like(cov, math.nan)
-    summed = np.array(list(groups.values()))
-    out: FloatArray = cov @ (summed.T @ summed) @ cov * (count / (count - 1))
-    return out
+_clustered = clustered_covariance
+"""The cluster-robust covariance (now :func:`odomgym.diagnose.stats.clustered_covariance`; the
+old private name is kept for tests/test_discover.py)."""
 
 
 def strata(runs: Sequence[Run]) -> dict[str, list[int]]:
@@ -572,35 +602,95 @@ def cross_validate(
     return out
 
 
-def _studentised(d: FloatArray) -> FloatArray:
-    """Studentised means over the last axis (0 where the spread is 0)."""
-    n = d.shape[-1]
-    mean = d.mean(axis=-1)
-    sd = d.std(axis=-1, ddof=1) if n > 1 else np.zeros_like(mean)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(sd > 0, mean / (sd / math.sqrt(n)), np.where(mean > 0, np.inf, 0.0))
-    return np.asarray(t)
+@dataclass(frozen=True)
+class FitJob:
+    """One candidate's fit and cross-validation: a unit of work for a worker process, and the
+    key of a finished fit in a journal (the fit is a deterministic function of these fields).
+
+    Attributes:
+        data: the fit runs.
+        model: the current model the candidate is added to (its noise already fitted with the
+            nuisance beside it).
+        effect: the candidate's registry name (:data:`odomgym.effects.EFFECTS`); a name, not
+            the object, so that a job pickles small and a forked worker finds the same effect
+            (user-registered ones included) in its inherited registry.
+        nuisance: the registry name of the noise effect fitted beside a systematic candidate,
+            or None.
+        folds: the cross-validation folds, run indices into ``data``.
+    """
+
+    data: Dataset
+    model: Model
+    effect: str
+    nuisance: str | None
+    folds: Sequence[Sequence[int]]
+
+    def key_parts(self) -> tuple[object, ...]:
+        """The job as the flat tuple a journal key is the hash of (the same tuple the jobs were
+        before they were a class, so that fits journalled then are still found)."""
+        return (
+            self.data,
+            self.model.spec,
+            self.model.sensor,
+            self.effect,
+            self.nuisance,
+            self.folds,
+        )
+
+    def run(self) -> CandidateFit:
+        """Fit the candidate and cross-validate it."""
+        effect = EFFECTS[self.effect]
+        nuisance = EFFECTS[self.nuisance] if self.nuisance else None
+        fit = fit_candidate(self.data, self.model.spec, self.model.sensor, effect, nuisance)
+        fit.cv_loglik = cross_validate(self.data, fit, effect, self.folds, nuisance)
+        return fit
 
 
-def _sign_matrix(n: int, rng: np.random.Generator, draws: int) -> FloatArray:
-    if n <= 12:
-        return np.array(list(itertools.product((1.0, -1.0), repeat=n)))
-    signs = rng.choice([1.0, -1.0], size=(draws, n))
-    signs[0] = 1.0
-    return signs
+def _run_job(job: FitJob) -> CandidateFit:
+    """:meth:`FitJob.run` as a module-level function (what a worker process is handed)."""
+    return job.run()
 
 
-def max_t_test(
-    improvements: FloatArray, rng: np.random.Generator, draws: int = 4000
-) -> tuple[FloatArray, FloatArray]:
-    """Studentised mean improvement of each candidate (C,) and its family-wise p-value
-    (single-step max-T, sign flips of whole runs; exact when there are at most 12 runs)."""
-    d = np.asarray(improvements, dtype=float)
-    t_obs = _studentised(d)
-    signs = _sign_matrix(d.shape[1], rng, draws)
-    null_max = np.array([_studentised(d * s).max() for s in signs])
-    p = np.array([(np.sum(null_max >= t - 1e-12)) / len(null_max) for t in t_obs])
-    return t_obs, p
+def run_fit_jobs(
+    jobs: Mapping[int, FitJob],
+    processes: int,
+    finished: Callable[[int, CandidateFit], None],
+) -> None:
+    """Run every job of ``jobs`` (keyed by the caller's index) and hand each fit to
+    ``finished(index, fit)`` as soon as it is done, in whatever order they finish.
+
+    With ``processes`` > 1, more than one job and the ``fork`` start method: in a pool of
+    forked worker processes (they share the effect registry, user effects included, and the
+    compiled kernels). Otherwise one after the other in this process, in the mapping's order.
+    Results do not depend on which: each fit is a deterministic function of its job.
+
+    Interruption: if ``finished`` raises, or anything else does while waiting (Ctrl-C, a
+    SIGTERM turned into an exception, a worker's error re-raised by ``result()``), the
+    workers are terminated at once — rather than waiting for their running fits, as the
+    executor's own shutdown would — the queued jobs are cancelled and the exception propagates.
+    A worker that dies (killed, out of memory) breaks the pool: the next ``result()`` raises
+    ``BrokenProcessPool``, handled the same way.
+    """
+    todo = list(jobs)
+    if processes > 1 and len(todo) > 1 and "fork" in mp.get_all_start_methods():
+        # No thread of this process's evaluation pool may be alive across the fork.
+        close_thread_pool()
+        pool = ProcessPoolExecutor(processes, mp_context=mp.get_context("fork"))
+        try:
+            futures = {pool.submit(_run_job, jobs[k]): k for k in todo}
+            for future in as_completed(futures):
+                finished(futures[future], future.result())
+        except BaseException:
+            # ``_processes`` is the executor's map of its worker processes (CPython's
+            # concurrent.futures internals; to be replaced by a shared worker pool).
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
+    else:
+        for k in todo:
+            finished(k, _run_job(jobs[k]))
 
 
 def candidate_effects(exclude: Sequence[str] = ()) -> list[Effect]:
@@ -624,13 +714,13 @@ class Joint(Effect):
             for p in e.parameters
         )
 
-    def read(self, spec: RobotSpec) -> dict[str, float]:
+    def read(self, spec: SpecView) -> dict[str, float]:
         out: dict[str, float] = {}
         for e in self.effects:
             out.update({f"{e.name}.{k}": v for k, v in e.read(spec).items()})
         return out
 
-    def write(self, spec: RobotSpec, values: Mapping[str, float]) -> RobotSpec:
+    def write(self, spec: Spec, values: Mapping[str, float]) -> Spec:
         out = spec
         for e in self.effects:
             prefix = f"{e.name}."

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.stats import holm, mean_t_test
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
@@ -128,18 +128,6 @@ def run_residuals(runs: Sequence[Run], spec: RobotSpec) -> list[RunResidual]:
     return out
 
 
-def _t_test(values: FloatArray) -> tuple[float, float, float, float]:
-    v = values[np.isfinite(values)]
-    n = len(v)
-    mean = float(v.mean()) if n else math.nan
-    if n < 2 or float(v.std(ddof=1)) == 0.0:
-        return mean, math.nan, math.nan, 1.0
-    se = float(v.std(ddof=1)) / math.sqrt(n)
-    q = float(stats.t.ppf(0.975, n - 1))
-    p = float(2 * stats.t.sf(abs(mean / se), n - 1))
-    return mean, mean - q * se, mean + q * se, p
-
-
 def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Finding]:
     """The tests of the module docstring, Holm-corrected together."""
     rows: list[tuple[str, str, str, str, FloatArray]] = []
@@ -200,9 +188,9 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
                     unit = "rad/rad"
                 component = "cross" if "cross" in group else "heading"
                 rows.append(("manoeuvres", group, component, unit, np.array(values)))
-    tested = [(row, _t_test(row[4])) for row in rows]
+    tested = [(row, mean_t_test(row[4])) for row in rows]
     pvals = np.array([t[3] for _, t in tested])
-    adjusted = _holm(pvals)
+    adjusted = holm(pvals)
     findings = []
     for ((view, group, component, unit, sample), (mean, low, high, _)), p in zip(
         tested, adjusted, strict=True
@@ -222,15 +210,3 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
             )
         )
     return findings
-
-
-def _holm(p: FloatArray) -> FloatArray:
-    """Holm's step-down adjustment of p-values."""
-    order = np.argsort(p)
-    m = len(p)
-    adjusted = np.empty(m)
-    running = 0.0
-    for rank, i in enumerate(order):
-        running = max(running, min(1.0, (m - rank) * p[i]))
-        adjusted[i] = running
-    return adjusted

@@ -37,18 +37,15 @@ from __future__ import annotations
 
 import hashlib
 import math
-import multiprocessing as mp
 import pickle
 import shutil
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from odomgym import interrupt
 from odomgym.diagnose.discover import (
@@ -63,15 +60,17 @@ from odomgym.diagnose.experiments import separating_experiment
 from odomgym.diagnose.fit import (
     CandidateFit,
     Dataset,
+    FitJob,
     Joint,
+    Model,
     candidate_effects,
-    close_thread_pool,
     cross_validate,
     evaluate,
     fit_candidate,
     fit_noise,
+    fit_noise_model,
     folds_for,
-    max_t_test,
+    run_fit_jobs,
     strata,
 )
 from odomgym.diagnose.likelihood import (
@@ -88,6 +87,16 @@ from odomgym.diagnose.sessions import (
     fit_session_frames,
     sessions_of,
 )
+from odomgym.diagnose.stats import (
+    bootstrap_ci,
+    combine_bonferroni,
+    likelihood_ratio,
+    lr_test,
+    max_t_test,
+    reducible_fraction,
+    rms,
+    whiteness_p,
+)
 from odomgym.diagnose.where import Finding, localise, run_residuals
 from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
 from odomgym.errors import SpecError
@@ -98,10 +107,14 @@ from odomgym.runs import Run
 __all__ = [
     "DISCOVERED",
     "NUISANCE",
+    "ROUND_GOES_ON",
     "DiagnoseConfig",
     "Diagnosis",
+    "DiagnosisState",
     "FitJournal",
+    "RoundContext",
     "diagnose",
+    "run_round",
     "split_runs",
 ]
 
@@ -315,28 +328,12 @@ def split_runs(
     return fit, sorted(held)
 
 
-def _consistency(data: Dataset, spec: RobotSpec, sensor: SensorNoise) -> float:
-    """p-value that the whitened innovations are white noise: per-run means (χ²) and pooled
-    lag-1 correlation (normal), Bonferroni-combined."""
-    ev = evaluate(data, spec, sensor)
-    chi2 = 0.0
-    dof = 0
-    lag_num = 0.0
-    lag_n = 0
-    for w, mask in zip(ev.whitened, data.masks, strict=True):
-        values = w.reshape(-1, 3)[mask]  # row order: time, then component
-        per = w.reshape(-1, 3)
-        for c in range(3):
-            series = per[mask[:, c], c]
-            if len(series) >= 2:
-                chi2 += float(series.sum()) ** 2 / len(series)
-                dof += 1
-                lag_num += float(np.sum(series[1:] * series[:-1]))
-                lag_n += len(series) - 1
-        del values
-    p_mean = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
-    p_lag = float(2 * stats.norm.sf(abs(lag_num / math.sqrt(max(lag_n, 1))))) if lag_n else 1.0
-    return min(1.0, 2 * min(p_mean, p_lag))
+def _consistency(data: Dataset, model: Model) -> float:
+    """p-value that ``model``'s whitened innovations on ``data`` are white noise
+    (:func:`odomgym.diagnose.stats.whiteness_p`: per-run means and pooled lag-1 correlation,
+    Bonferroni-combined)."""
+    ev = evaluate(data, model.spec, model.sensor)
+    return whiteness_p(ev.whitened, data.masks)
 
 
 def _gaps(
@@ -374,27 +371,6 @@ def _gaps(
     return out
 
 
-def _bootstrap(
-    values: Sequence[FloatArray],
-    statistic: Callable[..., float],
-    rng: np.random.Generator,
-    draws: int = 2000,
-) -> list[float]:
-    n = len(values[0])
-    out = []
-    for _ in range(draws):
-        pick = rng.integers(0, n, n)
-        out.append(statistic(*(v[pick] for v in values)))
-    finite = np.array(out)[np.isfinite(out)]
-    if len(finite) < 0.5 * draws:
-        return [math.nan, math.nan]
-    low, high = np.percentile(finite, [2.5, 97.5])
-    return [float(low), float(high)]
-
-
-Job = tuple[Dataset, RobotSpec, SensorNoise, str, str | None, Sequence[Sequence[int]]]
-
-
 class FitJournal:
     """The candidate fits a diagnosis has finished, one file each, so that an interrupted
     diagnosis (``odomgym diagnose --resume``) goes on where it stopped.
@@ -414,10 +390,11 @@ class FitJournal:
         if not resume:
             self.clear()
 
-    def key(self, job: Job) -> str:
+    def key(self, job: FitJob) -> str:
+        """The file name of ``job``'s fit: the hash of its :meth:`FitJob.key_parts`."""
         from odomgym import __version__
 
-        return hashlib.sha256(pickle.dumps((__version__, job), protocol=5)).hexdigest()
+        return hashlib.sha256(pickle.dumps((__version__, job.key_parts()), protocol=5)).hexdigest()
 
     def get(self, key: str) -> CandidateFit | None:
         """The stored fit, or ``None`` (none stored, or a file that does not load)."""
@@ -442,90 +419,109 @@ class FitJournal:
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
-def _fit_and_score(job: Job) -> CandidateFit:
-    """Fit one candidate and cross-validate it (a unit of work for a worker process)."""
-    data, spec, sensor, name, nuisance_name, folds = job
-    effect = EFFECTS[name]
-    nuisance = EFFECTS[nuisance_name] if nuisance_name else None
-    fit = fit_candidate(data, spec, sensor, effect, nuisance)
-    fit.cv_loglik = cross_validate(data, fit, effect, folds, nuisance)
-    return fit
+@dataclass(frozen=True)
+class RoundContext:
+    """What every round of Which/Add shares: fixed once the runs are split and the folds drawn.
+
+    Attributes:
+        data: the fit runs.
+        folds: cross-validation folds (indices into ``data``).
+        nuisance: the wheel-noise effect fitted beside every systematic candidate
+            (:data:`NUISANCE`; None if it is not registered).
+        stages: the candidate stages of a round in order — (stage name, effect names, the
+            nuisance fitted beside them) — module docstring, step 3.
+        config: the settings.
+        rng: the workflow's random stream (it drew the split and the folds; the max-T tests
+            continue it, so a round's numbers depend on the rounds before it, as they always
+            have).
+        report: progress callback; also where a swallowed stop request is raised.
+        journal: where finished candidate fits are stored and found (None: nowhere).
+    """
+
+    data: Dataset
+    folds: list[list[int]]
+    nuisance: Effect | None
+    stages: list[tuple[str, list[str], Effect | None]]
+    config: DiagnoseConfig
+    rng: np.random.Generator
+    report: Callable[[str, float], None]
+    journal: FitJournal | None = None
+
+
+@dataclass
+class DiagnosisState:
+    """What the rounds have found so far; :func:`run_round` updates it.
+
+    Attributes:
+        model: the current model (robot with the effects added so far, fitted sensor noise).
+        before_discovery: the robot model before the first discovered term joined (what the
+            discovered terms' evidence is shown against).
+        named: the catalogue effects named, in the order first named.
+        parameters: each named effect's parameters, ``{effect: {parameter: entry}}``
+            (:meth:`odomgym.diagnose.fit.CandidateFit.entry`).
+        passes: every discovery pass.
+        rounds: every finished round.
+    """
+
+    model: Model
+    before_discovery: RobotSpec
+    named: list[str] = field(default_factory=list)
+    parameters: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    passes: list[Discovery] = field(default_factory=list)
+    rounds: list[Round] = field(default_factory=list)
+
+    @property
+    def candidates(self) -> list[Candidate]:
+        """Every candidate scored, round after round."""
+        return [c for r in self.rounds for c in r.candidates]
 
 
 def _score_candidates(
-    data: Dataset,
+    ctx: RoundContext,
     effects: Sequence[Effect],
-    spec: RobotSpec,
-    sensor: SensorNoise,
+    base: Model,
     nuisance: Effect | None,
-    folds: Sequence[Sequence[int]],
     where: tuple[int, str],
-    cfg: DiagnoseConfig,
-    rng: np.random.Generator,
-    report: Callable[[str, float], None],
-    journal: FitJournal | None = None,
 ) -> tuple[list[Candidate], list[CandidateFit]]:
-    """Fit, cross-validate and test ``effects`` against the current model ``spec`` (in round and
-    stage ``where``)."""
+    """Fit, cross-validate and test ``effects`` against the current model ``base`` (in round and
+    stage ``where``): each candidate's likelihood-ratio test (Bonferroni over ``effects``), its
+    held-out gain, and the max-T sign-flip test over runs."""
     number, stage = where
-    base = CandidateFit(
+    data, cfg, journal = ctx.data, ctx.config, ctx.journal
+    spec, sensor = base.spec, base.sensor
+    current = CandidateFit(
         "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
     )
-    base_cv = cross_validate(data, base, None, folds)
-    jobs: list[Job] = [
-        (
-            data,
-            spec,
-            sensor,
-            e.name,
-            nuisance.name if nuisance and nuisance is not e else None,
-            folds,
+    base_cv = cross_validate(data, current, None, ctx.folds)
+    jobs = [
+        FitJob(
+            data, base, e.name, nuisance.name if nuisance and nuisance is not e else None, ctx.folds
         )
         for e in effects
     ]
     keys = [journal.key(job) for job in jobs] if journal is not None else []
     stored = {k: journal.get(keys[k]) for k in range(len(jobs))} if journal is not None else {}
     done = {k: fit for k, fit in stored.items() if fit is not None}
-    todo = [k for k in range(len(jobs)) if k not in done]
 
     def finished(k: int, fit: CandidateFit) -> None:
         if journal is not None:
             journal.record(keys[k], fit)
         done[k] = fit
-        report(f"round {number}: {effects[k].name}", len(done) / len(effects))
+        ctx.report(f"round {number}: {effects[k].name}", len(done) / len(effects))
 
-    if cfg.jobs > 1 and len(todo) > 1 and "fork" in mp.get_all_start_methods():
-        # Forked workers share the registry (user effects included) and the compiled kernels.
-        # No thread of this process's evaluation pool may be alive across the fork.
-        close_thread_pool()
-        pool = ProcessPoolExecutor(cfg.jobs, mp_context=mp.get_context("fork"))
-        try:
-            # Each fit is recorded as soon as it is done, in whatever order they finish.
-            futures = {pool.submit(_fit_and_score, jobs[k]): k for k in todo}
-            for future in as_completed(futures):
-                finished(futures[future], future.result())
-        except BaseException:
-            # Ctrl-C, SIGTERM or an error: stop the workers now rather than wait for their
-            # fits (the executor's own shutdown would); ``_processes`` is the executor's map
-            # of its worker processes (CPython's concurrent.futures).
-            for process in list((getattr(pool, "_processes", None) or {}).values()):
-                process.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-        pool.shutdown()
-    else:
-        for k in todo:
-            finished(k, _fit_and_score(jobs[k]))
+    # Each fit is recorded as soon as it is done, in whatever order they finish.
+    todo = {k: jobs[k] for k in range(len(jobs)) if k not in done}
+    run_fit_jobs(todo, cfg.jobs, finished)
     fits = [done[k] for k in range(len(jobs))]
     improvements = np.array([f.cv_loglik - base_cv for f in fits])
-    t, p_flip = max_t_test(improvements, rng)
+    t, p_flip = max_t_test(improvements, ctx.rng)
     candidates = []
     for k, f in enumerate(fits):
-        lr = max(0.0, 2.0 * float(np.sum(f.loglik - base.loglik)))
+        lr = likelihood_ratio(float(np.sum(f.loglik - current.loglik)))
         dof = len(EFFECTS[f.name].parameters) + sum(
             len(EFFECTS[p].parameters) for p in EFFECTS[f.name].partners
         )
-        p_family = min(1.0, len(fits) * float(stats.chi2.sf(lr, dof)))  # Bonferroni
+        p_family = lr_test(lr, dof, len(fits))
         gain = float(improvements[k].sum())
         candidates.append(
             Candidate(
@@ -548,8 +544,7 @@ def _score_candidates(
 
 def _refit_named(
     data: Dataset,
-    spec: RobotSpec,
-    sensor: SensorNoise,
+    model: Model,
     named: Sequence[str],
     parameters: dict[str, dict[str, dict[str, float]]],
     nuisance: Effect | None,
@@ -559,20 +554,19 @@ def _refit_named(
     absorbed while it was alone. ``parameters`` takes the joint values and standard errors."""
     systematic = [EFFECTS[n] for n in named if not EFFECTS[n].noise]
     if len(systematic) < 2:
-        return spec
+        return model.spec
     joint = Joint(systematic)
-    fit = fit_candidate(data, spec, sensor, joint, nuisance)
+    fit = fit_candidate(data, model.spec, model.sensor, joint, nuisance)
     for name, values in joint.split(fit.values).items():
         parameters[name] = {key: fit.entry(f"{name}.{key}", value) for key, value in values.items()}
-    return joint.write(spec, fit.values)
+    return joint.write(model.spec, fit.values)
 
 
-def _backward_check(
-    data: Dataset, spec: RobotSpec, sensor: SensorNoise, named: Sequence[str], alpha: float
-) -> list[str]:
+def _backward_check(data: Dataset, model: Model, named: Sequence[str], alpha: float) -> list[str]:
     """Named systematic effects that the final model no longer needs: the likelihood-ratio test
     of the final model against it without the effect (sensor noise refitted) does not pass α/2
     after a Bonferroni correction over the named effects."""
+    spec, sensor = model.spec, model.sensor
     systematic = [n for n in named if not EFFECTS[n].noise]
     if len(systematic) + (1 if spec.effect_values(DISCOVERED) else 0) < 2:
         return []
@@ -584,8 +578,7 @@ def _backward_check(
             data, effect.write(spec, effect.absent_values()), sensor
         )
         without = float(evaluate(data, reduced, reduced_sensor, whitened=False).loglik.sum())
-        lr = max(0.0, 2.0 * (full - without))
-        p = min(1.0, len(systematic) * float(stats.chi2.sf(lr, len(effect.parameters))))
+        p = lr_test(likelihood_ratio(full - without), len(effect.parameters), len(systematic))
         if p >= 0.5 * alpha:
             out.append(name)
     return out
@@ -625,6 +618,227 @@ def _discovery_record(passes: Sequence[Discovery]) -> list[dict[str, Any]]:
     ]
 
 
+ROUND_GOES_ON = ("explained", "discovered")
+"""Round verdicts after which another round follows (something joined the model)."""
+
+
+def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
+    """One round of Which/Add (module docstring, steps 3–4): score the stages' candidates
+    against ``state.model``, decide the round's verdict, and — when an effect is named or a
+    term discovered — add it to ``state.model``. The round is appended to ``state.rounds`` and
+    returned; another round follows if its verdict is in :data:`ROUND_GOES_ON`."""
+    cfg, data, report = ctx.config, ctx.data, ctx.report
+    model = state.model
+    candidates: list[Candidate] = []
+    fits: list[CandidateFit] = []
+    round_candidates: list[Candidate] = []
+    base = model
+    structure: StructureTest | None = None
+    stopped: str | None = None
+    for stage, stage_names, helper in ctx.stages:
+        if stage == "noise" and structure is None:
+            # Is the systematic structure exhausted? Score test of the whole grammar on the
+            # innovations of the model with its wheel noise (the nuisance) fitted.
+            report(f"round {number}: structure", 0.0)
+            lib = fit_noise_model(data, model, ctx.nuisance)
+            library = library_jacobian(data, lib.spec, lib.sensor)
+            structure = structure_test(library, seed=cfg.seed + number)
+            # Discovery runs again only after a pass that found terms.
+            again = not state.passes or bool(state.passes[-1].terms)
+            if structure.p_value < 0.5 * cfg.alpha and cfg.discover and again:
+                report(f"round {number}: discovery", 0.0)
+                latest = discover(
+                    data,
+                    lib.spec,
+                    lib.sensor,
+                    ctx.folds,
+                    alpha=cfg.alpha,
+                    nuisance=ctx.nuisance,
+                    library=library,
+                    structure=structure,
+                )
+                state.passes.append(latest)
+                if latest.terms and latest.fit is not None:
+                    stopped = "discovered"
+                    break
+            if structure.p_consistent < 0.5 * cfg.alpha:
+                # Structure shared by the runs: no noise effect may stand in for it.
+                stopped = "structured"
+                break
+        effects = [EFFECTS[n] for n in stage_names]
+        if not effects:
+            continue
+        base = fit_noise_model(data, model, helper)
+        candidates, fits = _score_candidates(ctx, effects, base, helper, (number, stage))
+        round_candidates.extend(candidates)
+        if any(c.significant for c in candidates):
+            break
+    consistency = _consistency(data, base)
+    structure_info = structure.as_dict() if structure is not None else None
+
+    def finish(
+        verdict: str,
+        winner: str | None = None,
+        tied: list[str] | None = None,
+        separating: dict[str, Any] | None = None,
+    ) -> Round:
+        done = Round(
+            number,
+            verdict,
+            winner,
+            tied if tied is not None else [],
+            separating,
+            round_candidates,
+            consistency,
+            structure_info,
+        )
+        state.rounds.append(done)
+        return done
+
+    found = state.passes[-1] if state.passes else None
+    if stopped == "discovered" and found is not None and found.fit is not None:
+        if not model.spec.effect_values(DISCOVERED):
+            state.before_discovery = model.spec
+        spec = DiscoveredTerms(found.terms).write(model.spec, found.fit.values)
+        state.model = fit_noise_model(data, Model(spec, model.sensor))
+        return finish("discovered", DISCOVERED)
+    significant = [k for k, c in enumerate(candidates) if c.significant]
+    if stopped == "structured" or not significant:
+        p_struct = structure.p_value if structure is not None else 1.0
+        p_left = combine_bonferroni(consistency, p_struct)
+        return finish("none" if p_left >= 0.5 * cfg.alpha else "unexplained")
+    best = max(significant, key=lambda k: candidates[k].cv_gain)
+    tied = [best] + [
+        k
+        for k in significant
+        if k != best and candidates[best].cv_gain - candidates[k].cv_gain < cfg.tie_nats
+    ]
+    if len(tied) > 1:
+        runner = max((k for k in tied if k != best), key=lambda k: candidates[k].cv_gain)
+        found_experiment, _ = separating_experiment(
+            fits[best].spec, fits[runner].spec, model.sensor
+        )
+        separating = {
+            "between": [fits[best].name, fits[runner].name],
+            "experiment": found_experiment.experiment,
+            "separation_mm": 1e3 * found_experiment.position,
+            "separation_deg": math.degrees(found_experiment.heading),
+            "separation_sigma": found_experiment.sigma,
+        }
+        return finish("ambiguous", None, [fits[k].name for k in tied], separating)
+    winner = fits[best]
+    # An effect already in the model may win again (refitted once others joined): its
+    # parameters are updated, it is listed once, where it was first added.
+    if winner.name not in state.named:
+        state.named.append(winner.name)
+    state.parameters[winner.name] = {
+        key: winner.entry(key, value) for key, value in winner.values.items()
+    }
+    done = finish("explained", winner.name)
+    # Only the named effect joins the model (not the nuisance wheel noise fitted beside a
+    # systematic effect); the sensor noise is refitted for it. A noise effect fitted jointly
+    # with a systematic partner (bumps with the distance scale) brings the partner's refit.
+    spec = EFFECTS[winner.name].write(model.spec, winner.values)
+    spec = _refit_named(
+        data, Model(spec, model.sensor), state.named, state.parameters, ctx.nuisance
+    )
+    for partner_name in EFFECTS[winner.name].partners:
+        partner = EFFECTS[partner_name]
+        refit = partner.read(winner.spec)
+        spec = partner.write(spec, refit)
+        if partner_name in state.parameters:
+            state.parameters[partner_name] = {
+                key: {**state.parameters[partner_name][key], "value": value}
+                for key, value in refit.items()
+            }
+    state.model = fit_noise_model(data, Model(spec, model.sensor))
+    return done
+
+
+def _check_runs(runs: Sequence[Run]) -> None:
+    """At least three runs, each with a measured pose after its first sample."""
+    if len(runs) < 3:
+        raise SpecError(f"diagnose needs at least 3 runs, got {len(runs)}", field="runs")
+    for run in runs:
+        if not measurement_mask(run, 0.0).any():
+            raise SpecError(
+                f"run {run.meta.get('run', '?')} has no measured pose after its first sample",
+                field="x",
+                source=run.source,
+            )
+
+
+def _final_test(
+    held_data: Dataset, model: Model, state: DiagnosisState, alpha: float, seed: int
+) -> tuple[str, dict[str, Any]]:
+    """The verdict on the held-out runs (module docstring, step 9 of docs/diagnose.md) and the
+    ``final_test`` record: the grammar's score test and the whiteness test under the final
+    model, Bonferroni-combined."""
+    held_structure = structure_test(
+        library_jacobian(held_data, model.spec, model.sensor), seed=seed
+    )
+    held_white = _consistency(held_data, model)
+    held_p = combine_bonferroni(held_structure.p_value, held_white)
+    found_anything = bool(state.named) or bool(model.spec.effect_values(DISCOVERED))
+    last = state.rounds[-1].verdict if state.rounds else "none"
+    if not found_anything:
+        verdict = last
+    elif held_p >= 0.5 * alpha and last not in ("unexplained", "ambiguous"):
+        verdict = "explained"
+    else:
+        verdict = "partly explained"
+    return verdict, {
+        "held_out_structure": held_structure.as_dict(),
+        "held_out_whiteness_p": held_white,
+        "held_out_p": held_p,
+        "residual_follows": held_structure.follows,
+        "residual_follows_z": held_structure.z,
+    }
+
+
+def _shrink(
+    held_runs: Sequence[Run], robot: RobotSpec, model: Model, cfg: DiagnoseConfig
+) -> dict[str, Any]:
+    """The gap report (module docstring, step 5) as :class:`Diagnosis` fields: the held-out
+    runs under the model as given and the final one, with bootstrap intervals over runs."""
+    # The model as given keeps its own noise effects; both are filtered with the sensor noise
+    # fitted last (the best estimate of the measurement's own noise).
+    before = _gaps(held_runs, robot, model.sensor, cfg.checkpoint_interval)
+    after = _gaps(held_runs, model.spec, model.sensor, cfg.checkpoint_interval)
+    ms_before, ms_after = before["whitened"], after["whitened"]
+    ms_floor = np.ones(len(held_runs))
+    boot = np.random.default_rng(cfg.seed + 1)
+    # The draws come from one stream in this order: before, after, difference, fraction.
+    gap_ci = {
+        "before": bootstrap_ci([ms_before], rms, boot),
+        "after": bootstrap_ci([ms_after], rms, boot),
+        "difference": bootstrap_ci([ms_before, ms_after], lambda b, a: rms(b) - rms(a), boot),
+    }
+    fraction_ci = bootstrap_ci([ms_before, ms_after, ms_floor], reducible_fraction, boot)
+    return {
+        "gap_before": rms(ms_before),
+        "gap_after": rms(ms_after),
+        "gap_ci": gap_ci,
+        "noise_floor": rms(ms_floor),
+        "fraction_closed": reducible_fraction(ms_before, ms_after, ms_floor),
+        "fraction_ci": fraction_ci,
+        "holdout_gaps": {
+            "before": np.sqrt(ms_before).tolist(),
+            "after": np.sqrt(ms_after).tolist(),
+            "noise": np.sqrt(ms_floor).tolist(),
+        },
+        "physical": {
+            "gap_position_mm": [1e3 * rms(before["position"]), 1e3 * rms(after["position"])],
+            "gap_heading_deg": [
+                math.degrees(rms(before["heading"])),
+                math.degrees(rms(after["heading"])),
+            ],
+            "gap_open_loop_sigma": [rms(before["normalised"]), rms(after["normalised"])],
+            "noise_floor_open_loop_sigma": [rms(before["floor"]), rms(after["floor"])],
+        },
+    }
+
+
 def diagnose(
     runs: Sequence[Run],
     robot: RobotSpec,
@@ -644,15 +858,7 @@ def diagnose(
         if progress is not None:
             progress(stage, fraction)
 
-    if len(runs) < 3:
-        raise SpecError(f"diagnose needs at least 3 runs, got {len(runs)}", field="runs")
-    for run in runs:
-        if not measurement_mask(run, 0.0).any():
-            raise SpecError(
-                f"run {run.meta.get('run', '?')} has no measured pose after its first sample",
-                field="x",
-                source=run.source,
-            )
+    _check_runs(runs)
     rng = np.random.default_rng(cfg.seed)
     fit_index, held_index = split_runs(runs, cfg.holdout, rng)
     fit_runs = [runs[j] for j in fit_index]
@@ -661,9 +867,7 @@ def diagnose(
         raise SpecError("too few runs left to fit after the hold-out split", field="holdout")
     data = Dataset.of(fit_runs, cfg.checkpoint_interval)
     names = cfg.candidates or tuple(EFFECTS)
-    spec = robot
-    sensor = SensorNoise(*cfg.initial_sensor)
-    spec, sensor, _ = fit_noise(data, spec, sensor)
+    model = fit_noise_model(data, Model(robot, SensorNoise(*cfg.initial_sensor)))
     frames: list[SessionFrame] = []
     use_frames = cfg.session_frames
     if use_frames is None:
@@ -671,277 +875,71 @@ def diagnose(
     if use_frames:
         # Per-session tracked point and yaw: fitted on the fit runs, removed from every run.
         report("session frames", 0.0)
-        frames = fit_session_frames(data, spec, sensor)
+        frames = fit_session_frames(data, model.spec, model.sensor)
         runs = correct_runs(runs, frames)
         fit_runs = [runs[j] for j in fit_index]
         held_runs = [runs[j] for j in held_index]
         data = Dataset.of(fit_runs, cfg.checkpoint_interval)
         names = tuple(n for n in names if n not in SESSION_EFFECTS)
-        spec, sensor, _ = fit_noise(data, spec, sensor)
+        model = fit_noise_model(data, model)
     report("where", 0.0)
     findings = localise(run_residuals(runs, robot), cfg.alpha)
-    rounds: list[Round] = []
-    all_candidates: list[Candidate] = []
-    named: list[str] = []
-    parameters: dict[str, dict[str, dict[str, float]]] = {}
-    folds = folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng)
     nuisance = EFFECTS.get(NUISANCE)
-    passes: list[Discovery] = []
-    before_discovery = spec
-    systematic = [
-        e.name for e in candidate_effects((NUISANCE, DISCOVERED)) if not e.noise and e.name in names
-    ]
-    noise = [
-        e.name for e in candidate_effects((NUISANCE, DISCOVERED)) if e.noise and e.name in names
-    ]
+    excluded = (NUISANCE, DISCOVERED)
+    systematic = [e.name for e in candidate_effects(excluded) if not e.noise and e.name in names]
+    noise = [e.name for e in candidate_effects(excluded) if e.noise and e.name in names]
     # Systematic effects first, then (once their structure is exhausted) discovery, then the
     # noise model: a noise effect may stand for nothing a systematic term explains.
-    stages: list[tuple[str, list[str], Effect | None]] = [
-        ("mean", systematic, nuisance),
-        ("noise", noise, nuisance),
-        ("noise", [NUISANCE] if NUISANCE in names else [], None),
-    ]
+    ctx = RoundContext(
+        data=data,
+        folds=folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng),
+        nuisance=nuisance,
+        stages=[
+            ("mean", systematic, nuisance),
+            ("noise", noise, nuisance),
+            ("noise", [NUISANCE] if NUISANCE in names else [], None),
+        ],
+        config=cfg,
+        rng=rng,
+        report=report,
+        journal=journal,
+    )
+    state = DiagnosisState(model=model, before_discovery=model.spec)
     for number in range(1, cfg.max_rounds + 1):
-        candidates: list[Candidate] = []
-        fits: list[CandidateFit] = []
-        round_candidates: list[Candidate] = []
-        base_spec, base_sensor = spec, sensor
-        structure: StructureTest | None = None
-        stopped: str | None = None
-        for stage, stage_names, helper in stages:
-            if stage == "noise" and structure is None:
-                # Is the systematic structure exhausted? Score test of the whole grammar on the
-                # innovations of the model with its wheel noise (the nuisance) fitted.
-                report(f"round {number}: structure", 0.0)
-                lib_spec, lib_sensor, _ = fit_noise(data, spec, sensor, nuisance)
-                library = library_jacobian(data, lib_spec, lib_sensor)
-                structure = structure_test(library, seed=cfg.seed + number)
-                # Discovery runs again only after a pass that found terms.
-                again = not passes or bool(passes[-1].terms)
-                if structure.p_value < 0.5 * cfg.alpha and cfg.discover and again:
-                    report(f"round {number}: discovery", 0.0)
-                    latest = discover(
-                        data,
-                        lib_spec,
-                        lib_sensor,
-                        folds,
-                        alpha=cfg.alpha,
-                        nuisance=nuisance,
-                        library=library,
-                        structure=structure,
-                    )
-                    passes.append(latest)
-                    if latest.terms and latest.fit is not None:
-                        stopped = "discovered"
-                        break
-                if structure.p_consistent < 0.5 * cfg.alpha:
-                    # Structure shared by the runs: no noise effect may stand in for it.
-                    stopped = "structured"
-                    break
-            effects = [EFFECTS[n] for n in stage_names]
-            if not effects:
-                continue
-            base_spec, base_sensor, _ = fit_noise(data, spec, sensor, helper)
-            candidates, fits = _score_candidates(
-                data,
-                effects,
-                base_spec,
-                base_sensor,
-                helper,
-                folds,
-                (number, stage),
-                cfg,
-                rng,
-                report,
-                journal,
-            )
-            round_candidates.extend(candidates)
-            if any(c.significant for c in candidates):
-                break
-        all_candidates.extend(round_candidates)
-        consistency = _consistency(data, base_spec, base_sensor)
-        structure_info = structure.as_dict() if structure is not None else None
-        if stopped == "discovered" and passes[-1].fit is not None:
-            if not spec.effect_values(DISCOVERED):
-                before_discovery = spec
-            spec = DiscoveredTerms(passes[-1].terms).write(spec, passes[-1].fit.values)
-            spec, sensor, _ = fit_noise(data, spec, sensor)
-            rounds.append(
-                Round(
-                    number,
-                    "discovered",
-                    DISCOVERED,
-                    [],
-                    None,
-                    round_candidates,
-                    consistency,
-                    structure_info,
-                )
-            )
-            continue
-        significant = [k for k, c in enumerate(candidates) if c.significant]
-        if stopped == "structured" or not significant:
-            p_struct = structure.p_value if structure is not None else 1.0
-            p_left = min(1.0, 2.0 * min(consistency, p_struct))
-            verdict = "none" if p_left >= 0.5 * cfg.alpha else "unexplained"
-            rounds.append(
-                Round(
-                    number, verdict, None, [], None, round_candidates, consistency, structure_info
-                )
-            )
+        if run_round(number, ctx, state).verdict not in ROUND_GOES_ON:
             break
-        best = max(significant, key=lambda k: candidates[k].cv_gain)
-        tied = [best] + [
-            k
-            for k in significant
-            if k != best and candidates[best].cv_gain - candidates[k].cv_gain < cfg.tie_nats
-        ]
-        if len(tied) > 1:
-            runner = max((k for k in tied if k != best), key=lambda k: candidates[k].cv_gain)
-            found, _ = separating_experiment(fits[best].spec, fits[runner].spec, sensor)
-            separating = {
-                "between": [fits[best].name, fits[runner].name],
-                "experiment": found.experiment,
-                "separation_mm": 1e3 * found.position,
-                "separation_deg": math.degrees(found.heading),
-                "separation_sigma": found.sigma,
-            }
-            rounds.append(
-                Round(
-                    number,
-                    "ambiguous",
-                    None,
-                    [fits[k].name for k in tied],
-                    separating,
-                    round_candidates,
-                    consistency,
-                    structure_info,
-                )
-            )
-            break
-        winner = fits[best]
-        # An effect already in the model may win again (refitted once others joined): its
-        # parameters are updated, it is listed once, where it was first added.
-        if winner.name not in named:
-            named.append(winner.name)
-        parameters[winner.name] = {
-            key: winner.entry(key, value) for key, value in winner.values.items()
-        }
-        rounds.append(
-            Round(
-                number,
-                "explained",
-                winner.name,
-                [],
-                None,
-                round_candidates,
-                consistency,
-                structure_info,
-            )
-        )
-        # Only the named effect joins the model (not the nuisance wheel noise fitted beside a
-        # systematic effect); the sensor noise is refitted for it. A noise effect fitted jointly
-        # with a systematic partner (bumps with the distance scale) brings the partner's refit.
-        spec = EFFECTS[winner.name].write(spec, winner.values)
-        spec = _refit_named(data, spec, sensor, named, parameters, nuisance)
-        for partner_name in EFFECTS[winner.name].partners:
-            partner = EFFECTS[partner_name]
-            refit = partner.read(winner.spec)
-            spec = partner.write(spec, refit)
-            if partner_name in parameters:
-                parameters[partner_name] = {
-                    key: {**parameters[partner_name][key], "value": value}
-                    for key, value in refit.items()
-                }
-        spec, sensor, _ = fit_noise(data, spec, sensor)
     # Backward check: a systematic effect named early may have stood in for what a later one
     # (or a discovered term) explains better; each must still be significant in the final model.
-    absorbed = _backward_check(data, spec, sensor, named, cfg.alpha)
+    absorbed = _backward_check(data, state.model, state.named, cfg.alpha)
     for name in absorbed:
-        spec = EFFECTS[name].write(spec, EFFECTS[name].absent_values())
-        named.remove(name)
-        parameters.pop(name, None)
+        spec = EFFECTS[name].write(state.model.spec, EFFECTS[name].absent_values())
+        state.model = Model(spec, state.model.sensor)
+        state.named.remove(name)
+        state.parameters.pop(name, None)
     if absorbed:
-        spec, sensor, _ = fit_noise(data, spec, sensor)
+        state.model = fit_noise_model(data, state.model)
     # The final model on runs the fit never saw: does any structure remain?
     report("held-out test", 1.0)
     held_data = Dataset.of(held_runs, cfg.checkpoint_interval)
-    held_structure = structure_test(library_jacobian(held_data, spec, sensor), seed=cfg.seed)
-    held_white = _consistency(held_data, spec, sensor)
-    held_p = min(1.0, 2.0 * min(held_structure.p_value, held_white))
-    found_anything = bool(named) or bool(spec.effect_values(DISCOVERED))
-    last = rounds[-1].verdict if rounds else "none"
-    if not found_anything:
-        verdict = last
-    elif held_p >= 0.5 * cfg.alpha and last not in ("unexplained", "ambiguous"):
-        verdict = "explained"
-    else:
-        verdict = "partly explained"
-    final_test = {
-        "held_out_structure": held_structure.as_dict(),
-        "held_out_whiteness_p": held_white,
-        "held_out_p": held_p,
-        "residual_follows": held_structure.follows,
-        "residual_follows_z": held_structure.z,
-        "absorbed": absorbed,
-    }
+    verdict, final_test = _final_test(held_data, state.model, state, cfg.alpha, cfg.seed)
+    final_test["absorbed"] = absorbed
     report("shrink", 1.0)
-    # The model as given keeps its own noise effects; both are filtered with the sensor noise
-    # fitted last (the best estimate of the measurement's own noise).
-    before = _gaps(held_runs, robot, sensor, cfg.checkpoint_interval)
-    after = _gaps(held_runs, spec, sensor, cfg.checkpoint_interval)
-    ms_before, ms_after = before["whitened"], after["whitened"]
-    ms_floor = np.ones(len(held_runs))
-
-    def rms(values: FloatArray) -> float:
-        return float(math.sqrt(np.mean(values)))
-
-    def fraction(before: FloatArray, after: FloatArray, floor: FloatArray) -> float:
-        reducible = float(np.mean(before) - np.mean(floor))
-        if reducible <= 0:
-            return math.nan
-        return float((np.mean(before) - np.mean(after)) / reducible)
-
-    boot = np.random.default_rng(cfg.seed + 1)
-    gap_ci = {
-        "before": _bootstrap([ms_before], rms, boot),
-        "after": _bootstrap([ms_after], rms, boot),
-        "difference": _bootstrap([ms_before, ms_after], lambda b, a: rms(b) - rms(a), boot),
-    }
+    gaps = _shrink(held_runs, robot, state.model, cfg)
     return Diagnosis(
         verdict=verdict,
-        named_effects=named,
-        parameters=parameters,
+        named_effects=state.named,
+        parameters=state.parameters,
         initial=robot,
-        model=spec,
-        sensor=sensor,
-        gap_before=rms(ms_before),
-        gap_after=rms(ms_after),
-        gap_ci=gap_ci,
-        noise_floor=rms(ms_floor),
-        fraction_closed=fraction(ms_before, ms_after, ms_floor),
-        fraction_ci=_bootstrap([ms_before, ms_after, ms_floor], fraction, boot),
-        rounds=rounds,
-        candidates=all_candidates,
+        model=state.model.spec,
+        sensor=state.model.sensor,
+        rounds=state.rounds,
+        candidates=state.candidates,
         findings=findings,
-        discovered=_with_evidence(passes, fit_runs, before_discovery),
-        discovery=_discovery_record(passes),
+        discovered=_with_evidence(state.passes, fit_runs, state.before_discovery),
+        discovery=_discovery_record(state.passes),
         final_test=final_test,
         session_frames=frames,
         fit_runs=[_run_id(runs[j], j) for j in fit_index],
         holdout_runs=[_run_id(runs[j], j) for j in held_index],
-        holdout_gaps={
-            "before": np.sqrt(ms_before).tolist(),
-            "after": np.sqrt(ms_after).tolist(),
-            "noise": np.sqrt(ms_floor).tolist(),
-        },
-        physical={
-            "gap_position_mm": [1e3 * rms(before["position"]), 1e3 * rms(after["position"])],
-            "gap_heading_deg": [
-                math.degrees(rms(before["heading"])),
-                math.degrees(rms(after["heading"])),
-            ],
-            "gap_open_loop_sigma": [rms(before["normalised"]), rms(after["normalised"])],
-            "noise_floor_open_loop_sigma": [rms(before["floor"]), rms(after["floor"])],
-        },
+        **gaps,
     )
