@@ -1,7 +1,9 @@
 """Reference solutions: calibration methods behind one interface.
 
 ``CALIBRATORS`` maps each method's command-line name to its class (see
-:class:`odomgym.baselines.base.Calibrator`):
+:class:`odomgym.baselines.base.Calibrator`); :func:`register_calibrator` adds a method of your
+own, which the command line, the benchmark and the leaderboard then offer (worked example in
+``docs/architecture.md``, "A new calibration method"):
 
 * ``umbmark`` — UMBmark (Borenstein & Feng 1994) with the E_s phase of solderspot 2014;
 * ``jung_chung`` — Jung & Chung, from the return *heading* errors;
@@ -16,7 +18,7 @@
 
 from __future__ import annotations
 
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import CALIBRATORS, CalibrationResult, Calibrator, register_calibrator
 from odomgym.baselines.ivanjko import Ivanjko
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.least_squares import LeastSquares
@@ -25,19 +27,9 @@ from odomgym.baselines.selfcal import SelfCal, SelfCalScripted
 from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.umbmark import UMBmark
 
-CALIBRATORS: dict[str, type[Calibrator]] = {
-    cls.name: cls
-    for cls in (
-        UMBmark,
-        JungChung,
-        Lee,
-        Ivanjko,
-        LeastSquares,
-        Trajectory,
-        SelfCal,
-        SelfCalScripted,
-    )
-}
+# The built-in methods, in the order tables list them.
+for _cls in (UMBmark, JungChung, Lee, Ivanjko, LeastSquares, Trajectory, SelfCal, SelfCalScripted):
+    register_calibrator(_cls)
 
 __all__ = [
     "CALIBRATORS",
@@ -51,4 +43,5 @@ __all__ = [
     "SelfCalScripted",
     "Trajectory",
     "UMBmark",
+    "register_calibrator",
 ]

@@ -20,27 +20,31 @@ from __future__ import annotations
 
 import dataclasses
 from abc import ABC, abstractmethod
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Self, TypeVar
 
 from odomgym.errors import SpecError, require_count, require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
-from odomgym.runs import Run
+from odomgym.runs import Direction, Run
 
 __all__ = [
+    "CALIBRATORS",
     "CalibrationResult",
     "Calibrator",
+    "Holdings",
     "SquareCalibrator",
     "SquareOptions",
     "check_square_settings",
     "option_names",
     "perform",
+    "register_calibrator",
     "require_choice",
-    "require_count",
     "square_experiments",
 ]
+
+C = TypeVar("C", bound="type[Calibrator]")
 
 
 def require_choice(name: str, value: object, choices: Collection[str]) -> None:
@@ -138,6 +142,34 @@ class Calibrator(ABC):
     reference: ClassVar[str]
     options_type: ClassVar[type[Any]]
     options: Any
+    min_budget: ClassVar[int] = 2
+    """Fewest runs the method can calibrate with (default: one square each way); the benchmark
+    refuses smaller budgets."""
+
+    # ------------------------------------------------------------------ sizing: the method's own
+    # rules for the callers that configure every method alike. Each returns constructor options
+    # (checked against :attr:`options_type` by the caller); the defaults size nothing, and the
+    # method then runs with its defaults.
+    @classmethod
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """How the method spends a budget of ``runs`` runs (the benchmark's ``--budget``)."""
+        del runs
+        return {}
+
+    @classmethod
+    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
+        """What the command line's square settings — side L [m] and squares per direction
+        (``odomgym calibrate METHOD --side L --runs N``) — mean for the method."""
+        del side, runs_per_direction
+        return {}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        """The method sized from what a recorded session holds; counts the session lacks keep
+        the method's defaults (and the method then says what is missing). Raises LookupError
+        if the method cannot run on a recorded session at all."""
+        del held
+        return {}
 
     @classmethod
     def from_options(cls, options: Any) -> Self:
@@ -156,6 +188,62 @@ class Calibrator(ABC):
     @abstractmethod
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Run the method in ``lab``, starting from ``initial`` (default: uncalibrated)."""
+
+
+@dataclass(frozen=True)
+class Holdings:
+    """What a recorded session holds, as the methods ask for it.
+
+    Attributes:
+        side: square side L [m] (0 when the session states none).
+        counts: runs per (experiment kind, direction), see
+            :meth:`odomgym.data.RecordedLab.holdings`.
+    """
+
+    side: float
+    counts: Mapping[tuple[ExperimentKind, Direction | None], int]
+
+    def runs(self, kind: ExperimentKind, direction: Direction | None = None) -> int:
+        """How many runs of ``kind`` (and ``direction``) the session holds."""
+        return int(self.counts.get((kind, direction), 0))
+
+    def square_options(self) -> dict[str, Any]:
+        """The side and squares per direction the session holds (for methods that drive the
+        bi-directional square)."""
+        out: dict[str, Any] = {}
+        if self.side > 0.0:
+            out["side"] = self.side
+        if self.runs(ExperimentKind.SQUARE, "cw"):
+            out["runs_per_direction"] = self.runs(ExperimentKind.SQUARE, "cw")
+        return out
+
+
+CALIBRATORS: dict[str, type[Calibrator]] = {}
+"""The registry: command-line name → calibrator class. The benchmark, the leaderboard and the
+command line offer every method in it; add one with :func:`register_calibrator`."""
+
+
+def register_calibrator(cls: C, *, replace: bool = False) -> C:
+    """Add calibrator class ``cls`` under ``cls.name`` (usable as a class decorator), so that
+    ``odomgym calibrate``, ``bench`` and ``leaderboard`` offer it: a new method is one file.
+
+    Raises ValueError for a name that is not letters, digits and ``_``, a name already taken
+    (unless ``replace``), or a class without ``reference`` or ``options_type``.
+    """
+    name = getattr(cls, "name", "")
+    if not isinstance(name, str) or not name or not name.replace("_", "").isalnum():
+        raise ValueError(f"a calibrator needs a name of letters, digits and '_', got {name!r}")
+    if name in CALIBRATORS and CALIBRATORS[name] is not cls and not replace:
+        raise ValueError(f"a calibrator named {name!r} is already registered")
+    for attribute in ("reference", "options_type"):
+        if not hasattr(cls, attribute):
+            raise ValueError(f"calibrator {name!r} has no {attribute}")
+    if not dataclasses.is_dataclass(cls.options_type):
+        raise ValueError(f"calibrator {name!r}: options_type must be a dataclass")
+    if isinstance(cls.min_budget, bool) or not isinstance(cls.min_budget, int):
+        raise ValueError(f"calibrator {name!r}: min_budget must be a whole number")
+    CALIBRATORS[name] = cls
+    return cls
 
 
 class SquareCalibrator(Calibrator):
@@ -182,3 +270,16 @@ class SquareCalibrator(Calibrator):
     def experiments(self) -> list[Experiment]:
         """The cw and the ccw squares."""
         return square_experiments(self.side, self.runs_per_direction)
+
+    @classmethod
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """Half the runs each way."""
+        return {"runs_per_direction": max(1, runs // 2)}
+
+    @classmethod
+    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
+        return {"side": side, "runs_per_direction": runs_per_direction}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        return held.square_options()

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym import interrupt
-from odomgym.baselines.base import CalibrationResult, Calibrator
+from odomgym.baselines.base import CALIBRATORS, CalibrationResult, Calibrator
 from odomgym.errors import SpecError
 from odomgym.experiments import Lab, parse_choice
 from odomgym.floor import FloorSpec
@@ -50,7 +50,6 @@ from odomgym.routes import square_route
 from odomgym.runs import Direction, end_error
 
 __all__ = [
-    "METHOD_BUDGETS",
     "Backend",
     "BenchConfig",
     "Journal",
@@ -88,56 +87,10 @@ class Backend(StrEnum):
             )
 
 
-def _umbmark_budget(runs: int) -> dict[str, Any]:
-    # The procedure of solderspot 2014 when the budget allows (2 E_s phases of 3 straight runs
-    # + 5 + 5).
-    if runs >= 16:
-        return {"scale_phases": 2, "straight_runs": 3, "runs_per_direction": (runs - 6) // 2}
-    if runs >= 6:
-        return {"scale_phases": 1, "straight_runs": 2, "runs_per_direction": (runs - 2) // 2}
-    return {"scale_phases": 0, "runs_per_direction": max(1, runs // 2)}
-
-
-def _squares_only(runs: int) -> dict[str, Any]:
-    return {"runs_per_direction": max(1, runs // 2)}
-
-
-def _ivanjko_budget(runs: int) -> dict[str, Any]:
-    # A third straight runs, a third spins each way (Ivanjko et al.'s experiment).
-    share = max(1, runs // 3)
-    return {"straight_runs": share, "spin_runs": share}
-
-
-def _least_squares_budget(runs: int) -> dict[str, Any]:
-    straight = max(1, runs // 4)
-    return {"straight_runs": straight, "squares_per_direction": max(1, (runs - straight) // 2)}
-
-
-MIN_BUDGET: dict[str, int] = {"ivanjko": 3, "least_squares": 3, "selfcal": 1, "selfcal_scripted": 1}
-"""Fewest runs a method can calibrate with (2 for the rest: one square each way)."""
-
-METHOD_BUDGETS: dict[str, Callable[[int], dict[str, Any]]] = {
-    "umbmark": _umbmark_budget,
-    "jung_chung": _squares_only,
-    "lee": _squares_only,
-    "ivanjko": _ivanjko_budget,
-    "least_squares": _least_squares_budget,
-    "trajectory": _squares_only,
-}
-"""How each method spends a budget of N runs (constructor keywords). Methods not listed here
-provide ``for_budget(runs)`` themselves or run with their defaults."""
-
-
 def configure(cls: type[Calibrator], runs: int) -> Calibrator:
-    """``cls`` set up to use at most ``runs`` runs."""
-    for_budget = getattr(cls, "for_budget", None)
-    if callable(for_budget):
-        calibrator = for_budget(runs)
-        assert isinstance(calibrator, Calibrator)
-        return calibrator
-    allocate = METHOD_BUDGETS.get(cls.name)
-    options = allocate(runs) if allocate is not None else {}
-    return cls(**options)
+    """``cls`` set up to use at most ``runs`` runs, by its own rule
+    (:meth:`~odomgym.baselines.base.Calibrator.budget_options`)."""
+    return cls(**cls.budget_options(runs))
 
 
 @dataclass(frozen=True)
@@ -147,7 +100,7 @@ class BenchConfig:
     Attributes:
         robots: population size.
         floors: names in :data:`BENCH_FLOORS` (``concrete``, ``rough``, ``cables``).
-        methods: calibrator names (``odomgym.baselines.CALIBRATORS``).
+        methods: calibrator names (:data:`odomgym.baselines.base.CALIBRATORS`).
         budget: runs each calibrator may perform per robot.
         extra_budgets: further budgets to compare (each method then appears once per budget,
             labelled ``method@runs``), e.g. ``(4,)`` to see which methods survive few runs.
@@ -176,7 +129,7 @@ class BenchConfig:
                 field="validation_runs",
             )
         for method in self.methods:
-            least = MIN_BUDGET.get(method, 2)
+            least = CALIBRATORS[method].min_budget if method in CALIBRATORS else 2
             if min(self.budgets) < least:
                 raise SpecError(
                     f"{method} needs a budget of at least {least} runs, got {min(self.budgets)}",
@@ -217,8 +170,6 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
     All robots of the chunk run in lockstep (:func:`odomgym.lockstep.run_lockstep`): one
     method at a time, their experiments simulated as one batch.
     """
-    from odomgym.baselines import CALIBRATORS
-
     robots_all = population(config)
     robots = [robots_all[i] for i in indices]
     rows: list[dict[str, Any]] = []

@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,12 +54,12 @@ from scipy.optimize import least_squares
 from odomgym.baselines.base import (
     CalibrationResult,
     Calibrator,
+    Holdings,
     perform,
     require_choice,
-    require_count,
 )
 from odomgym.baselines.trajectory import sample_indices
-from odomgym.errors import require_positive
+from odomgym.errors import require_count, require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
@@ -220,6 +220,23 @@ class Ivanjko(Calibrator):
         "Alpe-Adria-Danube Region (RAAD), 2007"
     )
     options_type: ClassVar[type[IvanjkoOptions]] = IvanjkoOptions
+    min_budget: ClassVar[int] = 3
+
+    @classmethod
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """A third straight runs, a third spins each way (Ivanjko et al.'s experiment)."""
+        share = max(1, runs // 3)
+        return {"straight_runs": share, "spin_runs": share}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        """Straight runs and spins; no squares to size (so ``--side``/``--runs`` do nothing)."""
+        out: dict[str, Any] = {}
+        if held.runs(ExperimentKind.STRAIGHT):
+            out["straight_runs"] = held.runs(ExperimentKind.STRAIGHT)
+        if held.runs(ExperimentKind.SPIN, "cw"):
+            out["spin_runs"] = held.runs(ExperimentKind.SPIN, "cw")
+        return out
 
     def __init__(
         self,

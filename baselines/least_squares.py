@@ -63,7 +63,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,11 +71,11 @@ from numpy.typing import NDArray
 from odomgym.baselines.base import (
     CalibrationResult,
     Calibrator,
+    Holdings,
     perform,
     require_choice,
-    require_count,
 )
-from odomgym.errors import SpecError, require_positive
+from odomgym.errors import SpecError, require_count, require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
@@ -321,6 +321,29 @@ class LeastSquares(Calibrator):
         "IEEE Trans. Robotics 21(5):994-1004, 2005"
     )
     options_type: ClassVar[type[LeastSquaresOptions]] = LeastSquaresOptions
+    min_budget: ClassVar[int] = 3
+
+    @classmethod
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """A quarter straight runs, the rest squares split between the directions."""
+        straight = max(1, runs // 4)
+        return {"straight_runs": straight, "squares_per_direction": max(1, (runs - straight) // 2)}
+
+    @classmethod
+    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
+        return {"side": side, "squares_per_direction": runs_per_direction}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "squares_per_direction": held.runs(ExperimentKind.SQUARE, "cw"),
+            "spins_per_direction": held.runs(ExperimentKind.SPIN, "cw"),
+        }
+        if held.side > 0.0:
+            out["side"] = held.side
+        if held.runs(ExperimentKind.STRAIGHT):
+            out["straight_runs"] = held.runs(ExperimentKind.STRAIGHT)
+        return out
 
     def __init__(
         self,

@@ -35,8 +35,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.baselines.base import CalibrationResult, Calibrator, perform, require_count
-from odomgym.errors import SpecError
+from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, perform
+from odomgym.errors import SpecError, require_count
 from odomgym.experiments import Experiment, Lab
 from odomgym.odometry import Calibration
 from odomgym.selfcal_session import (
@@ -233,10 +233,27 @@ class SelfCal(Calibrator):
         self.options = self.options_type(budget, policy)
         self._policy: MlpPolicy | None = None
 
+    min_budget: ClassVar[int] = 1
+
     @classmethod
-    def for_budget(cls, runs: int) -> SelfCal:
-        """The learned policy with a budget of ``runs``."""
-        return cls(budget=runs)
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """The whole budget is the session's."""
+        return {"budget": runs}
+
+    @classmethod
+    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
+        """The policy chooses its runs from a fixed menu: it gets UMBmark's budget for these
+        settings (2N squares and the 6 straight runs of its E_s phases; 16 for the defaults)."""
+        del side
+        return {"budget": 2 * runs_per_direction + 6}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        del held
+        raise LookupError(
+            "selfcal chooses each next run as it goes, which needs a simulated lab; a recorded "
+            "session holds only the runs that were driven"
+        )
 
     def experiments(self) -> list[Experiment]:
         """Chosen as the session goes: the menu's experiments, one run each."""

@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,12 +50,12 @@ from scipy.optimize import least_squares
 from odomgym.baselines.base import (
     CalibrationResult,
     Calibrator,
+    Holdings,
     perform,
     require_choice,
-    require_count,
     square_experiments,
 )
-from odomgym.errors import SpecError, require_finite, require_positive
+from odomgym.errors import SpecError, require_count, require_finite, require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab, parse_choice
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
@@ -336,6 +336,28 @@ class Trajectory(Calibrator):
         "Odometry Calibration of Wheeled Mobile Robots, J. Intell. Robot. Syst. 105:39, 2022"
     )
     options_type: ClassVar[type[TrajectoryOptions]] = TrajectoryOptions
+
+    @classmethod
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """Half the runs each way, as squares."""
+        return {"runs_per_direction": max(1, runs // 2)}
+
+    @classmethod
+    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
+        return {"side": side, "runs_per_direction": runs_per_direction}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        """Squares if the session has them, else circles, else free runs; otherwise the
+        defaults (and the lab says what is missing)."""
+        if held.runs(ExperimentKind.SQUARE, "cw"):
+            return {"path": ExperimentKind.SQUARE, **held.square_options()}
+        if held.runs(ExperimentKind.CIRCULAR, "cw"):
+            circles = held.runs(ExperimentKind.CIRCULAR, "cw")
+            return {"path": ExperimentKind.CIRCULAR, "runs_per_direction": circles}
+        if held.runs(ExperimentKind.FREE):
+            return {"path": ExperimentKind.FREE, "free_runs": held.runs(ExperimentKind.FREE)}
+        return {}
 
     def __init__(
         self,

@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,12 +47,12 @@ from numpy.typing import ArrayLike, NDArray
 from odomgym.baselines.base import (
     CalibrationResult,
     Calibrator,
+    Holdings,
     SquareOptions,
     require_choice,
-    require_count,
     square_experiments,
 )
-from odomgym.errors import SpecError, require_positive
+from odomgym.errors import SpecError, require_count, require_positive
 from odomgym.experiments import Experiment, ExperimentKind, Lab, parse_choice
 from odomgym.metrics import centre_of_gravity, summarize_umbmark
 from odomgym.odometry import Calibration
@@ -358,6 +358,24 @@ class UMBmark(Calibrator):
         "Dead-reckoning Errors in Mobile Robots, Univ. of Michigan TR UM-MEAM-94-22, 1994, §6"
     )
     options_type: ClassVar[type[UMBmarkOptions]] = UMBmarkOptions
+
+    @classmethod
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """The procedure of solderspot 2014 when the budget allows (2 E_s phases of 3 straight
+        runs + 5 + 5 squares)."""
+        if runs >= 16:
+            return {"scale_phases": 2, "straight_runs": 3, "runs_per_direction": (runs - 6) // 2}
+        if runs >= 6:
+            return {"scale_phases": 1, "straight_runs": 2, "runs_per_direction": (runs - 2) // 2}
+        return {"scale_phases": 0, "runs_per_direction": max(1, runs // 2)}
+
+    @classmethod
+    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
+        return {"side": side, "runs_per_direction": runs_per_direction}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        return held.square_options()
 
     def __init__(
         self,

@@ -10,39 +10,36 @@
 
 And the configuration of methods by callers that configure all of them alike:
 :func:`make_calibrator` (options by name, each checked against the method's options dataclass),
-:func:`calibrator_for_squares` (the command line's ``--side``/``--runs``: :data:`SQUARE_SIZING`)
-and :func:`calibrator_for_session` (sized from what a recorded session holds:
-:data:`SESSION_SIZING`). The tables say per method which settings apply; nothing is dropped
-silently.
+:func:`calibrator_for_squares` (the command line's ``--side``/``--runs``) and
+:func:`calibrator_for_session` (sized from what a recorded session holds). Each method says
+which settings apply to it (:meth:`~odomgym.baselines.base.Calibrator.square_options`,
+``session_options``, ``budget_options``, ``min_budget``); nothing is dropped silently.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.baselines.base import CalibrationResult, Calibrator, option_names
+from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, option_names
 from odomgym.data import RecordedLab, Session
 from odomgym.errors import SpecError
 from odomgym.evaluation import EvaluationMeasures, evaluate
-from odomgym.experiments import ExperimentKind, SensorAccuracy
+from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FloorSpec
 from odomgym.lab import SimLab, random_start_poses, simulate_runs
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.routes import square_route
-from odomgym.runs import Direction, Run, end_error
+from odomgym.runs import Run, end_error
 
 __all__ = [
-    "SESSION_SIZING",
-    "SQUARE_SIZING",
-    "Holdings",
     "SessionReport",
     "SimulationReport",
     "calibrate_in_simulation",
@@ -81,131 +78,23 @@ def make_calibrator(cls: type[Calibrator], **options: object) -> Calibrator:
 
 
 # ------------------------------------------------------------ which settings apply to which method
-SquareSizing = Callable[[float, int], dict[str, object]]
-
-
-def _square_side_and_runs(side: float, runs: int) -> dict[str, object]:
-    return {"side": side, "runs_per_direction": runs}
-
-
-SQUARE_SIZING: dict[str, SquareSizing] = {
-    "umbmark": _square_side_and_runs,
-    "jung_chung": _square_side_and_runs,
-    "lee": _square_side_and_runs,
-    "least_squares": lambda side, runs: {"side": side, "squares_per_direction": runs},
-    "trajectory": _square_side_and_runs,
-    "ivanjko": lambda side, runs: {},  # straight runs and spins: no squares to size
-    # The policy chooses its runs from a fixed menu: it gets UMBmark's budget for these
-    # settings (2N squares and the 6 straight runs of its E_s phases; 16 for the defaults).
-    "selfcal": lambda side, runs: {"budget": 2 * runs + 6},
-    "selfcal_scripted": lambda side, runs: {"budget": 2 * runs + 6},
-}
-"""How the command line's square settings — side L [m] and squares per direction — apply to
-each method (constructor options). A method missing here runs with its defaults."""
-
-
 def calibrator_for_squares(
     cls: type[Calibrator], *, side: float, runs_per_direction: int, **options: object
 ) -> Calibrator:
-    """``cls`` with the square side [m] and squares per direction of :data:`SQUARE_SIZING`
-    (what ``odomgym calibrate METHOD --side L --runs N`` means for each method), and any
-    further ``options`` (each of which the method must take)."""
-    sizing = SQUARE_SIZING.get(cls.name)
-    return make_calibrator(cls, **(sizing(side, runs_per_direction) if sizing else {}), **options)
-
-
-@dataclass(frozen=True)
-class Holdings:
-    """What a recorded session holds, as the methods ask for it.
-
-    Attributes:
-        side: square side L [m] (0 when the session states none).
-        counts: runs per (experiment kind, direction), see
-            :meth:`odomgym.data.RecordedLab.holdings`.
-    """
-
-    side: float
-    counts: Mapping[tuple[ExperimentKind, Direction | None], int]
-
-    def runs(self, kind: ExperimentKind, direction: Direction | None = None) -> int:
-        """How many runs of ``kind`` (and ``direction``) the session holds."""
-        return int(self.counts.get((kind, direction), 0))
-
-
-SessionSizing = Callable[[Holdings], dict[str, object]]
-
-
-def _squares_from(held: Holdings) -> dict[str, object]:
-    out: dict[str, object] = {}
-    if held.side > 0.0:
-        out["side"] = held.side
-    if held.runs(ExperimentKind.SQUARE, "cw"):
-        out["runs_per_direction"] = held.runs(ExperimentKind.SQUARE, "cw")
-    return out
-
-
-def _ivanjko_from(held: Holdings) -> dict[str, object]:
-    out: dict[str, object] = {}
-    if held.runs(ExperimentKind.STRAIGHT):
-        out["straight_runs"] = held.runs(ExperimentKind.STRAIGHT)
-    if held.runs(ExperimentKind.SPIN, "cw"):
-        out["spin_runs"] = held.runs(ExperimentKind.SPIN, "cw")
-    return out
-
-
-def _least_squares_from(held: Holdings) -> dict[str, object]:
-    out: dict[str, object] = {
-        "squares_per_direction": held.runs(ExperimentKind.SQUARE, "cw"),
-        "spins_per_direction": held.runs(ExperimentKind.SPIN, "cw"),
-    }
-    if held.side > 0.0:
-        out["side"] = held.side
-    if held.runs(ExperimentKind.STRAIGHT):
-        out["straight_runs"] = held.runs(ExperimentKind.STRAIGHT)
-    return out
-
-
-def _trajectory_from(held: Holdings) -> dict[str, object]:
-    """Squares if the session has them, else circles, else free runs; otherwise the defaults
-    (and the lab says what is missing)."""
-    if held.runs(ExperimentKind.SQUARE, "cw"):
-        return {"path": ExperimentKind.SQUARE, **_squares_from(held)}
-    if held.runs(ExperimentKind.CIRCULAR, "cw"):
-        circles = held.runs(ExperimentKind.CIRCULAR, "cw")
-        return {"path": ExperimentKind.CIRCULAR, "runs_per_direction": circles}
-    if held.runs(ExperimentKind.FREE):
-        return {"path": ExperimentKind.FREE, "free_runs": held.runs(ExperimentKind.FREE)}
-    return {}
-
-
-def _selfcal_from(held: Holdings) -> dict[str, object]:
-    raise LookupError(
-        "selfcal chooses each next run as it goes, which needs a simulated lab; a recorded "
-        "session holds only the runs that were driven"
-    )
-
-
-SESSION_SIZING: dict[str, SessionSizing] = {
-    "umbmark": _squares_from,
-    "jung_chung": _squares_from,
-    "lee": _squares_from,
-    "ivanjko": _ivanjko_from,
-    "least_squares": _least_squares_from,
-    "trajectory": _trajectory_from,
-    "selfcal": _selfcal_from,
-    "selfcal_scripted": _selfcal_from,
-}
-"""How each method is sized from what a recorded session holds (constructor options): counts
-the session lacks keep the method's defaults, and the method then says what is missing. A
-method missing here runs with its defaults."""
+    """``cls`` with the square side [m] and squares per direction as the method reads them
+    (:meth:`~odomgym.baselines.base.Calibrator.square_options`: what ``odomgym calibrate
+    METHOD --side L --runs N`` means for it), and any further ``options`` (each of which the
+    method must take)."""
+    return make_calibrator(cls, **cls.square_options(side, runs_per_direction), **options)
 
 
 def calibrator_for_session(
     cls: type[Calibrator], session: Session, conventions: str | None = None
 ) -> Calibrator:
-    """``cls`` sized for what ``session`` holds (:data:`SESSION_SIZING`): its square side, and
-    how many squares, straights, spins, circles or free runs it has. One rule for the CLI and
-    the leaderboard.
+    """``cls`` sized for what ``session`` holds, by the method's own rule
+    (:meth:`~odomgym.baselines.base.Calibrator.session_options`): its square side, and how many
+    squares, straights, spins, circles or free runs it has. One rule for the CLI and the
+    leaderboard.
 
     Raises:
         SpecError: ``conventions`` given to a method that takes none (``field="conventions"``),
@@ -214,8 +103,7 @@ def calibrator_for_session(
             squares nor spins for least squares); the message says what it holds.
     """
     lab = RecordedLab(session)
-    sizing = SESSION_SIZING.get(cls.name)
-    sized = sizing(Holdings(session.side, lab.holdings())) if sizing is not None else {}
+    sized = cls.session_options(Holdings(session.side, lab.holdings()))
     if conventions is not None:
         # Not taken by the method, or an unknown value: the user's error, said as such.
         method_options(cls, {"conventions": conventions})

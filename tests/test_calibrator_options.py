@@ -13,8 +13,6 @@ from odomgym.baselines.base import Calibrator, option_names
 from odomgym.baselines.jung_chung import JungChungConventions
 from odomgym.baselines.umbmark import UMBmarkConventions
 from odomgym.baselines.validation import (
-    SESSION_SIZING,
-    SQUARE_SIZING,
     calibrator_for_session,
     calibrator_for_squares,
     make_calibrator,
@@ -146,7 +144,6 @@ def test_experiment_kind_parses_spellings_and_names_the_field() -> None:
 def test_command_line_square_settings_configure_every_method(method: str) -> None:
     """``calibrate METHOD --side L --runs N`` works for every method, sizing those that drive
     squares (and only those)."""
-    assert method in SQUARE_SIZING
     calibrator = calibrator_for_squares(CALIBRATORS[method], side=2.0, runs_per_direction=4)
     squares = [e for e in calibrator.experiments() if e.kind is ExperimentKind.SQUARE]
     if method == "ivanjko":
@@ -160,8 +157,13 @@ def test_command_line_square_settings_configure_every_method(method: str) -> Non
         assert {(e.size, e.runs) for e in squares} == {(2.0, 4)}
 
 
-def test_session_sizing_covers_every_method() -> None:
-    assert set(SESSION_SIZING) == set(CALIBRATORS)
+@pytest.mark.parametrize("method", METHODS)
+def test_every_built_in_method_sizes_itself_from_a_session(method: str) -> None:
+    """Each method owns its session rule: a method that drives anything sizes itself from what
+    a session holds (the base class's rule sizes nothing), or says it cannot run on one."""
+    cls = CALIBRATORS[method]
+    for rule in ("session_options", "budget_options"):
+        assert getattr(cls, rule).__func__ is not getattr(Calibrator, rule).__func__, rule
 
 
 def test_session_conventions_only_for_methods_that_take_them() -> None:
