@@ -19,6 +19,7 @@ chunking or the order, and the comparison between methods is paired.
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib.util
 import json
 import math
@@ -28,7 +29,6 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +48,7 @@ from odomgym.population import BENCH_FLOORS, Population, check_bench_floor
 from odomgym.robot import RobotSpec
 from odomgym.routes import square_route
 from odomgym.runs import Direction, end_error
+from odomgym.workers import TaskFailed, WorkerDeath, run_tasks
 
 __all__ = [
     "Backend",
@@ -428,34 +429,15 @@ def failed_rows(config: BenchConfig, robots: Sequence[int], reason: str) -> list
     return out
 
 
-FAULT_VARIABLE = "ODOMGYM_BENCH_FAULT"
-"""Fault injection for tests: ``exit-once:N`` makes the worker that holds robot N exit hard on
-its first attempt, ``exit-always:N`` on every attempt."""
+def _chunk_task(config: BenchConfig, part: list[int], attempt: int) -> list[dict[str, Any]]:
+    """The benchmark's task for :func:`odomgym.workers.run_tasks`: one chunk of robots (the
+    attempt does not matter; every attempt computes the same rows)."""
+    del attempt
+    return run_chunk(config, part)
 
 
-def _chunk_worker(conn: Connection, config: BenchConfig) -> None:
-    """A worker process: it runs the chunks ``(robots, attempt)`` it receives through ``conn``
-    and sends back each one's rows, until it receives ``None``. One process serves many
-    chunks, so the start-up (imports, loading the compiled kernels: ~2 s) is paid once per
-    worker, not per chunk."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops its workers itself
-    fault = os.environ.get(FAULT_VARIABLE, "")
-    try:
-        while (job := conn.recv()) is not None:
-            part, attempt = job
-            if ":" in fault:
-                mode, robot = fault.split(":", 1)
-                if robot.isdigit() and int(robot) in part:
-                    if mode == "exit-always" or (mode == "exit-once" and attempt == 0):
-                        os._exit(86)
-            try:
-                conn.send(("ok", run_chunk(config, part)))
-            except Exception as exc:  # a bug, not a death: the parent raises it
-                conn.send(("error", f"{type(exc).__name__}: {exc}"))
-    except EOFError:  # the parent has gone
-        pass
-    finally:
-        conn.close()
+ChunkTask = Callable[[BenchConfig, list[int], int], list[dict[str, Any]]]
+"""What a worker runs for a chunk: ``task(config, robots, attempt) -> rows``."""
 
 
 def _run_processes(
@@ -464,98 +446,39 @@ def _run_processes(
     jobs: int,
     finished: Callable[[list[int], list[dict[str, Any]]], None],
     notify: Callable[[str], None],
+    task: ChunkTask = _chunk_task,
 ) -> None:
-    """Run the chunks in at most ``jobs`` worker processes, each serving chunk after chunk.
-    A worker that dies (killed, out of memory) is reported, replaced, and its chunk retried
-    once; if it dies again, its robots are recorded as failed. Whatever ends this function
-    early (an error, Ctrl-C, SIGTERM) terminates every worker before it returns."""
-    import multiprocessing
-    from multiprocessing.connection import wait
+    """Run the chunks in at most ``jobs`` worker processes (:mod:`odomgym.workers`), each
+    serving chunk after chunk. A worker that dies (killed, out of memory) is reported,
+    replaced, and its chunk retried once; if it dies again, its robots are recorded as failed.
+    Whatever ends this function early (an error, Ctrl-C, SIGTERM) terminates every worker
+    before it returns."""
 
-    context = multiprocessing.get_context("spawn")
-    queue = [(part, 0) for part in parts]
-    workers: dict[Any, Any] = {}  # connection -> process
-    busy: dict[Any, tuple[list[int], int]] = {}  # connection -> the chunk it runs
-
-    def start() -> None:
-        parent, child = context.Pipe()
-        process = context.Process(target=_chunk_worker, args=(child, config), daemon=True)
-        # Ctrl-C/SIGTERM wait until the worker is started and registered: interrupted inside
-        # start(), it would be left half-started (spawn's bootstrap then dies with an
-        # EOFError traceback) and unknown to the clean-up below.
-        with interrupt.deferred():
-            process.start()
-            child.close()
-            workers[parent] = process
-
-    def hand_out() -> None:
-        """Give queued chunks to idle workers, starting workers up to ``jobs``. A worker that
-        died while idle (its pipe is broken) is dropped and replaced; the chunk it was
-        offered goes back to the queue as it was (it never ran)."""
-        while queue:
-            idle = [c for c in workers if c not in busy]
-            if not idle:
-                if len(workers) >= jobs:
-                    return
-                start()
-                continue
-            conn, job = idle[0], queue.pop(0)
-            try:
-                conn.send(job)
-            except OSError:
-                queue.insert(0, job)
-                process = workers.pop(conn)
-                conn.close()
-                process.join(timeout=3)
-                continue
-            busy[conn] = job
+    def died(death: WorkerDeath[int]) -> bool:
+        part = parts[death.key]
+        if death.attempt == 0:
+            notify(
+                f"worker for robots {part[0]}-{part[-1]} died (exit code {death.exitcode}); "
+                "retrying once"
+            )
+            return True
+        reason = f"worker died twice (exit code {death.exitcode})"
+        notify(f"worker for robots {part[0]}-{part[-1]} died again; marked failed")
+        finished(part, failed_rows(config, part, reason))
+        return False
 
     try:
-        while queue or busy:
-            hand_out()
-            # A result arrives on the connection; a death shows as end-of-file there.
-            ready_now: list[Any] = wait(list(busy), timeout=1.0)
-            interrupt.check()  # at least once a second, even while every worker is busy
-            for ready in ready_now:
-                part, attempt = busy.pop(ready)
-                payload: Any = None
-                try:
-                    status, payload = ready.recv()
-                except (EOFError, OSError):
-                    status = "died"
-                if status == "ok":
-                    finished(part, payload)
-                    continue
-                if status == "error":
-                    raise RuntimeError(f"benchmark worker for robots {part} failed: {payload}")
-                process = workers.pop(ready)
-                ready.close()
-                process.join()
-                if attempt == 0:
-                    notify(
-                        f"worker for robots {part[0]}-{part[-1]} died (exit code "
-                        f"{process.exitcode}); retrying once"
-                    )
-                    queue.append((part, 1))
-                else:
-                    reason = f"worker died twice (exit code {process.exitcode})"
-                    notify(f"worker for robots {part[0]}-{part[-1]} died again; marked failed")
-                    finished(part, failed_rows(config, part, reason))
-        for conn in workers:  # done: each worker ends after its loop
-            with contextlib.suppress(OSError):
-                conn.send(None)
-        for process in workers.values():
-            process.join(timeout=5)
-    finally:
-        for process in workers.values():
-            if process.is_alive():
-                process.terminate()
-        for conn, process in workers.items():
-            process.join(timeout=3)
-            if process.is_alive():
-                process.kill()
-                process.join(timeout=3)
-            conn.close()
+        run_tasks(
+            functools.partial(task, config),
+            enumerate(parts),
+            processes=jobs,
+            finished=lambda k, rows: finished(parts[k], rows),
+            died=died,
+        )
+    except TaskFailed as exc:
+        raise RuntimeError(
+            f"benchmark worker for robots {parts[exc.key]} failed: {exc.message}"
+        ) from None
 
 
 def run_benchmark(
@@ -568,6 +491,7 @@ def run_benchmark(
     resume: bool = False,
     chunk: int | None = None,
     notify: Callable[[str], None] | None = None,
+    task: ChunkTask = _chunk_task,
 ) -> list[dict[str, Any]]:
     """Run the benchmark; rows do not depend on ``jobs``, ``backend``, ``chunk`` or on being
     interrupted and resumed.
@@ -581,6 +505,8 @@ def run_benchmark(
     robots it holds are not run again. ``chunk``: robots per unit of work (default: as many as
     spread the robots over the jobs, at most 16, so a long run records progress often; larger
     chunks batch more robots together). ``notify`` receives one-line reports (a worker died).
+    ``task`` is what a local worker process runs per chunk (tests give one that fails, to
+    check the recovery; it must be picklable by reference).
     """
     backend = parse_choice(Backend, backend, field="backend")
     backend.check_available()
@@ -612,7 +538,7 @@ def run_benchmark(
         for part in parts:
             finished(part, run_chunk(config, part))
     else:
-        _run_processes(config, parts, jobs, finished, notify or (lambda text: None))
+        _run_processes(config, parts, jobs, finished, notify or (lambda text: None), task)
     order = [label for label, _, _ in config.entries()]
     rows.sort(key=lambda r: (config.floors.index(r["floor"]), r["robot"], order.index(r["method"])))
     return rows

@@ -22,7 +22,6 @@ import importlib.util
 import inspect
 import json
 import math
-import multiprocessing
 import os
 import platform
 import shlex
@@ -46,6 +45,7 @@ from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_text, atomic_writer
 from odomgym.selfcal_session import OBSERVATION_LAYOUT, OBSERVATION_VERSION
+from odomgym.workers import Shards
 
 try:
     from stable_baselines3.common.vec_env.base_vec_env import VecEnv
@@ -166,21 +166,11 @@ class SelfCalVecEnv(VecEnv):
             for a in np.array_split(np.arange(n_envs), min(workers, n_envs))
         ]
         self._local: _Batch | None = None
-        self._pipes: list[Connection] = []
-        self._processes: list[Any] = []
+        self._shards: Shards | None = None
         if len(self._bounds) == 1:
             self._local = _Batch(n_envs, kwargs)
         else:
-            context = multiprocessing.get_context("spawn")
-            for lo, hi in self._bounds:
-                parent, child = context.Pipe()
-                process = context.Process(
-                    target=_worker, args=(child, hi - lo, kwargs), daemon=True
-                )
-                process.start()
-                child.close()
-                self._pipes.append(parent)
-                self._processes.append(process)
+            self._shards = Shards(_worker, [(hi - lo, kwargs) for lo, hi in self._bounds])
         self._actions: list[int] = []
         self.closed = False
         super().__init__(n_envs, probe.observation_space, probe.action_space)
@@ -191,19 +181,9 @@ class SelfCalVecEnv(VecEnv):
         if self._local is not None:
             lo, hi = self._bounds[0]
             return list(getattr(self._local, command)(*per_shard(lo, hi)) or [])
-        for pipe, (lo, hi) in zip(self._pipes, self._bounds, strict=True):
-            pipe.send((command, per_shard(lo, hi)))
-        out: list[Any] = []
-        error: BaseException | None = None
-        for pipe in self._pipes:  # every reply, so the pipes stay in step after an error
-            status, value = pipe.recv()
-            if status == "error":
-                error = error or value
-            else:
-                out.extend(value or [])
-        if error is not None:
-            raise error
-        return out
+        assert self._shards is not None
+        values = self._shards.call(command, [per_shard(lo, hi) for lo, hi in self._bounds])
+        return [item for value in values for item in (value or [])]
 
     def _indices(self, indices: Any) -> list[int]:
         return list(self._get_indices(indices))
@@ -237,15 +217,8 @@ class SelfCalVecEnv(VecEnv):
     def close(self) -> None:
         if self.closed:
             return
-        for pipe in self._pipes:
-            try:
-                pipe.send(("close", ()))
-            except (BrokenPipeError, OSError):
-                pass
-        for process in self._processes:
-            process.join(timeout=5)
-            if process.is_alive():
-                process.terminate()
+        if self._shards is not None:
+            self._shards.close()
         self.closed = True
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:

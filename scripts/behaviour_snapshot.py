@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parent.parent
 # of identical behaviour and are dropped from every JSON document before hashing.
 VOLATILE = re.compile(
     r"(seconds|elapsed|wall|time_s|duration|date|created|version|python|platform|host|"
-    r"machine|path|out|folder|file|written|wrote|cpu|cores|jobs|started|finished)",
+    r"machine|path|out|folder|file|written|wrote|cpu|cores|jobs|started|finished|git)",
     re.IGNORECASE,
 )
 

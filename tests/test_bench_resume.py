@@ -4,6 +4,7 @@ a worker that dies is retried once, and one that dies twice marks its robots fai
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -14,9 +15,9 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import pytest
+from faults import exiting_chunk
 
 from odomgym.baselines.benchmark import (
-    FAULT_VARIABLE,
     BenchConfig,
     Journal,
     run_benchmark,
@@ -165,17 +166,17 @@ def test_sigterm_stops_the_ray_workers_and_resume_gives_the_same_tables(
 
 @pytest.mark.slow
 def test_a_dead_worker_is_retried_once_then_its_robots_are_marked_failed(
-    monkeypatch: pytest.MonkeyPatch, reference: list[dict]
+    reference: list[dict],
 ) -> None:
     said: list[str] = []
-    monkeypatch.setenv(FAULT_VARIABLE, "exit-once:1")
-    rows = run_benchmark(CONFIG, jobs=2, chunk=1, notify=said.append)
+    once = functools.partial(exiting_chunk, robot=1, always=False)
+    rows = run_benchmark(CONFIG, jobs=2, chunk=1, notify=said.append, task=once)
     assert _comparable(rows) == reference
     assert said == ["worker for robots 1-1 died (exit code 86); retrying once"]
 
     said.clear()
-    monkeypatch.setenv(FAULT_VARIABLE, "exit-always:2")
-    rows = run_benchmark(CONFIG, jobs=2, chunk=1, notify=said.append)
+    always = functools.partial(exiting_chunk, robot=2, always=True)
+    rows = run_benchmark(CONFIG, jobs=2, chunk=1, notify=said.append, task=always)
     failed = [r for r in rows if r["failed"]]
     assert [r["robot"] for r in failed] == [2]
     assert "worker died twice (exit code 86)" in failed[0]["failed"]
