@@ -40,7 +40,7 @@ from odomgym.baselines.base import CALIBRATORS, CalibrationResult, Calibrator
 from odomgym.errors import SpecError
 from odomgym.experiments import Lab, parse_choice
 from odomgym.floor import FloorSpec
-from odomgym.lab import random_start_poses, simulate_runs
+from odomgym.lab import RunRequests, random_start_poses
 from odomgym.lockstep import run_lockstep
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
@@ -260,33 +260,26 @@ def _validate(
     ]
     directions: tuple[Direction, Direction] = ("cw", "ccw")
     for d, direction in enumerate(directions):
-        specs: list[RobotSpec] = []
-        cals: list[Calibration] = []
-        streams: list[np.random.Generator] = []
-        starts: list[FloatArray] = []
+        batch = RunRequests()
+        route = square_route(4.0, direction)
         slots: list[tuple[int, int]] = []
         for k, (i, robot) in enumerate(zip(indices, robots, strict=True)):
             rng = _stream(config, i, floor_index, 3 + d)
             poses = random_start_poses(rng, runs, start_region)
             for c, calibration in enumerate([Calibration(), *calibrations[k]]):
-                for r in range(runs):
-                    specs.append(robot)
-                    cals.append(calibration)
-                    starts.append(np.zeros(3) if poses is None else poses[r])
-                    slots.append((k, c))
                 # The same floor noise for every calibration of this robot: a paired comparison.
                 seeds = np.random.SeedSequence([config.seed, i, floor_index, 5 + d]).spawn(runs)
-                streams.extend(np.random.default_rng(seed) for seed in seeds)
-        sim, odom = simulate_runs(
-            specs,
-            floor,
-            square_route(4.0, direction),
-            calibration=cals,
-            rng=streams,
-            direction=direction,
-            start_poses=np.array(starts),
-            on_timeout="keep",
-        )
+                for r, seed in enumerate(seeds):
+                    batch.add(
+                        robot,
+                        route,
+                        calibration,
+                        stream=np.random.default_rng(seed),
+                        start=None if poses is None else poses[r],
+                        direction=direction,
+                    )
+                    slots.append((k, c))
+        sim, odom = batch.simulate(floor)
         # A calibration so wrong that the robot cannot finish a square gets NaN errors (and so
         # a NaN E_max,syst): it is reported as failed, not allowed to stop the benchmark.
         errors = np.array(
@@ -476,9 +469,8 @@ def _run_processes(
             died=died,
         )
     except TaskFailed as exc:
-        raise RuntimeError(
-            f"benchmark worker for robots {parts[exc.key]} failed: {exc.message}"
-        ) from None
+        part = parts[exc.key]
+        raise RuntimeError(f"benchmark worker for robots {part} failed: {exc.message}") from None
 
 
 def run_benchmark(

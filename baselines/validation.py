@@ -32,7 +32,7 @@ from odomgym.errors import SpecError
 from odomgym.evaluation import EvaluationMeasures, evaluate
 from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FloorSpec
-from odomgym.lab import SimLab, random_start_poses, simulate_runs
+from odomgym.lab import RunRequests, SimLab, random_start_poses
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
@@ -203,21 +203,17 @@ def validation_errors_many(
     results: list[dict[str, FloatArray]] = [{} for _ in calibrations]
     count = len(calibrations)
     for direction in ("cw", "ccw"):
-        starts = None
+        starts: FloatArray | None = None
         if start_region is not None:
             assert rng is not None, "random start poses need an rng"
-            one_set = random_start_poses(rng, runs, start_region)
-            assert one_set is not None
-            starts = np.tile(one_set, (count, 1))
-        sim, odom = simulate_runs(
-            [robot] * (runs * count),
-            floor,
-            square_route(side, direction),
-            calibration=[c for c in calibrations for _ in range(runs)],
-            rng=rng,
-            direction=direction,
-            start_poses=starts,
-        )
+            starts = random_start_poses(rng, runs, start_region)
+        batch = RunRequests()
+        route = square_route(side, direction)
+        for calibration in calibrations:
+            for r in range(runs):
+                start = None if starts is None else starts[r]
+                batch.add(robot, route, calibration, start=start, direction=direction)
+        sim, odom = batch.simulate(floor, rng=rng, on_timeout="raise")
         errors = np.array([end_error(run, end) for run, end in zip(sim, odom, strict=True)])
         for k in range(count):
             results[k][direction] = errors[k * runs : (k + 1) * runs]

@@ -69,7 +69,7 @@ from odomgym.envs.base import describe_action
 from odomgym.errors import SpecError
 from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FLOORS, FloorSpec
-from odomgym.lab import experiment_route, measure, random_start_poses, simulate_runs
+from odomgym.lab import RunRequests, experiment_route, measure, random_start_poses
 from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
 from odomgym.population import CABLES_START_REGION, Population, check_bench_floor
@@ -201,61 +201,23 @@ def new_episode(
     return Episode(robot, floor_name, session, run_rng, sensor)
 
 
-class _Batch:
-    """The runs of one step: every session's experiment run and the validation runs."""
-
-    def __init__(self) -> None:
-        self.specs: list[RobotSpec] = []
-        self.routes: list[Route] = []
-        self.calibrations: list[Calibration] = []
-        self.streams: list[np.random.Generator] = []
-        self.starts: list[FloatArray] = []
-        self.kinds: list[str] = []
-        self.directions: list[str | None] = []
-
-    def add(
-        self,
-        spec: RobotSpec,
-        route: Route,
-        calibration: Calibration,
-        stream: np.random.Generator,
-        start: FloatArray,
-        kind: str,
-        direction: str | None,
-    ) -> int:
-        self.specs.append(spec)
-        self.routes.append(route)
-        self.calibrations.append(calibration)
-        self.streams.append(stream)
-        self.starts.append(start)
-        self.kinds.append(kind)
-        self.directions.append(direction)
-        return len(self.specs) - 1
-
-    def run(self) -> tuple[list[Run], FloatArray]:
-        if not self.specs:
-            return [], np.zeros((0, 3))
-        return simulate_runs(
-            self.specs,
-            _shared_floor(),
-            self.routes,
-            calibration=self.calibrations,
-            rng=self.streams,
-            kind=self.kinds,
-            direction=self.directions,
-            start_poses=np.array(self.starts),
-            on_timeout="keep",
-        )
-
-
-def _add_validation(batch: _Batch, robot: RobotSpec, calibration: Calibration) -> list[int]:
+def _add_validation(batch: RunRequests, robot: RobotSpec, calibration: Calibration) -> list[int]:
     """A 4 m square each way and a 4 m straight run, with ``calibration`` and without, on a
     noiseless patch of floor (the robot without any roughness); returns their batch slots."""
     slots = []
     for cal in (calibration, Calibration()):
         for route, kind, direction in _VALIDATION_ROUTES:
             quiet = np.random.default_rng(0)  # never drawn from: k = 0 on these wheels
-            slots.append(batch.add(robot, route, cal, quiet, _VALIDATION_ORIGIN, kind, direction))
+            slot = batch.add(
+                robot,
+                route,
+                cal,
+                stream=quiet,
+                start=_VALIDATION_ORIGIN,
+                kind=kind,
+                direction=direction,
+            )
+            slots.append(slot)
     return slots
 
 
@@ -269,9 +231,9 @@ def validation_terms(
     ``after``), the family terms ``t_square``/``t_straight`` [nats], ``reward`` and
     ``finished`` (1.0 or 0.0).
     """
-    batch = _Batch()
+    batch = RunRequests()
     slots = [_add_validation(batch, r, c) for r, c in zip(robots, calibrations, strict=True)]
-    runs, odom = batch.run()
+    runs, odom = batch.simulate(_shared_floor())
     return [_verdict(runs, odom, own) for own in slots]
 
 
@@ -311,7 +273,7 @@ def step_episodes(
     A session whose budget is spent stops whatever the action (its observation says so: no
     runs left). Returns ``(observation, reward, terminated, info)`` per episode.
     """
-    batch = _Batch()
+    batch = RunRequests()
     experiment_slot: dict[int, int] = {}
     validation_slots: dict[int, list[int]] = {}
     for i, (episode, action) in enumerate(zip(episodes, actions, strict=True)):
@@ -332,12 +294,12 @@ def step_episodes(
             episode.driven,
             experiment_route(experiment),
             session.calibration,
-            episode.rng.spawn(1)[0],
-            start,
-            experiment.kind,
-            experiment.direction,
+            stream=episode.rng.spawn(1)[0],
+            start=start,
+            kind=experiment.kind,
+            direction=experiment.direction,
         )
-    runs, odom = batch.run()
+    runs, odom = batch.simulate(_shared_floor())
     results = []
     for i, episode in enumerate(episodes):
         session = episode.session

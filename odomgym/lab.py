@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -39,6 +39,7 @@ __all__ = [
     "FREE_LEG_LENGTH",
     "FREE_MIN_RADIUS",
     "Arc",
+    "RunRequests",
     "SimLab",
     "circle_plan",
     "drive_arcs",
@@ -209,6 +210,80 @@ def simulate_runs(
             )
         )
     return runs, trial.odom_pose.copy()
+
+
+@dataclass
+class RunRequests:
+    """Runs to simulate as *one* batch, added one at a time: the parallel per-run lists that
+    :func:`simulate_runs` takes, built in one place for every caller that mixes robots,
+    routes and calibrations in a batch (the experiments of several labs, the benchmark's and
+    the self-calibration env's validations).
+
+    :meth:`add` returns the run's slot: its index in what :meth:`simulate` returns.
+    """
+
+    specs: list[RobotSpec] = field(default_factory=list)
+    routes: list[Route] = field(default_factory=list)
+    calibrations: list[Calibration] = field(default_factory=list)
+    streams: list[np.random.Generator] = field(default_factory=list)
+    starts: list[FloatArray] = field(default_factory=list)
+    kinds: list[str] = field(default_factory=list)
+    directions: list[str | None] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.specs)
+
+    def add(
+        self,
+        spec: RobotSpec,
+        route: Route,
+        calibration: Calibration,
+        *,
+        stream: np.random.Generator | None = None,
+        start: FloatArray | None = None,
+        kind: str = "square",
+        direction: str | None = None,
+    ) -> int:
+        """Add one run: ``spec`` drives ``route`` with ``calibration`` in its odometry from
+        ``start`` (x, y [m], θ [rad]; the origin if None), its floor noise drawn from
+        ``stream`` (runs added without one share the ``rng`` given to :meth:`simulate`)."""
+        if (stream is None) != (not self.streams) and self.specs:
+            raise ValueError("give every run of a batch its own stream, or none of them")
+        self.specs.append(spec)
+        self.routes.append(route)
+        self.calibrations.append(calibration)
+        if stream is not None:
+            self.streams.append(stream)
+        self.starts.append(np.zeros(3) if start is None else np.asarray(start, dtype=float))
+        self.kinds.append(kind)
+        self.directions.append(direction)
+        return len(self.specs) - 1
+
+    def simulate(
+        self,
+        floor: FloorSpec,
+        *,
+        rng: np.random.Generator | None = None,
+        cruise_speed: float = 0.2,
+        on_timeout: Literal["raise", "keep"] = "keep",
+    ) -> tuple[list[Run], FloatArray]:
+        """Drive every run (:func:`simulate_runs`); ``rng`` is the one stream of runs added
+        without their own. Returns the runs and the odometry end poses, in slot order (an empty
+        batch gives no runs)."""
+        if not self.specs:
+            return [], np.zeros((0, 3))
+        return simulate_runs(
+            self.specs,
+            floor,
+            self.routes,
+            calibration=self.calibrations,
+            rng=self.streams if self.streams else rng,
+            cruise_speed=cruise_speed,
+            kind=self.kinds,
+            direction=self.directions,
+            start_poses=np.array(self.starts),
+            on_timeout=on_timeout,
+        )
 
 
 #: Length of each leg of a simulated free run [m]: long enough to show a curvature (a quarter
@@ -457,38 +532,23 @@ def perform_many(
     within the time limit (its batch companions are unaffected). Other errors (an invalid
     calibration) propagate to the caller.
     """
-    specs: list[RobotSpec] = []
-    routes: list[Route] = []
-    calibrations: list[Calibration] = []
-    streams: list[np.random.Generator] = []
-    starts: list[FloatArray] = []
-    kinds: list[str] = []
-    directions: list[str | None] = []
+    batch = RunRequests()
     owners: list[int] = []
     for index, (robot, experiment, calibration, rng) in enumerate(requests):
         route = experiment_route(experiment)
         poses = random_start_poses(rng, experiment.runs, start_region)
-        for k in range(experiment.runs):
-            specs.append(robot)
-            routes.append(route)
-            calibrations.append(calibration)
-            kinds.append(experiment.kind)
-            directions.append(experiment.direction)
+        for k, stream in enumerate(rng.spawn(experiment.runs)):
+            batch.add(
+                robot,
+                route,
+                calibration,
+                stream=stream,
+                start=None if poses is None else poses[k],
+                kind=experiment.kind,
+                direction=experiment.direction,
+            )
             owners.append(index)
-            starts.append(np.zeros(3) if poses is None else poses[k])
-        streams.extend(rng.spawn(experiment.runs))
-    runs, _ = simulate_runs(
-        specs,
-        floor,
-        routes,
-        calibration=calibrations,
-        rng=streams,
-        cruise_speed=cruise_speed,
-        kind=kinds,
-        direction=directions,
-        start_poses=np.array(starts),
-        on_timeout="keep",
-    )
+    runs, _ = batch.simulate(floor, cruise_speed=cruise_speed)
     grouped: list[list[Run]] = [[] for _ in requests]
     for owner, run in zip(owners, runs, strict=True):
         grouped[owner].append(run)

@@ -258,16 +258,16 @@ def test_guard_absurd_corrections_score_low_without_an_exception() -> None:
 def test_a_run_that_cannot_finish_ends_the_session_with_the_lowest_reward(monkeypatch) -> None:
     """Simulated here by a time limit too short for a 4 m square: the session ends at once,
     says why, and scores FAILED_REWARD (minus the shaping collected, which telescopes)."""
-    import odomgym.envs.selfcal as selfcal_env
+    import odomgym.lab as lab
 
-    real = selfcal_env.simulate_runs
+    real = lab.simulate_runs
 
     def hurried(*args, **kwargs):
         return real(*args, **{**kwargs, "max_time": 30.0})
 
     env = SelfCalibrationEnv(budget=4, shaping=0.0)
     env.reset(seed=2)
-    monkeypatch.setattr(selfcal_env, "simulate_runs", hurried)
+    monkeypatch.setattr(lab, "simulate_runs", hurried)
     _, reward, terminated, _, info = env.step(ITEM["square4-cw"])
     assert terminated and reward == FAILED_REWARD
     assert "did not finish its square4-cw run" in info["failed"]
