@@ -1,0 +1,134 @@
+"""The ``odomgym`` command line: thin — it parses, calls the library, prints and plots.
+
+Commands:
+    ``odomgym run square|straight …``   drive runs in simulation, report return errors;
+    ``odomgym calibrate METHOD …``      calibrate (simulated robot or measured session) and
+                                         validate on fresh runs;
+    ``odomgym bench calibrators …``     every calibrator on a robot population, three floors;
+    ``odomgym leaderboard --data DIR``  real data: calibrate on one session, test on the others;
+    ``odomgym covariance …``            Chong & Kleeman closed-form covariance (+ Monte Carlo);
+    ``odomgym fit-noise …``             estimate k_L, k_R from repeated runs;
+    ``odomgym diagnose DATA --robot R``  where a model and a robot's logs disagree, which
+                                         catalogue effect is missing, and the gap it closes.
+
+Every command exits 0 on success, 2 on bad input (one line naming the field and, where it came
+from a file, the file and line) — output paths included, which are checked before any work —
+and 1 if the machine refuses a write after all (a full disk); it never leaves a half-written
+output file. After its results it says what it wrote (``wrote: …``) and, where odometry is
+driven, which calibration it applied.
+
+Layout: one module per command (``odomgym/cli/<command>.py``, each with ``register`` adding
+its parser and ``run`` doing the work), and :mod:`odomgym.cli._common` for what they share —
+argument types, output checks, the :class:`~odomgym.cli._common.Reporter` of results and
+status lines, and the :class:`~odomgym.cli._common.Progress` bar. This module builds the
+parser from the commands and runs one, turning the library's exceptions into exit codes.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from odomgym import interrupt
+from odomgym.cli import (
+    bench,
+    calibrate,
+    covariance,
+    diagnose,
+    fit_noise,
+    leaderboard,
+    run,
+    train,
+)
+from odomgym.cli._common import Command, notice
+
+# The argument types and the output check under the names they had in the single-module
+# command line, which tests and benchmarks/fuzz_cli.py import from here.
+from odomgym.cli._common import check_output as _check_output
+from odomgym.cli._common import count as _count
+from odomgym.cli._common import positive as _positive
+from odomgym.cli._common import seed as _seed
+from odomgym.errors import SpecError
+from odomgym.interrupt import Interrupted
+
+__all__ = ["_check_output", "_count", "_positive", "_seed", "build_parser", "main"]
+
+COMMANDS: tuple[Command, ...] = (
+    run,
+    calibrate,
+    bench,
+    train,
+    leaderboard,
+    covariance,
+    fit_noise,
+    diagnose,
+)
+"""Every command, in the order ``odomgym --help`` lists them."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every command (every option has a help text: tested)."""
+    from odomgym import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="odomgym",
+        description="Wheel-odometry experiments, calibration and benchmarks in simulation and "
+        "on measured logs.",
+    )
+    parser.add_argument("--version", action="version", version=f"odomgym {__version__}")
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", help="what to do (COMMAND --help)"
+    )
+    for command in COMMANDS:
+        command.register(commands)
+    return parser
+
+
+def _on_signal(signum: int, frame: object) -> None:
+    """SIGINT and SIGTERM ask the running command to stop at its next check (it then leaves
+    no half-written output), instead of killing it wherever it is."""
+    import signal
+
+    if signum == signal.SIGINT:
+        interrupt.stop(130, "interrupted")
+    interrupt.stop(143, "stopped by SIGTERM")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``odomgym`` command."""
+    import signal
+    import threading
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Callable[[argparse.Namespace], int] = args.handler
+    previous: dict[signal.Signals, Any] = {}
+    interrupt.reset()
+    if threading.current_thread() is threading.main_thread():
+        for number in (signal.SIGINT, signal.SIGTERM):
+            previous[number] = signal.signal(number, _on_signal)
+    try:
+        code = handler(args)
+        late = interrupt.pending()
+        if late is None:
+            return code
+        raise late  # the signal's own raise was swallowed after the last check
+    except Interrupted as exc:
+        notice(str(exc))
+        return exc.code
+    except KeyboardInterrupt:
+        notice("interrupted")
+        return 130
+    except SpecError as exc:
+        notice(f"error: {exc}")
+        return 2
+    except OSError as exc:
+        # Checked up front (check_output); what is left is the machine's (a full disk).
+        where = f"{exc.filename}: " if exc.filename else ""
+        notice(f"error: {where}{exc.strerror or exc}")
+        return 1
+    finally:
+        interrupt.reset()
+        for number, handler_before in previous.items():
+            signal.signal(number, handler_before)

@@ -1,0 +1,150 @@
+"""``odomgym diagnose DATA --robot R``: where a robot model and measured logs disagree, which
+catalogue effect is missing, and how much of the gap it closes."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from odomgym.cli._common import (
+    Progress,
+    Reporter,
+    check_output,
+    count,
+    fraction,
+    processes,
+    seed,
+)
+from odomgym.errors import SpecError
+from odomgym.robot import load_robot
+
+if TYPE_CHECKING:
+    from odomgym.cli._common import Commands
+
+
+def register(commands: Commands) -> None:
+    """Add ``diagnose``."""
+    parser = commands.add_parser(
+        "diagnose",
+        help="find where a robot model and measured logs disagree and which effect is missing",
+        description="Replay measured runs through the robot model, localise the disagreement, "
+        "fit every catalogue effect, name the one the data support (or say the data cannot tell "
+        "them apart), discover terms outside the catalogue by sparse regression when structure "
+        "is left, name noise effects last, write the updated robot TOML, and report the gap "
+        "before and after and whether structure remains on held-out runs.",
+    )
+    parser.add_argument(
+        "data",
+        help="a native CSV, an OptiOdom folder, shipped data (optiodom:square) or a ROS 2 bag",
+    )
+    parser.add_argument("--robot", help="robot .toml (or preset) of the model to test")
+    parser.add_argument(
+        "--format",
+        choices=["native", "optiodom", "rosbag"],
+        help="log format (default: detected from DATA)",
+    )
+    parser.add_argument(
+        "--out", help="output folder, replaced whole (default: <DATA name>-diagnose)"
+    )
+    parser.add_argument(
+        "--holdout", type=fraction, default=0.3, help="share of runs held out (default 0.3)"
+    )
+    parser.add_argument("--seed", type=seed, default=0, help="random seed >= 0 (default 0)")
+    parser.add_argument(
+        "--max-rounds", type=count, default=8, help="most rounds of adding an effect (8)"
+    )
+    parser.add_argument("--candidates", nargs="+", help="effects to consider (default: all)")
+    parser.add_argument(
+        "--no-discover",
+        action="store_true",
+        help="catalogue effects only: no sparse regression over the error grammar when the "
+        "catalogue leaves structure",
+    )
+    parser.add_argument(
+        "--session-frames",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="fit a tracked-point offset and yaw misalignment per session (auto: when the runs "
+        "come from two or more sessions)",
+    )
+    parser.add_argument("--jobs", type=processes, help="worker processes (default: all cores)")
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="take the candidate fits an interrupted diagnose stored in OUT.journal (the "
+        "result is the same as an uninterrupted run's); without it the journal starts afresh",
+    )
+    parser.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
+    parser.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
+    parser.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")
+    parser.add_argument(
+        "--left-joint",
+        default="left_wheel_joint",
+        help="ROS 2 bags: the left wheel's joint name (default left_wheel_joint)",
+    )
+    parser.add_argument(
+        "--right-joint",
+        default="right_wheel_joint",
+        help="ROS 2 bags: the right wheel's joint name (default right_wheel_joint)",
+    )
+    parser.add_argument("--json", action="store_true", help="print report.json")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Read the logs, diagnose (resuming from the journal with ``--resume``), replace ``--out``
+    with the report, then print it (Markdown, or report.json) and the files written."""
+    from odomgym.data.logs import read_log
+    from odomgym.data.samples import resolve_data
+    from odomgym.diagnose.report import format_markdown, report_json, write_outputs
+    from odomgym.diagnose.workflow import DiagnoseConfig, FitJournal, diagnose
+
+    report = Reporter.of(args)
+    data = resolve_data(args.data, field="DATA")
+    robot = load_robot(args.robot) if args.robot else None
+    config = DiagnoseConfig(
+        holdout=args.holdout,
+        seed=args.seed,
+        max_rounds=args.max_rounds,
+        candidates=tuple(args.candidates) if args.candidates else None,
+        jobs=args.jobs or os.cpu_count() or 1,
+        discover=not args.no_discover,
+        session_frames={"auto": None, "on": True, "off": False}[args.session_frames],
+    )
+    out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
+    check_output(out, option="--out", folder=True, swap=True)
+    runs, nominal = read_log(
+        data,
+        robot=robot,
+        format=args.format,
+        pose_topic=args.pose_topic,
+        joint_topic=args.joint_topic,
+        encoder_topic=args.encoder_topic,
+        left_joint=args.left_joint,
+        right_joint=args.right_joint,
+    )
+    model = robot if robot is not None else nominal
+    if model is None:
+        raise SpecError("give the robot model with --robot robot.toml", field="robot")
+    # Every finished candidate fit is kept beside the output (which is replaced whole), so an
+    # interrupted diagnosis resumes with --resume; it is removed once the outputs are written.
+    journal = FitJournal(out.parent / f"{out.name}.journal", resume=args.resume)
+    with Progress(report, "diagnose", leave=False) as bar:
+        try:
+            diagnosis = diagnose(runs, model, config, progress=bar.stage, journal=journal)
+        except ValueError as exc:
+            if isinstance(exc, SpecError):
+                raise
+            raise SpecError(str(exc)) from None
+    if journal.reused:
+        report.status(f"resumed: {journal.reused} candidate fits taken from {journal.folder}")
+    written = write_outputs(diagnosis, out, str(data))
+    journal.clear()
+    if report.json:
+        report.text(report_json(diagnosis))  # report.json's text, already JSON
+    else:
+        report.text(format_markdown(diagnosis, str(data)))
+    report.wrote(written)
+    return 0
