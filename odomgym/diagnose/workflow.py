@@ -26,7 +26,8 @@ a :class:`Diagnosis`:
    experiment that would separate them); nothing significant — ``none`` if the model's whitened
    innovations look like noise (run means and lag-1 correlation), else ``unexplained``.
 4. **Add.** The winner's fitted spec becomes the current model; 3–4 repeat while a round names
-   an effect (at most ``max_rounds``).
+   an effect (at most ``max_rounds``). Steps 3–4 are one :func:`run_round`, which updates a
+   :class:`DiagnosisState` within a :class:`RoundContext` fixed for the whole diagnosis.
 5. **Shrink.** The held-out runs are replayed through the model as given and the final one; the
    gap (:data:`GAP_METRIC`: RMS whitened innovation, 1 at the noise floor) before and after,
    with bootstrap intervals over runs, and the fraction of the *reducible* gap closed,
@@ -769,11 +770,12 @@ def _check_runs(runs: Sequence[Run]) -> None:
 
 
 def _final_test(
-    held_data: Dataset, model: Model, state: DiagnosisState, alpha: float, seed: int
+    held_data: Dataset, state: DiagnosisState, alpha: float, seed: int
 ) -> tuple[str, dict[str, Any]]:
-    """The verdict on the held-out runs (module docstring, step 9 of docs/diagnose.md) and the
+    """The verdict on the held-out runs (step 9 of docs/diagnose.md) and the
     ``final_test`` record: the grammar's score test and the whiteness test under the final
     model, Bonferroni-combined."""
+    model = state.model
     held_structure = structure_test(
         library_jacobian(held_data, model.spec, model.sensor), seed=seed
     )
@@ -921,7 +923,7 @@ def diagnose(
     # The final model on runs the fit never saw: does any structure remain?
     report("held-out test", 1.0)
     held_data = Dataset.of(held_runs, cfg.checkpoint_interval)
-    verdict, final_test = _final_test(held_data, state.model, state, cfg.alpha, cfg.seed)
+    verdict, final_test = _final_test(held_data, state, cfg.alpha, cfg.seed)
     final_test["absorbed"] = absorbed
     report("shrink", 1.0)
     gaps = _shrink(held_runs, robot, state.model, cfg)
