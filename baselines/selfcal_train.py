@@ -30,7 +30,7 @@ import sys
 import time
 import tomllib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -347,6 +347,9 @@ class TrainResult:
     wall_time_s: float
     steps: int
     evaluation: dict[str, float]
+    written: list[Path] = field(default_factory=list)
+    """Every file written, in this order: the numpy policy, the SB3 model, the policy's
+    metadata, the learning curve's CSV and its plot."""
 
 
 class Checkpoints:
@@ -660,10 +663,13 @@ def train(
     exported = MlpPolicy(exported.weights, {**exported.meta, "evaluation": evaluation})
     policy_file = folder / "policy.npz"
     exported.save(policy_file)
-    _write_json(folder / "policy.json", exported.meta)
+    meta_file = folder / "policy.json"
+    _write_json(meta_file, exported.meta)
     checkpoints.finish()
-    plot_learning_curve(folder / "progress.csv", folder / "learning_curve.png")
-    return TrainResult(folder, policy_file, model_file, wall, total, evaluation)
+    curve_csv, curve_png = folder / "progress.csv", folder / "learning_curve.png"
+    plot_learning_curve(curve_csv, curve_png)
+    written = [policy_file, model_file, meta_file, curve_csv, curve_png]
+    return TrainResult(folder, policy_file, model_file, wall, total, evaluation, written)
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:

@@ -43,7 +43,11 @@ from odomgym.floor import FloorSpec
 from odomgym.odometry import Calibration
 from odomgym.robot import RobotSpec
 from odomgym.routes import Route
+from odomgym.stepping import REPORT_COLUMNS
 from odomgym.trial import Trial
+
+_REWARD = REPORT_COLUMNS["reward"][0]  # columns of the episode report
+_TERMINATED = REPORT_COLUMNS["terminated"][0]
 
 __all__ = ["OdometryVectorEnv", "make_square_vector_env", "make_straight_vector_env"]
 
@@ -198,8 +202,8 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             array[resetting] = 0.0
         trial.step(array)
         report = self._episodes.report(trial)
-        rewards = report[:, 0].copy()
-        done = report[:, 1] > 0.0
+        rewards = report[:, _REWARD].copy()
+        done = report[:, _TERMINATED] > 0.0
         terms = RouteEpisodes.terms(report)
         if any_reset:
             idx = np.flatnonzero(resetting)

@@ -33,7 +33,7 @@ from odomgym.physics import World
 from odomgym.robot import RobotSpec
 from odomgym.routes import Route, spin_route, square_route, straight_route
 from odomgym.runs import Direction, Run
-from odomgym.trial import Trial
+from odomgym.trial import OBSERVATION_NAMES, Trial
 
 __all__ = [
     "FREE_LEG_LENGTH",
@@ -52,6 +52,8 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+_ROUTE_FRACTION = OBSERVATION_NAMES.index("route_fraction")  # column of the route state
 
 
 def experiment_route(experiment: Experiment) -> Route:
@@ -191,7 +193,7 @@ def simulate_runs(
         step += 1
         recording.store(step, record(), trial.world.counts)
         if progress is not None and step % 100 == 0:
-            progress(float(trial.progress.state[:, 7].mean()))
+            progress(float(trial.progress.state[:, _ROUTE_FRACTION].mean()))
     if progress is not None:
         progress(1.0)
     runs = []

@@ -728,7 +728,7 @@ def _drive_wheels(
             motor_step[i, w] = mean * h
             counts[i, w] = math.floor(angle[i, w] * ticks_per_rad[i])
             rim_speed[i, w] = mean * true_radius[i, w]
-        _set_ground_velocity(i, rim_speed, pose, half_track, h, ground_v)
+        _set_ground_velocity(i, rim_speed, pose, ground_v)
     return True
 
 
@@ -811,12 +811,7 @@ def _unpack_states(
 
 @kernel
 def _set_ground_velocity(
-    i: int,
-    rim_speed: FloatArray,
-    pose: FloatArray,
-    half_track: FloatArray,
-    h: float,
-    ground_v: FloatArray,
+    i: int, rim_speed: FloatArray, pose: FloatArray, ground_v: FloatArray
 ) -> None:
     """No-slip contact velocities of robot ``i``: each rim speed along the heading at which
     Chipmunk solves the step (:func:`_midstep_translation` then turns the translation)."""
@@ -876,7 +871,7 @@ def _rim_from_wheel_step(
     for i in range(wheel_step.shape[0]):
         for w in range(2):
             rim_speed[i, w] = wheel_step[i, w] * true_radius[i, w] / h
-        _set_ground_velocity(i, rim_speed, pose, half_track, h, ground_v)
+        _set_ground_velocity(i, rim_speed, pose, ground_v)
 
 
 @kernel

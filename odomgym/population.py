@@ -17,9 +17,6 @@ Floors (:data:`BENCH_FLOORS`; their names never mean another floor elsewhere in 
   (≈ 0.29 crossings per metre per wheel, about 5 per wheel on a 4×4 m square; Borenstein 1995,
   §6.1, laid 10 cables along 18 m). Unlike the ``bumpy`` preset (one fixed layout under the
   4×4 m squares), no two runs meet the same cables.
-
-Earlier versions called ``concrete`` "smooth" and ``cables`` "bumpy"; those names now give an
-error naming the new one (:data:`RENAMED_BENCH_FLOORS`).
 """
 
 from __future__ import annotations
@@ -36,7 +33,6 @@ from odomgym.robot import PRESETS, RobotSpec
 __all__ = [
     "BENCH_FLOORS",
     "CABLES_START_REGION",
-    "RENAMED_BENCH_FLOORS",
     "BenchFloor",
     "Population",
     "check_bench_floor",
@@ -89,23 +85,11 @@ BENCH_FLOORS: dict[str, BenchFloor] = {
     ),
 }
 
-RENAMED_BENCH_FLOORS: dict[str, str] = {"smooth": "concrete", "bumpy": "cables"}
-"""Old benchmark floor names → today's (the old ones collided with different presets)."""
-
 
 def check_bench_floor(name: str) -> None:
-    """Raise :class:`SpecError` (field ``floor``) unless ``name`` is a benchmark floor; an old
-    name is answered with its new one."""
+    """Raise :class:`SpecError` (field ``floor``) unless ``name`` is a benchmark floor."""
     if name in BENCH_FLOORS:
         return
-    if name in RENAMED_BENCH_FLOORS:
-        new = RENAMED_BENCH_FLOORS[name]
-        what = BENCH_FLOORS[new].description
-        raise SpecError(
-            f"the benchmark floor {name!r} is now called {new!r} ({what}); "
-            f"{name!r} names a different preset floor of run and calibrate",
-            field="floor",
-        )
     raise SpecError(
         f"unknown benchmark floor {name!r}; floors: {', '.join(BENCH_FLOORS)}", field="floor"
     )

@@ -49,7 +49,7 @@ class TaskFailed(RuntimeError):
 
     def __init__(self, key: object, message: str) -> None:
         super().__init__(f"worker task {key!r} failed: {message}")
-        self.key = key
+        self.key: Any = key
         self.message = message
 
 
@@ -84,11 +84,12 @@ class _Workers:
     """Started worker processes and their pipes; :meth:`stop` ends them all, politely first."""
 
     def __init__(self, start_method: str) -> None:
-        self.context = multiprocessing.get_context(start_method)
+        self.context: Any = multiprocessing.get_context(start_method)  # spawn or fork
         self.processes: dict[Connection, Any] = {}  # parent end of the pipe -> process
 
     def start(self, target: Callable[..., None], *args: Any) -> Connection:
-        parent, child = self.context.Pipe()
+        pipe: tuple[Connection, Connection] = self.context.Pipe()
+        parent, child = pipe
         process = self.context.Process(target=target, args=(child, *args), daemon=True)
         with interrupt.deferred():
             process.start()

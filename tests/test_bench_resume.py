@@ -363,16 +363,16 @@ def test_a_stop_swallowed_by_a_finalizer_still_stops_the_command(
     assert err.strip().endswith("odomgym: stopped by SIGTERM")
     assert not out.exists()
 
-    import odomgym.cli as cli
+    from odomgym.cli import covariance
 
-    real_covariance = cli._command_covariance
+    real_covariance = covariance.run
 
     def covariance_then_signal(args: object) -> int:
         code = real_covariance(args)  # type: ignore[arg-type]
         _Swallowing()
         return code
 
-    monkeypatch.setattr(cli, "_command_covariance", covariance_then_signal)
+    monkeypatch.setattr(covariance, "run", covariance_then_signal)
     argv = ["covariance", "--left", "1", "--right", "1", "--wheelbase", "0.5", "--kl", "0.01"]
     assert main([*argv, "--kr", "0.01"]) == 143
     assert capsys.readouterr().err.strip().endswith("odomgym: stopped by SIGTERM")

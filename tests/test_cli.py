@@ -412,34 +412,33 @@ def test_benchmark_backend_is_an_enum() -> None:
 
 def test_a_floor_name_means_one_floor_everywhere() -> None:
     """A benchmark floor either is the preset of the same name, exactly, or has a name no
-    preset has; the benchmark's old names, which meant other floors than the presets of that
-    name, are refused with the new name."""
+    preset has; a preset that is not a benchmark floor is refused, naming the floors."""
     import numpy as np
 
-    from odomgym.baselines.benchmark import BENCH_FLOORS, RENAMED_BENCH_FLOORS, BenchConfig
+    from odomgym.baselines.benchmark import BenchConfig
     from odomgym.errors import SpecError
     from odomgym.floor import FLOORS
+    from odomgym.population import BENCH_FLOORS
 
     for name, bench_floor in BENCH_FLOORS.items():
         floor, _ = bench_floor.make(np.random.default_rng(0))
         assert floor.name == name
         if name in FLOORS:
             assert floor == FLOORS[name], name
-    assert set(RENAMED_BENCH_FLOORS) <= set(FLOORS) - set(BENCH_FLOORS)
-    for old, new in RENAMED_BENCH_FLOORS.items():
-        with pytest.raises(SpecError, match=f"now called '{new}'") as caught:
-            BenchConfig(floors=(old,))
+    for other in sorted(set(FLOORS) - set(BENCH_FLOORS)):
+        with pytest.raises(SpecError, match=f"unknown benchmark floor '{other}'") as caught:
+            BenchConfig(floors=(other,))
         assert caught.value.field == "floor" and "\n" not in str(caught.value)
 
 
-def test_bench_old_floor_name_is_one_line_naming_the_new_one(
+def test_bench_refuses_a_preset_that_is_no_benchmark_floor_in_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["bench", "calibrators", "--robots", "1", "--out", str(tmp_path / "b")]
     assert main([*argv, "--floor", "smooth"]) == 2
-    _one_line_error(capsys, "'smooth' is now called 'concrete'")
+    _one_line_error(capsys, "unknown benchmark floor 'smooth'; floors: concrete, rough, cables")
     assert main([*argv, "--floor", "concrete", "bumpy"]) == 2
-    _one_line_error(capsys, "'bumpy' is now called 'cables'")
+    _one_line_error(capsys, "unknown benchmark floor 'bumpy'")
 
 
 def test_bench_writes_its_floors_and_says_what_it_wrote(
@@ -497,9 +496,9 @@ def test_every_option_of_every_command_has_help() -> None:
 
 
 def test_floor_help_lists_every_floor_each_command_accepts() -> None:
-    from odomgym.baselines.benchmark import BENCH_FLOORS
     from odomgym.cli import build_parser
     from odomgym.floor import FLOORS
+    from odomgym.population import BENCH_FLOORS
 
     checked = 0
     for name, parser in _parsers(build_parser()):

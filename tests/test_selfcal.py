@@ -116,7 +116,7 @@ def test_same_seed_same_session_bit_for_bit() -> None:
 def test_bad_settings_and_actions_are_one_line_errors() -> None:
     with pytest.raises(SpecError, match=r"budget must be 1\.\.64"):
         SelfCalibrationEnv(budget=0)
-    with pytest.raises(SpecError, match="now called 'cables'"):
+    with pytest.raises(SpecError, match="unknown benchmark floor 'bumpy'"):
         SelfCalibrationEnv(floors=("bumpy",))
     with pytest.raises(SpecError, match="shaping"):
         SelfCalibrationEnv(shaping=float("nan"))

@@ -4,20 +4,18 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from odomgym.cli._common import Reporter, check_output, count, processes, seed32
 from odomgym.errors import SpecError
 
 if TYPE_CHECKING:
-    from odomgym.baselines.selfcal_train import TrainResult
     from odomgym.cli._common import Commands
 
 
 def register(commands: Commands) -> None:
     """Add ``train``."""
-    from odomgym.baselines.selfcal import MENU
+    from odomgym.selfcal_session import MENU
 
     parser = commands.add_parser(
         "train",
@@ -71,24 +69,6 @@ def register(commands: Commands) -> None:
     )
     parser.add_argument("--json", action="store_true", help="one JSON object instead of text")
     parser.set_defaults(handler=run)
-
-
-def _written(result: TrainResult, out: str) -> list[str]:
-    """The files :func:`~odomgym.baselines.selfcal_train.train` wrote, in the order the
-    ``wrote:`` line names them.
-
-    :class:`~odomgym.baselines.selfcal_train.TrainResult` names only the policy and the model;
-    the other three names are rebuilt here from what ``train`` writes into its folder. They
-    belong in the result (the library knows what it wrote; the command line should not have to
-    repeat it), and this function goes once the result lists them.
-    """
-    return [
-        str(result.policy_file),
-        str(result.model_file),
-        str(Path(out) / "policy.json"),
-        str(Path(out) / "progress.csv"),
-        str(Path(out) / "learning_curve.png"),
-    ]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -151,5 +131,5 @@ def run(args: argparse.Namespace) -> int:
             f"{ev['log_improvement_mean']:.2f}, {ev['runs_mean']:.1f} runs"
         )
     report.status(f"use it: odomgym calibrate selfcal --policy {result.policy_file}")
-    report.wrote(_written(result, args.out))
+    report.wrote([str(path) for path in result.written])
     return 0
