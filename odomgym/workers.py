@@ -67,6 +67,7 @@ def _serve_tasks(conn: Connection, handler: Handler) -> None:
     """A task worker: answers ``(payload, attempt)`` requests with ``("ok", result)`` or
     ``("error", text)`` until it receives ``None`` or the parent goes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops its workers itself
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a forked worker: not the parent's handler
     try:
         while (request := conn.recv()) is not None:
             payload, attempt = request

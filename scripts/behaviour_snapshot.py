@@ -33,21 +33,54 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 
-# Keys whose values are wall-clock time, machine facts or paths: they change between two runs
-# of identical behaviour and are dropped from every JSON document before hashing.
-VOLATILE = re.compile(
-    r"(seconds|elapsed|wall|time_s|duration|date|created|version|python|platform|host|"
-    r"machine|path|out|folder|file|written|wrote|cpu|cores|jobs|started|finished|git)",
-    re.IGNORECASE,
-)
+# Keys whose values are wall-clock time, machine facts or output paths: they change between two
+# runs of identical behaviour and are dropped from every JSON document before hashing. A key is
+# volatile if it *is* one of VOLATILE_KEYS, or if one of its words (split at ``_``, ``-``, ``/``,
+# ``.`` and spaces) is one of VOLATILE_WORDS — never by a substring, so that ``candidates``
+# (``date``) or ``held_out_lr`` (``out``) keep their values.
+VOLATILE_KEYS = {
+    "out",
+    "path",
+    "paths",
+    "folder",
+    "file",
+    "files",
+    "written",
+    "wrote",
+    "policy_file",
+    "model_file",
+    "version",
+    "versions",
+    "python",
+    "platform",
+    "host",
+    "hostname",
+    "machine",
+    "cpu",
+    "cpus",
+    "cores",
+    "jobs",
+    "command",
+}
+VOLATILE_WORDS = {"seconds", "elapsed", "wall", "duration", "date", "created", "git", "fps"}
 
 
-def scrub(value: Any) -> Any:
-    """Drop volatile keys recursively, keeping everything a behaviour change would move."""
+def volatile(key: str) -> bool:
+    """True for a key whose value is a fact of this machine or this moment, not of behaviour."""
+    if key in VOLATILE_KEYS:
+        return True
+    return any(word in VOLATILE_WORDS for word in re.split(r"[_\-/. ]+", key.lower()))
+
+
+def scrub(value: Any, work: str = "") -> Any:
+    """Drop volatile keys recursively (and the temporary folder from strings), keeping
+    everything a behaviour change would move."""
     if isinstance(value, dict):
-        return {k: scrub(v) for k, v in value.items() if not VOLATILE.search(str(k))}
+        return {k: scrub(v, work) for k, v in value.items() if not volatile(str(k))}
     if isinstance(value, list):
-        return [scrub(v) for v in value]
+        return [scrub(v, work) for v in value]
+    if isinstance(value, str) and work:
+        return value.replace(work, "<work>")
     return value
 
 
@@ -110,27 +143,29 @@ def odomgym(*args: str, cwd: Path) -> str:
     return proc.stdout
 
 
-def dump_json(text: str) -> str:
+def dump_json(text: str, work: str = "") -> str:
     """One JSON document, or JSON lines, scrubbed and printed in a stable form."""
     try:
         docs = [json.loads(text)]
     except json.JSONDecodeError:
         docs = [json.loads(line) for line in text.splitlines() if line.strip()]
-    return "".join(json.dumps(scrub(doc), indent=1, sort_keys=True) + "\n" for doc in docs)
+    return "".join(json.dumps(scrub(doc, work), indent=1, sort_keys=True) + "\n" for doc in docs)
 
 
 def job_cli(args: list[str], *, as_json: bool, files: tuple[str, ...] = ()) -> Any:
     def run(work: Path, out: Path) -> None:
         stdout = odomgym(*args, cwd=work)
-        (out / "stdout").write_text(dump_json(stdout) if as_json else scrub_text(stdout, work))
+        (out / "stdout").write_text(
+            dump_json(stdout, str(work)) if as_json else scrub_text(stdout, work)
+        )
         for name in files:
             for path in sorted(work.glob(name)):
                 rel = path.relative_to(work).as_posix().replace("/", "__")
                 if path.suffix in (".json",):
-                    data = dump_json(path.read_text())
+                    data = dump_json(path.read_text(), str(work))
                 elif path.suffix == ".jsonl":
                     data = "".join(
-                        json.dumps(scrub(json.loads(line)), sort_keys=True) + "\n"
+                        json.dumps(scrub(json.loads(line), str(work)), sort_keys=True) + "\n"
                         for line in path.read_text().splitlines()
                         if line.strip()
                     )

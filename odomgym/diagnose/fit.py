@@ -35,7 +35,7 @@ import multiprocessing as mp
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,6 +50,7 @@ from odomgym.effects.registry import Spec, SpecView
 from odomgym.errors import SpecError
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
+from odomgym.workers import WorkerDeath, run_tasks
 
 __all__ = [
     "CandidateFit",
@@ -646,8 +647,10 @@ class FitJob:
         return fit
 
 
-def _run_job(job: FitJob) -> CandidateFit:
-    """:meth:`FitJob.run` as a module-level function (what a worker process is handed)."""
+def _run_job(job: FitJob, attempt: int) -> CandidateFit:
+    """:meth:`FitJob.run` as a module-level task handler of :func:`odomgym.workers.run_tasks`
+    (every attempt gives the same fit)."""
+    del attempt
     return job.run()
 
 
@@ -659,38 +662,40 @@ def run_fit_jobs(
     """Run every job of ``jobs`` (keyed by the caller's index) and hand each fit to
     ``finished(index, fit)`` as soon as it is done, in whatever order they finish.
 
-    With ``processes`` > 1, more than one job and the ``fork`` start method: in a pool of
-    forked worker processes (they share the effect registry, user effects included, and the
-    compiled kernels). Otherwise one after the other in this process, in the mapping's order.
-    Results do not depend on which: each fit is a deterministic function of its job.
+    With ``processes`` > 1, more than one job and the ``fork`` start method: in odomgym's
+    worker pool (:func:`odomgym.workers.run_tasks`) of forked processes (they share the effect
+    registry, user effects included, and the compiled kernels). Otherwise one after the other
+    in this process, in the mapping's order. Results do not depend on which: each fit is a
+    deterministic function of its job.
 
     Interruption: if ``finished`` raises, or anything else does while waiting (Ctrl-C, a
-    SIGTERM turned into an exception, a worker's error re-raised by ``result()``), the
-    workers are terminated at once — rather than waiting for their running fits, as the
-    executor's own shutdown would — the queued jobs are cancelled and the exception propagates.
-    A worker that dies (killed, out of memory) breaks the pool: the next ``result()`` raises
-    ``BrokenProcessPool``, handled the same way.
+    SIGTERM turned into an exception), every worker is terminated at once and the exception
+    propagates; a fit that raised in its worker is a :class:`odomgym.workers.TaskFailed`. A
+    worker that dies (killed, out of memory) stops the diagnosis with a RuntimeError naming
+    the candidate; the fits already finished (journalled by ``finished``) stay for a resume.
     """
     todo = list(jobs)
     if processes > 1 and len(todo) > 1 and "fork" in mp.get_all_start_methods():
         # No thread of this process's evaluation pool may be alive across the fork.
         close_thread_pool()
-        pool = ProcessPoolExecutor(processes, mp_context=mp.get_context("fork"))
-        try:
-            futures = {pool.submit(_run_job, jobs[k]): k for k in todo}
-            for future in as_completed(futures):
-                finished(futures[future], future.result())
-        except BaseException:
-            # ``_processes`` is the executor's map of its worker processes (CPython's
-            # concurrent.futures internals; to be replaced by a shared worker pool).
-            for process in list((getattr(pool, "_processes", None) or {}).values()):
-                process.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-        pool.shutdown()
+
+        def died(death: WorkerDeath[int]) -> bool:
+            raise RuntimeError(
+                f"a diagnose worker died (exit code {death.exitcode}) while fitting "
+                f"{jobs[death.key].effect}"
+            )
+
+        run_tasks(
+            _run_job,
+            ((k, jobs[k]) for k in todo),
+            processes=processes,
+            finished=finished,
+            died=died,
+            start_method="fork",
+        )
     else:
         for k in todo:
-            finished(k, _run_job(jobs[k]))
+            finished(k, _run_job(jobs[k], 0))
 
 
 def candidate_effects(exclude: Sequence[str] = ()) -> list[Effect]:
