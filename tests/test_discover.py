@@ -168,7 +168,7 @@ def test_clustered_standard_errors() -> None:
     """The cluster-robust covariance (Liang & Zeger 1986) by hand: with the identity as the
     model covariance it is Σ_c s_c s_cᵀ · G/(G−1); two clusters whose scores agree in sign
     give a larger variance than the same scores split into independent runs that cancel."""
-    from odomgym.diagnose.fit import _clustered
+    from odomgym.diagnose.stats import clustered_covariance as _clustered
 
     scores = np.array([[1.0], [1.0], [-1.0], [-1.0]])
     eye = np.eye(1)

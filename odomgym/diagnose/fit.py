@@ -44,7 +44,7 @@ from scipy.optimize import least_squares, minimize
 
 from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_likelihood
 from odomgym.diagnose.replay import Replay, replay_run
-from odomgym.diagnose.stats import clustered_covariance, max_t_test
+from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import EFFECTS, Effect
 from odomgym.effects.registry import Spec, SpecView
 from odomgym.errors import SpecError
@@ -64,7 +64,6 @@ __all__ = [
     "fit_noise",
     "fit_noise_model",
     "folds_for",
-    "max_t_test",
     "noise_curvature",
     "run_fit_jobs",
     "strata",
@@ -522,11 +521,6 @@ def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
         fit.stderr[p.name] = float(math.sqrt(max(cov[k, k], 0.0)) * p.scale)
         fit.stderr_runs[p.name] = float(math.sqrt(max(by_run[k, k], 0.0)) * p.scale)
         fit.stderr_sessions[p.name] = float(math.sqrt(max(by_session[k, k], 0.0)) * p.scale)
-
-
-_clustered = clustered_covariance
-"""The cluster-robust covariance (now :func:`odomgym.diagnose.stats.clustered_covariance`; the
-old private name is kept for tests/test_discover.py)."""
 
 
 def strata(runs: Sequence[Run]) -> dict[str, list[int]]:
