@@ -36,6 +36,7 @@ __all__ = [
     "Holdings",
     "SquareCalibrator",
     "SquareOptions",
+    "SquaresSizing",
     "check_square_settings",
     "option_names",
     "perform",
@@ -246,7 +247,27 @@ def register_calibrator(cls: C, *, replace: bool = False) -> C:
     return cls
 
 
-class SquareCalibrator(Calibrator):
+class SquaresSizing(Calibrator):
+    """The sizing of a method that drives the bi-directional square (``side``,
+    ``runs_per_direction``): half a budget each way, the command line's square settings as
+    they are, and the squares a recorded session holds. A method with other experiments
+    besides overrides what differs."""
+
+    @classmethod
+    def budget_options(cls, runs: int) -> dict[str, Any]:
+        """Half the runs each way."""
+        return {"runs_per_direction": max(1, runs // 2)}
+
+    @classmethod
+    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
+        return {"side": side, "runs_per_direction": runs_per_direction}
+
+    @classmethod
+    def session_options(cls, held: Holdings) -> dict[str, Any]:
+        return held.square_options()
+
+
+class SquareCalibrator(SquaresSizing):
     """Base of methods that need only the bi-directional square experiment.
 
     Args:
@@ -270,16 +291,3 @@ class SquareCalibrator(Calibrator):
     def experiments(self) -> list[Experiment]:
         """The cw and the ccw squares."""
         return square_experiments(self.side, self.runs_per_direction)
-
-    @classmethod
-    def budget_options(cls, runs: int) -> dict[str, Any]:
-        """Half the runs each way."""
-        return {"runs_per_direction": max(1, runs // 2)}
-
-    @classmethod
-    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
-        return {"side": side, "runs_per_direction": runs_per_direction}
-
-    @classmethod
-    def session_options(cls, held: Holdings) -> dict[str, Any]:
-        return held.square_options()

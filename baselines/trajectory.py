@@ -49,8 +49,8 @@ from scipy.optimize import least_squares
 
 from odomgym.baselines.base import (
     CalibrationResult,
-    Calibrator,
     Holdings,
+    SquaresSizing,
     perform,
     require_choice,
     square_experiments,
@@ -298,7 +298,7 @@ class TrajectoryOptions:
         require_choice("loss", self.loss, LOSSES)
 
 
-class Trajectory(Calibrator):
+class Trajectory(SquaresSizing):
     """OptiOdom-style trajectory optimisation (Sousa et al. 2022) over the runs it performs.
 
     The runs (``path``): ``"square"`` (default) — ``runs_per_direction`` cw and as many ccw
@@ -336,15 +336,6 @@ class Trajectory(Calibrator):
         "Odometry Calibration of Wheeled Mobile Robots, J. Intell. Robot. Syst. 105:39, 2022"
     )
     options_type: ClassVar[type[TrajectoryOptions]] = TrajectoryOptions
-
-    @classmethod
-    def budget_options(cls, runs: int) -> dict[str, Any]:
-        """Half the runs each way, as squares."""
-        return {"runs_per_direction": max(1, runs // 2)}
-
-    @classmethod
-    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
-        return {"side": side, "runs_per_direction": runs_per_direction}
 
     @classmethod
     def session_options(cls, held: Holdings) -> dict[str, Any]:

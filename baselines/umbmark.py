@@ -46,9 +46,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from odomgym.baselines.base import (
     CalibrationResult,
-    Calibrator,
-    Holdings,
     SquareOptions,
+    SquaresSizing,
     require_choice,
     square_experiments,
 )
@@ -322,7 +321,7 @@ class UMBmarkOptions(SquareOptions):
 
 # mypy cannot follow the setuptools package-dir mapping odomgym.baselines → baselines/, so
 # to it Calibrator is Any; drop the ignore once that mapping is visible to mypy.
-class UMBmark(Calibrator):
+class UMBmark(SquaresSizing):
     """UMBmark (Borenstein & Feng 1994, §6) with the E_s phase and iteration of solderspot 2014.
 
     Procedure (default ``conventions="umbmark"``):
@@ -368,14 +367,6 @@ class UMBmark(Calibrator):
         if runs >= 6:
             return {"scale_phases": 1, "straight_runs": 2, "runs_per_direction": (runs - 2) // 2}
         return {"scale_phases": 0, "runs_per_direction": max(1, runs // 2)}
-
-    @classmethod
-    def square_options(cls, side: float, runs_per_direction: int) -> dict[str, Any]:
-        return {"side": side, "runs_per_direction": runs_per_direction}
-
-    @classmethod
-    def session_options(cls, held: Holdings) -> dict[str, Any]:
-        return held.square_options()
 
     def __init__(
         self,
