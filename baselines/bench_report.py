@@ -38,6 +38,11 @@ def _cell(summary: dict[str, Any]) -> str:
     )
 
 
+def _fraction(summary: dict[str, Any]) -> str:
+    value = summary["of_oracle_median"]
+    return f"{100 * value:.0f} %" if np.isfinite(value) else "–"
+
+
 def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str:
     """The Markdown report (see the module docstring)."""
     summary = summarize(rows)
@@ -50,7 +55,14 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
         f"E_b ∈ {list(config.population.e_b)}, E_s ∈ {list(config.population.e_s)}. "
         f"Validation: {config.validation_runs} cw + {config.validation_runs} ccw fresh 4×4 m "
         "squares per robot, true return errors. Improvement = E_max,syst before / after "
-        "(Borenstein & Feng 1994, Table III, reports 10–22-fold for UMBmark on a LabMate).",
+        "(Borenstein & Feng 1994, Table III, reports 10–22-fold for UMBmark on a LabMate)."
+        + (
+            " The `oracle` row is the robot's true parameters as the calibration, validated the "
+            "same way: the ceiling the validation's own noise allows; *of oracle* is, per robot, "
+            "the oracle's E_max,syst after / the method's (median)."
+            if config.oracle
+            else ""
+        ),
         "",
     ]
     for floor in config.floors:
@@ -58,13 +70,14 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
             f"## Floor: {floor} ({BENCH_FLOORS[floor].description})",
             "",
             "| method | E_max,syst before → after [mm] | improvement median [q25–q75] | "
-            "abs(ΔE_d) | abs(ΔE_b) | abs(ΔE_s) | runs | distance [m] | wall/robot [s] | failed |",
-            "|---|---|---|---|---|---|---|---|---|---|",
+            "of oracle | abs(ΔE_d) | abs(ΔE_b) | abs(ΔE_s) | runs | distance [m] | "
+            "wall/robot [s] | failed |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for s in (s for s in summary if s["floor"] == floor):
             lines.append(
                 f"| {s['method']} | {s['e_max_before_median_mm']:.0f} → "
-                f"{s['e_max_after_median_mm']:.1f} | {_cell(s)} | "
+                f"{s['e_max_after_median_mm']:.1f} | {_cell(s)} | {_fraction(s)} | "
                 f"{s['abs_err_E_d_median']:.2e} | {s['abs_err_E_b_median']:.2e} | "
                 f"{s['abs_err_E_s_median']:.2e} | {s['runs_mean']:.0f} | "
                 f"{s['distance_m_mean']:.0f} | {s['wall_time_s_mean']:.3f} | {s['failures']} |"
@@ -81,7 +94,7 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
             ]
             by_small = {s["method"]: s for s in summarize(small)}
             by_large = {s["method"]: s for s in summarize(large)}
-            for method, _, _ in config.entries():
+            for method in config.labels():
                 if method in by_small and method in by_large:
                     lines.append(
                         f"| {method} | {_cell(by_small[method])} | {_cell(by_large[method])} |"
@@ -148,9 +161,9 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
                 for r in rows
                 if r["floor"] == floor and r["method"] == m and np.isfinite(r["improvement"])
             ]
-            for m, _, _ in config.entries()
+            for m in config.labels()
         ]
-        labels = [label for label, _, _ in config.entries()]
+        labels = config.labels()
         ax.boxplot(data, showfliers=True)
         ax.set_xticks(range(1, len(labels) + 1), labels, rotation=30)
         ax.set_yscale("log")

@@ -51,12 +51,14 @@ from odomgym.runs import Direction, end_error
 from odomgym.workers import TaskFailed, WorkerDeath, run_tasks
 
 __all__ = [
+    "ORACLE",
     "Backend",
     "BenchConfig",
     "Journal",
     "config_record",
     "configure",
     "failed_rows",
+    "oracle_calibration",
     "population",
     "run_benchmark",
     "run_chunk",
@@ -108,6 +110,9 @@ class BenchConfig:
         seed: master seed.
         validation_runs: fresh squares per direction used to validate each result.
         population: the error ranges.
+        oracle: also validate the robot's *true* parameters as a calibration (the ``oracle``
+            row, no runs): the best any method could do, so the validation's own noise floor —
+            every method's improvement is also reported as a fraction of the oracle's.
     """
 
     robots: int = 100
@@ -118,6 +123,7 @@ class BenchConfig:
     seed: int = 0
     validation_runs: int = 5
     population: Population = Population()  # noqa: RUF009  (frozen, so one shared default is safe)
+    oracle: bool = True
 
     def __post_init__(self) -> None:
         for floor in self.floors:
@@ -142,6 +148,10 @@ class BenchConfig:
         """Every budget compared, the main one first."""
         return (self.budget, *(b for b in self.extra_budgets if b != self.budget))
 
+    def labels(self) -> list[str]:
+        """Every row label of the report, in order: the competitors, then ``oracle``."""
+        return [label for label, _, _ in self.entries()] + ([ORACLE] if self.oracle else [])
+
     def entries(self) -> list[tuple[str, str, int]]:
         """``(label, method, budget)`` of every competitor, in report order."""
         several = len(self.budgets) > 1
@@ -150,6 +160,16 @@ class BenchConfig:
             for method in self.methods
             for budget in self.budgets
         ]
+
+
+ORACLE = "oracle"
+"""The label of the row whose calibration is the robot's true parameters."""
+
+
+def oracle_calibration(robot: RobotSpec) -> Calibration:
+    """The calibration that makes the odometry's geometry the robot's true one
+    (Borenstein & Feng 1994, Eqs. 6.33–6.35 with the true E_d; E_b and E_s as they are)."""
+    return Calibration.from_errors(robot.e_d, robot.e_b, robot.e_s)
 
 
 def _stream(config: BenchConfig, *key: int) -> np.random.Generator:
@@ -201,23 +221,15 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
                 calibration = result.calibration if result is not None else Calibration()
                 calibrations[k].append(calibration)
                 method_rows[k].append(
-                    {
-                        "method": label,
-                        "budget": budget,
-                        "floor": floor_name,
-                        "robot": indices[k],
-                        "true_E_d": robot.e_d,
-                        "true_E_b": robot.e_b,
-                        "true_E_s": robot.e_s,
-                        "est_E_d": calibration.e_d,
-                        "est_E_b": calibration.wheelbase_scale,
-                        "est_E_s": calibration.distance_scale,
-                        "runs_used": result.runs_used if result is not None else 0,
-                        "distance_m": result.distance_used if result is not None else 0.0,
-                        "wall_time_s": wall,
-                        "failed": "" if outcome.error is None else repr(outcome.error),
-                    }
+                    _row(label, budget, floor_name, indices[k], robot, calibration, result, wall)
                 )
+                if outcome.error is not None:
+                    method_rows[k][-1]["failed"] = repr(outcome.error)
+        if config.oracle:
+            for k, robot in enumerate(robots):
+                truth = oracle_calibration(robot)
+                calibrations[k].append(truth)
+                method_rows[k].append(_row(ORACLE, 0, floor_name, indices[k], robot, truth, None))
         errors = _validate(config, floor, start_region, floor_index, indices, robots, calibrations)
         for k in range(len(robots)):
             before = errors[k][0]
@@ -238,6 +250,35 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
                     }
             rows.extend(method_rows[k])
     return rows
+
+
+def _row(
+    label: str,
+    budget: int,
+    floor: str,
+    index: int,
+    robot: RobotSpec,
+    calibration: Calibration,
+    result: CalibrationResult | None,
+    wall: float = 0.0,
+) -> dict[str, Any]:
+    """One result row before validation: the truth, the estimate, what it cost."""
+    return {
+        "method": label,
+        "budget": budget,
+        "floor": floor,
+        "robot": index,
+        "true_E_d": robot.e_d,
+        "true_E_b": robot.e_b,
+        "true_E_s": robot.e_s,
+        "est_E_d": calibration.e_d,
+        "est_E_b": calibration.wheelbase_scale,
+        "est_E_s": calibration.distance_scale,
+        "runs_used": result.runs_used if result is not None else 0,
+        "distance_m": result.distance_used if result is not None else 0.0,
+        "wall_time_s": wall,
+        "failed": "",
+    }
 
 
 def _validate(
@@ -380,6 +421,7 @@ def config_record(config: BenchConfig) -> dict[str, Any]:
         "extra_budgets": list(config.extra_budgets),
         "seed": config.seed,
         "validation_runs": config.validation_runs,
+        "oracle": config.oracle,
         "population": [
             config.population.base,
             *config.population.e_d,
@@ -395,9 +437,12 @@ def failed_rows(config: BenchConfig, robots: Sequence[int], reason: str) -> list
     nan = math.nan
     truth = population(config)
     out = []
+    competitors = [(label, budget) for label, _, budget in config.entries()]
+    if config.oracle:
+        competitors.append((ORACLE, 0))
     for floor in config.floors:
         for robot in robots:
-            for label, _, budget in config.entries():
+            for label, budget in competitors:
                 spec = truth[robot]
                 row: dict[str, Any] = {
                     "method": label,
@@ -531,7 +576,7 @@ def run_benchmark(
             finished(part, run_chunk(config, part))
     else:
         _run_processes(config, parts, jobs, finished, notify or (lambda text: None), task)
-    order = [label for label, _, _ in config.entries()]
+    order = config.labels()
     rows.sort(key=lambda r: (config.floors.index(r["floor"]), r["robot"], order.index(r["method"])))
     return rows
 
@@ -575,10 +620,15 @@ def _run_ray(
 
 def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per method and floor: median and quartiles of the improvement, parameter errors,
-    distance, wall time and failures."""
+    distance, wall time and failures; and, when the rows hold the ``oracle``, the fraction of
+    the oracle's improvement (per robot: the oracle's E_max,syst after / the method's, the
+    same robot's E_max,syst before cancelling; its median; NaN without an oracle)."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    ceiling: dict[tuple[str, int], float] = {}
     for row in rows:
         groups.setdefault((row["method"], row["floor"]), []).append(row)
+        if row["method"] == ORACLE and not row["failed"]:
+            ceiling[(row["floor"], row["robot"])] = row["improvement"]
     summary: list[dict[str, Any]] = []
     for (method, floor), all_rows in groups.items():
         # Failed calibrations are counted, not scored: scoring them as "uncalibrated" would
@@ -590,6 +640,12 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         def median_abs(key: str, group: list[dict[str, Any]] = group) -> float:
             return float(np.median([abs(r[key]) for r in group]))
 
+        fractions = [
+            r["improvement"] / ceiling[(floor, r["robot"])]
+            for r in group
+            if (floor, r["robot"]) in ceiling and not r["failed"]
+        ]
+
         summary.append(
             {
                 "method": method,
@@ -598,6 +654,7 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 "improvement_median": float(q50),
                 "improvement_q25": float(q25),
                 "improvement_q75": float(q75),
+                "of_oracle_median": float(np.median(fractions)) if fractions else math.nan,
                 "e_max_before_median_mm": float(np.median([r["e_max_before_mm"] for r in group])),
                 "e_max_after_median_mm": float(np.median([r["e_max_after_mm"] for r in group])),
                 "abs_err_E_d_median": median_abs("err_E_d"),

@@ -108,6 +108,8 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (0)")
     parser.add_argument("--json", action="store_true", help="JSON lines instead of tables")
     parser.add_argument("--noise", action="store_true", help="measure MENU's floor scatter")
+    parser.add_argument("--save", help="also write the benchmark's rows to this JSON file")
+    parser.add_argument("--load", help="analyse the rows of an earlier --save instead of running")
     args = parser.parse_args()
     if args.noise:
         measure_noise()
@@ -121,8 +123,15 @@ def main() -> int:
         seed=args.seed,
     )
     start = time.perf_counter()
-    rows = run_benchmark(config, jobs=args.jobs)
+    if args.load:
+        with open(args.load, encoding="utf-8") as f:
+            rows = json.load(f)["rows"]
+    else:
+        rows = run_benchmark(config, jobs=args.jobs)
     wall = time.perf_counter() - start
+    if args.save:
+        with open(args.save, "w", encoding="utf-8") as f:
+            json.dump({"wall_time_s": wall, "rows": rows}, f, default=float)
     summary = summarize(rows)
     comparison = paired(rows, "selfcal", "umbmark") if "selfcal" in args.methods else []
     ablation = (

@@ -114,7 +114,7 @@ def test_benchmark_rows_do_not_depend_on_chunking(tmp_path: Path) -> None:
         assert key(a) == key(b)
         assert a["est_E_b"] == b["est_E_b"] and a["improvement"] == b["improvement"]
     summary = summarize(whole)
-    assert {s["method"] for s in summary} == {"umbmark", "jung_chung"}
+    assert {s["method"] for s in summary} == {"umbmark", "jung_chung", "oracle"}
     paths = write_outputs(config, whole, tmp_path / "out", elapsed=1.0)
     names = {p.name for p in paths}
     assert {"summary.md", "results.csv", "results.json", "improvement.png"} <= names
@@ -144,7 +144,11 @@ def test_benchmark_compares_budgets() -> None:
         robots=1, floors=("concrete",), methods=("umbmark",), budget=6, extra_budgets=(2,)
     )
     rows = run_chunk(config, [0])
-    assert [(r["method"], r["budget"]) for r in rows] == [("umbmark@6", 6), ("umbmark@2", 2)]
+    assert [(r["method"], r["budget"]) for r in rows] == [
+        ("umbmark@6", 6),
+        ("umbmark@2", 2),
+        ("oracle", 0),
+    ]
     assert rows[1]["runs_used"] <= 2 < rows[0]["runs_used"]
 
 
@@ -185,3 +189,61 @@ def test_bench_config_errors_name_their_field(kwargs: dict, field: str) -> None:
     with pytest.raises(SpecError) as caught:
         BenchConfig(**kwargs)
     assert caught.value.field == field
+
+
+def test_the_oracle_row_is_the_truth_and_changes_no_other_row() -> None:
+    """The ``oracle`` row calibrates with the robot's true parameters (no runs, no estimate
+    error); it shares every random stream of the validation with the other rows, so adding it
+    changes none of them, and it is what they are measured against."""
+    base = BenchConfig(robots=2, floors=("concrete",), methods=("umbmark",), budget=4)
+    with_oracle = run_chunk(base, [0, 1])
+    without = run_chunk(BenchConfig(**{**base.__dict__, "oracle": False}), [0, 1])
+
+    def timeless(rows: list[dict]) -> list[dict]:
+        return [{k: v for k, v in r.items() if k != "wall_time_s"} for r in rows]
+
+    assert timeless([r for r in with_oracle if r["method"] != "oracle"]) == timeless(without)
+    oracle = [r for r in with_oracle if r["method"] == "oracle"]
+    assert [r["robot"] for r in oracle] == [0, 1]
+    for row in oracle:
+        assert row["runs_used"] == 0 and row["distance_m"] == 0.0 and not row["failed"]
+        for name in ("E_d", "E_b", "E_s"):
+            assert row[f"err_{name}"] == pytest.approx(0.0, abs=1e-12)
+        # The truth removes the systematic error: what is left is the floor's noise (concrete:
+        # a few cm at most on 4 m squares, against > 0.3 m uncalibrated).
+        assert row["e_max_after_mm"] < 0.1 * row["e_max_before_mm"]
+
+
+def test_fraction_of_the_oracle_is_paired_by_robot() -> None:
+    """of_oracle_median = median over robots of (oracle's E_after / the method's E_after), the
+    same robot's E_before cancelling; without an oracle it is NaN."""
+
+    def row(method: str, robot: int, before: float, after: float) -> dict[str, object]:
+        return {
+            "method": method,
+            "floor": "concrete",
+            "robot": robot,
+            "failed": "",
+            "improvement": before / after,
+            "e_max_before_mm": before,
+            "e_max_after_mm": after,
+            "err_E_d": 0.0,
+            "err_E_b": 0.0,
+            "err_E_s": 0.0,
+            "distance_m": 0.0,
+            "runs_used": 0,
+            "wall_time_s": 0.0,
+        }
+
+    rows = [
+        row("oracle", 0, 1000.0, 10.0),
+        row("oracle", 1, 500.0, 20.0),
+        row("oracle", 2, 800.0, 10.0),
+        row("m", 0, 1000.0, 20.0),  # half the oracle's improvement
+        row("m", 1, 500.0, 20.0),  # all of it
+        row("m", 2, 800.0, 40.0),  # a quarter
+    ]
+    by_method = {s["method"]: s for s in summarize(rows)}
+    assert by_method["oracle"]["of_oracle_median"] == 1.0
+    assert by_method["m"]["of_oracle_median"] == pytest.approx(0.5)
+    assert np.isnan(summarize(rows[3:])[0]["of_oracle_median"])

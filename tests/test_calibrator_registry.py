@@ -64,9 +64,10 @@ def look_only() -> Iterator[type[_LookOnly]]:
 def test_a_registered_method_is_benchmarked_with_its_own_budget_rule(
     look_only: type[_LookOnly],
 ) -> None:
-    rows = run_benchmark(
-        BenchConfig(robots=1, floors=("concrete",), methods=("look_only",), budget=6), jobs=1
+    config = BenchConfig(
+        robots=1, floors=("concrete",), methods=("look_only",), budget=6, oracle=False
     )
+    rows = run_benchmark(config, jobs=1)
     assert [row["runs_used"] for row in rows] == [6]  # budget_options: 3 squares each way
     assert (rows[0]["method"], rows[0]["budget"]) == ("look_only", 6)
     assert rows[0]["improvement"] == pytest.approx(1.0)  # it calibrates nothing

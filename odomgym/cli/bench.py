@@ -74,6 +74,14 @@ def register(commands: Commands) -> None:
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument(
+        "--oracle",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also validate each robot's true parameters as a calibration (the oracle row, the "
+        "ceiling the validation noise allows) and report every method as a fraction of it "
+        "(default: on)",
+    )
+    parser.add_argument(
         "--resume",
         action="store_true",
         help=f"continue an interrupted run: robots recorded in OUT/{JOURNAL_NAME} are not run "
@@ -110,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
         budget=args.budget[0],
         extra_budgets=tuple(args.budget[1:]),
         seed=args.seed,
+        oracle=args.oracle,
     )
     jobs = args.jobs or os.cpu_count() or 1
     journal = Path(args.out) / JOURNAL_NAME
