@@ -177,6 +177,22 @@ def _stream(config: BenchConfig, *key: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([config.seed, *key]))
 
 
+def bench_floor(config: BenchConfig, name: str) -> tuple[FloorSpec, float | None, int]:
+    """The benchmark floor ``name`` as laid out for ``config``'s seed, the half-width [m] of
+    its start region (None: runs start at the origin) and the floor's index in the streams."""
+    floor_index = list(BENCH_FLOORS).index(name)
+    floor, start_region = BENCH_FLOORS[name].make(_stream(config, 0, floor_index, 1))
+    return floor, start_region, floor_index
+
+
+def calibration_streams(
+    config: BenchConfig, indices: Sequence[int], floor_index: int
+) -> list[np.random.Generator]:
+    """The random streams the calibrations of robots ``indices`` draw from on a floor (the
+    same for every method: a paired comparison)."""
+    return [_stream(config, i, floor_index, 2) for i in indices]
+
+
 def population(config: BenchConfig) -> list[RobotSpec]:
     """The benchmark's robots (robot i depends only on the seed and i)."""
     return [
@@ -195,8 +211,7 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
     robots = [robots_all[i] for i in indices]
     rows: list[dict[str, Any]] = []
     for f, floor_name in enumerate(config.floors):
-        floor_index = list(BENCH_FLOORS).index(floor_name)
-        floor, start_region = BENCH_FLOORS[floor_name].make(_stream(config, 0, floor_index, 1))
+        floor, start_region, floor_index = bench_floor(config, floor_name)
         calibrations: list[list[Calibration]] = [[] for _ in robots]
         method_rows: list[list[dict[str, Any]]] = [[] for _ in robots]
         for label, method, budget in config.entries():
@@ -212,7 +227,7 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
                 procedure,
                 robots,
                 floor,
-                [_stream(config, i, floor_index, 2) for i in indices],
+                calibration_streams(config, indices, floor_index),
                 start_region=start_region,
             )
             wall = (time.perf_counter() - start) / len(robots)

@@ -32,6 +32,24 @@ from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
 from odomgym.population import BENCH_FLOORS
 
 METHODS = ("selfcal", "selfcal_scripted", "umbmark", "jung_chung", "least_squares", "trajectory")
+CLASSICAL = ("umbmark", "jung_chung", "lee", "ivanjko", "least_squares", "trajectory")
+
+
+def best_classical(rows: list[dict[str, Any]], floor: str, budget: int) -> str | None:
+    """The classical method with the highest median improvement on ``floor`` at ``budget``."""
+    medians = {}
+    for method in CLASSICAL:
+        values = [
+            r["improvement"]
+            for r in rows
+            if r["floor"] == floor
+            and r["budget"] == budget
+            and r["method"].split("@")[0] == method
+            and not r["failed"]
+        ]
+        if values:
+            medians[method] = float(np.median(values))
+    return max(medians, key=lambda m: medians[m]) if medians else None
 
 
 def paired(rows: list[dict[str, Any]], a: str, b: str) -> list[dict[str, Any]]:
@@ -73,6 +91,48 @@ def paired(rows: list[dict[str, Any]], a: str, b: str) -> list[dict[str, Any]]:
     return out
 
 
+def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
+    """What the learned policy drives, per floor and budget: how often it picks each menu item
+    over ``config``'s robots, in the benchmark's own sessions (same robots, floors and random
+    streams as its ``selfcal`` rows)."""
+    from odomgym.baselines.benchmark import bench_floor, calibration_streams, configure, population
+    from odomgym.baselines.selfcal import SelfCal
+    from odomgym.lockstep import run_lockstep
+    from odomgym.selfcal_session import MENU
+
+    robots = population(config)
+    indices = list(range(config.robots))
+    out = []
+    for floor_name in config.floors:
+        floor, start_region, floor_index = bench_floor(config, floor_name)
+        for budget in config.budgets:
+            outcomes = run_lockstep(
+                lambda lab, _i, budget=budget: configure(SelfCal, budget).calibrate(lab),
+                robots,
+                floor,
+                calibration_streams(config, indices, floor_index),
+                start_region=start_region,
+            )
+            counts = dict.fromkeys((item.name for item in MENU[1:]), 0)
+            for outcome in outcomes:
+                if outcome.value is None:
+                    continue
+                listed = outcome.value.notes[0].removeprefix("experiments: ")
+                for name in listed.split(", "):
+                    if name in counts:
+                        counts[name] += 1
+            total = sum(counts.values())
+            out.append(
+                {
+                    "floor": floor_name,
+                    "budget": budget,
+                    "runs": total,
+                    "share": {k: v / total for k, v in counts.items() if v} if total else {},
+                }
+            )
+    return out
+
+
 def measure_noise(runs: int = 24) -> None:
     """The end-pose scatter of every menu item on the concrete floor (MenuItem.floor_std)."""
     from odomgym.floor import FLOORS
@@ -110,6 +170,9 @@ def main() -> int:
     parser.add_argument("--noise", action="store_true", help="measure MENU's floor scatter")
     parser.add_argument("--save", help="also write the benchmark's rows to this JSON file")
     parser.add_argument("--load", help="analyse the rows of an earlier --save instead of running")
+    parser.add_argument(
+        "--picks", action="store_true", help="also count the menu items the policy drives"
+    )
     args = parser.parse_args()
     if args.noise:
         measure_noise()
@@ -139,6 +202,17 @@ def main() -> int:
         if {"selfcal", "selfcal_scripted"} <= set(args.methods)
         else []
     )
+    against_best = []
+    if "selfcal" in args.methods:
+        for floor in config.floors:
+            for budget in config.budgets:
+                best = best_classical(rows, floor, budget)
+                if best is None:
+                    continue
+                for record in paired(rows, "selfcal", best):
+                    if record["floor"] == floor and record["budget"] == budget:
+                        against_best.append({"best": best, **record})
+    picks = menu_picks(config) if args.picks else []
     if args.json:
         for record in summary:
             print(json.dumps({"summary": record}))
@@ -146,25 +220,36 @@ def main() -> int:
             print(json.dumps({"selfcal_vs_umbmark": record}))
         for record in ablation:
             print(json.dumps({"selfcal_vs_scripted": record}))
+        for record in against_best:
+            print(json.dumps({"selfcal_vs_best_classical": record}))
+        for record in picks:
+            print(json.dumps({"menu_picks": record}))
         print(json.dumps({"wall_time_s": round(wall, 1), "robots": args.robots}))
         return 0
     print(f"{args.robots} robots per floor, budgets {args.budget}, {wall:.0f} s\n")
     print(
-        f"{'floor':<9} {'method':<22} {'improvement [q25-q75]':<24} {'E_after mm':>10} "
-        f"{'travel m':>9} {'runs':>5} {'fail':>4}"
+        f"{'floor':<9} {'method':<22} {'improvement [q25-q75]':<24} {'of oracle':>9} "
+        f"{'E_after mm':>10} {'travel m':>9} {'runs':>5} {'fail':>4}"
     )
     for s in sorted(summary, key=lambda s: (s["floor"], s["method"])):
         iqr = (
             f"{s['improvement_median']:.1f} [{s['improvement_q25']:.1f}-{s['improvement_q75']:.1f}]"
         )
         print(
-            f"{s['floor']:<9} {s['method']:<22} {iqr:<24} {s['e_max_after_median_mm']:10.1f} "
+            f"{s['floor']:<9} {s['method']:<22} {iqr:<24} {s['of_oracle_median']:9.0%} "
+            f"{s['e_max_after_median_mm']:10.1f} "
             f"{s['distance_m_mean']:9.1f} {s['runs_mean']:5.1f} {s['failures']:4d}"
         )
-    for title, records, a, b in (
+    groups = [
         ("selfcal against UMBmark (paired by robot)", comparison, "selfcal", "umbmark"),
         ("selfcal against its scripted ablation", ablation, "selfcal", "selfcal_scripted"),
-    ):
+    ]
+    for best in sorted({r["best"] for r in against_best}):
+        records = [r for r in against_best if r["best"] == best]
+        groups.append(
+            (f"selfcal against the best classical method ({best})", records, "selfcal", best)
+        )
+    for title, records, a, b in groups:
         if not records:
             continue
         print(f"\n{title}")
@@ -179,6 +264,11 @@ def main() -> int:
                 f"{r['ratio_median']:6.2f} {r['better_share']:7.0%} {r['wilcoxon_p']:8.2g} "
                 f"{r[f'{a}_travel_m']:6.0f}/{r[f'{b}_travel_m']:<6.0f}"
             )
+    if picks:
+        print("\nWhat the learned policy drives (share of its runs)")
+        for record in picks:
+            shares = ", ".join(f"{k} {v:.0%}" for k, v in record["share"].items())
+            print(f"{record['floor']:<9} {record['budget']:3d} runs: {shares}")
     return 0
 
 
