@@ -40,6 +40,32 @@ step, ``return_error`` (the vehicle's) and ``truck_return_errors`` (2, 3).
 Defaults: the ``clapper`` vehicle (two calibrated LabMates), the ``concrete`` floor
 (:data:`odomgym.clapper.CLAPPER_FLOOR`, the same as the CLI's and the tests') and the
 ``recommended`` IPEC configuration.
+
+Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
+``"human"`` (a pygame window), with the ``[render]`` extra; ``metadata["render_fps"]`` is
+1/T_s (25 frames/s), so frames play back in real time. A frame shows the programmed path
+(grey), the cables laid so far (brown), both trucks at their true poses (blue outlines, "A"
+and "B") and at their estimated poses (thin green), the linkage between their centres with
+its current length in the header (red when it is within 1 cm of an end stop; for the encoder
+trailer, the rigid tongue), the true paths (blue), the estimator's paths (green: IPEC's, or
+plain dead reckoning with ``ipec=False``) and each truck's own wheel odometry (orange for A,
+purple for B). The view grows to keep every path on screen. With ``render_mode=None`` (the
+default) nothing is drawn or kept for drawing.
+
+Arguments (both envs): ``vehicle`` (a preset — ``clapper``, ``clapper-uncalibrated``,
+``trailer`` for the §7 encoder trailer —, a vehicle ``.toml`` path or a
+:class:`~odomgym.vehicle.VehicleSpec`), ``floor`` (a floor preset, ``.toml`` path or
+:class:`~odomgym.floor.FloorSpec`; default ``concrete``), ``bumps`` (cables laid, default 10),
+``ipec`` (True: IPEC's ``recommended`` configuration; False: each truck's plain dead reckoning),
+``estimator`` (any :class:`~odomgym.internal.InternalEstimator` factory, instead of IPEC),
+``render_mode``; ``ClapperStraight-v0`` also ``length`` (of each leg [m], default 18);
+``ClapperRectangle-v0`` also ``direction`` (``"cw"``/``"ccw"``) and ``side`` (which wheels
+cross the cables, ``"left"``/``"right"``).
+
+Version history:
+    * v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was
+      added in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info``: a
+      compatible addition, so the version stays v0.
 """
 
 from __future__ import annotations
@@ -63,7 +89,7 @@ from odomgym.clapper import (
     straight_path,
 )
 from odomgym.envs.base import describe_action, real_array
-from odomgym.floor import FloorSpec, load_floor
+from odomgym.floor import CableBump, FloorSpec, load_floor
 from odomgym.ipec import ipec_estimator
 from odomgym.vehicle import VehicleSpec, load_vehicle
 
@@ -89,7 +115,7 @@ def _whole(name: str, value: object) -> int:
 class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Base of the CLAPPER envs (module docstring): subclasses give the path and the cables."""
 
-    metadata = {"render_modes": [], "render_fps": 25}  # noqa: RUF012
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}  # noqa: RUF012
 
     def __init__(
         self,
@@ -98,7 +124,13 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         *,
         ipec: bool = True,
         estimator: EstimatorFactory | None = None,
+        render_mode: str | None = None,
     ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.render_mode = render_mode
         self.vehicle = vehicle if isinstance(vehicle, VehicleSpec) else load_vehicle(str(vehicle))
         self.floor = floor if isinstance(floor, FloorSpec) else load_floor(str(floor))
         if estimator is not None and not callable(estimator):
@@ -120,6 +152,9 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             low.astype(np.float32), high.astype(np.float32), dtype=np.float32
         )
         self._trial: VehicleTrial | None = None
+        self._renderer: Any = None
+        # Kept only when rendering (render_mode None: nothing is recorded for drawing).
+        self._trace: Any = None
 
     # ------------------------------------------------------------------ to implement
     def _path(self) -> VehiclePath:
@@ -145,6 +180,13 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         self._total = sum(leg.length for leg in path.legs)
         self._done_before = 0.0
+        if self.render_mode is not None:
+            from odomgym.envs.render import VehicleTrace
+
+            self._trace = VehicleTrace.empty()
+            self._record()
+            if self.render_mode == "human":
+                self.render()
         return self._observation(), self._info(np.zeros(2), final=False)
 
     def step(
@@ -166,7 +208,69 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._done_before = done_now
         terminated = bool(trial.done.all())
         info = self._info(trial.estimator.correction[0], final=terminated)
+        if self.render_mode is not None:
+            self._record()
+            if self.render_mode == "human":
+                self.render()
         return self._observation(), float(reward), terminated, False, info
+
+    # ------------------------------------------------------------------ rendering
+    def _record(self) -> None:
+        """Keep this step's poses for drawing (only called when rendering)."""
+        trial = self._trial
+        assert trial is not None and self._trace is not None
+        self._trace.add(
+            trial.truth[0], trial.estimated[0], trial.odometry.pose.reshape(trial.n, 2, 3)[0]
+        )
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """Top-down view of the run so far (module docstring, "Rendering")."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
+            return None
+        trial = self._trial
+        if trial is None:
+            raise RuntimeError("call reset() before render()")
+        from odomgym.envs.render import VehicleRenderer
+
+        if self._renderer is None:
+            spec = self.vehicle
+            if self.ipec:
+                label = "IPEC estimate"
+            elif self._estimator is not None:
+                label = "estimate (given estimator)"
+            else:
+                label = "estimate (no IPEC)"
+            self._renderer = VehicleRenderer(
+                (spec.truck_a, spec.truck_b),
+                self.floor,
+                [leg.points for leg in trial.path.legs],
+                self.render_mode,
+                self.metadata["render_fps"],
+                estimator_label=label,
+                link_range=None if spec.trailer else (spec.link_min, spec.link_max),
+                names=(
+                    (("truck", "truck"), ("trailer", "trailer"))
+                    if spec.trailer
+                    else (("A", "truck A"), ("B", "truck B"))
+                ),
+            )
+        legs = len(trial.path.legs)
+        leg = min(int(trial.driver.leg_index[0]), legs - 1) + 1
+        mode = "IPEC on" if self.ipec else "IPEC off"
+        status = f"t = {trial.time:6.2f} s   leg {leg}/{legs}   {mode}"
+        laid: tuple[CableBump, ...] = tuple(trial.cables.laid) if trial.cables else ()
+        return self._renderer.draw(self._trace, laid, status)  # type: ignore[no-any-return]
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None  # pygame surfaces do not pickle; re-created on demand
+        return state
 
     # ------------------------------------------------------------------ helpers
     def _path_done(self) -> float:
@@ -234,6 +338,7 @@ class ClapperStraightEnv(ClapperEnv):
         length: float = 18.0,
         ipec: bool = True,
         estimator: EstimatorFactory | None = None,
+        render_mode: str | None = None,
     ) -> None:
         bumps = _whole("bumps", bumps)
         if not isinstance(length, (int, float)) or not 3.5 < length < 1e3:
@@ -242,7 +347,7 @@ class ClapperStraightEnv(ClapperEnv):
                 f"each end), got {length!r}"
             )
         self.bumps, self.length = int(bumps), float(length)
-        super().__init__(vehicle, floor, ipec=ipec, estimator=estimator)
+        super().__init__(vehicle, floor, ipec=ipec, estimator=estimator, render_mode=render_mode)
 
     def _path(self) -> VehiclePath:
         return straight_path(self.length)
@@ -267,6 +372,7 @@ class ClapperRectangleEnv(ClapperEnv):
         side: Literal["left", "right"] = "right",
         ipec: bool = True,
         estimator: EstimatorFactory | None = None,
+        render_mode: str | None = None,
     ) -> None:
         if direction not in ("cw", "ccw"):
             raise ValueError(f"direction must be 'cw' or 'ccw', got {direction!r}")
@@ -274,7 +380,7 @@ class ClapperRectangleEnv(ClapperEnv):
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
         bumps = _whole("bumps", bumps)
         self.direction, self.bumps, self.side = direction, bumps, side
-        super().__init__(vehicle, floor, ipec=ipec, estimator=estimator)
+        super().__init__(vehicle, floor, ipec=ipec, estimator=estimator, render_mode=render_mode)
 
     def _path(self) -> VehiclePath:
         return rectangle_path(direction=self.direction)

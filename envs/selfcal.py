@@ -51,6 +51,30 @@ finish; the registered step limit (66 ≥ budget + 1) never truncates.
 ``true_errors``/``estimated_errors`` (E_d, E_b, E_s), ``calibration`` and ``experiments``;
 a session whose run could not finish ends with ``failed`` (the reason) instead of the
 validation entries.
+
+Arguments: ``floors`` (benchmark floor names to draw each episode's floor from; default all
+three), ``budget`` (runs, or a list to draw from per episode; default 16), ``shaping`` (the
+coefficient c, default 0.1), ``population`` (:class:`~odomgym.population.Population`, the ranges
+of the hidden errors), ``sensor`` (:class:`~odomgym.experiments.SensorAccuracy` of the end-pose
+measurement), ``render_mode``. Reset options: ``{"floor": name, "budget": runs}``.
+
+Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
+``"human"`` (a pygame window), with the ``[render]`` extra. A frame shows the session so far:
+every run in its start frame (the robot starts at the origin heading +x), its true path (blue)
+and its odometry path as the robot computed it with the corrections it drove with (orange),
+the latest run bold and earlier ones faded, over the nominal shapes of the items driven (grey);
+beside it the experiment just chosen, the budget used and left (a bar), the current estimates
+of E_d, E_b, E_s next to the true values (hidden from the agent: shown for the viewer), the
+runs in order and, at the end, the validated improvement. One frame per step (one run), so
+``metadata["render_fps"]`` is 2. With ``render_mode=None`` (the default) no run is kept for
+drawing.
+
+Version history:
+    * v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was
+      added in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info`` (before, any
+      ``render_mode`` raised :class:`~odomgym.errors.SpecError`, which stopped
+      ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so
+      the version stays v0.
 """
 
 from __future__ import annotations
@@ -166,6 +190,9 @@ class Episode:
     potential: float = 0.0
     travel: float = 0.0
     done: bool = False
+    #: Every run driven, with its menu index and the calibration it was driven with — kept
+    #: only when the env renders (None: nothing is kept).
+    trace: list[tuple[int, Run, Calibration]] | None = None
     driven: RobotSpec = field(init=False)
 
     def __post_init__(self) -> None:
@@ -312,6 +339,8 @@ def step_episodes(
         terminated = False
         if i in experiment_slot:
             run = runs[experiment_slot[i]]
+            if episode.trace is not None:
+                episode.trace.append((int(actions[i]), run, session.calibration))
             if run.meta["finished"]:
                 session.record(int(actions[i]), measure([run], episode.sensor, episode.rng))
                 episode.travel += run.distance
@@ -400,10 +429,12 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
         shaping: coefficient c of the potential-based shaping (0 turns it off).
         population: the ranges the robots' systematic errors are drawn from.
         sensor: the end-pose sensor's accuracy.
-        render_mode: only ``None`` (a session is a list of runs, not a scene).
+        render_mode: ``None`` (no drawing), ``"rgb_array"`` or ``"human"`` (module docs,
+            "Rendering").
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (Gymnasium's convention)
+    # One frame per run: at 2 frames/s a 16-run session plays back in about 8 s.
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 2}  # noqa: RUF012
 
     def __init__(
         self,
@@ -414,8 +445,11 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
         sensor: SensorAccuracy | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None:
-            raise SpecError("SelfCalibration-v0 has no render modes", field="render_mode")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise SpecError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}",
+                field="render_mode",
+            )
         if isinstance(floors, str):
             floors = (floors,)
         if not isinstance(floors, (list, tuple)):
@@ -442,6 +476,10 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
             -bound, bound, (len(OBSERVATION_LAYOUT),), dtype=np.float32
         )
         self.episode: Episode | None = None
+        self._renderer: Any = None
+        self._drawn: list[Any] = []  # the runs converted for drawing (rendering only)
+        self._improvement: float | None = None
+        self._last_item = "(none yet)"
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -467,6 +505,13 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
             "travel_m": 0.0,
             "floor": self.episode.floor_name,
         }
+        if self.render_mode is not None:
+            self.episode.trace = []
+            self._drawn = []
+            self._improvement = None
+            self._last_item = "(none yet)"
+            if self.render_mode == "human":
+                self.render()
         return self.episode.session.observation(), info
 
     def step(
@@ -477,4 +522,72 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
             raise RuntimeError("call reset() before step()")
         index = menu_index(action)
         obs, reward, terminated, info = step_episodes([self.episode], [index], self.shaping)[0]
+        if self.render_mode is not None:
+            self._improvement = info.get("improvement")
+            self._last_item = str(info["item"])
+            if self.render_mode == "human":
+                self.render()
         return obs, reward, terminated, False, info
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """The session so far (module docs, "Rendering")."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
+            return None
+        episode = self.episode
+        if episode is None or episode.trace is None:
+            raise RuntimeError("call reset() before render()")
+        from odomgym.envs.render import SessionRenderer, SessionRun, SessionState
+        from odomgym.runs import replay_odometry
+
+        if self._renderer is None:
+            self._renderer = SessionRenderer(self.render_mode, self.metadata["render_fps"])
+        for action, run, calibration in episode.trace[len(self._drawn) :]:
+            start = run.true_pose[0]
+            odometry = replay_odometry(run, episode.robot, calibration)
+            self._drawn.append(
+                SessionRun(
+                    MENU[action].name,
+                    _start_frame(run.true_pose, start),
+                    _start_frame(odometry, start),
+                    bool(run.meta["finished"]),
+                )
+            )
+        session = episode.session
+        items = sorted({action for action, _, _ in episode.trace})
+        routes = [_route_points(experiment_route(MENU[a].experiment)) for a in items]  # type: ignore[arg-type]
+        state = SessionState(
+            floor=episode.floor_name,
+            budget=session.budget,
+            runs_used=session.runs_used,
+            estimated=tuple(float(v) for v in session.estimator.errors),  # type: ignore[arg-type]
+            true=(episode.robot.e_d, episode.robot.e_b, episode.robot.e_s),
+            last_item=self._last_item,
+            improvement=self._improvement,
+        )
+        return self._renderer.draw(self._drawn, state, routes)  # type: ignore[no-any-return]
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None  # pygame surfaces do not pickle; re-created on demand
+        return state
+
+
+def _start_frame(poses: FloatArray, start: FloatArray) -> FloatArray:
+    """Positions (K, 2) [m] of ``poses`` (K, 3) in the frame of ``start`` (x, y, θ)."""
+    c, s = math.cos(float(start[2])), math.sin(float(start[2]))
+    d = poses[:, :2] - start[:2]
+    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
+
+
+def _route_points(route: Route) -> FloatArray:
+    """The polyline (K, 2) [m] of a route's driven segments (an empty one for a spin)."""
+    drives = [seg for seg in route.segments if seg.kind == "drive"]
+    if not drives:
+        return np.zeros((0, 2))
+    return np.array([drives[0].start, *(seg.end for seg in drives)], dtype=np.float64)
