@@ -9,8 +9,9 @@ and resets itself as SB3's ``DummyVecEnv`` does, so its episodes are the same wh
 number of workers, and the same as a ``DummyVecEnv`` of single envs
 (tests/test_selfcal_training.py).
 
-:func:`train` reads the hyperparameters from ``odomgym/data/hyperparams/selfcal.toml`` (one
-table per algorithm, keyed by env id, as rl-baselines3-zoo's ``hyperparams/<algo>.yml``),
+:func:`train` reads the hyperparameters from ``odomgym/data/hyperparams/<algo>.yml``, files in
+rl-baselines3-zoo's own format (one key per env id) that the zoo reads as they are
+(``python -m rl_zoo3.train … -conf``): one source of truth, no second copy to drift,
 logs SB3's progress to ``progress.csv`` (and TensorBoard when it is installed), shows a tqdm
 progress bar, plots the learning curve and exports the policy network to the ``.npz`` file
 that :class:`odomgym.baselines.selfcal.MlpPolicy` runs without torch.
@@ -28,7 +29,6 @@ import shlex
 import subprocess
 import sys
 import time
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -247,9 +247,11 @@ class SelfCalVecEnv(VecEnv):
 
 
 def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The hyperparameters of ``algo`` for ``SelfCalibration-v0``: the table
-    ``[<algo>."SelfCalibration-v0"]`` of ``path`` (default: the shipped
-    ``odomgym/data/hyperparams/selfcal.toml``)."""
+    """The hyperparameters of ``algo`` for ``SelfCalibration-v0``: the ``SelfCalibration-v0``
+    key of ``path``, a YAML file in rl-baselines3-zoo's format (default: the shipped
+    ``odomgym/data/hyperparams/<algo>.yml``, which the zoo reads too)."""
+    import yaml
+
     if algo not in ALGORITHMS:
         raise SpecError(
             f"unknown algorithm {algo!r}; algorithms for a Discrete action space: "
@@ -257,8 +259,8 @@ def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any
             field="algo",
         )
     if path is None:
-        text = (resources.files("odomgym.data.hyperparams") / "selfcal.toml").read_text()
-        source = "selfcal.toml"
+        text = (resources.files("odomgym.data.hyperparams") / f"{algo}.yml").read_text()
+        source = f"{algo}.yml"
     else:
         source = str(path)
         try:
@@ -266,12 +268,13 @@ def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any
         except OSError as exc:
             raise SpecError(f"{path}: cannot read ({exc.strerror})", field="hyperparams") from exc
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{source}: {exc}", field="hyperparams") from exc
-    table = data.get(algo, {}).get(ENV_ID)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        problem = " ".join(str(exc).split())
+        raise SpecError(f"{source}: not valid YAML ({problem})", field="hyperparams") from None
+    table = data.get(ENV_ID) if isinstance(data, dict) else None
     if not isinstance(table, dict):
-        raise SpecError(f'{source}: no table [{algo}."{ENV_ID}"]', field=algo)
+        raise SpecError(f"{source}: no key {ENV_ID!r} (rl-zoo3 format)", field="hyperparams")
     return dict(table)
 
 
@@ -533,7 +536,7 @@ def train(
     unknown = sorted(set(params) - takes)
     if unknown:
         raise SpecError(
-            f"{hyperparams or 'selfcal.toml'}: {algo} takes no hyperparameter {', '.join(unknown)}",
+            f"{hyperparams or f'{algo}.yml'}: {algo} takes no hyperparameter {', '.join(unknown)}",
             field="hyperparams",
         )
     if checkpoint_every < 1:

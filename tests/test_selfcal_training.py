@@ -112,9 +112,13 @@ def test_hyperparameters_come_from_the_data_file_keyed_by_env_id(tmp_path) -> No
     assert params["policy"] == "MlpPolicy" and params["gamma"] == 1.0
     with pytest.raises(SpecError, match="unknown algorithm 'sac'"):
         load_hyperparams("sac")
-    (tmp_path / "h.toml").write_text("[ppo.Other-v0]\nn_envs = 2\n")
-    with pytest.raises(SpecError, match=r'no table \[ppo\."SelfCalibration-v0"\]'):
-        load_hyperparams("ppo", tmp_path / "h.toml")
+    assert load_hyperparams("dqn")["buffer_size"] == 50_000  # each algorithm its own file
+    (tmp_path / "h.yml").write_text("Other-v0:\n  n_envs: 2\n")
+    with pytest.raises(SpecError, match=r"h\.yml: no key 'SelfCalibration-v0'"):
+        load_hyperparams("ppo", tmp_path / "h.yml")
+    (tmp_path / "bad.yml").write_text("SelfCalibration-v0: [\n")
+    with pytest.raises(SpecError, match=r"bad\.yml: not valid YAML"):
+        load_hyperparams("ppo", tmp_path / "bad.yml")
 
 
 def test_train_command_writes_the_policy_and_its_record(tmp_path, capsys) -> None:

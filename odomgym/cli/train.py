@@ -51,8 +51,9 @@ def register(commands: Commands) -> None:
     )
     parser.add_argument(
         "--hyperparams",
-        help='a TOML file with [<algo>."SelfCalibration-v0"] tables (default: the shipped '
-        "odomgym/data/hyperparams/selfcal.toml)",
+        help="a YAML file in rl-baselines3-zoo's format with a SelfCalibration-v0 key for "
+        "--algo (default: the shipped odomgym/data/hyperparams/<algo>.yml, which the zoo "
+        "reads too)",
     )
     parser.add_argument(
         "--checkpoint-every",
