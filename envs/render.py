@@ -402,11 +402,14 @@ class VehicleRenderer:
         canvas.floor(px, self.floor, cables)
         for points in self.paths:
             canvas.path(px, points, ROUTE, 2)
-        for k in (1, 0):  # truck A's lines on top
-            line = 2 if k == 0 else 1
-            canvas.path(px, odometry[:, k, :2], ODOM_PATH if k == 0 else ODOM_PATH_B, line)
-            canvas.path(px, estimated[:, k, :2], ESTIMATE, line)
-            canvas.path(px, true[:, k, :2], TRUE_PATH, line)
+        # The truth wide underneath, the odometry over it and the estimate thin on top: an
+        # estimate that stays on the truth shows as a green line inside the blue one.
+        for k in (1, 0):  # truck A's lines on top of truck B's
+            canvas.path(px, true[:, k, :2], TRUE_PATH, 4 if k == 0 else 3)
+        for k in (1, 0):
+            canvas.path(px, odometry[:, k, :2], ODOM_PATH if k == 0 else ODOM_PATH_B, 1)
+        for k in (1, 0):
+            canvas.path(px, estimated[:, k, :2], ESTIMATE, 1)
         if len(true):
             self._vehicle(px, true[-1], estimated[-1])
         self._header(status, true[-1] if len(true) else None)
