@@ -12,8 +12,8 @@ truck's two wheel encoders it measures
 An :class:`InternalEstimator` turns these into the poses of both trucks, batched over N
 vehicles. Array conventions (all float64, world frame, metres and radians, θ counter-clockwise):
 
-* poses (N, 2, 3): [vehicle][truck A, B][x, y, θ]; θ is kept unwrapped (continuous);
-* wheel travel (N, 2, 2): [vehicle][truck][left, right], the travel of one sampling interval *as
+* poses (N, 2, 3): `[vehicle][truck A, B][x, y, θ]`; θ is kept unwrapped (continuous);
+* wheel travel (N, 2, 2): `[vehicle][truck][left, right]`, the travel of one sampling interval *as
   the odometry believes it* (encoder counts × calibrated metres per count);
 * :class:`LinkReading`: the encoders' values at the end of the interval.
 
