@@ -30,5 +30,9 @@ echo "== mypy (installed package)"
 # mapped in by package-dir) does not shadow the installed package.
 REPO="$(pwd)"
 (cd "$(mktemp -d)" && "$REPO/$VENV/bin/mypy" --config-file "$REPO/pyproject.toml" -p odomgym)
+echo "== mkdocs build --strict (the documentation site; a broken link or undocumented name fails)"
+SITE="$(mktemp -d)"
+NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$SITE"
+rm -rf "$SITE"
 echo "== pytest"
 "$VENV/bin/pytest" -p no:cacheprovider
