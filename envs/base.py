@@ -238,7 +238,25 @@ _REWARD, _TERMINATED = _COLUMN["reward"], _COLUMN["terminated"]
 _PROGRESS, _TIME, _COMPLETION = (_COLUMN[name] for name in _TERMS)
 
 
-class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
+class DrawsLazily:
+    """``close()`` and pickling for an env whose renderer (``_renderer``) is created on the first
+    ``render()`` call: rendering costs nothing until asked for, pygame surfaces do not pickle
+    (a copy re-creates its renderer on demand), and closing releases the window."""
+
+    _renderer: Any
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state
+
+
+class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
     """Base of the single-robot envs: a robot follows a route by its own odometry.
 
     Subclasses implement :meth:`_route` (which route an episode drives). See
@@ -392,13 +410,3 @@ class RouteEnv(gym.Env[NDArray[Any], NDArray[Any]]):
                 self.robot, self.floor, self.render_mode, self.metadata["render_fps"]
             )
         return self._renderer.draw(self.route, self._history)  # type: ignore[no-any-return]
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["_renderer"] = None  # pygame surfaces do not pickle; re-created on demand
-        return state

@@ -88,7 +88,7 @@ from odomgym.clapper import (
     rectangle_path,
     straight_path,
 )
-from odomgym.envs.base import describe_action, real_array
+from odomgym.envs.base import DrawsLazily, describe_action, real_array
 from odomgym.floor import CableBump, FloorSpec, load_floor
 from odomgym.ipec import ipec_estimator
 from odomgym.vehicle import VehicleSpec, load_vehicle
@@ -112,7 +112,7 @@ def _whole(name: str, value: object) -> int:
     return int(value)
 
 
-class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Base of the CLAPPER envs (module docstring): subclasses give the path and the cables."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}  # noqa: RUF012
@@ -261,16 +261,6 @@ class ClapperEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         status = f"t = {trial.time:6.2f} s   leg {leg}/{legs}   {mode}"
         laid: tuple[CableBump, ...] = tuple(trial.cables.laid) if trial.cables else ()
         return self._renderer.draw(self._trace, laid, status)  # type: ignore[no-any-return]
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["_renderer"] = None  # pygame surfaces do not pickle; re-created on demand
-        return state
 
     # ------------------------------------------------------------------ helpers
     def _path_done(self) -> float:

@@ -89,7 +89,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.envs.base import describe_action
+from odomgym.envs.base import DrawsLazily, describe_action
 from odomgym.errors import SpecError
 from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FLOORS, FloorSpec
@@ -419,7 +419,7 @@ def _budgets(budget: object) -> tuple[int, ...]:
     return tuple(int(v) for v in values)  # type: ignore[call-overload]
 
 
-class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
+class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
     """One self-calibration session per episode (see the module docs).
 
     Args:
@@ -566,16 +566,6 @@ class SelfCalibrationEnv(gym.Env[NDArray[np.float32], np.int64]):
             improvement=self._improvement,
         )
         return self._renderer.draw(self._drawn, state, routes)  # type: ignore[no-any-return]
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["_renderer"] = None  # pygame surfaces do not pickle; re-created on demand
-        return state
 
 
 def _start_frame(poses: FloatArray, start: FloatArray) -> FloatArray:
