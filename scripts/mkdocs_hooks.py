@@ -24,6 +24,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+from mkdocs.plugins import event_priority
 from mkdocs.structure.files import File, Files
 
 log = logging.getLogger("mkdocs.plugins.odomgym")
@@ -245,6 +246,7 @@ SOURCE_LAYOUT = ROOT / "build" / "docs-src"
 """Where :func:`on_config` lays out the package as installed (``mkdocs.yml``: ``paths``)."""
 
 
+@event_priority(100)  # before mkdocstrings reads ``paths``: a fresh clone has no layout yet
 def on_config(config: Any) -> Any:
     """Lay the source tree out as the installed package (``odomgym/envs`` and
     ``odomgym/baselines`` mapped in from the top-level folders, as setuptools' ``package-dir``
