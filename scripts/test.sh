@@ -5,6 +5,15 @@
 #   bash scripts/test.sh            # venv in .venv-test (recreated every time)
 #   VENV=/tmp/v bash scripts/test.sh
 #
+# pytest runs the WHOLE suite, tests marked slow included, on parallel workers (pytest-xdist,
+# part of the test extra): -n auto starts one worker per CPU (2 on the 2-core CI machine, where
+# it takes about half the serial time). PYTEST_WORKERS overrides the count (0: serially, in this
+# process, e.g. to read a failure without xdist in the way).
+#
+# Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
+#
+#   pytest -n auto -m "not slow"    # about 2 minutes on 2 cores; CI runs the slow ones too
+#
 # torch is pinned first because this machine ships a CPU build of 2.13.0 locally; without the
 # pin pip may choose a multi-GB CUDA build to satisfy the `rl` extra's loose range.
 set -euo pipefail
@@ -34,5 +43,5 @@ echo "== mkdocs build --strict (the documentation site; a broken link or undocum
 SITE="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$SITE"
 rm -rf "$SITE"
-echo "== pytest"
-"$VENV/bin/pytest" -p no:cacheprovider
+echo "== pytest (every test, slow ones included, on ${PYTEST_WORKERS:-auto} xdist workers)"
+"$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}"

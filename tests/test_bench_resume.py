@@ -214,12 +214,12 @@ DIAGNOSE = [
 ]
 
 
-@pytest.mark.slow
 def _fits(journal: Path) -> list[Path]:
     """The stored fits (not the writer's hidden temporaries)."""
     return [p for p in journal.glob("*.pkl") if not p.name.startswith(".")]
 
 
+@pytest.mark.slow
 def test_sigterm_stops_diagnose_and_resume_gives_the_same_report(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

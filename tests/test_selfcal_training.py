@@ -201,6 +201,7 @@ MARGIN = 0.8
 (the medians of 20 paired robots scatter by about ±15 %)."""
 
 
+@pytest.mark.slow
 def test_training_is_reproducible_from_its_command(tmp_path) -> None:
     """The same command twice (two worker processes each time) gives bit-identical weights:
     the shipped policy's recorded command reproduces it."""
