@@ -619,7 +619,13 @@ def _run_ray(
     pending = {remote.remote(config, part): part for part in parts}
     try:
         while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            try:
+                ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            except SystemError:
+                # A stop request raised by the signal handler inside Ray's compiled wait comes
+                # back wrapped ("returned a result with an exception set"): stop as asked.
+                interrupt.check()
+                raise
             interrupt.check()
             for ref in ready:
                 finished(pending.pop(ref), ray.get(ref))
