@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
+from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.odometry import Calibration, load_calibration
 from odomgym.robot import RobotSpec, load_robot
@@ -244,6 +245,26 @@ class DrawsLazily:
     (a copy re-creates its renderer on demand), and closing releases the window."""
 
     _renderer: Any
+    render_mode: str | None
+    metadata: dict[str, Any]
+
+    def _set_render_mode(self, render_mode: str | None) -> None:
+        """Check ``render_mode`` against ``metadata["render_modes"]`` (a :class:`SpecError`
+        naming it) and keep it; no renderer exists until the first ``render()``."""
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise SpecError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}",
+                field="render_mode",
+            )
+        self.render_mode = render_mode
+        self._renderer = None
+
+    def _render_mode_or_warn(self) -> str | None:
+        """The render mode; None, with Gymnasium's warning, when ``render()`` is called without
+        one."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
+        return self.render_mode
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -287,23 +308,18 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
                 )
             covariance_k = (kl, kr)
         self.covariance_k = covariance_k
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
+        self._set_render_mode(render_mode)
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
         self.dt = float(dt)
         # Frames are one control period apart: played back at 1/dt they run in real time.
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.dt}
-        self.render_mode = render_mode
         self.weights = reward_weights or RewardWeights()
         self._episodes = RouteEpisodes(self.weights, 1)
         self.observation_space = observation_space()
         self.action_space = action_space()
         self._trial: Trial | None = None
         self._terminated = False
-        self._renderer: Any = None
         self._history: list[tuple[float, float, float, float, float, float]] = []
 
     # ------------------------------------------------------------------ to implement
@@ -400,13 +416,13 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
         """Top-down view: floor bumps, the route, the true path (blue), the odometry path
         (orange), the robot at its true pose and a ghost at its odometry pose, with a legend
         and a scale bar."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
+        mode = self._render_mode_or_warn()
+        if mode is None:
             return None
         from odomgym.envs.render import TopDownRenderer
 
         if self._renderer is None:
             self._renderer = TopDownRenderer(
-                self.robot, self.floor, self.render_mode, self.metadata["render_fps"]
+                self.robot, self.floor, mode, self.metadata["render_fps"]
             )
         return self._renderer.draw(self.route, self._history)  # type: ignore[no-any-return]

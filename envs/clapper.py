@@ -126,11 +126,7 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
         estimator: EstimatorFactory | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
+        self._set_render_mode(render_mode)
         self.vehicle = vehicle if isinstance(vehicle, VehicleSpec) else load_vehicle(str(vehicle))
         self.floor = floor if isinstance(floor, FloorSpec) else load_floor(str(floor))
         if estimator is not None and not callable(estimator):
@@ -152,7 +148,6 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
             low.astype(np.float32), high.astype(np.float32), dtype=np.float32
         )
         self._trial: VehicleTrial | None = None
-        self._renderer: Any = None
         # Kept only when rendering (render_mode None: nothing is recorded for drawing).
         self._trace: Any = None
 
@@ -225,8 +220,8 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
 
     def render(self) -> NDArray[np.uint8] | None:
         """Top-down view of the run so far (module docstring, "Rendering")."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
+        mode = self._render_mode_or_warn()
+        if mode is None:
             return None
         trial = self._trial
         if trial is None:
@@ -245,7 +240,7 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
                 (spec.truck_a, spec.truck_b),
                 self.floor,
                 [leg.points for leg in trial.path.legs],
-                self.render_mode,
+                mode,
                 self.metadata["render_fps"],
                 estimator_label=label,
                 link_range=None if spec.trailer else (spec.link_min, spec.link_max),

@@ -445,11 +445,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         sensor: SensorAccuracy | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise SpecError(
-                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}",
-                field="render_mode",
-            )
+        self._set_render_mode(render_mode)
         if isinstance(floors, str):
             floors = (floors,)
         if not isinstance(floors, (list, tuple)):
@@ -469,14 +465,12 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         self.shaping = float(shaping)
         self.population = population or Population()
         self.sensor = sensor or SensorAccuracy()
-        self.render_mode = render_mode
         self.action_space = gym.spaces.Discrete(len(MENU))
         bound = OBSERVATION_BOUND
         self.observation_space = gym.spaces.Box(
             -bound, bound, (len(OBSERVATION_LAYOUT),), dtype=np.float32
         )
         self.episode: Episode | None = None
-        self._renderer: Any = None
         self._drawn: list[Any] = []  # the runs converted for drawing (rendering only)
         self._improvement: float | None = None
         self._last_item = "(none yet)"
@@ -531,8 +525,8 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
 
     def render(self) -> NDArray[np.uint8] | None:
         """The session so far (module docs, "Rendering")."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode to make()")
+        mode = self._render_mode_or_warn()
+        if mode is None:
             return None
         episode = self.episode
         if episode is None or episode.trace is None:
@@ -541,7 +535,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         from odomgym.runs import replay_odometry
 
         if self._renderer is None:
-            self._renderer = SessionRenderer(self.render_mode, self.metadata["render_fps"])
+            self._renderer = SessionRenderer(mode, self.metadata["render_fps"])
         for action, run, calibration in episode.trace[len(self._drawn) :]:
             start = run.true_pose[0]
             odometry = replay_odometry(run, episode.robot, calibration)
