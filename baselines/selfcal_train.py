@@ -44,7 +44,7 @@ from odomgym.baselines.selfcal import MlpPolicy
 from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_text, atomic_writer
-from odomgym.selfcal_session import OBSERVATION_LAYOUT, OBSERVATION_VERSION
+from odomgym.selfcal_session import OBSERVATION_LAYOUT, OBSERVATION_VERSION, check_observe
 from odomgym.workers import Shards
 
 try:
@@ -653,6 +653,7 @@ def train(
         "hyperparams": {k: v for k, v in params.items() if k != "policy_kwargs"}
         | {"policy_kwargs": json.loads(json.dumps(params.get("policy_kwargs", {})))},
         "env_kwargs": env_kwargs,
+        "observe": check_observe(env_kwargs.get("observe", "trajectory")),
         "observation_version": OBSERVATION_VERSION,
         "observation_layout": list(OBSERVATION_LAYOUT),
     }

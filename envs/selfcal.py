@@ -19,9 +19,12 @@ Spaces:
         last run's normalised innovation and which item it was. Everything a person at the home
         position could know — never the truth.
 
-Each run is measured as a person at the home position would (the end pose with the sensor's
-noise, σ = 2 mm and 0.4°; Borenstein & Feng 1994, §6.3), and the estimator refits the
-corrections (iterative compensation).
+Each run is measured by the lab's ground-truth sensor (every pose sample with its noise,
+σ = 2 mm and 0.4°, the accuracy of Borenstein & Feng 1994, §6.3), and the estimator updates the
+corrections (iterative compensation): by default (``observe="trajectory"``) a Kalman filter
+along the whole measured run (:class:`~odomgym.selfcal_session.TrajectoryEstimator`); with
+``observe="end_pose"`` a fit to the end poses alone, what a person with a tape measure at the
+home position gets (:class:`~odomgym.selfcal_session.EndPoseEstimator`).
 
 Reward: at the end of the session, the final corrections are validated on fresh runs the agent
 never sees — a 4×4 m square each way and a 4 m straight run, driven on the noiseless ``smooth``
@@ -55,8 +58,9 @@ validation entries.
 Arguments: ``floors`` (benchmark floor names to draw each episode's floor from; default all
 three), ``budget`` (runs, or a list to draw from per episode; default 16), ``shaping`` (the
 coefficient c, default 0.1), ``population`` (:class:`~odomgym.population.Population`, the ranges
-of the hidden errors), ``sensor`` (:class:`~odomgym.experiments.SensorAccuracy` of the end-pose
-measurement), ``render_mode``. Reset options: ``{"floor": name, "budget": runs}``.
+of the hidden errors), ``sensor`` (:class:`~odomgym.experiments.SensorAccuracy` of each measured
+pose), ``observe`` (``"trajectory"`` or ``"end_pose"``: what the estimator sees; version 2 of the
+observation, :data:`~odomgym.selfcal_session.OBSERVATION_VERSION`), ``render_mode``. Reset options: ``{"floor": name, "budget": runs}``.
 
 Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
 ``"human"`` (a pygame window), with the ``[render]`` extra. A frame shows the session so far:
@@ -106,6 +110,7 @@ from odomgym.selfcal_session import (
     OBSERVATION_BOUND,
     OBSERVATION_LAYOUT,
     SelfCalSession,
+    check_observe,
 )
 
 __all__ = [
@@ -207,6 +212,7 @@ def new_episode(
     population: Population,
     sensor: SensorAccuracy,
     options: Mapping[str, Any] | None = None,
+    observe: str = "trajectory",
 ) -> Episode:
     """A new session: robot, floor, budget and run stream all drawn from ``rng``.
 
@@ -224,7 +230,8 @@ def new_episode(
     check_bench_floor(floor_name)
     budget = opts.get("budget", budgets[int(rng.integers(len(budgets)))])
     robot = population.sample(robot_rng, "selfcal-robot")
-    session = SelfCalSession(robot, budget, sensor)  # it reads only the nominal parameters
+    # The session reads only the nominal parameters.
+    session = SelfCalSession(robot, budget, sensor, observe=observe)
     return Episode(robot, floor_name, session, run_rng, sensor)
 
 
@@ -428,7 +435,9 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             uses (4, 8, 16) so one policy serves every budget; the budget is observed).
         shaping: coefficient c of the potential-based shaping (0 turns it off).
         population: the ranges the robots' systematic errors are drawn from.
-        sensor: the end-pose sensor's accuracy.
+        sensor: the ground-truth sensor's accuracy (each pose sample).
+        observe: what the estimator sees of each run: ``"trajectory"`` (default) or
+            ``"end_pose"`` (:data:`~odomgym.selfcal_session.ESTIMATORS`).
         render_mode: ``None`` (no drawing), ``"rgb_array"`` or ``"human"`` (module docs,
             "Rendering").
     """
@@ -443,9 +452,11 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         shaping: float = 0.1,
         population: Population | None = None,
         sensor: SensorAccuracy | None = None,
+        observe: str = "trajectory",
         render_mode: str | None = None,
     ) -> None:
         self._set_render_mode(render_mode)
+        self.observe = check_observe(observe)
         if isinstance(floors, str):
             floors = (floors,)
         if not isinstance(floors, (list, tuple)):
@@ -491,7 +502,13 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
                 )
             opts["budget"] = _budgets(opts["budget"])[0]
         self.episode = new_episode(
-            self.np_random, self.floors, self.budgets, self.population, self.sensor, opts
+            self.np_random,
+            self.floors,
+            self.budgets,
+            self.population,
+            self.sensor,
+            opts,
+            self.observe,
         )
         info = {
             "runs_used": 0,
