@@ -11,9 +11,10 @@ own, which the command line, the benchmark and the leaderboard then offer (worke
 * ``ivanjko`` — Ivanjko et al., straight runs and in-place spins, nonlinear least squares;
 * ``least_squares`` — Antonelli et al. style linear least squares over whole runs;
 * ``trajectory`` — OptiOdom-style optimisation over whole trajectories;
-* ``selfcal`` — a learned policy that chooses the experiments, with an end-pose estimator
-  (``SelfCalibration-v0``; the shipped policy runs in numpy, no torch needed);
-* ``selfcal_scripted`` — the same estimator with a fixed schedule (the ablation).
+* ``selfcal`` — a learned policy that chooses the experiments, with a Kalman filter along the
+  measured runs (``SelfCalibration-v0``; the shipped policy runs in numpy, no torch needed);
+* ``selfcal_scripted`` — the same estimator with a fixed schedule (the policy's ablation);
+* ``selfcal_end_pose`` — that schedule with end poses only (the trajectory's ablation).
 """
 
 from __future__ import annotations
@@ -23,12 +24,22 @@ from odomgym.baselines.ivanjko import Ivanjko
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.least_squares import LeastSquares
 from odomgym.baselines.lee import Lee
-from odomgym.baselines.selfcal import SelfCal, SelfCalScripted
+from odomgym.baselines.selfcal import SelfCal, SelfCalEndPose, SelfCalScripted
 from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.umbmark import UMBmark
 
 # The built-in methods, in the order tables list them.
-for _cls in (UMBmark, JungChung, Lee, Ivanjko, LeastSquares, Trajectory, SelfCal, SelfCalScripted):
+for _cls in (
+    UMBmark,
+    JungChung,
+    Lee,
+    Ivanjko,
+    LeastSquares,
+    Trajectory,
+    SelfCal,
+    SelfCalScripted,
+    SelfCalEndPose,
+):
     register_calibrator(_cls)
 
 __all__ = [
@@ -40,6 +51,7 @@ __all__ = [
     "LeastSquares",
     "Lee",
     "SelfCal",
+    "SelfCalEndPose",
     "SelfCalScripted",
     "Trajectory",
     "UMBmark",

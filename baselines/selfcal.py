@@ -46,11 +46,14 @@ from odomgym.selfcal_session import (
     OBSERVATION_VERSION,
     STOP,
     SelfCalSession,
+    check_observe,
 )
 
 __all__ = [
     "MlpPolicy",
     "SelfCal",
+    "SelfCalEndPose",
+    "SelfCalEndPoseOptions",
     "SelfCalOptions",
     "SelfCalScripted",
     "SelfCalScriptedOptions",
@@ -198,12 +201,17 @@ class SelfCalOptions:
         budget: runs the session may perform [runs] (the benchmark's default: 16).
         policy: ``"learned"`` (the shipped PPO policy), ``"scripted"`` (the fixed schedule of
             :func:`scripted_policy`) or the path of a policy ``.npz`` file.
+        observe: what the estimator sees of each run: ``"trajectory"`` (every measured pose,
+            the default) or ``"end_pose"`` (:data:`odomgym.selfcal_session.ESTIMATORS`); a
+            learned policy must have been trained with the same (its file records it).
     """
 
     budget: int = 16
     policy: str = "learned"
+    observe: str = "trajectory"
 
     def __post_init__(self) -> None:
+        check_observe(self.observe)
         require_count("budget", self.budget, 1)
         if self.budget > MAX_BUDGET:
             raise SpecError(
@@ -224,13 +232,15 @@ class SelfCal(Calibrator):
 
     name: ClassVar[str] = "selfcal"
     reference: ClassVar[str] = (
-        "odomgym's SelfCalibration-v0 policy (PPO: Schulman et al. 2017) with a Gauss-Newton "
-        "end-pose estimator; compared with Borenstein & Feng 1994"
+        "odomgym's SelfCalibration-v0 policy (PPO: Schulman et al. 2017) with an augmented-"
+        "state Kalman filter along the measured runs; compared with Borenstein & Feng 1994"
     )
     options_type: ClassVar[type[Any]] = SelfCalOptions
 
-    def __init__(self, budget: int = 16, policy: str = "learned") -> None:
-        self.options = self.options_type(budget, policy)
+    def __init__(
+        self, budget: int = 16, policy: str = "learned", observe: str = "trajectory"
+    ) -> None:
+        self.options = self.options_type(budget, policy, observe)
         self._policy: MlpPolicy | None = None
 
     min_budget: ClassVar[int] = 1
@@ -265,13 +275,23 @@ class SelfCal(Calibrator):
         if self.options.policy == "scripted":
             return scripted_policy(session.observation(), session.budget, session.runs_used)
         if self._policy is None:
-            self._policy = load_policy(self.options.policy)
+            policy = load_policy(self.options.policy)
+            trained = policy.meta.get("observe", "trajectory")
+            if trained != self.options.observe:
+                raise SpecError(
+                    f"policy {self.options.policy!r} was trained with observe={trained!r}, not "
+                    f"{self.options.observe!r}: its observations would mean something else",
+                    field="observe",
+                )
+            self._policy = policy
         return self._policy(session.observation())
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Run a session in ``lab``: choose, drive with the current estimate, measure, refit."""
         sensor = getattr(lab, "sensor", None)  # a SimLab's; else the default sonar calibrator
-        session = SelfCalSession(lab.robot, self.options.budget, sensor, initial)
+        session = SelfCalSession(
+            lab.robot, self.options.budget, sensor, initial, observe=self.options.observe
+        )
         while (action := self._choose(session)) != STOP:
             experiment = session.experiment(action)
             assert experiment is not None
@@ -319,10 +339,47 @@ class SelfCalScripted(SelfCal):
 
     name: ClassVar[str] = "selfcal_scripted"
     reference: ClassVar[str] = (
-        "odomgym's end-pose Gauss-Newton estimator with a fixed schedule of 4 m squares "
+        "odomgym's trajectory Kalman filter with a fixed schedule of 4 m squares "
         "(Borenstein & Feng 1994's experiment) and straight runs"
     )
     options_type: ClassVar[type[Any]] = SelfCalScriptedOptions
 
-    def __init__(self, budget: int = 16, policy: str = "scripted") -> None:
-        super().__init__(budget, policy)
+    def __init__(
+        self, budget: int = 16, policy: str = "scripted", observe: str = "trajectory"
+    ) -> None:
+        super().__init__(budget, policy, observe)
+
+
+@dataclass(frozen=True)
+class SelfCalEndPoseOptions(SelfCalScriptedOptions):
+    """Options of :class:`SelfCalEndPose`: the scripted schedule, end poses only."""
+
+    observe: str = "end_pose"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.observe != "end_pose":
+            raise SpecError(
+                "selfcal_end_pose always sees end poses only; for the trajectory use "
+                "selfcal_scripted",
+                field="observe",
+            )
+
+
+class SelfCalEndPose(SelfCalScripted):
+    """The second ablation: the scripted schedule with the estimator restricted to each run's
+    end pose (:class:`~odomgym.selfcal_session.EndPoseEstimator`) — UMBmark's information, a
+    tape measure at the home position — so the gain of seeing the whole trajectory is measured
+    on its own."""
+
+    name: ClassVar[str] = "selfcal_end_pose"
+    reference: ClassVar[str] = (
+        "odomgym's end-pose Gauss-Newton estimator with the fixed schedule of selfcal_scripted "
+        "(end poses only, as Borenstein & Feng 1994 measure them)"
+    )
+    options_type: ClassVar[type[Any]] = SelfCalEndPoseOptions
+
+    def __init__(
+        self, budget: int = 16, policy: str = "scripted", observe: str = "end_pose"
+    ) -> None:
+        super().__init__(budget, policy, observe)
