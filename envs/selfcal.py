@@ -60,7 +60,8 @@ three), ``budget`` (runs, or a list to draw from per episode; default 16), ``sha
 coefficient c, default 0.1), ``population`` (:class:`~odomgym.population.Population`, the ranges
 of the hidden errors), ``sensor`` (:class:`~odomgym.experiments.SensorAccuracy` of each measured
 pose), ``observe`` (``"trajectory"`` or ``"end_pose"``: what the estimator sees; version 2 of the
-observation, :data:`~odomgym.selfcal_session.OBSERVATION_VERSION`), ``render_mode``. Reset options: ``{"floor": name, "budget": runs}``.
+observation, :data:`~odomgym.selfcal_session.OBSERVATION_VERSION`), ``render_mode``.
+Reset options: ``{"floor": name, "budget": runs}``.
 
 Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
 ``"human"`` (a pygame window), with the ``[render]`` extra. A frame shows the session so far:
