@@ -1,4 +1,4 @@
-"""Self-calibration: a policy chooses the experiments, an end-pose estimator does the geometry.
+"""Self-calibration: a policy chooses the experiments, a Kalman filter does the geometry.
 
 UMBmark (Borenstein & Feng 1994, §6.3) prescribes ten 4×4 m squares and reads two numbers off
 their end errors. ``selfcal`` asks instead: *which* run should the robot drive next, given
@@ -6,13 +6,14 @@ what it has measured so far, and when has it learnt enough? A session has a budg
 at every step a policy picks one item of :data:`MENU` (a 4 m or 2 m square either way, a 4 m
 straight run one way or out and back, an in-place spin) or ``stop``. Every run is driven with
 the current estimate in the odometry (iterative compensation, as UMBmark's §6.3 second round
-and solderspot 2014 do), and a person at the home position measures where it stopped —
-the same information UMBmark uses, never the trajectory in between.
+and solderspot 2014 do), and the lab's ground-truth sensor measures it.
 
-**The estimator** (:class:`odomgym.selfcal_session.EndPoseEstimator`) is a Gauss–Newton fit of
-the effective D_L, D_R and b to the measured end poses, with a prior from the benchmark
-population; the session, its menu and its observation are :mod:`odomgym.selfcal_session`,
-shared with the env.
+**The estimator** (:class:`odomgym.selfcal_session.TrajectoryEstimator`) is an augmented-state
+Kalman filter along every measured pose of the runs (Larsen et al. 1998; Martinelli et al.
+2007), with a prior from the benchmark population; ``observe="end_pose"``
+(:class:`~odomgym.selfcal_session.EndPoseEstimator`, the ``selfcal_end_pose`` method) restricts
+it to the end poses a person at the home position measures — UMBmark's information. The
+session, its menu and its observation are :mod:`odomgym.selfcal_session`, shared with the env.
 
 **The policy** maps the session's fixed-size observation
 (:meth:`~odomgym.selfcal_session.SelfCalSession.observation`, layout

@@ -1,21 +1,31 @@
-"""The self-calibration session: its experiment menu, its end-pose estimator, its observation.
+"""The self-calibration session: its experiment menu, its estimators, its observation.
 
 A session (:class:`SelfCalSession`) has a budget of runs; at every step a policy picks one item
 of :data:`MENU` (a 4 m or 2 m square either way, a 4 m straight run one way or out and back, an
-in-place spin) or ``stop``, the run is driven with the current estimate in the odometry, and a
-person at the home position measures where it stopped.
+in-place spin) or ``stop``, the run is driven with the current estimate in the odometry, and the
+lab's ground-truth sensor measures it.
 
-**The estimator** (:class:`EndPoseEstimator`) is a Gauss–Newton fit of the three effective
-odometry parameters x = (ln D_L/D_n, ln D_R/D_n, ln b/b_n) to the measured end poses: each run's
-encoder counts are dead-reckoned from its (exactly known) start pose with the candidate
-parameters (:func:`odomgym.runs.replay_with_jacobian`, which also gives the end pose's
-Jacobian), and the residuals against the measured end poses are weighted by the sensor's
-accuracy plus the floor's scatter for that kind of run. A Gaussian prior centred on the nominal
-robot with σ = the benchmark population's half-ranges (:class:`odomgym.population.Population`:
-E_d ± 0.01, E_b ± 0.05, E_s ± 0.02) keeps the fit well posed after one run. The floor's scatter
-is :data:`MENU`'s per-run standard deviations, measured on the ``concrete`` benchmark floor,
-times a roughness factor ρ ≥ 1 estimated from the residuals (ρ ≈ 5 on the ``rough`` floor): a
-rough floor down-weights itself relative to the prior.
+**The estimators** fit the three effective odometry parameters
+x = (ln D_L/D_n, ln D_R/D_n, ln b/b_n), with a Gaussian prior centred on the nominal robot with
+σ = the benchmark population's half-ranges (:class:`odomgym.population.Population`:
+E_d ± 0.01, E_b ± 0.05, E_s ± 0.02), which keeps the fit well posed after one run.
+
+* :class:`TrajectoryEstimator` (``observe="trajectory"``, the default) — an augmented-state
+  Kalman filter along every measured pose of each run (Larsen et al. 1998; Martinelli et al.
+  2007): the odometry's motion between samples predicts the pose, the floor's wheel-travel
+  noise (Chong & Kleeman 1997, Eq. 4) widens the prediction, the measured pose corrects pose and
+  parameters together.
+* :class:`EndPoseEstimator` (``observe="end_pose"``) — a Gauss–Newton fit to each run's end pose
+  alone, what a person with a tape measure at the home position gets (UMBmark's information,
+  Borenstein & Feng 1994, §6.3): each run's encoder counts are dead-reckoned from its exactly
+  known start pose with the candidate parameters (:func:`odomgym.runs.replay_with_jacobian`)
+  and the residuals are weighted by the sensor's accuracy plus the floor's scatter for that kind
+  of run.
+
+Both estimate the floor's roughness factor ρ ≥ 1 from the end-pose residuals: the scatter of
+each kind of run over :data:`MENU`'s per-run standard deviations, measured on the ``concrete``
+benchmark floor (ρ ≈ 5 on the ``rough`` floor), so a rough floor down-weights itself relative
+to the prior.
 
 The Gymnasium env (:mod:`odomgym.envs.selfcal`), its batched training env and the calibrator
 (:class:`odomgym.baselines.selfcal.SelfCal`) all drive this one object, so it lives in the core
@@ -364,8 +374,8 @@ class TrajectoryEstimator(EndPoseEstimator):
     Where a lab records the whole run (motion capture, as OptiOdom's OptiTrack; every sample of
     a simulated run through :func:`odomgym.lab.measure`), the end pose throws most of it away.
     This estimator runs an augmented-state extended Kalman filter — the robot's pose and the
-    three parameters x in one state (Larsen, Bak, Andersen & Ravn 1998; Martinelli, Tomatis &
-    Siegwart 2007) — along each run: every ``chunk`` samples the odometry's motion with the
+    three parameters x in one state (Larsen et al. 1998; Martinelli et al. 2007) — along each
+    run: every ``chunk`` samples the odometry's motion with the
     current parameters predicts the pose (:func:`chunk_motions`), the floor's wheel-travel
     noise (Chong & Kleeman 1997, Eq. 4, with k = ρ·:data:`REFERENCE_ROUGHNESS`) widens it,
     and the measured pose (σ of the sensor) corrects pose and parameters together. The
