@@ -148,10 +148,7 @@ def test_command_line_square_settings_configure_every_method(method: str) -> Non
     squares = [e for e in calibrator.experiments() if e.kind is ExperimentKind.SQUARE]
     if method == "ivanjko":
         assert not squares and calibrator.options == Ivanjko.options_type()
-    elif method in (
-        "selfcal",
-        "selfcal_scripted",
-    ):  # a fixed menu; it gets UMBmark's budget for these settings
+    elif method.startswith("selfcal"):  # a fixed menu; it gets UMBmark's budget for these settings
         assert calibrator.options.budget == 2 * 4 + 6
     else:
         assert {(e.size, e.runs) for e in squares} == {(2.0, 4)}

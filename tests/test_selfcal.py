@@ -32,7 +32,13 @@ from odomgym.floor import FLOORS
 from odomgym.odometry import Calibration
 from odomgym.population import Population
 from odomgym.robot import PRESETS
-from odomgym.selfcal_session import MENU, OBSERVATION_LAYOUT, STOP, SelfCalSession
+from odomgym.selfcal_session import (
+    MENU,
+    OBSERVATION_LAYOUT,
+    OBSERVATION_VERSION,
+    STOP,
+    SelfCalSession,
+)
 
 ITEM = {item.name: k for k, item in enumerate(MENU)}
 
@@ -153,7 +159,7 @@ def test_estimator_recovers_the_true_errors_on_a_noiseless_floor() -> None:
     the sensor allows (σ = 2 mm, 0.4°)."""
     robot = PRESETS["labmate"].with_errors(1.006, 0.97, 1.012)
     report = calibrate_in_simulation(
-        SelfCal(budget=8, policy="scripted"), robot, FLOORS["smooth"], seed=5
+        SelfCal(budget=8, policy="scripted", observe="end_pose"), robot, FLOORS["smooth"], seed=5
     )
     est = report.result.estimates
     assert abs(est["E_d"] - robot.e_d) < 2e-4
@@ -297,13 +303,15 @@ def test_scripted_schedule() -> None:
 
 def test_policy_files_are_checked(tmp_path) -> None:
     shipped = load_policy("learned")
-    assert shipped.meta["observation_version"] == 1
+    assert shipped.meta["observation_version"] == OBSERVATION_VERSION == 2
+    assert shipped.meta["observe"] == "trajectory"
     assert shipped.meta["command"].startswith("odomgym train selfcal --algo ppo --steps ")
     assert shipped.meta["steps"] >= 100_000
-    bad = MlpPolicy(shipped.weights, {**shipped.meta, "observation_version": 0})
-    bad.save(tmp_path / "old.npz")
-    with pytest.raises(SpecError, match="observation layout 0"):
-        load_policy(str(tmp_path / "old.npz"))
+    for old in (0, 1):  # version 1: the end-pose policy's spreads mean something else
+        bad = MlpPolicy(shipped.weights, {**shipped.meta, "observation_version": old})
+        bad.save(tmp_path / "old.npz")
+        with pytest.raises(SpecError, match=f"observation layout {old}"):
+            load_policy(str(tmp_path / "old.npz"))
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(SpecError, match="not a selfcal policy file"):
         load_policy(str(tmp_path / "junk.npz"))
