@@ -3,6 +3,7 @@
     python benchmarks/bench_selfcal.py --budget 16 8 4 --picks  # 100 robots, 3 floors
     python benchmarks/bench_selfcal.py --robots 20 --json  # quicker; JSON lines for scripts
     python benchmarks/bench_selfcal.py --noise             # re-measure MENU's floor scatter
+    python benchmarks/bench_selfcal.py --error-budget      # what a parameter error costs
 
 Every method runs in the calibrator benchmark (:mod:`odomgym.baselines.benchmark`): the same
 robots, floors, random streams and budget, validated on the same fresh 4×4 m squares (5 cw +
@@ -172,6 +173,64 @@ def measure_noise(runs: int = 24) -> None:
         print(f"{item.name:<16} {sx:8.1f} {sy:8.1f} {math.degrees(err[:, 2].std()):7.3f}")
 
 
+#: (σ of E_d, E_b, E_s) [-] the error budget tries: each alone, then the filter's errors at 8 runs.
+ERROR_CASES = (
+    (2e-5, 0.0, 0.0),
+    (5e-5, 0.0, 0.0),
+    (1e-4, 0.0, 0.0),
+    (0.0, 1e-4, 0.0),
+    (0.0, 3e-4, 0.0),
+    (0.0, 0.0, 1e-4),
+    (0.0, 0.0, 5e-4),
+    (5e-5, 2.5e-4, 4.5e-5),
+)
+
+
+def error_budget(robots: int, seed: int = 0) -> list[dict[str, Any]]:
+    """What a given parameter error costs on ``concrete``: every robot calibrated with its true
+    E_d, E_b, E_s plus Gaussian errors of the stated σ, validated on the benchmark's own
+    squares (same streams as the oracle); the median per-robot ratio of the oracle's
+    E_max,syst to the perturbed one's (*of oracle*)."""
+    from odomgym.baselines import benchmark as bench
+    from odomgym.metrics import e_max_syst
+    from odomgym.odometry import Calibration
+
+    config = BenchConfig(robots=robots, floors=("concrete",), seed=seed)
+    fleet = bench.population(config)
+    floor, start_region, floor_index = bench.bench_floor(config, "concrete")
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 77]))
+    calibrations = [
+        [bench.oracle_calibration(robot)]
+        + [
+            Calibration.from_errors(
+                robot.e_d + sd * rng.standard_normal(),
+                robot.e_b + sb * rng.standard_normal(),
+                robot.e_s + ss * rng.standard_normal(),
+            )
+            for sd, sb, ss in ERROR_CASES
+        ]
+        for robot in fleet
+    ]
+    errors = bench._validate(  # the benchmark's own validation: same squares, same noise
+        config, floor, start_region, floor_index, list(range(robots)), fleet, calibrations
+    )
+    out = []
+    for c, (sd, sb, ss) in enumerate(ERROR_CASES, start=2):
+        ratios = [
+            e_max_syst(e[1]["cw"], e[1]["ccw"]) / e_max_syst(e[c]["cw"], e[c]["ccw"])
+            for e in errors
+        ]
+        out.append(
+            {
+                "sigma_E_d": sd,
+                "sigma_E_b": sb,
+                "sigma_E_s": ss,
+                "of_oracle": float(np.median(ratios)),
+            }
+        )
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--robots", type=int, default=100, help="robots per floor (100)")
@@ -182,6 +241,11 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (0)")
     parser.add_argument("--json", action="store_true", help="JSON lines instead of tables")
     parser.add_argument("--noise", action="store_true", help="measure MENU's floor scatter")
+    parser.add_argument(
+        "--error-budget",
+        action="store_true",
+        help="what a parameter error of a given size costs, as a fraction of the oracle",
+    )
     parser.add_argument("--save", help="also write the benchmark's rows to this JSON file")
     parser.add_argument("--load", help="analyse the rows of an earlier --save instead of running")
     parser.add_argument(
@@ -190,6 +254,16 @@ def main() -> int:
     args = parser.parse_args()
     if args.noise:
         measure_noise()
+        return 0
+    if args.error_budget:
+        for record in error_budget(args.robots, args.seed):
+            if args.json:
+                print(json.dumps({"error_budget": record}))
+            else:
+                print(
+                    f"σ(E_d) {record['sigma_E_d']:.0e}  σ(E_b) {record['sigma_E_b']:.1e}  "
+                    f"σ(E_s) {record['sigma_E_s']:.1e}  of oracle {record['of_oracle']:.1%}"
+                )
         return 0
     config = BenchConfig(
         robots=args.robots,
