@@ -25,7 +25,7 @@ from odomgym.baselines.selfcal_train import (
 from odomgym.cli import main
 from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
-from odomgym.selfcal_session import MENU
+from odomgym.selfcal_session import MENU, OBSERVATION_VERSION
 
 KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
 
@@ -77,7 +77,7 @@ def test_exported_policy_acts_as_sb3_predicts(algo: str, tmp_path) -> None:
             "MlpPolicy", env, seed=3, learning_starts=16, policy_kwargs={"net_arch": [16, 16]}
         )
     model.learn(64)
-    policy = export_policy(model, {"observation_version": 1})
+    policy = export_policy(model, {"observation_version": OBSERVATION_VERSION})
     policy.save(tmp_path / "p.npz")
     loaded = load_policy(str(tmp_path / "p.npz"))
     assert loaded.meta["activation"] == ("tanh" if algo == "ppo" else "relu")
