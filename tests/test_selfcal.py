@@ -43,7 +43,9 @@ from odomgym.selfcal_session import (
 ITEM = {item.name: k for k, item in enumerate(MENU)}
 
 
-def _episodes(seeds: Sequence[int], floor: str, budget: int) -> list[Episode]:
+def _episodes(
+    seeds: Sequence[int], floor: str, budget: int, observe: str = "trajectory"
+) -> list[Episode]:
     return [
         new_episode(
             np.random.default_rng(seed),
@@ -51,6 +53,7 @@ def _episodes(seeds: Sequence[int], floor: str, budget: int) -> list[Episode]:
             (budget,),
             Population(),
             SensorAccuracy(),
+            observe=observe,
         )
         for seed in seeds
     ]

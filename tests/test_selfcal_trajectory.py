@@ -4,17 +4,15 @@ end poses on the same runs."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 import pytest
+from test_selfcal import _episodes
 
 from odomgym.baselines.selfcal import SelfCal, SelfCalEndPose, scripted_policy
-from odomgym.envs.selfcal import Episode, SelfCalibrationEnv, new_episode, step_episodes
+from odomgym.envs.selfcal import Episode, SelfCalibrationEnv, step_episodes
 from odomgym.errors import SpecError
 from odomgym.experiments import SensorAccuracy
 from odomgym.odometry import Calibration
-from odomgym.population import Population
 from odomgym.robot import PRESETS
 from odomgym.runs import Run, replay_odometry, replay_with_jacobian
 from odomgym.selfcal_session import (
@@ -95,20 +93,6 @@ def test_chunk_noise_matches_a_monte_carlo_of_the_wheel_travel_noise() -> None:
         del counts
     sample = np.cov(np.array(draws).T)
     np.testing.assert_allclose(np.diag(sample), np.diag(noise[0]) * k**2, rtol=0.07)
-
-
-def _episodes(seeds: Sequence[int], floor: str, budget: int, observe: str) -> list[Episode]:
-    return [
-        new_episode(
-            np.random.default_rng(seed),
-            (floor,),
-            (budget,),
-            Population(),
-            SensorAccuracy(),
-            observe=observe,
-        )
-        for seed in seeds
-    ]
 
 
 def _play_scripted(episodes: list[Episode]) -> None:
