@@ -80,6 +80,12 @@ Version history:
       ``render_mode`` raised :class:`~odomgym.errors.SpecError`, which stopped
       ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so
       the version stays v0.
+    * Not yet versioned (issue 20): the estimator became the trajectory filter
+      (``observe="trajectory"``, observation version 2). Spaces, dynamics and episode end are
+      unchanged, but the observation's values and, through the final corrections, the reward
+      differ — by this project's rule that is ``SelfCalibration-v1``, which has not been
+      registered yet (the id is used by the hyperparameter files, ``odomgym train`` and the
+      docs pages). ``observe="end_pose"`` keeps the earlier estimator and its arithmetic.
 """
 
 from __future__ import annotations
