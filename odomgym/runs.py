@@ -14,8 +14,9 @@ equations (Borenstein & Feng 1994, §6.1).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,11 +28,14 @@ __all__ = [
     "PARAMETER_NAMES",
     "Direction",
     "Run",
+    "WheelSteps",
     "end_error",
     "replay_odometry",
     "replay_with_jacobian",
     "return_error",
+    "step_jacobians",
     "to_start_frame",
+    "wheel_steps",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -79,6 +83,58 @@ class Run:
         return float(np.sum(np.hypot(steps[:, 0], steps[:, 1])))
 
 
+class WheelSteps(NamedTuple):
+    """Each sample step of a run as the odometry reads its encoder counts.
+
+    Attributes:
+        left, right: each wheel's travel per step, Δs_L and Δs_R [m] (T − 1,).
+        wheelbase: the calibrated wheelbase B [m].
+        ds: the travel of the midpoint, (Δs_L + Δs_R)/2 [m] (T − 1,).
+        dtheta: the heading change, (Δs_R − Δs_L)/B [rad] (T − 1,).
+    """
+
+    left: FloatArray
+    right: FloatArray
+    wheelbase: float
+    ds: FloatArray
+    dtheta: FloatArray
+
+
+def wheel_steps(run: Run, robot: RobotSpec, calibration: Calibration | None = None) -> WheelSteps:
+    """``run``'s encoder counts as wheel travel and motion per step, with ``robot``'s nominal
+    parameters and ``calibration`` (the equations of :class:`odomgym.odometry.Odometry`)."""
+    cal = calibration if calibration is not None else Calibration()
+    per_tick = robot.metres_per_tick * cal.distance_scale
+    increments = np.diff(run.counts, axis=0).astype(float)
+    left = increments[:, 0] * (cal.c_left * per_tick)
+    right = increments[:, 1] * (cal.c_right * per_tick)
+    wheelbase = cal.wheelbase_scale * robot.wheelbase
+    return WheelSteps(left, right, wheelbase, 0.5 * (left + right), (right - left) / wheelbase)
+
+
+def step_jacobians(
+    steps: WheelSteps,
+    cos_mid: FloatArray,
+    sin_mid: FloatArray,
+    heading_before: Callable[[FloatArray], FloatArray],
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each step's contribution to ∂(x, y, θ)/∂(ln k_L, ln k_R, ln B) (module docs of
+    :func:`replay_with_jacobian`): three (T − 1, 3) arrays, summed over the steps by the caller.
+
+    ``cos_mid``, ``sin_mid`` are the cosines and sines of each step's midpoint heading in the
+    caller's frame; ``heading_before`` maps the steps' ∂Δθ (T − 1, 3) to ∂θ at the start of
+    each step, the sum over the earlier steps the caller's frame counts from (the whole run, or
+    each chunk's start).
+    """
+    left, right, wheelbase, ds, dtheta = steps
+    d_ds = np.stack([0.5 * left, 0.5 * right, np.zeros_like(ds)], axis=1)  # (n, 3)
+    d_dtheta = np.stack([-left / wheelbase, right / wheelbase, -dtheta], axis=1)
+    d_mid = heading_before(d_dtheta) + 0.5 * d_dtheta
+    d_x = d_ds * cos_mid[:, None] - (ds * sin_mid)[:, None] * d_mid
+    d_y = d_ds * sin_mid[:, None] + (ds * cos_mid)[:, None] * d_mid
+    return d_x, d_y, d_dtheta
+
+
 def replay_odometry(
     run: Run, robot: RobotSpec, calibration: Calibration | None = None
 ) -> FloatArray:
@@ -88,13 +144,7 @@ def replay_odometry(
     result is directly comparable with ``run.true_pose``. Same equations as
     :class:`odomgym.odometry.Odometry`, vectorised over the samples.
     """
-    cal = calibration if calibration is not None else Calibration()
-    per_tick = robot.metres_per_tick * cal.distance_scale
-    increments = np.diff(run.counts, axis=0).astype(float)
-    left = increments[:, 0] * (cal.c_left * per_tick)
-    right = increments[:, 1] * (cal.c_right * per_tick)
-    ds = 0.5 * (left + right)
-    dtheta = (right - left) / (cal.wheelbase_scale * robot.wheelbase)
+    _, _, _, ds, dtheta = wheel_steps(run, robot, calibration)
     x0, y0, th0 = run.true_pose[0]
     theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
     mid = theta[:-1] + 0.5 * dtheta  # midpoint integration, as odomgym.odometry.Odometry
@@ -175,25 +225,18 @@ def replay_with_jacobian(
         ``jacobian[k, i, j]`` = ∂pose_i/∂ln(parameter_j) at sample k, parameters in the order
         of :data:`PARAMETER_NAMES` ([m] or [rad] per unit relative change).
     """
-    cal = calibration if calibration is not None else Calibration()
-    per_tick = robot.metres_per_tick * cal.distance_scale
-    increments = np.diff(run.counts, axis=0).astype(float)
-    left = increments[:, 0] * (cal.c_left * per_tick)
-    right = increments[:, 1] * (cal.c_right * per_tick)
-    wheelbase = cal.wheelbase_scale * robot.wheelbase
-    ds = 0.5 * (left + right)
-    dtheta = (right - left) / wheelbase
+    steps = wheel_steps(run, robot, calibration)
+    ds, dtheta = steps.ds, steps.dtheta
     x0, y0, th0 = run.true_pose[0]
     theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
     mid = theta[:-1] + 0.5 * dtheta
     cos_mid, sin_mid = np.cos(mid), np.sin(mid)
-
-    d_ds = np.stack([0.5 * left, 0.5 * right, np.zeros_like(ds)], axis=1)  # (n, 3)
-    d_dtheta = np.stack([-left / wheelbase, right / wheelbase, -dtheta], axis=1)
-    d_theta_before = np.cumsum(d_dtheta, axis=0) - d_dtheta  # ∂θ_j, j = 0..n−1
-    d_mid = d_theta_before + 0.5 * d_dtheta
-    d_x = d_ds * cos_mid[:, None] - (ds * sin_mid)[:, None] * d_mid
-    d_y = d_ds * sin_mid[:, None] + (ds * cos_mid)[:, None] * d_mid
+    d_x, d_y, d_dtheta = step_jacobians(
+        steps,
+        cos_mid,
+        sin_mid,
+        lambda d: np.cumsum(d, axis=0) - d,  # ∂θ_j, j = 0..n−1
+    )
 
     poses = np.empty_like(run.true_pose)
     poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * cos_mid)])

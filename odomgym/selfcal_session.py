@@ -44,7 +44,7 @@ from odomgym.errors import SpecError, require_count
 from odomgym.experiments import Experiment, ExperimentKind, SensorAccuracy
 from odomgym.odometry import Calibration, wrap_angle
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run, replay_with_jacobian
+from odomgym.runs import Run, replay_with_jacobian, step_jacobians, wheel_steps
 
 __all__ = [
     "CLIP_PRIORS",
@@ -193,12 +193,15 @@ class EndPoseEstimator:
     @property
     def calibration(self) -> Calibration:
         """The calibration the estimate stands for (exactly the identity at x = 0)."""
+        return self._calibration_at(self.x)
+
+    def _calibration_at(self, x: FloatArray) -> Calibration:
         d, b = self.robot.wheel_diameter, self.robot.wheelbase
         return Calibration.from_parameters(
             self.robot,
-            wheelbase=b * math.exp(self.x[2]),
-            right_diameter=d * math.exp(self.x[1]),
-            left_diameter=d * math.exp(self.x[0]),
+            wheelbase=b * math.exp(x[2]),
+            right_diameter=d * math.exp(x[1]),
+            left_diameter=d * math.exp(x[0]),
         )
 
     @property
@@ -314,13 +317,8 @@ def chunk_motions(
     All chunks are computed at once (reduceat over the samples), so a 2 000-sample run costs a
     few vectorised passes, not a Python loop over samples.
     """
-    per_tick = robot.metres_per_tick * calibration.distance_scale
-    increments = np.diff(run.counts, axis=0).astype(float)
-    left = increments[:, 0] * (calibration.c_left * per_tick)
-    right = increments[:, 1] * (calibration.c_right * per_tick)
-    b = calibration.wheelbase_scale * robot.wheelbase
-    ds = 0.5 * (left + right)
-    dtheta = (right - left) / b
+    steps = wheel_steps(run, robot, calibration)
+    left, right, b, ds, dtheta = steps
     n = len(ds)
     starts = np.arange(0, n, every, dtype=np.intp)
     chunk = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, n)))
@@ -342,11 +340,7 @@ def chunk_motions(
         ],
         axis=1,
     )
-    d_ds = np.stack([0.5 * left, 0.5 * right, np.zeros(n)], axis=1)
-    d_dtheta = np.stack([-left / b, right / b, -dtheta], axis=1)
-    d_mid = since_start(d_dtheta) + 0.5 * d_dtheta
-    d_x = d_ds * cos_mid[:, None] - (ds * sin_mid)[:, None] * d_mid
-    d_y = d_ds * sin_mid[:, None] + (ds * cos_mid)[:, None] * d_mid
+    d_x, d_y, d_dtheta = step_jacobians(steps, cos_mid, sin_mid, since_start)
     jac = np.stack(
         [
             np.add.reduceat(d_x, starts),
@@ -462,10 +456,7 @@ class TrajectoryEstimator(EndPoseEstimator):
         self, run: Run, prior_x: FloatArray, prior_cov: FloatArray, linearised_at: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """One pass of the filter over ``run``: the parameters' mean and covariance after it."""
-        kept = self.x
-        self.x = linearised_at
-        calibration = self.calibration
-        self.x = kept
+        calibration = self._calibration_at(linearised_at)
         u, jac, noise, ends = chunk_motions(run, self.robot, calibration, self.chunk)
         noise = noise * (REFERENCE_ROUGHNESS * self._filtered_roughness) ** 2
         sensor = np.diag(self._sensor_var)

@@ -59,7 +59,8 @@ def test_chunk_motions_compose_to_the_odometry_and_their_jacobian_is_exact() -> 
         assert ends[-1] == len(run.time) - 1
         np.testing.assert_allclose(_compose(run.true_pose[0], u), poses[-1], atol=1e-12)
         # chunk 1 on its own, as a run of its own
-        a, b = (0 if len(ends) < 2 else ends[0]), ends[min(1, len(ends) - 1)]
+        c = min(1, len(ends) - 1)  # the second chunk, or the only one
+        a, b = (0 if c == 0 else ends[c - 1]), ends[c]
         sub = Run(
             "free",
             run.time[a : b + 1],
@@ -67,7 +68,7 @@ def test_chunk_motions_compose_to_the_odometry_and_their_jacobian_is_exact() -> 
             np.zeros((b - a + 1, 3)),
         )
         _, full = replay_with_jacobian(sub, ROBOT, cal)
-        np.testing.assert_allclose(jac[min(1, len(ends) - 1)], full[-1], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(jac[c], full[-1], rtol=1e-12, atol=1e-15)
 
 
 def test_chunk_noise_matches_a_monte_carlo_of_the_wheel_travel_noise() -> None:
@@ -84,13 +85,11 @@ def test_chunk_noise_matches_a_monte_carlo_of_the_wheel_travel_noise() -> None:
     draws = []
     for _ in range(4000):
         travel = steps + rng.standard_normal(steps.shape) * k * np.sqrt(np.abs(steps))
-        counts = np.concatenate([[[0.0, 0.0]], np.cumsum(travel / per_tick, axis=0)])
         left, right = travel[:, 0], travel[:, 1]
         dtheta = (right - left) / ROBOT.wheelbase
         theta = np.concatenate([[0.0], np.cumsum(dtheta)])[:-1] + 0.5 * dtheta
         ds = 0.5 * (left + right)
         draws.append([np.sum(ds * np.cos(theta)), np.sum(ds * np.sin(theta)), np.sum(dtheta)])
-        del counts
     sample = np.cov(np.array(draws).T)
     np.testing.assert_allclose(np.diag(sample), np.diag(noise[0]) * k**2, rtol=0.07)
 
