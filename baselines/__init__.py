@@ -12,7 +12,7 @@ own, which the command line, the benchmark and the leaderboard then offer (worke
 * ``least_squares`` — Antonelli et al. style linear least squares over whole runs;
 * ``trajectory`` — OptiOdom-style optimisation over whole trajectories;
 * ``selfcal`` — a learned policy that chooses the experiments, with a Kalman filter along the
-  measured runs (``SelfCalibration-v0``; the shipped policy runs in numpy, no torch needed);
+  measured runs (``SelfCalibration-v1``; the shipped policy runs in numpy, no torch needed);
 * ``selfcal_scripted`` — the same estimator with a fixed schedule (the policy's ablation);
 * ``selfcal_end_pose`` — that schedule with end poses only (the trajectory's ablation).
 """

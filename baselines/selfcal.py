@@ -19,7 +19,7 @@ session, its menu and its observation are :mod:`odomgym.selfcal_session`, shared
 (:meth:`~odomgym.selfcal_session.SelfCalSession.observation`, layout
 :data:`~odomgym.selfcal_session.OBSERVATION_LAYOUT`) to a menu item. The shipped policy
 (``selfcal-ppo.npz``) is a small MLP trained with PPO (Schulman et al. 2017) in
-``SelfCalibration-v0`` (``odomgym train selfcal``); it runs here in numpy, so calibrating needs
+``SelfCalibration-v1`` (``odomgym train selfcal``); it runs here in numpy, so calibrating needs
 no torch. The ``scripted`` policy (alternate 4 m squares, a straight run every eighth run) is the
 ablation that shows what the estimator does without learning.
 """
@@ -233,7 +233,7 @@ class SelfCal(Calibrator):
 
     name: ClassVar[str] = "selfcal"
     reference: ClassVar[str] = (
-        "odomgym's SelfCalibration-v0 policy (PPO: Schulman et al. 2017) with an augmented-"
+        "odomgym's SelfCalibration-v1 policy (PPO: Schulman et al. 2017) with an augmented-"
         "state Kalman filter along the measured runs; compared with Borenstein & Feng 1994"
     )
     options_type: ClassVar[type[Any]] = SelfCalOptions

@@ -1,6 +1,6 @@
 """Training the self-calibration policy with stable-baselines3 (the ``rl`` extra).
 
-:class:`SelfCalVecEnv` is an SB3 ``VecEnv`` of ``SelfCalibration-v0`` sessions that simulates
+:class:`SelfCalVecEnv` is an SB3 ``VecEnv`` of ``SelfCalibration-v1`` sessions that simulates
 all their runs of a step as one physics batch per floor (:func:`odomgym.envs.selfcal.
 step_episodes`; one physics batch per shard and step) — a batch of 8 costs about as much wall
 time as 2 single runs — and splits the sessions over ``workers`` processes (shards) so both
@@ -68,7 +68,7 @@ __all__ = [
     "train",
 ]
 
-ENV_ID = "SelfCalibration-v0"
+ENV_ID = "SelfCalibration-v1"
 ALGORITHMS = ("ppo", "a2c", "dqn")
 CHECKPOINT_EVERY = 10_000
 """Default environment steps between checkpoints: about two minutes of training on two cores."""
@@ -156,7 +156,7 @@ class SelfCalVecEnv(VecEnv):
         unknown = sorted(set(kwargs) - known)
         if unknown:
             raise SpecError(
-                f"unknown env_kwargs {', '.join(unknown)}; SelfCalibration-v0 takes "
+                f"unknown env_kwargs {', '.join(unknown)}; SelfCalibration-v1 takes "
                 f"{', '.join(sorted(known))}",
                 field="env_kwargs",
             )
@@ -247,7 +247,7 @@ class SelfCalVecEnv(VecEnv):
 
 
 def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The hyperparameters of ``algo`` for ``SelfCalibration-v0``: the ``SelfCalibration-v0``
+    """The hyperparameters of ``algo`` for ``SelfCalibration-v1``: the ``SelfCalibration-v1``
     key of ``path``, a YAML file in rl-baselines3-zoo's format (default: the shipped
     ``odomgym/data/hyperparams/<algo>.yml``, which the zoo reads too)."""
     import yaml
@@ -711,7 +711,7 @@ def plot_learning_curve(csv_path: Path, png_path: Path) -> None:
             ax.plot(xs, ys, label=label)
     ax.set_xlabel("environment steps (runs and stops)")
     ax.set_ylabel("nats")
-    ax.set_title("SelfCalibration-v0 learning curve")
+    ax.set_title("SelfCalibration-v1 learning curve")
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     fig.tight_layout()

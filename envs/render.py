@@ -11,7 +11,7 @@ a header band above the floor (never over the paths) and a scale bar at the bott
 * :class:`TopDownRenderer` — a route env (``UMBmarkSquare-v0``, ``StraightLine-v0``);
 * :class:`VehicleRenderer` — the two-truck vehicles (``ClapperStraight-v0``,
   ``ClapperRectangle-v0``, the CLAPPER or the encoder trailer);
-* :class:`SessionRenderer` — ``SelfCalibration-v0``: the runs of the session so far, overlaid
+* :class:`SessionRenderer` — ``SelfCalibration-v1``: the runs of the session so far, overlaid
   in their start frames, beside a panel of the estimates and the budget.
 """
 

@@ -7,7 +7,10 @@ module is imported until ``gymnasium.make`` needs it):
 * ``StraightLine-v0`` — straight runs, optionally out and back (Borenstein's CLAPPER paper);
 * ``ClapperStraight-v0``, ``ClapperRectangle-v0`` — the CLAPPER vehicle with IPEC (Borenstein
   1995, §6);
-* ``SelfCalibration-v0`` — choose the experiments that calibrate a robot within a budget.
+* ``SelfCalibration-v1`` — choose the experiments that calibrate a robot within a budget; its
+  estimator filters every measured pose of each run. ``SelfCalibration-v0`` is the same env
+  with the earlier estimator (end poses only, ``observe="end_pose"``), kept so that code and
+  results made with it stay reproducible.
 
 The core API: :class:`~odomgym.robot.RobotSpec`, :class:`~odomgym.floor.FloorSpec`,
 :class:`~odomgym.physics.World`, :class:`~odomgym.odometry.Odometry`,
@@ -45,24 +48,35 @@ __all__ = [
     "register_envs",
 ]
 
-_ENVS: dict[str, tuple[str, str | None, int]] = {
+# id -> (entry point, vector entry point, max_episode_steps, default kwargs)
+_ENVS: dict[str, tuple[str, str | None, int, dict[str, object]]] = {
     "UMBmarkSquare-v0": (
         "odomgym.envs.umbmark:UMBmarkSquareEnv",
         "odomgym.envs.vector:make_square_vector_env",
         6000,
+        {},
     ),
     "StraightLine-v0": (
         "odomgym.envs.straight:StraightLineEnv",
         "odomgym.envs.vector:make_straight_vector_env",
         4000,
+        {},
     ),
     # The CLAPPER (Borenstein 1995, §6): 36 m out and back takes ~2100 steps of 40 ms, the
     # 7×4 m rectangle ~1500.
-    "ClapperStraight-v0": ("odomgym.envs.clapper:ClapperStraightEnv", None, 6000),
-    "ClapperRectangle-v0": ("odomgym.envs.clapper:ClapperRectangleEnv", None, 4000),
+    "ClapperStraight-v0": ("odomgym.envs.clapper:ClapperStraightEnv", None, 6000, {}),
+    "ClapperRectangle-v0": ("odomgym.envs.clapper:ClapperRectangleEnv", None, 4000, {}),
     # One step per run: at most MAX_BUDGET (64) runs and the stop (a margin of one, so the
-    # limit never truncates a session).
-    "SelfCalibration-v0": ("odomgym.envs.selfcal:SelfCalibrationEnv", None, 66),
+    # limit never truncates a session). v1 estimates with the trajectory filter (observation
+    # version 2); v0 keeps the end-pose estimator it was published with (the env's version
+    # history says what changed).
+    "SelfCalibration-v0": (
+        "odomgym.envs.selfcal:SelfCalibrationEnv",
+        None,
+        66,
+        {"observe": "end_pose"},
+    ),
+    "SelfCalibration-v1": ("odomgym.envs.selfcal:SelfCalibrationEnv", None, 66, {}),
 }
 
 
@@ -70,7 +84,7 @@ def register_envs() -> None:
     """Register odomgym's envs with Gymnasium; safe to call more than once."""
     import gymnasium
 
-    for env_id, (entry_point, vector_entry_point, max_steps) in _ENVS.items():
+    for env_id, (entry_point, vector_entry_point, max_steps, kwargs) in _ENVS.items():
         if env_id in gymnasium.registry:
             continue
         gymnasium.register(
@@ -78,6 +92,7 @@ def register_envs() -> None:
             entry_point=entry_point,
             max_episode_steps=max_steps,
             vector_entry_point=vector_entry_point,
+            kwargs=dict(kwargs),
         )
 
 

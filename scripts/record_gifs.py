@@ -66,7 +66,7 @@ RECORDINGS: dict[str, tuple[dict[str, Any], dict[str, Any], Callable[..., Policy
     "StraightLine-v0": ({"floor": "bumpy"}, {"return_trip": True}, _route_policy, 120),
     "ClapperStraight-v0": ({}, {}, _full_speed, 120),
     "ClapperRectangle-v0": ({}, {}, _full_speed, 120),
-    "SelfCalibration-v0": ({"budget": 16}, {"floor": "rough"}, _learned, 700),
+    "SelfCalibration-v1": ({"budget": 16}, {"floor": "rough"}, _learned, 700),
 }
 
 
@@ -78,7 +78,7 @@ def _episode(env_id: str) -> tuple[list[NDArray[np.uint8]], int]:
     policy = make_policy(env)
     frames: list[NDArray[np.uint8]] = []
     steps = 0
-    keep_every = 1 if env_id == "SelfCalibration-v0" else 10  # drawing every step is waste
+    keep_every = 1 if env_id == "SelfCalibration-v1" else 10  # drawing every step is waste
     while True:
         if steps % keep_every == 0:
             frames.append(env.render())  # type: ignore[arg-type]

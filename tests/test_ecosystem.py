@@ -22,7 +22,7 @@ ENV_IDS = [
     "StraightLine-v0",
     "ClapperStraight-v0",
     "ClapperRectangle-v0",
-    "SelfCalibration-v0",
+    "SelfCalibration-v1",
 ]
 
 
@@ -48,7 +48,7 @@ def test_every_env_renders_a_frame(env_id: str) -> None:
     assert env.metadata["render_modes"] == ["human", "rgb_array"]
     assert env.metadata["render_fps"] > 0
     env.reset(seed=0)
-    for k in range(3 if env_id == "SelfCalibration-v0" else 150):
+    for k in range(3 if env_id == "SelfCalibration-v1" else 150):
         env.step(_act(env, k))
     frame = env.render()
     assert frame is not None and frame.dtype == np.uint8
@@ -63,7 +63,7 @@ def test_every_env_renders_a_frame(env_id: str) -> None:
         assert _count(frame, ESTIMATE) > 100
         assert _count(frame, LINK) > 10
         assert _count(frame, ROUTE) > 200
-    if env_id == "SelfCalibration-v0":
+    if env_id == "SelfCalibration-v1":
         from odomgym.envs.render import ODOM_PATH
 
         assert _count(frame, ESTIMATE) > 20  # the estimates' figures in the panel
@@ -161,7 +161,7 @@ def test_a_bad_render_mode_is_refused_naming_it() -> None:
     with pytest.raises(ValueError, match="render_mode must be one of"):
         gym.make("ClapperStraight-v0", render_mode="ascii")
     with pytest.raises(odomgym.errors.SpecError, match="render_mode must be one of"):
-        gym.make("SelfCalibration-v0", render_mode="ascii")
+        gym.make("SelfCalibration-v1", render_mode="ascii")
 
 
 # ------------------------------------------------------------------------------ SB3 one-liners
@@ -178,7 +178,7 @@ def _small(algo: str) -> dict[str, object]:
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_sb3_makes_every_env_from_its_id(env_id: str) -> None:
     """The construction of ``PPO("MlpPolicy", env_id)`` alone (quick): SB3 asks for
-    ``render_mode="rgb_array"``, which used to stop ``SelfCalibration-v0``."""
+    ``render_mode="rgb_array"``, which used to stop ``SelfCalibration-v1``."""
     sb3 = pytest.importorskip("stable_baselines3")
     model = sb3.PPO("MlpPolicy", env_id, device="cpu")
     assert model.get_env().envs[0].unwrapped.render_mode == "rgb_array"
@@ -189,7 +189,7 @@ _SLOW = pytest.mark.slow
 
 
 @pytest.mark.parametrize(
-    "env_id", [e if e != "SelfCalibration-v0" else pytest.param(e, marks=_SLOW) for e in ENV_IDS]
+    "env_id", [e if e != "SelfCalibration-v1" else pytest.param(e, marks=_SLOW) for e in ENV_IDS]
 )
 @pytest.mark.parametrize("algo", ["ppo", "a2c", "dqn"])
 def test_sb3_one_liner_learns(env_id: str, algo: str) -> None:
@@ -197,7 +197,7 @@ def test_sb3_one_liner_learns(env_id: str, algo: str) -> None:
     the env from its id with ``render_mode="rgb_array"`` and learns a few hundred steps."""
     sb3 = pytest.importorskip("stable_baselines3")
     spec = gym.spec(env_id)
-    discrete = env_id == "SelfCalibration-v0"
+    discrete = env_id == "SelfCalibration-v1"
     if algo == "dqn" and not discrete:
         pytest.skip("DQN needs a Discrete action space")
     model = getattr(sb3, algo.upper())("MlpPolicy", env_id, seed=0, device="cpu", **_small(algo))
@@ -231,7 +231,7 @@ def test_rl_zoo3_trains_from_the_shipped_hyperparameters(algo: str, tmp_path: Pa
         "--algo",
         algo,
         "--env",
-        "SelfCalibration-v0",
+        "SelfCalibration-v1",
         "--gym-packages",
         "odomgym",
         "-conf",
@@ -252,15 +252,15 @@ def test_rl_zoo3_trains_from_the_shipped_hyperparameters(algo: str, tmp_path: Pa
         command, capture_output=True, text=True, timeout=600, check=False, env=env
     )
     assert result.returncode == 0, (result.stdout[-2000:], result.stderr[-3000:])
-    run = tmp_path / algo / "SelfCalibration-v0_1"
-    assert (run / "SelfCalibration-v0.zip").is_file()
+    run = tmp_path / algo / "SelfCalibration-v1_1"
+    assert (run / "SelfCalibration-v1.zip").is_file()
     import yaml
 
     # The zoo writes its config as a Python OrderedDict; this file is its own output from this
     # test's temporary folder, so the unsafe loader reads nothing foreign.
-    config = (run / "SelfCalibration-v0" / "config.yml").read_text()
+    config = (run / "SelfCalibration-v1" / "config.yml").read_text()
     saved = dict(yaml.load(config, Loader=yaml.UnsafeLoader))
     assert saved["gamma"] == 1.0  # the shipped value reached the algorithm
     assert "net_arch" in str(saved["policy_kwargs"])
-    shipped = yaml.safe_load(conf.read_text())["SelfCalibration-v0"]
+    shipped = yaml.safe_load(conf.read_text())["SelfCalibration-v1"]
     assert dict(saved["env_kwargs"]) == shipped["env_kwargs"]

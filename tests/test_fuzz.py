@@ -1176,9 +1176,9 @@ SELFCAL_ACTIONS = st.one_of(
 @settings(max_examples=max(EXAMPLES // 4, 1))
 @given(SELFCAL_ACTIONS)
 def test_selfcal_env_steps(action: Any) -> None:
-    """``SelfCalibration-v0``'s ``step`` (not only :func:`menu_index`) with menu indices and
+    """``SelfCalibration-v1``'s ``step`` (not only :func:`menu_index`) with menu indices and
     everything else."""
-    env = _env("SelfCalibration-v0")
+    env = _env("SelfCalibration-v1")
     value = action.item() if isinstance(action, np.ndarray) and action.shape == () else action
     valid = isinstance(value, int | np.integer) and not isinstance(value, bool)
     valid = valid and 0 <= int(value) < 10
@@ -1197,10 +1197,10 @@ def test_selfcal_env_steps(action: Any) -> None:
 
 
 def test_regression_a_selfcal_action_error_is_one_line() -> None:
-    """Found by test_selfcal_env_steps: SelfCalibration-v0.step(np.zeros((2, 2), int)) raised
+    """Found by test_selfcal_env_steps: SelfCalibration-v1.step(np.zeros((2, 2), int)) raised
     a SpecError whose message held the array's two-line repr; now one line."""
     with pytest.raises(SpecError) as caught:
-        _env("SelfCalibration-v0").step(np.zeros((2, 2), int))
+        _env("SelfCalibration-v1").step(np.zeros((2, 2), int))
     assert caught.value.field == "action"
     assert str(caught.value).endswith("got array([[0, 0], [0, 0]])")
 

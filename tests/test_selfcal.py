@@ -1,4 +1,4 @@
-"""SelfCalibration-v0, its estimator, its reward guards and the selfcal calibrator.
+"""SelfCalibration-v1, its estimator, its reward guards and the selfcal calibrator.
 
 The guards are the issue's list of exploits, one test each: corrections that help one path and
 wreck another, ending early, farming noise, free experiments, absurd corrections.
@@ -88,10 +88,32 @@ def _scripted(episode: Episode, obs: np.ndarray) -> int:
 def test_check_env_gymnasium_and_sb3() -> None:
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make("SelfCalibration-v0", budget=4, floors=("concrete",))
+    env = gym.make("SelfCalibration-v1", budget=4, floors=("concrete",))
     check_env(env.unwrapped, skip_render_check=True)
     sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
     sb3.check_env(SelfCalibrationEnv(budget=4, floors=("concrete",)), warn=True)
+
+
+def test_v0_keeps_the_end_pose_estimator_and_v1_filters_the_trajectory() -> None:
+    """The trajectory filter changed the observation's values and the reward, so by the
+    project's versioning rule it is a new id, ``SelfCalibration-v1``; ``-v0`` stays registered
+    as the same class with ``observe="end_pose"`` (its earlier estimator)."""
+
+    def trace(env_id: str, **kwargs: str) -> list[np.ndarray]:
+        env = gym.make(env_id, budget=2, floors=("concrete",), **kwargs)
+        obs, _ = env.reset(seed=5)
+        out = [obs]
+        for action in (1, 5):  # a 4 m square cw, then a 4 m straight run
+            obs, reward, *_ = env.step(action)
+            out += [obs, np.float64(reward)]
+        return out
+
+    v0, v1 = trace("SelfCalibration-v0"), trace("SelfCalibration-v1")
+    v1_end_pose = trace("SelfCalibration-v1", observe="end_pose")
+    assert all(np.array_equal(a, b) for a, b in zip(v0, v1_end_pose, strict=True))
+    assert not all(np.array_equal(a, b) for a, b in zip(v0, v1, strict=True))
+    assert gym.spec("SelfCalibration-v0").kwargs == {"observe": "end_pose"}
+    assert gym.spec("SelfCalibration-v1").kwargs == {}
 
 
 def test_spaces_and_observation_layout() -> None:

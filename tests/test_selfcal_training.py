@@ -114,9 +114,9 @@ def test_hyperparameters_come_from_the_data_file_keyed_by_env_id(tmp_path) -> No
         load_hyperparams("sac")
     assert load_hyperparams("dqn")["buffer_size"] == 50_000  # each algorithm its own file
     (tmp_path / "h.yml").write_text("Other-v0:\n  n_envs: 2\n")
-    with pytest.raises(SpecError, match=r"h\.yml: no key 'SelfCalibration-v0'"):
+    with pytest.raises(SpecError, match=r"h\.yml: no key 'SelfCalibration-v1'"):
         load_hyperparams("ppo", tmp_path / "h.yml")
-    (tmp_path / "bad.yml").write_text("SelfCalibration-v0: [\n")
+    (tmp_path / "bad.yml").write_text("SelfCalibration-v1: [\n")
     with pytest.raises(SpecError, match=r"bad\.yml: not valid YAML"):
         load_hyperparams("ppo", tmp_path / "bad.yml")
 

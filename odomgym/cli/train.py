@@ -20,7 +20,7 @@ def register(commands: Commands) -> None:
     parser = commands.add_parser(
         "train",
         help="train a self-calibration policy (needs the rl extra)",
-        description="Train a policy in SelfCalibration-v0 with stable-baselines3: each step it "
+        description="Train a policy in SelfCalibration-v1 with stable-baselines3: each step it "
         f"picks one of {len(MENU) - 1} experiments or stops; the reward is the validated "
         "improvement of the final corrections. Writes the SB3 model, the numpy policy that "
         "odomgym calibrate selfcal --policy takes, progress.csv and a learning-curve plot.",
@@ -51,7 +51,7 @@ def register(commands: Commands) -> None:
     )
     parser.add_argument(
         "--hyperparams",
-        help="a YAML file in rl-baselines3-zoo's format with a SelfCalibration-v0 key for "
+        help="a YAML file in rl-baselines3-zoo's format with a SelfCalibration-v1 key for "
         "--algo (default: the shipped odomgym/data/hyperparams/<algo>.yml, which the zoo "
         "reads too)",
     )
