@@ -55,6 +55,8 @@ __all__ = [
     "Backend",
     "BenchConfig",
     "Journal",
+    "bench_floor",
+    "calibration_streams",
     "config_record",
     "configure",
     "failed_rows",
@@ -63,6 +65,7 @@ __all__ = [
     "run_benchmark",
     "run_chunk",
     "summarize",
+    "validate_calibrations",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -245,7 +248,9 @@ def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any
                 truth = oracle_calibration(robot)
                 calibrations[k].append(truth)
                 method_rows[k].append(_row(ORACLE, 0, floor_name, indices[k], robot, truth, None))
-        errors = _validate(config, floor, start_region, floor_index, indices, robots, calibrations)
+        errors = validate_calibrations(
+            config, floor, start_region, floor_index, indices, robots, calibrations
+        )
         for k in range(len(robots)):
             before = errors[k][0]
             e_before = e_max_syst(before["cw"], before["ccw"])
@@ -296,7 +301,7 @@ def _row(
     }
 
 
-def _validate(
+def validate_calibrations(
     config: BenchConfig,
     floor: FloorSpec,
     start_region: float | None,
@@ -309,6 +314,10 @@ def _validate(
     the same start poses; all robots and calibrations simulated together per direction.
 
     Returns ``errors[k][c][direction]`` (runs, 3) for robot k and calibration c (0: none).
+
+    Public so that studies beside the benchmark (``benchmarks/bench_selfcal.py``'s error
+    budget, ``benchmarks/design_bound.py``'s schedules) validate their calibrations on exactly
+    the benchmark's squares and floor noise, paired with its rows.
     """
     runs = config.validation_runs
     out: list[list[dict[str, FloatArray]]] = [

@@ -59,6 +59,7 @@ __all__ = [
     "SelfCalScripted",
     "SelfCalScriptedOptions",
     "load_policy",
+    "schedule_items",
     "scripted_policy",
 ]
 
@@ -320,9 +321,17 @@ class SelfCal(Calibrator):
 
 @dataclass(frozen=True)
 class SelfCalScriptedOptions(SelfCalOptions):
-    """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy."""
+    """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy.
+
+    Attributes:
+        schedule: menu item names (:data:`~odomgym.selfcal_session.MENU`, e.g.
+            ``("square4-cw", "square4-ccw", "straight4")``) driven in this order, repeated until
+            the budget is spent; empty (the default) for :func:`scripted_policy`'s schedule. A
+            lab that can drive only some items, or an experiment design of your own.
+    """
 
     policy: str = "scripted"
+    schedule: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -332,11 +341,32 @@ class SelfCalScriptedOptions(SelfCalOptions):
                 f"selfcal --policy {self.policy}",
                 field="policy",
             )
+        object.__setattr__(self, "schedule", schedule_items(self.schedule))
+
+
+def schedule_items(schedule: object) -> tuple[str, ...]:
+    """``schedule`` checked: a sequence (or comma-separated string) of menu item names other
+    than ``stop``; a :class:`SpecError` (field ``schedule``) names the first unknown one."""
+    if isinstance(schedule, str):
+        schedule = [name.strip() for name in schedule.split(",") if name.strip()]
+    if not isinstance(schedule, (list, tuple)):
+        raise SpecError(
+            f"schedule must be a list of menu item names, got {schedule!r}", field="schedule"
+        )
+    names = [item.name for item in MENU[1:]]
+    for name in schedule:
+        if name not in names:
+            raise SpecError(
+                f"schedule: {name!r} is not a menu item; the menu has {', '.join(names)}",
+                field="schedule",
+            )
+    return tuple(schedule)
 
 
 class SelfCalScripted(SelfCal):
     """The ablation of ``selfcal``: the same estimator with the fixed schedule of
-    :func:`scripted_policy` — what the estimator achieves without a learned policy."""
+    :func:`scripted_policy` — what the estimator achieves without a learned policy — or any
+    fixed ``schedule`` of menu items."""
 
     name: ClassVar[str] = "selfcal_scripted"
     reference: ClassVar[str] = (
@@ -346,9 +376,21 @@ class SelfCalScripted(SelfCal):
     options_type: ClassVar[type[Any]] = SelfCalScriptedOptions
 
     def __init__(
-        self, budget: int = 16, policy: str = "scripted", observe: str = "trajectory"
+        self,
+        budget: int = 16,
+        policy: str = "scripted",
+        observe: str = "trajectory",
+        schedule: tuple[str, ...] = (),
     ) -> None:
-        super().__init__(budget, policy, observe)
+        self.options = self.options_type(budget, policy, observe, schedule)
+        self._policy = None
+
+    def _choose(self, session: SelfCalSession) -> int:
+        schedule = self.options.schedule
+        if not schedule or session.runs_left <= 0:
+            return super()._choose(session)
+        name = schedule[session.runs_used % len(schedule)]
+        return next(i for i, item in enumerate(MENU) if item.name == name)
 
 
 @dataclass(frozen=True)
@@ -381,6 +423,10 @@ class SelfCalEndPose(SelfCalScripted):
     options_type: ClassVar[type[Any]] = SelfCalEndPoseOptions
 
     def __init__(
-        self, budget: int = 16, policy: str = "scripted", observe: str = "end_pose"
+        self,
+        budget: int = 16,
+        policy: str = "scripted",
+        observe: str = "end_pose",
+        schedule: tuple[str, ...] = (),
     ) -> None:
-        super().__init__(budget, policy, observe)
+        super().__init__(budget, policy, observe, schedule)

@@ -211,7 +211,7 @@ def error_budget(robots: int, seed: int = 0) -> list[dict[str, Any]]:
         ]
         for robot in fleet
     ]
-    errors = bench._validate(  # the benchmark's own validation: same squares, same noise
+    errors = bench.validate_calibrations(  # the benchmark's own: same squares, same noise
         config, floor, start_region, floor_index, list(range(robots)), fleet, calibrations
     )
     out = []

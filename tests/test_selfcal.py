@@ -6,6 +6,7 @@ wreck another, ending early, farming noise, free experiments, absurd corrections
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Sequence
 
@@ -193,6 +194,43 @@ def test_estimator_recovers_the_true_errors_on_a_noiseless_floor() -> None:
     assert report.result.runs_used == 8
     assert report.improvement > 20.0
     assert report.result.notes[0].startswith("experiments: square4-cw, square4-ccw, straight4")
+
+
+def test_a_fixed_schedule_is_driven_in_order_and_checked(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``selfcal_scripted``'s ``schedule`` (and ``odomgym calibrate --schedule``): the items are
+    driven in the given order and repeated until the budget is spent; an unknown item, or the
+    option on a method that does not take it, is a one-line error naming ``schedule``."""
+    from odomgym.baselines.selfcal import SelfCalEndPose, SelfCalScripted
+    from odomgym.cli import main
+
+    robot = PRESETS["labmate"].with_errors(1.004, 0.98, 1.01)
+    report = calibrate_in_simulation(
+        SelfCalScripted(5, schedule=("square2-ccw", "straight4-back")),
+        robot,
+        FLOORS["concrete"],
+        seed=1,
+    )
+    assert report.result.notes == [
+        "experiments: square2-ccw, straight4-back, square2-ccw, straight4-back, square2-ccw"
+    ]
+    assert report.improvement > 3.0
+    assert SelfCalEndPose(2, schedule="spin360-cw, square4-cw").options.schedule == (
+        "spin360-cw",
+        "square4-cw",
+    )
+    with pytest.raises(SpecError, match="'square5' is not a menu item") as err:
+        SelfCalScripted(4, schedule=("square4-cw", "square5"))
+    assert err.value.field == "schedule"
+    with pytest.raises(SpecError):
+        SelfCalScripted(4, schedule=("stop",))
+    assert main(["calibrate", "umbmark", "--schedule", "square4-cw"]) == 2
+    assert "umbmark takes no option 'schedule'" in capsys.readouterr().err
+    code = main(["calibrate", "selfcal_scripted", "--schedule", "spin720-cw,square4-ccw", "--json"])
+    assert code == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert notes[0].startswith("experiments: spin720-cw, square4-ccw, spin720-cw")
 
 
 def test_roughness_estimate_tracks_the_floor() -> None:

@@ -57,6 +57,12 @@ def register(commands: Commands) -> None:
         help="selfcal only: learned (the shipped policy, default), scripted (alternate 4 m "
         "squares) or a policy .npz file written by odomgym train selfcal",
     )
+    parser.add_argument(
+        "--schedule",
+        help="selfcal_scripted and selfcal_end_pose only: menu items driven in this order, "
+        "comma-separated, repeated until the budget is spent (e.g. square4-cw,square4-ccw,"
+        "straight4); default the scripted schedule",
+    )
     parser.add_argument("--save", help="write the calibration as TOML here")
     parser.add_argument(
         "--export", choices=["ros2"], help="also export the calibration (ros2: diff_drive YAML)"
@@ -144,7 +150,9 @@ def run(args: argparse.Namespace) -> int:
         )
     robot = robot_from(args)
     floor = load_floor(args.floor)
-    extra = {"policy": args.policy} if args.policy is not None else {}
+    extra: dict[str, object] = {"policy": args.policy} if args.policy is not None else {}
+    if args.schedule is not None:
+        extra["schedule"] = args.schedule
     calibrator = calibrator_for_squares(cls, side=args.side, runs_per_direction=args.runs, **extra)
     simulated = calibrate_in_simulation(
         calibrator,
