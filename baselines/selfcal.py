@@ -382,8 +382,8 @@ class SelfCalScripted(SelfCal):
         observe: str = "trajectory",
         schedule: tuple[str, ...] = (),
     ) -> None:
+        super().__init__(budget, policy, observe)
         self.options = self.options_type(budget, policy, observe, schedule)
-        self._policy = None
 
     def _choose(self, session: SelfCalSession) -> int:
         schedule = self.options.schedule
