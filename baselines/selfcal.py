@@ -27,7 +27,7 @@ ablation that shows what the estimator does without learning.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -325,13 +325,14 @@ class SelfCalScriptedOptions(SelfCalOptions):
 
     Attributes:
         schedule: menu item names (:data:`~odomgym.selfcal_session.MENU`, e.g.
-            ``("square4-cw", "square4-ccw", "straight4")``) driven in this order, repeated until
-            the budget is spent; empty (the default) for :func:`scripted_policy`'s schedule. A
-            lab that can drive only some items, or an experiment design of your own.
+            ``("square4-cw", "square4-ccw", "straight4")``, or one comma-separated string)
+            driven in this order, repeated until the budget is spent; empty (the default) for
+            :func:`scripted_policy`'s schedule. A lab that can drive only some items, or an
+            experiment design of your own (``benchmarks/design_bound.py``).
     """
 
     policy: str = "scripted"
-    schedule: tuple[str, ...] = ()
+    schedule: Sequence[str] | str = ()
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -348,7 +349,13 @@ def schedule_items(schedule: object) -> tuple[str, ...]:
     """``schedule`` checked: a sequence (or comma-separated string) of menu item names other
     than ``stop``; a :class:`SpecError` (field ``schedule``) names the first unknown one."""
     if isinstance(schedule, str):
-        schedule = [name.strip() for name in schedule.split(",") if name.strip()]
+        text = schedule
+        schedule = [name.strip() for name in text.split(",") if name.strip()]
+        if not schedule:
+            raise SpecError(
+                f"schedule {text!r} names no menu item (leave it out for the scripted schedule)",
+                field="schedule",
+            )
     if not isinstance(schedule, (list, tuple)):
         raise SpecError(
             f"schedule must be a list of menu item names, got {schedule!r}", field="schedule"
@@ -380,10 +387,12 @@ class SelfCalScripted(SelfCal):
         budget: int = 16,
         policy: str = "scripted",
         observe: str = "trajectory",
-        schedule: tuple[str, ...] = (),
+        schedule: Sequence[str] | str = (),
     ) -> None:
         super().__init__(budget, policy, observe)
-        self.options = self.options_type(budget, policy, observe, schedule)
+        self.options = self.options_type(
+            budget=budget, policy=policy, observe=observe, schedule=schedule
+        )
 
     def _choose(self, session: SelfCalSession) -> int:
         schedule = self.options.schedule
@@ -427,6 +436,6 @@ class SelfCalEndPose(SelfCalScripted):
         budget: int = 16,
         policy: str = "scripted",
         observe: str = "end_pose",
-        schedule: tuple[str, ...] = (),
+        schedule: Sequence[str] | str = (),
     ) -> None:
         super().__init__(budget, policy, observe, schedule)

@@ -60,18 +60,32 @@ def test_schedules_by_name() -> None:
 
 
 def test_a_small_study_end_to_end(capsys: pytest.CaptureFixture[str]) -> None:
-    """Four robots on ``concrete``, 3 runs, driven: the predicted miss of the best schedule
-    is the least of all (the scripted schedule's rank is reported against it), and every
-    driven schedule has an of-oracle figure."""
+    """Four robots on ``concrete``, 3 runs, driven: a JSON record with every schedule's
+    of-oracle figure (a calibration that helps: between 10 % and 500 % of the oracle), and
+    the scripted schedule driven by name is ``selfcal_scripted`` itself — what pairs the
+    study's rows with the benchmark's. Bad arguments are the parser's one-line errors."""
+    from odomgym.baselines.selfcal import SelfCalScripted
+    from odomgym.baselines.validation import calibrate_in_simulation
+    from odomgym.floor import FLOORS
+    from odomgym.robot import PRESETS
+
     argv = ["--robots", "4", "--info-robots", "2", "--floor", "concrete", "--budget", "3"]
     assert design.main([*argv, "--json"]) == 0
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     (record,) = [line for line in lines if "floor" in line]
-    predicted = record["predicted_rms_mm"]
-    assert predicted["best"] <= min(predicted.values())
-    assert record["rank_of_scripted"] >= 1 and record["designs"] == math.comb(11, 8)
+    assert record["designs"] == math.comb(11, 8)
     assert set(record["of_oracle"]) == {"best", "scripted", "squares"}
-    assert all(0.0 < v < 5.0 for v in record["of_oracle"].values())
-    assert record["room_over_scripted_median"] >= 1.0
-    with pytest.raises(SystemExit):
-        design.main(["--robots", "2", "--info-robots", "3"])
+    assert all(0.1 < v < 5.0 for v in record["of_oracle"].values())
+    robot = PRESETS["labmate"].with_errors(1.004, 0.98, 1.01)
+    for budget in (3, 8):
+        results = [
+            calibrate_in_simulation(c, robot, FLOORS["concrete"], seed=2).result.calibration
+            for c in (
+                SelfCalScripted(budget),
+                SelfCalScripted(budget, schedule=design.scripted_schedule(budget)),
+            )
+        ]
+        assert results[0] == results[1]
+    for bad in (["--robots", "2", "--info-robots", "3"], ["--budget", "21"], ["--floor", "ice"]):
+        with pytest.raises(SystemExit):
+            design.main(bad)

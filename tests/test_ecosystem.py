@@ -178,7 +178,8 @@ def _small(algo: str) -> dict[str, object]:
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_sb3_makes_every_env_from_its_id(env_id: str) -> None:
     """The construction of ``PPO("MlpPolicy", env_id)`` alone (quick): SB3 asks for
-    ``render_mode="rgb_array"``, which used to stop ``SelfCalibration-v1``."""
+    ``render_mode="rgb_array"``, which used to stop the self-calibration env (then
+    ``SelfCalibration-v0``)."""
     sb3 = pytest.importorskip("stable_baselines3")
     model = sb3.PPO("MlpPolicy", env_id, device="cpu")
     assert model.get_env().envs[0].unwrapped.render_mode == "rgb_array"

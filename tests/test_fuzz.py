@@ -1197,7 +1197,7 @@ def test_selfcal_env_steps(action: Any) -> None:
 
 
 def test_regression_a_selfcal_action_error_is_one_line() -> None:
-    """Found by test_selfcal_env_steps: SelfCalibration-v1.step(np.zeros((2, 2), int)) raised
+    """Found by test_selfcal_env_steps: SelfCalibration-v0.step(np.zeros((2, 2), int)) raised
     a SpecError whose message held the array's two-line repr; now one line."""
     with pytest.raises(SpecError) as caught:
         _env("SelfCalibration-v1").step(np.zeros((2, 2), int))

@@ -109,7 +109,9 @@ def test_v0_keeps_the_end_pose_estimator_and_v1_filters_the_trajectory() -> None
             out += [obs, np.float64(reward)]
         return out
 
-    v0, v1 = trace("SelfCalibration-v0"), trace("SelfCalibration-v1")
+    with pytest.warns(DeprecationWarning, match="out of date"):  # Gymnasium's own notice
+        v0 = trace("SelfCalibration-v0")
+    v1 = trace("SelfCalibration-v1")
     v1_end_pose = trace("SelfCalibration-v1", observe="end_pose")
     assert all(np.array_equal(a, b) for a, b in zip(v0, v1_end_pose, strict=True))
     assert not all(np.array_equal(a, b) for a, b in zip(v0, v1, strict=True))
@@ -225,6 +227,8 @@ def test_a_fixed_schedule_is_driven_in_order_and_checked(
     assert err.value.field == "schedule"
     with pytest.raises(SpecError):
         SelfCalScripted(4, schedule=("stop",))
+    with pytest.raises(SpecError, match="names no menu item"):
+        SelfCalScripted(4, schedule=" , ")
     assert main(["calibrate", "umbmark", "--schedule", "square4-cw"]) == 2
     assert "umbmark takes no option 'schedule'" in capsys.readouterr().err
     code = main(["calibrate", "selfcal_scripted", "--schedule", "spin720-cw,square4-ccw", "--json"])

@@ -190,11 +190,12 @@ def test_a_learned_policy_runs_only_with_what_it_was_trained_to_see() -> None:
 def test_run_information_adds_up_to_the_posterior_and_hardly_depends_on_the_data() -> None:
     """What an experiment design rests on (``benchmarks/design_bound.py``): the runs'
     information matrices, added to the prior's, give the filter's posterior information
-    (measured: within 5e-4 relative on all three floors), and one item's matrix at a given
-    roughness hardly depends on the robot or its noise — 12 robots, different true errors
-    and floor noise, their first 4 m square: within 2.6 % of the mean (measured). What does
-    change the matrix is the roughness factor the runs reveal, the floor."""
-    for floor in ("concrete", "cables"):
+    (measured: within 5e-4 relative on all three floors; asserted 1e-3), and one item's
+    matrix at a given roughness hardly depends on the robot or its noise — 12 robots,
+    different true errors and floor noise, their first 4 m square: within 2.6 % of the mean
+    (measured; asserted 3.5 %). What does change the matrix is the roughness factor the runs
+    reveal, the floor."""
+    for floor in ("concrete", "rough", "cables"):
         episodes = _episodes(range(3), floor, 8, "trajectory")
         _play_scripted(episodes)
         for ep in episodes:
@@ -204,7 +205,7 @@ def test_run_information_adds_up_to_the_posterior_and_hardly_depends_on_the_data
             total = est.prior_information + sum(est.run_information(run) for run, _ in est._runs)
             posterior = np.linalg.inv(est.covariance)
             rel = np.linalg.norm(total - posterior) / np.linalg.norm(posterior)
-            assert rel < 2e-3, (floor, rel)
+            assert rel < 1e-3, (floor, rel)
     episodes = _episodes(range(12), "concrete", 2, "trajectory")
     _play_scripted(episodes)
     matrices = []
@@ -219,4 +220,4 @@ def test_run_information_adds_up_to_the_posterior_and_hardly_depends_on_the_data
         assert np.trace(rough) < np.trace(matrices[-1]) / 5.0
     mean = np.mean(matrices, axis=0)
     spread = max(np.linalg.norm(m - mean) / np.linalg.norm(mean) for m in matrices)
-    assert spread < 0.05, spread
+    assert spread < 0.035, spread
