@@ -26,7 +26,7 @@ import math
 import os
 import signal
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -61,6 +61,7 @@ __all__ = [
     "configure",
     "failed_rows",
     "oracle_calibration",
+    "oracle_fractions",
     "population",
     "run_benchmark",
     "run_chunk",
@@ -299,6 +300,19 @@ def _row(
         "wall_time_s": wall,
         "failed": "",
     }
+
+
+def oracle_fractions(
+    errors: Sequence[Sequence[Mapping[str, FloatArray]]], oracle: int, method: int
+) -> list[float]:
+    """Per robot, the *of oracle* figure of calibration ``method``: the oracle's E_max,syst
+    (Borenstein & Feng 1994, Eq. 3.3) over the method's on the same validation squares, from
+    :func:`validate_calibrations`'s ``errors`` (indices as there: 0 is uncalibrated)."""
+    return [
+        e_max_syst(e[oracle]["cw"], e[oracle]["ccw"])
+        / e_max_syst(e[method]["cw"], e[method]["ccw"])
+        for e in errors
+    ]
 
 
 def validate_calibrations(

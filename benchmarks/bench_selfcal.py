@@ -192,7 +192,6 @@ def error_budget(robots: int, seed: int = 0) -> list[dict[str, Any]]:
     squares (same streams as the oracle); the median per-robot ratio of the oracle's
     E_max,syst to the perturbed one's (*of oracle*)."""
     from odomgym.baselines import benchmark as bench
-    from odomgym.metrics import e_max_syst
     from odomgym.odometry import Calibration
 
     config = BenchConfig(robots=robots, floors=("concrete",), seed=seed)
@@ -216,10 +215,7 @@ def error_budget(robots: int, seed: int = 0) -> list[dict[str, Any]]:
     )
     out = []
     for c, (sd, sb, ss) in enumerate(ERROR_CASES, start=2):
-        ratios = [
-            e_max_syst(e[1]["cw"], e[1]["ccw"]) / e_max_syst(e[c]["cw"], e[c]["ccw"])
-            for e in errors
-        ]
+        ratios = bench.oracle_fractions(errors, 1, c)
         out.append(
             {
                 "sigma_E_d": sd,

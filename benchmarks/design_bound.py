@@ -55,7 +55,6 @@ from odomgym.baselines.base import perform
 from odomgym.baselines.selfcal import SelfCalScripted, scripted_policy
 from odomgym.experiments import Experiment, ExperimentKind, Lab, SensorAccuracy
 from odomgym.lockstep import run_lockstep
-from odomgym.metrics import e_max_syst
 from odomgym.odometry import Calibration
 from odomgym.population import BENCH_FLOORS
 from odomgym.runs import replay_with_jacobian
@@ -187,13 +186,7 @@ def drive(
     errors = bench.validate_calibrations(
         config, floor, start_region, floor_index, indices, fleet, calibrations
     )
-    out: dict[str, list[float]] = {}
-    for c, name in enumerate(schedules, start=2):
-        out[name] = [
-            e_max_syst(e[1]["cw"], e[1]["ccw"]) / e_max_syst(e[c]["cw"], e[c]["ccw"])
-            for e in errors
-        ]
-    return out
+    return {name: bench.oracle_fractions(errors, 1, c) for c, name in enumerate(schedules, start=2)}
 
 
 def study(

@@ -248,7 +248,8 @@ class EndPoseEstimator:
         return np.sqrt(self._sensor_var + self.roughness**2 * floor)
 
     def add(self, run: Run, item: int, iterations: int = 1) -> FloatArray:
-        """Take in one measured run of menu item ``item`` and refit.
+        """Take in one measured run of menu item ``item`` and update the estimate (this class
+        refits all runs; :class:`TrajectoryEstimator` filters the new one).
 
         Returns the run's innovation — its residual at the estimate *before* the update,
         divided by :meth:`predicted_std` [-] — which tells a policy how surprising it was.
@@ -256,8 +257,12 @@ class EndPoseEstimator:
         r, _ = self.residual(run)
         innovation = r / self.predicted_std(item)
         self._runs.append((run, np.square(np.array(MENU[item].floor_std))))
-        self.fit(iterations)
+        self._update(iterations)
         return innovation
+
+    def _update(self, iterations: int) -> None:
+        """Take in the run :meth:`add` just appended: refit on all runs so far."""
+        self.fit(iterations)
 
     def fit(self, iterations: int = 2) -> None:
         """Gauss–Newton iterations on all runs so far, re-estimating the roughness factor."""
@@ -415,19 +420,12 @@ class TrajectoryEstimator(EndPoseEstimator):
         self.chunk = require_count("chunk", chunk, 1)
         self._filtered_roughness = self.roughness
 
-    def add(self, run: Run, item: int, iterations: int = 1) -> FloatArray:
-        """Take in one measured run of menu item ``item`` and filter it (``iterations`` is
-        accepted for the interface and ignored: each run is filtered twice).
-
-        Returns the run's end-pose innovation before the update, as :meth:`EndPoseEstimator.add`.
-        """
+    def _update(self, iterations: int) -> None:
+        """Filter the run :meth:`add` just appended (``iterations`` is ignored: each run is
+        filtered twice), then settle the roughness factor."""
         del iterations
-        r, _ = self.residual(run)
-        innovation = r / self.predicted_std(item)
-        self._runs.append((run, np.square(np.array(MENU[item].floor_std))))
-        self._filter_run(run)
+        self._filter_run(self._runs[-1][0])
         self._settle_roughness()
-        return innovation
 
     def fit(self, iterations: int = 2) -> None:
         """Filter every run again from the prior (with the current roughness factor)."""
