@@ -67,6 +67,7 @@ __all__ = [
     "noise_curvature",
     "run_fit_jobs",
     "strata",
+    "systematic_vector",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -374,7 +375,7 @@ def noise_curvature(
     return f0, grad, hess
 
 
-def _systematic_vector(
+def systematic_vector(
     spec: RobotSpec, effect: Effect
 ) -> tuple[FloatArray, FloatArray, FloatArray, Callable[[FloatArray], RobotSpec]]:
     """Parameters in units of their scale, relative to the current values, with bounds."""
@@ -430,7 +431,7 @@ def _least_squares_step(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
 ) -> RobotSpec:
     """``effect``'s parameters fitted by generalised least squares at fixed noise."""
-    u0, low, high, build = _systematic_vector(spec, effect)
+    u0, low, high, build = systematic_vector(spec, effect)
 
     def residual(u: FloatArray) -> FloatArray:
         return _whitened_stack(data, build(u), sensor)[0]
@@ -495,7 +496,7 @@ def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
     session-clustered (``stderr_sessions``, the same with each session's runs summed into one
     score; NaN with fewer than two sessions), which also holds when the robot itself changed
     between sessions (tyre wear, load, floor)."""
-    u0, _, _, build = _systematic_vector(fit.spec, effect)
+    u0, _, _, build = systematic_vector(fit.spec, effect)
     _, base = _whitened_stack(data, fit.spec, fit.sensor)
     columns: list[list[FloatArray]] = [[] for _ in data.runs]
     step = 0.05

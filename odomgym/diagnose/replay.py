@@ -21,7 +21,7 @@ from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["Replay", "replay_run"]
+__all__ = ["Replay", "replay_run", "session_time", "wheel_angles"]
 
 FloatArray = NDArray[np.float64]
 
@@ -64,8 +64,8 @@ def replay_run(run: Run, spec: RobotSpec) -> Replay:
         wheel=motor,
         wheelbase=float(spec.true_wheelbase),
         radius=radius,
-        angle=_wheel_angles(run, motor),
-        time=_session_time(run),
+        angle=wheel_angles(run, motor),
+        time=session_time(run),
     )
     for name, values in effects:
         EFFECTS[name].replay("transmission", values, arrays)
@@ -89,7 +89,7 @@ def replay_run(run: Run, spec: RobotSpec) -> Replay:
     return Replay(pose, tracked, travel, ds, dtheta, wheelbase)
 
 
-def _wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
+def wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
     """Each wheel's angle at the middle of every interval [rad], from the session's start when
     the run records where its wheels began (``meta["wheel_angle0"]``), else from the run's."""
     start = np.zeros(2)
@@ -101,7 +101,7 @@ def _wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
     return angles
 
 
-def _session_time(run: Run) -> FloatArray:
+def session_time(run: Run) -> FloatArray:
     """Time since the session started at the middle of every interval [s]."""
     t0 = float(run.meta.get("session_time", 0.0))  # type: ignore[arg-type]
     middle: FloatArray = t0 + 0.5 * (run.time[1:] + run.time[:-1]) - run.time[0]
