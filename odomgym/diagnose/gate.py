@@ -4,12 +4,15 @@ The rounds of :mod:`odomgym.diagnose.workflow` name catalogue effects and discov
 by likelihood, whose noise model can absorb what the systematic part lacks: on real logs the
 whitened gap then "closes" while the model predicts the robot worse (a real-robot diagnosis went
 from 108 to 163 mm of open-loop error on held-out sessions while its whitened gap said 99 %
-closed). The gate replays the proposals one at a time, in the order the rounds made them, and
-keeps one only if the model with it predicts the held-out folds better *open loop, in plain
-units* (:func:`odomgym.diagnose.openloop.cross_validate_open_loop`: whole sessions left out, or
+closed). The gate replays the proposals and keeps one only if the model with it predicts the
+held-out folds better *open loop, in plain units*
+(:func:`odomgym.diagnose.openloop.cross_validate_open_loop`: whole sessions left out, or
 contiguous blocks of runs with one session):
 
-* a catalogue effect if the mean held-out error over the folds falls;
+* catalogue effects by forward selection among those the rounds found significant (named or
+  not: the filter's likelihood ranks them, and real logs can mislead it — on the June OptiOdom
+  sessions it preferred a turn skid to the wheelbase): at each step the one whose addition
+  predicts the folds best joins if the mean held-out error over the folds falls;
 * a discovered term if it falls by more than one standard error of the folds' differences —
   the one-standard-error rule (Breiman, Friedman, Olshen & Stone 1984, §3.4.3; Hastie,
   Tibshirani & Friedman 2009, §7.10): a term must earn its place against the smaller model.
@@ -146,24 +149,28 @@ def open_loop_gate(
     report: Callable[[str, float], None] | None = None,
 ) -> GateResult:
     """Try ``effects`` then ``terms`` (their values in ``proposed``, the rounds' model) on
-    ``robot`` (the model as given), one at a time (module docstring). ``nominal``: the model
-    as given already fitted (its nuisances) on ``data``; ``start``: nuisances to start from."""
+    ``robot`` (the model as given) (module docstring). ``nominal``: the model as given already
+    fitted (its nuisances) on ``data``; ``start``: nuisances to start from."""
     current = nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
     current_cv = cross_validate_open_loop(data, current, folds)
     nominal_cv = current_cv
     kept_effects: list[str] = []
     kept_terms: list[str] = []
     steps: list[GateStep] = []
-    proposals = [("effect", name) for name in effects] + [("term", name) for name in terms]
-    for k, (kind, name) in enumerate(proposals):
+    total = len(effects) + len(terms)
+
+    def attempt(kind: str, name: str) -> tuple[GateStep, OpenLoopFit, FloatArray]:
         if report is not None:
-            report(f"open-loop check: {name}", k / max(len(proposals), 1))
+            report(f"open-loop check: {name}", len(steps) / max(total, 1))
         trial_effects = kept_effects + ([name] if kind == "effect" else [])
         trial_terms = kept_terms + ([name] if kind == "term" else [])
         # Start from the rounds' values of the new proposal and the current fit of the rest.
-        spec = spec_with(current.spec, proposed, [name] if kind == "effect" else [], [])
-        if kind == "term":
-            spec = spec_with(spec, proposed, [], [name])
+        spec = spec_with(
+            current.spec,
+            proposed,
+            [name] if kind == "effect" else [],
+            [name] if kind == "term" else [],
+        )
         trial = fit_open_loop(
             data, spec, model_effect(trial_effects, trial_terms), options, current.nuisances
         )
@@ -173,20 +180,38 @@ def open_loop_gate(
         stderr = float(np.std(diff, ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else math.inf
         rule = "lower" if kind == "effect" else "one standard error"
         kept = mean < 0.0 if kind == "effect" else mean + stderr < 0.0
-        steps.append(
-            GateStep(
-                kind=kind,
-                name=name,
-                kept=kept,
-                before_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
-                after_mm=1e3 * math.sqrt(float(np.mean(trial_cv))),
-                difference=1e6 * mean,
-                stderr=1e6 * stderr,
-                rule=rule,
-            )
+        step = GateStep(
+            kind=kind,
+            name=name,
+            kept=kept,
+            before_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
+            after_mm=1e3 * math.sqrt(float(np.mean(trial_cv))),
+            difference=1e6 * mean,
+            stderr=1e6 * stderr,
+            rule=rule,
         )
-        if kept:
-            kept_effects, kept_terms = trial_effects, trial_terms
+        return step, trial, trial_cv
+
+    # Catalogue effects: forward selection, the one that predicts the folds best first (the
+    # rounds' order is the filter's, which real logs can mislead).
+    pool = list(effects)
+    while pool:
+        tried = [attempt("effect", name) for name in pool]
+        best = min(range(len(tried)), key=lambda k: tried[k][0].difference)
+        step, trial, trial_cv = tried[best]
+        if not step.kept:
+            steps.extend(t[0] for t in tried)
+            break
+        steps.append(step)
+        kept_effects.append(step.name)
+        pool.remove(step.name)
+        current, current_cv = trial, trial_cv
+    # Discovered terms: in the order the discovery found them, each against the model so far.
+    for name in terms:
+        step, trial, trial_cv = attempt("term", name)
+        steps.append(step)
+        if step.kept:
+            kept_terms.append(name)
             current, current_cv = trial, trial_cv
     return GateResult(
         steps, kept_effects, kept_terms, current, current_cv, nominal_cv, [list(f) for f in folds]

@@ -1,37 +1,32 @@
 """The discrepancy workflow: where the model and the robot disagree, which effect is missing,
-add it, show the gap shrink on runs the fit never saw.
+add it, and show on data the fit never saw that the updated model predicts the robot better.
 
 :func:`diagnose` takes logged runs (any source: :mod:`odomgym.data`) and a robot model and returns
-a :class:`Diagnosis`:
+a :class:`Diagnosis`. The steps (``docs/diagnose.md`` gives each in full):
 
-1. **Split.** A fraction of whole runs (stratified by experiment label, seeded) is held out for
-   the final gap report; nothing is fitted on them.
-2. **Where.** :func:`odomgym.diagnose.where.localise` on the model as given.
-3. **Which**, in two stages. First every effect but the wheel noise (``floor_roughness``),
-   each fitted with that wheel noise as a free *nuisance* beside the sensor noise: a random
-   walk can absorb a systematic drift run by run (on the OptiOdom data it out-scored every
-   systematic effect when it competed on equal terms), so an effect must beat the best
-   wheel-noise explanation. Only if none is significant, the wheel noise itself against the
-   model with sensor noise alone. In each stage every effect is fitted added to the current
-   model
-   (:mod:`odomgym.diagnose.fit`) and scored by K-fold cross-validated log-likelihood on whole
-   fit runs. A candidate is significant if its likelihood-ratio test against the current model
-   passes at α after a Bonferroni correction for the number of candidates (χ² with as many
-   degrees of freedom as it has parameters; conservative for noise parameters on their
-   boundary) *and* it improves the held-out log-likelihood (the out-of-sample check guards
-   against a misspecified noise model). The best is the significant candidate with the largest
-   held-out gain; those within ``tie_nats`` of it are tied. (A max-T sign-flip test over runs
-   is reported too; it is weak when an effect shows in a few runs only, e.g. backlash in spins.)
-   Verdicts: one significant winner — ``explained``; tied winners — ``ambiguous`` (with the
-   experiment that would separate them); nothing significant — ``none`` if the model's whitened
-   innovations look like noise (run means and lag-1 correlation), else ``unexplained``.
-4. **Add.** The winner's fitted spec becomes the current model; 3–4 repeat while a round names
-   an effect (at most ``max_rounds``). Steps 3–4 are one :func:`run_round`, which updates a
-   :class:`DiagnosisState` within a :class:`RoundContext` fixed for the whole diagnosis.
-5. **Shrink.** The held-out runs are replayed through the model as given and the final one; the
-   gap (:data:`GAP_METRIC`: RMS whitened innovation, 1 at the noise floor) before and after,
-   with bootstrap intervals over runs, and the fraction of the *reducible* gap closed,
-   (MS_before − MS_after)/(MS_before − 1); plus the plain disagreement in mm and degrees.
+1. **Split** (:func:`split_runs`): whole sessions are held out, or with one session, per
+   experiment family a contiguous block of runs in time. Nothing is fitted on them.
+2. **Measurement nuisances** (:mod:`odomgym.diagnose.nuisances`): each session's time offset
+   (and, with several sessions, tracked point and yaw misalignment), fitted open loop jointly
+   with E_d, E_b, E_s (:mod:`odomgym.diagnose.openloop`) and removed from the runs.
+3. **Where** (:mod:`odomgym.diagnose.where`) the model as given disagrees.
+4. **Rounds** (:func:`run_round`): catalogue effects scored by the Kalman filter's
+   cross-validated likelihood and tested family-wise (:mod:`odomgym.diagnose.fit`); when the
+   catalogue leaves structure, sparse discovery over the error grammar
+   (:mod:`odomgym.diagnose.discover`); the noise model last; a backward check.
+5. **Physical sizes** (:mod:`odomgym.diagnose.physical`): a discovered term too large for what
+   the robot did is a stand-in, reported and not kept.
+6. **The open-loop gate** (:mod:`odomgym.diagnose.gate`): each proposal in turn is kept only if
+   it lowers the error of predicting left-out folds (sessions, or blocks) open loop.
+7. **The estimator** of the kept model's values — the filter's or the open-loop fit's —
+   whichever predicts the left-out folds better.
+8. **Noise effects**: floor bumps only with their signature and a size the floor can produce;
+   how far a noise effect with a mean part moved E_d, E_b, E_s is reported.
+9. **Held-out verdict** (:mod:`odomgym.diagnose.heldout`): the held-out runs predicted open loop
+   by the model as given, the diagnosed model and a baseline calibration, in mm and degrees —
+   the headline; the grammar's score test and a whiteness test on the held-out runs decide
+   ``explained`` / ``partly explained``; a model that does not predict the held-out runs better
+   than the model as given is ``unconfirmed``. The whitened gap stays as a diagnostic.
 """
 
 from __future__ import annotations
@@ -935,6 +930,13 @@ def _shrink(
     }
 
 
+def _significant_effects(state: DiagnosisState) -> list[str]:
+    """Every systematic catalogue effect some round found significant (named, absorbed or
+    beaten by another), in the order first found: the open-loop gate's pool."""
+    found = [c.name for c in state.candidates if c.significant]
+    return [n for n in dict.fromkeys([*state.named, *found]) if not EFFECTS[n].noise]
+
+
 def _terms_tried(passes: Sequence[Discovery]) -> int:
     """How many grammar terms the discovery tried: the library's identifiable terms (0 when no
     pass ran)."""
@@ -1114,7 +1116,7 @@ def diagnose(
     plausible_terms = [size.term for size in sizes if size.plausible]
     # 3. The open-loop gate: each proposal in turn must lower the error of predicting the
     # held-out folds (whole sessions, or blocks of time) open loop.
-    proposed_effects = [n for n in state.named if not EFFECTS[n].noise]
+    proposed_effects = _significant_effects(state)
     gate = open_loop_gate(
         open_data,
         robot,
