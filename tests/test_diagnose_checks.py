@@ -109,20 +109,48 @@ def test_bumps_need_their_signature_and_a_size_the_floor_can_make() -> None:
     without = simulate_protocol(NOMINAL_ROBOT, "rich", rng)
     values = {"rate": 0.5, "heading_jump": math.radians(1.5)}
     found = check_bumps(
-        with_bumps, NOMINAL_ROBOT, values, max_obstacle=0.02, interval=0.25, alpha=0.025
+        with_bumps,
+        NOMINAL_ROBOT,
+        values,
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
     )
     assert found.signature and found.plausible and found.accepted, found
     absent = check_bumps(
-        without, NOMINAL_ROBOT, values, max_obstacle=0.02, interval=0.25, alpha=0.025
+        without,
+        NOMINAL_ROBOT,
+        values,
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
     )
     assert not absent.signature and not absent.accepted, absent
     ten_degrees = {"rate": 0.75, "heading_jump": math.radians(10.0)}
     huge = check_bumps(
-        with_bumps, NOMINAL_ROBOT, ten_degrees, max_obstacle=0.02, interval=0.25, alpha=0.025
+        with_bumps,
+        NOMINAL_ROBOT,
+        ten_degrees,
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
     )
     radius = 0.5 * NOMINAL_ROBOT.wheel_diameter
     assert huge.largest_loss == pytest.approx(bump_extra_rotation(radius, 0.02))
     assert not huge.plausible and "obstacle" in huge.reason
+    frequent = check_bumps(
+        with_bumps,
+        NOMINAL_ROBOT,
+        {"rate": 3.5, "heading_jump": math.radians(0.57)},
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
+    )
+    assert not frequent.plausible and "per metre" in frequent.reason
 
 
 def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term() -> None:

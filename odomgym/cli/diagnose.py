@@ -89,6 +89,13 @@ def register(commands: Commands) -> None:
         "do (default 0.02)",
     )
     parser.add_argument(
+        "--max-bump-rate",
+        type=positive,
+        default=1.0,
+        help="most obstacle crossings per metre of a wheel's travel the floor may hold: bounds "
+        "named floor bumps (default 1.0)",
+    )
+    parser.add_argument(
         "--no-baseline",
         action="store_true",
         help="skip the baseline calibration (trajectory optimisation of b, D_R, D_L on the fit "
@@ -141,6 +148,7 @@ def run(args: argparse.Namespace) -> int:
         time_offset=not args.no_time_offset,
         max_time_offset=args.max_time_offset,
         max_obstacle=args.max_obstacle,
+        max_bump_rate=args.max_bump_rate,
     )
     out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
     check_output(out, option="--out", folder=True, swap=True)

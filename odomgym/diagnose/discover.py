@@ -41,10 +41,10 @@ from scipy import stats
 from odomgym.diagnose.fit import (
     CandidateFit,
     Dataset,
-    _whitened_stack,
     cross_validate,
     evaluate,
     fit_candidate,
+    whitened_stack,
 )
 from odomgym.diagnose.likelihood import SensorNoise
 from odomgym.diagnose.physical import term_modulator
@@ -111,7 +111,7 @@ def library_jacobian(
     cannot separate from earlier ones are dropped (relative residual norm below 1e-3 after
     projecting on the kept columns)."""
     names = list(terms) if terms is not None else [t.name for t in TERMS]
-    _, base = _whitened_stack(data, spec, sensor)
+    _, base = whitened_stack(data, spec, sensor)
     columns: list[list[FloatArray]] = [[] for _ in data.runs]
     kept: list[str] = []
     dropped: list[str] = []
@@ -123,8 +123,8 @@ def library_jacobian(
         bound = effect.parameters[0]
         high = min(current + h, bound.high)
         low = max(current - h, bound.low)
-        _, plus = _whitened_stack(data, effect.write(spec, {name: high}), sensor)
-        _, minus = _whitened_stack(data, effect.write(spec, {name: low}), sensor)
+        _, plus = whitened_stack(data, effect.write(spec, {name: high}), sensor)
+        _, minus = whitened_stack(data, effect.write(spec, {name: low}), sensor)
         per_run = [(p - m) / (high - low) for p, m in zip(plus, minus, strict=True)]
         stacked = np.concatenate(per_run)
         norm = float(np.linalg.norm(stacked))

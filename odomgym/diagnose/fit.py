@@ -68,6 +68,7 @@ __all__ = [
     "run_fit_jobs",
     "strata",
     "systematic_vector",
+    "whitened_stack",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -393,9 +394,10 @@ def systematic_vector(
     return np.zeros(len(params)), (low - origin) / scale, (high - origin) / scale, build
 
 
-def _whitened_stack(
+def whitened_stack(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise
 ) -> tuple[FloatArray, list[FloatArray]]:
+    """The whitened innovations of every run under ``spec``, concatenated and per run."""
     ev = evaluate(data, spec, sensor)
     return np.concatenate(ev.whitened), ev.whitened
 
@@ -434,7 +436,7 @@ def _least_squares_step(
     u0, low, high, build = systematic_vector(spec, effect)
 
     def residual(u: FloatArray) -> FloatArray:
-        return _whitened_stack(data, build(u), sensor)[0]
+        return whitened_stack(data, build(u), sensor)[0]
 
     result = least_squares(
         residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=30
@@ -497,14 +499,14 @@ def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
     score; NaN with fewer than two sessions), which also holds when the robot itself changed
     between sessions (tyre wear, load, floor)."""
     u0, _, _, build = systematic_vector(fit.spec, effect)
-    _, base = _whitened_stack(data, fit.spec, fit.sensor)
+    _, base = whitened_stack(data, fit.spec, fit.sensor)
     columns: list[list[FloatArray]] = [[] for _ in data.runs]
     step = 0.05
     for k in range(len(u0)):
         du = np.zeros_like(u0)
         du[k] = step
-        _, plus = _whitened_stack(data, build(u0 + du), fit.sensor)
-        _, minus = _whitened_stack(data, build(u0 - du), fit.sensor)
+        _, plus = whitened_stack(data, build(u0 + du), fit.sensor)
+        _, minus = whitened_stack(data, build(u0 - du), fit.sensor)
         for j in range(len(data.runs)):
             columns[j].append((plus[j] - minus[j]) / (2.0 * step))
     fit.whitened = base

@@ -62,8 +62,9 @@ class HeldOut:
         baseline_geometry: its E_d, E_b, E_s.
         intervals: 95 % bootstrap intervals over the held-out runs of the position and heading
             RMS differences, diagnosed − as given and diagnosed − baseline [mm], [°].
-        truth: the measured paths (T, 2) [m] of the runs whose predictions the models keep
-            (:attr:`odomgym.diagnose.openloop.ModelErrors.paths`), for the picture.
+        truth: the measured paths of the runs whose predictions the models keep
+            (:attr:`odomgym.diagnose.openloop.ModelErrors.paths`), for the picture: time since
+            the run's start [s], x, y [m] (T, 3).
     """
 
     split: str

@@ -16,14 +16,14 @@ to what a robot can physically do:
   heavy-tailed heading increments *during steady driving*, where slip at starts and stops, a
   time offset or a controller transient cannot produce them (excess kurtosis of the heading
   disagreement's increments over steady intervals, tested against its sampling error
-  √(24/n)), made by *separate events*: a fitted jump at least :data:`SEPARATE_JUMP` times the
-  robust spread of those increments, and at most :data:`SPARSE_JUMPS` bumps expected per
-  interval (bumps every few centimetres with jumps the size of the noise are heavier-tailed
-  wheel noise, not bumps; as bumps they would shorten the mean travel and move E_s) — and only
-  with a jump the floor can produce: the travel one bump loses, a·b, at
-  most what a wheel loses crossing an obstacle of ``max_obstacle`` (the rigid-wheel-over-
-  cylinder geometry of :func:`odomgym.cables.bump_extra_rotation`; a 20 mm obstacle by
-  default, a thick cable or a door threshold, the largest a lab floor plausibly holds).
+  √(24/n)) — and only with what the floor can produce: at most ``max_rate`` crossings per metre
+  of a wheel's travel (one per metre by default, three times the project's cable-strewn
+  benchmark floor; bumps every few centimetres are heavier-tailed wheel noise, not obstacles,
+  and as bumps they would shorten the mean travel and move E_s), each with a jump whose travel
+  loss a·b is at most what a wheel loses crossing an obstacle of
+  ``max_obstacle`` (the rigid-wheel-over-cylinder geometry of
+  :func:`odomgym.cables.bump_extra_rotation`; a 20 mm obstacle by default, a thick cable or a
+  door threshold, the largest a lab floor plausibly holds).
 """
 
 from __future__ import annotations
@@ -48,8 +48,6 @@ from odomgym.runs import Run
 __all__ = [
     "PLAUSIBLE_CHANGE",
     "PLAUSIBLE_CRAB",
-    "SEPARATE_JUMP",
-    "SPARSE_JUMPS",
     "BumpCheck",
     "TermSize",
     "check_bumps",
@@ -67,13 +65,6 @@ at the speeds and accelerations it actually had would not be usable for dead rec
 PLAUSIBLE_CRAB = math.radians(5.0)
 """The largest crab angle (translation off the heading) a term may make at the data's operating
 range [rad]."""
-
-SEPARATE_JUMP = 3.0
-"""A bump's heading jump must be at least this many robust standard deviations of a steady
-interval's heading increment to be a separate event [-]."""
-
-SPARSE_JUMPS = 0.2
-"""Most bumps expected per steady interval (both wheels) for bumps to be separate events [-]."""
 
 OPERATING_QUANTILE = 0.95
 """The quantile of a modulator's magnitude that stands for the data's operating range."""
@@ -177,11 +168,9 @@ class BumpCheck:
         steady_intervals: how many steady-driving intervals the signature was measured on.
         excess_kurtosis: of the heading disagreement's increments over them [-].
         kurtosis_p: one-sided p-value of that excess against 0 (sampling error √(24/n)).
-        increment_spread: robust standard deviation (1.4826 × MAD) of those increments [rad].
-        jumps_per_interval: bumps the fit expects per steady interval (both wheels) [-].
-        signature: heavy tails during steady driving (p below the test level) made by separate
-            jumps (:data:`SEPARATE_JUMP`, :data:`SPARSE_JUMPS`).
-        plausible: the jump within the obstacle bound.
+        max_rate: the most crossings per metre the floor is assumed to hold [1/m].
+        signature: heavy tails during steady driving (p below the test level).
+        plausible: the jump within the obstacle bound and the rate within ``max_rate``.
         reason: why the bumps are not named, in words ("" when they may be).
     """
 
@@ -193,8 +182,7 @@ class BumpCheck:
     steady_intervals: int
     excess_kurtosis: float
     kurtosis_p: float
-    increment_spread: float
-    jumps_per_interval: float
+    max_rate: float
     signature: bool
     plausible: bool
     reason: str
@@ -208,15 +196,12 @@ class BumpCheck:
         return {**self.__dict__, "accepted": self.accepted}
 
 
-def _steady_increments(
-    runs: Sequence[Run], spec: RobotSpec, interval: float
-) -> tuple[FloatArray, FloatArray]:
+def _steady_increments(runs: Sequence[Run], spec: RobotSpec, interval: float) -> FloatArray:
     """Increments of the heading disagreement (measured − replayed) between consecutive
     measured samples ``interval`` apart, over intervals of steady driving: every sample between
     them moving, no wheel reversing, each wheel's speed changing by less than 20 % across the
-    interval (starts, stops and transients left out) — and both wheels' travel over each [m]."""
+    interval (starts, stops and transients left out)."""
     out: list[FloatArray] = []
-    travel: list[float] = []
     for run in runs:
         mask = measurement_mask(run, interval)[:, 2]
         rows = np.flatnonzero(mask)
@@ -236,10 +221,7 @@ def _steady_increments(
             if np.any(high - low > 0.2 * high):
                 continue
             out.append(np.atleast_1d(error[b] - error[a]))
-            travel.append(float(np.sum(np.abs(rep.travel[a:b]))))
-    if not out:
-        return np.zeros(0), np.zeros(0)
-    return np.concatenate(out), np.array(travel)
+    return np.concatenate(out) if out else np.zeros(0)
 
 
 def check_bumps(
@@ -248,6 +230,7 @@ def check_bumps(
     values: Mapping[str, float],
     *,
     max_obstacle: float,
+    max_rate: float,
     interval: float,
     alpha: float,
 ) -> BumpCheck:
@@ -257,37 +240,32 @@ def check_bumps(
     loss = jump * float(spec.true_wheelbase)
     radius = 0.5 * float(spec.wheel_diameter)
     largest = bump_extra_rotation(radius, max_obstacle)
-    increments, travel = _steady_increments(runs, spec, interval)
+    increments = _steady_increments(runs, spec, interval)
     n = len(increments)
     if n >= 20:
         excess = float(stats.kurtosis(increments, fisher=True, bias=False))
         p = float(stats.norm.sf(excess / math.sqrt(24.0 / n)))
-        spread = 1.4826 * float(np.median(np.abs(increments - np.median(increments))))
-        per_interval = rate * float(np.median(travel))
     else:
-        excess, p, spread, per_interval = math.nan, 1.0, math.nan, math.nan
-    heavy = p < alpha
-    separate = jump >= SEPARATE_JUMP * spread and per_interval <= SPARSE_JUMPS
-    signature = heavy and separate
-    plausible = loss <= largest
+        excess, p = math.nan, 1.0
+    signature = p < alpha
+    plausible = loss <= largest and rate <= max_rate
     reasons = []
-    if not heavy:
+    if not signature:
         reasons.append(
             "no heavy-tailed heading jumps during steady driving "
             f"(excess kurtosis {excess:.3g} over {n} steady intervals, p = {p:.3g})"
         )
-    elif not separate:
-        reasons.append(
-            f"the fitted bumps ({rate:.3g} per metre, {math.degrees(jump):.3g}°) would come "
-            f"{per_interval:.2g} times per steady interval with jumps {jump / spread:.2g} × the "
-            "interval's spread: heavier-tailed wheel noise, not separate events (as bumps they "
-            f"would shorten the mean travel by {100 * rate * loss:.2g} %)"
-        )
-    if not plausible:
+    if loss > largest:
         reasons.append(
             f"each bump would lose {1e3 * loss:.3g} mm of travel ({math.degrees(jump):.3g}° of "
             f"heading), more than crossing a {1e3 * max_obstacle:.3g} mm obstacle can "
             f"({1e3 * largest:.3g} mm)"
+        )
+    if rate > max_rate:
+        reasons.append(
+            f"{rate:.3g} bumps per metre is more than the {max_rate:.3g} a floor is assumed to "
+            f"hold: heavier-tailed wheel noise, not obstacles (as bumps they would shorten the "
+            f"mean travel by {100 * rate * loss:.2g} % and move E_s)"
         )
     return BumpCheck(
         rate=rate,
@@ -298,8 +276,7 @@ def check_bumps(
         steady_intervals=n,
         excess_kurtosis=excess,
         kurtosis_p=p,
-        increment_spread=spread,
-        jumps_per_interval=per_interval,
+        max_rate=max_rate,
         signature=signature,
         plausible=plausible,
         reason="; ".join(reasons),

@@ -404,7 +404,8 @@ _STYLES = {  # (colour, line style) of each model's path
 
 def _paths_plot(d: Diagnosis, folder: Path) -> str:
     """``held_out_paths.png``: for a few held-out runs, the measured path and the open-loop
-    predictions of the model as given, the diagnosed model and the baseline, in metres."""
+    predictions of the model as given, the diagnosed model and the baseline, in metres; below
+    each, the three position errors over time (the paths alone hide millimetres)."""
     from matplotlib.figure import Figure
 
     assert d.held_out is not None
@@ -412,11 +413,15 @@ def _paths_plot(d: Diagnosis, folder: Path) -> str:
     names = list(held.truth)
     cols = min(2, len(names))
     rows = math.ceil(len(names) / cols)
-    fig = Figure(figsize=(5.2 * cols, 4.6 * rows + 0.6))
+    fig = Figure(figsize=(5.4 * cols, 6.4 * rows + 0.4))
+    grid = fig.add_gridspec(2 * rows, cols, height_ratios=[3.0, 1.2] * rows)
     for k, name in enumerate(names):
-        ax = fig.add_subplot(rows, cols, k + 1)
+        row, col = divmod(k, cols)
+        ax = fig.add_subplot(grid[2 * row, col])
+        err_ax = fig.add_subplot(grid[2 * row + 1, col])
         truth = held.truth[name]
-        ax.plot(truth[:, 0], truth[:, 1], "k-", lw=2.2, alpha=0.35, label="ground truth")
+        time, xy = truth[:, 0], truth[:, 1:]
+        ax.plot(xy[:, 0], xy[:, 1], "k-", lw=2.2, alpha=0.35, label="ground truth")
         for label, model in held.models.items():
             if name not in model.paths:
                 continue
@@ -431,17 +436,19 @@ def _paths_plot(d: Diagnosis, folder: Path) -> str:
                 lw=1.2,
                 label=f"{label}: {1e3 * model.position[index]:.1f} mm RMS",
             )
-        ax.plot(truth[0, 0], truth[0, 1], "ko", ms=4)
+            error = 1e3 * np.hypot(*(path - xy).T)
+            err_ax.plot(time, error, color=colour, linestyle=style, lw=1.0)
+        ax.plot(xy[0, 0], xy[0, 1], "ko", ms=4)
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_title(f"run {name}", fontsize=9)
         ax.legend(fontsize=7, loc="best")
         ax.grid(True, lw=0.3)
-    fig.suptitle(
-        "held-out runs predicted open loop from the logged wheel motions",
-        fontsize=10,
-    )
+        err_ax.set_xlabel("time [s]")
+        err_ax.set_ylabel("position error [mm]")
+        err_ax.grid(True, lw=0.3)
+    fig.suptitle("held-out runs predicted open loop from the logged wheel motions", fontsize=10)
     fig.tight_layout()
     fig.savefig(folder / "held_out_paths.png", dpi=110)
     return "held_out_paths.png"

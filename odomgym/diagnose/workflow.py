@@ -31,11 +31,12 @@ a :class:`Diagnosis`. The steps (``docs/diagnose.md`` gives each in full):
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import pickle
 import shutil
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -71,6 +72,7 @@ from odomgym.diagnose.fit import (
     strata,
 )
 from odomgym.diagnose.gate import (
+    FilterLinearisation,
     GateStep,
     SystematicFit,
     filter_estimate,
@@ -194,6 +196,8 @@ class DiagnoseConfig:
         max_time_offset: the largest time offset searched [s].
         max_obstacle: the largest obstacle the floor is assumed to hold [m] — the bound on
             what named floor bumps may do (:mod:`odomgym.diagnose.physical`).
+        max_bump_rate: the most obstacle crossings per metre of a wheel's travel the floor is
+            assumed to hold [1/m].
     """
 
     holdout: float = 0.3
@@ -211,6 +215,7 @@ class DiagnoseConfig:
     time_offset: bool = True
     max_time_offset: float = 1.0
     max_obstacle: float = 0.02
+    max_bump_rate: float = 1.0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:
@@ -226,6 +231,11 @@ class DiagnoseConfig:
             raise SpecError(
                 f"max_obstacle must lie in (0, 1] m, got {self.max_obstacle!r}",
                 field="max_obstacle",
+            )
+        if not 0.0 < self.max_bump_rate <= 100.0:
+            raise SpecError(
+                f"max_bump_rate must lie in (0, 100] per metre, got {self.max_bump_rate!r}",
+                field="max_bump_rate",
             )
         if self.max_rounds < 1 or self.folds < 2:
             raise SpecError("max_rounds must be >= 1 and folds >= 2", field="max_rounds")
@@ -930,11 +940,49 @@ def _shrink(
     }
 
 
+OFFSET_SIGNIFICANCE = 3.0
+"""A session's fitted time offset is removed only beyond this many (run-clustered) standard
+errors from zero."""
+
+
+def _significant_offset(nuisance: SessionNuisance) -> SessionNuisance:
+    """``nuisance``'s time offset alone (the frame is refitted at that offset), zero — with its
+    standard error kept — where it is within :data:`OFFSET_SIGNIFICANCE` standard errors of
+    zero or its standard error is unknown."""
+    tau, se = nuisance.time_offset, nuisance.time_offset_se
+    keep = math.isfinite(se) and abs(tau) >= OFFSET_SIGNIFICANCE * se
+    return SessionNuisance(
+        nuisance.session, nuisance.runs, time_offset=tau if keep else 0.0, time_offset_se=se
+    )
+
+
+def _with_clock(
+    nuisances: Mapping[str, SessionNuisance], clock: Mapping[str, SessionNuisance]
+) -> dict[str, SessionNuisance]:
+    """``nuisances`` (frames, fitted on runs whose clocks were already corrected) with each
+    session's time offset from ``clock`` put back."""
+    out = {}
+    for session, n in nuisances.items():
+        c = clock.get(session)
+        out[session] = (
+            dataclasses.replace(n, time_offset=c.time_offset, time_offset_se=c.time_offset_se)
+            if c is not None
+            else n
+        )
+    return out
+
+
 def _significant_effects(state: DiagnosisState) -> list[str]:
     """Every systematic catalogue effect some round found significant (named, absorbed or
-    beaten by another), in the order first found: the open-loop gate's pool."""
+    beaten by another), in the order first found: the open-loop gate's pool. Those tied in a
+    last round that ended ``ambiguous`` stay out: the data cannot tell them apart, and the
+    verdict says so with the experiment that would."""
     found = [c.name for c in state.candidates if c.significant]
-    return [n for n in dict.fromkeys([*state.named, *found]) if not EFFECTS[n].noise]
+    last = state.rounds[-1] if state.rounds else None
+    tied = set(last.tied) if last is not None and last.verdict == "ambiguous" else set()
+    return [
+        n for n in dict.fromkeys([*state.named, *found]) if not EFFECTS[n].noise and n not in tied
+    ]
 
 
 def _terms_tried(passes: Sequence[Discovery]) -> int:
@@ -1051,17 +1099,32 @@ def diagnose(
     use_frames = cfg.session_frames
     if use_frames is None:
         use_frames = len(set(sessions_of(runs))) >= 2
-    options = NuisanceOptions(
+    clock_options = NuisanceOptions(
         time_offset=cfg.time_offset, frames=use_frames, max_time_offset=cfg.max_time_offset
     )
     interval, length = cfg.checkpoint_interval, float(robot.wheelbase)
-    open_data = OpenLoopData(fit_runs, interval, length)
     # 1. The recording's nuisances, fitted jointly with the geometry (E_d, E_b, E_s) so that a
-    # curving straight is not read as a tilted frame, nor a scale as a clock; kept alone.
+    # curving straight is not read as a tilted frame, nor a scale as a clock. A time offset is
+    # removed only where the data show one (module docstring of odomgym.diagnose.nuisances):
+    # resampling the counts at a spurious offset adds the acceleration-correlated disagreement
+    # the filter is most sensitive to.
     report("measurement nuisances", 0.0)
-    start = fit_open_loop(open_data, robot, model_effect(GEOMETRY, []), options)
-    nuisances = start.nuisances
-    fit_corrected = correct_runs(fit_runs, nuisances)
+    geometry = model_effect(GEOMETRY, [])
+    clock = {
+        s: _significant_offset(n)
+        for s, n in fit_open_loop(
+            OpenLoopData(fit_runs, interval, length), robot, geometry, clock_options
+        ).nuisances.items()
+    }
+    timed = correct_runs(fit_runs, clock)
+    options = NuisanceOptions(time_offset=False, frames=use_frames)
+    open_data = OpenLoopData(timed, interval, length)
+    nuisances = (
+        fit_open_loop(open_data, robot, geometry, options).nuisances
+        if use_frames
+        else {s: SessionNuisance(s, n.runs) for s, n in clock.items()}
+    )
+    fit_corrected = correct_runs(timed, nuisances)
     data = Dataset.of(fit_corrected, interval)
     names = cfg.candidates or tuple(EFFECTS)
     if use_frames:
@@ -1071,7 +1134,14 @@ def diagnose(
     nominal = fit_open_loop(open_data, robot, None, options, nuisances)
     pictured = pictured_runs(held_runs)
     as_given = evaluate_open_loop(
-        AS_GIVEN, held_runs, robot, nominal.nuisances, options, interval, length, pictured
+        AS_GIVEN,
+        held_runs,
+        robot,
+        _with_clock(nominal.nuisances, clock),
+        clock_options,
+        interval,
+        length,
+        pictured,
     )
     report("where", 0.0)
     shown = [*fit_corrected, *correct_runs(held_runs, as_given.nuisances)]
@@ -1117,6 +1187,15 @@ def diagnose(
     # 3. The open-loop gate: each proposal in turn must lower the error of predicting the
     # held-out folds (whole sessions, or blocks of time) open loop.
     proposed_effects = _significant_effects(state)
+    # The filter's estimates, linearised at the rounds' model, without a noise effect's mean part
+    # (floor bumps shorten the travel: their partner takes it in the fits).
+    base = state.model.spec
+    for name in state.named:
+        if EFFECTS[name].noise and type(EFFECTS[name]).replay is not Effect.replay:
+            base = EFFECTS[name].write(base, EFFECTS[name].absent_values())
+    linearised = FilterLinearisation(
+        data, Model(base, state.model.sensor), proposed_effects, plausible_terms
+    )
     gate = open_loop_gate(
         open_data,
         robot,
@@ -1128,13 +1207,15 @@ def diagnose(
         start=nuisances,
         nominal=nominal,
         report=report,
+        filtered=linearised,
+        corrected=OpenLoopData(fit_corrected, interval, length),
     )
     # 4. The estimator of the kept model's values: the filter's (efficient when its noise model
     # is right) or the open-loop fit's (what the held-out comparison measures), whichever
     # predicts the left-out folds better open loop.
     kept = list(gate.effects)
     chosen = open_loop_estimate(gate.fit, gate.cv_error)
-    corrected_final = correct_runs(fit_runs, gate.fit.nuisances)
+    corrected_final = correct_runs(timed, gate.fit.nuisances)
     kf_data = Dataset.of(corrected_final, interval)
     corrected_open = OpenLoopData(corrected_final, interval, length)
     effect = model_effect(kept, gate.terms)
@@ -1165,6 +1246,7 @@ def diagnose(
                 chosen.spec,
                 values,
                 max_obstacle=cfg.max_obstacle,
+                max_rate=cfg.max_bump_rate,
                 interval=interval,
                 alpha=0.5 * cfg.alpha,
             )
@@ -1198,8 +1280,9 @@ def diagnose(
     final_model = fit_noise_model(kf_data, Model(spec, state.model.sensor))
     # 5. The held-out runs: the model as given, the diagnosed one and the baseline, open loop.
     models = {AS_GIVEN: as_given}
+    final_nuisances = _with_clock(gate.fit.nuisances, clock)
     models[DIAGNOSED] = evaluate_open_loop(
-        DIAGNOSED, held_runs, spec, gate.fit.nuisances, options, interval, length, pictured
+        DIAGNOSED, held_runs, spec, final_nuisances, clock_options, interval, length, pictured
     )
     baseline_name, baseline_geometry = None, None
     if baseline is not None:
@@ -1210,15 +1293,20 @@ def diagnose(
             BASELINE,
             held_runs,
             base_spec,
-            base_fit.nuisances,
-            options,
+            _with_clock(base_fit.nuisances, clock),
+            clock_options,
             interval,
             length,
             pictured,
         )
         baseline_name = baseline.name
         baseline_geometry = {"E_d": base_spec.e_d, "E_b": base_spec.e_b, "E_s": base_spec.e_s}
-    truth = {_run_id(held_runs[j], j): held_runs[j].true_pose[:, :2] for j in pictured}
+    truth = {
+        _run_id(held_runs[j], j): np.column_stack(
+            [held_runs[j].time - held_runs[j].time[0], held_runs[j].true_pose[:, :2]]
+        )
+        for j in pictured
+    }
     held_out = compare_models(
         split, models, np.random.default_rng(cfg.seed + 2), baseline_name, baseline_geometry, truth
     )
@@ -1246,7 +1334,7 @@ def diagnose(
         discovered=_kept_terms(state, gate.terms, chosen, corrected_final),
         discovery=_discovery_record(state.passes),
         final_test=final_test,
-        nuisances=list(gate.fit.nuisances.values()),
+        nuisances=list(final_nuisances.values()),
         estimators={
             "chosen": chosen.estimator,
             "held_out_fold_rms_mm": {k: 1e3 * math.sqrt(v) for k, v in estimators.items()},
