@@ -10,9 +10,11 @@ held-out folds better *open loop, in plain units*
 contiguous blocks of runs with one session):
 
 * catalogue effects by forward selection among those the rounds found significant (named or
-  not: the filter's likelihood ranks them, and real logs can mislead it — on the June OptiOdom
-  sessions it preferred a turn skid to the wheelbase): at each step the one whose addition
-  predicts the folds best joins if the mean held-out error over the folds falls;
+  not): at each step the next in the rounds' order — unless another predicts the folds better by
+  more than one standard error (the filter's likelihood ranks them, and real logs can mislead it:
+  on the June OptiOdom sessions it put a turn skid before the wheelbase) — joins if the mean
+  held-out error over the folds falls (one the rounds did not name: by more than one standard
+  error, as a term);
 * a discovered term if it falls by more than one standard error of the folds' differences —
   the one-standard-error rule (Breiman, Friedman, Olshen & Stone 1984, §3.4.3; Hastie,
   Tibshirani & Friedman 2009, §7.10): a term must earn its place against the smaller model.
@@ -243,10 +245,15 @@ def open_loop_gate(
     report: Callable[[str, float], None] | None = None,
     filtered: FilterLinearisation | None = None,
     corrected: OpenLoopData | None = None,
+    named: Sequence[str] | None = None,
 ) -> GateResult:
     """Try ``effects`` then ``terms`` (their values in ``proposed``, the rounds' model) on
-    ``robot`` (the model as given) (module docstring). ``nominal``: the model as given already
-    fitted (its nuisances) on ``data``; ``start``: nuisances to start from."""
+    ``robot`` (the model as given) (module docstring). ``named``: the effects the rounds named
+    (default: all of ``effects``); the others must pass the one-standard-error rule, as terms do.
+    ``nominal``: the model as given already fitted (its nuisances) on ``data``; ``start``:
+    nuisances to start from; ``filtered`` and ``corrected``: the filter's linearisation and the
+    runs it was made on, nuisances removed (without them, the open-loop fit alone)."""
+    chosen_by_rounds = set(effects if named is None else named)
     current = nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
 
     def held_out(fit: OpenLoopFit, keys: Sequence[str]) -> tuple[FloatArray, str]:
@@ -286,8 +293,9 @@ def open_loop_gate(
         diff = _fold_means(trial_cv, folds) - _fold_means(current_cv, folds)
         mean = float(np.mean(diff))
         stderr = float(np.std(diff, ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else math.inf
-        rule = "lower" if kind == "effect" else "one standard error"
-        kept = mean < 0.0 if kind == "effect" else mean + stderr < 0.0
+        lenient = kind == "effect" and name in chosen_by_rounds
+        rule = "lower" if lenient else "one standard error"
+        kept = mean < 0.0 if lenient else mean + stderr < 0.0
         step = GateStep(
             kind=kind,
             name=name,
@@ -301,12 +309,18 @@ def open_loop_gate(
         )
         return step, trial, trial_cv
 
-    # Catalogue effects: forward selection, the one that predicts the folds best first (the
-    # rounds' order is the filter's, which real logs can mislead).
+    # Catalogue effects: forward selection. The rounds' order (the filter's likelihood) is
+    # followed unless another effect predicts the folds better by more than one standard error
+    # of its change — real logs can mislead the filter (on the June OptiOdom sessions it put a
+    # turn skid before the wheelbase), but open-loop folds too noisy to tell two effects apart
+    # must not overrule it by chance.
     pool = list(effects)
     while pool:
         tried = [attempt("effect", name) for name in pool]
+        first = tried[0][0]
         best = min(range(len(tried)), key=lambda k: tried[k][0].difference)
+        if tried[best][0].difference + tried[best][0].stderr >= first.difference:
+            best = 0
         step, trial, trial_cv = tried[best]
         if not step.kept:
             steps.extend(t[0] for t in tried)

@@ -1209,6 +1209,7 @@ def diagnose(
         report=report,
         filtered=linearised,
         corrected=OpenLoopData(fit_corrected, interval, length),
+        named=[n for n in state.named if not EFFECTS[n].noise],
     )
     # 4. The estimator of the kept model's values: the filter's (efficient when its noise model
     # is right) or the open-loop fit's (what the held-out comparison measures), whichever
