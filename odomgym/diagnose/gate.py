@@ -4,18 +4,21 @@ The rounds of :mod:`odomgym.diagnose.workflow` name catalogue effects and discov
 by likelihood, whose noise model can absorb what the systematic part lacks: on real logs the
 whitened gap then "closes" while the model predicts the robot worse (a real-robot diagnosis went
 from 108 to 163 mm of open-loop error on held-out sessions while its whitened gap said 99 %
-closed). The gate replays the proposals and keeps one only if the model with it predicts the
-held-out folds better *open loop, in plain units*
+closed). The gate keeps a proposal only if the model with it predicts the held-out folds better
+*open loop, in plain units* than the model without it
 (:func:`odomgym.diagnose.openloop.cross_validate_open_loop`: whole sessions left out, or
-contiguous blocks of runs with one session):
+contiguous blocks of runs with one session). It works backwards from the model with every
+proposal (backward elimination): each proposal is tested against the model without it, the least
+useful one that fails goes, and the rest are tested again — tested one at a time on a model
+missing the others, a real effect can look useless (a scale fitted while a large diameter ratio
+is missing takes part of the curvature and predicts worse than nothing). The rules:
 
-* catalogue effects by forward selection among those the rounds found significant (named or
-  not): at each step the next in the rounds' order — unless another predicts the folds better by
-  more than one standard error (the filter's likelihood ranks them, and real logs can mislead it:
-  on the June OptiOdom sessions it put a turn skid before the wheelbase) — joins if the mean
-  held-out error over the folds falls (one the rounds did not name: by more than one standard
-  error, as a term);
-* a discovered term if it falls by more than one standard error of the folds' differences —
+* a catalogue effect the rounds named stays if the mean held-out error over the folds is lower
+  with it; one they found significant but did not name (beaten by another in the filter's
+  likelihood — on the June OptiOdom sessions the wheelbase, behind a turn skid) must lower it by
+  more than one standard error, as a term must;
+* a discovered term (a sinusoid's sine and cosine together) stays if it lowers the error by more
+  than one standard error of the folds' differences —
   the one-standard-error rule (Breiman, Friedman, Olshen & Stone 1984, §3.4.3; Hastie,
   Tibshirani & Friedman 2009, §7.10): a term must earn its place against the smaller model.
 
@@ -68,6 +71,7 @@ __all__ = [
     "open_loop_estimate",
     "open_loop_gate",
     "spec_with",
+    "term_proposals",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -79,7 +83,8 @@ class GateStep:
     """One proposal tried by the gate.
 
     Attributes:
-        kind: ``"effect"`` (catalogue) or ``"term"`` (discovered).
+        kind: ``"effect"`` (catalogue) or ``"term"`` (discovered; a sinusoid's sine and cosine
+            are one proposal, ``"right_sin1+right_cos1"``).
         name: the effect's or term's name.
         kept: whether it joined the model.
         before_mm, after_mm: held-out RMS combined open-loop error without and with it [mm]
@@ -232,6 +237,25 @@ class FilterLinearisation:
         return out
 
 
+def term_proposals(terms: Sequence[str]) -> list[str]:
+    """The discovered ``terms`` as the gate's proposals, in order: a sine and a cosine of the
+    same channel and harmonic are one sinusoid (``"right_sin1+right_cos1"``), proposed together
+    where the first of the two stood — alone, either is a sinusoid at a phase the data did not
+    choose."""
+    out: list[str] = []
+    for name in terms:
+        channel, _, modulator = name.rpartition("_")
+        if modulator[:3] in ("sin", "cos"):
+            other = f"{channel}_{'cos' if modulator.startswith('sin') else 'sin'}{modulator[3:]}"
+            if other in terms:
+                pair = "+".join(sorted((name, other), key=lambda t: "cos" in t))
+                if pair not in out:
+                    out.append(pair)
+                continue
+        out.append(name)
+    return out
+
+
 def open_loop_gate(
     data: OpenLoopData,
     robot: RobotSpec,
@@ -247,14 +271,21 @@ def open_loop_gate(
     corrected: OpenLoopData | None = None,
     named: Sequence[str] | None = None,
 ) -> GateResult:
-    """Try ``effects`` then ``terms`` (their values in ``proposed``, the rounds' model) on
+    """Keep those of ``effects`` and ``terms`` (their values in ``proposed``, the rounds'
+    model) that the held-out folds confirm, by backward elimination from all of them on
     ``robot`` (the model as given) (module docstring). ``named``: the effects the rounds named
     (default: all of ``effects``); the others must pass the one-standard-error rule, as terms do.
     ``nominal``: the model as given already fitted (its nuisances) on ``data``; ``start``:
     nuisances to start from; ``filtered`` and ``corrected``: the filter's linearisation and the
     runs it was made on, nuisances removed (without them, the open-loop fit alone)."""
     chosen_by_rounds = set(effects if named is None else named)
-    current = nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
+    proposals = [("effect", n) for n in effects] + [("term", n) for n in term_proposals(terms)]
+
+    def parts(members: Sequence[tuple[str, str]]) -> tuple[list[str], list[str]]:
+        return (
+            [n for k, n in members if k == "effect"],
+            [t for k, n in members if k == "term" for t in n.split("+")],
+        )
 
     def held_out(fit: OpenLoopFit, keys: Sequence[str]) -> tuple[FloatArray, str]:
         """The fold errors of a model by the better of the two estimators: the open-loop fit
@@ -267,77 +298,104 @@ def open_loop_gate(
             return by_filter, "filter"
         return by_open_loop, "open loop"
 
-    current_cv, _ = held_out(current, [])
-    nominal_cv = current_cv
-    kept_effects: list[str] = []
-    kept_terms: list[str] = []
-    steps: list[GateStep] = []
-    total = len(effects) + len(terms)
-
-    def attempt(kind: str, name: str) -> tuple[GateStep, OpenLoopFit, FloatArray]:
-        if report is not None:
-            report(f"open-loop check: {name}", len(steps) / max(total, 1))
-        trial_effects = kept_effects + ([name] if kind == "effect" else [])
-        trial_terms = kept_terms + ([name] if kind == "term" else [])
-        # Start from the rounds' values of the new proposal and the current fit of the rest.
-        spec = spec_with(
-            current.spec,
-            proposed,
-            [name] if kind == "effect" else [],
-            [name] if kind == "term" else [],
-        )
-        joint = model_effect(trial_effects, trial_terms)
-        trial = fit_open_loop(data, spec, joint, options, current.nuisances)
+    def fitted(
+        members: Sequence[tuple[str, str]],
+        begin: RobotSpec,
+        nuisances: Mapping[str, SessionNuisance] | None,
+    ) -> tuple[OpenLoopFit, FloatArray, str]:
+        effect_names, term_names = parts(members)
+        joint = model_effect(effect_names, term_names)
+        fit = fit_open_loop(data, begin, joint, options, nuisances)
         keys = [p.name for p in joint.parameters] if joint is not None else []
-        trial_cv, estimator = held_out(trial, keys)
-        diff = _fold_means(trial_cv, folds) - _fold_means(current_cv, folds)
-        mean = float(np.mean(diff))
-        stderr = float(np.std(diff, ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else math.inf
-        lenient = kind == "effect" and name in chosen_by_rounds
-        rule = "lower" if lenient else "one standard error"
-        kept = mean < 0.0 if lenient else mean + stderr < 0.0
-        step = GateStep(
-            kind=kind,
-            name=name,
-            kept=kept,
-            before_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
-            after_mm=1e3 * math.sqrt(float(np.mean(trial_cv))),
-            difference=1e6 * mean,
-            stderr=1e6 * stderr,
-            rule=rule,
-            estimator=estimator,
-        )
-        return step, trial, trial_cv
+        cv, estimator = held_out(fit, keys)
+        return fit, cv, estimator
 
-    # Catalogue effects: forward selection. The rounds' order (the filter's likelihood) is
-    # followed unless another effect predicts the folds better by more than one standard error
-    # of its change — real logs can mislead the filter (on the June OptiOdom sessions it put a
-    # turn skid before the wheelbase), but open-loop folds too noisy to tell two effects apart
-    # must not overrule it by chance.
-    pool = list(effects)
-    while pool:
-        tried = [attempt("effect", name) for name in pool]
-        first = tried[0][0]
-        best = min(range(len(tried)), key=lambda k: tried[k][0].difference)
-        if tried[best][0].difference + tried[best][0].stderr >= first.difference:
-            best = 0
-        step, trial, trial_cv = tried[best]
-        if not step.kept:
-            steps.extend(t[0] for t in tried)
+    nominal_fit = (
+        nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
+    )
+    nominal_cv, _ = held_out(nominal_fit, [])
+    model = list(proposals)
+    effect_names, term_names = parts(model)
+    current, current_cv, current_estimator = (
+        fitted(model, spec_with(robot, proposed, effect_names, term_names), start)
+        if model
+        else (nominal_fit, nominal_cv, "open loop")
+    )
+    removed: list[GateStep] = []
+    tested: dict[tuple[str, str], GateStep] = {}
+    round_number = 0
+    while model:
+        round_number += 1
+        trials: dict[tuple[str, str], tuple[GateStep, OpenLoopFit, FloatArray]] = {}
+        for k, member in enumerate(model):
+            if report is not None:
+                report(f"open-loop check {round_number}: {member[1]}", k / len(model))
+            kind, name = member
+            rest = [m for m in model if m != member]
+            # The smaller model starts from the larger one's fit, the proposal made absent.
+            effect_names, term_names = parts([member])
+            begin = current.spec
+            for e in effect_names:
+                begin = EFFECTS[e].write(begin, EFFECTS[e].absent_values())
+            if term_names:
+                chosen = DiscoveredTerms(term_names)
+                begin = chosen.write(begin, dict.fromkeys(term_names, 0.0))
+            if rest:
+                smaller, smaller_cv, _ = fitted(rest, begin, current.nuisances)
+            else:
+                smaller, smaller_cv = nominal_fit, nominal_cv
+            diff = _fold_means(current_cv, folds) - _fold_means(smaller_cv, folds)
+            mean = float(np.mean(diff))
+            spread = (
+                float(np.std(diff, ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else math.inf
+            )
+            lenient = kind == "effect" and name in chosen_by_rounds
+            step = GateStep(
+                kind=kind,
+                name=name,
+                kept=mean < 0.0 if lenient else mean + spread < 0.0,
+                before_mm=1e3 * math.sqrt(float(np.mean(smaller_cv))),
+                after_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
+                difference=1e6 * mean,
+                stderr=1e6 * spread,
+                rule="lower" if lenient else "one standard error",
+                estimator=current_estimator,
+            )
+            trials[member] = (step, smaller, smaller_cv)
+            tested[member] = step
+        failing = [m for m in model if not trials[m][0].kept]
+        if not failing:
             break
-        steps.append(step)
-        kept_effects.append(step.name)
-        pool.remove(step.name)
-        current, current_cv = trial, trial_cv
-    # Discovered terms: in the order the discovery found them, each against the model so far.
-    for name in terms:
-        step, trial, trial_cv = attempt("term", name)
-        steps.append(step)
-        if step.kept:
-            kept_terms.append(name)
-            current, current_cv = trial, trial_cv
+        # The least useful proposal goes (the largest change, a term's counted with its
+        # standard error), and the rest are tested again without it.
+        worst = max(
+            failing,
+            key=lambda m: (
+                trials[m][0].difference
+                + (trials[m][0].stderr if trials[m][0].rule != "lower" else 0.0)
+            ),
+        )
+        removed.append(trials[worst][0])
+        model.remove(worst)
+        _, current, current_cv = trials[worst]
+        current_estimator = "open loop"
+        if model:
+            effect_names, term_names = parts(model)
+            joint = model_effect(effect_names, term_names)
+            keys = [p.name for p in joint.parameters] if joint is not None else []
+            current_cv, current_estimator = held_out(current, keys)
+        else:
+            current_cv = nominal_cv
+    kept_steps = [tested[m] for m in model]
+    effect_names, term_names = parts(model)
     return GateResult(
-        steps, kept_effects, kept_terms, current, current_cv, nominal_cv, [list(f) for f in folds]
+        kept_steps + removed,
+        effect_names,
+        term_names,
+        current,
+        current_cv,
+        nominal_cv,
+        [list(f) for f in folds],
     )
 
 
