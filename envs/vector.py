@@ -172,7 +172,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             self._restart(chosen, [route] * len(chosen))
         present = np.zeros(self.num_envs, dtype=bool)
         present[chosen] = True
-        report = self._episodes.report(self._trial, rewarded=False)
+        report = self._episodes.report(self._trial)
         return self._trial.observation(), self._vector_info(present, report, None)
 
     def _restart(self, indices: NDArray[np.intp], routes: Sequence[Route]) -> None:
@@ -200,8 +200,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         if any_reset:
             resetting = self._autoreset.copy()  # _restart clears the flags
             array[resetting] = 0.0
-        trial.step(array)
-        report = self._episodes.report(trial)
+        report = self._episodes.step(trial, array)
         rewards = report[:, _REWARD].copy()
         done = report[:, _TERMINATED] > 0.0
         terms = RouteEpisodes.terms(report)
@@ -216,7 +215,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             self._steps += running  # the reset step is not a step of the new episode
             terminated = done & running
             # The reset sub-envs report their new episode's start.
-            report = self._episodes.report(trial, rewarded=False)
+            report = self._episodes.report(trial)
         else:
             running = self._everyone
             self._steps += 1

@@ -1,10 +1,10 @@
 """The compiled kernels of one control step after the physics: dead reckoning, route progress,
 rewards and the reported poses.
 
-Why one module: these kernels call each other (a step runs them in one compiled call,
-:func:`after_step` and :func:`episode_report`, because numba's dispatch costs ~0.1 µs per array
-argument and the single-robot env step is a few tens of µs), and numba's on-disk cache only
-notices edits to a kernel's own module (see :mod:`odomgym._jit`). The classes that own the state
+Why one module: these kernels call each other (an env's step runs them in one compiled call,
+:func:`after_step_report`, because numba's dispatch costs ~0.1 µs per array argument and the
+single-robot env step is a few µs), and numba's on-disk cache only notices edits to a kernel's
+own module (see :mod:`odomgym._jit`). The classes that own the state
 (:class:`odomgym.odometry.Odometry`, :class:`odomgym.routes.RouteProgress`,
 :class:`odomgym.trial.Trial`, the envs' ``RouteEpisodes``) call them.
 
@@ -23,6 +23,7 @@ from odomgym._jit import kernel
 __all__ = [
     "REPORT_COLUMNS",
     "after_step",
+    "after_step_report",
     "episode_report",
     "integrate_odometry",
     "pose_error_into",
@@ -226,9 +227,8 @@ def episode_report(
     count: NDArray[np.intp],
     state: FloatArray,
     time: float,
-    start_time: FloatArray,
+    episodes: FloatArray,
     weights: FloatArray,
-    fraction: FloatArray,
     rewarded: bool,
     out: FloatArray,
 ) -> None:
@@ -236,20 +236,21 @@ def episode_report(
     :data:`REPORT_COLUMNS`): the reward and its terms, whether the route is done, the
     odometry and true poses and their error, encoder counts, segment and episode time [s].
 
-    ``weights`` = (progress, time, completion) reward weights. With ``rewarded`` the reward
-    terms are those of this step and ``fraction`` (each robot's route share at its last reward)
-    moves on; without (after a reset), they are zero and ``fraction`` stays.
+    ``episodes`` (N, 2): each robot's episode start time [s] and its route share at its last
+    reward; ``weights`` = (progress, time, completion) reward weights. With ``rewarded`` the
+    reward terms are those of this step and the route share moves on; without (after a reset),
+    they are zero and the share stays.
     """
     pose_error_into(true_pose, start_poses, odom_pose, out[:, 11:14])
     for i in range(true_pose.shape[0]):
         done = index[i] >= count[i]
         if rewarded:
             now = state[i, 7]
-            out[i, 2] = weights[0] * (now - fraction[i])
+            out[i, 2] = weights[0] * (now - episodes[i, 1])
             out[i, 3] = -weights[1]
             out[i, 4] = weights[2] * (1.0 if done else 0.0)
             out[i, 0] = out[i, 2] + out[i, 3] + out[i, 4]
-            fraction[i] = now
+            episodes[i, 1] = now
         else:
             out[i, 0] = 0.0
             out[i, 2] = 0.0
@@ -262,4 +263,67 @@ def episode_report(
         out[i, 14] = counts[i, 0]
         out[i, 15] = counts[i, 1]
         out[i, 16] = index[i]
-        out[i, 17] = time - start_time[i]
+        out[i, 17] = time - episodes[i, 0]
+
+
+@kernel
+def after_step_report(
+    counts: NDArray[np.int64],
+    last_counts: NDArray[np.int64],
+    travel_per_tick: FloatArray,
+    wheelbase: FloatArray,
+    inv_dt: float,
+    pose: FloatArray,
+    wheel_speed: FloatArray,
+    max_speed: FloatArray,
+    count: NDArray[np.intp],
+    is_turn: NDArray[np.bool_],
+    segments: FloatArray,
+    cumulative: FloatArray,
+    limits: FloatArray,
+    index: NDArray[np.intp],
+    state: FloatArray,
+    progress: FloatArray,
+    advanced: NDArray[np.bool_],
+    true_pose: FloatArray,
+    start_poses: FloatArray,
+    time: float,
+    episodes: FloatArray,
+    weights: FloatArray,
+    out: FloatArray,
+) -> None:
+    """:func:`after_step` then the rewarded :func:`episode_report` into ``out``: everything a
+    route-following env computes after the physics, in one compiled call."""
+    after_step(
+        counts,
+        last_counts,
+        travel_per_tick,
+        wheelbase,
+        inv_dt,
+        pose,
+        wheel_speed,
+        max_speed,
+        count,
+        is_turn,
+        segments,
+        cumulative,
+        limits,
+        index,
+        state,
+        progress,
+        advanced,
+    )
+    episode_report(
+        true_pose,
+        start_poses,
+        pose,
+        counts,
+        index,
+        count,
+        state,
+        time,
+        episodes,
+        weights,
+        True,
+        out,
+    )

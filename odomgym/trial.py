@@ -34,7 +34,7 @@ from odomgym.odometry import Calibration, Odometry
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
 from odomgym.routes import Route, RouteProgress
-from odomgym.stepping import after_step, pose_error_into, start_frame
+from odomgym.stepping import after_step, after_step_report, pose_error_into, start_frame
 
 __all__ = ["OBSERVATION_NAMES", "Trial"]
 
@@ -136,25 +136,53 @@ class Trial:
         self._route_arrays = self.progress.step_arrays()  # set_routes may reallocate them
         self._refresh(advance=False)
 
-    def step(self, actions: FloatArray) -> NDArray[np.bool_]:
+    def step(
+        self,
+        actions: FloatArray,
+        report: tuple[FloatArray, FloatArray, FloatArray] | None = None,
+    ) -> NDArray[np.bool_]:
         """Apply wheel-speed actions (N, 2) in [−1, 1] for one control period.
+
+        With ``report`` = (episodes, weights, out), also writes the rewarded episode report
+        into ``out`` (:func:`odomgym.stepping.episode_report`, where the arguments are
+        described) in the same compiled call as the dead reckoning and the route.
 
         Returns the robots that completed a segment this step.
         """
         world, odometry = self.world, self.odometry
         world.step(actions, scale=self._action_to_rate)
-        # Dead reckoning and route progress in one compiled call (odomgym.stepping).
-        after_step(
-            world.counts,
-            odometry.last_counts,
-            odometry.travel_per_tick,
-            odometry.effective_wheelbase,
-            1.0 / world.dt,
-            odometry.pose,
-            odometry.wheel_speed,
-            self._max_speed,
-            *self._route_arrays,
-        )
+        # Dead reckoning and route progress (and the env's report) in one compiled call.
+        if report is None:
+            after_step(
+                world.counts,
+                odometry.last_counts,
+                odometry.travel_per_tick,
+                odometry.effective_wheelbase,
+                1.0 / world.dt,
+                odometry.pose,
+                odometry.wheel_speed,
+                self._max_speed,
+                *self._route_arrays,
+            )
+        else:
+            episodes, weights, out = report
+            after_step_report(
+                world.counts,
+                odometry.last_counts,
+                odometry.travel_per_tick,
+                odometry.effective_wheelbase,
+                1.0 / world.dt,
+                odometry.pose,
+                odometry.wheel_speed,
+                self._max_speed,
+                *self._route_arrays,
+                world.pose,
+                self.start_poses,
+                world.time,
+                episodes,
+                weights,
+                out,
+            )
         return self._route_arrays[-1].copy()
 
     def _refresh(self, advance: bool) -> NDArray[np.bool_]:
