@@ -56,8 +56,9 @@ from odomgym.substep import (
     exchange,
     floor_kernel,
     midstep_translation,
-    pack_params,
+    new_state,
     rim_from_wheel_step,
+    state_views,
     step_plain,
 )
 
@@ -195,10 +196,18 @@ class World:
         self._plain = not (
             self._transmission or self._shape or self._perturb or self._modifies_ground
         )
-        # The constants of a substep in one array (one argument of the compiled calls).
-        self._params = pack_params(
+        # The per-robot state in one array (one argument of a compiled call; pose, velocity,
+        # wheel rates and angles are views of it) and the arrays of other shapes, all updated
+        # in place from here on.
+        self._state = new_state(
             self.max_rate, self.max_rate_step, self.true_radius, self.ticks_per_rad, self.half_track
         )
+        self._bind_state()
+        self.counts = np.zeros((self.n, 2), dtype=np.int64)
+        self.slip = np.zeros((self.n, 2))
+        self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
+        self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
+        self._no_noise = np.zeros((self.n, 2))
         self._bind_noise(rng)
 
         self._build_space()
@@ -338,13 +347,28 @@ class World:
         self._set_friction(np.full((self.n, 2), self.floor.friction))
         self._io = SpaceExchange(space, self._chassis, self._ground)
 
+    def _bind_state(self) -> None:
+        """The World's arrays that are views of the packed state (``substep.STATE_COLUMNS``)."""
+        views = state_views(self._state)
+        self._params = views["params"]
+        self.pose = views["pose"]
+        self.velocity = views["velocity"]
+        self.wheel_rate = views["wheel_rate"]
+        self.wheel_angle = views["wheel_angle"]
+        self._rim_speed = views["rim_speed"]
+        self._motor_step = views["motor_step"]
+
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         del state["_io"]  # C structures pointing at this space; the unpickled one gets its own
+        for name in ("_params", "pose", "velocity", "wheel_rate", "wheel_angle"):
+            del state[name]  # views, which pickling would turn into copies
+        del state["_rim_speed"], state["_motor_step"]
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
+        self._bind_state()
         self._io = SpaceExchange(self.space, self._chassis, self._ground)
 
     # ------------------------------------------------------------------ reset
@@ -359,17 +383,9 @@ class World:
         if indices is None:
             indices = np.arange(self.n)
             self.time = 0.0
-            self.pose = np.zeros((self.n, 3))
-            self.velocity = np.zeros((self.n, 3))
-            self.wheel_rate = np.zeros((self.n, 2))
-            self.wheel_angle = np.zeros((self.n, 2))
-            self.counts = np.zeros((self.n, 2), dtype=np.int64)
-            self.slip = np.zeros((self.n, 2))
-            self._rim_speed = np.zeros((self.n, 2))
-            self._motor_step = np.zeros((self.n, 2))
-            self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
-            self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
-            self._no_noise = np.zeros((self.n, 2))
+            self._rim_speed[:] = 0.0
+            self._motor_step[:] = 0.0
+            self._contact[:] = 0.0
         indices = np.asarray(indices, dtype=np.intp)
         targets = np.zeros((len(indices), 3)) if poses is None else np.asarray(poses, dtype=float)
         if targets.shape != (len(indices), 3) or not np.all(np.isfinite(targets)):
@@ -422,15 +438,9 @@ class World:
                 status = step_plain(
                     command,
                     scale,
-                    self._params,
-                    self.pose,
-                    self.velocity,
-                    self.wheel_rate,
-                    self.wheel_angle,
+                    self._state,
                     self.counts,
-                    self._rim_speed,
                     self._ground_v,
-                    self._motor_step,
                     io.addresses,
                     io.heads,
                     io.buffer,
