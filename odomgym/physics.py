@@ -3,10 +3,11 @@
 One :class:`World` holds a *batch* of N robots in one pymunk space (they do not interact); the
 single-robot envs are a batch of one. The per-wheel arithmetic of a step (wheel controllers,
 encoders, contact velocities, floor effects) runs in numba-compiled loops over the robots
-(:mod:`odomgym.substep`), and body state crosses into Chipmunk and back once per physics substep,
-from compiled code that calls Chipmunk's functions by address: with no effect hooks on a plain
-floor a whole substep, Chipmunk's step included, is one compiled call (measured in
-``benchmarks/bench_speed.py``; docs/architecture.md, "Performance design").
+(:mod:`odomgym.stepping`), and body state crosses into Chipmunk and back once per physics
+substep, from compiled code that calls Chipmunk's functions by address
+(:mod:`odomgym.chipmunk_link`): with no effect hooks on a plain floor a whole step, Chipmunk's
+steps included, is one compiled call, which a :class:`~odomgym.trial.Trial` makes part of its
+own (measured in ``benchmarks/bench_speed.py``; docs/architecture.md, "Performance design").
 
 Model, per robot (top-down, no gravity in the plane):
 
@@ -46,11 +47,12 @@ import pymunk
 from numpy.typing import NDArray
 
 from odomgym.cables import CableGrid, apply_cable_deficits
+from odomgym.chipmunk_link import SpaceExchange
 from odomgym.effects import EFFECTS, WorldHook
 from odomgym.floor import FloorSpec
 from odomgym.robot import RobotSpec
-from odomgym.substep import (
-    SpaceExchange,
+from odomgym.stepping import (
+    check_step_status,
     drive_plain,
     drive_wheels,
     exchange,
@@ -69,7 +71,6 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 _NOISE_BLOCK = 256  # roughness draws per robot fetched at once
-_READ_BACK_FAILED = "Chipmunk returned another number of body states than the space has bodies"
 
 
 class World:
@@ -208,6 +209,7 @@ class World:
         self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
         self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
         self._no_noise = np.zeros((self.n, 2))
+        self._clock = np.zeros(1)  # simulated time [s], an array so compiled steps advance it
         self._bind_noise(rng)
 
         self._build_space()
@@ -382,7 +384,7 @@ class World:
         """
         if indices is None:
             indices = np.arange(self.n)
-            self.time = 0.0
+            self._clock[0] = 0.0
             self._rim_speed[:] = 0.0
             self._motor_step[:] = 0.0
             self._contact[:] = 0.0
@@ -418,13 +420,7 @@ class World:
         robot's ``max_wheel_speed`` are clipped to it; a non-finite command raises ValueError
         (the envs check their actions before they get here).
         """
-        command = np.asarray(wheel_rate_cmd, dtype=np.float64)
-        if command.shape != (self.n, 2):
-            if command.size != 2 * self.n:
-                raise ValueError(
-                    f"wheel_rate_cmd must have shape ({self.n}, 2), got {command.shape}"
-                )
-            command = command.reshape(self.n, 2)
+        command = self.commands(wheel_rate_cmd)
         if scale is None:
             scale = self._unit_scale
         h = self._h
@@ -435,23 +431,21 @@ class World:
             # substep only when the slip (numpy, see _accumulate_slip) is tracked in between.
             per_call = 1 if self.track_slip else self.substeps
             for _ in range(self.substeps // per_call):
-                status = step_plain(
-                    command,
-                    scale,
-                    self._state,
-                    self.counts,
-                    self._ground_v,
-                    io.addresses,
-                    io.heads,
-                    io.buffer,
-                    io.rows,
-                    h,
-                    per_call,
+                check_step_status(
+                    step_plain(
+                        command,
+                        scale,
+                        self._state,
+                        self.counts,
+                        self._ground_v,
+                        io.addresses,
+                        io.heads,
+                        io.buffer,
+                        io.rows,
+                        h,
+                        per_call,
+                    )
                 )
-                if status == 1:
-                    raise ValueError("wheel rate commands must be finite")
-                if status == 2:
-                    raise RuntimeError(_READ_BACK_FAILED)
                 if self.track_slip:
                     self._accumulate_slip(h)
         else:
@@ -471,13 +465,66 @@ class World:
                     self._ground_v,
                     self._motor_step,
                 ):
-                    raise ValueError("wheel rate commands must be finite")
+                    check_step_status(1)
                 if not self._plain:
                     self._effect_stages(h)
                 self._exchange(h)
                 if self.track_slip:
                     self._accumulate_slip(h)
-        self.time += self.dt
+        self._clock[0] += self.dt
+
+    def commands(self, wheel_rate_cmd: Any) -> FloatArray:
+        """``wheel_rate_cmd`` as the (N, 2) float64 array a step takes (any array-like of N×2
+        numbers, reshaped if need be); ValueError if it has another number of entries."""
+        command = np.asarray(wheel_rate_cmd, dtype=np.float64)
+        if command.shape != (self.n, 2):
+            if command.size != 2 * self.n:
+                raise ValueError(
+                    f"wheel_rate_cmd must have shape ({self.n}, 2), got {command.shape}"
+                )
+            command = command.reshape(self.n, 2)
+        return command
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s] since the World was built or last reset as a whole."""
+        return float(self._clock[0])
+
+    @property
+    def fuses_substeps(self) -> bool:
+        """True if a whole step runs as one compiled call (no effect hooks, a plain floor, the
+        compiled Chipmunk link, slip not tracked), which a caller may then make part of a
+        larger compiled step (:func:`odomgym.stepping.control_step`) with
+        :meth:`step_arrays`."""
+        return self._plain and self._io.compiled and not self.track_slip
+
+    def step_arrays(
+        self,
+    ) -> tuple[
+        FloatArray,
+        IntArray,
+        FloatArray,
+        NDArray[np.uint64],
+        NDArray[np.int32],
+        FloatArray,
+        NDArray[np.intp],
+        FloatArray,
+    ]:
+        """The arrays a fused step (:func:`odomgym.stepping.step_plain`) works on, in the
+        order of :data:`odomgym.stepping.STEP_FIELDS`: packed state, encoder counts, contact
+        velocities, the Chipmunk link's addresses, headers, buffer and rows, and the clock
+        (1,) [s]. They stay the same arrays for the World's life."""
+        io = self._io
+        return (
+            self._state,
+            self.counts,
+            self._ground_v,
+            io.addresses,
+            io.heads,
+            io.buffer,
+            io.rows,
+            self._clock,
+        )
 
     def _exchange(self, h: float) -> None:
         """The ground bodies take their contact velocities, Chipmunk steps by ``h`` [s], and
@@ -494,7 +541,7 @@ class World:
         elif not exchange(
             io.addresses, io.heads, io.buffer, io.rows, self.velocity, self._ground_v, h, self.pose
         ):
-            raise RuntimeError(_READ_BACK_FAILED)
+            check_step_status(2)
 
     def _effect_stages(self, h: float) -> None:
         """After the wheels, one substep's contact velocities through every stage: transmission

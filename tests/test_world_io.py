@@ -1,6 +1,6 @@
 """The World's two ways across the pymunk boundary give bit-identical trajectories.
 
-Compiled kernels calling Chipmunk's functions by address (:class:`odomgym.substep.SpaceExchange`)
+Compiled kernels calling Chipmunk's functions by address (:class:`odomgym.chipmunk_link.SpaceExchange`)
 and pymunk's own ``pymunk.batch`` and ``Space.step`` (the fallback if a pymunk release changes
 the internals the compiled path relies on) are speed choices only (docs/architecture.md,
 "Performance design"); a robot's motion must not depend on them, nor on its batch.
@@ -16,7 +16,7 @@ import pytest
 from odomgym.floor import FLOORS
 from odomgym.physics import World
 from odomgym.robot import PRESETS
-from odomgym.substep import SpaceExchange
+from odomgym.chipmunk_link import SpaceExchange
 
 STEPS = 300
 
