@@ -220,7 +220,9 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             running = self._everyone
             self._steps += 1
             terminated = done
-        truncated = (self._steps >= self.max_episode_steps) & ~terminated & running
+        truncated = (self._steps >= self.max_episode_steps) & ~terminated
+        if any_reset:
+            truncated &= running
         self._autoreset = terminated | truncated
         info = self._vector_info(self._everyone, report, terms, running)
         if terminated.any():
@@ -240,20 +242,31 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         step, the reset ones after a reset), ``rewarded`` those with reward terms (not the ones
         autoreset this step: a reset reports none)."""
         info: dict[str, Any] = {}
-        everyone = bool(present.all())
-        for key, value in RouteEpisodes.info(report).items():
+        entries = RouteEpisodes.info(report)
+        # The masks are rows of one block (distinct arrays, as SyncVectorEnv gives): one
+        # allocation instead of one per entry.
+        masks = np.empty((len(entries) + 1, self.num_envs), dtype=np.bool_)
+        masks[:] = present
+        everyone = present is self._everyone or bool(present.all())
+        for (key, value), mask in zip(entries.items(), masks, strict=False):
             # The entries are fresh arrays; only a partial reset blanks the absent sub-envs.
             if not everyone:
                 value[~present] = 0
             info[key] = value
-            info[f"_{key}"] = present.copy()
+            info[f"_{key}"] = mask
         reward_terms: dict[str, Any] = {}
-        if terms is not None and rewarded is not None and rewarded.any():
-            for key, value in terms.items():
+        if (
+            terms is not None
+            and rewarded is not None
+            and (rewarded is self._everyone or rewarded.any())
+        ):
+            term_masks = np.empty((len(terms), self.num_envs), dtype=np.bool_)
+            term_masks[:] = rewarded
+            for (key, value), mask in zip(terms.items(), term_masks, strict=True):
                 reward_terms[key] = value
-                reward_terms[f"_{key}"] = rewarded.copy()
+                reward_terms[f"_{key}"] = mask
         info["reward_terms"] = reward_terms
-        info["_reward_terms"] = present.copy()
+        info["_reward_terms"] = masks[-1]
         return info
 
 

@@ -224,24 +224,11 @@ def drive_wheels(
     ``rim_speed``, ``ground_v`` and ``motor_step`` (the rotation this substep [rad], for
     transmission effects); returns False (touching nothing) if any command is not finite.
     """
-    n = command.shape[0]
-    for i in range(n):
-        if not (math.isfinite(command[i, 0]) and math.isfinite(command[i, 1])):
-            return False
-    for i in range(n):
-        limit = params[i, _MAX_RATE]
-        step = params[i, _MAX_RATE_STEP]
-        for w in range(2):
-            target = min(max(command[i, w] * scale[i], -limit), limit)
-            old = rate[i, w]
-            delta = min(max(target - old, -step), step)
-            rate[i, w] = old + delta
-            mean = old + 0.5 * delta  # constant acceleration within the substep
-            angle[i, w] += mean * h
-            motor_step[i, w] = mean * h
-            counts[i, w] = math.floor(angle[i, w] * params[i, _TICKS])
-            rim_speed[i, w] = mean * params[i, _RADIUS + w]
-        _set_ground_velocity(i, rim_speed, pose, ground_v)
+    if not _finite(command):
+        return False
+    for i in range(command.shape[0]):
+        _wheels(i, command, scale, params, h, rate, angle, counts, rim_speed, motor_step)
+        _set_ground_velocity(i, rim_speed, math.cos(pose[i, 2]), math.sin(pose[i, 2]), ground_v)
     return True
 
 
@@ -259,14 +246,55 @@ def drive_plain(
     ground_v: FloatArray,
     motor_step: FloatArray,
 ) -> bool:
-    """:func:`drive_wheels` then :func:`midstep_translation`: a substep's contact velocities
-    when no effect or floor feature acts between them."""
-    if not drive_wheels(
-        command, scale, params, pose, h, rate, angle, counts, rim_speed, ground_v, motor_step
-    ):
+    """:func:`drive_wheels` then :func:`midstep_translation`, robot by robot: a substep's
+    contact velocities when no effect or floor feature acts between them (the heading's cosine
+    and sine serve both)."""
+    if not _finite(command):
         return False
-    midstep_translation(ground_v, pose, params, h)
+    for i in range(command.shape[0]):
+        _wheels(i, command, scale, params, h, rate, angle, counts, rim_speed, motor_step)
+        cos_t = math.cos(pose[i, 2])
+        sin_t = math.sin(pose[i, 2])
+        _set_ground_velocity(i, rim_speed, cos_t, sin_t, ground_v)
+        _midstep_turn(i, ground_v, cos_t, sin_t, params[i, _HALF_TRACK], h)
     return True
+
+
+@kernel
+def _finite(command: FloatArray) -> bool:
+    """True if every command (N, 2) is finite."""
+    for i in range(command.shape[0]):
+        if not (math.isfinite(command[i, 0]) and math.isfinite(command[i, 1])):
+            return False
+    return True
+
+
+@kernel
+def _wheels(
+    i: int,
+    command: FloatArray,
+    scale: FloatArray,
+    params: FloatArray,
+    h: float,
+    rate: FloatArray,
+    angle: FloatArray,
+    counts: IntArray,
+    rim_speed: FloatArray,
+    motor_step: FloatArray,
+) -> None:
+    """Robot ``i``'s wheel controllers and encoders for one substep (see :func:`drive_wheels`)."""
+    limit = params[i, _MAX_RATE]
+    step = params[i, _MAX_RATE_STEP]
+    for w in range(2):
+        target = min(max(command[i, w] * scale[i], -limit), limit)
+        old = rate[i, w]
+        delta = min(max(target - old, -step), step)
+        rate[i, w] = old + delta
+        mean = old + 0.5 * delta  # constant acceleration within the substep
+        angle[i, w] += mean * h
+        motor_step[i, w] = mean * h
+        counts[i, w] = math.floor(angle[i, w] * params[i, _TICKS])
+        rim_speed[i, w] = mean * params[i, _RADIUS + w]
 
 
 @kernel
@@ -305,12 +333,11 @@ def unpack_states(
 
 @kernel
 def _set_ground_velocity(
-    i: int, rim_speed: FloatArray, pose: FloatArray, ground_v: FloatArray
+    i: int, rim_speed: FloatArray, cos_t: float, sin_t: float, ground_v: FloatArray
 ) -> None:
-    """No-slip contact velocities of robot ``i``: each rim speed along the heading at which
-    Chipmunk solves the step (:func:`midstep_translation` then turns the translation)."""
-    cos_t = math.cos(pose[i, 2])
-    sin_t = math.sin(pose[i, 2])
+    """No-slip contact velocities of robot ``i``: each rim speed along the heading (cosine and
+    sine given) at which Chipmunk solves the step (:func:`midstep_translation` then turns the
+    translation)."""
     for w in range(2):
         ground_v[i, w, 0] = rim_speed[i, w] * cos_t
         ground_v[i, w, 1] = rim_speed[i, w] * sin_t
@@ -333,21 +360,29 @@ def midstep_translation(
     for i in range(ground_v.shape[0]):
         cos_t = math.cos(pose[i, 2])
         sin_t = math.sin(pose[i, 2])
-        dvx = ground_v[i, 1, 0] - ground_v[i, 0, 0]
-        dvy = ground_v[i, 1, 1] - ground_v[i, 0, 1]
-        omega = (dvx * cos_t + dvy * sin_t) / (2.0 * params[i, _HALF_TRACK])
-        if omega == 0.0:
-            continue
-        turn = 0.5 * omega * h
-        c = math.cos(turn)
-        s = math.sin(turn)
-        mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])
-        my = 0.5 * (ground_v[i, 0, 1] + ground_v[i, 1, 1])
-        rx = c * mx - s * my - mx
-        ry = s * mx + c * my - my
-        for w in range(2):
-            ground_v[i, w, 0] += rx
-            ground_v[i, w, 1] += ry
+        _midstep_turn(i, ground_v, cos_t, sin_t, params[i, _HALF_TRACK], h)
+
+
+@kernel
+def _midstep_turn(
+    i: int, ground_v: FloatArray, cos_t: float, sin_t: float, half_track: float, h: float
+) -> None:
+    """Robot ``i``'s part of :func:`midstep_translation`, at heading cosine and sine given."""
+    dvx = ground_v[i, 1, 0] - ground_v[i, 0, 0]
+    dvy = ground_v[i, 1, 1] - ground_v[i, 0, 1]
+    omega = (dvx * cos_t + dvy * sin_t) / (2.0 * half_track)
+    if omega == 0.0:
+        return
+    turn = 0.5 * omega * h
+    c = math.cos(turn)
+    s = math.sin(turn)
+    mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])
+    my = 0.5 * (ground_v[i, 0, 1] + ground_v[i, 1, 1])
+    rx = c * mx - s * my - mx
+    ry = s * mx + c * my - my
+    for w in range(2):
+        ground_v[i, w, 0] += rx
+        ground_v[i, w, 1] += ry
 
 
 @kernel
@@ -364,7 +399,7 @@ def rim_from_wheel_step(
     for i in range(wheel_step.shape[0]):
         for w in range(2):
             rim_speed[i, w] = wheel_step[i, w] * params[i, _RADIUS + w] / h
-        _set_ground_velocity(i, rim_speed, pose, ground_v)
+        _set_ground_velocity(i, rim_speed, math.cos(pose[i, 2]), math.sin(pose[i, 2]), ground_v)
 
 
 @kernel
