@@ -1,6 +1,8 @@
 """The C structures through which compiled kernels reach Chipmunk (:mod:`odomgym.stepping`,
-"How Chipmunk is reached"): a World's space, its two ``pmBatchedData`` blocks and the numpy
-memory they point into, checked against pymunk's own view of the bodies.
+"How Chipmunk is reached"): a World's space and bodies as addresses, the two ``pmBatchedData``
+blocks of pymunk's batch iterators and the numpy memory they point into, checked against
+pymunk's own view of the bodies; and the same exchange through pymunk's public API, the
+fallback if a pymunk release changes what the compiled path relies on.
 
 Units: metres, radians, seconds.
 """
@@ -18,10 +20,8 @@ from odomgym.stepping import (
     BODY_STATE_WIDTH,
     CHIPMUNK_FUNCTIONS,
     SPARE_ENTRIES,
-    pack_velocities,
-    read_bodies,
-    unpack_states,
-    write_bodies,
+    read_chassis,
+    write_ground,
 )
 
 __all__ = ["SpaceExchange"]
@@ -39,59 +39,51 @@ _STATE_FIELDS = (
 class SpaceExchange:
     """Where a World's body states cross into and out of Chipmunk, once per substep.
 
-    Every body's velocity goes in (a chassis keeps its own, a ground body gets its wheel's
-    contact velocity); after Chipmunk's step every body's position, angle, velocity and angular
-    velocity come out, in Chipmunk's own body order, which ``rows`` maps the robots onto.
-    With ``compiled`` the kernels do this through Chipmunk's functions by address (module
-    docstring); otherwise (a pymunk whose batch internals differ from what this module expects,
-    checked at construction) :meth:`exchange_in_python` does the same through ``pymunk.batch``.
+    The ground bodies take their wheels' contact velocities; after Chipmunk's step, each
+    chassis' position, angle, velocity and angular velocity come out (a chassis' velocity is
+    Chipmunk's own and never written). With ``compiled``, kernels do this by calling pymunk's
+    batch iterators on these bodies and Chipmunk's step through their addresses
+    (:func:`odomgym.stepping.exchange`); otherwise :meth:`exchange_in_python` does the same
+    through pymunk's properties and ``Space.step`` (bit-identical, ``tests/test_world_io.py``).
 
     Args:
         space: the World's space (its bodies are never added to or removed afterwards).
         chassis: each robot's chassis body.
         ground: each robot's two ground bodies, ``[2i]`` left and ``[2i + 1]`` right.
 
-    Arrays (read them in kernels; the C structures point into them):
-        ``rows`` (N, 3) Chipmunk's row of each robot's chassis, left and right ground body;
-        ``buffer`` the 2·B velocities going in (B bodies), then the 6·B states coming out and
-        two spare entries;
+    Arrays (for kernels; the C structures point into them):
+        ``bodies`` (N, 3) uint64: the ``cpBody*`` of each robot's chassis, left and right
+        ground body;
+        ``buffer``: the 4·N ground velocities going in (robot by robot, left then right, x and
+        y), then the 6·N chassis states coming out (x, y, θ, ẋ, ẏ, θ̇) and two spare entries;
         ``heads`` (2, 4) int32: the ``pmFloatArray`` headers (``num``, ``max``, data pointer) of
         the two parts of ``buffer``, in numpy memory so a kernel can rewind ``num``;
-        ``addresses`` (7,) uint64: the space, the two ``pmBatchedData`` blocks and the four C
-        functions (``CHIPMUNK_FUNCTIONS``).
+        ``addresses`` (6,) uint64: the space, the set and get ``pmBatchedData`` blocks and the
+        C functions of :data:`odomgym.stepping.CHIPMUNK_FUNCTIONS`.
     """
 
     def __init__(
         self, space: pymunk.Space, chassis: list[pymunk.Body], ground: list[pymunk.Body]
     ) -> None:
         self.space = space
-        n_bodies = len(space.bodies)
-        ids = pbatch.Buffer()
-        pbatch.get_space_bodies(space, pbatch.BodyFields.BODY_ID, ids)
-        row = {int(body_id): k for k, body_id in enumerate(np.frombuffer(ids.int_buf(), np.uintp))}
-        self.rows = np.array(
-            [
-                [row[body.id] for body in (c, *ground[2 * i : 2 * i + 2])]
-                for i, c in enumerate(chassis)
-            ],
-            dtype=np.intp,
-        ).reshape(-1, 3)
-        self.buffer = np.zeros(2 * n_bodies + BODY_STATE_WIDTH * n_bodies + SPARE_ENTRIES)
-        self._velocities = self.buffer[: 2 * n_bodies]
-        # pymunk.batch's own buffers, for the fallback: the outgoing one wraps our velocities.
-        self._out = pbatch.Buffer()
-        self._out.set_float_buf(self._velocities)
-        self._in = pbatch.Buffer()
+        self._chassis = chassis
+        self._ground = ground
+        n = len(chassis)
+        self.buffer = np.zeros(4 * n + BODY_STATE_WIDTH * n + SPARE_ENTRIES)
         self.heads = np.zeros((2, 4), dtype=np.int32)
-        self.addresses = np.zeros(7, dtype=np.uint64)
+        self.addresses = np.zeros(3 + len(CHIPMUNK_FUNCTIONS), dtype=np.uint64)
+        self.bodies = np.zeros((n, 3), dtype=np.uint64)
         self._structures: list[Any] = []  # cffi objects the addresses point into, kept alive
-        self.compiled = self._link() and self._link_works(chassis, ground)
+        self.compiled = self._link() and self._link_works()
 
     def _link(self) -> bool:
-        """Build the C structures and fill ``addresses``; False if this pymunk lacks them."""
+        """Build the C structures, fill ``addresses`` and ``bodies``; False if this pymunk
+        lacks what they need (its C library's functions and types, ``Space._space``,
+        ``Body._body``)."""
         ffi, lib = getattr(pbatch, "ffi", None), getattr(pbatch, "lib", None)
         raw_space = getattr(self.space, "_space", None)  # the cpSpace* pymunk steps
-        if ffi is None or lib is None or raw_space is None:
+        raw_bodies = [getattr(body, "_body", None) for body in self._chassis + self._ground]
+        if ffi is None or lib is None or raw_space is None or None in raw_bodies:
             return False
         try:
             functions = [ffi.addressof(lib, name) for name in CHIPMUNK_FUNCTIONS]
@@ -101,12 +93,12 @@ class SpaceExchange:
                 and ffi.offsetof("pmFloatArray", "num") == 0
             ):
                 return False
-            n_velocities = self._velocities.size
+            n_in = 4 * len(self._chassis)
             blocks = []
             for k, (part, fields) in enumerate(
                 (
-                    (self._velocities, pbatch.BodyFields.VELOCITY),
-                    (self.buffer[n_velocities:], _STATE_FIELDS),
+                    (self.buffer[:n_in], pbatch.BodyFields.VELOCITY),
+                    (self.buffer[n_in:], _STATE_FIELDS),
                 )
             ):
                 array = ffi.from_buffer("pmFloatArray *", self.heads[k])
@@ -125,38 +117,42 @@ class SpaceExchange:
             return int(ffi.cast("uintptr_t", pointer))
 
         self.addresses[:] = [address(raw_space), *map(address, blocks), *map(address, functions)]
+        n = len(self._chassis)
+        self.bodies[:, 0] = [address(b) for b in raw_bodies[:n]]
+        self.bodies[:, 1:] = np.reshape([address(b) for b in raw_bodies[n:]], (n, 2))
         return True
 
-    def _link_works(self, chassis: list[pymunk.Body], ground: list[pymunk.Body]) -> bool:
+    def _link_works(self) -> bool:
         """True if the compiled exchange moves what pymunk's properties see: every chassis
-        state and a test velocity of one ground body out, another test velocity in. The bodies
-        are left as they were (every velocity written back is one just read, then the test
-        body's own is restored), so a World unpickled mid-run goes on unchanged."""
-        probe, row = ground[0], self.rows[0, 1]
-        original = probe.velocity
-        probe.velocity = (0.25, -0.5)
-        states = self.buffer[self._velocities.size : -SPARE_ENTRIES].reshape(-1, BODY_STATE_WIDTH)
-        ok = read_bodies(self.addresses, self.heads)
-        ok = ok and tuple(states[row, 3:5]) == (0.25, -0.5)
-        for i, body in enumerate(chassis):
+        state out, with a test velocity on the first; a test velocity into one ground body, the
+        others' own. The bodies are left as they were (the test velocities are undone), so a
+        World unpickled mid-run goes on unchanged."""
+        chassis, probe = self._chassis[0], self._ground[0]
+        original = chassis.velocity, chassis.angular_velocity, probe.velocity
+        chassis.velocity, chassis.angular_velocity = (0.25, -0.5), 0.125
+        ok = read_chassis(self.addresses, self.heads, self.bodies)
+        states = self.buffer[4 * len(self._chassis) : -SPARE_ENTRIES].reshape(-1, BODY_STATE_WIDTH)
+        for body, state in zip(self._chassis, states, strict=True):
             expected = (*body.position, body.angle, *body.velocity, body.angular_velocity)
-            ok = ok and tuple(states[self.rows[i, 0]]) == expected
-        velocities = self._velocities.reshape(-1, 2)
-        velocities[:] = states[:, 3:5]
-        velocities[row] = (-1.0, 2.0)
-        write_bodies(self.addresses, self.heads)
+            ok = ok and tuple(state) == expected
+        self.buffer[: 4 * len(self._chassis)] = [v for body in self._ground for v in body.velocity]
+        self.buffer[:2] = (-1.0, 2.0)
+        write_ground(self.addresses, self.heads, self.bodies)
         ok = ok and tuple(probe.velocity) == (-1.0, 2.0)
-        probe.velocity = original
+        chassis.velocity, chassis.angular_velocity, probe.velocity = original
         return ok
 
     def exchange_in_python(
-        self, velocity: FloatArray, ground_v: FloatArray, h: float, pose: FloatArray
+        self, ground_v: FloatArray, h: float, pose: FloatArray, velocity: FloatArray
     ) -> None:
-        """:func:`exchange` through ``pymunk.batch`` and ``Space.step`` (the fallback)."""
-        n_velocities = self._velocities.size
-        pack_velocities(velocity, ground_v, self.rows, self.buffer[:n_velocities])
-        pbatch.set_space_bodies(self.space, pbatch.BodyFields.VELOCITY, self._out)
+        """:func:`odomgym.stepping.exchange` through pymunk's properties and ``Space.step``
+        (the fallback), with the same arithmetic."""
+        for body, (vx, vy) in zip(self._ground, ground_v.reshape(-1, 2).tolist(), strict=True):
+            body.velocity = (vx, vy)
         self.space.step(h)
-        self._in.clear()
-        pbatch.get_space_bodies(self.space, _STATE_FIELDS, self._in)
-        unpack_states(np.frombuffer(self._in.float_buf(), np.float64), self.rows, h, pose, velocity)
+        for i, body in enumerate(self._chassis):
+            px, py = body.position
+            vx, vy = body.velocity
+            omega = body.angular_velocity
+            pose[i] = (px + vx * h, py + vy * h, body.angle + omega * h)
+            velocity[i] = (vx, vy, omega)

@@ -441,7 +441,7 @@ class World:
                         io.addresses,
                         io.heads,
                         io.buffer,
-                        io.rows,
+                        io.bodies,
                         h,
                         per_call,
                     )
@@ -507,12 +507,12 @@ class World:
         NDArray[np.uint64],
         NDArray[np.int32],
         FloatArray,
-        NDArray[np.intp],
+        NDArray[np.uint64],
         FloatArray,
     ]:
         """The arrays a fused step (:func:`odomgym.stepping.step_plain`) works on, in the
         order of :data:`odomgym.stepping.STEP_FIELDS`: packed state, encoder counts, contact
-        velocities, the Chipmunk link's addresses, headers, buffer and rows, and the clock
+        velocities, the Chipmunk link's addresses, headers, buffer and bodies, and the clock
         (1,) [s]. They stay the same arrays for the World's life."""
         io = self._io
         return (
@@ -522,7 +522,7 @@ class World:
             io.addresses,
             io.heads,
             io.buffer,
-            io.rows,
+            io.bodies,
             self._clock,
         )
 
@@ -537,9 +537,16 @@ class World:
         """
         io = self._io
         if not io.compiled:
-            io.exchange_in_python(self.velocity, self._ground_v, h, self.pose)
+            io.exchange_in_python(self._ground_v, h, self.pose, self.velocity)
         elif not exchange(
-            io.addresses, io.heads, io.buffer, io.rows, self.velocity, self._ground_v, h, self.pose
+            io.addresses,
+            io.heads,
+            io.buffer,
+            io.bodies,
+            self._ground_v,
+            h,
+            self.pose,
+            self.velocity,
         ):
             check_step_status(2)
 

@@ -13,16 +13,17 @@ because numba's on-disk cache notices edits to a kernel's own module only
 :class:`odomgym.odometry.Odometry`, :class:`odomgym.routes.RouteProgress`,
 :class:`odomgym.trial.Trial`, the envs' ``RouteEpisodes``) call them.
 
-How Chipmunk is reached: pymunk's batch API (``pymunk.batch``) is a pair of C iterator functions,
-``pmSpaceBodySetIteratorFuncBatched`` and ``pmSpaceBodyGetIteratorFuncBatched``, that
-``cpSpaceEachBody`` calls for every body of a space with a ``pmBatchedData`` block: they copy
-each body's velocity from, or its position, angle, velocity and angular velocity into, a
-``pmFloatArray``. Every argument of these functions and of ``cpSpaceStep`` is a pointer or a
-double, so compiled code calls them through their addresses (two small numba intrinsics,
-:func:`_call_each_body` and :func:`_call_space_step`) with the arithmetic of pymunk's own Python
-wrappers; :class:`odomgym.chipmunk_link.SpaceExchange` sets up the structures and checks them,
-and pymunk's wrappers remain the World's fallback. The addresses are runtime values, so the
-kernels stay cached.
+How Chipmunk is reached: pymunk's batch API (``pymunk.batch``) has two C iterator functions,
+``pmSpaceBodySetIteratorFuncBatched`` and ``pmSpaceBodyGetIteratorFuncBatched``, that take a body
+and a ``pmBatchedData`` block and copy the body's velocity from, or its position, angle,
+velocity and angular velocity into, a ``pmFloatArray`` (pymunk calls them on every body of a
+space through ``cpSpaceEachBody``). Every argument of these functions and of ``cpSpaceStep`` is a
+pointer or a double, so compiled code calls them through their addresses (two small numba
+intrinsics, :func:`_call_iterator` and :func:`_call_space_step`) on just the bodies it needs,
+the ground bodies in and the chassis out, with the arithmetic of pymunk's own wrappers;
+:class:`odomgym.chipmunk_link.SpaceExchange` sets up the structures and checks them, and pymunk's
+properties remain the World's fallback. The addresses are runtime values, so the kernels stay
+cached.
 
 Units: metres, radians, seconds. Wheel index 0 is the left wheel, 1 the right.
 """
@@ -63,16 +64,14 @@ __all__ = [
     "integrate_odometry",
     "midstep_translation",
     "new_state",
-    "pack_velocities",
     "pose_error_into",
-    "read_bodies",
+    "read_chassis",
     "rim_from_wheel_step",
     "route_update",
     "start_frame",
     "state_views",
     "step_plain",
-    "unpack_states",
-    "write_bodies",
+    "write_ground",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -100,11 +99,10 @@ _POSE, _VELOCITY, _RATE, _ANGLE, _RIM, _MOTOR = (
 )
 
 # A Chipmunk link (odomgym.chipmunk_link.SpaceExchange): its ``addresses`` hold the space, the
-# two pmBatchedData blocks (set, get), then the C functions of CHIPMUNK_FUNCTIONS, in this order.
-_SPACE, _SET_DATA, _GET_DATA, _EACH_BODY, _SPACE_STEP, _SET_ITERATOR, _GET_ITERATOR = range(7)
+# set and get pmBatchedData blocks, then the C functions of CHIPMUNK_FUNCTIONS, in this order.
+_SPACE, _SET_DATA, _GET_DATA, _SPACE_STEP, _SET_ITERATOR, _GET_ITERATOR = range(6)
 #: The C functions compiled code calls, in the order of a link's addresses after the data.
 CHIPMUNK_FUNCTIONS = (
-    "cpSpaceEachBody",
     "cpSpaceStep",
     "pmSpaceBodySetIteratorFuncBatched",
     "pmSpaceBodyGetIteratorFuncBatched",
@@ -156,22 +154,23 @@ def state_views(state: FloatArray) -> dict[str, FloatArray]:
     return {name: state[:, first:stop] for name, (first, stop) in STATE_COLUMNS.items()}
 
 
-def _each_body_typing(typingctx: Any, function: Any, space: Any, iterator: Any, data: Any) -> Any:
-    """``cpSpaceEachBody(space, iterator, data)`` through the function's address: Chipmunk
-    calls ``iterator(body, data)`` for every body. All four arguments are addresses (integers)."""
+def _iterator_typing(typingctx: Any, function: Any, body: Any, data: Any) -> Any:
+    """``iterator(body, data)`` through the function's address: one of pymunk's batch
+    iterators (``void (cpBody *, void *)``) on one body. All three arguments are addresses
+    (integers)."""
     del typingctx
-    if not all(isinstance(t, types.Integer) for t in (function, space, iterator, data)):
+    if not all(isinstance(t, types.Integer) for t in (function, body, data)):
         return None
 
     def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
         del signature
         pointer = ir.IntType(8).as_pointer()
-        callee_type = ir.FunctionType(ir.VoidType(), [pointer, pointer, pointer])
+        callee_type = ir.FunctionType(ir.VoidType(), [pointer, pointer])
         callee = builder.inttoptr(args[0], callee_type.as_pointer())
         builder.call(callee, [builder.inttoptr(a, pointer) for a in args[1:]])
         return context.get_dummy_value()
 
-    return types.void(function, space, iterator, data), codegen
+    return types.void(function, body, data), codegen
 
 
 def _space_step_typing(typingctx: Any, function: Any, space: Any, h: Any) -> Any:
@@ -196,7 +195,7 @@ def _space_step_typing(typingctx: Any, function: Any, space: Any, h: Any) -> Any
 
 
 # Typed Any: numba's stubs declare an intrinsic's call with the typing context argument too.
-_call_each_body: Any = intrinsic(_each_body_typing)
+_call_iterator: Any = intrinsic(_iterator_typing)
 _call_space_step: Any = intrinsic(_space_step_typing)
 
 
@@ -295,40 +294,6 @@ def _wheels(
         motor_step[i, w] = mean * h
         counts[i, w] = math.floor(angle[i, w] * params[i, _TICKS])
         rim_speed[i, w] = mean * params[i, _RADIUS + w]
-
-
-@kernel
-def pack_velocities(
-    velocity: FloatArray,
-    ground_v: FloatArray,
-    rows: NDArray[np.intp],
-    out: FloatArray,
-) -> None:
-    """Every body's velocity in Chipmunk's body order (``out``, flat x, y per body): a chassis
-    keeps its own, a ground body gets its contact velocity."""
-    for i in range(rows.shape[0]):
-        out[2 * rows[i, 0]] = velocity[i, 0]
-        out[2 * rows[i, 0] + 1] = velocity[i, 1]
-        for w in range(2):
-            out[2 * rows[i, 1 + w]] = ground_v[i, w, 0]
-            out[2 * rows[i, 1 + w] + 1] = ground_v[i, w, 1]
-
-
-@kernel
-def unpack_states(
-    data: FloatArray,
-    rows: NDArray[np.intp],
-    h: float,
-    pose: FloatArray,
-    velocity: FloatArray,
-) -> None:
-    """Chassis poses advanced by v·h and velocities from Chipmunk's rows (x, y, θ, ẋ, ẏ, θ̇ per
-    body, flat), in place (see ``World._read_state``)."""
-    for i in range(rows.shape[0]):
-        base = BODY_STATE_WIDTH * rows[i, 0]
-        for k in range(3):
-            velocity[i, k] = data[base + 3 + k]
-            pose[i, k] = data[base + k] + data[base + 3 + k] * h
 
 
 @kernel
@@ -433,24 +398,27 @@ def floor_kernel(
 
 
 @kernel
-def write_bodies(addresses: NDArray[np.uint64], heads: NDArray[np.int32]) -> None:
-    """Every body's velocity from the first part of the exchange buffer (pymunk's
-    ``set_space_bodies``: the set iterator reads from entry ``num`` on, so it starts at 0)."""
+def write_ground(
+    addresses: NDArray[np.uint64], heads: NDArray[np.int32], bodies: NDArray[np.uint64]
+) -> None:
+    """Each ground body's velocity from the first part of a link's buffer, robot by robot, left
+    then right (pymunk's set iterator reads from entry ``num`` on, so it starts at 0)."""
     heads[0, 0] = 0
-    _call_each_body(
-        addresses[_EACH_BODY], addresses[_SPACE], addresses[_SET_ITERATOR], addresses[_SET_DATA]
-    )
+    for i in range(bodies.shape[0]):
+        for w in range(2):
+            _call_iterator(addresses[_SET_ITERATOR], bodies[i, 1 + w], addresses[_SET_DATA])
 
 
 @kernel
-def read_bodies(addresses: NDArray[np.uint64], heads: NDArray[np.int32]) -> bool:
-    """Every body's state into the second part of the exchange buffer (pymunk's
-    ``get_space_bodies`` after ``Buffer.clear``); False if Chipmunk wrote another count."""
+def read_chassis(
+    addresses: NDArray[np.uint64], heads: NDArray[np.int32], bodies: NDArray[np.uint64]
+) -> bool:
+    """Each chassis' state into the second part of a link's buffer, robot by robot (pymunk's
+    get iterator appends from entry ``num`` on); False if it appended another count."""
     heads[1, 0] = 0
-    _call_each_body(
-        addresses[_EACH_BODY], addresses[_SPACE], addresses[_GET_ITERATOR], addresses[_GET_DATA]
-    )
-    return bool(heads[1, 0] == heads[1, 1] - SPARE_ENTRIES)
+    for i in range(bodies.shape[0]):
+        _call_iterator(addresses[_GET_ITERATOR], bodies[i, 0], addresses[_GET_DATA])
+    return bool(heads[1, 0] == BODY_STATE_WIDTH * bodies.shape[0])
 
 
 @kernel
@@ -458,23 +426,30 @@ def exchange(
     addresses: NDArray[np.uint64],
     heads: NDArray[np.int32],
     buffer: FloatArray,
-    rows: NDArray[np.intp],
-    velocity: FloatArray,
+    bodies: NDArray[np.uint64],
     ground_v: FloatArray,
     h: float,
     pose: FloatArray,
+    velocity: FloatArray,
 ) -> bool:
     """One Chipmunk step of ``h`` [s] between the World's arrays and the space: the ground
-    bodies take ``ground_v`` (N, 2, 2), the chassis keep ``velocity``; afterwards ``pose`` and
-    ``velocity`` (N, 3) hold each chassis' pose advanced by v·h and velocity (see
-    ``World._read_state``). False if the read-back went wrong (nothing to trust then)."""
-    n_velocities = heads[0, 1]
-    pack_velocities(velocity, ground_v, rows, buffer[:n_velocities])
-    write_bodies(addresses, heads)
+    bodies take ``ground_v`` (N, 2, 2) [m/s]; afterwards ``pose`` and ``velocity`` (N, 3) hold
+    each chassis' pose advanced by v·h and its velocity (see ``World._exchange``). False if
+    the read-back went wrong (nothing to trust then)."""
+    n = bodies.shape[0]
+    for i in range(n):
+        for w in range(2):
+            buffer[4 * i + 2 * w] = ground_v[i, w, 0]
+            buffer[4 * i + 2 * w + 1] = ground_v[i, w, 1]
+    write_ground(addresses, heads, bodies)
     _call_space_step(addresses[_SPACE_STEP], addresses[_SPACE], h)
-    if not read_bodies(addresses, heads):
+    if not read_chassis(addresses, heads, bodies):
         return False
-    unpack_states(buffer[n_velocities:], rows, h, pose, velocity)
+    for i in range(n):
+        base = 4 * n + BODY_STATE_WIDTH * i  # x, y, θ, ẋ, ẏ, θ̇
+        for k in range(3):
+            velocity[i, k] = buffer[base + 3 + k]
+            pose[i, k] = buffer[base + k] + buffer[base + 3 + k] * h
     return True
 
 
@@ -488,7 +463,7 @@ def step_plain(
     addresses: NDArray[np.uint64],
     heads: NDArray[np.int32],
     buffer: FloatArray,
-    rows: NDArray[np.intp],
+    bodies: NDArray[np.uint64],
     h: float,
     substeps: int,
 ) -> int:
@@ -508,7 +483,7 @@ def step_plain(
             command, scale, params, pose, h, rate, angle, counts, rim_speed, ground_v, motor_step
         ):
             return 1
-        if not exchange(addresses, heads, buffer, rows, velocity, ground_v, h, pose):
+        if not exchange(addresses, heads, buffer, bodies, ground_v, h, pose, velocity):
             return 2
     return 0
 
@@ -732,7 +707,7 @@ def episode_report(
 #: The fields of a :class:`StepArrays`, in its constructor's order: the World's (the trial's
 #: wheel rate per unit action [rad/s], then what :meth:`odomgym.physics.World.step_arrays`
 #: returns: packed state, encoder counts, contact velocities, the Chipmunk link's addresses,
-#: headers, buffer and rows, the clock [s]), the odometry's (last counts, travel per tick [m],
+#: headers, buffer and bodies, the clock [s]), the odometry's (last counts, travel per tick [m],
 #: wheelbase [m], pose, wheel speeds [m/s]), the trial's top wheel speeds [m/s], the route's
 #: (:meth:`odomgym.routes.RouteProgress.step_arrays`), the trial's start poses, and the
 #: substep [s], substeps per step and control period [s].
@@ -744,7 +719,7 @@ STEP_FIELDS = (
     "addresses",
     "heads",
     "buffer",
-    "rows",
+    "bodies",
     "clock",
     "last_counts",
     "travel_per_tick",
@@ -822,7 +797,7 @@ def control_step(
             a.addresses,
             a.heads,
             a.buffer,
-            a.rows,
+            a.bodies,
             a.substep,
             a.substeps,
         )

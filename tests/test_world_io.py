@@ -1,9 +1,10 @@
 """The World's two ways across the pymunk boundary give bit-identical trajectories.
 
-Compiled kernels calling Chipmunk's functions by address (:class:`odomgym.chipmunk_link.SpaceExchange`)
-and pymunk's own ``pymunk.batch`` and ``Space.step`` (the fallback if a pymunk release changes
-the internals the compiled path relies on) are speed choices only (docs/architecture.md,
-"Performance design"); a robot's motion must not depend on them, nor on its batch.
+Compiled kernels calling Chipmunk's functions by address
+(:class:`odomgym.chipmunk_link.SpaceExchange`) and pymunk's own properties and ``Space.step``
+(the fallback if a pymunk release changes the internals the compiled path relies on) are speed
+choices only (docs/architecture.md, "Performance design"); a robot's motion must not depend on
+them, nor on its batch.
 """
 
 from __future__ import annotations
