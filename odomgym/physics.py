@@ -52,6 +52,8 @@ from odomgym.effects import EFFECTS, WorldHook
 from odomgym.floor import FloorSpec
 from odomgym.robot import RobotSpec
 from odomgym.stepping import (
+    STEP_BAD_READ_BACK,
+    STEP_NOT_FINITE,
     check_step_status,
     drive_plain,
     drive_wheels,
@@ -465,7 +467,7 @@ class World:
                     self._ground_v,
                     self._motor_step,
                 ):
-                    check_step_status(1)
+                    check_step_status(STEP_NOT_FINITE)
                 if not self._plain:
                     self._effect_stages(h)
                 self._exchange(h)
@@ -548,7 +550,7 @@ class World:
             self.pose,
             self.velocity,
         ):
-            check_step_status(2)
+            check_step_status(STEP_BAD_READ_BACK)
 
     def _effect_stages(self, h: float) -> None:
         """After the wheels, one substep's contact velocities through every stage: transmission

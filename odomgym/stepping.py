@@ -50,7 +50,10 @@ __all__ = [
     "SPARE_ENTRIES",
     "STATE_COLUMNS",
     "STATE_WIDTH",
+    "STEP_BAD_READ_BACK",
     "STEP_FIELDS",
+    "STEP_NOT_FINITE",
+    "STEP_OK",
     "StepArrays",
     "StepArraysType",
     "after_step",
@@ -112,6 +115,10 @@ BODY_STATE_WIDTH = 6
 #: pmFloatArrayPush grows (reallocates) its array when it is within two entries of full; a
 #: link's incoming buffer has this many spare entries, so it never reallocates numpy's memory.
 SPARE_ENTRIES = 2
+
+#: What :func:`step_plain` and :func:`control_step` return: done, a command was not finite
+#: (nothing touched), Chipmunk's read-back went wrong (see :func:`check_step_status`).
+STEP_OK, STEP_NOT_FINITE, STEP_BAD_READ_BACK = 0, 1, 2
 
 #: Columns of :func:`episode_report`'s rows: name -> (first, stop).
 REPORT_COLUMNS: dict[str, tuple[int, int]] = {
@@ -469,8 +476,8 @@ def step_plain(
 ) -> int:
     """``substeps`` whole substeps of a World without effect hooks on a plain floor: wheels,
     contact velocities and their mid-step turn (:func:`drive_plain`), then Chipmunk
-    (:func:`exchange`), on the World's packed ``state`` (:data:`STATE_COLUMNS`). Returns 0, or
-    1 if a command is not finite (nothing touched), or 2 if Chipmunk's read-back went wrong."""
+    (:func:`exchange`), on the World's packed ``state`` (:data:`STATE_COLUMNS`). Returns
+    ``STEP_OK``, ``STEP_NOT_FINITE`` or ``STEP_BAD_READ_BACK``."""
     params = state[:, :_POSE]
     pose = state[:, _POSE : _POSE + 3]
     velocity = state[:, _VELOCITY : _VELOCITY + 3]
@@ -482,10 +489,10 @@ def step_plain(
         if not drive_plain(
             command, scale, params, pose, h, rate, angle, counts, rim_speed, ground_v, motor_step
         ):
-            return 1
+            return STEP_NOT_FINITE
         if not exchange(addresses, heads, buffer, bodies, ground_v, h, pose, velocity):
-            return 2
-    return 0
+            return STEP_BAD_READ_BACK
+    return STEP_OK
 
 
 @kernel
@@ -783,8 +790,7 @@ def control_step(
     (:func:`after_step`); and with ``report``, the rewarded episode report into ``out``
     (:func:`episode_report`, which describes ``episodes`` and ``weights``).
 
-    Returns :func:`step_plain`'s status: 0, 1 if a command is not finite (nothing touched) or 2
-    if Chipmunk's read-back went wrong (nothing after the physics done).
+    Returns :func:`step_plain`'s status (after a failed one nothing after the physics is done).
     """
     a = arrays
     if physics:
@@ -801,7 +807,7 @@ def control_step(
             a.substep,
             a.substeps,
         )
-        if status != 0:
+        if status != STEP_OK:
             return status
         a.clock[0] += a.dt
     after_step(
@@ -838,14 +844,14 @@ def control_step(
             True,
             out,
         )
-    return 0
+    return STEP_OK
 
 
 def check_step_status(status: int) -> None:
     """Raise the error a :func:`step_plain` or :func:`control_step` status stands for."""
-    if status == 1:
+    if status == STEP_NOT_FINITE:
         raise ValueError("wheel rate commands must be finite")
-    if status == 2:
+    if status == STEP_BAD_READ_BACK:
         raise RuntimeError(
             "Chipmunk returned another number of body states than the space has bodies"
         )

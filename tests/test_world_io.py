@@ -14,10 +14,10 @@ import pickle
 import numpy as np
 import pytest
 
+from odomgym.chipmunk_link import SpaceExchange
 from odomgym.floor import FLOORS
 from odomgym.physics import World
 from odomgym.robot import PRESETS
-from odomgym.chipmunk_link import SpaceExchange
 
 STEPS = 300
 
