@@ -7,9 +7,9 @@ Chipmunk's ``cpSpaceStep`` (0.7 µs on a 2-core machine), while every crossing o
 boundary costs about as much: a numba call ~0.1 µs per array argument, a pymunk property 1-2 µs.
 So a step is one compiled call (:func:`control_step`) that takes its arrays in one
 :class:`StepArrays` (numba's dispatch of that object costs about as much as of five arrays,
-whatever it holds) and calls Chipmunk's C functions by address; the kernels it calls live here
-because numba's on-disk cache notices edits to a kernel's own module only
-(:mod:`odomgym._jit`). The classes that own the state (:class:`odomgym.physics.World`,
+whatever it holds) and calls Chipmunk's C functions by address; the kernels it calls are
+inlined into it (:func:`odomgym._jit.inlined_kernel`) and live here because numba's on-disk
+cache notices edits to a kernel's own module only (:mod:`odomgym._jit`). The classes that own the state (:class:`odomgym.physics.World`,
 :class:`odomgym.odometry.Odometry`, :class:`odomgym.routes.RouteProgress`,
 :class:`odomgym.trial.Trial`, the envs' ``RouteEpisodes``) call them.
 
@@ -40,7 +40,7 @@ from numba.experimental import structref
 from numba.extending import intrinsic
 from numpy.typing import NDArray
 
-from odomgym._jit import kernel
+from odomgym._jit import inlined_kernel, kernel
 
 __all__ = [
     "BODY_STATE_WIDTH",
@@ -206,7 +206,7 @@ _call_iterator: Any = intrinsic(_iterator_typing)
 _call_space_step: Any = intrinsic(_space_step_typing)
 
 
-@kernel
+@inlined_kernel
 def drive_wheels(
     command: FloatArray,
     scale: FloatArray,
@@ -238,7 +238,7 @@ def drive_wheels(
     return True
 
 
-@kernel
+@inlined_kernel
 def drive_plain(
     command: FloatArray,
     scale: FloatArray,
@@ -266,7 +266,7 @@ def drive_plain(
     return True
 
 
-@kernel
+@inlined_kernel
 def _finite(command: FloatArray) -> bool:
     """True if every command (N, 2) is finite."""
     for i in range(command.shape[0]):
@@ -275,7 +275,7 @@ def _finite(command: FloatArray) -> bool:
     return True
 
 
-@kernel
+@inlined_kernel
 def _wheels(
     i: int,
     command: FloatArray,
@@ -303,7 +303,7 @@ def _wheels(
         rim_speed[i, w] = mean * params[i, _RADIUS + w]
 
 
-@kernel
+@inlined_kernel
 def _set_ground_velocity(
     i: int, rim_speed: FloatArray, cos_t: float, sin_t: float, ground_v: FloatArray
 ) -> None:
@@ -315,7 +315,7 @@ def _set_ground_velocity(
         ground_v[i, w, 1] = rim_speed[i, w] * sin_t
 
 
-@kernel
+@inlined_kernel
 def midstep_translation(
     ground_v: FloatArray, pose: FloatArray, params: FloatArray, h: float
 ) -> None:
@@ -335,7 +335,7 @@ def midstep_translation(
         _midstep_turn(i, ground_v, cos_t, sin_t, params[i, _HALF_TRACK], h)
 
 
-@kernel
+@inlined_kernel
 def _midstep_turn(
     i: int, ground_v: FloatArray, cos_t: float, sin_t: float, half_track: float, h: float
 ) -> None:
@@ -357,7 +357,7 @@ def _midstep_turn(
         ground_v[i, w, 1] += ry
 
 
-@kernel
+@inlined_kernel
 def rim_from_wheel_step(
     wheel_step: FloatArray,
     params: FloatArray,
@@ -374,7 +374,7 @@ def rim_from_wheel_step(
         _set_ground_velocity(i, rim_speed, math.cos(pose[i, 2]), math.sin(pose[i, 2]), ground_v)
 
 
-@kernel
+@inlined_kernel
 def floor_kernel(
     pose: FloatArray,
     lateral: FloatArray,
@@ -404,7 +404,7 @@ def floor_kernel(
                 ground_v[i, w, 1] += extra * sin_t
 
 
-@kernel
+@inlined_kernel
 def write_ground(
     addresses: NDArray[np.uint64], heads: NDArray[np.int32], bodies: NDArray[np.uint64]
 ) -> None:
@@ -416,7 +416,7 @@ def write_ground(
             _call_iterator(addresses[_SET_ITERATOR], bodies[i, 1 + w], addresses[_SET_DATA])
 
 
-@kernel
+@inlined_kernel
 def read_chassis(
     addresses: NDArray[np.uint64], heads: NDArray[np.int32], bodies: NDArray[np.uint64]
 ) -> bool:
@@ -428,7 +428,7 @@ def read_chassis(
     return bool(heads[1, 0] == BODY_STATE_WIDTH * bodies.shape[0])
 
 
-@kernel
+@inlined_kernel
 def exchange(
     addresses: NDArray[np.uint64],
     heads: NDArray[np.int32],
@@ -460,7 +460,7 @@ def exchange(
     return True
 
 
-@kernel
+@inlined_kernel
 def step_plain(
     command: FloatArray,
     scale: FloatArray,
@@ -495,7 +495,7 @@ def step_plain(
     return STEP_OK
 
 
-@kernel
+@inlined_kernel
 def integrate_odometry(
     counts: NDArray[np.int64],
     last_counts: NDArray[np.int64],
@@ -522,7 +522,7 @@ def integrate_odometry(
         pose[i, 2] += dtheta
 
 
-@kernel
+@inlined_kernel
 def route_update(
     pose: FloatArray,
     wheel_speed: FloatArray,
@@ -598,7 +598,7 @@ def route_update(
             advanced[i] = True
 
 
-@kernel
+@inlined_kernel
 def start_frame(pose: FloatArray, start: FloatArray, out: FloatArray) -> None:
     """World-frame poses (N, 3) expressed in each robot's start frame, into ``out``."""
     for i in range(pose.shape[0]):
@@ -611,7 +611,7 @@ def start_frame(pose: FloatArray, start: FloatArray, out: FloatArray) -> None:
         out[i, 2] = pose[i, 2] - start[i, 2]
 
 
-@kernel
+@inlined_kernel
 def pose_error_into(pose: FloatArray, start: FloatArray, odom: FloatArray, out: FloatArray) -> None:
     """True pose (world frame) in each robot's start frame minus odometry (N, 3), heading
     wrapped to [−π, π), into ``out`` (compiled; callable from other kernels)."""
@@ -623,7 +623,7 @@ def pose_error_into(pose: FloatArray, start: FloatArray, odom: FloatArray, out: 
         out[i, 2] = (out[i, 2] - odom[i, 2] + math.pi) % two_pi - math.pi
 
 
-@kernel
+@inlined_kernel
 def after_step(
     counts: NDArray[np.int64],
     last_counts: NDArray[np.int64],
@@ -662,7 +662,7 @@ def after_step(
     )
 
 
-@kernel
+@inlined_kernel
 def episode_report(
     true_pose: FloatArray,
     start_poses: FloatArray,
