@@ -248,7 +248,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         masks = np.empty((len(entries) + 1, self.num_envs), dtype=np.bool_)
         masks[:] = present
         everyone = present is self._everyone or bool(present.all())
-        for (key, value), mask in zip(entries.items(), masks, strict=False):
+        for (key, value), mask in zip(entries.items(), masks[:-1], strict=True):
             # The entries are fresh arrays; only a partial reset blanks the absent sub-envs.
             if not everyone:
                 value[~present] = 0
