@@ -9,9 +9,10 @@ So a step is one compiled call (:func:`control_step`) that takes its arrays in o
 :class:`StepArrays` (numba's dispatch of that object costs about as much as of five arrays,
 whatever it holds) and calls Chipmunk's C functions by address; the kernels it calls are
 inlined into it (:func:`odomgym._jit.inlined_kernel`) and live here because numba's on-disk
-cache notices edits to a kernel's own module only (:mod:`odomgym._jit`). The classes that own the state (:class:`odomgym.physics.World`,
-:class:`odomgym.odometry.Odometry`, :class:`odomgym.routes.RouteProgress`,
-:class:`odomgym.trial.Trial`, the envs' ``RouteEpisodes``) call them.
+cache notices edits to a kernel's own module only (:mod:`odomgym._jit`). The classes that own
+the state (:class:`odomgym.physics.World`, :class:`odomgym.odometry.Odometry`,
+:class:`odomgym.routes.RouteProgress`, :class:`odomgym.trial.Trial`, the envs'
+``RouteEpisodes``) call them.
 
 How Chipmunk is reached: pymunk's batch API (``pymunk.batch``) has two C iterator functions,
 ``pmSpaceBodySetIteratorFuncBatched`` and ``pmSpaceBodyGetIteratorFuncBatched``, that take a body
