@@ -43,6 +43,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.floor",
             "odomgym.cables",
             "odomgym.physics",
+            "odomgym.chipmunk_link",
             "odomgym.odometry",
             "odomgym.routes",
             "odomgym.stepping",
@@ -87,6 +88,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         (
             "odomgym.envs",
             "odomgym.envs.base",
+            "odomgym.envs.info",
             "odomgym.envs.umbmark",
             "odomgym.envs.straight",
             "odomgym.envs.clapper",
