@@ -58,12 +58,14 @@ __all__ = [
     "FitJob",
     "Joint",
     "Model",
+    "build_within",
     "close_thread_pool",
     "evaluate",
     "fit_candidate",
     "fit_noise",
     "fit_noise_model",
     "folds_for",
+    "gauss_newton_step",
     "noise_curvature",
     "run_fit_jobs",
     "strata",
@@ -392,6 +394,33 @@ def systematic_vector(
         return effect.write(spec, {p.name: float(v) for p, v in zip(params, values, strict=True)})
 
     return np.zeros(len(params)), (low - origin) / scale, (high - origin) / scale, build
+
+
+def gauss_newton_step(a: FloatArray, b: FloatArray, rcond: float = 1e-9) -> FloatArray:
+    """The step −A⁺b of normal equations A·δ = −b, A⁺ the pseudo-inverse that drops directions
+    whose eigenvalue is below ``rcond`` × the largest: a fold that leaves out the only runs
+    determining a parameter keeps that parameter where the full fit put it instead of sending it
+    to infinity."""
+    values, vectors = np.linalg.eigh(0.5 * (a + a.T))
+    top = float(np.max(values)) if len(values) else 0.0
+    keep = values > rcond * top if top > 0 else np.zeros(len(values), dtype=bool)
+    inverse = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
+    step: FloatArray = -(vectors @ (inverse * (vectors.T @ b)))
+    return step
+
+
+def build_within(
+    build: Callable[[FloatArray], RobotSpec], start: FloatArray, step: FloatArray
+) -> RobotSpec:
+    """``build(start + step)``, the step halved until the robot it makes is valid (a linearised
+    step can leave the range a robot may have, e.g. a wheel twice nominal); ``build(start)`` if
+    none is."""
+    for _ in range(20):
+        try:
+            return build(start + step)
+        except SpecError:
+            step = 0.5 * step
+    return build(start)
 
 
 def whitened_stack(

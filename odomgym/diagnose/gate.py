@@ -45,7 +45,9 @@ from odomgym.diagnose.fit import (
     Dataset,
     Joint,
     Model,
+    build_within,
     fit_candidate,
+    gauss_newton_step,
     systematic_vector,
     whitened_stack,
 )
@@ -218,11 +220,8 @@ class FilterLinearisation:
                 rest = self.whitened[j] + cols[:, ~inside] @ u[~inside]
                 a += cols[:, inside].T @ cols[:, inside]
                 b += cols[:, inside].T @ rest
-            try:
-                u[inside] = -np.linalg.solve(a, b)
-            except np.linalg.LinAlgError:
-                u[inside] = -np.linalg.lstsq(a, b, rcond=None)[0]
-        return self.build(u)
+            u[inside] = gauss_newton_step(a, b)
+        return build_within(self.build, np.zeros(len(self.keys)), u)
 
     def cross_validate(
         self, kept: Sequence[str], open_data: OpenLoopData, folds: Sequence[Sequence[int]]
@@ -467,11 +466,10 @@ def filter_estimate(
         train = [j for j in range(len(data)) if j not in held]
         a = np.sum([fit.jacobian[j].T @ fit.jacobian[j] for j in train], axis=0)
         b = np.sum([fit.jacobian[j].T @ fit.whitened[j] for j in train], axis=0)
-        try:
-            delta = -np.linalg.solve(a, b)
-        except np.linalg.LinAlgError:
-            delta = -np.linalg.lstsq(a, b, rcond=None)[0]
-        cv[list(fold)] = run_errors(open_data.subset(list(fold)), build(delta))
+        step = gauss_newton_step(a, b)
+        cv[list(fold)] = run_errors(
+            open_data.subset(list(fold)), build_within(build, np.zeros(len(step)), step)
+        )
     spec = effect.write(base, fit.values)
     entries = {}
     for key, value in fit.values.items():

@@ -42,12 +42,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.diagnose.fit import strata, systematic_vector
+from odomgym.diagnose.fit import build_within, gauss_newton_step, strata, systematic_vector
 from odomgym.diagnose.likelihood import measurement_mask
 from odomgym.diagnose.nuisances import SessionNuisance, correct_run, sessions_of
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import Effect
+from odomgym.errors import SpecError
 from odomgym.metrics import e_max_syst
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
@@ -295,8 +296,15 @@ class _Problem:
         for a in range(self.size):
             moved = x.copy()
             moved[a] += step
-            for j, r in enumerate(self.residuals(moved)):
-                robot[j][:, a] = (r - base[j]) / step
+            try:
+                shifted = self.residuals(moved)
+                h = step
+            except SpecError:  # at the edge of a valid robot: the backward difference
+                moved[a] -= 2.0 * step
+                shifted = self.residuals(moved)
+                h = -step
+            for j, r in enumerate(shifted):
+                robot[j][:, a] = (r - base[j]) / h
         for i in range(len(self.active)):
             moved = x.copy()
             for s in self.sessions:
@@ -372,8 +380,12 @@ def _levenberg_marquardt(
             delta = -np.linalg.lstsq(a + damping * np.diag(diag), g, rcond=None)[0]
         trial = np.clip(x + delta, problem.low, problem.high)
         step = trial - x
-        trial_res = problem.residuals(trial)
-        trial_cost = _cost(trial_res)
+        try:
+            trial_res = problem.residuals(trial)
+        except SpecError:  # beyond the range a robot may have: a failed step
+            trial_res, trial_cost = res, math.inf
+        else:
+            trial_cost = _cost(trial_res)
         predicted = -(step @ g) - 0.5 * step @ a @ step
         gain = (cost - trial_cost) / predicted if predicted > 0 else -1.0
         if trial_cost < cost:
@@ -553,23 +565,23 @@ def open_loop_folds(runs: Sequence[Run], blocks: int = 5) -> list[list[int]]:
     return [sorted(f) for f in folds if f]
 
 
-def _fold_step(fit: OpenLoopFit, train: Sequence[int]) -> FloatArray:
-    """The fit-unit parameters without the runs outside ``train``: one Gauss–Newton step from
-    the full fit on the training runs (columns no training run touches stay put)."""
+def _fold_step(fit: OpenLoopFit, train: Sequence[int]) -> tuple[FloatArray, RobotSpec]:
+    """The fit-unit parameters without the runs outside ``train`` — one Gauss–Newton step from
+    the full fit on the training runs (:func:`odomgym.diagnose.fit.gauss_newton_step`; columns no
+    training run touches stay put) — and the robot there (the step halved until it is a valid
+    robot: :func:`odomgym.diagnose.fit.build_within`)."""
     problem = fit.problem
     robot, own, res = fit.blocks
     a, g = problem.normal(robot, own, res, train)
     used = np.flatnonzero(np.diag(a) > 0)
     x = fit.x.copy()
     if len(used) == 0:
-        return x
-    sub, rhs = a[np.ix_(used, used)], g[used]
-    try:
-        delta = -np.linalg.solve(sub, rhs)
-    except np.linalg.LinAlgError:
-        delta = -np.linalg.lstsq(sub, rhs, rcond=None)[0]
+        return x, problem.build(x[: problem.size])
+    delta = gauss_newton_step(a[np.ix_(used, used)], g[used])
     x[used] = np.clip(x[used] + delta, problem.low[used], problem.high[used])
-    return x
+    size = problem.size
+    spec = build_within(problem.build, fit.x[:size], x[:size] - fit.x[:size])
+    return x, spec
 
 
 def cross_validate_open_loop(
@@ -583,8 +595,7 @@ def cross_validate_open_loop(
     out = np.empty(len(data))
     for fold in folds:
         held = set(fold)
-        x = _fold_step(fit, [j for j in range(len(data)) if j not in held])
-        spec = problem.build(x[: problem.size])
+        x, spec = _fold_step(fit, [j for j in range(len(data)) if j not in held])
         for j in fold:
             nuisance = problem.nuisance(x, data.sessions[j])
             out[j] = float(np.sum(_residual(data, j, spec, nuisance) ** 2))
