@@ -42,7 +42,10 @@ class Baseline(Protocol):
     returns the robot with the calibrated true geometry. ``name`` says which, in the report.
     :class:`odomgym.baselines.trajectory.TrajectoryBaseline` is one."""
 
-    name: str
+    @property
+    def name(self) -> str:
+        """Which calibration this is, in the report (read-only, so frozen dataclasses qualify)."""
+        ...
 
     def __call__(self, runs: Sequence[Run], robot: RobotSpec) -> RobotSpec: ...
 
