@@ -42,19 +42,24 @@ def _independent(effects: dict[str, dict[str, float]], seed: int) -> list:  # ty
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("name", "values"),
+    ("name", "values", "verdict"),
     [
-        ("wheel_toe", {"angle": 0.005}),
-        ("backlash", {"angle": 0.015}),
-        ("gt_sensor_offset", {"dx": 0.006, "dy": -0.004}),
-        ("turn_skid", {"gain": 0.2}),
+        ("wheel_toe", {"angle": 0.005}, "explained"),
+        # 15 mrad of wheel slack is named and fitted (0.0153 ± 0.0008), but it moves an
+        # open-loop prediction less than the noise does: the held-out runs are not predicted
+        # better than by the model as given (2.92 against 2.88 mm), and the verdict says so.
+        ("backlash", {"angle": 0.015}, "unconfirmed"),
+        ("gt_sensor_offset", {"dx": 0.006, "dy": -0.004}, "explained"),
+        ("turn_skid", {"gain": 0.2}, "explained"),
     ],
 )
 def test_independent_generator_effect_is_named_and_fitted(
-    name: str, values: dict[str, float]
+    name: str, values: dict[str, float], verdict: str
 ) -> None:
     result = diagnose(_independent({name: values}, seed=11), MODEL, DiagnoseConfig(seed=1))
-    assert result.verdict == "explained"
+    assert result.verdict == verdict
+    assert result.held_out is not None
+    assert result.held_out.better_than_as_given == (verdict != "unconfirmed")
     assert result.named_effects[0] == name
     for key, truth in values.items():
         fitted = result.parameters[name][key]
@@ -74,12 +79,21 @@ def test_independent_generator_without_effect_is_none() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [*catalogue(), None])
 def test_world_hidden_effect_at_three_times_the_detection_limit(name: str | None) -> None:
-    """One blind trial per effect (and one without) at 3-10 x the detection limit."""
+    """One blind trial per effect (and one without) at 3-10 x the detection limit.
+
+    The detection limit is the filter's (three Cramér–Rao standard errors); the open-loop gate
+    keeps an effect only where it lowers the error of predicting left-out runs open loop, which
+    has less power for the smallest effects (E_s = 1.0005, 9.6x the filter's limit, moves a
+    2-m run by 1 mm). So the effect must be either named, or proposed first by the likelihood
+    and reported ``unconfirmed`` — never another name."""
     trial = hidden_effect_trial(
         name, "rich", seed=100 + (sorted(catalogue()).index(name) if name else 99)
     )
     if name is None:
         assert trial["verdict"] == "none", trial
+    elif trial["top1"] == "unconfirmed":
+        assert trial["proposed"] == name, trial
+        assert trial["named"] == [], trial
     else:
         assert trial["top1"] == name, trial
         assert trial["gap_after"] <= trial["gap_before"], trial
@@ -126,7 +140,11 @@ def test_cli_diagnose_native_log_writes_the_report_and_a_loadable_model(tmp_path
         "candidates",
     ):
         assert key in report
-    assert report["verdict"] == "explained"
+    # The open-loop fit's E_d (1.003968; truth 1.004) predicts the left-out blocks better by
+    # one standard error than the filter's, so it is the one reported; the held-out whiteness
+    # test still sees its 3e-5 as structure (z = 8): ``partly explained``, honestly.
+    assert report["verdict"] in ("explained", "partly explained")
+    assert report["held_out_open_loop"]["better_than_as_given"]
     assert report["named_effects"] == ["wheel_diameter_ratio"]
     assert report["gap_after"] < report["gap_before"]
     assert {"report.md", "model.toml", "gap_before_after.png", "where.png"} <= {

@@ -423,6 +423,14 @@ class SystematicFit:
         """Mean over the folds of their mean square error [m²] (folds weigh equally)."""
         return float(np.mean(_fold_means(self.cv_error, folds)))
 
+    def better_than(self, other: SystematicFit, folds: Sequence[Sequence[int]]) -> bool:
+        """Whether this fit predicts the left-out folds better than ``other`` by more than one
+        standard error of the folds' paired differences (one fold: never)."""
+        diff = _fold_means(self.cv_error, folds) - _fold_means(other.cv_error, folds)
+        if len(diff) < 2:
+            return False
+        return float(np.mean(diff) + np.std(diff, ddof=1) / math.sqrt(len(diff))) < 0.0
+
 
 def _quoted(by_session: float, by_run: float) -> float:
     """The standard error to quote: session-clustered where there are sessions, else

@@ -255,6 +255,8 @@ def hidden_effect_trial(
         # The report names systematic effects before the noise model: a noise effect's trial
         # is scored on the first noise effect named, any other on the first systematic one.
         "top1": _top1(name, result),
+        # What the likelihood's first round proposed, before the open-loop gate judged it.
+        "proposed": result.rounds[0].winner if result.rounds else None,
         "named": result.named_effects,
         "tied": last.tied,
         "fitted": result.parameters,

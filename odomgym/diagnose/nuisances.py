@@ -45,16 +45,22 @@ from numpy.typing import NDArray
 from odomgym.runs import Run
 
 __all__ = [
+    "OFFSET_SIGNIFICANCE",
     "SESSION_EFFECTS",
     "SessionNuisance",
     "correct_run",
     "correct_runs",
+    "offset_is_significant",
     "sessions_of",
 ]
 
 FloatArray = NDArray[np.float64]
 SESSION_EFFECTS = ("gt_sensor_offset", "wheel_toe")
 """Catalogue effects that per-session frames make unidentifiable (left out of the candidates)."""
+OFFSET_SIGNIFICANCE = 3.0
+"""A session's fitted time offset is applied only beyond this many (run-clustered) standard
+errors from zero: resampling the counts at a spurious offset adds the acceleration-correlated
+disagreement the filter is most sensitive to."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +76,8 @@ class SessionNuisance:
         yaw: δ, measured heading − robot heading [rad].
         frame: whether (dx, dy, δ) were fitted (else they are 0).
         time_offset_se, dx_se, dy_se, yaw_se: standard errors [s], [m], [m], [rad].
+        held_out: a session the diagnosis held out: its nuisances were fitted on its own runs
+            with the diagnosed model fixed (they never inform the robot's parameters).
     """
 
     session: str
@@ -83,6 +91,7 @@ class SessionNuisance:
     dx_se: float = math.nan
     dy_se: float = math.nan
     yaw_se: float = math.nan
+    held_out: bool = False
 
     @property
     def values(self) -> FloatArray:
@@ -122,7 +131,15 @@ class SessionNuisance:
             "dx_se_mm": 1e3 * self.dx_se,
             "dy_se_mm": 1e3 * self.dy_se,
             "yaw_se_deg": math.degrees(self.yaw_se),
+            "held_out": self.held_out,
         }
+
+
+def offset_is_significant(nuisance: SessionNuisance) -> bool:
+    """Whether ``nuisance``'s time offset is at least :data:`OFFSET_SIGNIFICANCE` standard
+    errors from zero (False when its standard error is unknown)."""
+    se = nuisance.time_offset_se
+    return math.isfinite(se) and abs(nuisance.time_offset) >= OFFSET_SIGNIFICANCE * se
 
 
 def sessions_of(runs: Sequence[Run]) -> list[str]:

@@ -34,6 +34,7 @@ to that recording, and every model compared gets the same treatment
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -44,7 +45,12 @@ from numpy.typing import NDArray
 
 from odomgym.diagnose.fit import build_within, gauss_newton_step, strata, systematic_vector
 from odomgym.diagnose.likelihood import measurement_mask
-from odomgym.diagnose.nuisances import SessionNuisance, correct_run, sessions_of
+from odomgym.diagnose.nuisances import (
+    SessionNuisance,
+    correct_run,
+    offset_is_significant,
+    sessions_of,
+)
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import Effect
@@ -673,8 +679,18 @@ def evaluate_open_loop(
     for session in dict.fromkeys(data.sessions):
         if session in known or not options.active:
             continue
-        own = [j for j, s in enumerate(data.sessions) if s == session]
-        known[session] = fit_open_loop(data.subset(own), spec, None, options).nuisances[session]
+        own = data.subset([j for j, s in enumerate(data.sessions) if s == session])
+        fitted = fit_open_loop(own, spec, None, options).nuisances[session]
+        if options.time_offset and not offset_is_significant(fitted):
+            # The fit sessions' rule: no offset where the data show none (its s.e. reported).
+            frames_only = dataclasses.replace(options, time_offset=False)
+            refit = (
+                fit_open_loop(own, spec, None, frames_only).nuisances[session]
+                if frames_only.active
+                else SessionNuisance(session, fitted.runs)
+            )
+            fitted = dataclasses.replace(refit, time_offset_se=fitted.time_offset_se)
+        known[session] = fitted
     position = np.empty(len(data))
     heading = np.empty(len(data))
     combined = np.empty(len(data))

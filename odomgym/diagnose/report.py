@@ -50,6 +50,11 @@ def _found(d: Diagnosis) -> str:
     return "; ".join(parts) or "nothing"
 
 
+def _refused(d: Diagnosis) -> str:
+    """The proposals the open-loop gate refused, in words."""
+    return ", ".join(f"**{step.name}**" for step in d.gate if not step.kept) or "nothing"
+
+
 def report_json(diagnosis: Diagnosis) -> str:
     """``report.json`` as text (strict JSON)."""
     return json.dumps(_clean(diagnosis.as_dict()), indent=2, allow_nan=False)
@@ -73,9 +78,15 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
         "unexplained": "the model disagrees with the data beyond noise, and neither the catalogue "
         f"nor the grammar's terms explain it (the residuals follow **{left}** most)",
         "none": "the model already matches the data within noise",
-        "unconfirmed": f"the fit runs pointed to {found}, but the updated model does **not** "
-        "predict the held-out runs better open loop than the model as given: nothing here is "
-        "a finding to copy into the robot",
+        "unconfirmed": (
+            f"the fit runs pointed to {found}, but the updated model does **not** "
+            "predict the held-out runs better open loop than the model as given: nothing here "
+            "is a finding to copy into the robot"
+            if found != "nothing"
+            else f"the fit runs' likelihood proposed {_refused(d)}, but none of it lowered "
+            "the error of predicting left-out folds open loop (the open-loop check below): the "
+            "model stays as given, and nothing here is a finding to copy into the robot"
+        ),
     }
     lines += [f"**Verdict: {d.verdict}** — {verdicts.get(d.verdict, d.verdict)}.", ""]
     lines += _held_out_lines(d)
@@ -288,8 +299,9 @@ def _nuisance_lines(d: Diagnosis) -> list[str]:
             if n.frame
             else "— | — | —"
         )
+        label = (n.session or "(one session)") + (" (held out)" if n.held_out else "")
         lines.append(
-            f"| {n.session or '(one session)'} | {n.runs} | {1e3 * n.time_offset:.1f} ± "
+            f"| {label} | {n.runs} | {1e3 * n.time_offset:.1f} ± "
             f"{1e3 * n.time_offset_se:.1f} | {frame} |"
         )
     lines += [
