@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares, minimize
 
-from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_likelihood
+from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_scores
 from odomgym.diagnose.replay import Replay, replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import EFFECTS, Effect
@@ -133,12 +133,7 @@ def evaluate(
     def one(j: int) -> tuple[Replay, float, FloatArray | None]:
         run, mask = data.runs[j], data.masks[j]
         rep = replays[j] if replays is not None else replay_run(run, spec)
-        loglik = run_likelihood(run, rep, spec, sensor, mask).loglik
-        white = (
-            run_likelihood(run, rep, spec, sensor, mask, gaussian_jumps=True).whitened
-            if whitened
-            else None
-        )
+        loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened)
         return rep, loglik, white
 
     def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
