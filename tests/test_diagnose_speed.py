@@ -9,12 +9,16 @@ equality of the bytes, not a tolerance. The threaded evaluation's identity is te
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from alien_robot import generate_session
+from scipy.optimize import least_squares
 
-from odomgym.diagnose.fit import Dataset
+from odomgym.diagnose.fit import Dataset, _whitened_stack
 from odomgym.diagnose.likelihood import SensorNoise, run_likelihood, run_scores
 from odomgym.diagnose.replay import replay_run
-from odomgym.effects import EFFECTS
+from odomgym.diagnose.sessions import _SCALE, _spec_for, fit_session_frames, sessions_of
+from odomgym.effects import EFFECTS, ReplayArrays
+from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
 from odomgym.robot import RobotSpec
 
 MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8)
@@ -23,6 +27,35 @@ SENSOR = SensorNoise(0.002, 0.005)
 
 def _bits(value: float) -> bytes:
     return np.float64(value).tobytes()
+
+
+def _numpy_terms(values: dict[str, float], arrays: ReplayArrays) -> tuple[np.ndarray, ...]:
+    """The grammar's replay as numpy expressions, one array per term (the path the compiled
+    kernels replaced): wheel rotations after the transmission stage, crab and dθ after the
+    body stage (which sees ``arrays.ds`` and ``arrays.dtheta`` as given)."""
+    safe = np.where(arrays.dt > 0, arrays.dt, np.inf)
+    speed = arrays.wheel * arrays.radius[None, :] / safe[:, None]
+    if len(arrays.dt) < 2:
+        accel = np.zeros_like(speed)
+    else:
+        mid = np.cumsum(arrays.dt) - 0.5 * arrays.dt
+        increasing = np.all(np.diff(mid) > 0)
+        accel = np.gradient(np.abs(speed), mid, axis=0) if increasing else 0 * speed
+    factor = np.ones_like(arrays.wheel)
+    crab = np.zeros_like(arrays.dt)
+    yaw = np.ones_like(arrays.dt)
+    v, omega = arrays.ds / safe, arrays.dtheta / safe
+    for name, c in values.items():
+        term = next(t for t in TERMS if t.name == name)
+        if term.wheel:
+            col = 0 if term.channel == "left" else 1
+            m = wheel_modulator(term.modulator, speed, accel, arrays.angle, arrays.time)
+            factor[:, col] += c * m[:, col]
+        elif term.channel == "crab":
+            crab += c * body_modulator(term.modulator, v, omega, arrays.time)
+        else:
+            yaw += c * body_modulator(term.modulator, v, omega, arrays.time)
+    return arrays.wheel * factor, arrays.crab + crab, arrays.dtheta * yaw
 
 
 def test_one_filter_pass_gives_both_scores_bit_identical() -> None:
@@ -47,3 +80,99 @@ def test_one_filter_pass_gives_both_scores_bit_identical() -> None:
             assert _bits(alone) == _bits(mixture.loglik)
         if spec is bumpy:  # the jumps matter here: the two filters really differ
             assert mixture.whitened.tobytes() != gaussian.whitened.tobytes()
+
+
+def test_session_frames_evaluate_only_the_moved_session_bit_identical() -> None:
+    """:func:`fit_session_frames` takes the sessions a derivative column leaves alone from its
+    cache; its frames equal those of the same least-squares fit evaluating every session at
+    every point."""
+    runs = []
+    for k, session in enumerate("abc"):
+        for run in generate_session({}, np.random.default_rng(60 + k))[:3]:
+            run.true_pose[:, 2] += 0.004 * (k - 1)  # a yaw misalignment per session
+            run.meta["session"] = session
+            runs.append(run)
+    data = Dataset.of(runs, 0.25)
+    frames = fit_session_frames(data, MODEL, SENSOR)
+
+    labels = sessions_of(data.runs)
+    subsets = [data.subset([j for j, x in enumerate(labels) if x == s]) for s in "abc"]
+
+    def every_session(x: np.ndarray) -> np.ndarray:  # the plain residual: nothing reused
+        return np.concatenate(
+            [
+                _whitened_stack(sub, _spec_for(MODEL, x[:3], x[3 + 3 * k : 6 + 3 * k]), SENSOR)[0]
+                for k, sub in enumerate(subsets)
+            ]
+        )
+
+    plain = least_squares(every_session, np.zeros(12), diff_step=1e-2, x_scale=1.0, max_nfev=20)
+    se = np.sqrt(np.maximum(np.diag(np.linalg.inv(plain.jac.T @ plain.jac)), 0.0))
+    for k, frame in enumerate(frames):
+        value = plain.x[3 + 3 * k : 6 + 3 * k] * _SCALE
+        error = se[3 + 3 * k : 6 + 3 * k] * _SCALE
+        got = np.array([frame.dx, frame.dy, frame.yaw, frame.dx_se, frame.dy_se, frame.yaw_se])
+        assert got.tobytes() == np.concatenate([value, error]).tobytes()
+
+
+@pytest.mark.parametrize("spacing", ["logged", "uniform", "stalled", "one", "two"])
+def test_compiled_grammar_replay_is_the_numpy_one_bit_for_bit(spacing: str) -> None:
+    """Every wheel and body term at once (and each alone) through ``DiscoveredTerms.replay``,
+    whose kernels compute the modulators sample by sample, gives the bytes of the numpy
+    expressions: on irregular intervals (numpy's non-uniform gradient), equal ones (its uniform
+    formula), with a zero interval (middles not increasing: no acceleration), on one and two
+    intervals; speeds of both signs, at rest and reversing."""
+    rng = np.random.default_rng(7)
+    n = {"one": 1, "two": 2}.get(spacing, 60)
+    dt = {
+        "logged": 0.05 + 0.01 * rng.random(n),
+        "uniform": np.full(n, 3 / 64),  # sums exactly: equal steps between the middles
+        "stalled": np.where(np.arange(n) == 30, 0.0, 0.05),
+    }.get(spacing, np.full(n, 0.05))
+    wheel = 0.3 * rng.standard_normal((n, 2))
+    wheel[n // 3] = 0.0
+    wheel[n // 2, 0] = -0.0
+    arrays = ReplayArrays(
+        dt=dt,
+        wheel=wheel,
+        radius=np.array([0.041, 0.042]),
+        angle=np.cumsum(wheel, axis=0),
+        time=100.0 + np.cumsum(dt),
+        ds=0.02 * rng.standard_normal(n),
+        dtheta=0.05 * rng.standard_normal(n),
+        crab=0.001 * rng.standard_normal(n),
+    )
+    every = {t.name: 10.0 ** rng.uniform(-3.0, 3.0) * (-1) ** k for k, t in enumerate(TERMS)}
+    # Each term alone with a coefficient of ±2²⁰: c·m outweighs the 1 it is added to, and a
+    # power of two scales exactly, so a modulator off in its last bit shows in the result.
+    alone = [{name: 2.0**20 * np.sign(c)} for name, c in every.items()]
+    for values in [every, *alone]:
+        effect = DiscoveredTerms(list(values))
+        replayed = ReplayArrays(**{**arrays.__dict__, "memo": {}})
+        effect.replay("transmission", values, replayed)
+        effect.replay("body", values, replayed)
+        expected = _numpy_terms(values, arrays)
+        got = (replayed.wheel, replayed.crab, replayed.dtheta)
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(got, expected, strict=True))
+
+
+def test_replays_from_kept_inputs_are_replays_from_scratch() -> None:
+    """A dataset keeps each run's inputs (and the angle modulators derived from them) across
+    replays; the second replay through a model with every kind of stage is the bytes of a
+    fresh :func:`replay_run`, and the kept arrays are read-only."""
+    runs = generate_session(
+        {"out_of_round": {"value": 0.01, "phase": 1.0}}, np.random.default_rng(8)
+    )[:3]
+    data = Dataset.of(runs, 0.25)
+    terms = {"right_sin1": 0.01, "left_cos2": -0.004, "left_accel": 0.02, "yaw_lateral": 0.03}
+    spec = DiscoveredTerms(list(terms)).write(MODEL, terms)
+    spec = EFFECTS["backlash"].write(spec, {"angle": 0.01})
+    spec = EFFECTS["gt_sensor_offset"].write(spec, {"dx": 0.01, "dy": -0.005})
+    for j, run in enumerate(data.runs):
+        data.replay(j, spec)
+        kept, fresh = data.replay(j, spec), replay_run(run, spec)
+        for name in ("pose", "tracked", "travel", "ds", "dtheta"):
+            assert getattr(kept, name).tobytes() == getattr(fresh, name).tobytes()
+        inputs = data.inputs[j][spec.ticks_per_rev]
+        assert "discovered.sin1" in inputs.memo
+        assert not inputs.motor.flags.writeable

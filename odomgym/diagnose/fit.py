@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares, minimize
 
 from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_scores
-from odomgym.diagnose.replay import Replay, replay_run
+from odomgym.diagnose.replay import Replay, RunInputs, replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import EFFECTS, Effect
 from odomgym.effects.registry import Spec, SpecView
@@ -91,20 +91,50 @@ class Model:
 
 @dataclass
 class Dataset:
-    """Runs with the pose components that enter the likelihood."""
+    """Runs with the pose components that enter the likelihood.
+
+    ``inputs`` keeps each run's :class:`~odomgym.diagnose.replay.RunInputs` (by encoder
+    resolution) once a replay has made them, shared with every subset: a fit replays each run
+    hundreds of times. It is a cache, not data: pickles (worker jobs, journal keys) leave it
+    out and are the same bytes as without it."""
 
     runs: list[Run]
     masks: list[NDArray[np.bool_]]
+    inputs: list[dict[float, RunInputs]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if not self.inputs:
+            self.inputs = [{} for _ in self.runs]
 
     @classmethod
     def of(cls, runs: Sequence[Run], min_interval: float) -> Dataset:
         return cls(list(runs), [measurement_mask(r, min_interval) for r in runs])
 
     def subset(self, index: Sequence[int]) -> Dataset:
-        return Dataset([self.runs[i] for i in index], [self.masks[i] for i in index])
+        return Dataset(
+            [self.runs[i] for i in index],
+            [self.masks[i] for i in index],
+            [self.inputs[i] for i in index],
+        )
+
+    def replay(self, j: int, spec: RobotSpec) -> Replay:
+        """Run ``j`` replayed through ``spec`` (:func:`~odomgym.diagnose.replay.replay_run`)
+        with its kept inputs."""
+        held = self.inputs[j]
+        ticks = spec.ticks_per_rev
+        if ticks not in held:
+            held[ticks] = RunInputs.of(self.runs[j], ticks)
+        return replay_run(self.runs[j], spec, held[ticks])
 
     def __len__(self) -> int:
         return len(self.runs)
+
+    def __getstate__(self) -> dict[str, object]:
+        return {"runs": self.runs, "masks": self.masks}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self.inputs = [{} for _ in self.runs]
 
 
 @dataclass
@@ -132,7 +162,7 @@ def evaluate(
 
     def one(j: int) -> tuple[Replay, float, FloatArray | None]:
         run, mask = data.runs[j], data.masks[j]
-        rep = replays[j] if replays is not None else replay_run(run, spec)
+        rep = replays[j] if replays is not None else data.replay(j, spec)
         loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened)
         return rep, loglik, white
 
@@ -273,7 +303,7 @@ def fit_noise(
     model (the joint refits of :func:`fit_candidate`): start exactly there, without the
     multi-start of a fresh fit."""
     chosen = [e for e in effects if e is not None]
-    reps = None if _moves_mean(chosen) else [replay_run(r, spec) for r in data.runs]
+    reps = None if _moves_mean(chosen) else [data.replay(j, spec) for j in range(len(data))]
     x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
 
     def objective(x: FloatArray) -> float:
@@ -336,7 +366,7 @@ def noise_curvature(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
     log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
-    reps = None if _moves_mean(effects) else [replay_run(r, spec) for r in data.runs]
+    reps = None if _moves_mean(effects) else [data.replay(j, spec) for j in range(len(data))]
     x0, _, _, build = _noise_vector(spec, sensor, effects, at_current=True)
     step = 0.05
 

@@ -7,12 +7,13 @@ wheel toe), midpoint integration, the tracked point — i.e. the World's physics
 It starts from the first measured pose, moved from the tracked point to the axle.
 
 Everything is vectorised over the samples of a run (numpy), so a fit can replay dozens of runs
-per millisecond-scale evaluation.
+per millisecond-scale evaluation. What a replay takes from the run alone (:class:`RunInputs`) is
+computed once per run by a fit, which replays every run hundreds of times.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,7 +22,7 @@ from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["Replay", "replay_run"]
+__all__ = ["Replay", "RunInputs", "replay_run"]
 
 FloatArray = NDArray[np.float64]
 
@@ -46,26 +47,63 @@ class Replay:
     wheelbase: float
 
 
+@dataclass(frozen=True)
+class RunInputs:
+    """What every replay of a run takes from the run alone, whatever the model's geometry and
+    effects: computed once and shared, read-only, by the replays of a fit.
+
+    Attributes:
+        ticks_per_rev: the encoder resolution ``motor`` was converted with [counts/rev].
+        dt: sample intervals (n,) [s].
+        motor: motor rotation per interval (n, 2) [rad], from the counts.
+        angle: each wheel's angle at the middle of every interval (n, 2) [rad].
+        time: time since the session started at the middle of every interval (n,) [s].
+        memo: what effects derive from these arrays (:class:`odomgym.effects.ReplayArrays`).
+    """
+
+    ticks_per_rev: float
+    dt: FloatArray
+    motor: FloatArray
+    angle: FloatArray
+    time: FloatArray
+    memo: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, run: Run, ticks_per_rev: float) -> RunInputs:
+        """``run``'s inputs at ``ticks_per_rev``, the arrays made read-only (an effect that
+        wrote into one would change every later replay of the run)."""
+        dt = np.diff(run.time)
+        motor = np.diff(run.counts, axis=0).astype(np.float64) * (2.0 * np.pi / ticks_per_rev)
+        inputs = cls(ticks_per_rev, dt, motor, _wheel_angles(run, motor), _session_time(run))
+        for array in (inputs.dt, inputs.motor, inputs.angle, inputs.time):
+            array.flags.writeable = False
+        return inputs
+
+
 def _effects_of(spec: RobotSpec) -> list[tuple[str, dict[str, float]]]:
     return [(name, values) for name, values in spec.effect_dict().items() if name in EFFECTS]
 
 
-def replay_run(run: Run, spec: RobotSpec) -> Replay:
+def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Replay:
     """Replay ``run``'s counts through ``spec`` (its true geometry and its effects).
 
-    The first sample must carry a full measured pose (the readers check it).
+    ``inputs``: ``run``'s :class:`RunInputs`, if the caller keeps them (made here when not
+    given, or when made for another encoder resolution). The first sample must carry a full
+    measured pose (the readers check it).
     """
     effects = _effects_of(spec)
-    dt = np.diff(run.time)
-    motor = np.diff(run.counts, axis=0).astype(np.float64) * (2.0 * np.pi / spec.ticks_per_rev)
+    if inputs is None or inputs.ticks_per_rev != spec.ticks_per_rev:
+        inputs = RunInputs.of(run, spec.ticks_per_rev)
+    dt = inputs.dt
     radius = 0.5 * np.array([spec.true_left_diameter, spec.true_right_diameter], dtype=float)
     arrays = ReplayArrays(
         dt=dt,
-        wheel=motor,
+        wheel=inputs.motor,
         wheelbase=float(spec.true_wheelbase),
         radius=radius,
-        angle=_wheel_angles(run, motor),
-        time=_session_time(run),
+        angle=inputs.angle,
+        time=inputs.time,
+        memo=inputs.memo,
     )
     for name, values in effects:
         EFFECTS[name].replay("transmission", values, arrays)
