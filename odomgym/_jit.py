@@ -19,7 +19,7 @@ from typing import Any, TypeVar, cast
 
 import numba
 
-__all__ = ["kernel"]
+__all__ = ["inlined_kernel", "kernel"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -27,4 +27,14 @@ F = TypeVar("F", bound=Callable[..., Any])
 def kernel(function: F) -> F:
     """Compile ``function`` in nopython mode, cached on disk, IEEE-exact (no fastmath)."""
     compiled = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")(function)
+    return cast(F, compiled)
+
+
+def inlined_kernel(function: F) -> F:
+    """:func:`kernel`, inlined by numba into the kernels that call it: a call with a constant
+    argument (a loop bound) is compiled for that constant, so loops over it unroll. The same
+    operations in the same order, so the same results; it costs compile time per call site."""
+    compiled = numba.njit(
+        cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always"
+    )(function)
     return cast(F, compiled)

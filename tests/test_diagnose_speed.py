@@ -13,9 +13,16 @@ import pytest
 from alien_robot import generate_session
 from scipy.optimize import least_squares
 
-from odomgym.diagnose.fit import Dataset, _whitened_stack
-from odomgym.diagnose.likelihood import SensorNoise, run_likelihood, run_scores
-from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.fit import Dataset, _whitened_stack, fit_noise
+from odomgym.diagnose.likelihood import (
+    SensorNoise,
+    _filter,
+    _model_arrays,
+    _residual,
+    run_likelihood,
+    run_scores,
+)
+from odomgym.diagnose.replay import _headings, _positions, replay_run
 from odomgym.diagnose.sessions import _SCALE, _spec_for, fit_session_frames, sessions_of
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
@@ -176,3 +183,69 @@ def test_replays_from_kept_inputs_are_replays_from_scratch() -> None:
         inputs = data.inputs[j][spec.ticks_per_rev]
         assert "discovered.sin1" in inputs.memo
         assert not inputs.motor.flags.writeable
+
+
+def test_compiled_filter_is_its_source_run_by_python() -> None:
+    """The filter kernel inlines the Kalman update and compiles it for three measured rows (its
+    loops unrolled); run by the Python interpreter (``py_func``), the same source calls the
+    update compiled for any number of rows. Both give the same bytes: log-likelihood,
+    whitened innovations, count — with the jump mixture, with Gaussian jumps, and the
+    open-loop expected gap."""
+    runs = generate_session({"floor_bumps": {"value": 0.02}}, np.random.default_rng(9))[:3]
+    data = Dataset.of(runs, 0.25)
+    rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 1e-3, "k_right": 1.2e-3})
+    bumpy = EFFECTS["floor_bumps"].write(rough, {"rate": 0.5, "heading_jump": 0.01})
+    for spec in (rough, bumpy):
+        for run, mask in zip(data.runs, data.masks, strict=True):
+            mask = mask.copy()
+            mask[::7, 2] = False  # some samples with two measured rows
+            rep = replay_run(run, spec)
+            arrays = (*_model_arrays(rep, spec, SENSOR), _residual(run, rep, mask), mask)
+            for gaussian, update in ((False, True), (True, True), (True, False)):
+                compiled_gap = np.full((len(run.time), 2), np.nan)
+                python_gap = compiled_gap.copy()
+                compiled = _filter(*arrays, gaussian, update, compiled_gap)
+                python = _filter.py_func(*arrays, gaussian, update, python_gap)
+                assert _bits(compiled[0]) == _bits(python[0])
+                assert compiled[1].tobytes() == python[1].tobytes()
+                assert compiled[2] == python[2]
+                assert compiled_gap.tobytes() == python_gap.tobytes()
+
+
+def test_compiled_integration_is_numpy_cumsum_bit_for_bit() -> None:
+    """The replay's midpoint integration (two kernels around numpy's cos and sin) gives the
+    bytes of the numpy expressions it replaced, signed zeros at the start included."""
+    rng = np.random.default_rng(11)
+    for first in (0.0, -0.0, 0.3):
+        dtheta = 0.05 * rng.standard_normal(50)
+        ds = 0.01 * rng.standard_normal(50)
+        crab = 1e-3 * rng.standard_normal(50)
+        dtheta[0] = ds[0] = first
+        for start in (np.array([1.0, -2.0, 0.5]), np.array([-0.0, -0.0, -0.0])):
+            theta = start[2] + np.concatenate([[0.0], np.cumsum(dtheta)])
+            direction = theta[:-1] + 0.5 * dtheta + crab
+            pose = np.empty((51, 3))
+            pose[:, 0] = start[0] + np.concatenate([[0.0], np.cumsum(ds * np.cos(direction))])
+            pose[:, 1] = start[1] + np.concatenate([[0.0], np.cumsum(ds * np.sin(direction))])
+            pose[:, 2] = theta
+            got_theta, got_direction = _headings(float(start[2]), dtheta, crab)
+            got = _positions(start, got_theta, ds, np.cos(got_direction), np.sin(got_direction))
+            assert got_direction.tobytes() == direction.tobytes()
+            assert got.tobytes() == pose.tobytes()
+
+
+def test_a_repeated_noise_fit_is_the_first_one() -> None:
+    """:func:`fit_noise` keeps its results on the dataset: a second call with the same inputs
+    returns them (nothing refitted), and they are the bytes of a fit on a fresh copy of the
+    runs; other effects or a warm start are other entries."""
+    runs = generate_session({"floor_roughness": {"value": 0.003}}, np.random.default_rng(12))
+    data = Dataset.of(runs[:4], 0.25)
+    rough = EFFECTS["floor_roughness"]
+    first = fit_noise(data, MODEL, SENSOR, rough)
+    again = fit_noise(data, MODEL, SENSOR, rough)
+    fresh = fit_noise(Dataset.of(runs[:4], 0.25), MODEL, SENSOR, rough)
+    assert again is first and len(data.noise_fits) == 1
+    assert first[0] == fresh[0] and first[1] == fresh[1] and _bits(first[2]) == _bits(fresh[2])
+    fit_noise(data, MODEL, SensorNoise(0.002, 0.005), None)
+    fit_noise(data, MODEL, SensorNoise(0.002, 0.005), rough, warm=True)
+    assert len(data.noise_fits) == 3

@@ -33,6 +33,7 @@ import itertools
 import math
 import multiprocessing as mp
 import os
+import pickle
 import re
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -93,14 +94,17 @@ class Model:
 class Dataset:
     """Runs with the pose components that enter the likelihood.
 
-    ``inputs`` keeps each run's :class:`~odomgym.diagnose.replay.RunInputs` (by encoder
-    resolution) once a replay has made them, shared with every subset: a fit replays each run
-    hundreds of times. It is a cache, not data: pickles (worker jobs, journal keys) leave it
-    out and are the same bytes as without it."""
+    Two caches, not data (pickles — worker jobs, journal keys — leave them out and are the same
+    bytes as without them): ``inputs`` keeps each run's
+    :class:`~odomgym.diagnose.replay.RunInputs` (by encoder resolution) once a replay has made
+    them, shared with every subset (a fit replays each run hundreds of times); ``noise_fits``
+    keeps the results of :func:`fit_noise` on these runs by their exact inputs (a round asks
+    for the same noise fit of the same model up to three times)."""
 
     runs: list[Run]
     masks: list[NDArray[np.bool_]]
     inputs: list[dict[float, RunInputs]] = field(default_factory=list)
+    noise_fits: dict[object, tuple[RobotSpec, SensorNoise, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.inputs:
@@ -135,6 +139,7 @@ class Dataset:
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         self.inputs = [{} for _ in self.runs]
+        self.noise_fits = {}
 
 
 @dataclass
@@ -301,8 +306,26 @@ def fit_noise(
 
     ``warm``: ``spec`` and ``sensor`` already hold a fit of the same effects to nearly the same
     model (the joint refits of :func:`fit_candidate`): start exactly there, without the
-    multi-start of a fresh fit."""
+    multi-start of a fresh fit.
+
+    A deterministic function of its inputs, so a repeated call on the same ``data`` returns the
+    first one's result (``Dataset.noise_fits``; the spec and sensor noise keyed by their pickled
+    bytes: the exact bits of every value, −0.0 apart from 0.0)."""
     chosen = [e for e in effects if e is not None]
+    key = (
+        pickle.dumps((spec, sensor), protocol=5),
+        tuple((type(e), e.name, e.parameters) for e in chosen),
+        warm,
+    )
+    if key not in data.noise_fits:
+        data.noise_fits[key] = _fit_noise(data, spec, sensor, chosen, warm)
+    return data.noise_fits[key]
+
+
+def _fit_noise(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, chosen: list[Effect], warm: bool
+) -> tuple[RobotSpec, SensorNoise, float]:
+    """:func:`fit_noise` itself (without its memo)."""
     reps = None if _moves_mean(chosen) else [data.replay(j, spec) for j in range(len(data))]
     x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
 

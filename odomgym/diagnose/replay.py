@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym._jit import kernel
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
@@ -117,14 +118,61 @@ def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Re
         EFFECTS[name].replay("body", values, arrays)
     start = _start_pose(run.true_pose[0], effects)
     ds, dtheta = arrays.ds, arrays.dtheta
-    theta = start[2] + np.concatenate([[0.0], np.cumsum(dtheta)])
-    direction = theta[:-1] + 0.5 * dtheta + arrays.crab
-    pose = np.empty((len(run.time), 3))
-    pose[:, 0] = start[0] + np.concatenate([[0.0], np.cumsum(ds * np.cos(direction))])
-    pose[:, 1] = start[1] + np.concatenate([[0.0], np.cumsum(ds * np.sin(direction))])
-    pose[:, 2] = theta
+    # Midpoint integration: θ the running sum of dθ, each interval translated along its middle
+    # heading plus the crab angle.
+    theta, direction = _headings(float(start[2]), _floats(dtheta), _floats(arrays.crab))
+    pose = _positions(start, theta, _floats(ds), np.cos(direction), np.sin(direction))
     tracked = _measure(pose, effects, arrays)
     return Replay(pose, tracked, travel, ds, dtheta, wheelbase)
+
+
+def _floats(values: FloatArray) -> FloatArray:
+    """``values`` as float64 (what the stages give; a kernel compiles for one dtype)."""
+    return np.asarray(values, dtype=np.float64)
+
+
+# The two kernels below are numpy's cumulative sums and sums written out (``np.cumsum`` adds
+# in order, its first element the first input itself), so a replay's bits do not depend on
+# which computed it; the cosines and sines between them stay numpy's. Compiled because a fit
+# replays every run hundreds of times and a dozen small numpy calls per replay added up.
+@kernel
+def _headings(theta0: float, dtheta: FloatArray, crab: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Heading at every sample (T,) from ``theta0`` [rad] and the increments ``dtheta`` (n,),
+    and the direction of translation over every interval (n,): its middle heading plus
+    ``crab`` [rad]."""
+    n = dtheta.shape[0]
+    theta = np.empty(n + 1)
+    direction = np.empty(n)
+    theta[0] = theta0 + 0.0
+    total = 0.0
+    for i in range(n):
+        total = dtheta[i] if i == 0 else total + dtheta[i]
+        theta[i + 1] = theta0 + total
+    for i in range(n):
+        direction[i] = theta[i] + 0.5 * dtheta[i] + crab[i]
+    return theta, direction
+
+
+@kernel
+def _positions(
+    start: FloatArray, theta: FloatArray, ds: FloatArray, cos_d: FloatArray, sin_d: FloatArray
+) -> FloatArray:
+    """Axle poses (T, 3) [m, m, rad] from the start pose, the headings ``theta`` (T,) and each
+    interval's translation ``ds`` [m] along the direction whose cosine and sine are given."""
+    n = ds.shape[0]
+    pose = np.empty((n + 1, 3))
+    pose[0, 0] = start[0] + 0.0
+    pose[0, 1] = start[1] + 0.0
+    x = 0.0
+    y = 0.0
+    for i in range(n):
+        x = ds[i] * cos_d[i] if i == 0 else x + ds[i] * cos_d[i]
+        y = ds[i] * sin_d[i] if i == 0 else y + ds[i] * sin_d[i]
+        pose[i + 1, 0] = start[0] + x
+        pose[i + 1, 1] = start[1] + y
+    for i in range(n + 1):
+        pose[i, 2] = theta[i]
+    return pose
 
 
 def _wheel_angles(run: Run, motor: FloatArray) -> FloatArray:

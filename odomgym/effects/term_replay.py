@@ -157,36 +157,39 @@ def replay_body_terms(
     v = ``ds``/``dt`` [m/s], ω = ``dtheta``/``dt`` [rad/s]). Bit-identical to the numpy
     expressions of ``body_modulator``: the same operations in the same order."""
     n = ds.shape[0]
-    out_crab = np.empty(n)
-    out_dtheta = np.empty(n)
+    v = np.empty(n)
+    omega = np.empty(n)
     for i in range(n):
         safe = dt[i] if dt[i] > 0.0 else np.inf
-        v = ds[i] / safe
-        omega = dtheta[i] / safe
-        extra = 0.0
-        scale = 1.0
-        for t in range(codes.size):
-            code = codes[t]
+        v[i] = ds[i] / safe
+        omega[i] = dtheta[i] / safe
+    extra = np.zeros(n)
+    scale = np.ones(n)
+    for t in range(codes.size):  # term by term: each sample still sums its terms in order
+        code = codes[t]
+        c = coefficients[t]
+        acc = scale if yaw[t] else extra
+        for i in range(n):
             if code == 0:
                 m = 1.0
             elif code == 1:
-                m = abs(v)
+                m = abs(v[i])
             elif code == 2:
-                m = v * v
+                m = v[i] * v[i]
             elif code == 3:
-                m = abs(omega)
+                m = abs(omega[i])
             elif code == 4:
-                m = abs(v * omega)
+                m = abs(v[i] * omega[i])
             elif code == 5:
-                m = v * omega
+                m = v[i] * omega[i]
             elif code == 6:
-                m = _sign(v)
+                m = _sign(v[i])
             else:
                 m = time[i]
-            if yaw[t]:
-                scale += coefficients[t] * m
-            else:
-                extra += coefficients[t] * m
-        out_crab[i] = crab[i] + extra
-        out_dtheta[i] = dtheta[i] * scale
+            acc[i] += c * m
+    out_crab = np.empty(n)
+    out_dtheta = np.empty(n)
+    for i in range(n):
+        out_crab[i] = crab[i] + extra[i]
+        out_dtheta[i] = dtheta[i] * scale[i]
     return out_crab, out_dtheta
