@@ -65,6 +65,7 @@ __all__ = [
     "POOR_CONDITION",
     "TRAJECTORY_PATHS",
     "Trajectory",
+    "TrajectoryBaseline",
     "TrajectoryFit",
     "TrajectoryOptions",
     "fit_trajectories",
@@ -240,6 +241,32 @@ def fit_trajectories(
         residuals=int(final.size),
         evaluations=int(solution.nfev),
     )
+
+
+@dataclass(frozen=True)
+class TrajectoryBaseline:
+    """The baseline of ``odomgym diagnose`` (:class:`odomgym.diagnose.heldout.Baseline`): the
+    3-parameter calibration a user already trusts, (b, D_R, D_L) by :func:`fit_trajectories` on
+    the diagnosis's fit runs (their measurement nuisances removed), as the robot with that true
+    geometry.
+
+    ``heading_weight`` (0.2 m/rad, as :class:`TrajectoryOptions` recommends for in-place spins)
+    makes it determine b on runs of any kind, straight-and-spin sessions included; the paper's
+    position-only cost would leave b free there.
+    """
+
+    heading_weight: float = 0.2
+    name: str = "trajectory optimisation (Sousa et al. 2022), heading weight 0.2 m/rad"
+
+    def __call__(self, runs: Sequence[Run], robot: RobotSpec) -> RobotSpec:
+        fit = fit_trajectories(runs, robot, heading_weight=self.heading_weight)
+        b = fit.parameters["wheelbase"]
+        right, left = fit.parameters["right_diameter"], fit.parameters["left_diameter"]
+        return robot.with_errors(
+            e_d=right / left,
+            e_b=b / robot.wheelbase,
+            e_s=0.5 * (right + left) / robot.wheel_diameter,
+        )
 
 
 #: The runs :class:`Trajectory` can ask a lab for: each turns while it moves, so positions

@@ -1,6 +1,7 @@
 """Speed of odomgym's simulator, measured side by side with references in one run.
 
     python benchmarks/bench_speed.py [--json] [--robots 256] [--seconds 2]
+        [--limit-robots 16 256 1024]
 
 Figures (the project's targets in brackets):
 1. one LabMate 4×4 m UMBmark run with the reference driver, simulated time / wall time
@@ -11,7 +12,17 @@ Figures (the project's targets in brackets):
    single env, at N robots [≥ 1 M robot-steps/s and ratio ≥ 20 at 256];
 4. the CLAPPER's 36 m straight out and back (Borenstein 1995, §6.1) with IPEC on and twenty
    cables on the concrete floor, simulated time / wall time [≥ 500× real time], beside the
-   same run with IPEC off.
+   same run with IPEC off;
+5. against the physical limit: Chipmunk's own step (``cpSpaceStep`` × substeps, called through
+   pymunk's cffi library) of the very space the env's World steps, timed interleaved in blocks
+   with ``World.step`` and ``env.step`` of that env (``gymnasium.make``, pre-sampled actions),
+   medians of the per-step times [``env.step`` ≤ 10×, ``World.step`` ≤ 4× the limit];
+6. the same for the native vector env at 16, 256 and 1024 robots, per robot-step [≤ 1.5× the
+   limit at 256], beside its World alone.
+
+No pymunk robot steps faster than Chipmunk's step of its space, so 5 and 6 measure what odomgym
+adds around it. Every figure of one run comes from one process on one machine; ratios are
+measured side by side because the machine's load moves absolute figures by tens of percent.
 
 Compilation of the numba kernels happens once, before timing; its cost is printed separately.
 """
@@ -22,15 +33,19 @@ import argparse
 import json
 import os
 import platform
+import statistics
 import time
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import pymunk.batch
 
 import odomgym
 from odomgym.floor import FLOORS
 from odomgym.lab import simulate_runs
+from odomgym.physics import World
 from odomgym.routes import square_route
 
 
@@ -131,11 +146,143 @@ def vector_robot_steps_per_second(num_envs: int, mode: str, seconds: float) -> f
     return steps * num_envs / elapsed
 
 
+# Chipmunk's C library as pymunk's own ``Space.step`` calls it: the limit below which no pymunk
+# robot steps (pymunk's wrapper adds a Python loop over new bodies and a lock around the call).
+_CP_SPACE_STEP = pymunk.batch.lib.cpSpaceStep
+
+
+def _interleaved_medians(
+    blocks: dict[str, Callable[[], int]], seconds: float, min_rounds: int = 15
+) -> dict[str, float]:
+    """Median seconds per step of each block: the blocks run one after another in rounds (the
+    order rotating), so all of them see the same machine load; each returns its step count."""
+    per_step: dict[str, list[float]] = {name: [] for name in blocks}
+    names = list(blocks)
+    start = time.perf_counter()
+    rounds = 0
+    while rounds < min_rounds or time.perf_counter() - start < seconds:
+        for name in names[rounds % len(names) :] + names[: rounds % len(names)]:
+            begin = time.perf_counter()
+            steps = blocks[name]()
+            per_step[name].append((time.perf_counter() - begin) / steps)
+        rounds += 1
+    return {name: statistics.median(times) for name, times in per_step.items()}
+
+
+def _limit_block(world: World, steps: int) -> int:
+    """``steps`` control periods of Chipmunk's own step on ``world``'s space; returns ``steps``.
+
+    The bodies keep the velocities the World last gave them, so the solver does the same work
+    as inside :meth:`World.step` (two saturating or not pivot joints per robot)."""
+    raw_space = world.space._space  # the cpSpace* pymunk's Space.step passes to Chipmunk
+    h = world.dt / world.substeps
+    for _ in range(steps * world.substeps):
+        _CP_SPACE_STEP(raw_space, h)
+    return steps
+
+
+def single_env_limit(seconds: float, block: int = 500) -> dict[str, float]:
+    """``env.step`` of ``UMBmarkSquare-v0`` through ``gymnasium.make`` (its wrappers included)
+    and ``World.step`` of that env's own World, against Chipmunk's step of that World's space.
+
+    Per step [µs] and the ratios to the limit. The World is stepped outside the env (its state
+    moves on under the env's odometry, which does not change the cost of a step); a reset builds
+    a new World, so every block looks the World up again.
+    """
+    env = gym.make("UMBmarkSquare-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    actions = [env.action_space.sample() for _ in range(block)]
+    # World.step takes (N, 2) float64 commands in [-1, 1] times each robot's top wheel rate,
+    # which is what the env passes it after checking an action.
+    commands = [np.asarray(a, dtype=np.float64).reshape(1, 2) for a in actions]
+    unwrapped = env.unwrapped
+
+    def world() -> World:
+        return unwrapped._trial.world  # type: ignore[attr-defined, no-any-return]
+
+    def env_block() -> int:
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        return len(actions)
+
+    def world_block() -> int:
+        w = world()
+        for command in commands:
+            w.step(command, w.max_rate)
+        return len(commands)
+
+    blocks = {
+        "env_step": env_block,
+        "world_step": world_block,
+        "limit": lambda: _limit_block(world(), block),
+    }
+    for run in blocks.values():  # warm-up (and JIT)
+        run()
+    median = _interleaved_medians(blocks, seconds)
+    env.close()
+    return {
+        "limit_us": 1e6 * median["limit"],
+        "world_step_us": 1e6 * median["world_step"],
+        "env_step_us": 1e6 * median["env_step"],
+        "world_ratio": median["world_step"] / median["limit"],
+        "env_ratio": median["env_step"] / median["limit"],
+    }
+
+
+def vector_env_limit(num_envs: int, seconds: float) -> dict[str, float]:
+    """The native vector env's ``step`` and its World's, per robot-step, against Chipmunk's
+    step of that World's space; pre-sampled random actions."""
+    envs = gym.make_vec(
+        "UMBmarkSquare-v0", num_envs=num_envs, vectorization_mode="vector_entry_point"
+    )
+    envs.reset(seed=0)
+    block = max(10, 8192 // num_envs)  # a few ms per block
+    rng = np.random.default_rng(0)
+    actions = [rng.uniform(-1, 1, size=(num_envs, 2)).astype(np.float32) for _ in range(block)]
+    commands = [a.astype(np.float64) for a in actions]
+    unwrapped = envs.unwrapped
+    world: World = unwrapped._trial.world  # type: ignore[attr-defined]  # reset steps build none
+
+    def env_block() -> int:
+        for action in actions:
+            envs.step(action)
+        return len(actions)
+
+    def world_block() -> int:
+        for command in commands:
+            world.step(command, world.max_rate)
+        return len(commands)
+
+    blocks = {
+        "env_step": env_block,
+        "world_step": world_block,
+        "limit": lambda: _limit_block(world, block),
+    }
+    for run in blocks.values():
+        run()
+    median = _interleaved_medians(blocks, seconds)
+    envs.close()
+    return {
+        "robots": num_envs,
+        "limit_us_per_robot_step": 1e6 * median["limit"] / num_envs,
+        "world_us_per_robot_step": 1e6 * median["world_step"] / num_envs,
+        "env_us_per_robot_step": 1e6 * median["env_step"] / num_envs,
+        "env_robot_steps_per_s": num_envs / median["env_step"],
+        "world_robot_steps_per_s": num_envs / median["world_step"],
+        "world_ratio": median["world_step"] / median["limit"],
+        "env_ratio": median["env_step"] / median["limit"],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--robots", type=int, default=256)
     parser.add_argument("--seconds", type=float, default=2.0)
+    parser.add_argument("--limit-robots", type=int, nargs="+", default=[16, 256, 1024])
     args = parser.parse_args()
 
     run = umbmark_run()
@@ -144,6 +291,8 @@ def main() -> None:
     native = vector_robot_steps_per_second(args.robots, "vector_entry_point", args.seconds)
     sync = vector_robot_steps_per_second(args.robots, "sync", args.seconds)
     clapper = clapper_run()
+    single = single_env_limit(args.seconds)
+    vector = {n: vector_env_limit(n, args.seconds) for n in args.limit_robots}
     result = {
         "machine": {"cpu_count": os.cpu_count(), "python": platform.python_version()},
         "umbmark_run": run,
@@ -159,31 +308,98 @@ def main() -> None:
             "ratio": native / sync,
         },
         "clapper_straight": clapper,
+        "limit_single_env": single,
+        "limit_vector_env": {str(n): row for n, row in vector.items()},
     }
+    rows: list[tuple[str, str, str, bool | None]] = [
+        (
+            "UMBmark 4x4 m run (LabMate, reference driver)",
+            f"{run['real_time_factor']:.0f}x real time ({run['simulated_s']:.1f} s in "
+            f"{1e3 * run['wall_s']:.1f} ms; first call {run['first_call_s']:.2f} s)",
+            ">= 1000x",
+            run["real_time_factor"] >= 1000,
+        ),
+        (
+            "env steps/s, UMBmarkSquare-v0 vs LunarLander-v3",
+            f"{ours:,.0f} vs {lunar:,.0f} -> {ours / lunar:.2f}",
+            ">= 2.0",
+            ours / lunar >= 2.0,
+        ),
+        (
+            f"robot-steps/s at {args.robots} robots, native vector env",
+            f"{native:,.0f}",
+            ">= 1,000,000" if args.robots == 256 else "-",
+            native >= 1e6 if args.robots == 256 else None,
+        ),
+        (
+            "  the same against SyncVectorEnv",
+            f"{sync:,.0f} -> {native / sync:.1f}x",
+            ">= 20x" if args.robots == 256 else "-",
+            native / sync >= 20 if args.robots == 256 else None,
+        ),
+        (
+            "CLAPPER 36 m straight, 20 cables, concrete, IPEC on (off)",
+            f"{clapper['ipec_real_time_factor']:.0f}x ({clapper['no_ipec_real_time_factor']:.0f}x)"
+            f" real time, {1e3 * clapper['ipec_wall_s']:.0f} ms for {clapper['simulated_s']:.1f} s",
+            ">= 500x",
+            clapper["ipec_real_time_factor"] >= 500,
+        ),
+        (
+            "the limit: cpSpaceStep x substeps, single env's space",
+            f"{single['limit_us']:.2f} us/step",
+            "1x",
+            None,
+        ),
+        (
+            "  World.step (physics core, no env)",
+            f"{single['world_step_us']:.2f} us -> {single['world_ratio']:.1f}x",
+            "<= 4x",
+            single["world_ratio"] <= 4.0,
+        ),
+        (
+            "  env.step through gymnasium.make",
+            f"{single['env_step_us']:.2f} us -> {single['env_ratio']:.1f}x",
+            "<= 10x",
+            single["env_ratio"] <= 10.0,
+        ),
+    ]
+    for n, row in vector.items():
+        rows += [
+            (
+                f"the limit at {n} robots (per robot-step)",
+                f"{1e3 * row['limit_us_per_robot_step']:.0f} ns",
+                "1x",
+                None,
+            ),
+            (
+                f"  native vector env, {n} robots",
+                f"{1e3 * row['env_us_per_robot_step']:.0f} ns "
+                f"({row['env_robot_steps_per_s'] / 1e6:.2f} M robot-steps/s) "
+                f"-> {row['env_ratio']:.2f}x",
+                "<= 1.5x" if n == 256 else "-",
+                row["env_ratio"] <= 1.5 if n == 256 else None,
+            ),
+            (
+                f"  its World alone, {n} robots",
+                f"{1e3 * row['world_us_per_robot_step']:.0f} ns "
+                f"({row['world_robot_steps_per_s'] / 1e6:.2f} M robot-steps/s) "
+                f"-> {row['world_ratio']:.2f}x",
+                "-",
+                None,
+            ),
+        ]
+    result["rows"] = [
+        {"figure": figure, "measured": measured, "target": target, "met": met}
+        for figure, measured, target, met in rows
+    ]
     if args.json:
         print(json.dumps(result, indent=2))
         return
     print(f"machine: {os.cpu_count()} cores, Python {platform.python_version()}")
-    print(
-        f"UMBmark 4x4 m run (LabMate, reference driver): {run['simulated_s']:.1f} s simulated in "
-        f"{1e3 * run['wall_s']:.1f} ms -> {run['real_time_factor']:.0f}x real time "
-        f"(first call incl. compilation {run['first_call_s']:.2f} s)   [target >= 1000x]"
-    )
-    print(
-        f"env steps/s: UMBmarkSquare-v0 {ours:,.0f} vs LunarLander-v3 {lunar:,.0f} "
-        f"-> ratio {ours / lunar:.2f}   [target >= 2.0]"
-    )
-    print(
-        f"robot-steps/s at {args.robots} robots: native vector env {native:,.0f} vs "
-        f"SyncVectorEnv {sync:,.0f} -> ratio {native / sync:.1f}   "
-        "[targets >= 1,000,000 and >= 20 at 256]"
-    )
-    print(
-        f"CLAPPER 36 m straight, 20 cables, concrete: {clapper['simulated_s']:.1f} s simulated "
-        f"in {1e3 * clapper['ipec_wall_s']:.0f} ms with IPEC -> "
-        f"{clapper['ipec_real_time_factor']:.0f}x real time (without IPEC "
-        f"{clapper['no_ipec_real_time_factor']:.0f}x)   [target >= 500x]"
-    )
+    width = max(len(figure) for figure, *_ in rows)
+    for figure, measured, target, met in rows:
+        verdict = "" if met is None else ("met" if met else "MISSED")
+        print(f"{figure:<{width}}  {measured:<62} {target:<12} {verdict}")
 
 
 if __name__ == "__main__":

@@ -172,7 +172,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             self._restart(chosen, [route] * len(chosen))
         present = np.zeros(self.num_envs, dtype=bool)
         present[chosen] = True
-        report = self._episodes.report(self._trial, rewarded=False)
+        report = self._episodes.report(self._trial)
         return self._trial.observation(), self._vector_info(present, report, None)
 
     def _restart(self, indices: NDArray[np.intp], routes: Sequence[Route]) -> None:
@@ -200,8 +200,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         if any_reset:
             resetting = self._autoreset.copy()  # _restart clears the flags
             array[resetting] = 0.0
-        trial.step(array)
-        report = self._episodes.report(trial)
+        report = self._episodes.step(trial, array)
         rewards = report[:, _REWARD].copy()
         done = report[:, _TERMINATED] > 0.0
         terms = RouteEpisodes.terms(report)
@@ -216,12 +215,14 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             self._steps += running  # the reset step is not a step of the new episode
             terminated = done & running
             # The reset sub-envs report their new episode's start.
-            report = self._episodes.report(trial, rewarded=False)
+            report = self._episodes.report(trial)
         else:
             running = self._everyone
             self._steps += 1
             terminated = done
-        truncated = (self._steps >= self.max_episode_steps) & ~terminated & running
+        truncated = (self._steps >= self.max_episode_steps) & ~terminated
+        if any_reset:
+            truncated &= running
         self._autoreset = terminated | truncated
         info = self._vector_info(self._everyone, report, terms, running)
         if terminated.any():
@@ -241,20 +242,31 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         step, the reset ones after a reset), ``rewarded`` those with reward terms (not the ones
         autoreset this step: a reset reports none)."""
         info: dict[str, Any] = {}
-        everyone = bool(present.all())
-        for key, value in RouteEpisodes.info(report).items():
+        entries = RouteEpisodes.info(report)
+        # The masks are rows of one block (distinct arrays, as SyncVectorEnv gives): one
+        # allocation instead of one per entry.
+        masks = np.empty((len(entries) + 1, self.num_envs), dtype=np.bool_)
+        masks[:] = present
+        everyone = present is self._everyone or bool(present.all())
+        for (key, value), mask in zip(entries.items(), masks[:-1], strict=True):
             # The entries are fresh arrays; only a partial reset blanks the absent sub-envs.
             if not everyone:
                 value[~present] = 0
             info[key] = value
-            info[f"_{key}"] = present.copy()
+            info[f"_{key}"] = mask
         reward_terms: dict[str, Any] = {}
-        if terms is not None and rewarded is not None and rewarded.any():
-            for key, value in terms.items():
+        if (
+            terms is not None
+            and rewarded is not None
+            and (rewarded is self._everyone or rewarded.any())
+        ):
+            term_masks = np.empty((len(terms), self.num_envs), dtype=np.bool_)
+            term_masks[:] = rewarded
+            for (key, value), mask in zip(terms.items(), term_masks, strict=True):
                 reward_terms[key] = value
-                reward_terms[f"_{key}"] = rewarded.copy()
+                reward_terms[f"_{key}"] = mask
         info["reward_terms"] = reward_terms
-        info["_reward_terms"] = present.copy()
+        info["_reward_terms"] = masks[-1]
         return info
 
 

@@ -31,9 +31,12 @@ def kernel(function: F) -> F:
 
 
 def inlined_kernel(function: F) -> F:
-    """:func:`kernel`, inlined by numba into the kernels that call it: a call with a constant
-    argument (a loop bound) is compiled for that constant, so loops over it unroll. The same
-    operations in the same order, so the same results; it costs compile time per call site."""
+    """A :func:`kernel` that other kernels inline (numba's ``inline="always"``, at the level of
+    numba's IR, so the arithmetic is the same): no call boundary, where passing arrays to a
+    called kernel costs reference counting and copies of their descriptions (~0.5 µs of a
+    single robot's control step, which calls some fifteen kernels). Called from Python it is
+    an ordinary kernel. A call with a constant argument (a loop bound) is compiled for that
+    constant, so loops over it unroll; it costs compile time per call site."""
     compiled = numba.njit(
         cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always"
     )(function)

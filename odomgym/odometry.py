@@ -181,9 +181,15 @@ class Odometry:
         self.n = len(specs)
         self._metres_per_tick = np.array([s.metres_per_tick for s in specs])
         self._nominal_wheelbase = np.array([s.wheelbase for s in specs])
+        # Allocated once and updated in place: a Trial's compiled step holds them
+        # (odomgym.stepping.StepArrays).
+        self._travel_per_tick = np.zeros((self.n, 2))
+        self._wheelbase = np.zeros(self.n)
+        self.pose = np.zeros((self.n, 3))
+        self.last_counts = np.zeros((self.n, 2), dtype=np.int64)
+        self.wheel_speed = np.zeros((self.n, 2))
         self.calibrations: list[Calibration] = [Calibration()] * self.n
         self.set_calibration(calibration if calibration is not None else Calibration())
-        self.reset()
 
     def set_calibration(
         self, calibration: Calibration | Sequence[Calibration], index: int | None = None
@@ -202,14 +208,14 @@ class Odometry:
             self.calibrations = cals
         cal = self.calibrations
         scale = np.array([c.distance_scale for c in cal])
-        self._travel_per_tick = np.stack(
+        self._travel_per_tick[:] = np.stack(
             [
                 np.array([c.c_left for c in cal]) * scale * self._metres_per_tick,
                 np.array([c.c_right for c in cal]) * scale * self._metres_per_tick,
             ],
             axis=1,
         )
-        self._wheelbase = np.array([c.wheelbase_scale for c in cal]) * self._nominal_wheelbase
+        self._wheelbase[:] = np.array([c.wheelbase_scale for c in cal]) * self._nominal_wheelbase
 
     @property
     def travel_per_tick(self) -> FloatArray:
@@ -226,9 +232,6 @@ class Odometry:
     ) -> None:
         """Restart the estimate at ``poses`` (K, 3) with encoder counts at zero."""
         if indices is None:
-            self.pose = np.zeros((self.n, 3))
-            self.last_counts = np.zeros((self.n, 2), dtype=np.int64)
-            self.wheel_speed = np.zeros((self.n, 2))
             indices = np.arange(self.n)
         self.pose[indices] = 0.0 if poses is None else poses
         self.last_counts[indices] = 0

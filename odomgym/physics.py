@@ -2,10 +2,12 @@
 
 One :class:`World` holds a *batch* of N robots in one pymunk space (they do not interact); the
 single-robot envs are a batch of one. The per-wheel arithmetic of a step (wheel controllers,
-encoders, contact velocities, floor effects) runs in numba-compiled loops over the robots, and
-body state crosses the Python/Chipmunk boundary once per physics substep in each direction —
-through ``pymunk.batch`` for four or more robots, per-body attribute access below that (cheaper
-for a batch of one; both measured in ``benchmarks/bench_speed.py`` and docs/architecture.md).
+encoders, contact velocities, floor effects) runs in numba-compiled loops over the robots
+(:mod:`odomgym.stepping`), and body state crosses into Chipmunk and back once per physics
+substep, from compiled code that calls Chipmunk's functions by address
+(:mod:`odomgym.chipmunk_link`): with no effect hooks on a plain floor a whole step, Chipmunk's
+steps included, is one compiled call, which a :class:`~odomgym.trial.Trial` makes part of its
+own (measured in ``benchmarks/bench_speed.py``; docs/architecture.md, "Performance design").
 
 Model, per robot (top-down, no gravity in the plane):
 
@@ -42,14 +44,27 @@ from typing import Any
 
 import numpy as np
 import pymunk
-import pymunk.batch as pbatch
 from numpy.typing import NDArray
 
-from odomgym._jit import kernel
 from odomgym.cables import CableGrid, apply_cable_deficits
+from odomgym.chipmunk_link import SpaceExchange
 from odomgym.effects import EFFECTS, WorldHook
 from odomgym.floor import FloorSpec
 from odomgym.robot import RobotSpec
+from odomgym.stepping import (
+    STEP_BAD_READ_BACK,
+    STEP_NOT_FINITE,
+    check_step_status,
+    drive_plain,
+    drive_wheels,
+    exchange,
+    floor_kernel,
+    midstep_translation,
+    new_state,
+    rim_from_wheel_step,
+    state_views,
+    step_plain,
+)
 
 __all__ = ["GRAVITY", "World"]
 
@@ -57,20 +72,7 @@ GRAVITY = 9.81  # m/s²
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-_STATE_FIELDS = (
-    pbatch.BodyFields.POSITION
-    | pbatch.BodyFields.ANGLE
-    | pbatch.BodyFields.VELOCITY
-    | pbatch.BodyFields.ANGULAR_VELOCITY
-)
 _NOISE_BLOCK = 256  # roughness draws per robot fetched at once
-_BATCH_IO_MIN_ROBOTS = 4  # below this, per-body access is cheaper (measured)
-# Chipmunk's C functions as pymunk's own property code calls them (``pymunk.batch`` re-exports
-# the library). For a batch of one or two robots a direct call costs ~0.4 µs where the property,
-# with its Vec2d and typing wrappers, costs ~1-2 µs: a third of a single env's step otherwise.
-# ``Body._body`` (the C pointer) is pymunk-internal, so the World checks it is there and falls
-# back to the properties if a pymunk release renames it.
-_CHIPMUNK: Any = getattr(pbatch, "lib", None)
 
 
 class World:
@@ -197,6 +199,19 @@ class World:
         self._plain = not (
             self._transmission or self._shape or self._perturb or self._modifies_ground
         )
+        # The per-robot state in one array (one argument of a compiled call; pose, velocity,
+        # wheel rates and angles are views of it) and the arrays of other shapes, all updated
+        # in place from here on.
+        self._state = new_state(
+            self.max_rate, self.max_rate_step, self.true_radius, self.ticks_per_rad, self.half_track
+        )
+        self._bind_state()
+        self.counts = np.zeros((self.n, 2), dtype=np.int64)
+        self.slip = np.zeros((self.n, 2))
+        self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
+        self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
+        self._no_noise = np.zeros((self.n, 2))
+        self._clock = np.zeros(1)  # simulated time [s], an array so compiled steps advance it
         self._bind_noise(rng)
 
         self._build_space()
@@ -334,47 +349,31 @@ class World:
             self._hitches.append(hitch)
         self._friction = np.full((self.n, 2), np.nan)
         self._set_friction(np.full((self.n, 2), self.floor.friction))
-        self._use_batch_io = self.n >= _BATCH_IO_MIN_ROBOTS
-        self._buffer: pbatch.Buffer | None = None
-        if self._use_batch_io:
-            self._index_bodies()
-        self._direct_io = not self._use_batch_io and _direct_access_works(
-            self._chassis + self._ground
-        )
-        self._raw_space: Any = None  # Chipmunk's space pointer, after the first step
+        self._io = SpaceExchange(space, self._chassis, self._ground)
 
-    def _index_bodies(self) -> None:
-        """Map pymunk's body iteration order onto chassis and ground-body indices."""
-        buffer = pbatch.Buffer()
-        pbatch.get_space_bodies(self.space, pbatch.BodyFields.BODY_ID, buffer)
-        ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp)
-        position = {int(body_id): k for k, body_id in enumerate(ids)}
-        self._chassis_rows = np.array([position[b.id] for b in self._chassis], dtype=np.intp)
-        self._ground_rows = np.array([position[b.id] for b in self._ground], dtype=np.intp).reshape(
-            self.n, 2
-        )
-        self._velocity_out = np.zeros((len(ids), 2))
-        self._make_buffers()
-
-    def _make_buffers(self) -> None:
-        """The batch I/O buffers; the outgoing one wraps ``_velocity_out`` (no copy), so a step
-        only refills that array."""
-        self._out_buffer = pbatch.Buffer()
-        self._out_buffer.set_float_buf(self._velocity_out.reshape(-1))
-        self._buffer = pbatch.Buffer()
+    def _bind_state(self) -> None:
+        """The World's arrays that are views of the packed state (``substep.STATE_COLUMNS``)."""
+        views = state_views(self._state)
+        self._params = views["params"]
+        self.pose = views["pose"]
+        self.velocity = views["velocity"]
+        self.wheel_rate = views["wheel_rate"]
+        self.wheel_angle = views["wheel_angle"]
+        self._rim_speed = views["rim_speed"]
+        self._motor_step = views["motor_step"]
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        for key in ("_buffer", "_out_buffer"):
-            state.pop(key, None)
-        state["_raw_space"] = None  # a C pointer; the unpickled space has its own
+        del state["_io"]  # C structures pointing at this space; the unpickled one gets its own
+        for name in ("_params", "pose", "velocity", "wheel_rate", "wheel_angle"):
+            del state[name]  # views, which pickling would turn into copies
+        del state["_rim_speed"], state["_motor_step"]
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
-        self._buffer = None
-        if self._use_batch_io:
-            self._make_buffers()
+        self._bind_state()
+        self._io = SpaceExchange(self.space, self._chassis, self._ground)
 
     # ------------------------------------------------------------------ reset
     def reset(
@@ -387,18 +386,10 @@ class World:
         """
         if indices is None:
             indices = np.arange(self.n)
-            self.time = 0.0
-            self.pose = np.zeros((self.n, 3))
-            self.velocity = np.zeros((self.n, 3))
-            self.wheel_rate = np.zeros((self.n, 2))
-            self.wheel_angle = np.zeros((self.n, 2))
-            self.counts = np.zeros((self.n, 2), dtype=np.int64)
-            self.slip = np.zeros((self.n, 2))
-            self._rim_speed = np.zeros((self.n, 2))
-            self._motor_step = np.zeros((self.n, 2))
-            self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
-            self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
-            self._no_noise = np.zeros((self.n, 2))
+            self._clock[0] = 0.0
+            self._rim_speed[:] = 0.0
+            self._motor_step[:] = 0.0
+            self._contact[:] = 0.0
         indices = np.asarray(indices, dtype=np.intp)
         targets = np.zeros((len(indices), 3)) if poses is None else np.asarray(poses, dtype=float)
         if targets.shape != (len(indices), 3) or not np.all(np.isfinite(targets)):
@@ -431,6 +422,62 @@ class World:
         robot's ``max_wheel_speed`` are clipped to it; a non-finite command raises ValueError
         (the envs check their actions before they get here).
         """
+        command = self.commands(wheel_rate_cmd)
+        if scale is None:
+            scale = self._unit_scale
+        h = self._h
+        io = self._io
+        if self._plain and io.compiled:
+            # No effect hooks, a plain floor: whole substeps (wheels, contact velocities, their
+            # mid-step turn, Chipmunk's step and the read-back) in one compiled call, one per
+            # substep only when the slip (numpy, see _accumulate_slip) is tracked in between.
+            per_call = 1 if self.track_slip else self.substeps
+            for _ in range(self.substeps // per_call):
+                check_step_status(
+                    step_plain(
+                        command,
+                        scale,
+                        self._state,
+                        self.counts,
+                        self._ground_v,
+                        io.addresses,
+                        io.heads,
+                        io.buffer,
+                        io.bodies,
+                        h,
+                        per_call,
+                    )
+                )
+                if self.track_slip:
+                    self._accumulate_slip(h)
+        else:
+            for _ in range(self.substeps):
+                # The wheels (and, on a plain floor, the mid-step turn), then every stage.
+                drive = drive_plain if self._plain else drive_wheels
+                if not drive(
+                    command,
+                    scale,
+                    self._params,
+                    self.pose,
+                    h,
+                    self.wheel_rate,
+                    self.wheel_angle,
+                    self.counts,
+                    self._rim_speed,
+                    self._ground_v,
+                    self._motor_step,
+                ):
+                    check_step_status(STEP_NOT_FINITE)
+                if not self._plain:
+                    self._effect_stages(h)
+                self._exchange(h)
+                if self.track_slip:
+                    self._accumulate_slip(h)
+        self._clock[0] += self.dt
+
+    def commands(self, wheel_rate_cmd: Any) -> FloatArray:
+        """``wheel_rate_cmd`` as the (N, 2) float64 array a step takes (any array-like of N×2
+        numbers, reshaped if need be); ValueError if it has another number of entries."""
         command = np.asarray(wheel_rate_cmd, dtype=np.float64)
         if command.shape != (self.n, 2):
             if command.size != 2 * self.n:
@@ -438,46 +485,72 @@ class World:
                     f"wheel_rate_cmd must have shape ({self.n}, 2), got {command.shape}"
                 )
             command = command.reshape(self.n, 2)
-        if scale is None:
-            scale = self._unit_scale
-        h = self._h
-        for _ in range(self.substeps):
-            # No effect hooks and a plain floor: the wheels, the contact velocities and their
-            # mid-step turn in one compiled call; otherwise the wheels, then every stage.
-            drive = _drive_plain if self._plain else _drive_wheels
-            if not drive(
-                command,
-                scale,
-                self.max_rate,
-                self.max_rate_step,
-                self.true_radius,
-                self.ticks_per_rad,
-                self.pose,
-                h,
-                self.wheel_rate,
-                self.wheel_angle,
-                self.counts,
-                self._rim_speed,
-                self._ground_v,
-                self._motor_step,
-                self.half_track,
-            ):
-                raise ValueError("wheel rate commands must be finite")
-            if not self._plain:
-                self._effect_stages(h)
-            self._write_ground_velocity()
-            if self._raw_space is not None:
-                _CHIPMUNK.cpSpaceStep(self._raw_space, h)
-            else:
-                self.space.step(h)
-                # After pymunk's first step has checked the bodies' masses, a World (which
-                # never adds, removes or registers callbacks) can call Chipmunk's step itself:
-                # pymunk's wrapper around it costs more than the step of one robot.
-                self._raw_space = getattr(self.space, "_space", None) if self._direct_io else None
-            self._read_state(h)
-            if self.track_slip:
-                self._accumulate_slip(h)
-        self.time += self.dt
+        return command
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s] since the World was built or last reset as a whole."""
+        return float(self._clock[0])
+
+    @property
+    def fuses_substeps(self) -> bool:
+        """True if a whole step runs as one compiled call (no effect hooks, a plain floor, the
+        compiled Chipmunk link, slip not tracked), which a caller may then make part of a
+        larger compiled step (:func:`odomgym.stepping.control_step`) with
+        :meth:`step_arrays`."""
+        return self._plain and self._io.compiled and not self.track_slip
+
+    def step_arrays(
+        self,
+    ) -> tuple[
+        FloatArray,
+        IntArray,
+        FloatArray,
+        NDArray[np.uint64],
+        NDArray[np.int32],
+        FloatArray,
+        NDArray[np.uint64],
+        FloatArray,
+    ]:
+        """The arrays a fused step (:func:`odomgym.stepping.step_plain`) works on, in the
+        order of :data:`odomgym.stepping.STEP_FIELDS`: packed state, encoder counts, contact
+        velocities, the Chipmunk link's addresses, headers, buffer and bodies, and the clock
+        (1,) [s]. They stay the same arrays for the World's life."""
+        io = self._io
+        return (
+            self._state,
+            self.counts,
+            self._ground_v,
+            io.addresses,
+            io.heads,
+            io.buffer,
+            io.bodies,
+            self._clock,
+        )
+
+    def _exchange(self, h: float) -> None:
+        """The ground bodies take their contact velocities, Chipmunk steps by ``h`` [s], and
+        ``pose``/``velocity`` take the chassis' new state.
+
+        ``pose`` is the raw Chipmunk pose advanced by v·h: Chipmunk integrates positions at the
+        *start* of its next step with the velocities just solved, so this is where the motion of
+        this step (already counted by the encoders) puts the robot, and the configuration at
+        which the next step's contact velocities will be solved.
+        """
+        io = self._io
+        if not io.compiled:
+            io.exchange_in_python(self._ground_v, h, self.pose, self.velocity)
+        elif not exchange(
+            io.addresses,
+            io.heads,
+            io.buffer,
+            io.bodies,
+            self._ground_v,
+            h,
+            self.pose,
+            self.velocity,
+        ):
+            check_step_status(STEP_BAD_READ_BACK)
 
     def _effect_stages(self, h: float) -> None:
         """After the wheels, one substep's contact velocities through every stage: transmission
@@ -485,11 +558,10 @@ class World:
         if self._transmission:
             for hook in self._transmission:
                 hook.transmission(self._motor_step)
-            _rim_from_wheel_step(
+            rim_from_wheel_step(
                 self._motor_step,
-                self.true_radius,
+                self._params,
                 self.pose,
-                self.half_track,
                 h,
                 self._rim_speed,
                 self._ground_v,
@@ -500,7 +572,7 @@ class World:
             self._floor_effects(h)
         for hook in self._perturb:
             hook.perturb(self, h)
-        _midstep_translation(self._ground_v, self.pose, self.half_track, h)
+        midstep_translation(self._ground_v, self.pose, self._params, h)
 
     def _accumulate_slip(self, h: float) -> None:
         """Contact point velocity v + ω × r = v − ω·l·(cos θ, sin θ) against its ground body's.
@@ -524,7 +596,7 @@ class World:
         depend on how many robots share its batch.
         """
         noise = self._standard_normal() if self._rough else self._no_noise
-        _floor_kernel(
+        floor_kernel(
             self.pose,
             self._lateral,
             self._rim_speed,
@@ -569,63 +641,6 @@ class World:
             self._joints[2 * i + side].max_force = float(mu[i, side] * self.normal_force[i])
         self._friction = mu
 
-    def _write_ground_velocity(self) -> None:
-        ground_v = self._ground_v
-        if self._use_batch_io:
-            _pack_velocities(
-                self.velocity, ground_v, self._chassis_rows, self._ground_rows, self._velocity_out
-            )
-            pbatch.set_space_bodies(self.space, pbatch.BodyFields.VELOCITY, self._out_buffer)
-        elif self._direct_io:
-            set_velocity = _CHIPMUNK.cpBodySetVelocity
-            for ground, velocity in zip(
-                self._ground, ground_v.reshape(-1, 2).tolist(), strict=True
-            ):
-                set_velocity(ground._body, velocity)
-        else:
-            for ground, (vx, vy) in zip(
-                self._ground, ground_v.reshape(-1, 2).tolist(), strict=True
-            ):
-                ground.velocity = (vx, vy)
-
-    def _read_state(self, h: float) -> None:
-        """Read chassis states into ``pose``/``velocity`` in place.
-
-        ``pose`` is the raw Chipmunk pose advanced by v·h: Chipmunk integrates positions at the
-        *start* of its next step with the velocities just solved, so this is where the motion of
-        this step (already counted by the encoders) puts the robot, and the configuration at
-        which the next step's contact velocities will be solved.
-        """
-        pose, velocity = self.pose, self.velocity
-        if self._use_batch_io:
-            assert self._buffer is not None
-            self._buffer.clear()
-            pbatch.get_space_bodies(self.space, _STATE_FIELDS, self._buffer)
-            data = np.frombuffer(self._buffer.float_buf(), dtype=np.float64)
-            _unpack_states(data, self._chassis_rows, h, pose, velocity)
-        elif self._direct_io:
-            cp = _CHIPMUNK
-            for i, body in enumerate(self._chassis):
-                raw = body._body
-                p = cp.cpBodyGetPosition(raw)
-                v = cp.cpBodyGetVelocity(raw)
-                angle = cp.cpBodyGetAngle(raw)
-                omega = cp.cpBodyGetAngularVelocity(raw)
-                vx, vy = v.x, v.y
-                pose[i, 0] = p.x + vx * h
-                pose[i, 1] = p.y + vy * h
-                pose[i, 2] = angle + omega * h
-                velocity[i, 0] = vx
-                velocity[i, 1] = vy
-                velocity[i, 2] = omega
-        else:
-            for i, body in enumerate(self._chassis):
-                px, py = body.position
-                vx, vy = body.velocity
-                omega = body.angular_velocity
-                pose[i] = (px + vx * h, py + vy * h, body.angle + omega * h)
-                velocity[i] = (vx, vy, omega)
-
     # ------------------------------------------------------------------ diagnostics
     def contact_forces(self) -> FloatArray:
         """Magnitude of the last friction impulse of each wheel divided by the step [N], (N, 2)."""
@@ -664,241 +679,3 @@ class World:
     def friction_limits(self) -> FloatArray:
         """Current friction force limit μ·N of each wheel [N], (N, 2)."""
         return np.asarray(self._friction * self.normal_force[:, None])
-
-
-def _direct_access_works(bodies: Sequence[pymunk.Body]) -> bool:
-    """True if Chipmunk's body functions can be called directly on these bodies, with the
-    results the pymunk properties give (see ``_CHIPMUNK``)."""
-    if _CHIPMUNK is None or not all(hasattr(b, "_body") for b in bodies):
-        return False
-    try:
-        body = bodies[0]
-        p = _CHIPMUNK.cpBodyGetPosition(body._body)
-        v = _CHIPMUNK.cpBodyGetVelocity(body._body)
-        return (p.x, p.y, v.x, v.y) == (*body.position, *body.velocity) and (
-            _CHIPMUNK.cpBodyGetAngle(body._body) == body.angle
-            and _CHIPMUNK.cpBodyGetAngularVelocity(body._body) == body.angular_velocity
-        )
-    except (AttributeError, TypeError):
-        return False
-
-
-@kernel
-def _drive_wheels(
-    command: FloatArray,
-    scale: FloatArray,
-    max_rate: FloatArray,
-    max_rate_step: FloatArray,
-    true_radius: FloatArray,
-    ticks_per_rad: FloatArray,
-    pose: FloatArray,
-    h: float,
-    rate: FloatArray,
-    angle: FloatArray,
-    counts: IntArray,
-    rim_speed: FloatArray,
-    ground_v: FloatArray,
-    motor_step: FloatArray,
-    half_track: FloatArray,
-) -> bool:
-    """Wheel velocity controllers, encoders and no-slip contact velocities of one substep.
-
-    Per wheel: clip the command × ``scale`` of its robot to ±max_rate, move the rate toward it
-    by at most max_rate_step (the acceleration limit), rotate by the trapezoid mean rate × h,
-    count ticks (floor of the true rotation), and set the contact velocities
-    (:func:`_set_ground_velocity`). In place on
-    ``rate``, ``angle``, ``counts``, ``rim_speed``, ``ground_v`` and ``motor_step`` (the rotation
-    this substep [rad], for transmission effects); returns False (touching nothing) if any
-    command is not finite.
-    """
-    n = command.shape[0]
-    for i in range(n):
-        if not (math.isfinite(command[i, 0]) and math.isfinite(command[i, 1])):
-            return False
-    for i in range(n):
-        limit = max_rate[i]
-        step = max_rate_step[i]
-        for w in range(2):
-            target = min(max(command[i, w] * scale[i], -limit), limit)
-            old = rate[i, w]
-            delta = min(max(target - old, -step), step)
-            rate[i, w] = old + delta
-            mean = old + 0.5 * delta  # constant acceleration within the substep
-            angle[i, w] += mean * h
-            motor_step[i, w] = mean * h
-            counts[i, w] = math.floor(angle[i, w] * ticks_per_rad[i])
-            rim_speed[i, w] = mean * true_radius[i, w]
-        _set_ground_velocity(i, rim_speed, pose, ground_v)
-    return True
-
-
-@kernel
-def _drive_plain(
-    command: FloatArray,
-    scale: FloatArray,
-    max_rate: FloatArray,
-    max_rate_step: FloatArray,
-    true_radius: FloatArray,
-    ticks_per_rad: FloatArray,
-    pose: FloatArray,
-    h: float,
-    rate: FloatArray,
-    angle: FloatArray,
-    counts: IntArray,
-    rim_speed: FloatArray,
-    ground_v: FloatArray,
-    motor_step: FloatArray,
-    half_track: FloatArray,
-) -> bool:
-    """:func:`_drive_wheels` then :func:`_midstep_translation`: a substep's contact velocities
-    when no effect or floor feature acts between them (one call instead of two)."""
-    if not _drive_wheels(
-        command,
-        scale,
-        max_rate,
-        max_rate_step,
-        true_radius,
-        ticks_per_rad,
-        pose,
-        h,
-        rate,
-        angle,
-        counts,
-        rim_speed,
-        ground_v,
-        motor_step,
-        half_track,
-    ):
-        return False
-    _midstep_translation(ground_v, pose, half_track, h)
-    return True
-
-
-@kernel
-def _pack_velocities(
-    velocity: FloatArray,
-    ground_v: FloatArray,
-    chassis_rows: NDArray[np.intp],
-    ground_rows: NDArray[np.intp],
-    out: FloatArray,
-) -> None:
-    """Every body's velocity in pymunk's body order (``out``, rows × 2): chassis keep theirs,
-    ground bodies get their contact velocity."""
-    for i in range(chassis_rows.shape[0]):
-        out[chassis_rows[i], 0] = velocity[i, 0]
-        out[chassis_rows[i], 1] = velocity[i, 1]
-        for w in range(2):
-            out[ground_rows[i, w], 0] = ground_v[i, w, 0]
-            out[ground_rows[i, w], 1] = ground_v[i, w, 1]
-
-
-@kernel
-def _unpack_states(
-    data: FloatArray,
-    chassis_rows: NDArray[np.intp],
-    h: float,
-    pose: FloatArray,
-    velocity: FloatArray,
-) -> None:
-    """Chassis poses advanced by v·h and velocities from pymunk's batch rows (x, y, θ, ẋ, ẏ, θ̇
-    per body, flat), in place (see :meth:`World._read_state`)."""
-    for i in range(chassis_rows.shape[0]):
-        base = 6 * chassis_rows[i]
-        for k in range(3):
-            velocity[i, k] = data[base + 3 + k]
-            pose[i, k] = data[base + k] + data[base + 3 + k] * h
-
-
-@kernel
-def _set_ground_velocity(
-    i: int, rim_speed: FloatArray, pose: FloatArray, ground_v: FloatArray
-) -> None:
-    """No-slip contact velocities of robot ``i``: each rim speed along the heading at which
-    Chipmunk solves the step (:func:`_midstep_translation` then turns the translation)."""
-    cos_t = math.cos(pose[i, 2])
-    sin_t = math.sin(pose[i, 2])
-    for w in range(2):
-        ground_v[i, w, 0] = rim_speed[i, w] * cos_t
-        ground_v[i, w, 1] = rim_speed[i, w] * sin_t
-
-
-@kernel
-def _midstep_translation(
-    ground_v: FloatArray, pose: FloatArray, half_track: FloatArray, h: float
-) -> None:
-    """Turn each robot's translation (the mean of its two contact velocities) to the mid-step
-    heading θ + ω·h/2, after every effect and the floor shaped the contact velocities; the
-    rotation part (their difference, perpendicular to the lever arms) stays as it is.
-
-    Why: Chipmunk moves a body by its velocity times h (first order), so a translation along θ
-    makes each step of an arc a tangent, not a chord: a 1 m-radius half circle at 0.35 m/s and
-    20 Hz drifted 17.5 mm sideways from the (exact, midpoint) odometry of the same wheel motion.
-    With the translation along θ + ω·h/2 each step is the chord; the drift is 0.08 mm. ω is the
-    rigid-body rate the contacts ask for: ω = (g_R − g_L)·(cos θ, sin θ)/b.
-    """
-    for i in range(ground_v.shape[0]):
-        cos_t = math.cos(pose[i, 2])
-        sin_t = math.sin(pose[i, 2])
-        dvx = ground_v[i, 1, 0] - ground_v[i, 0, 0]
-        dvy = ground_v[i, 1, 1] - ground_v[i, 0, 1]
-        omega = (dvx * cos_t + dvy * sin_t) / (2.0 * half_track[i])
-        if omega == 0.0:
-            continue
-        turn = 0.5 * omega * h
-        c = math.cos(turn)
-        s = math.sin(turn)
-        mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])
-        my = 0.5 * (ground_v[i, 0, 1] + ground_v[i, 1, 1])
-        rx = c * mx - s * my - mx
-        ry = s * mx + c * my - my
-        for w in range(2):
-            ground_v[i, w, 0] += rx
-            ground_v[i, w, 1] += ry
-
-
-@kernel
-def _rim_from_wheel_step(
-    wheel_step: FloatArray,
-    true_radius: FloatArray,
-    pose: FloatArray,
-    half_track: FloatArray,
-    h: float,
-    rim_speed: FloatArray,
-    ground_v: FloatArray,
-) -> None:
-    """Rim speeds and no-slip contact velocities from the wheel rotation of this substep (after
-    transmission effects changed it), in place."""
-    for i in range(wheel_step.shape[0]):
-        for w in range(2):
-            rim_speed[i, w] = wheel_step[i, w] * true_radius[i, w] / h
-        _set_ground_velocity(i, rim_speed, pose, ground_v)
-
-
-@kernel
-def _floor_kernel(
-    pose: FloatArray,
-    lateral: FloatArray,
-    rim_speed: FloatArray,
-    noise: FloatArray,
-    roughness: FloatArray,
-    h: float,
-    contact: FloatArray,
-    ground_v: FloatArray,
-) -> None:
-    """Contact points (N, 2, 2) [m] and rough-floor ground velocities, in place.
-
-    Roughness: each wheel's ground travel is its rim travel plus k·√|d|·ξ (Chong & Kleeman 1997,
-    Eq. 4), i.e. the ground velocity along the heading gains k·√(|v|·h)·ξ / h, with
-    k = ``roughness`` (N, 2) of that wheel [m^½].
-    """
-    for i in range(pose.shape[0]):
-        cos_t = math.cos(pose[i, 2])
-        sin_t = math.sin(pose[i, 2])
-        for w in range(2):
-            contact[i, w, 0] = pose[i, 0] - sin_t * lateral[i, w]
-            contact[i, w, 1] = pose[i, 1] + cos_t * lateral[i, w]
-            k = roughness[i, w]
-            if k > 0.0:
-                extra = k * math.sqrt(abs(rim_speed[i, w]) * h) * noise[i, w] / h
-                ground_v[i, w, 0] += extra * cos_t
-                ground_v[i, w, 1] += extra * sin_t

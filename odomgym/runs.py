@@ -59,7 +59,7 @@ class Run:
 
     kind: str
     time: FloatArray
-    counts: NDArray[np.int64]
+    counts: NDArray[np.int64] | NDArray[np.float64]
     true_pose: FloatArray
     direction: Direction | None = None
     side: float = 0.0

@@ -25,6 +25,7 @@ idx   name                   meaning                                            
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,11 +35,21 @@ from odomgym.odometry import Calibration, Odometry
 from odomgym.physics import World
 from odomgym.robot import RobotSpec
 from odomgym.routes import Route, RouteProgress
-from odomgym.stepping import after_step, pose_error_into, start_frame
+from odomgym.stepping import (
+    REPORT_WIDTH,
+    StepArrays,
+    check_step_status,
+    control_step,
+    pose_error_into,
+    start_frame,
+)
 
 __all__ = ["OBSERVATION_NAMES", "Trial"]
 
 FloatArray = NDArray[np.float64]
+
+# control_step's report arguments when no report is asked for: empty, never read.
+_NO_REPORT = (np.zeros((0, 2)), np.zeros(3), np.zeros((0, REPORT_WIDTH)))
 
 OBSERVATION_NAMES = (
     "remaining",
@@ -110,7 +121,37 @@ class Trial:
         # An action of 1 is the robot's top wheel speed: its wheel rate [rad/s] per unit action.
         self._action_to_rate = self._max_speed / self.world.nominal_radius
         self._route_arrays = self.progress.step_arrays()
+        self._bind_step_arrays()
         self._refresh(advance=False)
+
+    def _bind_step_arrays(self) -> None:
+        """Gather the arrays of a control step for :func:`odomgym.stepping.control_step`
+        (after construction, and after a reset, which may reallocate the route arrays)."""
+        world, odometry = self.world, self.odometry
+        self._step_arrays = StepArrays(
+            self._action_to_rate,
+            *world.step_arrays(),
+            odometry.last_counts,
+            odometry.travel_per_tick,
+            odometry.effective_wheelbase,
+            odometry.pose,
+            odometry.wheel_speed,
+            self._max_speed,
+            *self._route_arrays,
+            self.start_poses,
+            world.substep,
+            world.substeps,
+            world.dt,
+        )
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        del state["_step_arrays"]  # numba's object does not pickle; the copy gathers its own
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._bind_step_arrays()
 
     @property
     def dt(self) -> float:
@@ -134,26 +175,34 @@ class Trial:
             chosen = np.arange(self.n) if indices is None else np.asarray(indices)
             self.progress.set_routes([keep[i] for i in chosen], chosen)
         self._route_arrays = self.progress.step_arrays()  # set_routes may reallocate them
+        self._bind_step_arrays()
         self._refresh(advance=False)
 
-    def step(self, actions: FloatArray) -> NDArray[np.bool_]:
+    def step(
+        self,
+        actions: FloatArray,
+        report: tuple[FloatArray, FloatArray, FloatArray] | None = None,
+    ) -> NDArray[np.bool_]:
         """Apply wheel-speed actions (N, 2) in [−1, 1] for one control period.
+
+        With ``report`` = (episodes, weights, out), also writes the rewarded episode report
+        into ``out`` (:func:`odomgym.stepping.episode_report`, where the arguments are
+        described).
 
         Returns the robots that completed a segment this step.
         """
-        world, odometry = self.world, self.odometry
-        world.step(actions, scale=self._action_to_rate)
-        # Dead reckoning and route progress in one compiled call (odomgym.stepping).
-        after_step(
-            world.counts,
-            odometry.last_counts,
-            odometry.travel_per_tick,
-            odometry.effective_wheelbase,
-            1.0 / world.dt,
-            odometry.pose,
-            odometry.wheel_speed,
-            self._max_speed,
-            *self._route_arrays,
+        world = self.world
+        command = world.commands(actions)
+        # Physics (when the World can fuse its step), dead reckoning, route progress and the
+        # report in one compiled call; otherwise the World steps first, on its own.
+        fused = world.fuses_substeps
+        if not fused:
+            world.step(command, scale=self._action_to_rate)
+        episodes, weights, out = _NO_REPORT if report is None else report
+        check_step_status(
+            control_step(
+                command, self._step_arrays, fused, report is not None, episodes, weights, out
+            )
         )
         return self._route_arrays[-1].copy()
 

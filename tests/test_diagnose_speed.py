@@ -11,9 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from alien_robot import generate_session
-from scipy.optimize import least_squares
 
-from odomgym.diagnose.fit import Dataset, _whitened_stack, fit_noise
+from odomgym.diagnose.fit import Dataset, fit_noise
 from odomgym.diagnose.likelihood import (
     SensorNoise,
     _filter,
@@ -23,7 +22,6 @@ from odomgym.diagnose.likelihood import (
     run_scores,
 )
 from odomgym.diagnose.replay import _headings, _positions, replay_run
-from odomgym.diagnose.sessions import _SCALE, _spec_for, fit_session_frames, sessions_of
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
 from odomgym.robot import RobotSpec
@@ -87,39 +85,6 @@ def test_one_filter_pass_gives_both_scores_bit_identical() -> None:
             assert _bits(alone) == _bits(mixture.loglik)
         if spec is bumpy:  # the jumps matter here: the two filters really differ
             assert mixture.whitened.tobytes() != gaussian.whitened.tobytes()
-
-
-def test_session_frames_evaluate_only_the_moved_session_bit_identical() -> None:
-    """:func:`fit_session_frames` takes the sessions a derivative column leaves alone from its
-    cache; its frames equal those of the same least-squares fit evaluating every session at
-    every point."""
-    runs = []
-    for k, session in enumerate("abc"):
-        for run in generate_session({}, np.random.default_rng(60 + k))[:3]:
-            run.true_pose[:, 2] += 0.004 * (k - 1)  # a yaw misalignment per session
-            run.meta["session"] = session
-            runs.append(run)
-    data = Dataset.of(runs, 0.25)
-    frames = fit_session_frames(data, MODEL, SENSOR)
-
-    labels = sessions_of(data.runs)
-    subsets = [data.subset([j for j, x in enumerate(labels) if x == s]) for s in "abc"]
-
-    def every_session(x: np.ndarray) -> np.ndarray:  # the plain residual: nothing reused
-        return np.concatenate(
-            [
-                _whitened_stack(sub, _spec_for(MODEL, x[:3], x[3 + 3 * k : 6 + 3 * k]), SENSOR)[0]
-                for k, sub in enumerate(subsets)
-            ]
-        )
-
-    plain = least_squares(every_session, np.zeros(12), diff_step=1e-2, x_scale=1.0, max_nfev=20)
-    se = np.sqrt(np.maximum(np.diag(np.linalg.inv(plain.jac.T @ plain.jac)), 0.0))
-    for k, frame in enumerate(frames):
-        value = plain.x[3 + 3 * k : 6 + 3 * k] * _SCALE
-        error = se[3 + 3 * k : 6 + 3 * k] * _SCALE
-        got = np.array([frame.dx, frame.dy, frame.yaw, frame.dx_se, frame.dy_se, frame.yaw_se])
-        assert got.tobytes() == np.concatenate([value, error]).tobytes()
 
 
 @pytest.mark.parametrize("spacing", ["logged", "uniform", "stalled", "one", "two"])

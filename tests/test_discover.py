@@ -282,7 +282,7 @@ def test_session_frames_are_measurement_nuisances_not_robot_effects() -> None:
             run.meta["run"] = f"{session}{run.meta['run']}"
             runs.append(run)
     result = diagnose(runs, MODEL, DiagnoseConfig(seed=4))
-    fitted = {f.session: f for f in result.session_frames}
+    fitted = {f.session: f for f in result.nuisances}
     for session, (dx, dy, yaw) in frames.items():
         f = fitted[session]
         assert abs(f.dx - dx) < 5e-4 and abs(f.dy - dy) < 5e-4, f

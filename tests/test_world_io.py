@@ -1,16 +1,20 @@
-"""The World's three ways across the pymunk boundary give bit-identical trajectories.
+"""The World's two ways across the pymunk boundary give bit-identical trajectories.
 
-Batch I/O (``pymunk.batch``, four or more robots), direct Chipmunk calls (smaller batches) and
-pymunk's properties (the fallback if a pymunk release hides the C pointers) are speed choices
-only (docs/architecture.md, "Performance design"); a robot's motion must not depend on them.
+Compiled kernels calling Chipmunk's functions by address
+(:class:`odomgym.chipmunk_link.SpaceExchange`) and pymunk's own properties and ``Space.step``
+(the fallback if a pymunk release changes the internals the compiled path relies on) are speed
+choices only (docs/architecture.md, "Performance design"); a robot's motion must not depend on
+them, nor on its batch.
 """
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
-import odomgym.physics as physics
+from odomgym.chipmunk_link import SpaceExchange
 from odomgym.floor import FLOORS
 from odomgym.physics import World
 from odomgym.robot import PRESETS
@@ -23,26 +27,47 @@ def _commands(n: int) -> np.ndarray:
     return rng.uniform(-1.0, 1.0, size=(STEPS, 1, 2)).repeat(n, axis=1)
 
 
-def _drive(world: World) -> np.ndarray:
+def _drive(world: World, commands: np.ndarray) -> np.ndarray:
     scale = np.full(world.n, 5.0)  # rad/s per unit command
-    for command in _commands(world.n):
+    for command in commands:
         world.step(command, scale=scale)
-    return world.pose.copy()
+    return np.hstack([world.pose, world.velocity, world.counts, world.slip])
 
 
+@pytest.mark.parametrize("substeps", [1, 2])
+@pytest.mark.parametrize("track_slip", [False, True])
 @pytest.mark.parametrize("floor", ["smooth", "bumpy"])
-def test_batch_direct_and_property_io_agree(floor: str, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_compiled_and_pymunk_exchange_agree(
+    floor: str, track_slip: bool, substeps: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
     robot = PRESETS["labmate"]
-    direct = World(robot, FLOORS[floor])
-    assert direct._direct_io and not direct._use_batch_io
-    batch = World([robot] * 4, FLOORS[floor])
-    assert batch._use_batch_io
-    monkeypatch.setattr(physics, "_direct_access_works", lambda bodies: False)
-    fallback = World(robot, FLOORS[floor])
-    assert not fallback._direct_io
-    expected = _drive(fallback)[0]
-    np.testing.assert_array_equal(_drive(direct)[0], expected)
-    assert direct._raw_space is not None  # stepped through Chipmunk directly
-    for row in _drive(batch):
+    options = {"track_slip": track_slip, "substeps": substeps}
+    single = World(robot, FLOORS[floor], **options)
+    batch = World([robot] * 4, FLOORS[floor], **options)
+    assert single._io.compiled and batch._io.compiled
+    monkeypatch.setattr(SpaceExchange, "_link", lambda self: False)
+    fallback = World(robot, FLOORS[floor], **options)
+    assert not fallback._io.compiled
+    expected = _drive(fallback, _commands(1))[0]
+    np.testing.assert_array_equal(_drive(single, _commands(1))[0], expected)
+    for row in _drive(batch, _commands(4)):
         np.testing.assert_array_equal(row, expected)
     assert np.hypot(*expected[:2]) > 0.1  # the robots moved
+
+
+def test_an_unpickled_world_links_to_its_own_space(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled exchange points at C structures of one space: a World unpickled mid-run
+    links to its own, and checking that link leaves the bodies as they were (the copy goes on
+    exactly as a copy through pymunk's own functions does)."""
+    world = World([PRESETS["labmate"]] * 2, FLOORS["smooth"])
+    commands = _commands(2)
+    _drive(world, commands[:100])
+    data = pickle.dumps(world)
+    linked = pickle.loads(data)
+    assert linked._io.compiled
+    monkeypatch.setattr(SpaceExchange, "_link", lambda self: False)
+    fallback = pickle.loads(data)
+    assert not fallback._io.compiled
+    for mine, theirs in zip(linked.space.bodies, fallback.space.bodies, strict=True):
+        assert (mine.position, mine.velocity) == (theirs.position, theirs.velocity)
+    np.testing.assert_array_equal(_drive(linked, commands[100:]), _drive(fallback, commands[100:]))

@@ -14,6 +14,7 @@ from odomgym.cli._common import (
     check_output,
     count,
     fraction,
+    positive,
     processes,
     seed,
 )
@@ -69,6 +70,37 @@ def register(commands: Commands) -> None:
         help="fit a tracked-point offset and yaw misalignment per session (auto: when the runs "
         "come from two or more sessions)",
     )
+    parser.add_argument(
+        "--no-time-offset",
+        action="store_true",
+        help="do not fit a time offset between the encoder log and the ground truth per session",
+    )
+    parser.add_argument(
+        "--max-time-offset",
+        type=positive,
+        default=1.0,
+        help="largest time offset searched, seconds (default 1.0)",
+    )
+    parser.add_argument(
+        "--max-obstacle",
+        type=positive,
+        default=0.02,
+        help="largest obstacle the floor may hold, metres: bounds what named floor bumps may "
+        "do (default 0.02)",
+    )
+    parser.add_argument(
+        "--max-bump-rate",
+        type=positive,
+        default=1.0,
+        help="most obstacle crossings per metre of a wheel's travel the floor may hold: bounds "
+        "named floor bumps (default 1.0)",
+    )
+    parser.add_argument(
+        "--no-baseline",
+        action="store_true",
+        help="skip the baseline calibration (trajectory optimisation of b, D_R, D_L on the fit "
+        "runs) the held-out comparison reports beside the diagnosed model",
+    )
     parser.add_argument("--jobs", type=processes, help="worker processes (default: all cores)")
     parser.add_argument(
         "--resume",
@@ -96,6 +128,7 @@ def register(commands: Commands) -> None:
 def run(args: argparse.Namespace) -> int:
     """Read the logs, diagnose (resuming from the journal with ``--resume``), replace ``--out``
     with the report, then print it (Markdown, or report.json) and the files written."""
+    from odomgym.baselines.trajectory import TrajectoryBaseline
     from odomgym.data.logs import read_log
     from odomgym.data.samples import resolve_data
     from odomgym.diagnose.report import format_markdown, report_json, write_outputs
@@ -112,6 +145,10 @@ def run(args: argparse.Namespace) -> int:
         jobs=args.jobs or os.cpu_count() or 1,
         discover=not args.no_discover,
         session_frames={"auto": None, "on": True, "off": False}[args.session_frames],
+        time_offset=not args.no_time_offset,
+        max_time_offset=args.max_time_offset,
+        max_obstacle=args.max_obstacle,
+        max_bump_rate=args.max_bump_rate,
     )
     out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
     check_output(out, option="--out", folder=True, swap=True)
@@ -125,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
         left_joint=args.left_joint,
         right_joint=args.right_joint,
     )
+    baseline = None if args.no_baseline else TrajectoryBaseline()
     model = robot if robot is not None else nominal
     if model is None:
         raise SpecError("give the robot model with --robot robot.toml", field="robot")
@@ -133,7 +171,9 @@ def run(args: argparse.Namespace) -> int:
     journal = FitJournal(out.parent / f"{out.name}.journal", resume=args.resume)
     with Progress(report, "diagnose", leave=False) as bar:
         try:
-            diagnosis = diagnose(runs, model, config, progress=bar.stage, journal=journal)
+            diagnosis = diagnose(
+                runs, model, config, baseline=baseline, progress=bar.stage, journal=journal
+            )
         except ValueError as exc:
             if isinstance(exc, SpecError):
                 raise

@@ -30,7 +30,7 @@ is ``explained``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,12 +41,14 @@ from scipy import stats
 from odomgym.diagnose.fit import (
     CandidateFit,
     Dataset,
-    _whitened_stack,
     cross_validate,
     evaluate,
     fit_candidate,
+    whitened_stack,
 )
 from odomgym.diagnose.likelihood import SensorNoise
+from odomgym.diagnose.physical import term_modulator
+from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import sign_flip_p, wald_p
 from odomgym.effects import Effect
 from odomgym.effects.discovered import (
@@ -67,6 +69,7 @@ __all__ = [
     "discover",
     "library_jacobian",
     "structure_test",
+    "term_sentence",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -108,7 +111,7 @@ def library_jacobian(
     cannot separate from earlier ones are dropped (relative residual norm below 1e-3 after
     projecting on the kept columns)."""
     names = list(terms) if terms is not None else [t.name for t in TERMS]
-    _, base = _whitened_stack(data, spec, sensor)
+    _, base = whitened_stack(data, spec, sensor)
     columns: list[list[FloatArray]] = [[] for _ in data.runs]
     kept: list[str] = []
     dropped: list[str] = []
@@ -120,8 +123,8 @@ def library_jacobian(
         bound = effect.parameters[0]
         high = min(current + h, bound.high)
         low = max(current - h, bound.low)
-        _, plus = _whitened_stack(data, effect.write(spec, {name: high}), sensor)
-        _, minus = _whitened_stack(data, effect.write(spec, {name: low}), sensor)
+        _, plus = whitened_stack(data, effect.write(spec, {name: high}), sensor)
+        _, minus = whitened_stack(data, effect.write(spec, {name: low}), sensor)
         per_run = [(p - m) / (high - low) for p, m in zip(plus, minus, strict=True)]
         stacked = np.concatenate(per_run)
         norm = float(np.linalg.norm(stacked))
@@ -325,28 +328,29 @@ class Discovery:
                     "coefficient": value,
                     "stderr": err,
                     "unit": term.unit,
-                    "sentence": _sentence(name, self.fit),
+                    "sentence": term_sentence(name, self.fit.values, self.fit.stderr),
                     "catalogue_equivalent": same[0] if same else None,
                 }
             )
         return out
 
 
-def _sentence(name: str, fit: CandidateFit) -> str:
-    """The term's sentence; a sin/cos pair of the same channel and harmonic is one sinusoid,
-    described once with its amplitude √(a² + b²) and phase (standard error by propagation)."""
+def term_sentence(name: str, values: Mapping[str, float], stderr: Mapping[str, float]) -> str:
+    """Term ``name``'s sentence at ``values`` (all terms fitted together) with their standard
+    errors; a sin/cos pair of the same channel and harmonic is one sinusoid, described once
+    with its amplitude √(a² + b²) and phase (standard error by propagation)."""
     term = term_by_name(name)
-    value = float(fit.values[name])
-    err = float(fit.stderr.get(name, math.nan))
+    value = float(values[name])
+    err = float(stderr.get(name, math.nan))
     if term.modulator[:3] in ("sin", "cos"):
         other = term.channel + "_" + ("cos" if term.modulator.startswith("sin") else "sin")
         other += term.modulator[-1]
-        if other in fit.values:
-            a = value if term.modulator.startswith("sin") else float(fit.values[other])
-            b = float(fit.values[other]) if term.modulator.startswith("sin") else value
+        if other in values:
+            a = value if term.modulator.startswith("sin") else float(values[other])
+            b = float(values[other]) if term.modulator.startswith("sin") else value
             amplitude = math.hypot(a, b)
-            ea = float(fit.stderr.get(f"{term.channel}_sin{term.modulator[-1]}", math.nan))
-            eb = float(fit.stderr.get(f"{term.channel}_cos{term.modulator[-1]}", math.nan))
+            ea = float(stderr.get(f"{term.channel}_sin{term.modulator[-1]}", math.nan))
+            eb = float(stderr.get(f"{term.channel}_cos{term.modulator[-1]}", math.nan))
             se = math.hypot(a * ea, b * eb) / amplitude if amplitude > 0 else math.nan
             phase = math.degrees(math.atan2(b, a))
             return (
@@ -458,9 +462,6 @@ def channel_evidence(
     Returns bin centres ``x``, mean channel error ``y`` and its standard error ``se`` (NaN-free),
     or None without dense ground truth.
     """
-    from odomgym.diagnose.replay import _session_time, _wheel_angles, replay_run
-    from odomgym.effects.discovered import body_modulator, wheel_modulator
-
     term = term_by_name(name)
     xs: list[FloatArray] = []
     ys: list[FloatArray] = []
@@ -478,8 +479,7 @@ def channel_evidence(
         along = c * (d_meas[:, 0] - d_pred[:, 0]) + s * (d_meas[:, 1] - d_pred[:, 1])
         cross = -s * (d_meas[:, 0] - d_pred[:, 0]) + c * (d_meas[:, 1] - d_pred[:, 1])
         heading = d_meas[:, 2] - d_pred[:, 2]
-        dt = np.diff(run.time)
-        safe = np.where(dt > 0, dt, np.inf)
+        mod = term_modulator(run, rep, spec, name)
         if term.wheel:
             w = 0 if term.channel == "left" else 1
             side = -1.0 if w == 0 else 1.0
@@ -487,24 +487,12 @@ def channel_evidence(
             base = rep.travel[:, w]
             use = both & (np.abs(base) > 2e-3)
             value = error / np.where(use, base, 1.0)
-            motor = np.diff(run.counts, axis=0).astype(float) * (2 * np.pi / spec.ticks_per_rev)
-            speed = rep.travel / safe[:, None]
-            accel = np.gradient(np.abs(speed), np.cumsum(dt), axis=0) if len(dt) > 1 else 0 * speed
-            mod = wheel_modulator(
-                term.modulator, speed, accel, _wheel_angles(run, motor), _session_time(run)
-            )[:, w]
         elif term.channel == "crab":
             use = both & (np.abs(rep.ds) > 2e-3)
             value = cross / np.where(use, rep.ds, 1.0)
-            mod = body_modulator(
-                term.modulator, rep.ds / safe, rep.dtheta / safe, _session_time(run)
-            )
         else:
             use = both & (np.abs(rep.dtheta) > 0.01)
             value = heading / np.where(use, rep.dtheta, 1.0)
-            mod = body_modulator(
-                term.modulator, rep.ds / safe, rep.dtheta / safe, _session_time(run)
-            )
         xs.append(mod[use])
         ys.append(value[use])
     if not xs or sum(len(x) for x in xs) < 3 * bins:

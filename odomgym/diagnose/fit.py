@@ -59,15 +59,19 @@ __all__ = [
     "FitJob",
     "Joint",
     "Model",
+    "build_within",
     "close_thread_pool",
     "evaluate",
     "fit_candidate",
     "fit_noise",
     "fit_noise_model",
     "folds_for",
+    "gauss_newton_step",
     "noise_curvature",
     "run_fit_jobs",
     "strata",
+    "systematic_vector",
+    "whitened_stack",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -422,7 +426,7 @@ def noise_curvature(
     return f0, grad, hess
 
 
-def _systematic_vector(
+def systematic_vector(
     spec: RobotSpec, effect: Effect
 ) -> tuple[FloatArray, FloatArray, FloatArray, Callable[[FloatArray], RobotSpec]]:
     """Parameters in units of their scale, relative to the current values, with bounds."""
@@ -440,9 +444,37 @@ def _systematic_vector(
     return np.zeros(len(params)), (low - origin) / scale, (high - origin) / scale, build
 
 
-def _whitened_stack(
+def gauss_newton_step(a: FloatArray, b: FloatArray, rcond: float = 1e-9) -> FloatArray:
+    """The step −A⁺b of normal equations A·δ = −b, A⁺ the pseudo-inverse that drops directions
+    whose eigenvalue is below ``rcond`` × the largest: a fold that leaves out the only runs
+    determining a parameter keeps that parameter where the full fit put it instead of sending it
+    to infinity."""
+    values, vectors = np.linalg.eigh(0.5 * (a + a.T))
+    top = float(np.max(values)) if len(values) else 0.0
+    keep = values > rcond * top if top > 0 else np.zeros(len(values), dtype=bool)
+    inverse = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
+    step: FloatArray = -(vectors @ (inverse * (vectors.T @ b)))
+    return step
+
+
+def build_within(
+    build: Callable[[FloatArray], RobotSpec], start: FloatArray, step: FloatArray
+) -> RobotSpec:
+    """``build(start + step)``, the step halved until the robot it makes is valid (a linearised
+    step can leave the range a robot may have, e.g. a wheel twice nominal); ``build(start)`` if
+    none is."""
+    for _ in range(20):
+        try:
+            return build(start + step)
+        except SpecError:
+            step = 0.5 * step
+    return build(start)
+
+
+def whitened_stack(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise
 ) -> tuple[FloatArray, list[FloatArray]]:
+    """The whitened innovations of every run under ``spec``, concatenated and per run."""
     ev = evaluate(data, spec, sensor)
     return np.concatenate(ev.whitened), ev.whitened
 
@@ -478,10 +510,10 @@ def _least_squares_step(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
 ) -> RobotSpec:
     """``effect``'s parameters fitted by generalised least squares at fixed noise."""
-    u0, low, high, build = _systematic_vector(spec, effect)
+    u0, low, high, build = systematic_vector(spec, effect)
 
     def residual(u: FloatArray) -> FloatArray:
-        return _whitened_stack(data, build(u), sensor)[0]
+        return whitened_stack(data, build(u), sensor)[0]
 
     result = least_squares(
         residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=30
@@ -543,15 +575,15 @@ def _linearise(data: Dataset, fit: CandidateFit, effect: Effect) -> None:
     session-clustered (``stderr_sessions``, the same with each session's runs summed into one
     score; NaN with fewer than two sessions), which also holds when the robot itself changed
     between sessions (tyre wear, load, floor)."""
-    u0, _, _, build = _systematic_vector(fit.spec, effect)
-    _, base = _whitened_stack(data, fit.spec, fit.sensor)
+    u0, _, _, build = systematic_vector(fit.spec, effect)
+    _, base = whitened_stack(data, fit.spec, fit.sensor)
     columns: list[list[FloatArray]] = [[] for _ in data.runs]
     step = 0.05
     for k in range(len(u0)):
         du = np.zeros_like(u0)
         du[k] = step
-        _, plus = _whitened_stack(data, build(u0 + du), fit.sensor)
-        _, minus = _whitened_stack(data, build(u0 - du), fit.sensor)
+        _, plus = whitened_stack(data, build(u0 + du), fit.sensor)
+        _, minus = whitened_stack(data, build(u0 - du), fit.sensor)
         for j in range(len(data.runs)):
             columns[j].append((plus[j] - minus[j]) / (2.0 * step))
     fit.whitened = base

@@ -23,7 +23,7 @@ from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.robot import RobotSpec
 from odomgym.runs import Run
 
-__all__ = ["Replay", "RunInputs", "replay_run"]
+__all__ = ["Replay", "RunInputs", "replay_run", "session_time", "wheel_angles"]
 
 FloatArray = NDArray[np.float64]
 
@@ -75,7 +75,7 @@ class RunInputs:
         wrote into one would change every later replay of the run)."""
         dt = np.diff(run.time)
         motor = np.diff(run.counts, axis=0).astype(np.float64) * (2.0 * np.pi / ticks_per_rev)
-        inputs = cls(ticks_per_rev, dt, motor, _wheel_angles(run, motor), _session_time(run))
+        inputs = cls(ticks_per_rev, dt, motor, wheel_angles(run, motor), session_time(run))
         for array in (inputs.dt, inputs.motor, inputs.angle, inputs.time):
             array.flags.writeable = False
         return inputs
@@ -175,7 +175,7 @@ def _positions(
     return pose
 
 
-def _wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
+def wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
     """Each wheel's angle at the middle of every interval [rad], from the session's start when
     the run records where its wheels began (``meta["wheel_angle0"]``), else from the run's."""
     start = np.zeros(2)
@@ -187,7 +187,7 @@ def _wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
     return angles
 
 
-def _session_time(run: Run) -> FloatArray:
+def session_time(run: Run) -> FloatArray:
     """Time since the session started at the middle of every interval [s]."""
     t0 = float(run.meta.get("session_time", 0.0))  # type: ignore[arg-type]
     middle: FloatArray = t0 + 0.5 * (run.time[1:] + run.time[:-1]) - run.time[0]

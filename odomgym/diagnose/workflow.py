@@ -1,46 +1,42 @@
 """The discrepancy workflow: where the model and the robot disagree, which effect is missing,
-add it, show the gap shrink on runs the fit never saw.
+add it, and show on data the fit never saw that the updated model predicts the robot better.
 
 :func:`diagnose` takes logged runs (any source: :mod:`odomgym.data`) and a robot model and returns
-a :class:`Diagnosis`:
+a :class:`Diagnosis`. The steps (``docs/diagnose.md`` gives each in full):
 
-1. **Split.** A fraction of whole runs (stratified by experiment label, seeded) is held out for
-   the final gap report; nothing is fitted on them.
-2. **Where.** :func:`odomgym.diagnose.where.localise` on the model as given.
-3. **Which**, in two stages. First every effect but the wheel noise (``floor_roughness``),
-   each fitted with that wheel noise as a free *nuisance* beside the sensor noise: a random
-   walk can absorb a systematic drift run by run (on the OptiOdom data it out-scored every
-   systematic effect when it competed on equal terms), so an effect must beat the best
-   wheel-noise explanation. Only if none is significant, the wheel noise itself against the
-   model with sensor noise alone. In each stage every effect is fitted added to the current
-   model
-   (:mod:`odomgym.diagnose.fit`) and scored by K-fold cross-validated log-likelihood on whole
-   fit runs. A candidate is significant if its likelihood-ratio test against the current model
-   passes at α after a Bonferroni correction for the number of candidates (χ² with as many
-   degrees of freedom as it has parameters; conservative for noise parameters on their
-   boundary) *and* it improves the held-out log-likelihood (the out-of-sample check guards
-   against a misspecified noise model). The best is the significant candidate with the largest
-   held-out gain; those within ``tie_nats`` of it are tied. (A max-T sign-flip test over runs
-   is reported too; it is weak when an effect shows in a few runs only, e.g. backlash in spins.)
-   Verdicts: one significant winner — ``explained``; tied winners — ``ambiguous`` (with the
-   experiment that would separate them); nothing significant — ``none`` if the model's whitened
-   innovations look like noise (run means and lag-1 correlation), else ``unexplained``.
-4. **Add.** The winner's fitted spec becomes the current model; 3–4 repeat while a round names
-   an effect (at most ``max_rounds``). Steps 3–4 are one :func:`run_round`, which updates a
-   :class:`DiagnosisState` within a :class:`RoundContext` fixed for the whole diagnosis.
-5. **Shrink.** The held-out runs are replayed through the model as given and the final one; the
-   gap (:data:`GAP_METRIC`: RMS whitened innovation, 1 at the noise floor) before and after,
-   with bootstrap intervals over runs, and the fraction of the *reducible* gap closed,
-   (MS_before − MS_after)/(MS_before − 1); plus the plain disagreement in mm and degrees.
+1. **Split** (:func:`split_runs`): whole sessions are held out, or with one session, per
+   experiment family a contiguous block of runs in time. Nothing is fitted on them.
+2. **Measurement nuisances** (:mod:`odomgym.diagnose.nuisances`): each session's time offset
+   (and, with several sessions, tracked point and yaw misalignment), fitted open loop jointly
+   with E_d, E_b, E_s (:mod:`odomgym.diagnose.openloop`) and removed from the runs.
+3. **Where** (:mod:`odomgym.diagnose.where`) the model as given disagrees.
+4. **Rounds** (:func:`run_round`): catalogue effects scored by the Kalman filter's
+   cross-validated likelihood and tested family-wise (:mod:`odomgym.diagnose.fit`); when the
+   catalogue leaves structure, sparse discovery over the error grammar
+   (:mod:`odomgym.diagnose.discover`); the noise model last; a backward check.
+5. **Physical sizes** (:mod:`odomgym.diagnose.physical`): a discovered term too large for what
+   the robot did is a stand-in, reported and not kept.
+6. **The open-loop gate** (:mod:`odomgym.diagnose.gate`): each proposal in turn is kept only if
+   it lowers the error of predicting left-out folds (sessions, or blocks) open loop.
+7. **The estimator** of the kept model's values — the filter's or the open-loop fit's —
+   whichever predicts the left-out folds better.
+8. **Noise effects**: floor bumps only with their signature and a size the floor can produce;
+   how far a noise effect with a mean part moved E_d, E_b, E_s is reported.
+9. **Held-out verdict** (:mod:`odomgym.diagnose.heldout`): the held-out runs predicted open loop
+   by the model as given, the diagnosed model and a baseline calibration, in mm and degrees —
+   the headline; the grammar's score test and a whiteness test on the held-out runs decide
+   ``explained`` / ``partly explained``; a model that does not predict the held-out runs better
+   than the model as given is ``unconfirmed``. The whitened gap stays as a diagnostic.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import pickle
 import shutil
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,6 +52,7 @@ from odomgym.diagnose.discover import (
     discover,
     library_jacobian,
     structure_test,
+    term_sentence,
 )
 from odomgym.diagnose.experiments import separating_experiment
 from odomgym.diagnose.fit import (
@@ -74,20 +71,47 @@ from odomgym.diagnose.fit import (
     run_fit_jobs,
     strata,
 )
+from odomgym.diagnose.gate import (
+    FilterLinearisation,
+    GateStep,
+    SystematicFit,
+    filter_estimate,
+    model_effect,
+    open_loop_estimate,
+    open_loop_gate,
+    spec_with,
+)
+from odomgym.diagnose.heldout import (
+    AS_GIVEN,
+    BASELINE,
+    DIAGNOSED,
+    Baseline,
+    HeldOut,
+    compare_models,
+    pictured_runs,
+)
 from odomgym.diagnose.likelihood import (
     SensorNoise,
     expected_square_gap,
     measurement_mask,
     run_likelihood,
 )
-from odomgym.diagnose.replay import replay_run
-from odomgym.diagnose.sessions import (
+from odomgym.diagnose.nuisances import (
     SESSION_EFFECTS,
-    SessionFrame,
+    SessionNuisance,
     correct_runs,
-    fit_session_frames,
     sessions_of,
 )
+from odomgym.diagnose.openloop import (
+    NuisanceOptions,
+    OpenLoopData,
+    cross_validate_open_loop,
+    evaluate_open_loop,
+    fit_open_loop,
+    open_loop_folds,
+)
+from odomgym.diagnose.physical import check_bumps, term_size
+from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import (
     bootstrap_ci,
     combine_bonferroni,
@@ -99,7 +123,7 @@ from odomgym.diagnose.stats import (
     whiteness_p,
 )
 from odomgym.diagnose.where import Finding, localise, run_residuals
-from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
+from odomgym.effects import EFFECTS, TERMS, DiscoveredTerms, Effect
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_bytes
 from odomgym.robot import RobotSpec
@@ -125,6 +149,10 @@ docstring, step 3)."""
 
 DISCOVERED = "discovered"
 """The grammar's effect: never a catalogue candidate, only the discovery pass adds to it."""
+
+GEOMETRY = ("wheel_diameter_ratio", "wheelbase", "distance_scale")
+"""The catalogue's geometric effects (E_d, E_b, E_s): fitted beside the measurement nuisances,
+the baseline's parameters."""
 
 FloatArray = NDArray[np.float64]
 GAP_METRIC = (
@@ -163,6 +191,13 @@ class DiagnoseConfig:
             sessions (``Run.meta["session"]``).
         discover: run the discovery pass (:mod:`odomgym.diagnose.discover`) when the catalogue
             leaves structure.
+        time_offset: fit each session's time offset between the encoder log and the ground
+            truth (:mod:`odomgym.diagnose.nuisances`; needs dense ground truth).
+        max_time_offset: the largest time offset searched [s].
+        max_obstacle: the largest obstacle the floor is assumed to hold [m] — the bound on
+            what named floor bumps may do (:mod:`odomgym.diagnose.physical`).
+        max_bump_rate: the most obstacle crossings per metre of a wheel's travel the floor is
+            assumed to hold [1/m].
     """
 
     holdout: float = 0.3
@@ -177,12 +212,31 @@ class DiagnoseConfig:
     jobs: int = 1
     discover: bool = True
     session_frames: bool | None = None
+    time_offset: bool = True
+    max_time_offset: float = 1.0
+    max_obstacle: float = 0.02
+    max_bump_rate: float = 1.0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:
             raise SpecError(f"holdout must lie in (0, 1), got {self.holdout!r}", field="holdout")
         if not 0.0 < self.alpha < 1.0:
             raise SpecError(f"alpha must lie in (0, 1), got {self.alpha!r}", field="alpha")
+        if not 0.0 < self.max_time_offset <= 10.0:
+            raise SpecError(
+                f"max_time_offset must lie in (0, 10] s, got {self.max_time_offset!r}",
+                field="max_time_offset",
+            )
+        if not 0.0 < self.max_obstacle <= 1.0:
+            raise SpecError(
+                f"max_obstacle must lie in (0, 1] m, got {self.max_obstacle!r}",
+                field="max_obstacle",
+            )
+        if not 0.0 < self.max_bump_rate <= 100.0:
+            raise SpecError(
+                f"max_bump_rate must lie in (0, 100] per metre, got {self.max_bump_rate!r}",
+                field="max_bump_rate",
+            )
         if self.max_rounds < 1 or self.folds < 2:
             raise SpecError("max_rounds must be >= 1 and folds >= 2", field="max_rounds")
         for name in self.candidates or ():
@@ -229,7 +283,13 @@ class Round:
 
 @dataclass
 class Diagnosis:
-    """What :func:`diagnose` found (``as_dict`` is ``report.json``)."""
+    """What :func:`diagnose` found (``as_dict`` is ``report.json``).
+
+    The headline is :attr:`held_out`: the open-loop prediction of the held-out runs (whole
+    sessions when there are several) by the model as given, the diagnosed model and a baseline
+    calibration, in mm and degrees (:mod:`odomgym.diagnose.heldout`). The whitened gap
+    (``gap_*``) is a diagnostic of the noise model beside it.
+    """
 
     verdict: str
     named_effects: list[str]
@@ -248,12 +308,20 @@ class Diagnosis:
     findings: list[Finding]
     fit_runs: list[str]
     holdout_runs: list[str]
+    held_out: HeldOut | None = None
     holdout_gaps: dict[str, list[float]] = field(default_factory=dict)
     physical: dict[str, list[float]] = field(default_factory=dict)
     discovered: list[dict[str, Any]] = field(default_factory=list)
     discovery: list[dict[str, Any]] = field(default_factory=list)
     final_test: dict[str, Any] = field(default_factory=dict)
-    session_frames: list[SessionFrame] = field(default_factory=list)
+    nuisances: list[SessionNuisance] = field(default_factory=list)
+    gate: list[GateStep] = field(default_factory=list)
+    stand_ins: list[dict[str, Any]] = field(default_factory=list)
+    noise_checks: dict[str, dict[str, Any]] = field(default_factory=dict)
+    geometry_check: dict[str, dict[str, Any]] = field(default_factory=dict)
+    filter_parameters: dict[str, dict[str, float]] = field(default_factory=dict)
+    estimators: dict[str, Any] = field(default_factory=dict)
+    terms_tried: int = 0
 
     @property
     def systematic_effects(self) -> list[str]:
@@ -266,14 +334,24 @@ class Diagnosis:
         return [n for n in self.named_effects if EFFECTS[n].noise]
 
     def as_dict(self) -> dict[str, Any]:
-        """The JSON report (``report.json``)."""
+        """The JSON report (``report.json``): the held-out open-loop comparison first."""
         return {
             "verdict": self.verdict,
+            "held_out_open_loop": self.held_out.as_dict() if self.held_out else None,
             "systematic_effects": self.systematic_effects,
             "discovered": self.discovered,
             "noise_model": self.noise_model,
             "named_effects": self.named_effects,
             "parameters": self.parameters,
+            "measurement_nuisances": [n.as_dict() for n in self.nuisances],
+            "open_loop_check": [step.as_dict() for step in self.gate],
+            "terms_tried": self.terms_tried,
+            "terms_kept": len(self.discovered),
+            "stand_ins": self.stand_ins,
+            "noise_checks": self.noise_checks,
+            "geometry_with_and_without_noise": self.geometry_check,
+            "filter_parameters": self.filter_parameters,
+            "estimator": self.estimators,
             "gap_metric": GAP_METRIC,
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
@@ -296,7 +374,6 @@ class Diagnosis:
                 for r in self.rounds
             ],
             "final_test": self.final_test,
-            "session_frames": [f.as_dict() for f in self.session_frames],
             "discovery": self.discovery,
             "where": [f.as_dict() for f in self.findings],
             "fit_runs": self.fit_runs,
@@ -311,22 +388,62 @@ def _run_id(run: Run, index: int) -> str:
     return str(run.meta.get("run", index + 1))
 
 
+def _session_family(runs: Sequence[Run], members: Sequence[int]) -> str:
+    """A session's kind of experiment: ``meta["path_type"]`` (OptiOdom), else the experiment
+    families of its runs (:func:`odomgym.diagnose.fit.strata`)."""
+    given = runs[members[0]].meta.get("path_type")
+    if given:
+        return str(given)
+    return "+".join(strata([runs[j] for j in members]))
+
+
+def _time_order(runs: Sequence[Run], members: Sequence[int]) -> list[int]:
+    return sorted(members, key=lambda j: (float(runs[j].meta.get("session_time", 0.0)), j))  # type: ignore[arg-type]
+
+
 def split_runs(
     runs: Sequence[Run], holdout: float, rng: np.random.Generator
-) -> tuple[list[int], list[int]]:
-    """(fit, held-out) run indices: per experiment family (:func:`odomgym.diagnose.fit.strata`),
-    a ``holdout`` share held out (rounded, at least one run of each family kept for fitting);
-    at least one held out overall."""
+) -> tuple[list[int], list[int], str]:
+    """(fit, held-out) run indices and how they were split.
+
+    With two or more sessions (``meta["session"]``) whole sessions are held out (``"sessions"``):
+    per kind of session (:func:`_session_family`) a ``holdout`` share, rounded, at least one
+    session of each kind kept for fitting; at least one session held out overall. With one
+    session (``"blocks"``): per experiment family (:func:`odomgym.diagnose.fit.strata`) a
+    contiguous block of a ``holdout`` share of its runs in time order (``meta
+    ["session_time"]``, then the runs' order), at a random place, at least one run of each
+    family kept; at least one run held out overall. A model is judged on what it did not see:
+    another recording, or a later or earlier stretch of the same one — never on runs
+    interleaved with the fit's (a drift over the session would pass unnoticed)."""
+    labels = sessions_of(runs)
+    order = list(dict.fromkeys(labels))
     held: list[int] = []
-    for members_in_order in strata(runs).values():
-        order = rng.permutation(len(members_in_order))
-        members = [members_in_order[int(k)] for k in order]
-        count = min(round(holdout * len(members)), len(members) - 1)
-        held.extend(members[:count])
-    if not held:
-        held = [int(rng.integers(len(runs)))]
+    if len(order) >= 2:
+        members = {s: [j for j, lab in enumerate(labels) if lab == s] for s in order}
+        families: dict[str, list[str]] = {}
+        for s in order:
+            families.setdefault(_session_family(runs, members[s]), []).append(s)
+        chosen: list[str] = []
+        for family in sorted(families):
+            group = families[family]
+            count = min(round(holdout * len(group)), len(group) - 1)
+            chosen.extend(group[int(k)] for k in rng.permutation(len(group))[:count])
+        if not chosen:
+            chosen = [order[int(rng.integers(len(order)))]]
+        held = [j for j, lab in enumerate(labels) if lab in set(chosen)]
+        split = "sessions"
+    else:
+        for family_runs in strata(runs).values():
+            ordered = _time_order(runs, family_runs)
+            count = min(round(holdout * len(ordered)), len(ordered) - 1)
+            if count > 0:
+                begin = int(rng.integers(len(ordered) - count + 1))
+                held.extend(ordered[begin : begin + count])
+        if not held:
+            held = [int(rng.integers(len(runs)))]
+        split = "blocks"
     fit = [j for j in range(len(runs)) if j not in set(held)]
-    return fit, sorted(held)
+    return fit, sorted(held), split
 
 
 def _consistency(data: Dataset, model: Model) -> float:
@@ -585,23 +702,6 @@ def _backward_check(data: Dataset, model: Model, named: Sequence[str], alpha: fl
     return out
 
 
-def _with_evidence(
-    passes: Sequence[Discovery], runs: Sequence[Run], spec: RobotSpec
-) -> list[dict[str, Any]]:
-    """The discovered terms of every discovery pass (a later pass's refit of a term replaces
-    the earlier one), each with the binned channel data behind it
-    (:func:`odomgym.diagnose.discover.channel_evidence`, on the fit runs, under the model before
-    the first term joined)."""
-    merged: dict[str, dict[str, Any]] = {}
-    for found in passes:
-        for entry in found.entries():
-            merged[entry["term"]] = entry
-    entries = list(merged.values())
-    for entry in entries:
-        entry["evidence"] = channel_evidence(runs, spec, entry["term"])
-    return entries
-
-
 def _discovery_record(passes: Sequence[Discovery]) -> list[dict[str, Any]]:
     """Every discovery pass for ``report.json`` (empty if the structure never called for one)."""
     return [
@@ -770,21 +870,20 @@ def _check_runs(runs: Sequence[Run]) -> None:
 
 
 def _final_test(
-    held_data: Dataset, state: DiagnosisState, alpha: float, seed: int
+    held_data: Dataset, model: Model, found_anything: bool, last: str, alpha: float, seed: int
 ) -> tuple[str, dict[str, Any]]:
-    """The verdict on the held-out runs (step 9 of docs/diagnose.md) and the
-    ``final_test`` record: the grammar's score test and the whiteness test under the final
-    model, Bonferroni-combined."""
-    model = state.model
+    """The verdict on the held-out runs (step 9 of docs/diagnose.md) and the ``final_test``
+    record: the grammar's score test and the whiteness test under the final ``model``,
+    Bonferroni-combined. ``last``: the verdict of the last round."""
     held_structure = structure_test(
         library_jacobian(held_data, model.spec, model.sensor), seed=seed
     )
     held_white = _consistency(held_data, model)
     held_p = combine_bonferroni(held_structure.p_value, held_white)
-    found_anything = bool(state.named) or bool(model.spec.effect_values(DISCOVERED))
-    last = state.rounds[-1].verdict if state.rounds else "none"
     if not found_anything:
-        verdict = last
+        verdict = last if last not in ROUND_GOES_ON else "none"
+        if verdict == "none" and held_p < 0.5 * alpha:
+            verdict = "unexplained"
     elif held_p >= 0.5 * alpha and last not in ("unexplained", "ambiguous"):
         verdict = "explained"
     else:
@@ -841,17 +940,147 @@ def _shrink(
     }
 
 
+OFFSET_SIGNIFICANCE = 3.0
+"""A session's fitted time offset is removed only beyond this many (run-clustered) standard
+errors from zero."""
+
+
+def _significant_offset(nuisance: SessionNuisance) -> SessionNuisance:
+    """``nuisance``'s time offset alone (the frame is refitted at that offset), zero — with its
+    standard error kept — where it is within :data:`OFFSET_SIGNIFICANCE` standard errors of
+    zero or its standard error is unknown."""
+    tau, se = nuisance.time_offset, nuisance.time_offset_se
+    keep = math.isfinite(se) and abs(tau) >= OFFSET_SIGNIFICANCE * se
+    return SessionNuisance(
+        nuisance.session, nuisance.runs, time_offset=tau if keep else 0.0, time_offset_se=se
+    )
+
+
+def _with_clock(
+    nuisances: Mapping[str, SessionNuisance], clock: Mapping[str, SessionNuisance]
+) -> dict[str, SessionNuisance]:
+    """``nuisances`` (frames, fitted on runs whose clocks were already corrected) with each
+    session's time offset from ``clock`` put back."""
+    out = {}
+    for session, n in nuisances.items():
+        c = clock.get(session)
+        out[session] = (
+            dataclasses.replace(n, time_offset=c.time_offset, time_offset_se=c.time_offset_se)
+            if c is not None
+            else n
+        )
+    return out
+
+
+def _significant_effects(state: DiagnosisState) -> list[str]:
+    """Every systematic catalogue effect some round found significant (named, absorbed or
+    beaten by another), in the order first found: the open-loop gate's pool. Those tied in a
+    last round that ended ``ambiguous`` stay out: the data cannot tell them apart, and the
+    verdict says so with the experiment that would."""
+    found = [c.name for c in state.candidates if c.significant]
+    last = state.rounds[-1] if state.rounds else None
+    tied = set(last.tied) if last is not None and last.verdict == "ambiguous" else set()
+    return [
+        n for n in dict.fromkeys([*state.named, *found]) if not EFFECTS[n].noise and n not in tied
+    ]
+
+
+def _terms_tried(passes: Sequence[Discovery]) -> int:
+    """How many grammar terms the discovery tried: the library's identifiable terms (0 when no
+    pass ran)."""
+    if not passes:
+        return 0
+    return len(TERMS) - len(passes[-1].dropped)
+
+
+def _discovered_order(state: DiagnosisState) -> list[str]:
+    """The discovered terms of the rounds' final model, in the order the passes found them."""
+    present = state.model.spec.effect_values(DISCOVERED) or {}
+    order = [t for found in state.passes for t in found.terms]
+    return [t for t in dict.fromkeys(order) if present.get(t, 0.0) != 0.0]
+
+
+def _kept_terms(
+    state: DiagnosisState,
+    terms: Sequence[str],
+    chosen: SystematicFit,
+    runs: Sequence[Run],
+) -> list[dict[str, Any]]:
+    """``report.json``'s ``discovered`` list for the kept ``terms``: each at its final value
+    with its standard error, and the binned channel data behind it."""
+    merged: dict[str, dict[str, Any]] = {}
+    for found in state.passes:
+        for entry in found.entries():
+            merged[entry["term"]] = entry
+    values = {t: chosen.entries[f"{DISCOVERED}.{t}"]["value"] for t in terms}
+    errors = {t: chosen.entries[f"{DISCOVERED}.{t}"]["stderr"] for t in terms}
+    out = []
+    for t in terms:
+        entry = dict(merged[t])
+        entry["discovery_coefficient"] = entry["coefficient"]
+        entry["coefficient"] = values[t]
+        entry["stderr"] = errors[t]
+        entry["sentence"] = term_sentence(t, values, errors)
+        entry["evidence"] = channel_evidence(runs, state.before_discovery, t)
+        out.append(entry)
+    return out
+
+
+def _parameters(
+    chosen: SystematicFit, effects: Sequence[str]
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Each kept catalogue effect's parameters (value and standard errors) from ``chosen``."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for name in effects:
+        prefix = f"{name}."
+        out[name] = {
+            key[len(prefix) :]: entry
+            for key, entry in chosen.entries.items()
+            if key.startswith(prefix)
+        }
+    return out
+
+
+def _geometry_moves(
+    without: SystematicFit, with_noise: SystematicFit, noise: Sequence[str]
+) -> dict[str, dict[str, Any]]:
+    """E_d, E_b, E_s fitted without and with the noise effects that move the mean: each value,
+    the change, its standard error and whether the change is within it, naming the noise
+    effects that moved it."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, key in (
+        ("wheel_diameter_ratio", "e_d"),
+        ("wheelbase", "e_b"),
+        ("distance_scale", "e_s"),
+    ):
+        before = float(getattr(without.spec, key))
+        after = float(getattr(with_noise.spec, key))
+        se = without.entries.get(f"{name}.{key}", {}).get("stderr", math.nan)
+        out[f"E_{key[-1]}"] = {
+            "without_noise_effects": before,
+            "with_noise_effects": after,
+            "change": after - before,
+            "stderr": se,
+            "within_errors": bool(abs(after - before) <= se) if math.isfinite(se) else None,
+            "moved_by": list(noise) if before != after else [],
+        }
+    return out
+
+
 def diagnose(
     runs: Sequence[Run],
     robot: RobotSpec,
     config: DiagnoseConfig | None = None,
     *,
+    baseline: Baseline | None = None,
     progress: Callable[[str, float], None] | None = None,
     journal: FitJournal | None = None,
 ) -> Diagnosis:
     """Run the workflow of the module docstring on ``runs`` with the model ``robot``.
 
-    ``journal``: store every finished candidate fit there, and take the fits it already holds
+    ``baseline``: a calibration a user already trusts (:class:`odomgym.diagnose.heldout.
+    Baseline`), run on the same fit runs and compared on the held-out ones; ``journal``: store
+    every finished candidate fit there, and take the fits it already holds
     (:class:`FitJournal`: an interrupted diagnosis resumed gives the same result)."""
     cfg = config if config is not None else DiagnoseConfig()
 
@@ -862,30 +1091,61 @@ def diagnose(
 
     _check_runs(runs)
     rng = np.random.default_rng(cfg.seed)
-    fit_index, held_index = split_runs(runs, cfg.holdout, rng)
+    fit_index, held_index, split = split_runs(runs, cfg.holdout, rng)
     fit_runs = [runs[j] for j in fit_index]
     held_runs = [runs[j] for j in held_index]
     if len(fit_runs) < 2:
         raise SpecError("too few runs left to fit after the hold-out split", field="holdout")
-    data = Dataset.of(fit_runs, cfg.checkpoint_interval)
-    names = cfg.candidates or tuple(EFFECTS)
-    model = fit_noise_model(data, Model(robot, SensorNoise(*cfg.initial_sensor)))
-    frames: list[SessionFrame] = []
     use_frames = cfg.session_frames
     if use_frames is None:
         use_frames = len(set(sessions_of(runs))) >= 2
+    clock_options = NuisanceOptions(
+        time_offset=cfg.time_offset, frames=use_frames, max_time_offset=cfg.max_time_offset
+    )
+    interval, length = cfg.checkpoint_interval, float(robot.wheelbase)
+    # 1. The recording's nuisances, fitted jointly with the geometry (E_d, E_b, E_s) so that a
+    # curving straight is not read as a tilted frame, nor a scale as a clock. A time offset is
+    # removed only where the data show one (module docstring of odomgym.diagnose.nuisances):
+    # resampling the counts at a spurious offset adds the acceleration-correlated disagreement
+    # the filter is most sensitive to.
+    report("measurement nuisances", 0.0)
+    geometry = model_effect(GEOMETRY, [])
+    clock = {
+        s: _significant_offset(n)
+        for s, n in fit_open_loop(
+            OpenLoopData(fit_runs, interval, length), robot, geometry, clock_options
+        ).nuisances.items()
+    }
+    timed = correct_runs(fit_runs, clock)
+    options = NuisanceOptions(time_offset=False, frames=use_frames)
+    open_data = OpenLoopData(timed, interval, length)
+    nuisances = (
+        fit_open_loop(open_data, robot, geometry, options).nuisances
+        if use_frames
+        else {s: SessionNuisance(s, n.runs) for s, n in clock.items()}
+    )
+    fit_corrected = correct_runs(timed, nuisances)
+    data = Dataset.of(fit_corrected, interval)
+    names = cfg.candidates or tuple(EFFECTS)
     if use_frames:
-        # Per-session tracked point and yaw: fitted on the fit runs, removed from every run.
-        report("session frames", 0.0)
-        frames = fit_session_frames(data, model.spec, model.sensor)
-        runs = correct_runs(runs, frames)
-        fit_runs = [runs[j] for j in fit_index]
-        held_runs = [runs[j] for j in held_index]
-        data = Dataset.of(fit_runs, cfg.checkpoint_interval)
         names = tuple(n for n in names if n not in SESSION_EFFECTS)
-        model = fit_noise_model(data, model)
+    model = fit_noise_model(data, Model(robot, SensorNoise(*cfg.initial_sensor)))
+    # The model as given, open loop: its own nuisances; the held-out sessions' on their own.
+    nominal = fit_open_loop(open_data, robot, None, options, nuisances)
+    pictured = pictured_runs(held_runs)
+    as_given = evaluate_open_loop(
+        AS_GIVEN,
+        held_runs,
+        robot,
+        _with_clock(nominal.nuisances, clock),
+        clock_options,
+        interval,
+        length,
+        pictured,
+    )
     report("where", 0.0)
-    findings = localise(run_residuals(runs, robot), cfg.alpha)
+    shown = [*fit_corrected, *correct_runs(held_runs, as_given.nuisances)]
+    findings = localise(run_residuals(shown, robot), cfg.alpha)
     nuisance = EFFECTS.get(NUISANCE)
     excluded = (NUISANCE, DISCOVERED)
     systematic = [e.name for e in candidate_effects(excluded) if not e.noise and e.name in names]
@@ -894,7 +1154,7 @@ def diagnose(
     # noise model: a noise effect may stand for nothing a systematic term explains.
     ctx = RoundContext(
         data=data,
-        folds=folds_for(fit_runs, min(cfg.folds, len(fit_runs)), rng),
+        folds=folds_for(fit_corrected, min(cfg.folds, len(fit_corrected)), rng),
         nuisance=nuisance,
         stages=[
             ("mean", systematic, nuisance),
@@ -918,29 +1178,179 @@ def diagnose(
         state.model = Model(spec, state.model.sensor)
         state.named.remove(name)
         state.parameters.pop(name, None)
-    if absorbed:
-        state.model = fit_noise_model(data, state.model)
-    # The final model on runs the fit never saw: does any structure remain?
+    # 2. Physical sizes: a discovered term implausible at the data's operating range is a
+    # stand-in (for a clock, a frame or a mechanism the grammar lacks), reported, not kept.
+    proposed_terms = _discovered_order(state)
+    present = state.model.spec.effect_values(DISCOVERED) or {}
+    sizes = [term_size(fit_corrected, state.model.spec, t, present[t]) for t in proposed_terms]
+    plausible_terms = [size.term for size in sizes if size.plausible]
+    # 3. The open-loop gate: each proposal in turn must lower the error of predicting the
+    # held-out folds (whole sessions, or blocks of time) open loop.
+    proposed_effects = _significant_effects(state)
+    # The filter's estimates, linearised at the rounds' model, without a noise effect's mean part
+    # (floor bumps shorten the travel: their partner takes it in the fits).
+    base = state.model.spec
+    for name in state.named:
+        if EFFECTS[name].noise and type(EFFECTS[name]).replay is not Effect.replay:
+            base = EFFECTS[name].write(base, EFFECTS[name].absent_values())
+    linearised = FilterLinearisation(
+        data, Model(base, state.model.sensor), proposed_effects, plausible_terms
+    )
+    gate = open_loop_gate(
+        open_data,
+        robot,
+        state.model.spec,
+        proposed_effects,
+        plausible_terms,
+        options,
+        open_loop_folds(fit_runs),
+        start=nuisances,
+        nominal=nominal,
+        report=report,
+        filtered=linearised,
+        corrected=OpenLoopData(fit_corrected, interval, length),
+        named=[n for n in state.named if not EFFECTS[n].noise],
+    )
+    # 4. The estimator of the kept model's values: the filter's (efficient when its noise model
+    # is right) or the open-loop fit's (what the held-out comparison measures), whichever
+    # predicts the left-out folds better open loop.
+    kept = list(gate.effects)
+    chosen = open_loop_estimate(gate.fit, gate.cv_error)
+    corrected_final = correct_runs(timed, gate.fit.nuisances)
+    kf_data = Dataset.of(corrected_final, interval)
+    corrected_open = OpenLoopData(corrected_final, interval, length)
+    effect = model_effect(kept, gate.terms)
+
+    def by_filter(spec_start: RobotSpec, effect_now: Effect) -> SystematicFit:
+        start_model = fit_noise_model(kf_data, Model(spec_start, state.model.sensor), nuisance)
+        return filter_estimate(
+            kf_data, start_model, effect_now, nuisance, corrected_open, gate.folds, spec_start
+        )
+
+    estimators: dict[str, float] = {"open loop": chosen.fold_error(gate.folds)}
+    if effect is not None:
+        report("estimator", 1.0)
+        filtered = by_filter(spec_with(gate.fit.spec, state.model.spec, kept, gate.terms), effect)
+        estimators["filter"] = filtered.fold_error(gate.folds)
+        if estimators["filter"] < estimators["open loop"]:
+            chosen = filtered
+    # 5. Noise effects: named by the rounds' held-out likelihood; floor bumps only with their
+    # signature and a size the floor can produce. One with a mean part (bumps shorten travel)
+    # is fitted beside its systematic partners, and how far it moved E_d, E_b, E_s is reported.
+    noise_checks: dict[str, dict[str, Any]] = {}
+    noise_kept: list[str] = []
+    for name in (n for n in state.named if EFFECTS[n].noise):
+        values = EFFECTS[name].read(state.model.spec)
+        if EFFECTS[name].wheel_jumps(values, np.ones((1, 2)), length) is not None:
+            check = check_bumps(
+                corrected_final,
+                chosen.spec,
+                values,
+                max_obstacle=cfg.max_obstacle,
+                max_rate=cfg.max_bump_rate,
+                interval=interval,
+                alpha=0.5 * cfg.alpha,
+            )
+            noise_checks[name] = check.as_dict()
+            if not check.accepted:
+                continue
+        noise_kept.append(name)
+    spec = chosen.spec
+    for name in noise_kept:
+        spec = EFFECTS[name].write(spec, EFFECTS[name].read(state.model.spec))
+    geometry_check: dict[str, dict[str, Any]] = {}
+    moving = [n for n in noise_kept if type(EFFECTS[n]).replay is not Effect.replay]
+    if moving:
+        kept += [p for n in moving for p in EFFECTS[n].partners if p not in kept]
+        joint = model_effect(kept, gate.terms)
+        assert joint is not None  # the partners at least
+        if chosen.estimator == "filter":
+            refit = by_filter(spec, joint)
+        else:
+            again = fit_open_loop(open_data, spec, joint, options, gate.fit.nuisances)
+            refit = open_loop_estimate(
+                again, cross_validate_open_loop(open_data, again, gate.folds)
+            )
+        geometry_check = _geometry_moves(chosen, refit, moving)
+        chosen, spec = refit, refit.spec
+    named = kept + noise_kept
+    parameters = _parameters(chosen, kept)
+    for name in noise_kept:
+        parameters[name] = state.parameters.get(name, {})
     report("held-out test", 1.0)
-    held_data = Dataset.of(held_runs, cfg.checkpoint_interval)
-    verdict, final_test = _final_test(held_data, state, cfg.alpha, cfg.seed)
+    final_model = fit_noise_model(kf_data, Model(spec, state.model.sensor))
+    # 5. The held-out runs: the model as given, the diagnosed one and the baseline, open loop.
+    models = {AS_GIVEN: as_given}
+    final_nuisances = _with_clock(gate.fit.nuisances, clock)
+    models[DIAGNOSED] = evaluate_open_loop(
+        DIAGNOSED, held_runs, spec, final_nuisances, clock_options, interval, length, pictured
+    )
+    baseline_name, baseline_geometry = None, None
+    if baseline is not None:
+        report("baseline", 1.0)
+        base_spec = baseline(fit_corrected, robot)
+        base_fit = fit_open_loop(open_data, base_spec, None, options, nuisances)
+        models[BASELINE] = evaluate_open_loop(
+            BASELINE,
+            held_runs,
+            base_spec,
+            _with_clock(base_fit.nuisances, clock),
+            clock_options,
+            interval,
+            length,
+            pictured,
+        )
+        baseline_name = baseline.name
+        baseline_geometry = {"E_d": base_spec.e_d, "E_b": base_spec.e_b, "E_s": base_spec.e_s}
+    truth = {
+        _run_id(held_runs[j], j): np.column_stack(
+            [held_runs[j].time - held_runs[j].time[0], held_runs[j].true_pose[:, :2]]
+        )
+        for j in pictured
+    }
+    held_out = compare_models(
+        split, models, np.random.default_rng(cfg.seed + 2), baseline_name, baseline_geometry, truth
+    )
+    held_corrected = correct_runs(held_runs, models[DIAGNOSED].nuisances)
+    found_anything = bool(named) or bool(gate.terms)
+    last = state.rounds[-1].verdict if state.rounds else "none"
+    verdict, final_test = _final_test(
+        Dataset.of(held_corrected, interval), final_model, found_anything, last, cfg.alpha, cfg.seed
+    )
+    if found_anything and not held_out.better_than_as_given:
+        verdict = "unconfirmed"
     final_test["absorbed"] = absorbed
     report("shrink", 1.0)
-    gaps = _shrink(held_runs, robot, state.model, cfg)
+    gaps = _shrink(held_corrected, robot, final_model, cfg)
     return Diagnosis(
         verdict=verdict,
-        named_effects=state.named,
-        parameters=state.parameters,
+        named_effects=named,
+        parameters=parameters,
         initial=robot,
-        model=state.model.spec,
-        sensor=state.model.sensor,
+        model=spec,
+        sensor=final_model.sensor,
         rounds=state.rounds,
         candidates=state.candidates,
         findings=findings,
-        discovered=_with_evidence(state.passes, fit_runs, state.before_discovery),
+        discovered=_kept_terms(state, gate.terms, chosen, corrected_final),
         discovery=_discovery_record(state.passes),
         final_test=final_test,
-        session_frames=frames,
+        nuisances=list(final_nuisances.values()),
+        estimators={
+            "chosen": chosen.estimator,
+            "held_out_fold_rms_mm": {k: 1e3 * math.sqrt(v) for k, v in estimators.items()},
+        },
+        held_out=held_out,
+        gate=gate.steps,
+        stand_ins=[size.as_dict() for size in sizes if not size.plausible],
+        noise_checks=noise_checks,
+        geometry_check=geometry_check,
+        filter_parameters={
+            name: {key: entry["value"] for key, entry in state.parameters[name].items()}
+            for name in state.named
+            if name in state.parameters
+        },
+        terms_tried=_terms_tried(state.passes),
         fit_runs=[_run_id(runs[j], j) for j in fit_index],
         holdout_runs=[_run_id(runs[j], j) for j in held_index],
         **gaps,

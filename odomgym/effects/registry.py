@@ -83,8 +83,11 @@ class WorldView(Protocol):
     (:class:`odomgym.physics.World` is one). Arrays are per robot, N rows."""
 
     n: int
-    time: float
-    """Simulated time since the World's start [s]."""
+
+    @property
+    def time(self) -> float:
+        """Simulated time since the World's start [s]."""
+
     pose: FloatArray
     """True axle-midpoint poses (N, 3) [m, m, rad]."""
     half_track: FloatArray

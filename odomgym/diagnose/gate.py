@@ -1,0 +1,479 @@
+"""The open-loop gate: keep only what predicts the robot better on data the fit never saw.
+
+The rounds of :mod:`odomgym.diagnose.workflow` name catalogue effects and discover grammar terms
+by likelihood, whose noise model can absorb what the systematic part lacks: on real logs the
+whitened gap then "closes" while the model predicts the robot worse (a real-robot diagnosis went
+from 108 to 163 mm of open-loop error on held-out sessions while its whitened gap said 99 %
+closed). The gate keeps a proposal only if the model with it predicts the held-out folds better
+*open loop, in plain units* than the model without it
+(:func:`odomgym.diagnose.openloop.cross_validate_open_loop`: whole sessions left out, or
+contiguous blocks of runs with one session). It works backwards from the model with every
+proposal (backward elimination): each proposal is tested against the model without it, the least
+useful one that fails goes, and the rest are tested again — tested one at a time on a model
+missing the others, a real effect can look useless (a scale fitted while a large diameter ratio
+is missing takes part of the curvature and predicts worse than nothing). The rules:
+
+* a catalogue effect the rounds named stays if the mean held-out error over the folds is lower
+  with it; one they found significant but did not name (beaten by another in the filter's
+  likelihood — on the June OptiOdom sessions the wheelbase, behind a turn skid) must lower it by
+  more than one standard error, as a term must;
+* a discovered term (a sinusoid's sine and cosine together) stays if it lowers the error by more
+  than one standard error of the folds' differences —
+  the one-standard-error rule (Breiman, Friedman, Olshen & Stone 1984, §3.4.3; Hastie,
+  Tibshirani & Friedman 2009, §7.10): a term must earn its place against the smaller model.
+
+Every model is fitted two ways, and judged by whichever predicts the folds better: by least
+squares on the open-loop error (:func:`odomgym.diagnose.openloop.fit_open_loop`, jointly with the
+sessions' nuisances; robust to a wrong noise model) and by the filter's generalised least
+squares, linearised at the rounds' model (:class:`FilterLinearisation`; efficient when the noise
+model is right — on simulated robots with wheel noise the open-loop fit alone cannot resolve
+effects the filter pins down, a 1.3 mrad wheel toe or a 0.015 rad backlash, and would drop
+them).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.diagnose.fit import (
+    Dataset,
+    Joint,
+    Model,
+    build_within,
+    fit_candidate,
+    gauss_newton_step,
+    systematic_vector,
+    whitened_stack,
+)
+from odomgym.diagnose.nuisances import SessionNuisance
+from odomgym.diagnose.openloop import (
+    NuisanceOptions,
+    OpenLoopData,
+    OpenLoopFit,
+    cross_validate_open_loop,
+    fit_open_loop,
+    run_errors,
+)
+from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
+from odomgym.robot import RobotSpec
+
+__all__ = [
+    "FilterLinearisation",
+    "GateResult",
+    "GateStep",
+    "SystematicFit",
+    "filter_estimate",
+    "model_effect",
+    "open_loop_estimate",
+    "open_loop_gate",
+    "spec_with",
+    "term_proposals",
+]
+
+FloatArray = NDArray[np.float64]
+DISCOVERED = "discovered"
+
+
+@dataclass(frozen=True)
+class GateStep:
+    """One proposal tried by the gate.
+
+    Attributes:
+        kind: ``"effect"`` (catalogue) or ``"term"`` (discovered; a sinusoid's sine and cosine
+            are one proposal, ``"right_sin1+right_cos1"``).
+        name: the effect's or term's name.
+        kept: whether it joined the model.
+        before_mm, after_mm: held-out RMS combined open-loop error without and with it [mm]
+            (runs weigh equally).
+        difference, stderr: mean over the folds of the change of their mean square error, and
+            its standard error [mm²].
+        rule: the rule it had to pass (``"lower"`` or ``"one standard error"``).
+        estimator: whose fold refits predicted the folds better, and so were compared:
+            ``"open loop"`` or ``"filter"`` (:class:`FilterLinearisation`).
+    """
+
+    kind: str
+    name: str
+    kept: bool
+    before_mm: float
+    after_mm: float
+    difference: float
+    stderr: float
+    rule: str
+    estimator: str = "open loop"
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class GateResult:
+    """What the gate kept, and the exact fit of the kept model.
+
+    Attributes:
+        steps: every proposal tried, in order.
+        effects: the catalogue effects kept (in order); terms: the discovered terms kept.
+        fit: the kept model's open-loop fit (the robot as given when nothing was kept).
+        cv_error: each fit run's held-out mean square combined error under the kept model [m²].
+        nominal_cv_error: the same under the model as given (its nuisances fitted) [m²].
+        folds: the cross-validation folds (indices of the fit runs).
+    """
+
+    steps: list[GateStep]
+    effects: list[str]
+    terms: list[str]
+    fit: OpenLoopFit
+    cv_error: FloatArray
+    nominal_cv_error: FloatArray
+    folds: list[list[int]]
+
+
+def model_effect(effects: Sequence[str], terms: Sequence[str]) -> Effect | None:
+    """The systematic parameters of a model as one effect: the catalogue ``effects`` and the
+    grammar ``terms`` side by side (None when there are none)."""
+    parts: list[Effect] = [EFFECTS[name] for name in effects]
+    if terms:
+        parts.append(DiscoveredTerms(list(terms)))
+    return Joint(parts) if parts else None
+
+
+def spec_with(
+    robot: RobotSpec, proposed: RobotSpec, effects: Sequence[str], terms: Sequence[str]
+) -> RobotSpec:
+    """``robot`` with ``effects`` and ``terms`` at their values in ``proposed``."""
+    spec = robot
+    for name in effects:
+        spec = EFFECTS[name].write(spec, EFFECTS[name].read(proposed))
+    if terms:
+        chosen = DiscoveredTerms(list(terms))
+        spec = chosen.write(spec, chosen.read(proposed))
+    return spec
+
+
+def _fold_means(per_run: FloatArray, folds: Sequence[Sequence[int]]) -> FloatArray:
+    return np.array([float(np.mean(per_run[list(f)])) for f in folds])
+
+
+class FilterLinearisation:
+    """The filter's view of every proposal at once, for the gate's cheap filter estimates.
+
+    The whitened innovations of the rounds' final model (``base``: every proposal at the
+    rounds' values, its wheel noise and sensor noise as fitted) and their derivatives with
+    respect to every proposal's parameters (central differences, in units of each parameter's
+    scale). A sub-model's parameters — some proposals kept, the others at their absent values —
+    are then one Gauss–Newton step from there on the runs of a fold's complement: the filter's
+    generalised least squares, linearised, as the rounds' own cross-validation does it.
+    """
+
+    def __init__(
+        self,
+        data: Dataset,
+        base: Model,
+        effects: Sequence[str],
+        terms: Sequence[str],
+        step: float = 0.05,
+    ) -> None:
+        joint = model_effect(effects, terms)
+        self.keys: list[str] = [p.name for p in joint.parameters] if joint is not None else []
+        self.whitened: list[FloatArray] = whitened_stack(data, base.spec, base.sensor)[1]
+        self.columns: list[FloatArray] = [np.zeros((len(w), 0)) for w in self.whitened]
+        self.current = np.zeros(len(self.keys))
+        self.absent = np.zeros(len(self.keys))
+        self.build: Callable[[FloatArray], RobotSpec] = lambda u: base.spec
+        if joint is None:
+            return
+        u0, _, _, build = systematic_vector(base.spec, joint)
+        self.build = build
+        values = joint.read(base.spec)
+        self.current = np.array([values[k] for k in self.keys])
+        self.absent = np.array([p.absent for p in joint.parameters])
+        self.scale = np.array([p.scale for p in joint.parameters])
+        columns: list[list[FloatArray]] = [[] for _ in self.whitened]
+        for k in range(len(u0)):
+            du = np.zeros_like(u0)
+            du[k] = step
+            _, plus = whitened_stack(data, build(u0 + du), base.sensor)
+            _, minus = whitened_stack(data, build(u0 - du), base.sensor)
+            for j in range(len(self.whitened)):
+                columns[j].append((plus[j] - minus[j]) / (2.0 * step))
+        self.columns = [np.stack(c, axis=1) for c in columns]
+
+    def spec_for(self, kept: Sequence[str], train: Sequence[int]) -> RobotSpec:
+        """The robot with the parameters ``kept`` (``EFFECT.PARAMETER`` keys) fitted on the runs
+        ``train`` by one Gauss–Newton step, every other proposal at its absent value."""
+        u = np.zeros(len(self.keys))
+        if not self.keys:
+            return self.build(u)
+        inside = np.array([k in set(kept) for k in self.keys])
+        u[~inside] = (self.absent[~inside] - self.current[~inside]) / self.scale[~inside]
+        if inside.any():
+            a = np.zeros((int(inside.sum()),) * 2)
+            b = np.zeros(int(inside.sum()))
+            for j in train:
+                cols = self.columns[j]
+                rest = self.whitened[j] + cols[:, ~inside] @ u[~inside]
+                a += cols[:, inside].T @ cols[:, inside]
+                b += cols[:, inside].T @ rest
+            u[inside] = gauss_newton_step(a, b)
+        return build_within(self.build, np.zeros(len(self.keys)), u)
+
+    def cross_validate(
+        self, kept: Sequence[str], open_data: OpenLoopData, folds: Sequence[Sequence[int]]
+    ) -> FloatArray:
+        """Each run's held-out mean square combined open-loop error [m²] under the filter's
+        fit of ``kept`` without its fold (``open_data``: the same runs, nuisances removed)."""
+        out = np.empty(len(open_data))
+        for fold in folds:
+            held = set(fold)
+            spec = self.spec_for(kept, [j for j in range(len(open_data)) if j not in held])
+            out[list(fold)] = run_errors(open_data.subset(list(fold)), spec)
+        return out
+
+
+def term_proposals(terms: Sequence[str]) -> list[str]:
+    """The discovered ``terms`` as the gate's proposals, in order: a sine and a cosine of the
+    same channel and harmonic are one sinusoid (``"right_sin1+right_cos1"``), proposed together
+    where the first of the two stood — alone, either is a sinusoid at a phase the data did not
+    choose."""
+    out: list[str] = []
+    for name in terms:
+        channel, _, modulator = name.rpartition("_")
+        if modulator[:3] in ("sin", "cos"):
+            other = f"{channel}_{'cos' if modulator.startswith('sin') else 'sin'}{modulator[3:]}"
+            if other in terms:
+                pair = "+".join(sorted((name, other), key=lambda t: "cos" in t))
+                if pair not in out:
+                    out.append(pair)
+                continue
+        out.append(name)
+    return out
+
+
+def open_loop_gate(
+    data: OpenLoopData,
+    robot: RobotSpec,
+    proposed: RobotSpec,
+    effects: Sequence[str],
+    terms: Sequence[str],
+    options: NuisanceOptions,
+    folds: Sequence[Sequence[int]],
+    start: Mapping[str, SessionNuisance] | None = None,
+    nominal: OpenLoopFit | None = None,
+    report: Callable[[str, float], None] | None = None,
+    filtered: FilterLinearisation | None = None,
+    corrected: OpenLoopData | None = None,
+    named: Sequence[str] | None = None,
+) -> GateResult:
+    """Keep those of ``effects`` and ``terms`` (their values in ``proposed``, the rounds'
+    model) that the held-out folds confirm, by backward elimination from all of them on
+    ``robot`` (the model as given) (module docstring). ``named``: the effects the rounds named
+    (default: all of ``effects``); the others must pass the one-standard-error rule, as terms do.
+    ``nominal``: the model as given already fitted (its nuisances) on ``data``; ``start``:
+    nuisances to start from; ``filtered`` and ``corrected``: the filter's linearisation and the
+    runs it was made on, nuisances removed (without them, the open-loop fit alone)."""
+    chosen_by_rounds = set(effects if named is None else named)
+    proposals = [("effect", n) for n in effects] + [("term", n) for n in term_proposals(terms)]
+
+    def parts(members: Sequence[tuple[str, str]]) -> tuple[list[str], list[str]]:
+        return (
+            [n for k, n in members if k == "effect"],
+            [t for k, n in members if k == "term" for t in n.split("+")],
+        )
+
+    def held_out(fit: OpenLoopFit, keys: Sequence[str]) -> tuple[FloatArray, str]:
+        """The fold errors of a model by the better of the two estimators: the open-loop fit
+        (``fit``) or the filter's, linearised (``filtered``, on ``corrected``)."""
+        by_open_loop = cross_validate_open_loop(data, fit, folds)
+        if filtered is None or corrected is None:
+            return by_open_loop, "open loop"
+        by_filter = filtered.cross_validate(keys, corrected, folds)
+        if np.mean(_fold_means(by_filter, folds)) < np.mean(_fold_means(by_open_loop, folds)):
+            return by_filter, "filter"
+        return by_open_loop, "open loop"
+
+    def fitted(
+        members: Sequence[tuple[str, str]],
+        begin: RobotSpec,
+        nuisances: Mapping[str, SessionNuisance] | None,
+    ) -> tuple[OpenLoopFit, FloatArray, str]:
+        effect_names, term_names = parts(members)
+        joint = model_effect(effect_names, term_names)
+        fit = fit_open_loop(data, begin, joint, options, nuisances)
+        keys = [p.name for p in joint.parameters] if joint is not None else []
+        cv, estimator = held_out(fit, keys)
+        return fit, cv, estimator
+
+    nominal_fit = (
+        nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
+    )
+    nominal_cv, _ = held_out(nominal_fit, [])
+    model = list(proposals)
+    effect_names, term_names = parts(model)
+    current, current_cv, current_estimator = (
+        fitted(model, spec_with(robot, proposed, effect_names, term_names), start)
+        if model
+        else (nominal_fit, nominal_cv, "open loop")
+    )
+    removed: list[GateStep] = []
+    tested: dict[tuple[str, str], GateStep] = {}
+    round_number = 0
+    while model:
+        round_number += 1
+        trials: dict[tuple[str, str], tuple[GateStep, OpenLoopFit, FloatArray]] = {}
+        for k, member in enumerate(model):
+            if report is not None:
+                report(f"open-loop check {round_number}: {member[1]}", k / len(model))
+            kind, name = member
+            rest = [m for m in model if m != member]
+            # The smaller model starts from the larger one's fit, the proposal made absent.
+            effect_names, term_names = parts([member])
+            begin = current.spec
+            for e in effect_names:
+                begin = EFFECTS[e].write(begin, EFFECTS[e].absent_values())
+            if term_names:
+                chosen = DiscoveredTerms(term_names)
+                begin = chosen.write(begin, dict.fromkeys(term_names, 0.0))
+            if rest:
+                smaller, smaller_cv, _ = fitted(rest, begin, current.nuisances)
+            else:
+                smaller, smaller_cv = nominal_fit, nominal_cv
+            diff = _fold_means(current_cv, folds) - _fold_means(smaller_cv, folds)
+            mean = float(np.mean(diff))
+            spread = (
+                float(np.std(diff, ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else math.inf
+            )
+            lenient = kind == "effect" and name in chosen_by_rounds
+            step = GateStep(
+                kind=kind,
+                name=name,
+                kept=mean < 0.0 if lenient else mean + spread < 0.0,
+                before_mm=1e3 * math.sqrt(float(np.mean(smaller_cv))),
+                after_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
+                difference=1e6 * mean,
+                stderr=1e6 * spread,
+                rule="lower" if lenient else "one standard error",
+                estimator=current_estimator,
+            )
+            trials[member] = (step, smaller, smaller_cv)
+            tested[member] = step
+        failing = [m for m in model if not trials[m][0].kept]
+        if not failing:
+            break
+        # The least useful proposal goes (the largest change, a term's counted with its
+        # standard error), and the rest are tested again without it.
+        worst = max(
+            failing,
+            key=lambda m: (
+                trials[m][0].difference
+                + (trials[m][0].stderr if trials[m][0].rule != "lower" else 0.0)
+            ),
+        )
+        removed.append(trials[worst][0])
+        model.remove(worst)
+        _, current, current_cv = trials[worst]
+        current_estimator = "open loop"
+        if model:
+            effect_names, term_names = parts(model)
+            joint = model_effect(effect_names, term_names)
+            keys = [p.name for p in joint.parameters] if joint is not None else []
+            current_cv, current_estimator = held_out(current, keys)
+        else:
+            current_cv = nominal_cv
+    kept_steps = [tested[m] for m in model]
+    effect_names, term_names = parts(model)
+    return GateResult(
+        kept_steps + removed,
+        effect_names,
+        term_names,
+        current,
+        current_cv,
+        nominal_cv,
+        [list(f) for f in folds],
+    )
+
+
+@dataclass
+class SystematicFit:
+    """The kept systematic model's parameters by one estimator, and how well its fold refits
+    predict the folds they left out.
+
+    Attributes:
+        estimator: ``"filter"`` (generalised least squares on the Kalman filter's whitened
+            innovations: efficient when the noise model is right) or ``"open loop"`` (least
+            squares on the open-loop error itself: what the held-out comparison measures, and
+            robust to a noise model that is wrong — on a real robot's logs the filter's E_d
+            predicted the held-out sessions worse than nominal, the open-loop one 3× better).
+        spec: the robot with the fitted values.
+        entries: ``{"EFFECT.PARAMETER": {value, stderr, stderr_runs, stderr_sessions}}``.
+        cv_error: each fit run's held-out mean square combined open-loop error [m²].
+    """
+
+    estimator: str
+    spec: RobotSpec
+    entries: dict[str, dict[str, float]]
+    cv_error: FloatArray
+
+    def fold_error(self, folds: Sequence[Sequence[int]]) -> float:
+        """Mean over the folds of their mean square error [m²] (folds weigh equally)."""
+        return float(np.mean(_fold_means(self.cv_error, folds)))
+
+
+def _quoted(by_session: float, by_run: float) -> float:
+    """The standard error to quote: session-clustered where there are sessions, else
+    run-clustered (errors along a run are correlated; model-based ones are far too small)."""
+    return by_session if math.isfinite(by_session) else by_run
+
+
+def open_loop_estimate(fit: OpenLoopFit, cv_error: FloatArray) -> SystematicFit:
+    """The open-loop fit as a :class:`SystematicFit` (its cross-validated errors given)."""
+    entries = {
+        key: {
+            "value": value,
+            "stderr": _quoted(fit.stderr_sessions.get(key, math.nan), fit.stderr_runs[key]),
+            "stderr_runs": fit.stderr_runs.get(key, math.nan),
+            "stderr_sessions": fit.stderr_sessions.get(key, math.nan),
+        }
+        for key, value in fit.values.items()
+    }
+    return SystematicFit("open loop", fit.spec, entries, cv_error)
+
+
+def filter_estimate(
+    data: Dataset,
+    start: Model,
+    effect: Effect,
+    nuisance: Effect | None,
+    open_data: OpenLoopData,
+    folds: Sequence[Sequence[int]],
+    base: RobotSpec,
+) -> SystematicFit:
+    """``effect`` fitted by the filter (:func:`odomgym.diagnose.fit.fit_candidate`, the wheel
+    noise ``nuisance`` beside it) from ``start`` on ``data``, and cross-validated open loop:
+    each fold's parameters one Gauss–Newton step on the whitened system without it, its runs
+    (``open_data``: the same runs, nuisances removed) replayed open loop. The values are
+    written onto ``base`` (the nuisance's fitted wheel noise is not a finding)."""
+    fit = fit_candidate(data, start.spec, start.sensor, effect, nuisance)
+    _, _, _, build = systematic_vector(fit.spec, effect)
+    cv = np.empty(len(data))
+    for fold in folds:
+        held = set(fold)
+        train = [j for j in range(len(data)) if j not in held]
+        a = np.sum([fit.jacobian[j].T @ fit.jacobian[j] for j in train], axis=0)
+        b = np.sum([fit.jacobian[j].T @ fit.whitened[j] for j in train], axis=0)
+        step = gauss_newton_step(a, b)
+        cv[list(fold)] = run_errors(
+            open_data.subset(list(fold)), build_within(build, np.zeros(len(step)), step)
+        )
+    spec = effect.write(base, fit.values)
+    entries = {}
+    for key, value in fit.values.items():
+        entry = fit.entry(key, value)
+        entry["stderr"] = _quoted(entry["stderr_sessions"], entry["stderr"])
+        entries[key] = entry
+    return SystematicFit("filter", spec, entries, cv)

@@ -1,0 +1,720 @@
+"""The open-loop prediction of a robot model, in plain units: what a diagnosed model is judged by.
+
+A model is better than another only if it predicts the robot's poses better *from the wheel
+motions alone*, on runs — on a real robot, on sessions — it was not fitted on. That is what a
+roboticist uses a model for (dead reckoning, or a simulator that behaves like the robot), and it
+cannot be gamed by a noise model that merely widens the predicted spread, as a whitened gap can.
+
+**Error.** A run's logged counts are replayed through the model (:func:`odomgym.diagnose.replay.
+replay_run`) from its first measured pose, after its session's measurement nuisances are removed
+(:mod:`odomgym.diagnose.nuisances`); the error at every measured sample after the first is
+measured − predicted: position [m], heading [rad]. The *combined* error of a sample is
+|Δp|² + (L·Δθ)², L = the model's nominal wheelbase [m/rad] (a heading error weighs as the
+displacement it makes at the wheels); a run's mean square error is its mean over the samples, one
+per ``interval`` seconds; runs weigh equally. The reports give position and heading RMS
+separately, over every measured sample.
+
+**Fit.** Least squares on those errors (:func:`fit_open_loop`, :func:`scipy.optimize.least_squares`,
+trust-region reflective): a model's systematic parameters jointly with each session's nuisances
+(Furgale, Rehder & Siegwart 2013 fit the time offset jointly with the rest, as here), by finite
+differences over a block-sparse Jacobian (a session's nuisances touch only its runs). The
+nuisances start from a coarse search: the time offset on a grid, the yaw misalignment in closed
+form for each (it rotates the predicted path about its start: a Procrustes rotation), so any yaw
+and offsets up to ``max_time_offset`` are found. Errors along a run are strongly correlated, so
+model-based standard errors would be far too small: they are cluster-robust, by run and by
+session (Liang & Zeger 1986).
+
+**Cross-validation.** :func:`open_loop_folds` leaves whole sessions out (or, with one session,
+per experiment family a contiguous block of runs in time); a fold's parameters are one
+Gauss–Newton step from the full fit without the fold's rows (exact for the linear part), and a
+left-out session's nuisances are then fitted on its own runs with the robot fixed — they belong
+to that recording, and every model compared gets the same treatment
+(:func:`cross_validate_open_loop`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.diagnose.fit import build_within, gauss_newton_step, strata, systematic_vector
+from odomgym.diagnose.likelihood import measurement_mask
+from odomgym.diagnose.nuisances import SessionNuisance, correct_run, sessions_of
+from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.stats import clustered_covariance
+from odomgym.effects import Effect
+from odomgym.errors import SpecError
+from odomgym.metrics import e_max_syst
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+__all__ = [
+    "ModelErrors",
+    "NuisanceOptions",
+    "OpenLoopData",
+    "OpenLoopFit",
+    "cross_validate_open_loop",
+    "evaluate_open_loop",
+    "fit_open_loop",
+    "open_loop_folds",
+    "pose_errors",
+    "predicted_path",
+    "run_errors",
+]
+
+FloatArray = NDArray[np.float64]
+_NUISANCE_SCALE = np.array([0.01, 1e-3, 1e-3, 1e-2])  # τ [s], dx, dy [m], δ [rad]: fit units
+_NUISANCE_BOUND = np.array([math.inf, 1.0, 1.0, math.inf])  # |dx|, |dy| < 1 m
+_GRID_STEP = 0.05  # [s]: the time-offset grid of the starting search
+
+
+@dataclass(frozen=True)
+class NuisanceOptions:
+    """Which measurement nuisances are fitted per session.
+
+    Attributes:
+        time_offset: fit the time offset τ of the encoder log against the ground truth.
+        frames: fit the tracked point (dx, dy) and the yaw misalignment δ (on when the runs
+            come from two or more sessions: with one session they are the catalogue's
+            ``gt_sensor_offset`` and ``wheel_toe``).
+        max_time_offset: the largest |τ| searched and allowed [s].
+    """
+
+    time_offset: bool = True
+    frames: bool = False
+    max_time_offset: float = 1.0
+
+    @property
+    def active(self) -> tuple[int, ...]:
+        """Indices of the fitted nuisances in (τ, dx, dy, δ)."""
+        return ((0,) if self.time_offset else ()) + ((1, 2, 3) if self.frames else ())
+
+
+class OpenLoopData:
+    """Runs with the samples whose open-loop error counts (:func:`measurement_mask`: measured
+    components, one sample per ``interval``, never the first) and each run's weight."""
+
+    def __init__(self, runs: Sequence[Run], interval: float, length: float) -> None:
+        self.runs = list(runs)
+        self.interval = interval
+        self.length = length
+        self.masks = [measurement_mask(r, interval) for r in self.runs]
+        self.sessions = sessions_of(self.runs)
+        # Runs weigh equally: each run's residuals are divided by √(its measured samples).
+        self.weights = [1.0 / math.sqrt(max(int(m.any(axis=1).sum()), 1)) for m in self.masks]
+
+    def subset(self, index: Sequence[int]) -> OpenLoopData:
+        out = OpenLoopData.__new__(OpenLoopData)
+        out.runs = [self.runs[j] for j in index]
+        out.interval, out.length = self.interval, self.length
+        out.masks = [self.masks[j] for j in index]
+        out.sessions = [self.sessions[j] for j in index]
+        out.weights = [self.weights[j] for j in index]
+        return out
+
+    def __len__(self) -> int:
+        return len(self.runs)
+
+
+def _wrap(angle: FloatArray) -> FloatArray:
+    wrapped: FloatArray = np.mod(angle + math.pi, 2.0 * math.pi) - math.pi
+    return wrapped
+
+
+def pose_errors(run: Run, spec: RobotSpec, nuisance: SessionNuisance | None) -> FloatArray:
+    """Measured − predicted poses (T, 3) [m, m, rad] of ``run`` replayed open loop through
+    ``spec`` with ``nuisance`` removed; heading wrapped to [−π, π); NaN where not measured."""
+    fixed = correct_run(run, nuisance)
+    error = fixed.true_pose - replay_run(fixed, spec).tracked
+    error[:, 2] = _wrap(error[:, 2])
+    return error
+
+
+def predicted_path(run: Run, spec: RobotSpec, nuisance: SessionNuisance | None) -> FloatArray:
+    """Where ``spec`` predicts the tracked point of ``run`` (T, 2) [m], open loop, in the ground
+    truth's own frame: the replay (nuisances removed) with the tracked-point offset put back."""
+    fixed = correct_run(run, nuisance)
+    tracked = replay_run(fixed, spec).tracked
+    dx, dy = (nuisance.dx, nuisance.dy) if nuisance is not None else (0.0, 0.0)
+    c, s = np.cos(tracked[:, 2]), np.sin(tracked[:, 2])
+    out: FloatArray = np.stack(
+        [tracked[:, 0] + c * dx - s * dy, tracked[:, 1] + s * dx + c * dy], 1
+    )
+    return out
+
+
+def _residual(
+    data: OpenLoopData, j: int, spec: RobotSpec, nuisance: SessionNuisance | None
+) -> FloatArray:
+    error = pose_errors(data.runs[j], spec, nuisance)
+    error[:, 2] *= data.length
+    out: FloatArray = error[data.masks[j]] * data.weights[j]
+    return out
+
+
+def _speeds(run: Run, spec: RobotSpec) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Interval midpoints [s], the encoders' body speed [m/s] and turn rate [rad/s] there (the
+    nominal geometry), and the interval lengths [s]."""
+    dt = np.diff(run.time)
+    safe = np.where(dt > 0, dt, np.inf)
+    travel = np.diff(run.counts.astype(np.float64), axis=0) * (
+        math.pi * spec.wheel_diameter / spec.ticks_per_rev
+    )
+    v = 0.5 * (travel[:, 0] + travel[:, 1]) / safe
+    omega = (travel[:, 1] - travel[:, 0]) / (spec.wheelbase * safe)
+    return 0.5 * (run.time[1:] + run.time[:-1]), v, omega, dt
+
+
+def _offset_from_speeds(
+    data: OpenLoopData, members: Sequence[int], spec: RobotSpec, limit: float
+) -> float:
+    """A time offset τ to start from [s]: the lag that best matches the ground truth's body
+    speed and turn rate (by differences of consecutive measured poses) to the encoders'
+    (v_enc(t + τ) ≈ v_gt(t)), on a 5 ms grid over ±``limit``, refined by a parabola through the
+    best three. No replay is needed, and a scale or wheelbase error does not move the lag. 0
+    where the ground truth is too sparse to give speeds (an UMBmark end-point log)."""
+    taus = np.arange(-limit, limit + 1e-12, 0.005)
+    cost = np.zeros(len(taus))
+    used = 0
+    for j in members:
+        run = data.runs[j]
+        mid, v_enc, w_enc, dt = _speeds(run, spec)
+        pose = run.true_pose
+        step = np.diff(pose, axis=0)
+        ok = np.isfinite(step).all(axis=1) & (dt > 0)
+        if ok.sum() < 10:
+            continue
+        heading = pose[:-1, 2] + 0.5 * step[:, 2]
+        v_gt = (step[:, 0] * np.cos(heading) + step[:, 1] * np.sin(heading)) / np.where(
+            ok, dt, np.inf
+        )
+        w_gt = step[:, 2] / np.where(ok, dt, np.inf)
+        at = mid[ok][None, :] + taus[:, None]
+        dv = np.interp(at, mid, v_enc) - v_gt[ok][None, :]
+        dw = (np.interp(at, mid, w_enc) - w_gt[ok][None, :]) * data.length
+        cost += data.weights[j] ** 2 * np.sum(dv * dv + dw * dw, axis=1)
+        used += 1
+    if not used:
+        return 0.0
+    k = int(np.argmin(cost))
+    if 0 < k < len(taus) - 1:
+        c0, c1, c2 = cost[k - 1], cost[k], cost[k + 1]
+        curvature = c0 - 2.0 * c1 + c2
+        if curvature > 0:
+            return float(taus[k] + 0.5 * 0.005 * (c0 - c2) / curvature)
+    return float(taus[k])
+
+
+def _procrustes_yaw(
+    data: OpenLoopData, members: Sequence[int], spec: RobotSpec, time_offset: float
+) -> float:
+    """The yaw misalignment δ that best aligns the predicted paths of ``members`` (one
+    session) with the measured ones at time offset τ, in closed form.
+
+    δ rotates every predicted path about its start by −δ and leaves the heading errors as
+    they are, so −δ is the Procrustes rotation of the predicted displacements a onto the
+    measured b: atan2(Σ a×b, Σ a·b) (weighted as the fit weighs the runs)."""
+    cross = dot = 0.0
+    guess = SessionNuisance("", time_offset=time_offset)
+    for j in members:
+        fixed = correct_run(data.runs[j], guess)
+        predicted = replay_run(fixed, spec).tracked
+        rows = data.masks[j][:, 0] & data.masks[j][:, 1]
+        w2 = data.weights[j] ** 2
+        a = predicted[rows, :2] - fixed.true_pose[0, :2]
+        b = fixed.true_pose[rows, :2] - fixed.true_pose[0, :2]
+        cross += w2 * float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
+        dot += w2 * float(np.sum(a * b))
+    return -math.atan2(cross, dot)
+
+
+def _start_nuisances(
+    data: OpenLoopData, members: Sequence[int], spec: RobotSpec, options: NuisanceOptions
+) -> FloatArray:
+    """(τ, dx, dy, δ) to start one session's fit from: τ from the speeds
+    (:func:`_offset_from_speeds`), δ in closed form at that τ (:func:`_procrustes_yaw`), the
+    offsets 0 — so any yaw and any time offset within the limit is found."""
+    out = np.zeros(4)
+    if options.time_offset:
+        out[0] = _offset_from_speeds(data, members, spec, options.max_time_offset)
+    if options.frames:
+        out[3] = _procrustes_yaw(data, members, spec, out[0])
+    return out
+
+
+@dataclass
+class _Problem:
+    """The least-squares problem of :func:`fit_open_loop` in fit units: x = (the robot's
+    parameters relative to the start, in units of their scale; then each session's active
+    nuisances in units of ``_NUISANCE_SCALE``)."""
+
+    data: OpenLoopData
+    build: Callable[[FloatArray], RobotSpec]
+    size: int  # robot parameters
+    active: list[int]
+    sessions: list[str]
+    members: dict[str, list[int]]
+    frames: bool
+    low: FloatArray
+    high: FloatArray
+
+    def column(self, session: str) -> int:
+        """The first nuisance column of ``session``."""
+        return self.size + self.sessions.index(session) * len(self.active)
+
+    def nuisance(self, x: FloatArray, session: str) -> SessionNuisance:
+        values = np.zeros(4)
+        if self.active:
+            k = self.column(session)
+            values[self.active] = x[k : k + len(self.active)] * _NUISANCE_SCALE[self.active]
+        return SessionNuisance(session, len(self.members[session]), frame=self.frames).with_values(
+            values
+        )
+
+    def residuals(self, x: FloatArray) -> list[FloatArray]:
+        model = self.build(x[: self.size])
+        cache = {s: self.nuisance(x, s) for s in self.sessions}
+        return [
+            _residual(self.data, j, model, cache[self.data.sessions[j]])
+            for j in range(len(self.data))
+        ]
+
+    def jacobian(
+        self, x: FloatArray, base: list[FloatArray], step: float = 1e-2
+    ) -> tuple[list[FloatArray], list[FloatArray]]:
+        """Forward differences: per run, d r_j / d robot (n_j, P) and d r_j / d its session's
+        nuisances (n_j, k). A session's nuisances touch only its runs, so each nuisance
+        column is perturbed in every session at once: P + k evaluations in all."""
+        n = len(self.data)
+        robot = [np.empty((len(base[j]), self.size)) for j in range(n)]
+        own = [np.empty((len(base[j]), len(self.active))) for j in range(n)]
+        for a in range(self.size):
+            moved = x.copy()
+            moved[a] += step
+            try:
+                shifted = self.residuals(moved)
+                h = step
+            except SpecError:  # at the edge of a valid robot: the backward difference
+                moved[a] -= 2.0 * step
+                shifted = self.residuals(moved)
+                h = -step
+            for j, r in enumerate(shifted):
+                robot[j][:, a] = (r - base[j]) / h
+        for i in range(len(self.active)):
+            moved = x.copy()
+            for s in self.sessions:
+                moved[self.column(s) + i] += step
+            for j, r in enumerate(self.residuals(moved)):
+                own[j][:, i] = (r - base[j]) / step
+        return robot, own
+
+    def normal(
+        self,
+        robot: list[FloatArray],
+        own: list[FloatArray],
+        res: list[FloatArray],
+        runs: Sequence[int],
+    ) -> tuple[FloatArray, FloatArray]:
+        """JᵀJ and Jᵀr over ``runs`` (full parameter space)."""
+        size = self.size + len(self.sessions) * len(self.active)
+        a = np.zeros((size, size))
+        g = np.zeros(size)
+        p, k = self.size, len(self.active)
+        for j in runs:
+            c = self.column(self.data.sessions[j])
+            ju, jn, r = robot[j], own[j], res[j]
+            a[:p, :p] += ju.T @ ju
+            g[:p] += ju.T @ r
+            if k:
+                a[:p, c : c + k] += ju.T @ jn
+                a[c : c + k, :p] += jn.T @ ju
+                a[c : c + k, c : c + k] += jn.T @ jn
+                g[c : c + k] += jn.T @ r
+        return a, g
+
+    def score(
+        self, robot: list[FloatArray], own: list[FloatArray], res: list[FloatArray], j: int
+    ) -> FloatArray:
+        """Run ``j``'s score Jᵀr (full parameter space)."""
+        size = self.size + len(self.sessions) * len(self.active)
+        out = np.zeros(size)
+        out[: self.size] = robot[j].T @ res[j]
+        k = len(self.active)
+        if k:
+            c = self.column(self.data.sessions[j])
+            out[c : c + k] = own[j].T @ res[j]
+        return out
+
+
+def _cost(res: list[FloatArray]) -> float:
+    return float(sum(float(r @ r) for r in res))
+
+
+def _levenberg_marquardt(
+    problem: _Problem, x0: FloatArray, max_iterations: int = 30
+) -> tuple[FloatArray, list[FloatArray], list[FloatArray], list[FloatArray]]:
+    """Minimise the summed squares of ``problem``'s residuals from ``x0`` (Levenberg 1944;
+    Marquardt 1963; the damping update of Nielsen 1999), steps projected onto the bounds.
+    The normal equations are small (robot + session nuisances) and assembled from the runs'
+    blocks. Returns x, the residuals and the two Jacobian blocks there."""
+    x = np.clip(x0, problem.low, problem.high)
+    res = problem.residuals(x)
+    cost = _cost(res)
+    robot, own = problem.jacobian(x, res)
+    everything = range(len(problem.data))
+    a, g = problem.normal(robot, own, res, everything)
+    damping = 1e-3 * max(float(np.max(np.diag(a))) if len(a) else 1.0, 1e-12)
+    grow = 2.0
+    for _ in range(max_iterations):
+        if len(x) == 0:
+            break
+        diag = np.maximum(np.diag(a), 1e-12)
+        try:
+            delta = -np.linalg.solve(a + damping * np.diag(diag), g)
+        except np.linalg.LinAlgError:
+            delta = -np.linalg.lstsq(a + damping * np.diag(diag), g, rcond=None)[0]
+        trial = np.clip(x + delta, problem.low, problem.high)
+        step = trial - x
+        try:
+            trial_res = problem.residuals(trial)
+        except SpecError:  # beyond the range a robot may have: a failed step
+            trial_res, trial_cost = res, math.inf
+        else:
+            trial_cost = _cost(trial_res)
+        predicted = -(step @ g) - 0.5 * step @ a @ step
+        gain = (cost - trial_cost) / predicted if predicted > 0 else -1.0
+        if trial_cost < cost:
+            x, res = trial, trial_res
+            done = cost - trial_cost <= 1e-10 * cost or float(np.max(np.abs(step))) < 1e-6
+            cost = trial_cost
+            robot, own = problem.jacobian(x, res)
+            a, g = problem.normal(robot, own, res, everything)
+            damping *= max(1.0 / 3.0, 1.0 - float(2.0 * gain - 1.0) ** 3)
+            grow = 2.0
+            if done:
+                break
+        else:
+            damping *= grow
+            grow *= 2.0
+            if float(np.max(np.abs(step))) < 1e-9:
+                break
+    return x, res, robot, own
+
+
+@dataclass
+class OpenLoopFit:
+    """A model fitted by least squares on the open-loop error (module docstring).
+
+    Attributes:
+        spec: the fitted robot.
+        effect: the effect whose parameters were fitted (a :class:`~odomgym.diagnose.fit.Joint`
+            of several), or None (nuisances only, the robot fixed).
+        values: its fitted parameters.
+        stderr_runs, stderr_sessions: their run- and session-clustered standard errors (NaN
+            with fewer than two clusters).
+        nuisances: each session's fitted nuisances.
+        options: which nuisances were fitted.
+        run_error: each run's mean square combined error at the fit [m²].
+    """
+
+    spec: RobotSpec
+    effect: Effect | None
+    values: dict[str, float]
+    stderr_runs: dict[str, float]
+    stderr_sessions: dict[str, float]
+    nuisances: dict[str, SessionNuisance]
+    options: NuisanceOptions
+    run_error: FloatArray
+    problem: _Problem = field(repr=False)
+    x: FloatArray = field(repr=False)
+    blocks: tuple[list[FloatArray], list[FloatArray], list[FloatArray]] = field(repr=False)
+
+    @property
+    def error(self) -> float:
+        """Mean square combined error over the runs (runs weigh equally) [m²]."""
+        return float(np.mean(self.run_error))
+
+
+def fit_open_loop(
+    data: OpenLoopData,
+    spec: RobotSpec,
+    effect: Effect | None = None,
+    options: NuisanceOptions | None = None,
+    start: Mapping[str, SessionNuisance] | None = None,
+) -> OpenLoopFit:
+    """Fit ``effect``'s parameters (none: the robot stays as ``spec``) and every session's
+    nuisances (``options``) to the open-loop errors of ``data`` (module docstring).
+
+    ``start``: sessions' nuisances to start from (a warm start; the others start from the
+    coarse search)."""
+    opts = options if options is not None else NuisanceOptions()
+    active = list(opts.active)
+    order = list(dict.fromkeys(data.sessions))
+    members = {s: [j for j, lab in enumerate(data.sessions) if lab == s] for s in order}
+    if effect is not None:
+        u0, low_u, high_u, build = systematic_vector(spec, effect)
+    else:
+        u0, low_u, high_u = np.zeros(0), np.zeros(0), np.zeros(0)
+
+        def build(u: FloatArray) -> RobotSpec:
+            del u
+            return spec
+
+    scale = _NUISANCE_SCALE[active]
+    bound = _NUISANCE_BOUND[active].copy()
+    if 0 in active:
+        bound[0] = opts.max_time_offset
+    x0, low, high = [u0], [low_u], [high_u]
+    for s in order:
+        given = start.get(s) if start is not None else None
+        begin = (
+            given.values if given is not None else _start_nuisances(data, members[s], spec, opts)
+        )
+        x0.append(begin[active] / scale)
+        low.append(-bound / scale)
+        high.append(bound / scale)
+    problem = _Problem(
+        data,
+        build,
+        len(u0),
+        active,
+        order,
+        members,
+        opts.frames,
+        np.concatenate(low),
+        np.concatenate(high),
+    )
+    x, res, robot, own = _levenberg_marquardt(problem, np.concatenate(x0))
+    fitted = build(x[: problem.size])
+    se_runs, se_sessions = _clustered_errors(problem, robot, own, res)
+    values = effect.read(fitted) if effect is not None else {}
+    stderr_runs: dict[str, float] = {}
+    stderr_sessions: dict[str, float] = {}
+    if effect is not None:
+        for k, p in enumerate(effect.parameters):
+            stderr_runs[p.name] = float(se_runs[k] * p.scale)
+            stderr_sessions[p.name] = float(se_sessions[k] * p.scale)
+    nuisances = {}
+    for s in order:
+        se = np.full(4, math.nan)
+        if active:
+            c = problem.column(s)
+            se[active] = se_runs[c : c + len(active)] * scale
+        nuisances[s] = problem.nuisance(x, s).with_values(problem.nuisance(x, s).values, se)
+    return OpenLoopFit(
+        spec=fitted,
+        effect=effect,
+        values=values,
+        stderr_runs=stderr_runs,
+        stderr_sessions=stderr_sessions,
+        nuisances=nuisances,
+        options=opts,
+        run_error=np.array([float(r @ r) for r in res]),
+        problem=problem,
+        x=x,
+        blocks=(robot, own, res),
+    )
+
+
+def _clustered_errors(
+    problem: _Problem, robot: list[FloatArray], own: list[FloatArray], res: list[FloatArray]
+) -> tuple[FloatArray, FloatArray]:
+    """Run- and session-clustered standard errors of every fitted parameter (fit units)."""
+    a, _ = problem.normal(robot, own, res, range(len(res)))
+    if len(a) == 0:
+        return np.zeros(0), np.zeros(0)
+    try:
+        cov: FloatArray = np.asarray(np.linalg.inv(a), dtype=np.float64)
+    except np.linalg.LinAlgError:
+        nan = np.full(len(a), math.nan)
+        return nan, nan
+    scores = np.array([problem.score(robot, own, res, j) for j in range(len(res))])
+    by_run = clustered_covariance(cov, scores, list(range(len(res))))
+    by_session = clustered_covariance(cov, scores, list(problem.data.sessions))
+    return (
+        np.sqrt(np.maximum(np.diag(by_run), 0.0)),
+        np.sqrt(np.maximum(np.diag(by_session), 0.0)),
+    )
+
+
+def _session_time(run: Run, index: int) -> tuple[float, int]:
+    return float(run.meta.get("session_time", 0.0)), index  # type: ignore[arg-type]
+
+
+def open_loop_folds(runs: Sequence[Run], blocks: int = 5) -> list[list[int]]:
+    """Cross-validation folds of run indices: one per session when the runs come from two or
+    more; else ``blocks`` folds, each taking, of every experiment family
+    (:func:`odomgym.diagnose.fit.strata`), a contiguous block of its runs in time order
+    (``meta["session_time"]``, then the runs' order)."""
+    labels = sessions_of(runs)
+    distinct = list(dict.fromkeys(labels))
+    if len(distinct) >= 2:
+        return [[j for j, s in enumerate(labels) if s == name] for name in distinct]
+    count = max(2, min(blocks, len(runs)))
+    folds: list[list[int]] = [[] for _ in range(count)]
+    for members in strata(runs).values():
+        ordered = sorted(members, key=lambda j: _session_time(runs[j], j))
+        n = len(ordered)
+        for k in range(count):
+            folds[k].extend(ordered[n * k // count : n * (k + 1) // count])
+    return [sorted(f) for f in folds if f]
+
+
+def _fold_step(fit: OpenLoopFit, train: Sequence[int]) -> tuple[FloatArray, RobotSpec]:
+    """The fit-unit parameters without the runs outside ``train`` — one Gauss–Newton step from
+    the full fit on the training runs (:func:`odomgym.diagnose.fit.gauss_newton_step`; columns no
+    training run touches stay put) — and the robot there (the step halved until it is a valid
+    robot: :func:`odomgym.diagnose.fit.build_within`)."""
+    problem = fit.problem
+    robot, own, res = fit.blocks
+    a, g = problem.normal(robot, own, res, train)
+    used = np.flatnonzero(np.diag(a) > 0)
+    x = fit.x.copy()
+    if len(used) == 0:
+        return x, problem.build(x[: problem.size])
+    delta = gauss_newton_step(a[np.ix_(used, used)], g[used])
+    x[used] = np.clip(x[used] + delta, problem.low[used], problem.high[used])
+    size = problem.size
+    spec = build_within(problem.build, fit.x[:size], x[:size] - fit.x[:size])
+    return x, spec
+
+
+def cross_validate_open_loop(
+    data: OpenLoopData, fit: OpenLoopFit, folds: Sequence[Sequence[int]]
+) -> FloatArray:
+    """Each run's held-out mean square combined error [m²] under ``fit`` refitted without its
+    fold (module docstring). A session left out whole keeps the nuisances the full fit gave it:
+    they are properties of its recording, not of the model (the fold step leaves columns no
+    training run touches where they are)."""
+    problem = fit.problem
+    out = np.empty(len(data))
+    for fold in folds:
+        held = set(fold)
+        x, spec = _fold_step(fit, [j for j in range(len(data)) if j not in held])
+        for j in fold:
+            nuisance = problem.nuisance(x, data.sessions[j])
+            out[j] = float(np.sum(_residual(data, j, spec, nuisance) ** 2))
+    return out
+
+
+def run_errors(data: OpenLoopData, spec: RobotSpec) -> FloatArray:
+    """Each run's mean square combined error [m²] under ``spec``, the runs taken as they are
+    (their nuisances already removed)."""
+    return np.array([float(np.sum(_residual(data, j, spec, None) ** 2)) for j in range(len(data))])
+
+
+@dataclass
+class ModelErrors:
+    """One model's open-loop errors on a set of runs, in plain units.
+
+    Attributes:
+        label: which model (``"as given"``, ``"diagnosed"``, ``"baseline"``).
+        runs: the runs' ids; sessions: their sessions.
+        position, heading: each run's RMS position [m] and heading [rad] error over its
+            measured samples after the first.
+        combined: each run's mean square combined error at the fit's samples [m²].
+        nuisances: the nuisances used per session (fitted with this model).
+        e_max_syst: per session with squares both ways, Borenstein & Feng's E_max,syst [m]
+            of the predicted return positions (1994, Eq. 3.3).
+        paths: for the runs asked for, the predicted positions of the tracked point (T, 2) [m]
+            in the ground truth's own frame (what a plot shows beside the measured path).
+    """
+
+    label: str
+    runs: list[str]
+    sessions: list[str]
+    position: FloatArray
+    heading: FloatArray
+    combined: FloatArray
+    nuisances: dict[str, SessionNuisance]
+    e_max_syst: dict[str, float]
+    paths: dict[str, FloatArray] = field(default_factory=dict)
+
+    @property
+    def position_rms(self) -> float:
+        """RMS position error over the runs (runs weigh equally) [m]."""
+        return float(np.sqrt(np.mean(self.position**2))) if len(self.position) else math.nan
+
+    @property
+    def heading_rms(self) -> float:
+        """RMS heading error over the runs (runs weigh equally) [rad]."""
+        return float(np.sqrt(np.mean(self.heading**2))) if len(self.heading) else math.nan
+
+    def summary(self) -> dict[str, Any]:
+        """The report's entry, in mm and degrees."""
+        return {
+            "position_rms_mm": 1e3 * self.position_rms,
+            "heading_rms_deg": math.degrees(self.heading_rms),
+            "combined_rms_mm": 1e3 * float(np.sqrt(np.mean(self.combined))),
+            "e_max_syst_mm": {s: 1e3 * v for s, v in self.e_max_syst.items()},
+        }
+
+
+def evaluate_open_loop(
+    label: str,
+    runs: Sequence[Run],
+    spec: RobotSpec,
+    nuisances: Mapping[str, SessionNuisance],
+    options: NuisanceOptions,
+    interval: float,
+    length: float,
+    paths: Sequence[int] = (),
+) -> ModelErrors:
+    """``spec``'s open-loop errors on ``runs`` (:class:`ModelErrors`). Sessions without
+    nuisances in ``nuisances`` get theirs fitted on their own runs with the robot fixed.
+    ``paths``: indices of the runs whose predicted paths to keep."""
+    data = OpenLoopData(runs, interval, length)
+    known = dict(nuisances)
+    for session in dict.fromkeys(data.sessions):
+        if session in known or not options.active:
+            continue
+        own = [j for j, s in enumerate(data.sessions) if s == session]
+        known[session] = fit_open_loop(data.subset(own), spec, None, options).nuisances[session]
+    position = np.empty(len(data))
+    heading = np.empty(len(data))
+    combined = np.empty(len(data))
+    ends: dict[str, dict[str, list[FloatArray]]] = {}
+    for j, run in enumerate(data.runs):
+        nuisance = known.get(data.sessions[j])
+        error = pose_errors(run, spec, nuisance)
+        measured: NDArray[np.bool_] = np.asarray(np.isfinite(error[:, :2]).all(axis=1))
+        measured[np.flatnonzero(measured)[0]] = False
+        position[j] = math.sqrt(float(np.mean(np.sum(error[measured, :2] ** 2, axis=1))))
+        head = error[measured, 2]
+        head = head[np.isfinite(head)]
+        heading[j] = math.sqrt(float(np.mean(head**2))) if len(head) else math.nan
+        combined[j] = float(np.sum(_residual(data, j, spec, nuisance) ** 2))
+        if run.kind == "square" and run.direction in ("cw", "ccw"):
+            last = np.flatnonzero(np.isfinite(error[:, :2]).all(axis=1))[-1]
+            theta0 = float(correct_run(run, nuisance).true_pose[0, 2])
+            c, s = math.cos(theta0), math.sin(theta0)
+            ex, ey = error[last, 0], error[last, 1]
+            start_frame = np.array([c * ex + s * ey, -s * ex + c * ey])
+            ends.setdefault(data.sessions[j], {}).setdefault(run.direction, []).append(start_frame)
+    kept_paths = {
+        str(data.runs[j].meta.get("run", j + 1)): predicted_path(
+            data.runs[j], spec, known.get(data.sessions[j])
+        )
+        for j in paths
+    }
+    e_max = {
+        s: e_max_syst(np.array(d["cw"]), np.array(d["ccw"]))
+        for s, d in ends.items()
+        if d.get("cw") and d.get("ccw")
+    }
+    return ModelErrors(
+        label=label,
+        runs=[str(r.meta.get("run", j + 1)) for j, r in enumerate(data.runs)],
+        sessions=data.sessions,
+        position=position,
+        heading=heading,
+        combined=combined,
+        nuisances=known,
+        e_max_syst=e_max,
+        paths=kept_paths,
+    )

@@ -1,0 +1,179 @@
+"""The checks that keep a diagnosis to what a robot physically does and to data it never saw:
+the held-out split, the physical size of discovered terms, the floor bumps' signature and
+magnitude, and the open-loop gate's rules.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from independent_robot import IndependentRobot, generate, rich_protocol
+
+from odomgym.cables import bump_extra_rotation
+from odomgym.diagnose.gate import model_effect, open_loop_gate
+from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
+from odomgym.diagnose.openloop import NuisanceOptions, OpenLoopData, open_loop_folds
+from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
+from odomgym.diagnose.workflow import split_runs
+from odomgym.effects import EFFECTS
+from odomgym.robot import RobotSpec
+from odomgym.runs import Run
+
+ROBOT = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8, max_wheel_speed=0.6)
+
+
+@pytest.fixture(scope="module")
+def runs() -> list[Run]:
+    return generate(IndependentRobot(), rich_protocol(), np.random.default_rng(21))
+
+
+def _tagged(runs: list[Run], sessions: list[tuple[str, str]]) -> list[Run]:
+    """Copies of the first runs, labelled with (session, path type) in turn."""
+    out = []
+    for k, (session, kind) in enumerate(sessions):
+        for run in runs[3 * k : 3 * k + 3]:
+            out.append(
+                Run(
+                    run.kind,
+                    run.time,
+                    run.counts,
+                    run.true_pose,
+                    run.direction,
+                    meta={**run.meta, "session": session, "path_type": kind},
+                )
+            )
+    return out
+
+
+def test_sessions_are_held_out_whole_and_every_kind_keeps_one_to_fit(runs: list[Run]) -> None:
+    labelled = _tagged(
+        runs,
+        [("a", "square"), ("b", "square"), ("c", "square"), ("d", "ivanjko"), ("e", "ivanjko")],
+    )
+    fit, held, split = split_runs(labelled, 0.3, np.random.default_rng(0))
+    assert split == "sessions"
+    sessions = [str(r.meta["session"]) for r in labelled]
+    held_sessions = {sessions[j] for j in held}
+    fit_sessions = {sessions[j] for j in fit}
+    assert held_sessions and not held_sessions & fit_sessions
+    assert {"a", "b", "c"} & fit_sessions and {"d", "e"} & fit_sessions
+    assert len(held_sessions & {"a", "b", "c"}) == 1  # round(0.3 × 3)
+
+
+def test_one_session_holds_out_a_contiguous_block_of_each_family(runs: list[Run]) -> None:
+    fit, held, split = split_runs(runs, 0.3, np.random.default_rng(1))
+    assert split == "blocks"
+    families: dict[str, list[int]] = {}
+    for j, run in enumerate(runs):
+        families.setdefault(str(run.meta["experiment"]).split("_")[0], []).append(j)
+    for members in families.values():
+        chosen = [members.index(j) for j in held if j in members]
+        assert len(chosen) == min(round(0.3 * len(members)), len(members) - 1)
+        assert chosen == list(range(chosen[0], chosen[0] + len(chosen))) if chosen else True
+    assert sorted(fit + held) == list(range(len(runs)))
+
+
+def test_folds_are_sessions_or_blocks(runs: list[Run]) -> None:
+    labelled = _tagged(runs, [("a", "square"), ("b", "square"), ("c", "ivanjko")])
+    assert [len(f) for f in open_loop_folds(labelled)] == [3, 3, 3]
+    folds = open_loop_folds(runs, blocks=5)
+    assert len(folds) == 5 and sorted(j for f in folds for j in f) == list(range(len(runs)))
+
+
+def test_a_term_is_judged_at_the_data_operating_range(runs: list[Run]) -> None:
+    """left_one = 0.3 % is a wheel 0.3 % large: plausible. left_accel = 2 per m/s² changes the
+    travel by tens of percent at the accelerations of these runs: a stand-in. A crab of 0.2 rad
+    (11°) constant: a stand-in (beyond 5°)."""
+    assert term_size(runs, ROBOT, "left_one", 0.003).plausible
+    accel = term_size(runs, ROBOT, "left_accel", 2.0)
+    assert not accel.plausible and accel.change > PLAUSIBLE_CHANGE
+    assert accel.change == pytest.approx(2.0 * accel.operating)
+    crab = term_size(runs, ROBOT, "crab_one", 0.2)
+    assert not crab.plausible and "crab" in crab.reason
+    huge = term_size(runs, ROBOT, "right_speed", -50.0)
+    assert not huge.plausible and "backwards" in huge.reason
+
+
+def test_bumps_need_their_signature_and_a_size_the_floor_can_make() -> None:
+    """A robot whose wheels cross bumps (0.5 per metre, 1.5° jumps) shows heavy-tailed heading
+    increments in steady driving; one without shows none. A 10° jump on a 42 mm wheel would lose
+    35 mm of travel per bump, more than crossing a 20 mm obstacle can (Borenstein's
+    rigid-wheel-over-cylinder geometry)."""
+    rng = np.random.default_rng(8)
+    bumpy = EFFECTS["floor_bumps"].write(
+        NOMINAL_ROBOT, {"rate": 0.5, "heading_jump": math.radians(1.5)}
+    )
+    with_bumps = simulate_protocol(bumpy, "rich", rng)
+    without = simulate_protocol(NOMINAL_ROBOT, "rich", rng)
+    values = {"rate": 0.5, "heading_jump": math.radians(1.5)}
+    found = check_bumps(
+        with_bumps,
+        NOMINAL_ROBOT,
+        values,
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
+    )
+    assert found.signature and found.plausible and found.accepted, found
+    absent = check_bumps(
+        without,
+        NOMINAL_ROBOT,
+        values,
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
+    )
+    assert not absent.signature and not absent.accepted, absent
+    ten_degrees = {"rate": 0.75, "heading_jump": math.radians(10.0)}
+    huge = check_bumps(
+        with_bumps,
+        NOMINAL_ROBOT,
+        ten_degrees,
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
+    )
+    radius = 0.5 * NOMINAL_ROBOT.wheel_diameter
+    assert huge.largest_loss == pytest.approx(bump_extra_rotation(radius, 0.02))
+    assert not huge.plausible and "obstacle" in huge.reason
+    frequent = check_bumps(
+        with_bumps,
+        NOMINAL_ROBOT,
+        {"rate": 3.5, "heading_jump": math.radians(0.57)},
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
+    )
+    assert not frequent.plausible and "per metre" in frequent.reason
+
+
+def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term() -> None:
+    """A robot with a 1 % wheelbase error: the wheelbase lowers the held-out open-loop error and
+    is kept; a term that is not there (right_sin1 at 1 %) raises it and is dropped."""
+    robot = IndependentRobot(effects={"wheelbase": {"e_b": 1.01}})
+    runs = generate(robot, rich_protocol(), np.random.default_rng(31))
+    proposed = EFFECTS["wheelbase"].write(ROBOT, {"e_b": 1.01})
+    proposed = model_effect((), ("right_sin1",)).write(  # type: ignore[union-attr]
+        proposed, {"discovered.right_sin1": 0.01}
+    )
+    data = OpenLoopData(runs, 0.25, ROBOT.wheelbase)
+    gate = open_loop_gate(
+        data,
+        ROBOT,
+        proposed,
+        ["wheelbase"],
+        ["right_sin1"],
+        NuisanceOptions(),
+        open_loop_folds(runs),
+    )
+    assert gate.effects == ["wheelbase"] and gate.terms == []
+    first, second = gate.steps
+    assert first.kept and first.after_mm < first.before_mm
+    assert not second.kept and second.rule == "one standard error"
+    assert abs(gate.fit.spec.e_b - 1.01) < 0.001
