@@ -35,7 +35,8 @@ def inlined_kernel(function: F) -> F:
     numba's IR, so the arithmetic is the same): no call boundary, where passing arrays to a
     called kernel costs reference counting and copies of their descriptions (~0.5 µs of a
     single robot's control step, which calls some fifteen kernels). Called from Python it is
-    an ordinary kernel."""
+    an ordinary kernel. A call with a constant argument (a loop bound) is compiled for that
+    constant, so loops over it unroll; it costs compile time per call site."""
     compiled = numba.njit(
         cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always"
     )(function)

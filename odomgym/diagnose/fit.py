@@ -33,6 +33,7 @@ import itertools
 import math
 import multiprocessing as mp
 import os
+import pickle
 import re
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -42,8 +43,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares, minimize
 
-from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_likelihood
-from odomgym.diagnose.replay import Replay, replay_run
+from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_scores
+from odomgym.diagnose.replay import Replay, RunInputs, replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import EFFECTS, Effect
 from odomgym.effects.registry import Spec, SpecView
@@ -95,20 +96,54 @@ class Model:
 
 @dataclass
 class Dataset:
-    """Runs with the pose components that enter the likelihood."""
+    """Runs with the pose components that enter the likelihood.
+
+    Two caches, not data (pickles — worker jobs, journal keys — leave them out and are the same
+    bytes as without them): ``inputs`` keeps each run's
+    :class:`~odomgym.diagnose.replay.RunInputs` (by encoder resolution) once a replay has made
+    them, shared with every subset (a fit replays each run hundreds of times); ``noise_fits``
+    keeps the results of :func:`fit_noise` on these runs by their exact inputs (a round asks
+    for the same noise fit of the same model up to three times)."""
 
     runs: list[Run]
     masks: list[NDArray[np.bool_]]
+    inputs: list[dict[float, RunInputs]] = field(default_factory=list)
+    noise_fits: dict[object, tuple[RobotSpec, SensorNoise, float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.inputs:
+            self.inputs = [{} for _ in self.runs]
 
     @classmethod
     def of(cls, runs: Sequence[Run], min_interval: float) -> Dataset:
         return cls(list(runs), [measurement_mask(r, min_interval) for r in runs])
 
     def subset(self, index: Sequence[int]) -> Dataset:
-        return Dataset([self.runs[i] for i in index], [self.masks[i] for i in index])
+        return Dataset(
+            [self.runs[i] for i in index],
+            [self.masks[i] for i in index],
+            [self.inputs[i] for i in index],
+        )
+
+    def replay(self, j: int, spec: RobotSpec) -> Replay:
+        """Run ``j`` replayed through ``spec`` (:func:`~odomgym.diagnose.replay.replay_run`)
+        with its kept inputs."""
+        held = self.inputs[j]
+        ticks = spec.ticks_per_rev
+        if ticks not in held:
+            held[ticks] = RunInputs.of(self.runs[j], ticks)
+        return replay_run(self.runs[j], spec, held[ticks])
 
     def __len__(self) -> int:
         return len(self.runs)
+
+    def __getstate__(self) -> dict[str, object]:
+        return {"runs": self.runs, "masks": self.masks}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self.inputs = [{} for _ in self.runs]
+        self.noise_fits = {}
 
 
 @dataclass
@@ -136,13 +171,8 @@ def evaluate(
 
     def one(j: int) -> tuple[Replay, float, FloatArray | None]:
         run, mask = data.runs[j], data.masks[j]
-        rep = replays[j] if replays is not None else replay_run(run, spec)
-        loglik = run_likelihood(run, rep, spec, sensor, mask).loglik
-        white = (
-            run_likelihood(run, rep, spec, sensor, mask, gaussian_jumps=True).whitened
-            if whitened
-            else None
-        )
+        rep = replays[j] if replays is not None else data.replay(j, spec)
+        loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened)
         return rep, loglik, white
 
     def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
@@ -280,9 +310,27 @@ def fit_noise(
 
     ``warm``: ``spec`` and ``sensor`` already hold a fit of the same effects to nearly the same
     model (the joint refits of :func:`fit_candidate`): start exactly there, without the
-    multi-start of a fresh fit."""
+    multi-start of a fresh fit.
+
+    A deterministic function of its inputs, so a repeated call on the same ``data`` returns the
+    first one's result (``Dataset.noise_fits``; the spec and sensor noise keyed by their pickled
+    bytes: the exact bits of every value, −0.0 apart from 0.0)."""
     chosen = [e for e in effects if e is not None]
-    reps = None if _moves_mean(chosen) else [replay_run(r, spec) for r in data.runs]
+    key = (
+        pickle.dumps((spec, sensor), protocol=5),
+        tuple((type(e), e.name, e.parameters) for e in chosen),
+        warm,
+    )
+    if key not in data.noise_fits:
+        data.noise_fits[key] = _fit_noise(data, spec, sensor, chosen, warm)
+    return data.noise_fits[key]
+
+
+def _fit_noise(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, chosen: list[Effect], warm: bool
+) -> tuple[RobotSpec, SensorNoise, float]:
+    """:func:`fit_noise` itself (without its memo)."""
+    reps = None if _moves_mean(chosen) else [data.replay(j, spec) for j in range(len(data))]
     x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
 
     def objective(x: FloatArray) -> float:
@@ -345,7 +393,7 @@ def noise_curvature(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
     log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
-    reps = None if _moves_mean(effects) else [replay_run(r, spec) for r in data.runs]
+    reps = None if _moves_mean(effects) else [data.replay(j, spec) for j in range(len(data))]
     x0, _, _, build = _noise_vector(spec, sensor, effects, at_current=True)
     step = 0.05
 

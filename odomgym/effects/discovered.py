@@ -63,6 +63,7 @@ from odomgym.effects.registry import (
     WorldHook,
     WorldView,
 )
+from odomgym.effects.term_replay import replay_body_terms, replay_wheel_terms
 
 __all__ = [
     "BODY_MODULATORS",
@@ -308,17 +309,6 @@ def body_modulator(
     raise KeyError(modulator)
 
 
-def _speed_accel(travel: FloatArray, dt: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Signed wheel speeds (n, 2) [m/s] and d|v|/dt (n, 2) [m/s²] of per-interval travels."""
-    safe = np.where(dt > 0, dt, np.inf)
-    speed = travel / safe[:, None]
-    if len(dt) < 2:
-        return speed, np.zeros_like(speed)
-    mid = np.cumsum(dt) - 0.5 * dt
-    accel = np.gradient(np.abs(speed), mid, axis=0) if np.all(np.diff(mid) > 0) else 0 * speed
-    return speed, np.asarray(accel)
-
-
 # ---------------------------------------------------------------------------- the effect
 def _parameter(term: Term) -> Parameter:
     bound = 1e3 * term.scale
@@ -383,38 +373,46 @@ class DiscoveredTerms(Effect):
 
     # ------------------------------------------------------------------ replay
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
-        active = [(_BY_NAME[k], float(v)) for k, v in values.items() if v != 0.0 and k in _BY_NAME]
-        if not active:
+        # Compiled, bit-identical to the modulators' numpy expressions (term_replay.py).
+        if stage not in ("transmission", "body"):
             return
-        if stage == "transmission":
-            wheel_terms = [(t, c) for t, c in active if t.wheel]
-            if not wheel_terms:
-                return
-            travel = arrays.wheel * arrays.radius[None, :]
-            speed, accel = _speed_accel(travel, arrays.dt)
-            factor = np.ones_like(arrays.wheel)
-            for term, c in wheel_terms:
-                col = 0 if term.channel == "left" else 1
-                m = wheel_modulator(term.modulator, speed, accel, arrays.angle, arrays.time)
-                factor[:, col] += c * m[:, col]
-            arrays.wheel = arrays.wheel * factor
-        elif stage == "body":
-            body_terms = [(t, c) for t, c in active if not t.wheel]
-            if not body_terms:
-                return
-            safe = np.where(arrays.dt > 0, arrays.dt, np.inf)
-            v = arrays.ds / safe
-            omega = arrays.dtheta / safe
-            crab = np.zeros_like(v)
-            yaw = np.ones_like(v)
-            for term, c in body_terms:
-                m = body_modulator(term.modulator, v, omega, arrays.time)
-                if term.channel == "crab":
-                    crab += c * m
-                else:
-                    yaw += c * m
-            arrays.crab = arrays.crab + crab
-            arrays.dtheta = arrays.dtheta * yaw
+        wheel = stage == "transmission"
+        terms = [
+            (_BY_NAME[k], float(v))
+            for k, v in values.items()
+            if v != 0.0 and k in _BY_NAME and _BY_NAME[k].wheel == wheel
+        ]
+        if not terms:
+            return
+        coefficients = np.array([c for _, c in terms])
+        if wheel:
+            sin1, cos1, sin2, cos2 = (
+                _harmonic(arrays, m, terms) for m in ("sin1", "cos1", "sin2", "cos2")
+            )
+            arrays.wheel = replay_wheel_terms(
+                np.asarray(arrays.wheel, dtype=np.float64),
+                arrays.radius,
+                arrays.dt,
+                sin1,
+                cos1,
+                sin2,
+                cos2,
+                arrays.time,
+                np.array([0 if t.channel == "left" else 1 for t, _ in terms]),
+                np.array([_WHEEL_CODES[t.modulator] for t, _ in terms]),
+                coefficients,
+            )
+        else:
+            arrays.crab, arrays.dtheta = replay_body_terms(
+                np.asarray(arrays.ds, dtype=np.float64),
+                np.asarray(arrays.dtheta, dtype=np.float64),
+                np.asarray(arrays.crab, dtype=np.float64),
+                arrays.dt,
+                arrays.time,
+                np.array([t.channel == "yaw" for t, _ in terms]),
+                np.array([_BODY_CODES[t.modulator] for t, _ in terms]),
+                coefficients,
+            )
 
     # ------------------------------------------------------------------ world
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
@@ -436,6 +434,27 @@ class Discovered(DiscoveredTerms):
 
 _WHEEL_CODES = {m: k for k, m in enumerate(WHEEL_MODULATORS)}
 _BODY_CODES = {m: k for k, m in enumerate(BODY_MODULATORS)}
+_NO_HARMONIC = np.zeros((0, 2))
+
+
+def _harmonic(
+    arrays: ReplayArrays, modulator: str, terms: Sequence[tuple[Term, float]]
+) -> FloatArray:
+    """The wheel-angle modulator ``modulator`` (``sin1``, ``cos2``, …) per interval and wheel
+    (n, 2) if one of ``terms`` has it (else an empty array): from ``arrays.memo`` while the
+    angles are the ones it was computed from (they depend on the run alone), else computed by
+    numpy and kept there."""
+    if all(t.modulator != modulator for t, _ in terms):
+        return _NO_HARMONIC
+    key = f"discovered.{modulator}"
+    held = arrays.memo.get(key)
+    if held is not None and held[0] is arrays.angle:
+        return held[1]
+    k = 1.0 if modulator.endswith("1") else 2.0
+    angle = np.asarray(arrays.angle, dtype=np.float64)
+    value = np.sin(k * angle) if modulator.startswith("sin") else np.cos(k * angle)
+    arrays.memo[key] = (arrays.angle, value)
+    return value
 
 
 class _DiscoveredHook(WorldHook):

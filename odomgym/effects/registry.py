@@ -275,6 +275,12 @@ class ReplayArrays:
     began, ``Run.meta["wheel_angle0"]``, else from the run's start) and ``time`` (n,) the time at
     the interval's middle since the session started [s] (``Run.meta["session_time"]`` at the
     run's first sample, else 0).
+
+    ``memo`` holds what an effect derives from a run's inputs alone (``angle``, ``time``,
+    ``dt``), kept between replays of the same run (the diagnose fits replay every run hundreds
+    of times with different parameters): each entry is ``(input, derived)``, reused only while
+    ``input is`` the array of the current replay. The input arrays of such replays are shared
+    and read-only: an effect replaces the arrays of its stage, never writes into them.
     """
 
     dt: FloatArray
@@ -289,6 +295,7 @@ class ReplayArrays:
     crab: FloatArray = field(default_factory=lambda: np.zeros(0))
     pose: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     tracked: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    memo: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
 
 
 class WorldHook:

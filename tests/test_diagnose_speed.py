@@ -1,0 +1,216 @@
+"""The fast paths of ``odomgym diagnose`` give every number bit for bit as the plain ones.
+
+Each speed-up of the workflow (one filter pass for both scores, cached evaluations, compiled
+replay stages) is checked here against the slower path it replaced, kept as the reference:
+equality of the bytes, not a tolerance. The threaded evaluation's identity is tested in
+``tests/test_discover.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from alien_robot import generate_session
+
+from odomgym.diagnose.fit import Dataset, fit_noise
+from odomgym.diagnose.likelihood import (
+    SensorNoise,
+    _filter,
+    _model_arrays,
+    _residual,
+    run_likelihood,
+    run_scores,
+)
+from odomgym.diagnose.replay import _headings, _positions, replay_run
+from odomgym.effects import EFFECTS, ReplayArrays
+from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
+from odomgym.robot import RobotSpec
+
+MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8)
+SENSOR = SensorNoise(0.002, 0.005)
+
+
+def _bits(value: float) -> bytes:
+    return np.float64(value).tobytes()
+
+
+def _numpy_terms(values: dict[str, float], arrays: ReplayArrays) -> tuple[np.ndarray, ...]:
+    """The grammar's replay as numpy expressions, one array per term (the path the compiled
+    kernels replaced): wheel rotations after the transmission stage, crab and dθ after the
+    body stage (which sees ``arrays.ds`` and ``arrays.dtheta`` as given)."""
+    safe = np.where(arrays.dt > 0, arrays.dt, np.inf)
+    speed = arrays.wheel * arrays.radius[None, :] / safe[:, None]
+    if len(arrays.dt) < 2:
+        accel = np.zeros_like(speed)
+    else:
+        mid = np.cumsum(arrays.dt) - 0.5 * arrays.dt
+        increasing = np.all(np.diff(mid) > 0)
+        accel = np.gradient(np.abs(speed), mid, axis=0) if increasing else 0 * speed
+    factor = np.ones_like(arrays.wheel)
+    crab = np.zeros_like(arrays.dt)
+    yaw = np.ones_like(arrays.dt)
+    v, omega = arrays.ds / safe, arrays.dtheta / safe
+    for name, c in values.items():
+        term = next(t for t in TERMS if t.name == name)
+        if term.wheel:
+            col = 0 if term.channel == "left" else 1
+            m = wheel_modulator(term.modulator, speed, accel, arrays.angle, arrays.time)
+            factor[:, col] += c * m[:, col]
+        elif term.channel == "crab":
+            crab += c * body_modulator(term.modulator, v, omega, arrays.time)
+        else:
+            yaw += c * body_modulator(term.modulator, v, omega, arrays.time)
+    return arrays.wheel * factor, arrays.crab + crab, arrays.dtheta * yaw
+
+
+def test_one_filter_pass_gives_both_scores_bit_identical() -> None:
+    """:func:`run_scores` runs the filter once when no wheel jump is expected and twice with
+    bumps; either way its log-likelihood is :func:`run_likelihood`'s with the jump mixture and
+    its whitened innovations are those with the jumps as their variance."""
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:4]
+    data = Dataset.of(runs, 0.25)
+    rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
+    bumpy = EFFECTS["floor_bumps"].write(rough, {"rate": 0.3, "heading_jump": 0.004})
+    for spec in (MODEL, rough, bumpy):
+        for run, mask in zip(data.runs, data.masks, strict=True):
+            rep = replay_run(run, spec)
+            mixture = run_likelihood(run, rep, spec, SENSOR, mask)
+            gaussian = run_likelihood(run, rep, spec, SENSOR, mask, gaussian_jumps=True)
+            loglik, white = run_scores(run, rep, spec, SENSOR, mask, whitened=True)
+            assert white is not None
+            assert _bits(loglik) == _bits(mixture.loglik)
+            assert white.tobytes() == gaussian.whitened.tobytes()
+            alone, none = run_scores(run, rep, spec, SENSOR, mask, whitened=False)
+            assert none is None
+            assert _bits(alone) == _bits(mixture.loglik)
+        if spec is bumpy:  # the jumps matter here: the two filters really differ
+            assert mixture.whitened.tobytes() != gaussian.whitened.tobytes()
+
+
+@pytest.mark.parametrize("spacing", ["logged", "uniform", "stalled", "one", "two"])
+def test_compiled_grammar_replay_is_the_numpy_one_bit_for_bit(spacing: str) -> None:
+    """Every wheel and body term at once (and each alone) through ``DiscoveredTerms.replay``,
+    whose kernels compute the modulators sample by sample, gives the bytes of the numpy
+    expressions: on irregular intervals (numpy's non-uniform gradient), equal ones (its uniform
+    formula), with a zero interval (middles not increasing: no acceleration), on one and two
+    intervals; speeds of both signs, at rest and reversing."""
+    rng = np.random.default_rng(7)
+    n = {"one": 1, "two": 2}.get(spacing, 60)
+    dt = {
+        "logged": 0.05 + 0.01 * rng.random(n),
+        "uniform": np.full(n, 3 / 64),  # sums exactly: equal steps between the middles
+        "stalled": np.where(np.arange(n) == 30, 0.0, 0.05),
+    }.get(spacing, np.full(n, 0.05))
+    wheel = 0.3 * rng.standard_normal((n, 2))
+    wheel[n // 3] = 0.0
+    wheel[n // 2, 0] = -0.0
+    arrays = ReplayArrays(
+        dt=dt,
+        wheel=wheel,
+        radius=np.array([0.041, 0.042]),
+        angle=np.cumsum(wheel, axis=0),
+        time=100.0 + np.cumsum(dt),
+        ds=0.02 * rng.standard_normal(n),
+        dtheta=0.05 * rng.standard_normal(n),
+        crab=0.001 * rng.standard_normal(n),
+    )
+    every = {t.name: 10.0 ** rng.uniform(-3.0, 3.0) * (-1) ** k for k, t in enumerate(TERMS)}
+    # Each term alone with a coefficient of ±2²⁰: c·m outweighs the 1 it is added to, and a
+    # power of two scales exactly, so a modulator off in its last bit shows in the result.
+    alone = [{name: 2.0**20 * np.sign(c)} for name, c in every.items()]
+    for values in [every, *alone]:
+        effect = DiscoveredTerms(list(values))
+        replayed = ReplayArrays(**{**arrays.__dict__, "memo": {}})
+        effect.replay("transmission", values, replayed)
+        effect.replay("body", values, replayed)
+        expected = _numpy_terms(values, arrays)
+        got = (replayed.wheel, replayed.crab, replayed.dtheta)
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(got, expected, strict=True))
+
+
+def test_replays_from_kept_inputs_are_replays_from_scratch() -> None:
+    """A dataset keeps each run's inputs (and the angle modulators derived from them) across
+    replays; the second replay through a model with every kind of stage is the bytes of a
+    fresh :func:`replay_run`, and the kept arrays are read-only."""
+    runs = generate_session(
+        {"out_of_round": {"value": 0.01, "phase": 1.0}}, np.random.default_rng(8)
+    )[:3]
+    data = Dataset.of(runs, 0.25)
+    terms = {"right_sin1": 0.01, "left_cos2": -0.004, "left_accel": 0.02, "yaw_lateral": 0.03}
+    spec = DiscoveredTerms(list(terms)).write(MODEL, terms)
+    spec = EFFECTS["backlash"].write(spec, {"angle": 0.01})
+    spec = EFFECTS["gt_sensor_offset"].write(spec, {"dx": 0.01, "dy": -0.005})
+    for j, run in enumerate(data.runs):
+        data.replay(j, spec)
+        kept, fresh = data.replay(j, spec), replay_run(run, spec)
+        for name in ("pose", "tracked", "travel", "ds", "dtheta"):
+            assert getattr(kept, name).tobytes() == getattr(fresh, name).tobytes()
+        inputs = data.inputs[j][spec.ticks_per_rev]
+        assert "discovered.sin1" in inputs.memo
+        assert not inputs.motor.flags.writeable
+
+
+def test_compiled_filter_is_its_source_run_by_python() -> None:
+    """The filter kernel inlines the Kalman update and compiles it for three measured rows (its
+    loops unrolled); run by the Python interpreter (``py_func``), the same source calls the
+    update compiled for any number of rows. Both give the same bytes: log-likelihood,
+    whitened innovations, count — with the jump mixture, with Gaussian jumps, and the
+    open-loop expected gap."""
+    runs = generate_session({"floor_bumps": {"value": 0.02}}, np.random.default_rng(9))[:3]
+    data = Dataset.of(runs, 0.25)
+    rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 1e-3, "k_right": 1.2e-3})
+    bumpy = EFFECTS["floor_bumps"].write(rough, {"rate": 0.5, "heading_jump": 0.01})
+    for spec in (rough, bumpy):
+        for run, mask in zip(data.runs, data.masks, strict=True):
+            mask = mask.copy()
+            mask[::7, 2] = False  # some samples with two measured rows
+            rep = replay_run(run, spec)
+            arrays = (*_model_arrays(rep, spec, SENSOR), _residual(run, rep, mask), mask)
+            for gaussian, update in ((False, True), (True, True), (True, False)):
+                compiled_gap = np.full((len(run.time), 2), np.nan)
+                python_gap = compiled_gap.copy()
+                compiled = _filter(*arrays, gaussian, update, compiled_gap)
+                python = _filter.py_func(*arrays, gaussian, update, python_gap)
+                assert _bits(compiled[0]) == _bits(python[0])
+                assert compiled[1].tobytes() == python[1].tobytes()
+                assert compiled[2] == python[2]
+                assert compiled_gap.tobytes() == python_gap.tobytes()
+
+
+def test_compiled_integration_is_numpy_cumsum_bit_for_bit() -> None:
+    """The replay's midpoint integration (two kernels around numpy's cos and sin) gives the
+    bytes of the numpy expressions it replaced, signed zeros at the start included."""
+    rng = np.random.default_rng(11)
+    for first in (0.0, -0.0, 0.3):
+        dtheta = 0.05 * rng.standard_normal(50)
+        ds = 0.01 * rng.standard_normal(50)
+        crab = 1e-3 * rng.standard_normal(50)
+        dtheta[0] = ds[0] = first
+        for start in (np.array([1.0, -2.0, 0.5]), np.array([-0.0, -0.0, -0.0])):
+            theta = start[2] + np.concatenate([[0.0], np.cumsum(dtheta)])
+            direction = theta[:-1] + 0.5 * dtheta + crab
+            pose = np.empty((51, 3))
+            pose[:, 0] = start[0] + np.concatenate([[0.0], np.cumsum(ds * np.cos(direction))])
+            pose[:, 1] = start[1] + np.concatenate([[0.0], np.cumsum(ds * np.sin(direction))])
+            pose[:, 2] = theta
+            got_theta, got_direction = _headings(float(start[2]), dtheta, crab)
+            got = _positions(start, got_theta, ds, np.cos(got_direction), np.sin(got_direction))
+            assert got_direction.tobytes() == direction.tobytes()
+            assert got.tobytes() == pose.tobytes()
+
+
+def test_a_repeated_noise_fit_is_the_first_one() -> None:
+    """:func:`fit_noise` keeps its results on the dataset: a second call with the same inputs
+    returns them (nothing refitted), and they are the bytes of a fit on a fresh copy of the
+    runs; other effects or a warm start are other entries."""
+    runs = generate_session({"floor_roughness": {"value": 0.003}}, np.random.default_rng(12))
+    data = Dataset.of(runs[:4], 0.25)
+    rough = EFFECTS["floor_roughness"]
+    first = fit_noise(data, MODEL, SENSOR, rough)
+    again = fit_noise(data, MODEL, SENSOR, rough)
+    fresh = fit_noise(Dataset.of(runs[:4], 0.25), MODEL, SENSOR, rough)
+    assert again is first and len(data.noise_fits) == 1
+    assert first[0] == fresh[0] and first[1] == fresh[1] and _bits(first[2]) == _bits(fresh[2])
+    fit_noise(data, MODEL, SensorNoise(0.002, 0.005), None)
+    fit_noise(data, MODEL, SensorNoise(0.002, 0.005), rough, warm=True)
+    assert len(data.noise_fits) == 3
