@@ -1,6 +1,8 @@
 """Leave-one-session-out replication of ``odomgym diagnose`` on a real robot's sessions.
 
     python benchmarks/diagnose_loso.py [DATA] [--robot R.toml] [--jobs 2] [--out DIR] [--json]
+    python benchmarks/diagnose_loso.py --jobs 1 --shard 1/2 & python benchmarks/diagnose_loso.py \
+        --jobs 1 --shard 2/2; python benchmarks/diagnose_loso.py    # two cores, then the table
 
 DATA: a folder of OptiOdom sessions; by default the 14 June sessions of the OptiOdom robot
 (Sousa et al. 2022, MIT): the six shipped in the package and the eight in
@@ -191,7 +193,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", default="loso-out", help="folder of per-fold results")
     parser.add_argument("--json", action="store_true", help="print the folds and summary as JSON")
+    parser.add_argument(
+        "--shard",
+        default="1/1",
+        help="K/N: diagnose only folds K, K+N, … (run N processes with --jobs 1 on N cores, "
+        "then once without --shard to print the table from their files)",
+    )
     args = parser.parse_args(argv)
+    try:
+        shard, shards = (int(v) for v in args.shard.split("/"))
+        if not 1 <= shard <= shards:
+            raise ValueError
+    except ValueError:
+        parser.error(f"--shard: expected K/N with 1 <= K <= N, got {args.shard!r}")
     robot = load_robot(args.robot)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -200,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
         runs, _ = read_log(data, robot=robot, format="optiodom")
     sessions = list(dict.fromkeys(sessions_of(runs)))
     folds = []
-    for session in tqdm(sessions, desc="leave one session out", file=sys.stderr):
+    mine = sessions[shard - 1 :: shards]
+    for session in tqdm(mine, desc="leave one session out", file=sys.stderr):
         path = out / f"fold-{session}.json"
         if path.is_file():
             folds.append(json.loads(path.read_text(encoding="utf-8")))

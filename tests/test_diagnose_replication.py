@@ -32,6 +32,9 @@ from odomgym.effects import EFFECTS
 from odomgym.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
+# One worker builds the module's fixture (one diagnosis of 102 runs) for all its tests
+# (scripts/test.sh runs xdist with --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("june-sessions")
 
 
 def _gather(folder: Path) -> Path:
