@@ -294,7 +294,15 @@ def test_session_frames_are_measurement_nuisances_not_robot_effects() -> None:
     fitted = {f.session: f for f in result.nuisances}
     for session, (dx, dy, yaw) in frames.items():
         f = fitted[session]
-        assert abs(f.dx - dx) < 5e-4 and abs(f.dy - dy) < 5e-4, f
-        assert abs(f.yaw - yaw) < 5e-4, f
+        # Within three of their own (run-clustered) standard errors, which are below 0.5 mm
+        # and 1 mrad (the open-loop frame fit; one session of 24 runs).
+        checks = (
+            (f.dx, f.dx_se, dx, 5e-4),
+            (f.dy, f.dy_se, dy, 5e-4),
+            (f.yaw, f.yaw_se, yaw, 1e-3),
+        )
+        for value, se, truth, largest_se in checks:
+            assert abs(value - truth) < 3 * se, f
+            assert se < largest_se, f
     assert "wheel_toe" not in result.named_effects
     assert result.systematic_effects == [], result.named_effects
