@@ -23,8 +23,8 @@ import numpy as np
 
 from odomgym.baselines.benchmark import BenchConfig, config_record, summarize
 from odomgym.io import atomic_write_text, atomic_writer
-from odomgym.population import BENCH_FLOORS
-from odomgym.report import plot_return_errors
+from odomgym.lab.population import BENCH_FLOORS
+from odomgym.lab.report import plot_return_errors
 
 __all__ = ["markdown_summary", "write_outputs"]
 

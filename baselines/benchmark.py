@@ -6,8 +6,8 @@ samples a population of simulated robots with systematic errors drawn uniformly 
 and floor (same random streams), then validates each result on fresh UMBmark squares it has not
 seen (5 cw + 5 ccw, 4×4 m, true return errors; E_max,syst of Borenstein & Feng 1994, Eq. 3.3).
 
-Floors are :data:`odomgym.population.BENCH_FLOORS` (``concrete``, ``rough``, ``cables``) and the
-robots are drawn from :class:`odomgym.population.Population`: the self-calibration env draws
+Floors are :data:`odomgym.lab.population.BENCH_FLOORS` (``concrete``, ``rough``, ``cables``) and the
+robots are drawn from :class:`odomgym.lab.population.Population`: the self-calibration env draws
 from the same ones, so they live in the core below both.
 
 Randomness: robot i on floor f draws everything (its errors, sensor noise, start poses, floor
@@ -38,16 +38,16 @@ from numpy.typing import NDArray
 from odomgym import interrupt
 from odomgym.baselines.base import CALIBRATORS, CalibrationResult, Calibrator
 from odomgym.errors import SpecError
-from odomgym.experiments import Lab, parse_choice
 from odomgym.floor import FloorSpec
-from odomgym.lab import RunRequests, random_start_poses
-from odomgym.lockstep import run_lockstep
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
-from odomgym.population import BENCH_FLOORS, Population, check_bench_floor
+from odomgym.lab.experiment import Lab, parse_choice
+from odomgym.lab.lockstep import run_lockstep
+from odomgym.lab.population import BENCH_FLOORS, Population, check_bench_floor
+from odomgym.lab.simulated import RunRequests, random_start_poses
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Direction, end_error
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
-from odomgym.routes import square_route
-from odomgym.runs import Direction, end_error
+from odomgym.sim.routes import square_route
 from odomgym.workers import TaskFailed, WorkerDeath, run_tasks
 
 __all__ = [
@@ -208,7 +208,7 @@ def population(config: BenchConfig) -> list[RobotSpec]:
 def run_chunk(config: BenchConfig, indices: Sequence[int]) -> list[dict[str, Any]]:
     """Calibrate robots ``indices`` with every method on every floor and validate them.
 
-    All robots of the chunk run in lockstep (:func:`odomgym.lockstep.run_lockstep`): one
+    All robots of the chunk run in lockstep (:func:`odomgym.lab.lockstep.run_lockstep`): one
     method at a time, their experiments simulated as one batch.
     """
     robots_all = population(config)

@@ -8,16 +8,16 @@ straight run one way or out and back, an in-place spin) or ``stop``. Every run i
 the current estimate in the odometry (iterative compensation, as UMBmark's §6.3 second round
 and solderspot 2014 do), and the lab's ground-truth sensor measures it.
 
-**The estimator** (:class:`odomgym.selfcal_session.TrajectoryEstimator`) is an augmented-state
+**The estimator** (:class:`odomgym.selfcal.session.TrajectoryEstimator`) is an augmented-state
 Kalman filter along every measured pose of the runs (Larsen et al. 1998; Martinelli et al.
 2007), with a prior from the benchmark population; ``observe="end_pose"``
-(:class:`~odomgym.selfcal_session.EndPoseEstimator`, the ``selfcal_end_pose`` method) restricts
+(:class:`~odomgym.selfcal.session.EndPoseEstimator`, the ``selfcal_end_pose`` method) restricts
 it to the end poses a person at the home position measures — UMBmark's information. The
-session, its menu and its observation are :mod:`odomgym.selfcal_session`, shared with the env.
+session, its menu and its observation are :mod:`odomgym.selfcal.session`, shared with the env.
 
 **The policy** maps the session's fixed-size observation
-(:meth:`~odomgym.selfcal_session.SelfCalSession.observation`, layout
-:data:`~odomgym.selfcal_session.OBSERVATION_LAYOUT`) to a menu item. The shipped policy
+(:meth:`~odomgym.selfcal.session.SelfCalSession.observation`, layout
+:data:`~odomgym.selfcal.session.OBSERVATION_LAYOUT`) to a menu item. The shipped policy
 (``selfcal-ppo.npz``) is a small MLP trained with PPO (Schulman et al. 2017) in
 ``SelfCalibration-v1`` (``odomgym train selfcal``); it runs here in numpy, so calibrating needs
 no torch. The ``scripted`` policy (alternate 4 m squares, a straight run every eighth run) is the
@@ -38,9 +38,9 @@ from numpy.typing import NDArray
 
 from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, perform
 from odomgym.errors import SpecError, require_count
-from odomgym.experiments import Experiment, Lab
-from odomgym.odometry import Calibration
-from odomgym.selfcal_session import (
+from odomgym.lab.experiment import Experiment, Lab
+from odomgym.odometry.calibration import Calibration
+from odomgym.selfcal.session import (
     MAX_BUDGET,
     MENU,
     OBSERVATION_LAYOUT,
@@ -204,7 +204,7 @@ class SelfCalOptions:
         policy: ``"learned"`` (the shipped PPO policy), ``"scripted"`` (the fixed schedule of
             :func:`scripted_policy`) or the path of a policy ``.npz`` file.
         observe: what the estimator sees of each run: ``"trajectory"`` (every measured pose,
-            the default) or ``"end_pose"`` (:data:`odomgym.selfcal_session.ESTIMATORS`); a
+            the default) or ``"end_pose"`` (:data:`odomgym.selfcal.session.ESTIMATORS`); a
             learned policy must have been trained with the same (its file records it).
     """
 
@@ -324,7 +324,7 @@ class SelfCalScriptedOptions(SelfCalOptions):
     """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy.
 
     Attributes:
-        schedule: menu item names (:data:`~odomgym.selfcal_session.MENU`, e.g.
+        schedule: menu item names (:data:`~odomgym.selfcal.session.MENU`, e.g.
             ``("square4-cw", "square4-ccw", "straight4")``, or one comma-separated string)
             driven in this order, repeated until the budget is spent; empty (the default) for
             :func:`scripted_policy`'s schedule. A lab that can drive only some items, or an
@@ -420,7 +420,7 @@ class SelfCalEndPoseOptions(SelfCalScriptedOptions):
 
 class SelfCalEndPose(SelfCalScripted):
     """The second ablation: the scripted schedule with the estimator restricted to each run's
-    end pose (:class:`~odomgym.selfcal_session.EndPoseEstimator`) — UMBmark's information, a
+    end pose (:class:`~odomgym.selfcal.session.EndPoseEstimator`) — UMBmark's information, a
     tape measure at the home position — so the gain of seeing the whole trajectory is measured
     on its own."""
 

@@ -44,7 +44,7 @@ from odomgym.baselines.selfcal import MlpPolicy
 from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_text, atomic_writer
-from odomgym.selfcal_session import OBSERVATION_LAYOUT, OBSERVATION_VERSION, check_observe
+from odomgym.selfcal.session import OBSERVATION_LAYOUT, OBSERVATION_VERSION, check_observe
 from odomgym.workers import Shards
 
 try:

@@ -1,12 +1,13 @@
 """Run a calibrator and judge its result on runs it has not seen.
 
-* :func:`calibrate_in_simulation` — a hidden true robot in a :class:`~odomgym.lab.SimLab`; the
+* :func:`calibrate_in_simulation` — a hidden true robot in a :class:`~odomgym.lab.simulated.SimLab`;
+the
   calibrator performs its experiments (through a sensor model), then fresh UMBmark squares are
   driven with the uncalibrated and with the calibrated odometry, and E_max,syst (Borenstein &
   Feng 1994, Eq. 3.3) is computed from the *true* return errors.
 * :func:`calibrate_on_session` — a recorded session of a real robot in a
   :class:`~odomgym.data.RecordedLab`; the result is judged by the OptiOdom evaluation measures
-  (:mod:`odomgym.evaluation`) on the session's runs, or on other sessions' runs.
+  (:mod:`odomgym.odometry.optiodom_measures`) on the session's runs, or on other sessions' runs.
 
 And the configuration of methods by callers that configure all of them alike:
 :func:`make_calibrator` (options by name, each checked against the method's options dataclass),
@@ -27,17 +28,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, option_names
-from odomgym.data import RecordedLab, Session
+from odomgym.data import Session
 from odomgym.errors import SpecError
-from odomgym.evaluation import EvaluationMeasures, evaluate
-from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FloorSpec
-from odomgym.lab import RunRequests, SimLab, random_start_poses
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.lab.recorded import RecordedLab
+from odomgym.lab.simulated import RunRequests, SimLab, random_start_poses
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.optiodom_measures import EvaluationMeasures, evaluate
+from odomgym.odometry.runs import Run, end_error
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
-from odomgym.routes import square_route
-from odomgym.runs import Run, end_error
+from odomgym.sim.routes import square_route
 
 __all__ = [
     "SessionReport",

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.stats import wilcoxon
 
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
-from odomgym.population import BENCH_FLOORS
+from odomgym.lab.population import BENCH_FLOORS
 
 METHODS = (
     "selfcal",
@@ -112,8 +112,8 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
     streams as its ``selfcal`` rows)."""
     from odomgym.baselines.benchmark import bench_floor, calibration_streams, configure, population
     from odomgym.baselines.selfcal import SelfCal
-    from odomgym.lockstep import run_lockstep
-    from odomgym.selfcal_session import MENU
+    from odomgym.lab.lockstep import run_lockstep
+    from odomgym.selfcal.session import MENU
 
     robots = population(config)
     indices = list(range(config.robots))
@@ -151,10 +151,10 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
 def measure_noise(runs: int = 24) -> None:
     """The end-pose scatter of every menu item on the concrete floor (MenuItem.floor_std)."""
     from odomgym.floor import FLOORS
-    from odomgym.lab import experiment_route, random_start_poses, simulate_runs
+    from odomgym.lab.simulated import experiment_route, random_start_poses, simulate_runs
+    from odomgym.odometry.runs import end_error
     from odomgym.robot import PRESETS
-    from odomgym.runs import end_error
-    from odomgym.selfcal_session import MENU
+    from odomgym.selfcal.session import MENU
 
     robot = PRESETS["labmate"].ideal()
     print(f"{'item':<16} {'σx [mm]':>8} {'σy [mm]':>8} {'σθ [°]':>7}   (concrete, {runs} runs)")
@@ -192,7 +192,7 @@ def error_budget(robots: int, seed: int = 0) -> list[dict[str, Any]]:
     squares (same streams as the oracle); the median per-robot ratio of the oracle's
     E_max,syst to the perturbed one's (*of oracle*)."""
     from odomgym.baselines import benchmark as bench
-    from odomgym.odometry import Calibration
+    from odomgym.odometry.calibration import Calibration
 
     config = BenchConfig(robots=robots, floors=("concrete",), seed=seed)
     fleet = bench.population(config)

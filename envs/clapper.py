@@ -1,10 +1,10 @@
 """``ClapperStraight-v0`` and ``ClapperRectangle-v0``: the CLAPPER's experiments of Borenstein
 1995, §6, as Gymnasium envs.
 
-The vehicle (:mod:`odomgym.vehicle`) is two LabMate trucks joined by a compliant linkage; it
-drives a programmed path (:mod:`odomgym.clapper`) and knows where it is only through its
-estimator: IPEC (``ipec=True``, :class:`odomgym.ipec.IPEC`) or each truck's plain
-wheel odometry (``ipec=False``), or any :class:`odomgym.internal.InternalEstimator` factory
+The vehicle (:mod:`odomgym.vehicle.spec`) is two LabMate trucks joined by a compliant linkage; it
+drives a programmed path (:mod:`odomgym.vehicle.trial`) and knows where it is only through its
+estimator: IPEC (``ipec=True``, :class:`odomgym.vehicle.ipec.IPEC`) or each truck's plain
+wheel odometry (``ipec=False``), or any :class:`odomgym.vehicle.estimator.InternalEstimator` factory
 passed as ``estimator``.
 
 Spaces:
@@ -38,7 +38,7 @@ many times the wheels of truck A and of truck B have passed over a cable; and, o
 step, ``return_error`` (the vehicle's) and ``truck_return_errors`` (2, 3).
 
 Defaults: the ``clapper`` vehicle (two calibrated LabMates), the ``concrete`` floor
-(:data:`odomgym.clapper.CLAPPER_FLOOR`, the same as the CLI's and the tests') and the
+(:data:`odomgym.vehicle.trial.CLAPPER_FLOOR`, the same as the CLI's and the tests') and the
 ``recommended`` IPEC configuration.
 
 Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
@@ -54,10 +54,10 @@ default) nothing is drawn or kept for drawing.
 
 Arguments (both envs): ``vehicle`` (a preset — ``clapper``, ``clapper-uncalibrated``,
 ``trailer`` for the §7 encoder trailer —, a vehicle ``.toml`` path or a
-:class:`~odomgym.vehicle.VehicleSpec`), ``floor`` (a floor preset, ``.toml`` path or
+:class:`~odomgym.vehicle.spec.VehicleSpec`), ``floor`` (a floor preset, ``.toml`` path or
 :class:`~odomgym.floor.FloorSpec`; default ``concrete``), ``bumps`` (cables laid, default 10),
 ``ipec`` (True: IPEC's ``recommended`` configuration; False: each truck's plain dead reckoning),
-``estimator`` (any :class:`~odomgym.internal.InternalEstimator` factory, instead of IPEC),
+``estimator`` (any :class:`~odomgym.vehicle.estimator.InternalEstimator` factory, instead of IPEC),
 ``render_mode``; ``ClapperStraight-v0`` also ``length`` (of each leg [m], default 18);
 ``ClapperRectangle-v0`` also ``direction`` (``"cw"``/``"ccw"``) and ``side`` (which wheels
 cross the cables, ``"left"``/``"right"``).
@@ -77,7 +77,11 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.clapper import (
+from odomgym.envs.base import DrawsLazily, describe_action, real_array
+from odomgym.floor import CableBump, FloorSpec, load_floor
+from odomgym.vehicle.ipec import ipec_estimator
+from odomgym.vehicle.spec import VehicleSpec, load_vehicle
+from odomgym.vehicle.trial import (
     CLAPPER_FLOOR,
     CableLayer,
     EstimatorFactory,
@@ -88,10 +92,6 @@ from odomgym.clapper import (
     rectangle_path,
     straight_path,
 )
-from odomgym.envs.base import DrawsLazily, describe_action, real_array
-from odomgym.floor import CableBump, FloorSpec, load_floor
-from odomgym.ipec import ipec_estimator
-from odomgym.vehicle import VehicleSpec, load_vehicle
 
 __all__ = ["ClapperEnv", "ClapperRectangleEnv", "ClapperStraightEnv"]
 

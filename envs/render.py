@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from odomgym.floor import CableBump, FloorSpec
 from odomgym.robot import RobotSpec
-from odomgym.routes import Route
+from odomgym.sim.routes import Route
 
 try:
     import pygame

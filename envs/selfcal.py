@@ -1,15 +1,15 @@
 """``SelfCalibration-v1``: choose the experiments that calibrate a robot, within a budget of runs.
 
-An episode is one calibration session (:class:`odomgym.selfcal_session.SelfCalSession`) on a
+An episode is one calibration session (:class:`odomgym.selfcal.session.SelfCalSession`) on a
 freshly sampled robot: systematic errors drawn over the benchmark's ranges
-(:class:`~odomgym.population.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
+(:class:`~odomgym.lab.population.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
 E_s ∈ [0.98, 1.02], on the LabMate) and a floor drawn from ``floors`` (the benchmark's
 ``concrete``, ``rough`` and ``cables``; on ``cables`` every run starts at a random pose on a
 field of random cables, so cables are met at random — one fixed field, not the benchmark's own,
 so the benchmark evaluates on cables the agent never trained on).
 
 Spaces:
-    action: ``Discrete(10)`` — an index into :data:`~odomgym.selfcal_session.MENU`: 0 stops
+    action: ``Discrete(10)`` — an index into :data:`~odomgym.selfcal.session.MENU`: 0 stops
         the session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or
         out and back, in-place spins of 360° either way or 720°) with the reference driver and
         the current corrections in the odometry.
@@ -22,9 +22,9 @@ Spaces:
 Each run is measured by the lab's ground-truth sensor (every pose sample with its noise,
 σ = 2 mm and 0.4°, the accuracy of Borenstein & Feng 1994, §6.3), and the estimator updates the
 corrections (iterative compensation): by default (``observe="trajectory"``) a Kalman filter
-along the whole measured run (:class:`~odomgym.selfcal_session.TrajectoryEstimator`); with
+along the whole measured run (:class:`~odomgym.selfcal.session.TrajectoryEstimator`); with
 ``observe="end_pose"`` a fit to the end poses alone, what a person with a tape measure at the
-home position gets (:class:`~odomgym.selfcal_session.EndPoseEstimator`).
+home position gets (:class:`~odomgym.selfcal.session.EndPoseEstimator`).
 
 Reward: at the end of the session, the final corrections are validated on fresh runs the agent
 never sees — a 4×4 m square each way and a 4 m straight run, driven on the noiseless ``smooth``
@@ -57,10 +57,10 @@ validation entries.
 
 Arguments: ``floors`` (benchmark floor names to draw each episode's floor from; default all
 three), ``budget`` (runs, or a list to draw from per episode; default 16), ``shaping`` (the
-coefficient c, default 0.1), ``population`` (:class:`~odomgym.population.Population`, the ranges
-of the hidden errors), ``sensor`` (:class:`~odomgym.experiments.SensorAccuracy` of each measured
+coefficient c, default 0.1), ``population`` (:class:`~odomgym.lab.population.Population`, the ranges
+of the hidden errors), ``sensor`` (:class:`~odomgym.lab.experiment.SensorAccuracy` of each measured
 pose), ``observe`` (``"trajectory"`` or ``"end_pose"``: what the estimator sees; version 2 of the
-observation, :data:`~odomgym.selfcal_session.OBSERVATION_VERSION`), ``render_mode``.
+observation, :data:`~odomgym.selfcal.session.OBSERVATION_VERSION`), ``render_mode``.
 Reset options: ``{"floor": name, "budget": runs}``.
 
 Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
@@ -81,7 +81,7 @@ Version history:
       ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so
       the version stays v0.
     * v1 (odomgym 0.2.0): the estimator became the trajectory filter
-      (:class:`~odomgym.selfcal_session.TrajectoryEstimator`, ``observe="trajectory"``,
+      (:class:`~odomgym.selfcal.session.TrajectoryEstimator`, ``observe="trajectory"``,
       observation version 2). Spaces, dynamics and episode end are unchanged, but the
       observation's values and, through the final corrections, the reward differ, so the id
       changed. ``SelfCalibration-v0`` is still registered: it is this class with
@@ -103,16 +103,15 @@ from numpy.typing import NDArray
 
 from odomgym.envs.base import DrawsLazily, describe_action
 from odomgym.errors import SpecError
-from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FLOORS, FloorSpec
-from odomgym.lab import RunRequests, experiment_route, measure, random_start_poses
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
-from odomgym.population import CABLES_START_REGION, Population, check_bench_floor
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.lab.population import CABLES_START_REGION, Population, check_bench_floor
+from odomgym.lab.simulated import RunRequests, experiment_route, measure, random_start_poses
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Run, end_error
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
-from odomgym.routes import Route, square_route, straight_route
-from odomgym.runs import Run, end_error
-from odomgym.selfcal_session import (
+from odomgym.selfcal.session import (
     MAX_BUDGET,
     MENU,
     OBSERVATION_BOUND,
@@ -120,6 +119,7 @@ from odomgym.selfcal_session import (
     SelfCalSession,
     check_observe,
 )
+from odomgym.sim.routes import Route, square_route, straight_route
 
 __all__ = [
     "FAILED_REWARD",
@@ -445,7 +445,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         population: the ranges the robots' systematic errors are drawn from.
         sensor: the ground-truth sensor's accuracy (each pose sample).
         observe: what the estimator sees of each run: ``"trajectory"`` (default) or
-            ``"end_pose"`` (:data:`~odomgym.selfcal_session.ESTIMATORS`).
+            ``"end_pose"`` (:data:`~odomgym.selfcal.session.ESTIMATORS`).
         render_mode: ``None`` (no drawing), ``"rgb_array"`` or ``"human"`` (module docs,
             "Rendering").
     """
@@ -557,7 +557,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         if episode is None or episode.trace is None:
             raise RuntimeError("call reset() before render()")
         from odomgym.envs.render import SessionRenderer, SessionRun, SessionState
-        from odomgym.runs import replay_odometry
+        from odomgym.odometry.runs import replay_odometry
 
         if self._renderer is None:
             self._renderer = SessionRenderer(mode, self.metadata["render_fps"])

@@ -34,39 +34,79 @@ ROOT = Path(__file__).resolve().parents[1]
 API: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "core": (
         "Core",
-        "Robots, floors, the pymunk World, odometry, routes, runs and the measures taken on "
-        "them. The modules the envs, calibrators and commands are built from "
-        "(docs/architecture.md shows how they fit).",
+        "The package's public names and the foundation below every layer folder: robot and "
+        "floor specs, the compiled kernels, files, errors, interruption and the worker pool "
+        "(docs/architecture.md shows how the layers fit).",
         (
             "odomgym",
             "odomgym.robot",
             "odomgym.floor",
-            "odomgym.cables",
-            "odomgym.physics",
-            "odomgym.chipmunk_link",
-            "odomgym.odometry",
-            "odomgym.routes",
-            "odomgym.stepping",
-            "odomgym.trial",
-            "odomgym.drivers",
-            "odomgym.experiments",
-            "odomgym.lab",
-            "odomgym.lockstep",
-            "odomgym.runs",
-            "odomgym.planning",
-            "odomgym.metrics",
-            "odomgym.evaluation",
-            "odomgym.population",
-            "odomgym.selfcal_session",
-            "odomgym.covariance",
-            "odomgym.montecarlo",
-            "odomgym.noise_fit",
-            "odomgym.noise_report",
             "odomgym.workers",
-            "odomgym.report",
             "odomgym.io",
             "odomgym.errors",
             "odomgym.interrupt",
+        ),
+    ),
+    "odometry": (
+        "Odometry",
+        "Dead reckoning from encoder counts, the run record and the measures taken on runs "
+        "(UMBmark's and OptiOdom's).",
+        (
+            "odomgym.odometry",
+            "odomgym.odometry.calibration",
+            "odomgym.odometry.runs",
+            "odomgym.odometry.umbmark_measures",
+            "odomgym.odometry.optiodom_measures",
+        ),
+    ),
+    "sim": (
+        "Simulation",
+        "The batched pymunk World, cables, routes, the reference driver and the Trial that "
+        "steps them with the odometry.",
+        (
+            "odomgym.sim",
+            "odomgym.sim.world",
+            "odomgym.sim.chipmunk_link",
+            "odomgym.sim.cables",
+            "odomgym.sim.routes",
+            "odomgym.sim.driver",
+            "odomgym.sim.trial",
+        ),
+    ),
+    "lab": (
+        "Labs and experiments",
+        "Experiments, the Lab protocol, the simulated and recorded labs, the lockstep, plans, "
+        "the benchmark population and the reports of runs.",
+        (
+            "odomgym.lab",
+            "odomgym.lab.experiment",
+            "odomgym.lab.simulated",
+            "odomgym.lab.lockstep",
+            "odomgym.lab.recorded",
+            "odomgym.lab.plans",
+            "odomgym.lab.population",
+            "odomgym.lab.report",
+        ),
+    ),
+    "noise": (
+        "Noise",
+        "The random part of odometry error: Chong & Kleeman's covariance, its Monte Carlo, "
+        "fitting k_L, k_R and the paper's experiment.",
+        (
+            "odomgym.noise",
+            "odomgym.noise.covariance",
+            "odomgym.noise.montecarlo",
+            "odomgym.noise.fit",
+            "odomgym.noise.experiment",
+        ),
+    ),
+    "selfcal": (
+        "Self-calibration",
+        "The self-calibration session shared by the env, the training vector env and the "
+        "calibrator.",
+        (
+            "odomgym.selfcal",
+            "odomgym.selfcal.session",
         ),
     ),
     "vehicle": (
@@ -75,10 +115,11 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         "(Borenstein 1995).",
         (
             "odomgym.vehicle",
-            "odomgym.internal",
-            "odomgym.ipec",
-            "odomgym.clapper",
-            "odomgym.clapper_runs",
+            "odomgym.vehicle.spec",
+            "odomgym.vehicle.estimator",
+            "odomgym.vehicle.ipec",
+            "odomgym.vehicle.trial",
+            "odomgym.vehicle.paper_runs",
         ),
     ),
     "envs": (
@@ -127,7 +168,6 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.data.native",
             "odomgym.data.rosbag2",
             "odomgym.data.logs",
-            "odomgym.data.lab",
             "odomgym.data.samples",
             "odomgym.data.hyperparams",
             "odomgym.data.policies",

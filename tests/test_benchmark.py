@@ -14,8 +14,8 @@ from odomgym.baselines import UMBmark
 from odomgym.baselines.bench_report import write_outputs
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, run_chunk, summarize
 from odomgym.baselines.validation import calibrate_in_simulation, validation_errors_many
-from odomgym.lockstep import run_lockstep
-from odomgym.metrics import e_max_syst
+from odomgym.lab.lockstep import run_lockstep
+from odomgym.odometry.umbmark_measures import e_max_syst
 
 LABMATE = odomgym.PRESETS["labmate"]
 CONCRETE = odomgym.FLOORS["concrete"]
@@ -155,7 +155,7 @@ def test_benchmark_compares_budgets() -> None:
 def test_a_robot_that_cannot_finish_fails_alone() -> None:
     """One impossible calibration (odometry wheelbase × 1000: it never completes a spin) fails
     that robot only, not the robots sharing its batch."""
-    from odomgym.experiments import Experiment
+    from odomgym.lab.experiment import Experiment
 
     def procedure(lab, index):  # type: ignore[no-untyped-def]
         calibration = odomgym.Calibration(wheelbase_scale=1000.0 if index == 1 else 1.0)

@@ -12,8 +12,12 @@ import math
 import numpy as np
 import pytest
 
-from odomgym.cables import bump_extra_rotation
-from odomgym.clapper import (
+from odomgym.floor import FloorSpec
+from odomgym.sim.cables import bump_extra_rotation
+from odomgym.vehicle.estimator import DeadReckoning, growth_rate
+from odomgym.vehicle.ipec import estimate_wheel_diameter_ratio, ipec_configuration
+from odomgym.vehicle.spec import VEHICLES, VehicleSpec
+from odomgym.vehicle.trial import (
     CableLayer,
     VehicleDriver,
     VehicleTrial,
@@ -24,10 +28,6 @@ from odomgym.clapper import (
     rectangle_path,
     straight_path,
 )
-from odomgym.floor import FloorSpec
-from odomgym.internal import DeadReckoning, growth_rate
-from odomgym.ipec import estimate_wheel_diameter_ratio, ipec_configuration
-from odomgym.vehicle import VEHICLES, VehicleSpec
 
 CLAPPER = VEHICLES["clapper"]
 TRUCK = CLAPPER.truck_a

@@ -28,12 +28,12 @@ from odomgym.envs.selfcal import (
     validation_terms,
 )
 from odomgym.errors import SpecError
-from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FLOORS
-from odomgym.odometry import Calibration
-from odomgym.population import Population
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.lab.population import Population
+from odomgym.odometry.calibration import Calibration
 from odomgym.robot import PRESETS
-from odomgym.selfcal_session import (
+from odomgym.selfcal.session import (
     MENU,
     OBSERVATION_LAYOUT,
     OBSERVATION_VERSION,
@@ -331,7 +331,7 @@ def test_guard_absurd_corrections_score_low_without_an_exception() -> None:
 def test_a_run_that_cannot_finish_ends_the_session_with_the_lowest_reward(monkeypatch) -> None:
     """Simulated here by a time limit too short for a 4 m square: the session ends at once,
     says why, and scores FAILED_REWARD (minus the shaping collected, which telescopes)."""
-    import odomgym.lab as lab
+    import odomgym.lab.simulated as lab
 
     real = lab.simulate_runs
 

@@ -25,7 +25,7 @@ from odomgym.baselines.selfcal_train import (
 from odomgym.cli import main
 from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
-from odomgym.selfcal_session import MENU, OBSERVATION_VERSION
+from odomgym.selfcal.session import MENU, OBSERVATION_VERSION
 
 KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
 

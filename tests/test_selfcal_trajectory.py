@@ -11,11 +11,11 @@ from test_selfcal import _episodes
 from odomgym.baselines.selfcal import SelfCal, SelfCalEndPose, scripted_policy
 from odomgym.envs.selfcal import Episode, SelfCalibrationEnv, step_episodes
 from odomgym.errors import SpecError
-from odomgym.experiments import SensorAccuracy
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Run, replay_odometry, replay_with_jacobian
 from odomgym.robot import PRESETS
-from odomgym.runs import Run, replay_odometry, replay_with_jacobian
-from odomgym.selfcal_session import (
+from odomgym.selfcal.session import (
     MENU,
     PRIOR_STD,
     EndPoseEstimator,

@@ -20,9 +20,9 @@ from odomgym.cli._common import (
 from odomgym.errors import SpecError
 from odomgym.floor import load_floor
 from odomgym.io import atomic_write_text
-from odomgym.odometry import Calibration
-from odomgym.planning import ros2_yaml
-from odomgym.report import format_session_report, format_simulation_report, plot_return_errors
+from odomgym.lab.plans import ros2_yaml
+from odomgym.lab.report import format_session_report, format_simulation_report, plot_return_errors
+from odomgym.odometry.calibration import Calibration
 
 if TYPE_CHECKING:
     from odomgym.cli._common import Commands

@@ -26,9 +26,9 @@ from odomgym.cli._common import (
     robot_from,
 )
 from odomgym.floor import FloorSpec, load_floor
-from odomgym.odometry import load_calibration
-from odomgym.planning import drive_plans, square_plans, straight_plans
-from odomgym.report import format_return_errors, plot_return_errors
+from odomgym.lab.plans import drive_plans, square_plans, straight_plans
+from odomgym.lab.report import format_return_errors, plot_return_errors
+from odomgym.odometry.calibration import load_calibration
 
 if TYPE_CHECKING:
     from odomgym.cli._common import Commands

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 
 def register(commands: Commands) -> None:
     """Add ``train``."""
-    from odomgym.selfcal_session import MENU
+    from odomgym.selfcal.session import MENU
 
     parser = commands.add_parser(
         "train",

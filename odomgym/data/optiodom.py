@@ -57,9 +57,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.errors import SpecError, require_positive
-from odomgym.odometry import Calibration
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Direction, Run
 
 __all__ = [
     "PATH_TYPES",

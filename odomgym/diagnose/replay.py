@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.effects import EFFECTS, ReplayArrays
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["Replay", "replay_run", "session_time", "wheel_angles"]
 

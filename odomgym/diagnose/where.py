@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import holm, mean_t_test
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["Finding", "RunResidual", "localise", "run_residuals"]
 

@@ -1,0 +1,6 @@
+"""Self-calibration: a session that chooses experiments and estimates the calibration.
+
+:mod:`~odomgym.selfcal.session` (the experiment menu, the two estimators, ``SelfCalSession`` and
+its observation layout), driven alike by ``SelfCalibration-v1``, the training vector env and
+the ``selfcal`` calibrator.
+"""
