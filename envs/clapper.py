@@ -79,19 +79,11 @@ from numpy.typing import NDArray
 
 from odomgym.envs.base import DrawsLazily, describe_action, real_array
 from odomgym.floor import CableBump, FloorSpec, load_floor
+from odomgym.vehicle.cable_layout import CableLayer, evenly, rectangle_cable_positions
 from odomgym.vehicle.ipec import ipec_estimator
+from odomgym.vehicle.paths import VehiclePath, rectangle_path, straight_path
 from odomgym.vehicle.spec import VehicleSpec, load_vehicle
-from odomgym.vehicle.trial import (
-    CLAPPER_FLOOR,
-    CableLayer,
-    EstimatorFactory,
-    VehiclePath,
-    VehicleTrial,
-    evenly,
-    rectangle_cable_positions,
-    rectangle_path,
-    straight_path,
-)
+from odomgym.vehicle.trial import CLAPPER_FLOOR, EstimatorFactory, VehicleTrial
 
 __all__ = ["ClapperEnv", "ClapperRectangleEnv", "ClapperStraightEnv"]
 

@@ -16,10 +16,12 @@ import pytest
 
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.sim.cables import bump_extra_rotation
+from odomgym.vehicle.cable_layout import CableLayer, evenly
 from odomgym.vehicle.ipec import ipec_estimator
 from odomgym.vehicle.paper_runs import PAPER_CONDITIONS, run_clapper, summarize
+from odomgym.vehicle.paths import straight_path
 from odomgym.vehicle.spec import VEHICLES
-from odomgym.vehicle.trial import CLAPPER_FLOOR, CableLayer, drive_vehicles, evenly, straight_path
+from odomgym.vehicle.trial import CLAPPER_FLOOR, drive_vehicles
 
 CLAPPER = VEHICLES["clapper"]
 TRUCK = CLAPPER.truck_a
@@ -129,7 +131,9 @@ def test_the_old_controller_lets_the_trucks_drift_apart() -> None:
     (``steering="pose"``), the trucks drift apart without IPEC and the linkage hits its end stop
     on the smooth rectangle with cables (the inflated baseline of the earlier controller);
     holding ψ, it never does."""
-    from odomgym.vehicle.trial import VehicleDriver, rectangle_cable_positions, rectangle_path
+    from odomgym.vehicle.cable_layout import rectangle_cable_positions
+    from odomgym.vehicle.controller import VehicleDriver
+    from odomgym.vehicle.paths import rectangle_path
 
     path = rectangle_path(direction="cw")
     forces = {}

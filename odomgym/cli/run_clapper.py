@@ -126,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
     """Drive the experiment's conditions (the paper's, or the one ``--bumps``/``--ipec`` ask
     for), then print the settings and the runs (a table, or a JSON line per run and a
     summary) and the figure written."""
+    from odomgym.vehicle.controller import VehicleDriver
     from odomgym.vehicle.ipec import ipec_estimator
     from odomgym.vehicle.paper_runs import (
         PAPER_CONDITIONS,
@@ -137,7 +138,6 @@ def run(args: argparse.Namespace) -> int:
         summarize,
     )
     from odomgym.vehicle.spec import PAPER_ERRORS, load_vehicle
-    from odomgym.vehicle.trial import VehicleDriver
 
     report = Reporter.of(args)
     check_plot_path(args.plot)

@@ -25,19 +25,11 @@ from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
 from odomgym.lab.report import save_error_axes
+from odomgym.vehicle.cable_layout import CableLayer, evenly, rectangle_cable_positions
+from odomgym.vehicle.controller import VehicleDriver
+from odomgym.vehicle.paths import rectangle_path, straight_path
 from odomgym.vehicle.spec import VehicleSpec
-from odomgym.vehicle.trial import (
-    CLAPPER_FLOOR,
-    CableLayer,
-    EstimatorFactory,
-    VehicleDriver,
-    VehicleOutcome,
-    drive_vehicles,
-    evenly,
-    rectangle_cable_positions,
-    rectangle_path,
-    straight_path,
-)
+from odomgym.vehicle.trial import CLAPPER_FLOOR, EstimatorFactory, VehicleOutcome, drive_vehicles
 
 __all__ = [
     "CLAPPER_FLOOR",
