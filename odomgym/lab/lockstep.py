@@ -4,8 +4,9 @@ A calibrator is a sequential procedure (perform an experiment, think, perform th
 one robot's experiment is a few hundred physics steps of one to ten robots — Python overhead
 per step dominates. :func:`run_lockstep` runs one procedure per robot, each in its own thread
 with its own :class:`~odomgym.lab.experiment.Lab`; whenever every still-running procedure is
-waiting for an experiment, all the requested runs are simulated as *one* batch (one pymunk
-space, :func:`odomgym.lab.simulated.simulate_runs`), and each procedure gets its runs back. The
+waiting for an experiment, all the requested runs are simulated as *one* batch
+(:func:`odomgym.lab.simulated.perform_many`: one pymunk space for the routes, one for the arcs),
+and each procedure gets its runs back, whatever kind of experiment it asked for. The
 threads pass a baton: exactly one of them runs at any time (the procedures in a fixed order, then
 the batch simulation), so the schedule is deterministic and a process never runs more than one
 thread's numerical work at once.

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,11 +36,13 @@ from odomgym.sim.trial import OBSERVATION_NAMES, Trial
 from odomgym.sim.world import World
 
 __all__ = [
+    "ARC_KINDS",
     "FREE_LEG_LENGTH",
     "FREE_MIN_RADIUS",
     "Arc",
     "RunRequests",
     "SimLab",
+    "arc_plans",
     "circle_plan",
     "drive_arcs",
     "experiment_route",
@@ -352,6 +354,7 @@ def drive_arcs(
     direction: Direction | None = None,
     start_poses: FloatArray | None = None,
     max_time: float | None = None,
+    on_timeout: Literal["raise", "keep"] = "raise",
 ) -> list[Run]:
     """Drive each robot through its plan of arcs by its own odometry; return the runs.
 
@@ -378,7 +381,10 @@ def drive_arcs(
         start_poses: where each robot starts on the floor (K, 3) [m, m, rad] (default: the
             origin); the plan is driven in each robot's start frame.
         max_time: give up after this much simulated time [s] (default: 3 × the nominal time
-            + 60 s); RuntimeError names the robots that did not stop.
+            + 60 s).
+        on_timeout: ``"raise"`` — RuntimeError naming the robots that did not stop;
+            ``"keep"`` — return their runs up to the time limit, marked
+            ``run.meta["finished"] = False`` (as :func:`simulate_runs`).
 
     Returns:
         One run per plan, true poses in the floor's frame (apply :func:`measure` before showing
@@ -421,7 +427,12 @@ def drive_arcs(
     braking = np.zeros(count, dtype=bool)
     command = np.zeros((count, 2))
     step = 0
+    timed_out = np.zeros(count, dtype=bool)
     while (recording.finished_at < 0).any():
+        if step >= max_steps and on_timeout == "keep":
+            timed_out = recording.finished_at < 0
+            recording.finished_at[timed_out] = step
+            break
         if step >= max_steps:
             stuck = np.flatnonzero(recording.finished_at < 0).tolist()
             raise RuntimeError(
@@ -466,7 +477,12 @@ def drive_arcs(
                 direction=direction,
                 side=float(shape.get("radius", 0.0)),
                 source=f"sim:{label}-{length:g}m",
-                meta={"robot": specs[i].name, "floor": floor.name, "finished": True, **shape},
+                meta={
+                    "robot": specs[i].name,
+                    "floor": floor.name,
+                    "finished": not bool(timed_out[i]),
+                    **shape,
+                },
             )
         )
     return runs
@@ -514,6 +530,79 @@ def measure(runs: Sequence[Run], sensor: SensorAccuracy, rng: np.random.Generato
     return measured
 
 
+ARC_KINDS = (ExperimentKind.CIRCULAR, ExperimentKind.FREE)
+"""The experiment kinds driven as arcs (:func:`drive_arcs`) rather than routes."""
+
+
+def arc_plans(experiment: Experiment, rng: np.random.Generator) -> list[tuple[Arc, ...]]:
+    """One plan of arcs per run of a circular or free ``experiment``: the same circle for every
+    run, or a new random path per free run drawn from ``rng``."""
+    if experiment.kind is ExperimentKind.CIRCULAR:
+        assert experiment.direction is not None
+        circle = circle_plan(experiment.size, experiment.direction, experiment.laps)
+        return [circle] * experiment.runs
+    if experiment.kind is ExperimentKind.FREE:
+        return [free_plan(rng, experiment.size) for _ in range(experiment.runs)]
+    raise ValueError(f"a {experiment.kind} experiment drives a route, not arcs")
+
+
+class _ArcRun(NamedTuple):
+    """One circular or free run of a :func:`perform_many` request."""
+
+    owner: int
+    robot: RobotSpec
+    plan: tuple[Arc, ...]
+    calibration: Calibration
+    stream: np.random.Generator
+    start: FloatArray
+
+
+@dataclass
+class _ArcRequests:
+    """Circular and free runs of several requests, collected for :func:`drive_arcs`: one batch
+    per kind and direction, since those label every run of a batch."""
+
+    groups: dict[tuple[str, Direction | None], list[_ArcRun]] = field(default_factory=dict)
+
+    def add(
+        self,
+        owner: int,
+        robot: RobotSpec,
+        experiment: Experiment,
+        calibration: Calibration,
+        rng: np.random.Generator,
+        start_region: float | None,
+    ) -> None:
+        """Draw the request's paths and start poses from its ``rng``, then one floor-noise
+        stream per run (``rng.spawn``), as :func:`perform_many` does for routes."""
+        plans = arc_plans(experiment, rng)
+        poses = random_start_poses(rng, experiment.runs, start_region)
+        group = self.groups.setdefault((str(experiment.kind), experiment.direction), [])
+        for k, stream in enumerate(rng.spawn(experiment.runs)):
+            start = np.zeros(3) if poses is None else poses[k]
+            group.append(_ArcRun(owner, robot, plans[k], calibration, stream, start))
+
+    def simulate(self, floor: FloorSpec, *, cruise_speed: float) -> list[tuple[int, Run]]:
+        """Drive every group (a robot that does not stop within the time limit gets its run
+        marked unfinished); return ``(owner, run)`` pairs."""
+        out: list[tuple[int, Run]] = []
+        for (kind, direction), group in self.groups.items():
+            runs = drive_arcs(
+                [run.robot for run in group],
+                floor,
+                [run.plan for run in group],
+                calibration=[run.calibration for run in group],
+                rng=[run.stream for run in group],
+                cruise_speed=cruise_speed,
+                kind=kind,
+                direction=direction,
+                start_poses=np.array([run.start for run in group]),
+                on_timeout="keep",
+            )
+            out.extend((request.owner, run) for request, run in zip(group, runs, strict=True))
+        return out
+
+
 def perform_many(
     requests: Sequence[tuple[RobotSpec, Experiment, Calibration, np.random.Generator]],
     floor: FloorSpec,
@@ -522,13 +611,16 @@ def perform_many(
     cruise_speed: float = 0.2,
     start_region: float | None = None,
 ) -> list[list[Run] | RuntimeError]:
-    """Perform several robots' square, straight or spin experiments as *one* batch.
+    """Perform several robots' experiments, of every kind :meth:`SimLab.perform` drives, as
+    one batch of routes (squares, straights, spins: :func:`simulate_runs`) and one of arcs
+    (circles, free paths: :func:`drive_arcs`).
 
-    Each request is ``(robot, experiment, calibration, rng)``; its ``rng`` alone draws the
-    start poses (within ±``start_region`` [m], or the origin), one floor-noise stream per run
-    (``rng.spawn``) and the sensor noise of :func:`measure` — so a robot's runs do not depend
-    on which other robots share the batch. Why one batch: a pymunk space of many robots costs
-    little more per step than one robot (Python overhead per step dominates).
+    Each request is ``(robot, experiment, calibration, rng)``; its ``rng`` alone draws a free
+    experiment's paths (:func:`free_plan`), the start poses (within ±``start_region`` [m], or
+    the origin), one floor-noise stream per run (``rng.spawn``) and the sensor noise of
+    :func:`measure` — so a robot's runs do not depend on which other robots share the batch.
+    Why one batch: a pymunk space of many robots costs little more per step than one robot
+    (Python overhead per step dominates).
 
     Returns, per request, its measured runs, or a ``RuntimeError`` if that robot did not finish
     within the time limit (its batch companions are unaffected). Other errors (an invalid
@@ -536,7 +628,11 @@ def perform_many(
     """
     batch = RunRequests()
     owners: list[int] = []
+    arcs = _ArcRequests()
     for index, (robot, experiment, calibration, rng) in enumerate(requests):
+        if experiment.kind in ARC_KINDS:
+            arcs.add(index, robot, experiment, calibration, rng, start_region)
+            continue
         route = experiment_route(experiment)
         poses = random_start_poses(rng, experiment.runs, start_region)
         for k, stream in enumerate(rng.spawn(experiment.runs)):
@@ -553,6 +649,8 @@ def perform_many(
     runs, _ = batch.simulate(floor, cruise_speed=cruise_speed)
     grouped: list[list[Run]] = [[] for _ in requests]
     for owner, run in zip(owners, runs, strict=True):
+        grouped[owner].append(run)
+    for owner, run in arcs.simulate(floor, cruise_speed=cruise_speed):
         grouped[owner].append(run)
     outcome: list[list[Run] | RuntimeError] = []
     for (_, experiment, _, rng), own in zip(requests, grouped, strict=True):
@@ -605,7 +703,7 @@ class SimLab(BookkeepingLab):
         """Drive the experiment ``experiment.runs`` times with ``calibration`` in the odometry
         (squares, straight runs and spins by the reference driver; circles and free paths by
         :func:`drive_arcs`, a new random path for every free run)."""
-        if experiment.kind in (ExperimentKind.CIRCULAR, ExperimentKind.FREE):
+        if experiment.kind in ARC_KINDS:
             runs = self._drive_arcs(experiment, calibration)
         else:
             runs = self._drive_route(experiment, calibration)
@@ -613,16 +711,10 @@ class SimLab(BookkeepingLab):
         return measure(runs, self.sensor, self.rng)
 
     def _drive_arcs(self, experiment: Experiment, calibration: Calibration) -> list[Run]:
-        if experiment.kind is ExperimentKind.CIRCULAR:
-            assert experiment.direction is not None
-            circle = circle_plan(experiment.size, experiment.direction, experiment.laps)
-            plans = [circle] * experiment.runs
-        else:
-            plans = [free_plan(self.rng, experiment.size) for _ in range(experiment.runs)]
         return drive_arcs(
             self._robot,
             self.floor,
-            plans,
+            arc_plans(experiment, self.rng),
             calibration=calibration,
             rng=self.rng,
             cruise_speed=self.cruise_speed,
