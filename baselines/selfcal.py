@@ -3,7 +3,7 @@
 UMBmark (Borenstein & Feng 1994, §6.3) prescribes ten 4×4 m squares and reads two numbers off
 their end errors. ``selfcal`` asks instead: *which* run should the robot drive next, given
 what it has measured so far, and when has it learnt enough? A session has a budget of runs;
-at every step a policy picks one item of :data:`MENU` (a 4 m or 2 m square either way, a 4 m
+at every step a policy picks one item of :data:`ACTION_MENU` (a 4 m or 2 m square either way, a 4 m
 straight run one way or out and back, an in-place spin) or ``stop``. Every run is driven with
 the current estimate in the odometry (iterative compensation, as UMBmark's §6.3 second round
 and solderspot 2014 do), and the lab's ground-truth sensor measures it.
@@ -41,8 +41,8 @@ from odomgym.errors import SpecError, require_count
 from odomgym.lab.experiment import Experiment, Lab
 from odomgym.odometry.calibration import Calibration
 from odomgym.selfcal.session import (
+    ACTION_MENU,
     MAX_BUDGET,
-    MENU,
     OBSERVATION_LAYOUT,
     OBSERVATION_VERSION,
     STOP,
@@ -164,10 +164,10 @@ class MlpPolicy:
             if w.ndim != 2 or b.shape != (w.shape[0],) or w.shape[1] != width:
                 raise refuse(f"layer {k} has weights {w.shape} and biases {b.shape}")
             width = w.shape[0]
-        if not weights or width != len(MENU):
+        if not weights or width != len(ACTION_MENU):
             raise SpecError(
                 f"{source}: network shape does not match {len(OBSERVATION_LAYOUT)} observations "
-                f"and {len(MENU)} actions",
+                f"and {len(ACTION_MENU)} actions",
                 field="policy",
             )
         return cls(weights, meta)
@@ -269,7 +269,7 @@ class SelfCal(Calibrator):
 
     def experiments(self) -> list[Experiment]:
         """Chosen as the session goes: the menu's experiments, one run each."""
-        return [item.experiment for item in MENU if item.experiment is not None]
+        return [item.experiment for item in ACTION_MENU if item.experiment is not None]
 
     def _choose(self, session: SelfCalSession) -> int:
         if session.runs_left <= 0:
@@ -324,7 +324,7 @@ class SelfCalScriptedOptions(SelfCalOptions):
     """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy.
 
     Attributes:
-        schedule: menu item names (:data:`~odomgym.selfcal.session.MENU`, e.g.
+        schedule: menu item names (:data:`~odomgym.selfcal.session.ACTION_MENU`, e.g.
             ``("square4-cw", "square4-ccw", "straight4")``, or one comma-separated string)
             driven in this order, repeated until the budget is spent; empty (the default) for
             :func:`scripted_policy`'s schedule. A lab that can drive only some items, or an
@@ -360,7 +360,7 @@ def schedule_items(schedule: object) -> tuple[str, ...]:
         raise SpecError(
             f"schedule must be a list of menu item names, got {schedule!r}", field="schedule"
         )
-    names = [item.name for item in MENU[1:]]
+    names = [item.name for item in ACTION_MENU[1:]]
     for name in schedule:
         if name not in names:
             raise SpecError(
@@ -399,7 +399,7 @@ class SelfCalScripted(SelfCal):
         if not schedule or session.runs_left <= 0:
             return super()._choose(session)
         name = schedule[session.runs_used % len(schedule)]
-        return next(i for i, item in enumerate(MENU) if item.name == name)
+        return next(i for i, item in enumerate(ACTION_MENU) if item.name == name)
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_selfcal.py --budget 16 8 4 --picks  # 100 robots, 3 floors
     python benchmarks/bench_selfcal.py --robots 20 --json  # quicker; JSON lines for scripts
-    python benchmarks/bench_selfcal.py --noise             # re-measure MENU's floor scatter
+    python benchmarks/bench_selfcal.py --noise             # re-measure ACTION_MENU's floor scatter
     python benchmarks/bench_selfcal.py --error-budget      # what a parameter error costs
 
 Every method runs in the calibrator benchmark (:mod:`odomgym.baselines.benchmark`): the same
@@ -113,7 +113,7 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
     from odomgym.baselines.benchmark import bench_floor, calibration_streams, configure, population
     from odomgym.baselines.selfcal import SelfCal
     from odomgym.lab.lockstep import run_lockstep
-    from odomgym.selfcal.session import MENU
+    from odomgym.selfcal.session import ACTION_MENU
 
     robots = population(config)
     indices = list(range(config.robots))
@@ -128,7 +128,7 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
                 calibration_streams(config, indices, floor_index),
                 start_region=start_region,
             )
-            counts = dict.fromkeys((item.name for item in MENU[1:]), 0)
+            counts = dict.fromkeys((item.name for item in ACTION_MENU[1:]), 0)
             for outcome in outcomes:
                 if outcome.value is None:
                     continue
@@ -154,11 +154,11 @@ def measure_noise(runs: int = 24) -> None:
     from odomgym.lab.simulated import experiment_route, random_start_poses, simulate_runs
     from odomgym.odometry.runs import end_error
     from odomgym.robot import PRESETS
-    from odomgym.selfcal.session import MENU
+    from odomgym.selfcal.session import ACTION_MENU
 
     robot = PRESETS["labmate"].ideal()
     print(f"{'item':<16} {'σx [mm]':>8} {'σy [mm]':>8} {'σθ [°]':>7}   (concrete, {runs} runs)")
-    for item in MENU[1:]:
+    for item in ACTION_MENU[1:]:
         assert item.experiment is not None
         rng = np.random.default_rng(5)
         sim, odom = simulate_runs(
@@ -236,7 +236,7 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (2)")
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (0)")
     parser.add_argument("--json", action="store_true", help="JSON lines instead of tables")
-    parser.add_argument("--noise", action="store_true", help="measure MENU's floor scatter")
+    parser.add_argument("--noise", action="store_true", help="measure ACTION_MENU's floor scatter")
     parser.add_argument(
         "--error-budget",
         action="store_true",

@@ -3,7 +3,7 @@
     python benchmarks/design_bound.py                      # 100 robots, 3 floors, 16/8/4 runs
     python benchmarks/design_bound.py --robots 20 --floor concrete --budget 8 --json
 
-The learned policy of ``selfcal`` chooses each run from :data:`odomgym.selfcal.session.MENU`.
+The learned policy of ``selfcal`` chooses each run from :data:`odomgym.selfcal.session.ACTION_MENU`.
 Whether a better choice exists is a question of experiment design, and the trajectory filter
 answers most of it without driving a single schedule:
 
@@ -58,10 +58,10 @@ from odomgym.lab.lockstep import run_lockstep
 from odomgym.lab.population import BENCH_FLOORS
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import replay_with_jacobian
-from odomgym.selfcal.session import MENU, TrajectoryEstimator
+from odomgym.selfcal.session import ACTION_MENU, TrajectoryEstimator
 
 FloatArray = NDArray[np.float64]
-ITEMS = tuple(item.name for item in MENU[1:])
+ITEMS = tuple(item.name for item in ACTION_MENU[1:])
 REPEATS = 2  # runs of each item per robot for the information matrices
 MAX_DESIGN_BUDGET = 20
 
@@ -87,7 +87,7 @@ def item_information(
         estimator = TrajectoryEstimator(lab.robot, getattr(lab, "sensor", SensorAccuracy()))
         nominal = Calibration()
         taken = []
-        for i, item in enumerate(MENU[1:], start=1):
+        for i, item in enumerate(ACTION_MENU[1:], start=1):
             assert item.experiment is not None
             for _ in range(REPEATS):
                 (run,) = perform(lab, item.experiment, nominal, method="design")
@@ -158,7 +158,9 @@ def interleaved(counts: NDArray[np.int64]) -> list[str]:
 
 def scripted_schedule(budget: int) -> list[str]:
     """The runs :func:`scripted_policy` drives with ``budget`` runs, by name."""
-    return [MENU[scripted_policy(np.zeros(1, np.float32), budget, k)].name for k in range(budget)]
+    return [
+        ACTION_MENU[scripted_policy(np.zeros(1, np.float32), budget, k)].name for k in range(budget)
+    ]
 
 
 def drive(

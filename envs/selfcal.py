@@ -9,7 +9,7 @@ field of random cables, so cables are met at random — one fixed field, not the
 so the benchmark evaluates on cables the agent never trained on).
 
 Spaces:
-    action: ``Discrete(10)`` — an index into :data:`~odomgym.selfcal.session.MENU`: 0 stops
+    action: ``Discrete(10)`` — an index into :data:`~odomgym.selfcal.session.ACTION_MENU`: 0 stops
         the session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or
         out and back, in-place spins of 360° either way or 720°) with the reference driver and
         the current corrections in the odometry.
@@ -112,8 +112,8 @@ from odomgym.odometry.runs import Run, end_error
 from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
 from odomgym.selfcal.session import (
+    ACTION_MENU,
     MAX_BUDGET,
-    MENU,
     OBSERVATION_BOUND,
     OBSERVATION_LAYOUT,
     SelfCalSession,
@@ -348,7 +348,7 @@ def step_episodes(
         info: dict[str, Any] = {
             "floor": episode.floor_name,
             "budget": session.budget,
-            "item": MENU[int(actions[i])].name if i in experiment_slot else "stop",
+            "item": ACTION_MENU[int(actions[i])].name if i in experiment_slot else "stop",
         }
         reward = 0.0
         terminated = False
@@ -366,7 +366,7 @@ def step_episodes(
                 terminated = True
                 reward = FAILED_REWARD - shaping * episode.potential
                 info["failed"] = (
-                    f"the robot did not finish its {MENU[int(actions[i])].name} run (a "
+                    f"the robot did not finish its {ACTION_MENU[int(actions[i])].name} run (a "
                     "slippery floor, or corrections that make it circle?)"
                 )
         else:
@@ -400,16 +400,18 @@ def step_episodes(
 
 def menu_index(action: object) -> int:
     """``action`` as a menu index, or :class:`SpecError` (field ``action``): a whole number
-    (Python or numpy, or a 0-d array of one) in 0..len(MENU)−1."""
+    (Python or numpy, or a 0-d array of one) in 0..len(ACTION_MENU)−1."""
     value = action.item() if isinstance(action, np.ndarray) and action.shape == () else action
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise SpecError(
-            f"action must be a whole menu index 0..{len(MENU) - 1}, got {describe_action(action)}",
+            f"action must be a whole menu index 0..{len(ACTION_MENU) - 1}, "
+            f"got {describe_action(action)}",
             field="action",
         )
-    if not 0 <= int(value) < len(MENU):
+    if not 0 <= int(value) < len(ACTION_MENU):
         raise SpecError(
-            f"action must be a menu index 0..{len(MENU) - 1}, got {int(value)}", field="action"
+            f"action must be a menu index 0..{len(ACTION_MENU) - 1}, got {int(value)}",
+            field="action",
         )
     return int(value)
 
@@ -484,7 +486,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         self.shaping = float(shaping)
         self.population = population or Population()
         self.sensor = sensor or SensorAccuracy()
-        self.action_space = gym.spaces.Discrete(len(MENU))
+        self.action_space = gym.spaces.Discrete(len(ACTION_MENU))
         bound = OBSERVATION_BOUND
         self.observation_space = gym.spaces.Box(
             -bound, bound, (len(OBSERVATION_LAYOUT),), dtype=np.float32
@@ -566,7 +568,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             odometry = replay_odometry(run, episode.robot, calibration)
             self._drawn.append(
                 SessionRun(
-                    MENU[action].name,
+                    ACTION_MENU[action].name,
                     _start_frame(run.true_pose, start),
                     _start_frame(odometry, start),
                     bool(run.meta["finished"]),
@@ -574,7 +576,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             )
         session = episode.session
         items = sorted({action for action, _, _ in episode.trace})
-        routes = [_route_points(experiment_route(MENU[a].experiment)) for a in items]  # type: ignore[arg-type]
+        routes = [_route_points(experiment_route(ACTION_MENU[a].experiment)) for a in items]  # type: ignore[arg-type]
         state = SessionState(
             floor=episode.floor_name,
             budget=session.budget,

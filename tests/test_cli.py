@@ -558,7 +558,7 @@ def test_run_plans_are_a_library_the_command_only_prints(
 
     robot = PRESETS["labmate"].with_errors(None, 1.02, None)  # as --eb 1.02 does
     batch = drive_plans(
-        robot, FLOORS["smooth"], square_plans(1.0), repeats=1, rng=np.random.default_rng(3)
+        robot, FLOORS["smooth"], square_plans(1.0, runs=1), rng=np.random.default_rng(3)
     )
     assert batch.directions == ["cw", "ccw"]
     assert [run.meta["experiment"] for run in batch.runs] == ["square_cw", "square_ccw"]

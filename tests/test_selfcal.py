@@ -34,14 +34,14 @@ from odomgym.lab.population import Population
 from odomgym.odometry.calibration import Calibration
 from odomgym.robot import PRESETS
 from odomgym.selfcal.session import (
-    MENU,
+    ACTION_MENU,
     OBSERVATION_LAYOUT,
     OBSERVATION_VERSION,
     STOP,
     SelfCalSession,
 )
 
-ITEM = {item.name: k for k, item in enumerate(MENU)}
+ITEM = {item.name: k for k, item in enumerate(ACTION_MENU)}
 
 
 def _episodes(
@@ -121,7 +121,7 @@ def test_v0_keeps_the_end_pose_estimator_and_v1_filters_the_trajectory() -> None
 
 def test_spaces_and_observation_layout() -> None:
     env = SelfCalibrationEnv(budget=4)
-    assert env.action_space.n == len(MENU) == 10
+    assert env.action_space.n == len(ACTION_MENU) == 10
     assert env.observation_space.shape == (len(OBSERVATION_LAYOUT),) == (31,)
     obs, info = env.reset(seed=3, options={"floor": "rough", "budget": 2})
     assert env.observation_space.contains(obs)
@@ -354,17 +354,17 @@ def test_session_refuses_bad_budgets_and_actions() -> None:
         SelfCalSession(robot, 65)
     session = SelfCalSession(robot, 4)
     with pytest.raises(SpecError, match="menu index"):
-        session.experiment(len(MENU))
+        session.experiment(len(ACTION_MENU))
     with pytest.raises(SpecError, match="stop drives no run"):
         session.record(STOP, [])
 
 
 def test_scripted_schedule() -> None:
-    names = [MENU[scripted_policy(np.zeros(1, np.float32), 16, k)].name for k in range(17)]
+    names = [ACTION_MENU[scripted_policy(np.zeros(1, np.float32), 16, k)].name for k in range(17)]
     assert names[:4] == ["square4-cw", "square4-ccw", "straight4", "square4-cw"]
     assert names.count("straight4") == 2 and names[10] == "straight4" and names[16] == "stop"
     assert names.count("square4-cw") == names.count("square4-ccw") == 7
-    short = [MENU[scripted_policy(np.zeros(1, np.float32), 4, k)].name for k in range(4)]
+    short = [ACTION_MENU[scripted_policy(np.zeros(1, np.float32), 4, k)].name for k in range(4)]
     assert short == ["square4-cw", "square4-ccw"] * 2
 
 

@@ -25,7 +25,7 @@ from odomgym.baselines.selfcal_train import (
 from odomgym.cli import main
 from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
-from odomgym.selfcal.session import MENU, OBSERVATION_VERSION
+from odomgym.selfcal.session import ACTION_MENU, OBSERVATION_VERSION
 
 KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
 
@@ -36,7 +36,7 @@ def _rollout(venv, steps: int) -> list[np.ndarray]:
     rng = np.random.default_rng(0)
     out = [obs]
     for _ in range(steps):
-        actions = rng.integers(0, len(MENU), size=venv.num_envs)
+        actions = rng.integers(0, len(ACTION_MENU), size=venv.num_envs)
         obs, rewards, dones, infos = venv.step(actions)
         terminal = [info.get("terminal_observation", np.zeros(1)).sum() for info in infos]
         out += [obs, rewards, dones.astype(float), np.array(terminal)]

@@ -16,7 +16,7 @@ from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Run, replay_odometry, replay_with_jacobian
 from odomgym.robot import PRESETS
 from odomgym.selfcal.session import (
-    MENU,
+    ACTION_MENU,
     PRIOR_STD,
     EndPoseEstimator,
     SelfCalSession,
@@ -24,7 +24,7 @@ from odomgym.selfcal.session import (
     chunk_motions,
 )
 
-ITEM = {item.name: k for k, item in enumerate(MENU)}
+ITEM = {item.name: k for k, item in enumerate(ACTION_MENU)}
 ROBOT = PRESETS["labmate"]
 
 

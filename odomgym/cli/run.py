@@ -110,15 +110,14 @@ def run(args: argparse.Namespace) -> int:
     floor: FloorSpec = load_floor(args.floor)
     calibration = load_calibration(args.calibration) if args.calibration else None
     if args.path == "square":
-        plans = square_plans(args.side, args.direction)
+        plans = square_plans(args.side, args.direction, args.runs)
     else:
-        plans = straight_plans(args.distance, args.return_trip)
+        plans = straight_plans(args.distance, args.return_trip, args.runs)
     with Progress.percent(report) as bar:
         batch = drive_plans(
             robot,
             floor,
             plans,
-            repeats=args.runs,
             calibration=calibration,
             rng=np.random.default_rng(args.seed),
             progress=bar.fraction,

@@ -1,14 +1,14 @@
-"""Batches of simulated runs: which routes to drive, driving them, and what they return.
+"""Batches of simulated runs driven with a known calibration: plans, driving them, and what
+they return.
 
 Why a module of its own: ``odomgym run`` and a notebook should plan and drive the same runs the
-same way, and the command line should only parse, call this and print. A *plan* is one route
-driven ``repeats`` times (a UMBmark square in one direction, or a straight run); a
-:class:`RunBatch` holds every run of a list of plans with its return error
-ε = true − odometry end pose in the start frame [m, m, rad] (Borenstein & Feng 1994, §3.1), and
-the UMBmark measures when both directions were driven (Borenstein & Feng 1994, Eq. 3.3).
-
-Also here: :func:`ros2_yaml`, the ros2_control parameter file a calibration exports (the
-mapping itself is :meth:`odomgym.odometry.calibration.Calibration.ros2_parameters`).
+same way, and the command line should only parse, call this and print. A *plan* is an
+:class:`~odomgym.lab.experiment.Experiment` — the one type for "what to drive and how often",
+whether a calibrator asks a lab for it or a user drives it here (:func:`square_plans`,
+:func:`straight_plans`). A :class:`RunBatch` holds every run of a list of plans with its return
+error ε = true − odometry end pose in the start frame [m, m, rad] (Borenstein & Feng 1994,
+§3.1), and the UMBmark measures when both directions were driven (Borenstein & Feng 1994,
+Eq. 3.3).
 """
 
 from __future__ import annotations
@@ -21,56 +21,46 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
-from odomgym.lab.simulated import simulate_runs
+from odomgym.lab.experiment import Experiment, ExperimentKind
+from odomgym.lab.simulated import experiment_route, simulate_runs
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Direction, Run, end_error
 from odomgym.odometry.umbmark_measures import UMBmarkSummary, summarize_umbmark
 from odomgym.robot import RobotSpec
-from odomgym.sim.routes import Route, square_route, straight_route
+from odomgym.sim.routes import square_route, straight_route
 
 __all__ = [
     "RunBatch",
-    "RunPlan",
     "drive_plans",
-    "ros2_yaml",
     "square_plans",
     "straight_plans",
 ]
 
 FloatArray = NDArray[np.float64]
-RouteKind = Literal["square", "straight"]
 
 
-@dataclass(frozen=True)
-class RunPlan:
-    """One route, driven several times.
-
-    Attributes:
-        kind: ``"square"`` (UMBmark square) or ``"straight"``.
-        direction: ``"cw"``/``"ccw"`` for squares, ``None`` for straight runs.
-        route: the route the reference driver follows.
-    """
-
-    kind: RouteKind
-    direction: Direction | None
-    route: Route
-
-    @property
-    def label(self) -> str:
-        """The experiment label stored with each run (``square_cw``, ``straight``)."""
-        return self.kind if self.direction is None else f"{self.kind}_{self.direction}"
-
-
-def square_plans(side: float, direction: Literal["cw", "ccw", "both"] = "both") -> list[RunPlan]:
-    """UMBmark squares of side ``side`` [m]: cw, ccw, or cw then ccw (``"both"``, which is
-    what E_max,syst needs; Borenstein & Feng 1994, §3.2)."""
+def square_plans(
+    side: float, direction: Literal["cw", "ccw", "both"] = "both", runs: int = 1
+) -> list[Experiment]:
+    """``runs`` UMBmark squares of side ``side`` [m] each way: cw, ccw, or cw then ccw
+    (``"both"``, which is what E_max,syst needs; Borenstein & Feng 1994, §3.2). The side is
+    checked as the route checks it, so an error names ``side``."""
     directions: list[Direction] = ["cw", "ccw"] if direction == "both" else [direction]
-    return [RunPlan("square", d, square_route(side, d)) for d in directions]
+    for d in directions:
+        square_route(side, d)
+    return [Experiment(ExperimentKind.SQUARE, d, runs, side) for d in directions]
 
 
-def straight_plans(distance: float, return_trip: bool = False) -> list[RunPlan]:
-    """A straight run of ``distance`` [m], optionally turning on the spot and driving back."""
-    return [RunPlan("straight", None, straight_route(distance, return_trip))]
+def straight_plans(distance: float, return_trip: bool = False, runs: int = 1) -> list[Experiment]:
+    """``runs`` straight runs of ``distance`` [m], optionally turning on the spot and driving
+    back. The distance is checked as the route checks it, so an error names ``distance``."""
+    straight_route(distance, return_trip)
+    return [Experiment(ExperimentKind.STRAIGHT, None, runs, distance, return_trip=return_trip)]
+
+
+def _label(plan: Experiment) -> str:
+    """The experiment label stored with each run (``square_cw``, ``straight``)."""
+    return str(plan.kind) if plan.direction is None else f"{plan.kind}_{plan.direction}"
 
 
 @dataclass
@@ -132,14 +122,14 @@ class RunBatch:
 def drive_plans(
     robot: RobotSpec,
     floor: FloorSpec,
-    plans: Sequence[RunPlan],
+    plans: Sequence[Experiment],
     *,
-    repeats: int,
     calibration: Calibration | None = None,
     rng: np.random.Generator | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> RunBatch:
-    """Drive every plan ``repeats`` times with the reference driver, plan after plan.
+    """Drive every plan (a square, straight or spin experiment) ``plan.runs`` times with the
+    reference driver, plan after plan.
 
     The plans share ``rng`` in order (so one seed gives one batch); ``progress`` receives the
     completed fraction of the whole batch (0..1).
@@ -158,16 +148,16 @@ def drive_plans(
         batch, odom_end = simulate_runs(
             robot,
             floor,
-            plan.route,
+            experiment_route(plan),
             calibration=calibration if calibration is not None else Calibration(),
             rng=rng,
-            repeats=repeats,
-            kind=plan.kind,
+            repeats=plan.runs,
+            kind=str(plan.kind),
             direction=plan.direction,
             progress=report,
         )
         for run, odom in zip(batch, odom_end, strict=True):
-            run.meta.update(run=str(len(runs) + 1), experiment=plan.label)
+            run.meta.update(run=str(len(runs) + 1), experiment=_label(plan))
             runs.append(run)
             directions.append(plan.direction)
             odometry.append(np.asarray(odom, dtype=float))
@@ -177,20 +167,5 @@ def drive_plans(
         directions=directions,
         odometry_end=np.array(odometry),
         errors=errors.reshape(-1, 3),
-        route_name=plans[0].route.name,
+        route_name=experiment_route(plans[0]).name,
     )
-
-
-def ros2_yaml(calibration: Calibration) -> str:
-    """A ros2_control ``diff_drive_controller`` parameter file equivalent to ``calibration``
-    (the multipliers of :meth:`~odomgym.odometry.calibration.Calibration.ros2_parameters`)."""
-    lines = [
-        "# ros2_control diff_drive_controller parameters equivalent to an odomgym calibration.",
-        "# Rename the top-level key to your controller's node name. Mapping (odomgym.odometry):",
-        "#   wheel_separation_multiplier = E_b, {left,right}_wheel_radius_multiplier = c_{L,R}*E_s",
-        "diff_drive_controller:",
-        "  ros__parameters:",
-    ]
-    for key, value in calibration.ros2_parameters().items():
-        lines.append(f"    {key}: {value:.9f}")
-    return "\n".join(lines) + "\n"

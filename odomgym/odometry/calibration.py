@@ -130,6 +130,23 @@ class Calibration:
             "right_wheel_radius_multiplier": self.c_right * self.distance_scale,
         }
 
+    def ros2_yaml(self) -> str:
+        """A ros2_control ``diff_drive_controller`` parameter file equivalent to this
+        calibration (the multipliers of :meth:`ros2_parameters`), what ``odomgym calibrate
+        --export ros2`` writes; rename its top-level key to the controller's node name."""
+        lines = [
+            "# ros2_control diff_drive_controller parameters equivalent to an odomgym calibration.",
+            "# Rename the top-level key to your controller's node name. "
+            "Mapping (odomgym.odometry):",
+            "#   wheel_separation_multiplier = E_b, "
+            "{left,right}_wheel_radius_multiplier = c_{L,R}*E_s",
+            "diff_drive_controller:",
+            "  ros__parameters:",
+        ]
+        for key, value in self.ros2_parameters().items():
+            lines.append(f"    {key}: {value:.9f}")
+        return "\n".join(lines) + "\n"
+
     # ------------------------------------------------------------------ TOML
     def to_dict(self) -> dict[str, float]:
         """A TOML-ready dict."""

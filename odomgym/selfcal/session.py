@@ -1,9 +1,9 @@
 """The self-calibration session: its experiment menu, its estimators, its observation.
 
 A session (:class:`SelfCalSession`) has a budget of runs; at every step a policy picks one item
-of :data:`MENU` (a 4 m or 2 m square either way, a 4 m straight run one way or out and back, an
-in-place spin) or ``stop``, the run is driven with the current estimate in the odometry, and the
-lab's ground-truth sensor measures it.
+of :data:`ACTION_MENU` (a 4 m or 2 m square either way, a 4 m straight run one way or out and
+back, an in-place spin) or ``stop``, the run is driven with the current estimate in the
+odometry, and the lab's ground-truth sensor measures it.
 
 **The estimators** fit the three effective odometry parameters
 x = (ln D_L/D_n, ln D_R/D_n, ln b/b_n), with a Gaussian prior centred on the nominal robot with
@@ -23,9 +23,9 @@ E_d ± 0.01, E_b ± 0.05, E_s ± 0.02), which keeps the fit well posed after one
   sensor's accuracy plus the floor's scatter for that kind of run.
 
 Both estimate the floor's roughness factor ρ ≥ 1 from the end-pose residuals: the scatter of
-each kind of run over :data:`MENU`'s per-run standard deviations, measured on the ``concrete``
-benchmark floor (ρ ≈ 5 on the ``rough`` floor), so a rough floor down-weights itself relative
-to the prior.
+each kind of run over :data:`ACTION_MENU`'s per-run standard deviations, measured on the
+``concrete`` benchmark floor (ρ ≈ 5 on the ``rough`` floor), so a rough floor down-weights
+itself relative to the prior.
 
 The Gymnasium env (:mod:`odomgym.envs.selfcal`), its batched training env and the calibrator
 (:class:`odomgym.baselines.selfcal.SelfCal`) all drive this one object, so it lives in the core
@@ -47,10 +47,10 @@ from odomgym.odometry.runs import Run, replay_with_jacobian, step_jacobians, whe
 from odomgym.robot import RobotSpec
 
 __all__ = [
+    "ACTION_MENU",
     "CLIP_PRIORS",
     "ESTIMATORS",
     "MAX_BUDGET",
-    "MENU",
     "OBSERVATION_BOUND",
     "OBSERVATION_LAYOUT",
     "OBSERVATION_VERSION",
@@ -89,7 +89,7 @@ class MenuItem(NamedTuple):
     floor_std: tuple[float, float, float]
 
 
-MENU: tuple[MenuItem, ...] = (
+ACTION_MENU: tuple[MenuItem, ...] = (
     MenuItem("stop", None, (0.0, 0.0, 0.0)),
     MenuItem(
         "square4-cw", Experiment(ExperimentKind.SQUARE, "cw", 1, 4.0), (0.017, 0.017, 0.40 * _DEG)
@@ -244,7 +244,7 @@ class EndPoseEstimator:
     def predicted_std(self, item: int) -> FloatArray:
         """Standard deviations of an end-pose residual of a run of menu item ``item`` at the
         current roughness estimate (x, y [m], θ [rad])."""
-        floor = np.square(MENU[item].floor_std)
+        floor = np.square(ACTION_MENU[item].floor_std)
         return np.sqrt(self._sensor_var + self.roughness**2 * floor)
 
     def add(self, run: Run, item: int, iterations: int = 1) -> FloatArray:
@@ -256,7 +256,7 @@ class EndPoseEstimator:
         """
         r, _ = self.residual(run)
         innovation = r / self.predicted_std(item)
-        self._runs.append((run, np.square(np.array(MENU[item].floor_std))))
+        self._runs.append((run, np.square(np.array(ACTION_MENU[item].floor_std))))
         self._update(iterations)
         return innovation
 
@@ -301,7 +301,8 @@ class EndPoseEstimator:
 
 
 #: Roughness k [m^½] the trajectory filter's process noise is scaled from (times the estimated
-#: factor ρ): the ``concrete`` benchmark floor's, at which :data:`MENU`'s scatter was measured.
+#: factor ρ): the ``concrete`` benchmark floor's, at which :data:`ACTION_MENU`'s scatter was
+#: measured.
 REFERENCE_ROUGHNESS = 0.0004
 
 
@@ -520,7 +521,7 @@ class TrajectoryEstimator(EndPoseEstimator):
 OBSERVATION_LAYOUT: tuple[str, ...] = (
     "runs_left_fraction",
     "budget_over_16",
-    *(f"share_{item.name}" for item in MENU[1:]),
+    *(f"share_{item.name}" for item in ACTION_MENU[1:]),
     "E_d_minus_1_over_0.01",
     "E_b_minus_1_over_0.05",
     "E_s_minus_1_over_0.02",
@@ -531,7 +532,7 @@ OBSERVATION_LAYOUT: tuple[str, ...] = (
     "innovation_x",
     "innovation_y",
     "innovation_theta",
-    *(f"last_{item.name}" for item in MENU),
+    *(f"last_{item.name}" for item in ACTION_MENU),
 )
 OBSERVATION_VERSION = 2
 """2: the estimate and its spreads come from the session's estimator, by default the
@@ -583,7 +584,7 @@ class SelfCalSession:
             raise SpecError(f"budget must be <= {MAX_BUDGET} runs, got {budget}", field="budget")
         self.observe = check_observe(observe)
         self.estimator = ESTIMATORS[observe](robot, sensor or SensorAccuracy(), initial)
-        self.counts = np.zeros(len(MENU), dtype=np.int64)
+        self.counts = np.zeros(len(ACTION_MENU), dtype=np.int64)
         self.runs_used = 0
         self.last_item = STOP
         self.innovation = np.zeros(3)
@@ -601,11 +602,12 @@ class SelfCalSession:
 
     def experiment(self, action: int) -> Experiment | None:
         """The run menu item ``action`` drives (``None`` for ``stop``)."""
-        if not 0 <= action < len(MENU):
+        if not 0 <= action < len(ACTION_MENU):
             raise SpecError(
-                f"action must be a menu index 0..{len(MENU) - 1}, got {action}", field="action"
+                f"action must be a menu index 0..{len(ACTION_MENU) - 1}, got {action}",
+                field="action",
             )
-        return MENU[action].experiment
+        return ACTION_MENU[action].experiment
 
     def record(self, action: int, runs: list[Run]) -> None:
         """Take in the measured run(s) of menu item ``action``."""
@@ -616,13 +618,13 @@ class SelfCalSession:
         self.counts[action] += len(runs)
         self.runs_used += len(runs)
         self.last_item = action
-        self.history.append(MENU[action].name)
+        self.history.append(ACTION_MENU[action].name)
 
     def observation(self) -> NDArray[np.float32]:
         """The policy's view (:data:`OBSERVATION_LAYOUT`), every entry within ±10."""
         est = self.estimator
         e_d, e_b, e_s = est.errors
-        last = np.zeros(len(MENU))
+        last = np.zeros(len(ACTION_MENU))
         last[self.last_item] = 1.0
         values = np.concatenate(
             [
