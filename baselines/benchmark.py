@@ -37,17 +37,17 @@ from numpy.typing import NDArray
 
 from odomgym import interrupt
 from odomgym.baselines.base import CALIBRATORS, CalibrationResult, Calibrator
+from odomgym.baselines.validation import ValidationSquare, square_errors
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import Lab, parse_choice
 from odomgym.lab.lockstep import run_lockstep
 from odomgym.lab.population import BENCH_FLOORS, Population, check_bench_floor
-from odomgym.lab.simulated import RunRequests, random_start_poses
+from odomgym.lab.simulated import random_start_poses
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Direction, end_error
+from odomgym.odometry.runs import Direction
 from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
-from odomgym.sim.routes import square_route
 from odomgym.workers import TaskFailed, WorkerDeath, run_tasks
 
 __all__ = [
@@ -279,11 +279,16 @@ def _row(
     floor: str,
     index: int,
     robot: RobotSpec,
-    calibration: Calibration,
+    calibration: Calibration | None,
     result: CalibrationResult | None,
     wall: float = 0.0,
 ) -> dict[str, Any]:
-    """One result row before validation: the truth, the estimate, what it cost."""
+    """One result row before validation: the truth, the estimate (NaN without a
+    ``calibration``), what it cost. The one layout of a row, failed or not."""
+    if calibration is None:
+        estimate = (math.nan, math.nan, math.nan)
+    else:
+        estimate = (calibration.e_d, calibration.wheelbase_scale, calibration.distance_scale)
     return {
         "method": label,
         "budget": budget,
@@ -292,9 +297,9 @@ def _row(
         "true_E_d": robot.e_d,
         "true_E_b": robot.e_b,
         "true_E_s": robot.e_s,
-        "est_E_d": calibration.e_d,
-        "est_E_b": calibration.wheelbase_scale,
-        "est_E_s": calibration.distance_scale,
+        "est_E_d": estimate[0],
+        "est_E_b": estimate[1],
+        "est_E_s": estimate[2],
         "runs_used": result.runs_used if result is not None else 0,
         "distance_m": result.distance_used if result is not None else 0.0,
         "wall_time_s": wall,
@@ -339,8 +344,7 @@ def validate_calibrations(
     ]
     directions: tuple[Direction, Direction] = ("cw", "ccw")
     for d, direction in enumerate(directions):
-        batch = RunRequests()
-        route = square_route(4.0, direction)
+        squares: list[ValidationSquare] = []
         slots: list[tuple[int, int]] = []
         for k, (i, robot) in enumerate(zip(indices, robots, strict=True)):
             rng = _stream(config, i, floor_index, 3 + d)
@@ -349,24 +353,18 @@ def validate_calibrations(
                 # The same floor noise for every calibration of this robot: a paired comparison.
                 seeds = np.random.SeedSequence([config.seed, i, floor_index, 5 + d]).spawn(runs)
                 for r, seed in enumerate(seeds):
-                    batch.add(
-                        robot,
-                        route,
-                        calibration,
-                        stream=np.random.default_rng(seed),
-                        start=None if poses is None else poses[r],
-                        direction=direction,
+                    squares.append(
+                        ValidationSquare(
+                            robot,
+                            calibration,
+                            start=None if poses is None else poses[r],
+                            stream=np.random.default_rng(seed),
+                        )
                     )
                     slots.append((k, c))
-        sim, odom = batch.simulate(floor)
         # A calibration so wrong that the robot cannot finish a square gets NaN errors (and so
         # a NaN E_max,syst): it is reported as failed, not allowed to stop the benchmark.
-        errors = np.array(
-            [
-                end_error(run, end) if run.meta["finished"] else np.full(3, np.nan)
-                for run, end in zip(sim, odom, strict=True)
-            ]
-        )
+        errors = square_errors(squares, floor, direction)
         for (k, c), start_row in zip(slots[::runs], range(0, len(slots), runs), strict=True):
             out[k][c][direction] = errors[start_row : start_row + runs]
     return out
@@ -481,26 +479,9 @@ def failed_rows(config: BenchConfig, robots: Sequence[int], reason: str) -> list
     for floor in config.floors:
         for robot in robots:
             for label, budget in competitors:
-                spec = truth[robot]
-                row: dict[str, Any] = {
-                    "method": label,
-                    "budget": budget,
-                    "floor": floor,
-                    "robot": robot,
-                    "true_E_d": spec.e_d,
-                    "true_E_b": spec.e_b,
-                    "true_E_s": spec.e_s,
-                    "runs_used": 0,
-                    "distance_m": 0.0,
-                    "wall_time_s": 0.0,
-                    "failed": reason,
-                    "e_max_before_mm": nan,
-                    "e_max_after_mm": nan,
-                    "improvement": nan,
-                }
-                for name in ("E_d", "E_b", "E_s"):
-                    row[f"est_{name}"] = nan
-                    row[f"err_{name}"] = nan
+                row = _row(label, budget, floor, robot, truth[robot], None, None)
+                row.update(failed=reason, e_max_before_mm=nan, e_max_after_mm=nan, improvement=nan)
+                row.update({f"err_{name}": nan for name in ("E_d", "E_b", "E_s")})
                 out.append(row)
     return out
 

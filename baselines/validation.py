@@ -36,7 +36,7 @@ from odomgym.lab.recorded import RecordedLab
 from odomgym.lab.simulated import RunRequests, SimLab, random_start_poses
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.optiodom_measures import EvaluationMeasures, evaluate
-from odomgym.odometry.runs import Run, end_error
+from odomgym.odometry.runs import Direction, Run, end_error
 from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
 from odomgym.sim.routes import square_route
@@ -44,12 +44,14 @@ from odomgym.sim.routes import square_route
 __all__ = [
     "SessionReport",
     "SimulationReport",
+    "ValidationSquare",
     "calibrate_in_simulation",
     "calibrate_on_session",
     "calibrator_for_session",
     "calibrator_for_squares",
     "make_calibrator",
     "method_options",
+    "square_errors",
     "validation_errors",
     "validation_errors_many",
 ]
@@ -186,6 +188,54 @@ class SimulationReport:
         }
 
 
+@dataclass(frozen=True)
+class ValidationSquare:
+    """One fresh UMBmark square to judge a calibration by: ``robot`` drives it with
+    ``calibration`` from ``start`` (x, y [m], θ [rad]; the origin if None), its floor noise from
+    ``stream`` (None: the batch's shared ``rng``)."""
+
+    robot: RobotSpec
+    calibration: Calibration
+    start: FloatArray | None = None
+    stream: np.random.Generator | None = None
+
+
+def square_errors(
+    squares: Sequence[ValidationSquare],
+    floor: FloorSpec,
+    direction: Direction,
+    *,
+    side: float = 4.0,
+    rng: np.random.Generator | None = None,
+) -> FloatArray:
+    """True return errors (K, 3) of ``squares`` of ``side`` [m] driven ``direction``, all in
+    one batch: true − odometry in each run's start frame [m, m, rad], heading wrapped.
+
+    The one validation of the benchmark and of :func:`calibrate_in_simulation`. A square not
+    finished within the time limit (a calibration so wrong that the robot circles) gets NaN
+    errors, and so a NaN E_max,syst: the benchmark reports that calibration as failed and goes
+    on; :func:`validation_errors_many` raises instead (one calibration a user asked about).
+    """
+    batch = RunRequests()
+    route = square_route(side, direction)
+    for square in squares:
+        batch.add(
+            square.robot,
+            route,
+            square.calibration,
+            stream=square.stream,
+            start=square.start,
+            direction=direction,
+        )
+    sim, odom = batch.simulate(floor, rng=rng, on_timeout="keep")
+    return np.array(
+        [
+            end_error(run, end) if run.meta["finished"] else np.full(3, np.nan)
+            for run, end in zip(sim, odom, strict=True)
+        ]
+    )
+
+
 def validation_errors_many(
     robot: RobotSpec,
     floor: FloorSpec,
@@ -200,23 +250,32 @@ def validation_errors_many(
     one batch per direction (every calibration drives from the same start poses).
 
     Returns one dict per calibration: ``"cw"``/``"ccw"`` → (runs, 3) errors (true − odometry,
-    start frame, heading wrapped).
+    start frame, heading wrapped) (:func:`square_errors`).
+
+    Raises:
+        RuntimeError: a square did not finish within the time limit with some calibration.
     """
     results: list[dict[str, FloatArray]] = [{} for _ in calibrations]
     count = len(calibrations)
-    for direction in ("cw", "ccw"):
+    directions: tuple[Direction, Direction] = ("cw", "ccw")
+    for direction in directions:
         starts: FloatArray | None = None
         if start_region is not None:
             assert rng is not None, "random start poses need an rng"
             starts = random_start_poses(rng, runs, start_region)
-        batch = RunRequests()
-        route = square_route(side, direction)
-        for calibration in calibrations:
-            for r in range(runs):
-                start = None if starts is None else starts[r]
-                batch.add(robot, route, calibration, start=start, direction=direction)
-        sim, odom = batch.simulate(floor, rng=rng, on_timeout="raise")
-        errors = np.array([end_error(run, end) for run, end in zip(sim, odom, strict=True)])
+        squares = [
+            ValidationSquare(robot, calibration, None if starts is None else starts[r])
+            for calibration in calibrations
+            for r in range(runs)
+        ]
+        errors = square_errors(squares, floor, direction, side=side, rng=rng)
+        unfinished = sorted({k // runs for k in np.flatnonzero(np.isnan(errors).any(axis=1))})
+        if unfinished:
+            raise RuntimeError(
+                f"validation squares ({direction}) did not finish with calibration(s) "
+                f"{unfinished} within the time limit (a calibration that makes the robot "
+                "circle, or a slippery floor?)"
+            )
         for k in range(count):
             results[k][direction] = errors[k * runs : (k + 1) * runs]
     return results

@@ -103,12 +103,18 @@ from numpy.typing import NDArray
 
 from odomgym.envs.base import DrawsLazily, describe_action
 from odomgym.errors import SpecError
-from odomgym.floor import FLOORS, FloorSpec
+from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import SensorAccuracy
-from odomgym.lab.population import CABLES_START_REGION, Population, check_bench_floor
+from odomgym.lab.population import (
+    BENCH_FLOORS,
+    CABLES_START_REGION,
+    Population,
+    cable_field,
+    check_bench_floor,
+)
 from odomgym.lab.simulated import RunRequests, experiment_route, measure, random_start_poses
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run, end_error
+from odomgym.odometry.runs import Run, end_error, to_frame
 from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
 from odomgym.selfcal.session import (
@@ -155,18 +161,6 @@ _VALIDATION_ROUTES: tuple[tuple[Route, str, str | None], ...] = (
 )
 
 
-@dataclass(frozen=True)
-class _FloorSetup:
-    roughness: float  # k of the floor under this session's wheels [m^½]
-    cables: bool  # runs start at random poses on the cable field
-
-
-_FLOOR_SETUPS: dict[str, _FloorSetup] = {
-    # As BENCH_FLOORS builds them: the concrete and rough presets, and concrete with cables.
-    "concrete": _FloorSetup(FLOORS["concrete"].roughness, False),
-    "rough": _FloorSetup(FLOORS["rough"].roughness, False),
-    "cables": _FloorSetup(FLOORS["concrete"].roughness, True),
-}
 #: Where runs on the cable-free floors start, and where validation runs start [m]: far enough
 #: from the cable field (±18 m) that no wheel ever meets a cable.
 _PLAIN_ORIGIN = np.array([100.0, 0.0, 0.0])
@@ -181,13 +175,7 @@ def _shared_floor() -> FloorSpec:
     ``floor_roughness`` effect (variances add, Chong & Kleeman 1997, Eq. 4), so sessions on
     different floors and the noiseless validation runs share one physics batch."""
     rng = np.random.default_rng(np.random.SeedSequence([0, 1995]))
-    return FloorSpec.scattered_cables(
-        rng,
-        half_size=CABLES_START_REGION + 6.0,
-        per_square_metre=1.5,
-        roughness=0.0,
-        name="selfcal-shared",
-    )
+    return cable_field(rng, roughness=0.0, name="selfcal-shared")
 
 
 @dataclass
@@ -209,7 +197,7 @@ class Episode:
     driven: RobotSpec = field(init=False)
 
     def __post_init__(self) -> None:
-        k = _FLOOR_SETUPS[self.floor_name].roughness
+        k = BENCH_FLOORS[self.floor_name].roughness
         self.driven = self.robot.apply_effect("floor_roughness", {"k_left": k, "k_right": k})
 
 
@@ -326,7 +314,7 @@ def step_episodes(
         if experiment is None or session.runs_left <= 0:
             validation_slots[i] = _add_validation(batch, episode.robot, session.calibration)
             continue
-        if _FLOOR_SETUPS[episode.floor_name].cables:
+        if BENCH_FLOORS[episode.floor_name].cables:
             poses = random_start_poses(episode.rng, 1, CABLES_START_REGION)
             assert poses is not None
             start = poses[0]
@@ -569,8 +557,8 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             self._drawn.append(
                 SessionRun(
                     ACTION_MENU[action].name,
-                    _start_frame(run.true_pose, start),
-                    _start_frame(odometry, start),
+                    to_frame(run.true_pose[:, :2], start),
+                    to_frame(odometry[:, :2], start),
                     bool(run.meta["finished"]),
                 )
             )
@@ -587,13 +575,6 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             improvement=self._improvement,
         )
         return self._renderer.draw(self._drawn, state, routes)  # type: ignore[no-any-return]
-
-
-def _start_frame(poses: FloatArray, start: FloatArray) -> FloatArray:
-    """Positions (K, 2) [m] of ``poses`` (K, 3) in the frame of ``start`` (x, y, θ)."""
-    c, s = math.cos(float(start[2])), math.sin(float(start[2]))
-    d = poses[:, :2] - start[:2]
-    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
 
 
 def _route_points(route: Route) -> FloatArray:

@@ -1,9 +1,11 @@
 """What a calibration is judged on: the population of robots and the benchmark floors.
 
 Both the benchmark (:mod:`odomgym.baselines.benchmark`) and the self-calibration env
-(:mod:`odomgym.envs.selfcal`) draw their robots from :class:`Population` and lay their floors
-from :data:`BENCH_FLOORS`, so they live here, below both: an env must not import the benchmark
-runner to know what a benchmark robot is.
+(:mod:`odomgym.envs.selfcal`) draw their robots from :class:`Population` and take their floors'
+settings from :data:`BENCH_FLOORS` (roughness, random starts) and :func:`cable_field` (the
+cables), so they live here, below both: an env must not import the benchmark runner to know
+what a benchmark robot is. (The env lays one fixed cable field of its own, so that the
+benchmark evaluates on cables the agent never trained on.)
 
 Floors (:data:`BENCH_FLOORS`; their names never mean another floor elsewhere in odomgym):
 
@@ -32,14 +34,35 @@ from odomgym.robot import PRESETS, RobotSpec
 
 __all__ = [
     "BENCH_FLOORS",
+    "CABLES_PER_SQUARE_METRE",
     "CABLES_START_REGION",
+    "CABLE_FIELD_HALF_SIZE",
     "BenchFloor",
     "Population",
+    "cable_field",
     "check_bench_floor",
 ]
 
 CABLES_START_REGION = 12.0
 """Half-width [m] of the square area of cable-strewn floor that runs start in (24 × 24 m)."""
+CABLE_FIELD_HALF_SIZE = CABLES_START_REGION + 6.0
+"""Half-width [m] of the cable field: 6 m beyond the start region, so that a 4×4 m square
+started at its edge still runs over cables."""
+CABLES_PER_SQUARE_METRE = 1.5
+"""Density of the cable field [1/m²] (10 mm cables, 0.3 m long)."""
+
+
+def cable_field(rng: np.random.Generator, *, roughness: float, name: str) -> FloorSpec:
+    """The benchmark's cable field laid out from ``rng``: 10 mm cables at
+    :data:`CABLES_PER_SQUARE_METRE` over ±:data:`CABLE_FIELD_HALF_SIZE` [m], on a floor of
+    roughness ``roughness`` [m^½]."""
+    return FloorSpec.scattered_cables(
+        rng,
+        half_size=CABLE_FIELD_HALF_SIZE,
+        per_square_metre=CABLES_PER_SQUARE_METRE,
+        roughness=roughness,
+        name=name,
+    )
 
 
 @dataclass(frozen=True)
@@ -51,10 +74,14 @@ class BenchFloor:
         make: the floor, laid out from a generator (a benchmark draws it once per seed), and
             the half-width [m] of the square area runs start in at random poses (``None``:
             every run starts at the origin).
+        roughness: the floor's roughness k [m^½] (Chong & Kleeman 1997, Eq. 4).
+        cables: whether the floor is a cable field whose runs start at random poses.
     """
 
     description: str
     make: Callable[[np.random.Generator], tuple[FloorSpec, float | None]]
+    roughness: float
+    cables: bool = False
 
 
 def _preset(name: str) -> Callable[[np.random.Generator], tuple[FloorSpec, float | None]]:
@@ -66,22 +93,25 @@ def _preset(name: str) -> Callable[[np.random.Generator], tuple[FloorSpec, float
 
 
 def _cables(rng: np.random.Generator) -> tuple[FloorSpec, float | None]:
-    floor = FloorSpec.scattered_cables(
-        rng,
-        half_size=CABLES_START_REGION + 6.0,
-        per_square_metre=1.5,
-        roughness=FLOORS["concrete"].roughness,
-        name="cables",
-    )
+    floor = cable_field(rng, roughness=FLOORS["concrete"].roughness, name="cables")
     return floor, CABLES_START_REGION
 
 
 # The order fixes each floor's random streams (its index): keep it, append new floors.
 BENCH_FLOORS: dict[str, BenchFloor] = {
-    "concrete": BenchFloor("the concrete preset, roughness k = 0.0004 m^0.5", _preset("concrete")),
-    "rough": BenchFloor("the rough preset, k = 0.002 m^0.5", _preset("rough")),
+    "concrete": BenchFloor(
+        "the concrete preset, roughness k = 0.0004 m^0.5",
+        _preset("concrete"),
+        FLOORS["concrete"].roughness,
+    ),
+    "rough": BenchFloor(
+        "the rough preset, k = 0.002 m^0.5", _preset("rough"), FLOORS["rough"].roughness
+    ),
     "cables": BenchFloor(
-        "concrete strewn with random 10 mm cables, runs started at random poses", _cables
+        "concrete strewn with random 10 mm cables, runs started at random poses",
+        _cables,
+        FLOORS["concrete"].roughness,
+        cables=True,
     ),
 }
 

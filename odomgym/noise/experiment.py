@@ -27,13 +27,12 @@ from odomgym.noise.fit import (
     NoiseFit,
     NoiseSamples,
     Systematic,
-    _check_run,
-    _wheel_travels,
+    check_noise_run,
     fit_noise,
     noise_samples,
 )
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run
+from odomgym.odometry.runs import Run, wheel_travels
 from odomgym.robot import PRESETS, RobotSpec
 
 __all__ = [
@@ -112,8 +111,8 @@ def with_wheel_noise(
     cal = calibration if calibration is not None else Calibration()
     noisy = []
     for run in runs:
-        travels, wheelbase = _wheel_travels(run, robot, cal)
-        _check_run(run, travels)
+        travels, wheelbase = wheel_travels(run, robot, cal)
+        check_noise_run(run, travels)
         scale = np.sqrt(np.abs(travels)) * np.array([k_left, k_right])
         travels = travels + scale * rng.standard_normal(travels.shape)
         dtheta = (travels[:, 1] - travels[:, 0]) / wheelbase

@@ -53,7 +53,7 @@ from scipy import optimize, stats
 
 from odomgym.noise.covariance import propagate_path
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run, return_error
+from odomgym.odometry.runs import Run, return_error, wheel_travels
 from odomgym.robot import RobotSpec
 
 __all__ = [
@@ -61,6 +61,7 @@ __all__ = [
     "ComponentFit",
     "NoiseFit",
     "NoiseSamples",
+    "check_noise_run",
     "fit_noise",
     "noise_samples",
     "run_noise_basis",
@@ -80,16 +81,9 @@ _MAX_SAMPLE_TURN = 1.0  # [rad]; samples turning more go through propagate_path 
 
 
 # ----------------------------------------------------------------------------- per-run inputs
-def _wheel_travels(run: Run, robot: RobotSpec, cal: Calibration) -> tuple[FloatArray, float]:
-    """Per-sample wheel travels (T−1, 2) [m] and the effective wheelbase [m], as
-    :func:`odomgym.odometry.runs.replay_odometry` computes them."""
-    per_tick = robot.metres_per_tick * cal.distance_scale
-    inc = np.diff(run.counts, axis=0).astype(np.float64)
-    travels = inc * np.array([cal.c_left * per_tick, cal.c_right * per_tick])
-    return travels, cal.wheelbase_scale * robot.wheelbase
-
-
-def _check_run(run: Run, travels: FloatArray) -> None:
+def check_noise_run(run: Run, travels: FloatArray) -> None:
+    """Refuse a run a noise fit or simulation cannot use (ValueError naming its source):
+    non-finite time or poses, non-finite wheel ``travels`` (T − 1, 2) [m], or no motion."""
     for name, values in (("time", run.time), ("true_pose", run.true_pose)):
         if not np.all(np.isfinite(values)):
             raise ValueError(f"{run.source}: run has non-finite (NaN/inf) values in {name}")
@@ -154,8 +148,8 @@ def run_noise_basis(
     more than 1 rad.
     """
     cal = calibration if calibration is not None else Calibration()
-    travels, wheelbase = _wheel_travels(run, robot, cal)
-    _check_run(run, travels)
+    travels, wheelbase = wheel_travels(run, robot, cal)
+    check_noise_run(run, travels)
     if method == "vectorised" and np.abs(np.diff(travels, axis=1)).max() / wheelbase < (
         _MAX_SAMPLE_TURN
     ):

@@ -30,12 +30,16 @@ __all__ = [
     "Run",
     "WheelSteps",
     "end_error",
+    "integrate_steps",
     "replay_odometry",
     "replay_with_jacobian",
     "return_error",
+    "rotate_into",
     "step_jacobians",
+    "to_frame",
     "to_start_frame",
     "wheel_steps",
+    "wheel_travels",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -100,17 +104,41 @@ class WheelSteps(NamedTuple):
     dtheta: FloatArray
 
 
-def wheel_steps(run: Run, robot: RobotSpec, calibration: Calibration | None = None) -> WheelSteps:
-    """``run``'s encoder counts as wheel travel and motion per step, with ``robot``'s nominal
-    parameters and ``calibration`` (the equations of
-    :class:`odomgym.odometry.calibration.Odometry`)."""
+def wheel_travels(
+    run: Run, robot: RobotSpec, calibration: Calibration | None = None
+) -> tuple[FloatArray, float]:
+    """``run``'s encoder counts as the travel of each wheel per sample (T − 1, 2) [m] (left,
+    right) and the effective wheelbase [m], with ``robot``'s nominal parameters and
+    ``calibration``: the one place counts become metres for every replay and fit of a run
+    (the equations of :class:`odomgym.odometry.calibration.Odometry`)."""
     cal = calibration if calibration is not None else Calibration()
     per_tick = robot.metres_per_tick * cal.distance_scale
-    increments = np.diff(run.counts, axis=0).astype(float)
-    left = increments[:, 0] * (cal.c_left * per_tick)
-    right = increments[:, 1] * (cal.c_right * per_tick)
-    wheelbase = cal.wheelbase_scale * robot.wheelbase
+    increments = np.diff(run.counts, axis=0).astype(np.float64)
+    travels = increments * np.array([cal.c_left * per_tick, cal.c_right * per_tick])
+    return travels, cal.wheelbase_scale * robot.wheelbase
+
+
+def wheel_steps(run: Run, robot: RobotSpec, calibration: Calibration | None = None) -> WheelSteps:
+    """``run``'s encoder counts as wheel travel and motion per step (:func:`wheel_travels`)."""
+    travels, wheelbase = wheel_travels(run, robot, calibration)
+    left, right = travels[:, 0], travels[:, 1]
     return WheelSteps(left, right, wheelbase, 0.5 * (left + right), (right - left) / wheelbase)
+
+
+def integrate_steps(
+    start: FloatArray, ds: FloatArray, dtheta: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Midpoint dead reckoning of per-step travel ``ds`` [m] and turn ``dtheta`` [rad] from
+    ``start`` (x, y [m], θ [rad]), as :class:`odomgym.odometry.calibration.Odometry` does:
+    poses (T, 3) and each step's midpoint heading μ_j = θ_j + Δθ_j/2 (T − 1,) [rad]."""
+    x0, y0, th0 = start
+    theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
+    mid = theta[:-1] + 0.5 * dtheta
+    poses = np.empty((len(theta), 3))
+    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * np.cos(mid))])
+    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * np.sin(mid))])
+    poses[:, 2] = theta
+    return poses, mid
 
 
 def step_jacobians(
@@ -146,24 +174,32 @@ def replay_odometry(
     :class:`odomgym.odometry.calibration.Odometry`, vectorised over the samples.
     """
     _, _, _, ds, dtheta = wheel_steps(run, robot, calibration)
-    x0, y0, th0 = run.true_pose[0]
-    theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
-    mid = (
-        theta[:-1] + 0.5 * dtheta
-    )  # midpoint integration, as odomgym.odometry.calibration.Odometry
-    poses = np.empty_like(run.true_pose)
-    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * np.cos(mid))])
-    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * np.sin(mid))])
-    poses[:, 2] = theta
+    poses, _ = integrate_steps(run.true_pose[0], ds, dtheta)
     return poses
+
+
+def rotate_into(dx: FloatArray, dy: FloatArray, heading: FloatArray | float) -> FloatArray:
+    """Vectors (dx, dy) [m] of the world frame expressed in a frame turned by ``heading``
+    [rad] (one angle, or one per vector): (K, 2), the rotation by −heading. The one rotation
+    behind every start frame and body frame of the numpy code (the compiled step has its own,
+    :func:`odomgym._kernels.start_frame`)."""
+    c, s = np.cos(heading), np.sin(heading)
+    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=1)
+
+
+def to_frame(points: FloatArray, origin: FloatArray) -> FloatArray:
+    """Poses (K, 3) — or positions (K, 2) — of the world frame in the frame of ``origin``
+    (x, y [m], θ [rad]): at its origin, +x along its heading."""
+    x0, y0, th0 = origin[0], origin[1], origin[2]
+    xy = rotate_into(points[:, 0] - x0, points[:, 1] - y0, th0)
+    if points.shape[1] == 2:
+        return xy
+    return np.column_stack([xy, points[:, 2] - th0])
 
 
 def to_start_frame(run: Run, points: FloatArray) -> FloatArray:
     """Express world-frame poses (K, 3) in the run's start frame (first true pose at origin)."""
-    x0, y0, th0 = run.true_pose[0]
-    c, s = np.cos(th0), np.sin(th0)
-    dx, dy = points[:, 0] - x0, points[:, 1] - y0
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, points[:, 2] - th0], axis=1)
+    return to_frame(points, run.true_pose[0])
 
 
 def return_error(
@@ -229,10 +265,7 @@ def replay_with_jacobian(
         of :data:`PARAMETER_NAMES` ([m] or [rad] per unit relative change).
     """
     steps = wheel_steps(run, robot, calibration)
-    ds, dtheta = steps.ds, steps.dtheta
-    x0, y0, th0 = run.true_pose[0]
-    theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
-    mid = theta[:-1] + 0.5 * dtheta
+    poses, mid = integrate_steps(run.true_pose[0], steps.ds, steps.dtheta)
     cos_mid, sin_mid = np.cos(mid), np.sin(mid)
     d_x, d_y, d_dtheta = step_jacobians(
         steps,
@@ -241,10 +274,6 @@ def replay_with_jacobian(
         lambda d: np.cumsum(d, axis=0) - d,  # ∂θ_j, j = 0..n−1
     )
 
-    poses = np.empty_like(run.true_pose)
-    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * cos_mid)])
-    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * sin_mid)])
-    poses[:, 2] = theta
     jacobian = np.zeros((len(run.time), 3, 3))
     jacobian[1:, 0] = np.cumsum(d_x, axis=0)
     jacobian[1:, 1] = np.cumsum(d_y, axis=0)
