@@ -68,16 +68,6 @@ Pixel = tuple[int, int]
 ToPixel = Callable[[float, float], Pixel]
 
 
-def _lighten(colour: tuple[int, int, int], amount: float) -> tuple[int, int, int]:
-    """``colour`` moved ``amount`` (0..1) of the way to white."""
-    r, g, b = colour
-    return (
-        round(r + (255 - r) * amount),
-        round(g + (255 - g) * amount),
-        round(b + (255 - b) * amount),
-    )
-
-
 class _Canvas:
     """A pygame surface, the window of ``"human"`` mode, fonts and the shared drawing helpers.
 

@@ -1,5 +1,7 @@
 """``SelfCalibration-v1``: choose the experiments that calibrate a robot, within a budget of runs.
 
+## Description
+
 An episode is one calibration session (:class:`odomgym.selfcal.session.SelfCalSession`) on a
 freshly sampled robot: systematic errors drawn over the benchmark's ranges
 (:class:`~odomgym.lab.population.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
@@ -8,17 +10,6 @@ E_s ∈ [0.98, 1.02], on the LabMate) and a floor drawn from ``floors`` (the ben
 field of random cables, so cables are met at random — one fixed field, not the benchmark's own,
 so the benchmark evaluates on cables the agent never trained on).
 
-Spaces:
-    action: ``Discrete(10)`` — an index into :data:`~odomgym.selfcal.session.ACTION_MENU`: 0 stops
-        the session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or
-        out and back, in-place spins of 360° either way or 720°) with the reference driver and
-        the current corrections in the odometry.
-    observation: ``Box(-10, 10, (31,), float32)`` — :data:`~odomgym.baselines.selfcal.
-        OBSERVATION_LAYOUT`: budget left and size, how often each item was driven, the
-        estimated E_d, E_b, E_s and their posterior spreads, the floor-roughness estimate, the
-        last run's normalised innovation and which item it was. Everything a person at the home
-        position could know — never the truth.
-
 Each run is measured by the lab's ground-truth sensor (every pose sample with its noise,
 σ = 2 mm and 0.4°, the accuracy of Borenstein & Feng 1994, §6.3), and the estimator updates the
 corrections (iterative compensation): by default (``observe="trajectory"``) a Kalman filter
@@ -26,7 +17,24 @@ along the whole measured run (:class:`~odomgym.selfcal.session.TrajectoryEstimat
 ``observe="end_pose"`` a fit to the end poses alone, what a person with a tape measure at the
 home position gets (:class:`~odomgym.selfcal.session.EndPoseEstimator`).
 
-Reward: at the end of the session, the final corrections are validated on fresh runs the agent
+## Action Space
+
+``Discrete(10)``: an index into :data:`~odomgym.selfcal.session.ACTION_MENU`. 0 stops the
+session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or out and back,
+in-place spins of 360° either way or 720°) with the reference driver and the current
+corrections in the odometry.
+
+## Observation Space
+
+``Box(-10, 10, (31,), float32)``, laid out as
+:data:`~odomgym.selfcal.session.OBSERVATION_LAYOUT` names it: budget left and size, how often
+each item was driven, the estimated E_d, E_b, E_s and their posterior spreads, the
+floor-roughness estimate, the last run's normalised innovation and which item it was.
+Everything a person at the home position could know — never the truth.
+
+## Rewards
+
+At the end of the session, the final corrections are validated on fresh runs the agent
 never sees — a 4×4 m square each way and a 4 m straight run, driven on the noiseless ``smooth``
 floor by the true robot with the final corrections and without any (same start, same floor, so
 the comparison is exact and free of luck). With E the square family's E_max,syst (Borenstein &
@@ -44,18 +52,29 @@ based (Ng, Harada & Russell 1999), so it sums to exactly zero over an episode an
 which policy is best; it only credits informative runs early. (With γ = 1, which the shipped
 hyperparameters use: for γ < 1 the potential difference would have to be c·(γΦ′ − Φ).)
 
-Episode end: terminated when the agent stops, or on the step after the budget is spent (any
+## Starting State
+
+A robot drawn from ``population``, a floor from ``floors`` and a budget, nothing driven yet:
+the estimate is the nominal robot (the prior's centre).
+
+## Episode End
+
+Terminated when the agent stops, or on the step after the budget is spent (any
 action then stops; that step validates and carries the terminal reward), or when a run cannot
 finish; the registered step limit (66 ≥ budget + 1) never truncates.
 
-``info``: ``runs_used``, ``budget``, ``travel_m`` (true path length driven so far [m]),
+## Info
+
+``runs_used``, ``budget``, ``travel_m`` (true path length driven so far [m]),
 ``floor``, ``item`` (the menu item's name); at the end also ``reward_terms``,
 ``e_max_before_mm``/``e_max_after_mm`` (validation squares), ``improvement`` (their ratio),
 ``true_errors``/``estimated_errors`` (E_d, E_b, E_s), ``calibration`` and ``experiments``;
 a session whose run could not finish ends with ``failed`` (the reason) instead of the
 validation entries.
 
-Arguments: ``floors`` (benchmark floor names to draw each episode's floor from; default all
+## Arguments
+
+``floors`` (benchmark floor names to draw each episode's floor from; default all
 three), ``budget`` (runs, or a list to draw from per episode; default 16), ``shaping`` (the
 coefficient c, default 0.1), ``population`` (:class:`~odomgym.lab.population.Population`, the ranges
 of the hidden errors), ``sensor`` (:class:`~odomgym.lab.experiment.SensorAccuracy` of each measured
@@ -63,7 +82,9 @@ pose), ``observe`` (``"trajectory"`` or ``"end_pose"``: what the estimator sees;
 observation, :data:`~odomgym.selfcal.session.OBSERVATION_VERSION`), ``render_mode``.
 Reset options: ``{"floor": name, "budget": runs}``.
 
-Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
+## Rendering
+
+``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
 ``"human"`` (a pygame window), with the ``[render]`` extra. A frame shows the session so far:
 every run in its start frame (the robot starts at the origin heading +x), its true path (blue)
 and its odometry path as the robot computed it with the corrections it drove with (orange),
@@ -74,19 +95,20 @@ runs in order and, at the end, the validated improvement. One frame per step (on
 ``metadata["render_fps"]`` is 2. With ``render_mode=None`` (the default) no run is kept for
 drawing.
 
-Version history:
-    * v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was
-      added in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info`` (before, any
-      ``render_mode`` raised :class:`~odomgym.errors.SpecError`, which stopped
-      ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so
-      the version stays v0.
-    * v1 (odomgym 0.2.0): the estimator became the trajectory filter
-      (:class:`~odomgym.selfcal.session.TrajectoryEstimator`, ``observe="trajectory"``,
-      observation version 2). Spaces, dynamics and episode end are unchanged, but the
-      observation's values and, through the final corrections, the reward differ, so the id
-      changed. ``SelfCalibration-v0`` is still registered: it is this class with
-      ``observe="end_pose"``, whose observations, rewards and ``info`` are bit-identical to
-      v0's before the change (checked on seeds 0–2 with a fixed action sequence).
+## Version History
+
+* v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was added
+  in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info`` (before, any
+  ``render_mode`` raised :class:`~odomgym.errors.SpecError`, which stopped
+  ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so the
+  version stays v0.
+* v1 (odomgym 0.2.0): the estimator became the trajectory filter
+  (:class:`~odomgym.selfcal.session.TrajectoryEstimator`, ``observe="trajectory"``,
+  observation version 2). Spaces, dynamics and episode end are unchanged, but the
+  observation's values and, through the final corrections, the reward differ, so the id
+  changed. ``SelfCalibration-v0`` is still registered: it is this class with
+  ``observe="end_pose"``, whose observations, rewards and ``info`` are bit-identical to v0's
+  before the change (checked on seeds 0–2 with a fixed action sequence).
 """
 
 from __future__ import annotations

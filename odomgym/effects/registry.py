@@ -171,11 +171,6 @@ class Effect:
 
     # ------------------------------------------------------------------ values
     @classmethod
-    def parameter_names(cls) -> tuple[str, ...]:
-        """The parameters' names, in order."""
-        return tuple(p.name for p in cls.parameters)
-
-    @classmethod
     def absent_values(cls) -> dict[str, float]:
         """The values at which the effect is absent."""
         return {p.name: p.absent for p in cls.parameters}

@@ -36,7 +36,6 @@ from odomgym._kernels import (
     check_step_status,
     control_step,
     pose_error_into,
-    start_frame,
 )
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration, Odometry
@@ -230,12 +229,6 @@ class Trial:
     def odom_pose(self) -> FloatArray:
         """Odometry poses (N, 3) [m, m, rad]."""
         return self.odometry.pose
-
-    def true_pose_in_start_frame(self) -> FloatArray:
-        """Ground-truth poses (N, 3) in each robot's start frame — the odometry's frame."""
-        out = np.empty((self.n, 3))
-        start_frame(self.world.pose, self.start_poses, out)
-        return out
 
     def pose_error(self, out: FloatArray | None = None) -> FloatArray:
         """True − odometry (N, 3) in the start frame, heading wrapped to [−π, π) [m, m, rad];

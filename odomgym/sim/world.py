@@ -82,9 +82,9 @@ class World:
         robots: one :class:`RobotSpec` per robot (a single spec for a batch of one).
         floor: the floor all robots share.
         dt: control period [s]: commands are held and encoders sampled once per ``dt``.
-            Default 0.05 s, the 20 Hz odometry rate of the OptiOdom robot whose measured logs
-            ship in ``shared/data/optiodom-diff`` (the CLAPPER sampled at 40 ms, Borenstein 1995,
-            §3.1).
+            Default 0.05 s, the 20 Hz odometry rate of the OptiOdom robot whose measured
+            sessions ship with the package (:mod:`odomgym.data.samples`; the CLAPPER sampled at
+            40 ms, Borenstein 1995, §3.1).
         substeps: physics steps per control period (each of ``dt/substeps`` seconds).
         iterations: Chipmunk solver iterations per step. The two wheel joints of a chassis are
             coupled; with Chipmunk's warm start (last step's impulses applied first) they
@@ -641,12 +641,6 @@ class World:
             self._joints[2 * i + side].max_force = float(mu[i, side] * self.normal_force[i])
         self._friction = mu
 
-    # ------------------------------------------------------------------ diagnostics
-    def contact_forces(self) -> FloatArray:
-        """Magnitude of the last friction impulse of each wheel divided by the step [N], (N, 2)."""
-        h = self.dt / self.substeps
-        return np.array([j.impulse / h for j in self._joints]).reshape(self.n, 2)
-
     def lay_floor(self, floor: FloorSpec) -> None:
         """Change the cables, patches and friction under the robots between steps, as an
         experimenter lays cables before a return leg (Borenstein 1995, §6.1). The roughness
@@ -675,7 +669,3 @@ class World:
         """Force each hitch passed in the last step [N] (the towing force)."""
         h = self.dt / self.substeps
         return np.array([abs(hitch.impulse) / h for hitch in self._hitches])
-
-    def friction_limits(self) -> FloatArray:
-        """Current friction force limit μ·N of each wheel [N], (N, 2)."""
-        return np.asarray(self._friction * self.normal_force[:, None])
