@@ -154,6 +154,8 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.baselines.least_squares",
             "odomgym.baselines.trajectory",
             "odomgym.baselines.selfcal",
+            "odomgym.baselines.selfcal_vec_env",
+            "odomgym.baselines.selfcal_checkpoints",
             "odomgym.baselines.selfcal_train",
             "odomgym.baselines.validation",
             "odomgym.baselines.benchmark",

@@ -323,7 +323,7 @@ def test_resume_refuses_a_missing_or_different_checkpoint(
 ) -> None:
     """``--resume`` with no checkpoint, or one made with another seed: one line, no work."""
     pytest.importorskip("stable_baselines3")
-    from odomgym.baselines.selfcal_train import Checkpoints
+    from odomgym.baselines.selfcal_checkpoints import Checkpoints
 
     out = tmp_path / "train"
     args = ["train", "selfcal", "--steps", "256", "--envs", "4", "--out", str(out), "--resume"]

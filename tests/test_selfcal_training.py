@@ -16,12 +16,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
 from odomgym.baselines.selfcal import load_policy
-from odomgym.baselines.selfcal_train import (
-    SelfCalVecEnv,
-    evaluate,
-    export_policy,
-    load_hyperparams,
-)
+from odomgym.baselines.selfcal_train import evaluate, export_policy, load_hyperparams
+from odomgym.baselines.selfcal_vec_env import SelfCalVecEnv
 from odomgym.cli import main
 from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
