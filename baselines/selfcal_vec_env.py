@@ -2,7 +2,7 @@
 of its own as SB3 keeps its VecEnvs.
 
 :class:`SelfCalVecEnv` steps ``SelfCalibration-v1`` sessions and simulates all their runs of a
-step as one physics batch per floor (:func:`odomgym.envs.selfcal.step_episodes`; one physics
+step as one physics batch per floor (:func:`odomgym.selfcal.episodes.step_episodes`; one physics
 batch per shard and step) — a batch of 8 costs about as much wall time as 2 single runs — and
 splits the sessions over ``workers`` processes (shards) so both cores simulate. Sub-env i is
 seeded ``seed + i`` and resets itself as SB3's ``DummyVecEnv`` does, so its episodes are the same
@@ -20,8 +20,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
+from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index
 from odomgym.errors import SpecError
+from odomgym.selfcal.episodes import step_episodes
 from odomgym.workers import Shards
 
 try:

@@ -107,6 +107,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         (
             "odomgym.selfcal",
             "odomgym.selfcal.session",
+            "odomgym.selfcal.episodes",
         ),
     ),
     "vehicle": (

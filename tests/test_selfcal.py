@@ -17,22 +17,22 @@ import pytest
 import odomgym  # noqa: F401  (registers the envs)
 from odomgym.baselines.selfcal import MlpPolicy, SelfCal, load_policy, scripted_policy
 from odomgym.baselines.validation import calibrate_in_simulation
-from odomgym.envs.selfcal import (
-    FAILED_REWARD,
-    STRAIGHT_WEIGHT,
-    WORSE_PENALTY,
-    Episode,
-    SelfCalibrationEnv,
-    new_episode,
-    step_episodes,
-    validation_terms,
-)
+from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.population import Population
 from odomgym.odometry.calibration import Calibration
 from odomgym.robot import PRESETS
+from odomgym.selfcal.episodes import (
+    FAILED_REWARD,
+    STRAIGHT_WEIGHT,
+    WORSE_PENALTY,
+    Episode,
+    new_episode,
+    step_episodes,
+    validation_terms,
+)
 from odomgym.selfcal.session import (
     ACTION_MENU,
     OBSERVATION_LAYOUT,

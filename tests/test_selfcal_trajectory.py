@@ -9,12 +9,13 @@ import pytest
 from test_selfcal import _episodes
 
 from odomgym.baselines.selfcal import SelfCal, SelfCalEndPose, scripted_policy
-from odomgym.envs.selfcal import Episode, SelfCalibrationEnv, step_episodes
+from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Run, replay_odometry, replay_with_jacobian
 from odomgym.robot import PRESETS
+from odomgym.selfcal.episodes import Episode, step_episodes
 from odomgym.selfcal.session import (
     ACTION_MENU,
     PRIOR_STD,
