@@ -332,7 +332,7 @@ class Trajectory(SquaresSizing):
     UMBmark squares of side ``side`` [m]; ``"circular"`` — ``runs_per_direction`` cw and as
     many ccw circles of radius ``radius`` [m], ``laps`` laps each; ``"free"`` — ``free_runs``
     free paths of ``free_length`` [m] (recorded, or the simulator's random arcs,
-    :func:`odomgym.lab.simulated.free_plan`). Squares suffice: the legs' lateral drift fixes
+    :func:`odomgym.sim.arc_runs.free_plan`). Squares suffice: the legs' lateral drift fixes
     D_R/D_L, the corners fix b relative to the mean diameter, and the positions *along* the legs fix
     the mean diameter — which return errors alone cannot see. Circles need both directions: one
     circle fixes the mean diameter and one combination of D_R/D_L and b (its curvature); the

@@ -33,12 +33,13 @@ from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.recorded import RecordedLab
-from odomgym.lab.simulated import RunRequests, SimLab, random_start_poses
+from odomgym.lab.simulated import SimLab, random_start_poses
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.optiodom_measures import EvaluationMeasures, evaluate
 from odomgym.odometry.runs import Direction, Run, end_error
 from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
+from odomgym.sim.route_runs import RunRequests
 from odomgym.sim.routes import square_route
 
 __all__ = [

@@ -151,10 +151,11 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
 def measure_noise(runs: int = 24) -> None:
     """The end-pose scatter of every menu item on the concrete floor (MenuItem.floor_std)."""
     from odomgym.floor import FLOORS
-    from odomgym.lab.simulated import experiment_route, random_start_poses, simulate_runs
+    from odomgym.lab.simulated import experiment_route, random_start_poses
     from odomgym.odometry.runs import end_error
     from odomgym.robot import PRESETS
     from odomgym.selfcal.session import ACTION_MENU
+    from odomgym.sim.route_runs import simulate_runs
 
     robot = PRESETS["labmate"].ideal()
     print(f"{'item':<16} {'σx [mm]':>8} {'σy [mm]':>8} {'σθ [°]':>7}   (concrete, {runs} runs)")

@@ -44,7 +44,7 @@ import pymunk.batch
 
 import odomgym
 from odomgym.floor import FLOORS
-from odomgym.lab.simulated import simulate_runs
+from odomgym.sim.route_runs import simulate_runs
 from odomgym.sim.routes import square_route
 from odomgym.sim.world import World
 

@@ -71,6 +71,8 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.sim.routes",
             "odomgym.sim.driver",
             "odomgym.sim.trial",
+            "odomgym.sim.route_runs",
+            "odomgym.sim.arc_runs",
         ),
     ),
     "lab": (

@@ -238,7 +238,7 @@ def _base_csv() -> list[str]:
     if not Path(CSV).exists():
         from odomgym.data.native import write_native
         from odomgym.floor import FLOORS
-        from odomgym.lab.simulated import simulate_runs
+        from odomgym.sim.route_runs import simulate_runs
         from odomgym.sim.routes import square_route
 
         runs, _ = simulate_runs(

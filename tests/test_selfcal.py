@@ -331,7 +331,7 @@ def test_guard_absurd_corrections_score_low_without_an_exception() -> None:
 def test_a_run_that_cannot_finish_ends_the_session_with_the_lowest_reward(monkeypatch) -> None:
     """Simulated here by a time limit too short for a 4 m square: the session ends at once,
     says why, and scores FAILED_REWARD (minus the shaping collected, which telescopes)."""
-    import odomgym.lab.simulated as lab
+    import odomgym.sim.route_runs as lab
 
     real = lab.simulate_runs
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from odomgym.floor import FloorSpec
-from odomgym.lab.simulated import simulate_runs
 from odomgym.robot import PRESETS, RobotSpec
+from odomgym.sim.route_runs import simulate_runs
 from odomgym.sim.routes import Route, square_route, straight_route
 from odomgym.sim.world import World
 

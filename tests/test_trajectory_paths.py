@@ -14,10 +14,11 @@ from odomgym.baselines.validation import calibrate_in_simulation, calibrate_on_s
 from odomgym.data import read_session, resolve_data
 from odomgym.lab.experiment import Experiment, ExperimentKind
 from odomgym.lab.recorded import ExperimentNotRecorded, RecordedLab
-from odomgym.lab.simulated import SimLab, circle_plan, free_plan
+from odomgym.lab.simulated import SimLab
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import replay_odometry
 from odomgym.robot import PRESETS
+from odomgym.sim.arc_runs import circle_plan, free_plan
 
 CIRCULAR = "optiodom:circular/250620202104"
 
@@ -122,7 +123,7 @@ def test_trajectory_on_simulated_circles_recovers_known_errors() -> None:
 
 
 def test_trajectory_on_simulated_free_paths_removes_the_errors() -> None:
-    """:data:`ROBOT` drives two random 10 m free paths (:func:`odomgym.lab.simulated.free_plan`);
+    """:data:`ROBOT` drives two random 10 m free paths (:func:`odomgym.sim.arc_runs.free_plan`);
     the fit leaves less than 1 % of each injected parameter error, and the UMBmark validation
     squares (Borenstein & Feng 1994, Eq. 3.3) improve accordingly.
 

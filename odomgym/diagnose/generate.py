@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
-from odomgym.lab.simulated import simulate_runs
 from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import RobotSpec
+from odomgym.sim.route_runs import simulate_runs
 from odomgym.sim.routes import spin_route, square_route, straight_route
 from odomgym.sim.world import World
 

@@ -66,7 +66,7 @@ class ExperimentKind(StrEnum):
     * ``circular`` — drive ``laps`` laps of a circle of radius ``size`` [m] without stopping
       (as in the circular sessions of the OptiOdom data set, Sousa et al. 2022);
     * ``free`` — any path, ``size`` = its length [m]: a person driving the robot about, or the
-      simulator's random stand-in for one (:func:`odomgym.lab.simulated.free_plan`).
+      simulator's random stand-in for one (:func:`odomgym.sim.arc_runs.free_plan`).
     """
 
     SQUARE = "square"

@@ -22,11 +22,12 @@ from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import Experiment, ExperimentKind
-from odomgym.lab.simulated import experiment_route, simulate_runs
+from odomgym.lab.simulated import experiment_route
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Direction, Run, end_error
 from odomgym.odometry.umbmark_measures import UMBmarkSummary, summarize_umbmark
 from odomgym.robot import RobotSpec
+from odomgym.sim.route_runs import simulate_runs
 from odomgym.sim.routes import square_route, straight_route
 
 __all__ = [

@@ -69,7 +69,7 @@ def simulate_noise_experiment(
         spec = spec.ideal()
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise ValueError(f"runs must be a positive integer, got {runs!r}")
-    from odomgym.lab.simulated import simulate_runs  # the physics stack loads only when simulating
+    from odomgym.sim.route_runs import simulate_runs
     from odomgym.sim.routes import straight_route
 
     floor = FloorSpec(friction=friction, roughness=k, name=f"roughness-{k:g}")

@@ -230,7 +230,7 @@ def end_error(run: Run, odometry_end: FloatArray) -> FloatArray:
 
     ``odometry_end`` is the robot's own odometry pose, which lives in the start frame (the
     odometry starts at zero where the robot starts), e.g. as returned by
-    :func:`odomgym.lab.simulated.simulate_runs`.
+    :func:`odomgym.sim.route_runs.simulate_runs`.
     """
     error: FloatArray = to_start_frame(run, run.true_pose[-1:])[0] - np.asarray(odometry_end)
     error[2] = float(wrap_angle(error[2]))

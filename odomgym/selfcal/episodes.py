@@ -31,7 +31,7 @@ from odomgym.lab.population import (
     cable_field,
     check_bench_floor,
 )
-from odomgym.lab.simulated import RunRequests, experiment_route, measure, random_start_poses
+from odomgym.lab.simulated import experiment_route, measure, random_start_poses
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Run, end_error
 from odomgym.odometry.umbmark_measures import e_max_syst
@@ -40,6 +40,7 @@ from odomgym.selfcal.session import (
     ACTION_MENU,
     SelfCalSession,
 )
+from odomgym.sim.route_runs import RunRequests
 from odomgym.sim.routes import Route, square_route, straight_route
 
 __all__ = [
