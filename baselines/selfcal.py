@@ -8,10 +8,10 @@ straight run one way or out and back, an in-place spin) or ``stop``. Every run i
 the current estimate in the odometry (iterative compensation, as UMBmark's §6.3 second round
 and solderspot 2014 do), and the lab's ground-truth sensor measures it.
 
-**The estimator** (:class:`odomgym.selfcal.session.TrajectoryEstimator`) is an augmented-state
+**The estimator** (:class:`odomgym.selfcal.estimators.TrajectoryEstimator`) is an augmented-state
 Kalman filter along every measured pose of the runs (Larsen et al. 1998; Martinelli et al.
 2007), with a prior from the benchmark population; ``observe="end_pose"``
-(:class:`~odomgym.selfcal.session.EndPoseEstimator`, the ``selfcal_end_pose`` method) restricts
+(:class:`~odomgym.selfcal.estimators.EndPoseEstimator`, the ``selfcal_end_pose`` method) restricts
 it to the end poses a person at the home position measures — UMBmark's information. The
 session, its menu and its observation are :mod:`odomgym.selfcal.session`, shared with the env.
 
@@ -40,14 +40,13 @@ from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, perf
 from odomgym.errors import SpecError, require_count
 from odomgym.lab.experiment import Experiment, Lab
 from odomgym.odometry.calibration import Calibration
+from odomgym.selfcal.estimators import check_observe
+from odomgym.selfcal.menu import ACTION_MENU, STOP
 from odomgym.selfcal.session import (
-    ACTION_MENU,
     MAX_BUDGET,
     OBSERVATION_LAYOUT,
     OBSERVATION_VERSION,
-    STOP,
     SelfCalSession,
-    check_observe,
 )
 
 __all__ = [
@@ -204,7 +203,7 @@ class SelfCalOptions:
         policy: ``"learned"`` (the shipped PPO policy), ``"scripted"`` (the fixed schedule of
             :func:`scripted_policy`) or the path of a policy ``.npz`` file.
         observe: what the estimator sees of each run: ``"trajectory"`` (every measured pose,
-            the default) or ``"end_pose"`` (:data:`odomgym.selfcal.session.ESTIMATORS`); a
+            the default) or ``"end_pose"`` (:data:`odomgym.selfcal.estimators.ESTIMATORS`); a
             learned policy must have been trained with the same (its file records it).
     """
 
@@ -324,7 +323,7 @@ class SelfCalScriptedOptions(SelfCalOptions):
     """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy.
 
     Attributes:
-        schedule: menu item names (:data:`~odomgym.selfcal.session.ACTION_MENU`, e.g.
+        schedule: menu item names (:data:`~odomgym.selfcal.menu.ACTION_MENU`, e.g.
             ``("square4-cw", "square4-ccw", "straight4")``, or one comma-separated string)
             driven in this order, repeated until the budget is spent; empty (the default) for
             :func:`scripted_policy`'s schedule. A lab that can drive only some items, or an
@@ -420,7 +419,7 @@ class SelfCalEndPoseOptions(SelfCalScriptedOptions):
 
 class SelfCalEndPose(SelfCalScripted):
     """The second ablation: the scripted schedule with the estimator restricted to each run's
-    end pose (:class:`~odomgym.selfcal.session.EndPoseEstimator`) — UMBmark's information, a
+    end pose (:class:`~odomgym.selfcal.estimators.EndPoseEstimator`) — UMBmark's information, a
     tape measure at the home position — so the gain of seeing the whole trajectory is measured
     on its own."""
 

@@ -38,7 +38,8 @@ from odomgym.baselines.selfcal_checkpoints import Checkpoints, write_json
 from odomgym.baselines.selfcal_vec_env import SelfCalVecEnv
 from odomgym.errors import SpecError
 from odomgym.io import atomic_writer
-from odomgym.selfcal.session import OBSERVATION_LAYOUT, OBSERVATION_VERSION, check_observe
+from odomgym.selfcal.estimators import check_observe
+from odomgym.selfcal.session import OBSERVATION_LAYOUT, OBSERVATION_VERSION
 
 __all__ = [
     "ALGORITHMS",

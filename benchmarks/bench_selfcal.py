@@ -113,7 +113,7 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
     from odomgym.baselines.benchmark import bench_floor, calibration_streams, configure, population
     from odomgym.baselines.selfcal import SelfCal
     from odomgym.lab.lockstep import run_lockstep
-    from odomgym.selfcal.session import ACTION_MENU
+    from odomgym.selfcal.menu import ACTION_MENU
 
     robots = population(config)
     indices = list(range(config.robots))
@@ -154,7 +154,7 @@ def measure_noise(runs: int = 24) -> None:
     from odomgym.lab.simulated import experiment_route, random_start_poses
     from odomgym.odometry.runs import end_error
     from odomgym.robot import PRESETS
-    from odomgym.selfcal.session import ACTION_MENU
+    from odomgym.selfcal.menu import ACTION_MENU
     from odomgym.sim.route_runs import simulate_runs
 
     robot = PRESETS["labmate"].ideal()

@@ -3,14 +3,14 @@
     python benchmarks/design_bound.py                      # 100 robots, 3 floors, 16/8/4 runs
     python benchmarks/design_bound.py --robots 20 --floor concrete --budget 8 --json
 
-The learned policy of ``selfcal`` chooses each run from :data:`odomgym.selfcal.session.ACTION_MENU`.
+The learned policy of ``selfcal`` chooses each run from :data:`odomgym.selfcal.menu.ACTION_MENU`.
 Whether a better choice exists is a question of experiment design, and the trajectory filter
 answers most of it without driving a single schedule:
 
 1. **Information of one run of each item.** On each floor, the first ``--info-robots`` robots
    of the benchmark drive every item twice; a :class:`~odomgym.selfcal.session.
    TrajectoryEstimator` takes all of them in (so its estimate and roughness factor settle) and
-   gives each run's information matrix (:meth:`~odomgym.selfcal.session.TrajectoryEstimator.
+   gives each run's information matrix (:meth:`~odomgym.selfcal.estimators.TrajectoryEstimator.
    run_information`). In the linearised model, given the floor's roughness, the matrix does
    not depend on the measured values — only on the item, the floor and the sensor — which is
    why a fixed schedule loses little to an adaptive policy: *room over best* is, per robot and
@@ -58,7 +58,8 @@ from odomgym.lab.lockstep import run_lockstep
 from odomgym.lab.population import BENCH_FLOORS
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import replay_with_jacobian
-from odomgym.selfcal.session import ACTION_MENU, TrajectoryEstimator
+from odomgym.selfcal.estimators import TrajectoryEstimator
+from odomgym.selfcal.menu import ACTION_MENU
 
 FloatArray = NDArray[np.float64]
 ITEMS = tuple(item.name for item in ACTION_MENU[1:])

@@ -13,13 +13,13 @@ so the benchmark evaluates on cables the agent never trained on).
 Each run is measured by the lab's ground-truth sensor (every pose sample with its noise,
 σ = 2 mm and 0.4°, the accuracy of Borenstein & Feng 1994, §6.3), and the estimator updates the
 corrections (iterative compensation): by default (``observe="trajectory"``) a Kalman filter
-along the whole measured run (:class:`~odomgym.selfcal.session.TrajectoryEstimator`); with
+along the whole measured run (:class:`~odomgym.selfcal.estimators.TrajectoryEstimator`); with
 ``observe="end_pose"`` a fit to the end poses alone, what a person with a tape measure at the
-home position gets (:class:`~odomgym.selfcal.session.EndPoseEstimator`).
+home position gets (:class:`~odomgym.selfcal.estimators.EndPoseEstimator`).
 
 ## Action Space
 
-``Discrete(10)``: an index into :data:`~odomgym.selfcal.session.ACTION_MENU`. 0 stops the
+``Discrete(10)``: an index into :data:`~odomgym.selfcal.menu.ACTION_MENU`. 0 stops the
 session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or out and back,
 in-place spins of 360° either way or 720°) with the reference driver and the current
 corrections in the odometry.
@@ -104,7 +104,7 @@ drawing.
   ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so the
   version stays v0.
 * v1 (odomgym 0.2.0): the estimator became the trajectory filter
-  (:class:`~odomgym.selfcal.session.TrajectoryEstimator`, ``observe="trajectory"``,
+  (:class:`~odomgym.selfcal.estimators.TrajectoryEstimator`, ``observe="trajectory"``,
   observation version 2). Spaces, dynamics and episode end are unchanged, but the
   observation's values and, through the final corrections, the reward differ, so the id
   changed. ``SelfCalibration-v0`` is still registered: it is this class with
@@ -132,13 +132,9 @@ from odomgym.lab.population import (
 from odomgym.lab.simulated import experiment_route
 from odomgym.odometry.runs import to_frame
 from odomgym.selfcal.episodes import Episode, new_episode, step_episodes
-from odomgym.selfcal.session import (
-    ACTION_MENU,
-    MAX_BUDGET,
-    OBSERVATION_BOUND,
-    OBSERVATION_LAYOUT,
-    check_observe,
-)
+from odomgym.selfcal.estimators import check_observe
+from odomgym.selfcal.menu import ACTION_MENU
+from odomgym.selfcal.session import MAX_BUDGET, OBSERVATION_BOUND, OBSERVATION_LAYOUT
 from odomgym.sim.routes import Route
 
 __all__ = [
@@ -198,7 +194,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         population: the ranges the robots' systematic errors are drawn from.
         sensor: the ground-truth sensor's accuracy (each pose sample).
         observe: what the estimator sees of each run: ``"trajectory"`` (default) or
-            ``"end_pose"`` (:data:`~odomgym.selfcal.session.ESTIMATORS`).
+            ``"end_pose"`` (:data:`~odomgym.selfcal.estimators.ESTIMATORS`).
         render_mode: ``None`` (no drawing), ``"rgb_array"`` or ``"human"`` (module docs,
             "Rendering").
     """

@@ -108,6 +108,8 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         "calibrator.",
         (
             "odomgym.selfcal",
+            "odomgym.selfcal.menu",
+            "odomgym.selfcal.estimators",
             "odomgym.selfcal.session",
             "odomgym.selfcal.episodes",
         ),

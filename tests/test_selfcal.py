@@ -33,13 +33,8 @@ from odomgym.selfcal.episodes import (
     step_episodes,
     validation_terms,
 )
-from odomgym.selfcal.session import (
-    ACTION_MENU,
-    OBSERVATION_LAYOUT,
-    OBSERVATION_VERSION,
-    STOP,
-    SelfCalSession,
-)
+from odomgym.selfcal.menu import ACTION_MENU, STOP
+from odomgym.selfcal.session import OBSERVATION_LAYOUT, OBSERVATION_VERSION, SelfCalSession
 
 ITEM = {item.name: k for k, item in enumerate(ACTION_MENU)}
 

@@ -21,7 +21,8 @@ from odomgym.baselines.selfcal_vec_env import SelfCalVecEnv
 from odomgym.cli import main
 from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
-from odomgym.selfcal.session import ACTION_MENU, OBSERVATION_VERSION
+from odomgym.selfcal.menu import ACTION_MENU
+from odomgym.selfcal.session import OBSERVATION_VERSION
 
 KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
 

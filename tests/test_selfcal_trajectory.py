@@ -16,14 +16,14 @@ from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Run, replay_odometry, replay_with_jacobian
 from odomgym.robot import PRESETS
 from odomgym.selfcal.episodes import Episode, step_episodes
-from odomgym.selfcal.session import (
-    ACTION_MENU,
+from odomgym.selfcal.estimators import (
     PRIOR_STD,
     EndPoseEstimator,
-    SelfCalSession,
     TrajectoryEstimator,
     chunk_motions,
 )
+from odomgym.selfcal.menu import ACTION_MENU
+from odomgym.selfcal.session import SelfCalSession
 
 ITEM = {item.name: k for k, item in enumerate(ACTION_MENU)}
 ROBOT = PRESETS["labmate"]

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 
 def register(commands: Commands) -> None:
     """Add ``train``."""
-    from odomgym.selfcal.session import ACTION_MENU
+    from odomgym.selfcal.menu import ACTION_MENU
 
     parser = commands.add_parser(
         "train",

@@ -36,10 +36,8 @@ from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Run, end_error
 from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
-from odomgym.selfcal.session import (
-    ACTION_MENU,
-    SelfCalSession,
-)
+from odomgym.selfcal.menu import ACTION_MENU
+from odomgym.selfcal.session import SelfCalSession
 from odomgym.sim.route_runs import RunRequests
 from odomgym.sim.routes import Route, square_route, straight_route
 
