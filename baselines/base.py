@@ -1,10 +1,10 @@
 """The interface every calibrator implements.
 
-A calibrator is a procedure that talks to a :class:`odomgym.experiments.Lab`: it performs the
+A calibrator is a procedure that talks to a :class:`odomgym.lab.experiment.Lab`: it performs the
 experiments it needs (with the calibration it wants active while driving), measures what a
 person would measure, and returns corrected odometry parameters as a
-:class:`odomgym.odometry.Calibration`. Because labs serve simulated and recorded runs alike, the
-same calibrator object calibrates a simulated robot and a real robot's recorded session.
+:class:`odomgym.odometry.calibration.Calibration`. Because labs serve simulated and recorded runs
+alike, the same calibrator object calibrates a simulated robot and a real robot's recorded session.
 
 **Options.** Every method declares its settings as a frozen dataclass (``UMBmarkOptions``,
 ``TrajectoryOptions``, …) registered with it as :attr:`Calibrator.options_type`. The dataclass
@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Self, TypeVar
 
 from odomgym.errors import SpecError, require_count, require_positive
-from odomgym.experiments import Experiment, ExperimentKind, Lab
-from odomgym.odometry import Calibration
-from odomgym.runs import Direction, Run
+from odomgym.lab.experiment import Experiment, ExperimentKind, Lab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Direction, Run
 
 __all__ = [
     "CALIBRATORS",

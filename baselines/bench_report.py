@@ -23,8 +23,8 @@ import numpy as np
 
 from odomgym.baselines.benchmark import BenchConfig, config_record, summarize
 from odomgym.io import atomic_write_text, atomic_writer
-from odomgym.population import BENCH_FLOORS
-from odomgym.report import plot_return_errors
+from odomgym.lab.population import BENCH_FLOORS
+from odomgym.lab.report import plot_return_errors
 
 __all__ = ["markdown_summary", "write_outputs"]
 
@@ -149,10 +149,15 @@ def write_outputs(
 
 
 def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path: Path) -> Path:
+    """Box plots of the improvement per method, one panel per floor. The boxes lie
+    horizontally with the method names beside them on the left, one line each, so that ten
+    or more methods (and their budgets) stay readable; the figure grows with their number."""
     # A Figure without pyplot: no global backend switch, nothing left open in a notebook.
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(4.2 * len(config.floors), 4.2))
+    labels = config.labels()
+    height = 1.6 + 0.32 * len(labels)
+    fig = Figure(figsize=(1.6 + 3.6 * len(config.floors), max(3.2, height)), layout="constrained")
     axes = fig.subplots(1, len(config.floors), sharey=True, squeeze=False)
     for ax, floor in zip(axes[0], config.floors, strict=True):
         data = [
@@ -161,13 +166,13 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
                 for r in rows
                 if r["floor"] == floor and r["method"] == m and np.isfinite(r["improvement"])
             ]
-            for m in config.labels()
+            for m in labels
         ]
-        labels = config.labels()
-        ax.boxplot(data, showfliers=True)
-        ax.set_xticks(range(1, len(labels) + 1), labels, rotation=30)
-        ax.set_yscale("log")
-        ax.axhspan(
+        ax.boxplot(data, showfliers=True, orientation="horizontal")
+        ax.set_yticks(range(1, len(labels) + 1), labels, fontsize=8)
+        ax.invert_yaxis()  # the first method on top, as in the tables
+        ax.set_xscale("log")
+        ax.axvspan(
             10,
             22,
             color="tab:green",
@@ -175,12 +180,12 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
             label="Borenstein & Feng 1994, Table III (10–22×)",
         )
         ax.set_title(f"{floor} floor")
-        ax.grid(True, axis="y", alpha=0.3)
-    axes[0][0].set_ylabel("E_max,syst before / after")
-    axes[0][0].legend(fontsize=8, loc="lower left")
+        ax.grid(True, axis="x", alpha=0.3)
+        ax.set_xlabel("E_max,syst before / after")
+    handles, names = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, names, fontsize=8, loc="outside lower center")  # clear of the boxes
     budgets = " / ".join(str(b) for b in config.budgets)
     fig.suptitle(f"Calibrator benchmark: {config.robots} robots, budget {budgets} runs")
-    fig.tight_layout()
 
     def write(tmp: Path) -> None:
         fig.savefig(tmp, dpi=110, format="png")

@@ -18,7 +18,7 @@ parameters and the corrections are fitted to the measured end poses by nonlinear
 
 Each fit is :func:`scipy.optimize.least_squares` (Levenberg–Marquardt, as the authors'
 ``lsqnonlin``) with the analytic Jacobian of
-:func:`odomgym.runs.replay_with_jacobian`. With ``residuals="samples"`` every
+:func:`odomgym.odometry.runs.replay_with_jacobian`. With ``residuals="samples"`` every
 sample of the runs enters the cost instead of the end pose only.
 
 On the OptiOdom authors' four straight-and-spin sessions (nominal b = 0.2 m, D = 0.084 m, all
@@ -37,7 +37,7 @@ number of rounds.
 **Frames and units.** Poses are in the ground-truth frame; the odometry starts at the first
 ground-truth pose; position residuals in metres, heading residuals in radians (unwrapped, so a
 180° spin is compared as ±π, not wrapped). Factors are dimensionless and multiply the
-calibration in place; the result is an absolute :class:`~odomgym.odometry.Calibration`.
+calibration in place; the result is an absolute :class:`~odomgym.odometry.calibration.Calibration`.
 """
 
 from __future__ import annotations
@@ -60,10 +60,10 @@ from odomgym.baselines.base import (
 )
 from odomgym.baselines.trajectory import sample_indices
 from odomgym.errors import require_count, require_positive
-from odomgym.experiments import Experiment, ExperimentKind, Lab
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import Experiment, ExperimentKind, Lab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Run, replay_with_jacobian
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run, replay_with_jacobian
 
 __all__ = [
     "Ivanjko",

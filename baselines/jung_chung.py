@@ -51,9 +51,9 @@ from odomgym.baselines.umbmark import (
     optiodom_update,
     perform_squares,
 )
-from odomgym.experiments import Lab, parse_choice
-from odomgym.odometry import Calibration, wrap_angle
-from odomgym.runs import return_error
+from odomgym.lab.experiment import Lab, parse_choice
+from odomgym.odometry.calibration import Calibration, wrap_angle
+from odomgym.odometry.runs import return_error
 
 __all__ = [
     "HeadingMean",

@@ -5,9 +5,9 @@ recorded session it can use, the method calibrates on that session; its paramete
 absolute, in metres) are then applied to every *other* session — squares, straight-and-spin
 and circular paths alike, each with its own nominal robot — and judged by the OptiOdom
 evaluation measures
-(:mod:`odomgym.evaluation`). The leaderboard ranks methods by the mean cross-session final and
-maximum position errors. Beside it, the in-session results are compared with the authors' own
-numbers in ``published_results.csv`` (Sousa et al. 2022, whose "optiodom" rows are compared with
+(:mod:`odomgym.odometry.optiodom_measures`). The leaderboard ranks methods by the mean cross-session
+final and maximum position errors. Beside it, the in-session results are compared with the authors'
+own numbers in ``published_results.csv`` (Sousa et al. 2022, whose "optiodom" rows are compared with
 our ``trajectory`` method).
 
 ``conventions="optiodom"`` runs the methods that have the authors' conventions (UMBmark and
@@ -32,10 +32,11 @@ import numpy as np
 
 from odomgym.baselines.base import CALIBRATORS, Calibrator, option_names
 from odomgym.baselines.validation import calibrator_for_session, method_options
-from odomgym.data import RecordedLab, find_sessions, read_session
+from odomgym.data import find_sessions, read_session
 from odomgym.errors import SpecError
-from odomgym.evaluation import EvaluationMeasures, evaluate
-from odomgym.odometry import Calibration
+from odomgym.lab.recorded import RecordedLab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.optiodom_measures import EvaluationMeasures, evaluate
 
 __all__ = [
     "Leaderboard",

@@ -12,8 +12,8 @@ increments in between, give the parameters by two ordinary least-squares problem
 
    one row per run, linear in c = (r_R/b, r_L/b) [-]: Φ_θ·c = Δθ, solved by least squares.
 2. **Position.** With c fixed, the heading is known at every sample (θ_j from the partial sums,
-   midpoint μ_j = θ_j + Δθ_j/2 as :mod:`odomgym.odometry`), and the displacement is linear in the
-   wheel radii r = (r_R, r_L) [m]:
+   midpoint μ_j = θ_j + Δθ_j/2 as :mod:`odomgym.odometry.calibration`), and the displacement is
+   linear in the wheel radii r = (r_R, r_L) [m]:
 
        x_end − x_start = Σ_j (r_R·Δφ_R,j + r_L·Δφ_L,j)/2 · cos μ_j
        y_end − y_start = Σ_j (r_R·Δφ_R,j + r_L·Δφ_L,j)/2 · sin μ_j
@@ -76,10 +76,10 @@ from odomgym.baselines.base import (
     require_choice,
 )
 from odomgym.errors import SpecError, require_count, require_positive
-from odomgym.experiments import Experiment, ExperimentKind, Lab
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import Experiment, ExperimentKind, Lab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = [
     "LeastSquares",

@@ -10,7 +10,7 @@ quarter-turn arc π·b/4 makes the robot turn (1 + E_d)·π/4 instead of π/2, a
     α_d = (E_d − 1)·π/4 = π·b / (4·(R − b/2))        (E_d = (R + b/2)/(R − b/2))
 
 per corner. With the centres of gravity x_cw, x_ccw, y_cw, y_ccw of the return errors
-(``odomgym.runs.return_error``, true − odometry, start frame):
+(``odomgym.odometry.runs.return_error``, true − odometry, start frame):
 
     R̂_x = −4L²/(x_cw − x_ccw)             (= L/β_x,  β_x = (x_cw − x_ccw)/(−4L), Eq. 6.22a)
     α_x = (x_cw + x_ccw)/(−4L) + π·b/(4·(R̂_x − b/2))
@@ -66,10 +66,10 @@ from odomgym.baselines.base import (
     require_choice,
 )
 from odomgym.baselines.umbmark import e_b_from_alpha, perform_squares
-from odomgym.experiments import Lab
-from odomgym.metrics import centre_of_gravity, summarize_umbmark
-from odomgym.odometry import Calibration
-from odomgym.runs import return_error
+from odomgym.lab.experiment import Lab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import return_error
+from odomgym.odometry.umbmark_measures import centre_of_gravity, summarize_umbmark
 
 __all__ = [
     "DiameterError",

@@ -3,21 +3,21 @@
 UMBmark (Borenstein & Feng 1994, §6.3) prescribes ten 4×4 m squares and reads two numbers off
 their end errors. ``selfcal`` asks instead: *which* run should the robot drive next, given
 what it has measured so far, and when has it learnt enough? A session has a budget of runs;
-at every step a policy picks one item of :data:`MENU` (a 4 m or 2 m square either way, a 4 m
+at every step a policy picks one item of :data:`ACTION_MENU` (a 4 m or 2 m square either way, a 4 m
 straight run one way or out and back, an in-place spin) or ``stop``. Every run is driven with
 the current estimate in the odometry (iterative compensation, as UMBmark's §6.3 second round
 and solderspot 2014 do), and the lab's ground-truth sensor measures it.
 
-**The estimator** (:class:`odomgym.selfcal_session.TrajectoryEstimator`) is an augmented-state
+**The estimator** (:class:`odomgym.selfcal.estimators.TrajectoryEstimator`) is an augmented-state
 Kalman filter along every measured pose of the runs (Larsen et al. 1998; Martinelli et al.
 2007), with a prior from the benchmark population; ``observe="end_pose"``
-(:class:`~odomgym.selfcal_session.EndPoseEstimator`, the ``selfcal_end_pose`` method) restricts
+(:class:`~odomgym.selfcal.estimators.EndPoseEstimator`, the ``selfcal_end_pose`` method) restricts
 it to the end poses a person at the home position measures — UMBmark's information. The
-session, its menu and its observation are :mod:`odomgym.selfcal_session`, shared with the env.
+session, its menu and its observation are :mod:`odomgym.selfcal.session`, shared with the env.
 
 **The policy** maps the session's fixed-size observation
-(:meth:`~odomgym.selfcal_session.SelfCalSession.observation`, layout
-:data:`~odomgym.selfcal_session.OBSERVATION_LAYOUT`) to a menu item. The shipped policy
+(:meth:`~odomgym.selfcal.session.SelfCalSession.observation`, layout
+:data:`~odomgym.selfcal.session.OBSERVATION_LAYOUT`) to a menu item. The shipped policy
 (``selfcal-ppo.npz``) is a small MLP trained with PPO (Schulman et al. 2017) in
 ``SelfCalibration-v1`` (``odomgym train selfcal``); it runs here in numpy, so calibrating needs
 no torch. The ``scripted`` policy (alternate 4 m squares, a straight run every eighth run) is the
@@ -38,16 +38,15 @@ from numpy.typing import NDArray
 
 from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, perform
 from odomgym.errors import SpecError, require_count
-from odomgym.experiments import Experiment, Lab
-from odomgym.odometry import Calibration
-from odomgym.selfcal_session import (
+from odomgym.lab.experiment import Experiment, Lab
+from odomgym.odometry.calibration import Calibration
+from odomgym.selfcal.estimators import check_observe
+from odomgym.selfcal.menu import ACTION_MENU, STOP
+from odomgym.selfcal.session import (
     MAX_BUDGET,
-    MENU,
     OBSERVATION_LAYOUT,
     OBSERVATION_VERSION,
-    STOP,
     SelfCalSession,
-    check_observe,
 )
 
 __all__ = [
@@ -164,10 +163,10 @@ class MlpPolicy:
             if w.ndim != 2 or b.shape != (w.shape[0],) or w.shape[1] != width:
                 raise refuse(f"layer {k} has weights {w.shape} and biases {b.shape}")
             width = w.shape[0]
-        if not weights or width != len(MENU):
+        if not weights or width != len(ACTION_MENU):
             raise SpecError(
                 f"{source}: network shape does not match {len(OBSERVATION_LAYOUT)} observations "
-                f"and {len(MENU)} actions",
+                f"and {len(ACTION_MENU)} actions",
                 field="policy",
             )
         return cls(weights, meta)
@@ -204,7 +203,7 @@ class SelfCalOptions:
         policy: ``"learned"`` (the shipped PPO policy), ``"scripted"`` (the fixed schedule of
             :func:`scripted_policy`) or the path of a policy ``.npz`` file.
         observe: what the estimator sees of each run: ``"trajectory"`` (every measured pose,
-            the default) or ``"end_pose"`` (:data:`odomgym.selfcal_session.ESTIMATORS`); a
+            the default) or ``"end_pose"`` (:data:`odomgym.selfcal.estimators.ESTIMATORS`); a
             learned policy must have been trained with the same (its file records it).
     """
 
@@ -269,7 +268,7 @@ class SelfCal(Calibrator):
 
     def experiments(self) -> list[Experiment]:
         """Chosen as the session goes: the menu's experiments, one run each."""
-        return [item.experiment for item in MENU if item.experiment is not None]
+        return [item.experiment for item in ACTION_MENU if item.experiment is not None]
 
     def _choose(self, session: SelfCalSession) -> int:
         if session.runs_left <= 0:
@@ -324,7 +323,7 @@ class SelfCalScriptedOptions(SelfCalOptions):
     """Options of :class:`SelfCalScripted`: :class:`SelfCalOptions` with the scripted policy.
 
     Attributes:
-        schedule: menu item names (:data:`~odomgym.selfcal_session.MENU`, e.g.
+        schedule: menu item names (:data:`~odomgym.selfcal.menu.ACTION_MENU`, e.g.
             ``("square4-cw", "square4-ccw", "straight4")``, or one comma-separated string)
             driven in this order, repeated until the budget is spent; empty (the default) for
             :func:`scripted_policy`'s schedule. A lab that can drive only some items, or an
@@ -360,7 +359,7 @@ def schedule_items(schedule: object) -> tuple[str, ...]:
         raise SpecError(
             f"schedule must be a list of menu item names, got {schedule!r}", field="schedule"
         )
-    names = [item.name for item in MENU[1:]]
+    names = [item.name for item in ACTION_MENU[1:]]
     for name in schedule:
         if name not in names:
             raise SpecError(
@@ -399,7 +398,7 @@ class SelfCalScripted(SelfCal):
         if not schedule or session.runs_left <= 0:
             return super()._choose(session)
         name = schedule[session.runs_used % len(schedule)]
-        return next(i for i, item in enumerate(MENU) if item.name == name)
+        return next(i for i, item in enumerate(ACTION_MENU) if item.name == name)
 
 
 @dataclass(frozen=True)
@@ -420,7 +419,7 @@ class SelfCalEndPoseOptions(SelfCalScriptedOptions):
 
 class SelfCalEndPose(SelfCalScripted):
     """The second ablation: the scripted schedule with the estimator restricted to each run's
-    end pose (:class:`~odomgym.selfcal_session.EndPoseEstimator`) — UMBmark's information, a
+    end pose (:class:`~odomgym.selfcal.estimators.EndPoseEstimator`) — UMBmark's information, a
     tape measure at the home position — so the gain of seeing the whole trajectory is measured
     on its own."""
 

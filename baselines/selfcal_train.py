@@ -1,20 +1,14 @@
 """Training the self-calibration policy with stable-baselines3 (the ``rl`` extra).
 
-:class:`SelfCalVecEnv` is an SB3 ``VecEnv`` of ``SelfCalibration-v1`` sessions that simulates
-all their runs of a step as one physics batch per floor (:func:`odomgym.envs.selfcal.
-step_episodes`; one physics batch per shard and step) — a batch of 8 costs about as much wall
-time as 2 single runs — and splits the sessions over ``workers`` processes (shards) so both
-cores simulate. Sub-env i is seeded ``seed + i``
-and resets itself as SB3's ``DummyVecEnv`` does, so its episodes are the same whatever the
-number of workers, and the same as a ``DummyVecEnv`` of single envs
-(tests/test_selfcal_training.py).
-
-:func:`train` reads the hyperparameters from ``odomgym/data/hyperparams/<algo>.yml``, files in
-rl-baselines3-zoo's own format (one key per env id) that the zoo reads as they are
-(``python -m rl_zoo3.train … -conf``): one source of truth, no second copy to drift,
-logs SB3's progress to ``progress.csv`` (and TensorBoard when it is installed), shows a tqdm
-progress bar, plots the learning curve and exports the policy network to the ``.npz`` file
-that :class:`odomgym.baselines.selfcal.MlpPolicy` runs without torch.
+:func:`train` steps :class:`odomgym.baselines.selfcal_vec_env.SelfCalVecEnv` (every session's
+runs of a step in one physics batch, sessions split over worker shards), reads the
+hyperparameters from ``odomgym/data/hyperparams/<algo>.yml``, files in rl-baselines3-zoo's own
+format (one key per env id) that the zoo reads as they are (``python -m rl_zoo3.train …
+-conf``): one source of truth, no second copy to drift, logs SB3's progress to
+``progress.csv`` (and TensorBoard when it is installed), shows a tqdm progress bar, writes
+checkpoints and resumes from them (:class:`odomgym.baselines.selfcal_checkpoints.Checkpoints`),
+plots the learning curve and exports the policy network to the ``.npz`` file that
+:class:`odomgym.baselines.selfcal.MlpPolicy` runs without torch.
 """
 
 from __future__ import annotations
@@ -32,7 +26,6 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
-from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
@@ -41,209 +34,38 @@ from numpy.typing import NDArray
 
 from odomgym import interrupt
 from odomgym.baselines.selfcal import MlpPolicy
-from odomgym.envs.selfcal import SelfCalibrationEnv, menu_index, step_episodes
+from odomgym.baselines.selfcal_checkpoints import Checkpoints, write_json
+from odomgym.baselines.selfcal_vec_env import SelfCalVecEnv
 from odomgym.errors import SpecError
-from odomgym.io import atomic_write_text, atomic_writer
-from odomgym.selfcal_session import OBSERVATION_LAYOUT, OBSERVATION_VERSION, check_observe
-from odomgym.workers import Shards
-
-try:
-    from stable_baselines3.common.vec_env.base_vec_env import VecEnv
-except ImportError as exc:  # pragma: no cover - the rl extra is missing
-    raise ImportError(
-        "training needs stable-baselines3 and torch: pip install 'odomgym[rl]'"
-    ) from exc
+from odomgym.io import atomic_writer
+from odomgym.selfcal.estimators import check_observe
+from odomgym.selfcal.session import OBSERVATION_LAYOUT, OBSERVATION_VERSION
 
 __all__ = [
     "ALGORITHMS",
     "CHECKPOINT_EVERY",
     "ENV_ID",
     "EVAL_SEEDS",
-    "Checkpoints",
-    "SelfCalVecEnv",
     "TrainResult",
     "evaluate",
     "export_policy",
     "load_hyperparams",
+    "plot_learning_curve",
     "train",
 ]
 
 ENV_ID = "SelfCalibration-v1"
+"""The env the policy is trained in."""
+
 ALGORITHMS = ("ppo", "a2c", "dqn")
+"""SB3 algorithms that accept a ``Discrete`` action space (SAC and TD3 need ``Box``)."""
+
 CHECKPOINT_EVERY = 10_000
 """Default environment steps between checkpoints: about two minutes of training on two cores."""
-"""SB3 algorithms that accept a ``Discrete`` action space (SAC and TD3 need ``Box``)."""
 
 EVAL_SEEDS: tuple[int, ...] = tuple(range(10_000, 10_032))
 """The held-out sessions every trained policy is evaluated on (seeds never used in training,
 which seeds sub-env i with seed + i for small seeds)."""
-
-StepResult = tuple[NDArray[np.float32], float, bool, dict[str, Any]]
-
-
-class _Batch:
-    """Sessions stepped together in this process (SB3 reset semantics)."""
-
-    def __init__(self, count: int, env_kwargs: dict[str, Any]) -> None:
-        self.envs = [SelfCalibrationEnv(**env_kwargs) for _ in range(count)]
-
-    def reset(
-        self, seeds: Sequence[int | None], options: Sequence[dict[str, Any]]
-    ) -> list[NDArray[np.float32]]:
-        out = []
-        for env, seed, opts in zip(self.envs, seeds, options, strict=True):
-            obs, _ = env.reset(seed=seed, options=opts or None)
-            out.append(obs)
-        return out
-
-    def step(self, actions: Sequence[int]) -> list[StepResult]:
-        episodes = []
-        for env in self.envs:
-            assert env.episode is not None, "reset() first"
-            episodes.append(env.episode)
-        # SelfCalVecEnv.step_async has checked every action (menu_index) before any shard steps.
-        results = step_episodes(episodes, list(actions), self.envs[0].shaping)
-        out: list[StepResult] = []
-        for env, (obs, reward, done, info) in zip(self.envs, results, strict=True):
-            info["TimeLimit.truncated"] = False
-            if done:
-                info["terminal_observation"] = obs
-                obs, _ = env.reset()
-            out.append((obs, reward, done, info))
-        return out
-
-    def get_attr(self, name: str, indices: Sequence[int]) -> list[Any]:
-        return [getattr(self.envs[i], name) for i in indices]
-
-    def set_attr(self, name: str, value: Any, indices: Sequence[int]) -> None:
-        for i in indices:
-            setattr(self.envs[i], name, value)
-
-
-def _worker(conn: Connection, count: int, env_kwargs: dict[str, Any]) -> None:
-    import torch
-
-    torch.set_num_threads(1)
-    batch = _Batch(count, env_kwargs)
-    while True:
-        command, payload = conn.recv()
-        if command == "close":
-            conn.close()
-            return
-        try:
-            conn.send(("ok", getattr(batch, command)(*payload)))
-        except Exception as exc:  # reported to the parent, which raises it
-            conn.send(("error", exc))
-
-
-class SelfCalVecEnv(VecEnv):
-    """``n_envs`` self-calibration sessions, their runs simulated in batches.
-
-    Args:
-        n_envs: sessions stepped together.
-        workers: processes to split them over (1: this process).
-        env_kwargs: keyword arguments of :class:`~odomgym.envs.selfcal.SelfCalibrationEnv`.
-    """
-
-    def __init__(
-        self, n_envs: int, *, workers: int = 1, env_kwargs: dict[str, Any] | None = None
-    ) -> None:
-        for name, value in (("n_envs", n_envs), ("workers", workers)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise SpecError(f"{name} must be a whole number >= 1, got {value!r}", field=name)
-        kwargs = dict(env_kwargs or {})
-        known = set(inspect.signature(SelfCalibrationEnv).parameters)
-        unknown = sorted(set(kwargs) - known)
-        if unknown:
-            raise SpecError(
-                f"unknown env_kwargs {', '.join(unknown)}; SelfCalibration-v1 takes "
-                f"{', '.join(sorted(known))}",
-                field="env_kwargs",
-            )
-        probe = SelfCalibrationEnv(**kwargs)  # validates the settings here, in one line
-        self._bounds = [
-            (int(a[0]), int(a[-1]) + 1)
-            for a in np.array_split(np.arange(n_envs), min(workers, n_envs))
-        ]
-        self._local: _Batch | None = None
-        self._shards: Shards | None = None
-        if len(self._bounds) == 1:
-            self._local = _Batch(n_envs, kwargs)
-        else:
-            self._shards = Shards(_worker, [(hi - lo, kwargs) for lo, hi in self._bounds])
-        self._actions: list[int] = []
-        self.closed = False
-        super().__init__(n_envs, probe.observation_space, probe.action_space)
-
-    # ---------------------------------------------------------------- plumbing
-    def _call(self, command: str, per_shard: Callable[[int, int], tuple[Any, ...]]) -> list[Any]:
-        """Run ``command`` on every shard with its slice of the arguments; concatenated."""
-        if self._local is not None:
-            lo, hi = self._bounds[0]
-            return list(getattr(self._local, command)(*per_shard(lo, hi)) or [])
-        assert self._shards is not None
-        values = self._shards.call(command, [per_shard(lo, hi) for lo, hi in self._bounds])
-        return [item for value in values for item in (value or [])]
-
-    def _indices(self, indices: Any) -> list[int]:
-        return list(self._get_indices(indices))
-
-    # ---------------------------------------------------------------- VecEnv API
-    def reset(self) -> NDArray[np.float32]:
-        seeds, options = list(self._seeds), list(self._options)
-        obs = self._call("reset", lambda lo, hi: (seeds[lo:hi], options[lo:hi]))
-        self._reset_seeds()
-        self._reset_options()
-        return np.stack(obs)
-
-    def step_async(self, actions: NDArray[Any]) -> None:
-        flat = np.asarray(actions).reshape(-1)
-        if flat.size != self.num_envs:
-            raise SpecError(
-                f"need one action per session ({self.num_envs}), got {flat.size}", field="action"
-            )
-        self._actions = [menu_index(a) for a in flat]  # checked here, before any shard steps
-
-    def step_wait(
-        self,
-    ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:
-        actions = self._actions
-        results = self._call("step", lambda lo, hi: (actions[lo:hi],))
-        obs = np.stack([r[0] for r in results])
-        rewards = np.array([r[1] for r in results], dtype=np.float32)
-        dones = np.array([r[2] for r in results], dtype=bool)
-        return obs, rewards, dones, [r[3] for r in results]
-
-    def close(self) -> None:
-        if self.closed:
-            return
-        if self._shards is not None:
-            self._shards.close()
-        self.closed = True
-
-    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        values = self._call("get_attr", lambda lo, hi: (attr_name, list(range(hi - lo))))
-        return [values[i] for i in self._indices(indices)]  # in the order asked for
-
-    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        wanted = set(self._indices(indices))
-        self._call(
-            "set_attr",
-            lambda lo, hi: (attr_name, value, [i - lo for i in range(lo, hi) if i in wanted]),
-        )
-
-    def env_method(
-        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
-    ) -> list[Any]:
-        raise NotImplementedError(
-            "SelfCalVecEnv steps its sessions together; call methods on SelfCalibrationEnv"
-        )
-
-    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
-        return [False for _ in self._indices(indices)]
-
-
-# -------------------------------------------------------------------------------- training
 
 
 def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any]:
@@ -353,128 +175,6 @@ class TrainResult:
     written: list[Path] = field(default_factory=list)
     """Every file written, in this order: the numpy policy, the SB3 model, the policy's
     metadata, the learning curve's CSV and its plot."""
-
-
-class Checkpoints:
-    """The checkpoint of an interrupted training in its output folder, and the resume.
-
-    Every ``every`` environment steps (at the start of a rollout, when the last update is
-    done) the model — weights, optimizer state, step count, and for DQN the replay buffer —
-    is written to ``checkpoint.zip`` (``checkpoint_replay.pkl``) and its record to
-    ``checkpoint.json``, each whole by a rename. ``--resume`` loads them and trains on to the
-    same total; the settings that shape the model (algorithm, sessions, seed, hyperparameters)
-    must match the record. The learning-curve rows logged before the checkpoint are kept in
-    ``progress.prev.csv`` and joined with the new ones at the end.
-
-    A resumed run is not bit-identical to an uninterrupted one: the sessions in flight at the
-    checkpoint are started afresh (seeded ``seed + steps``), as SB3 keeps no env state.
-    """
-
-    def __init__(self, folder: Path) -> None:
-        self.folder = folder
-        self.model = folder / "checkpoint.zip"
-        self.record = folder / "checkpoint.json"
-        self.replay = folder / "checkpoint_replay.pkl"
-        self.progress = folder / "progress.csv"
-        self.previous = folder / "progress.prev.csv"
-
-    def read(self, settings: dict[str, Any]) -> dict[str, Any]:
-        """The record of the checkpoint to resume from; one-line errors when there is none or
-        it was made with other settings."""
-        if not self.record.exists() or not self.model.exists():
-            raise SpecError(
-                f"{self.folder}: no checkpoint to resume from (checkpoint.json and "
-                "checkpoint.zip); start without --resume",
-                field="resume",
-            )
-        try:
-            record = json.loads(self.record.read_text(encoding="utf-8"))
-            steps = int(record["steps"])
-            saved = dict(record["settings"])
-            record["wall_time_s"] = float(record["wall_time_s"])
-            record["resumed_at"] = [int(k) for k in record["resumed_at"]]
-        except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
-            raise SpecError(
-                f"{self.record}: not a checkpoint record odomgym wrote ({exc})", field="resume"
-            ) from exc
-        differ = sorted(k for k in set(saved) | set(settings) if saved.get(k) != settings.get(k))
-        if differ:
-            shown = "; ".join(f"{k} {saved.get(k)!r} then, {settings.get(k)!r} now" for k in differ)
-            raise SpecError(
-                f"{self.record}: the checkpoint was made with other settings ({shown}); "
-                "resume with the same --algo, --envs, --seed and --hyperparams",
-                field="resume",
-            )
-        if steps < 0:
-            raise SpecError(f"{self.record}: steps {steps} is negative", field="resume")
-        return dict(record)
-
-    def save(self, model: Any, settings: dict[str, Any], extra: dict[str, Any]) -> None:
-        """Write the checkpoint of ``model`` now (each file whole, the record last, with
-        ``extra`` in it)."""
-        # The three files are one checkpoint: a stop between them would pair a new model with
-        # an old record, so Ctrl-C/SIGTERM wait until all are written.
-        with interrupt.deferred():
-            atomic_writer(self.model, model.save)  # the temporary name ends in .zip, as SB3 needs
-            if hasattr(model, "save_replay_buffer"):  # off-policy (DQN): its buffer is its data
-                atomic_writer(self.replay, model.save_replay_buffer)
-            record = {"steps": int(model.num_timesteps), **extra, "settings": settings}
-            _write_json(self.record, record)
-
-    def keep_progress(self, steps: int) -> None:
-        """Before a resume: the learning-curve rows logged up to ``steps`` (of every earlier
-        attempt) go to ``progress.prev.csv``; SB3 starts ``progress.csv`` afresh."""
-        rows, fields = _csv_rows([self.previous, self.progress])
-        rows = [r for r in rows if _timesteps(r) <= steps]
-        _write_csv(self.previous, rows, fields)
-
-    def finish(self) -> None:
-        """After the final model is written: one ``progress.csv`` of every attempt, and no
-        checkpoint left to resume from."""
-        if self.previous.exists():
-            rows, fields = _csv_rows([self.previous, self.progress])
-            _write_csv(self.progress, rows, fields)
-        self.clear()
-
-    def clear(self) -> None:
-        """No checkpoint left: after a finished training, or at a fresh start in a folder an
-        earlier training left one in."""
-        for path in (self.record, self.model, self.replay, self.previous):
-            path.unlink(missing_ok=True)
-
-
-def _timesteps(row: dict[str, str]) -> float:
-    try:
-        return float(row.get("time/total_timesteps") or "inf")
-    except ValueError:
-        return math.inf
-
-
-def _csv_rows(paths: Sequence[Path]) -> tuple[list[dict[str, str]], list[str]]:
-    import csv
-
-    rows: list[dict[str, str]] = []
-    fields: list[str] = []
-    for path in paths:
-        if not path.exists():
-            continue
-        with path.open(newline="", encoding="utf-8") as f:
-            reader = csv.DictReader(f)
-            fields += [k for k in reader.fieldnames or [] if k not in fields]
-            rows += list(reader)
-    return rows, fields
-
-
-def _write_csv(path: Path, rows: list[dict[str, str]], fields: list[str]) -> None:
-    import csv
-
-    def write(tmp: Path) -> None:
-        with tmp.open("w", newline="", encoding="utf-8") as f:
-            writer = csv.DictWriter(f, fieldnames=fields, restval="")
-            writer.writeheader()
-            writer.writerows(rows)
-
-    atomic_writer(path, write)
 
 
 def _git_commit() -> str:
@@ -668,16 +368,12 @@ def train(
     policy_file = folder / "policy.npz"
     exported.save(policy_file)
     meta_file = folder / "policy.json"
-    _write_json(meta_file, exported.meta)
+    write_json(meta_file, exported.meta)
     checkpoints.finish()
     curve_csv, curve_png = folder / "progress.csv", folder / "learning_curve.png"
     plot_learning_curve(curve_csv, curve_png)
     written = [policy_file, model_file, meta_file, curve_csv, curve_png]
     return TrainResult(folder, policy_file, model_file, wall, total, evaluation, written)
-
-
-def _write_json(path: Path, data: dict[str, Any]) -> None:
-    atomic_write_text(path, json.dumps(data, indent=2) + "\n")
 
 
 def plot_learning_curve(csv_path: Path, png_path: Path) -> None:

@@ -9,17 +9,17 @@ trajectory:
 
     min over (b, D_R, D_L) of  Σ_runs Σ_k ‖p_odo,k(b, D_R, D_L) − p_gt,k‖²
 
-with p_odo the odometry of :mod:`odomgym.odometry` (midpoint integration, started at the first
-ground-truth pose, as the authors' ``simulateRobot_diff.m``) and k over the samples of each run
-(every sample by default; the authors sample every ``sampleDist`` = 0.5 m of travel, available
+with p_odo the odometry of :mod:`odomgym.odometry.calibration` (midpoint integration, started at the
+first ground-truth pose, as the authors' ``simulateRobot_diff.m``) and k over the samples of each
+run (every sample by default; the authors sample every ``sampleDist`` = 0.5 m of travel, available
 as ``sample_distance``). The authors minimise it with iRprop−; here it is
 :func:`scipy.optimize.least_squares` (trust-region reflective) with the analytic Jacobian of
-:func:`odomgym.runs.replay_with_jacobian`, which converges in a handful of evaluations.
+:func:`odomgym.odometry.runs.replay_with_jacobian`, which converges in a handful of evaluations.
 
 **Parameters and units.** The fit works on the logarithms of the three effective parameters the
 odometry uses, x = (ln D_L/D_L0, ln D_R/D_R0, ln b/b0), starting at the calibration in place
 (x = 0); D_L, D_R are wheel diameters [m] and b the wheelbase [m]. The result is expressed as an
-absolute :class:`~odomgym.odometry.Calibration` (:meth:`Calibration.from_parameters`).
+absolute :class:`~odomgym.odometry.calibration.Calibration` (:meth:`Calibration.from_parameters`).
 
 **Frames.** Residuals are odometry − ground truth positions [m] in the ground-truth frame; the
 odometry starts at the first ground-truth pose, so the first sample's residual is zero and is
@@ -56,10 +56,10 @@ from odomgym.baselines.base import (
     square_experiments,
 )
 from odomgym.errors import SpecError, require_count, require_finite, require_positive
-from odomgym.experiments import Experiment, ExperimentKind, Lab, parse_choice
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import Experiment, ExperimentKind, Lab, parse_choice
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Run, replay_with_jacobian
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run, replay_with_jacobian
 
 __all__ = [
     "POOR_CONDITION",
@@ -332,9 +332,9 @@ class Trajectory(SquaresSizing):
     UMBmark squares of side ``side`` [m]; ``"circular"`` — ``runs_per_direction`` cw and as
     many ccw circles of radius ``radius`` [m], ``laps`` laps each; ``"free"`` — ``free_runs``
     free paths of ``free_length`` [m] (recorded, or the simulator's random arcs,
-    :func:`odomgym.lab.free_plan`). Squares suffice: the legs' lateral drift fixes D_R/D_L, the
-    corners fix b relative to the mean diameter, and the positions *along* the legs fix the
-    mean diameter — which return errors alone cannot see. Circles need both directions: one
+    :func:`odomgym.sim.arc_runs.free_plan`). Squares suffice: the legs' lateral drift fixes
+    D_R/D_L, the corners fix b relative to the mean diameter, and the positions *along* the legs fix
+    the mean diameter — which return errors alone cannot see. Circles need both directions: one
     circle fixes the mean diameter and one combination of D_R/D_L and b (its curvature); the
     circle turning the other way fixes the other. ``straight_runs`` adds straight runs of
     ``straight_distance`` [m] (more scale information; the default 0 keeps the budget of a
@@ -343,7 +343,7 @@ class Trajectory(SquaresSizing):
     Args:
         side: square side L [m].
         runs_per_direction: squares or circles per direction.
-        path: which runs to ask for: an :class:`~odomgym.experiments.ExperimentKind` among
+        path: which runs to ask for: an :class:`~odomgym.lab.experiment.ExperimentKind` among
             :data:`TRAJECTORY_PATHS`, or its spelling.
         radius: circle radius [m].
         laps: laps per circular run [-].

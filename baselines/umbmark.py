@@ -52,11 +52,11 @@ from odomgym.baselines.base import (
     square_experiments,
 )
 from odomgym.errors import SpecError, require_count, require_positive
-from odomgym.experiments import Experiment, ExperimentKind, Lab, parse_choice
-from odomgym.metrics import centre_of_gravity, summarize_umbmark
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import Experiment, ExperimentKind, Lab, parse_choice
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Run, replay_odometry, return_error
+from odomgym.odometry.umbmark_measures import centre_of_gravity, summarize_umbmark
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run, replay_odometry, return_error
 
 __all__ = [
     "Components",
@@ -335,8 +335,9 @@ class UMBmark(SquaresSizing):
        is corrected by c_L, c_R (Eqs. 6.33–6.34) and b ← E_b·b (Eq. 6.28), multiplying any
        correction already in place (solderspot 2014).
     3. **Second compensation** (optional, Borenstein & Feng 1994, §6.3): repeat the squares with
-       the new calibration; if E_max,syst > 3·SEM (:func:`odomgym.metrics.summarize_umbmark`),
-       correct again on top of the first correction.
+       the new calibration; if E_max,syst > 3·SEM
+       (:func:`odomgym.odometry.umbmark_measures.summarize_umbmark`), correct again on top of the
+       first correction.
 
     Args:
         side: square side L [m] (Borenstein & Feng 1994: 4 m).

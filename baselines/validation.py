@@ -1,12 +1,13 @@
 """Run a calibrator and judge its result on runs it has not seen.
 
-* :func:`calibrate_in_simulation` — a hidden true robot in a :class:`~odomgym.lab.SimLab`; the
+* :func:`calibrate_in_simulation` — a hidden true robot in a :class:`~odomgym.lab.simulated.SimLab`;
+the
   calibrator performs its experiments (through a sensor model), then fresh UMBmark squares are
   driven with the uncalibrated and with the calibrated odometry, and E_max,syst (Borenstein &
   Feng 1994, Eq. 3.3) is computed from the *true* return errors.
 * :func:`calibrate_on_session` — a recorded session of a real robot in a
   :class:`~odomgym.data.RecordedLab`; the result is judged by the OptiOdom evaluation measures
-  (:mod:`odomgym.evaluation`) on the session's runs, or on other sessions' runs.
+  (:mod:`odomgym.odometry.optiodom_measures`) on the session's runs, or on other sessions' runs.
 
 And the configuration of methods by callers that configure all of them alike:
 :func:`make_calibrator` (options by name, each checked against the method's options dataclass),
@@ -27,27 +28,31 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, option_names
-from odomgym.data import RecordedLab, Session
+from odomgym.data import Session
 from odomgym.errors import SpecError
-from odomgym.evaluation import EvaluationMeasures, evaluate
-from odomgym.experiments import SensorAccuracy
 from odomgym.floor import FloorSpec
-from odomgym.lab import RunRequests, SimLab, random_start_poses
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.lab.recorded import RecordedLab
+from odomgym.lab.simulated import SimLab, random_start_poses
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.optiodom_measures import EvaluationMeasures, evaluate
+from odomgym.odometry.runs import Direction, Run, end_error
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
-from odomgym.routes import square_route
-from odomgym.runs import Run, end_error
+from odomgym.sim.route_runs import RunRequests
+from odomgym.sim.routes import square_route
 
 __all__ = [
     "SessionReport",
     "SimulationReport",
+    "ValidationSquare",
     "calibrate_in_simulation",
     "calibrate_on_session",
     "calibrator_for_session",
     "calibrator_for_squares",
     "make_calibrator",
     "method_options",
+    "square_errors",
     "validation_errors",
     "validation_errors_many",
 ]
@@ -184,6 +189,54 @@ class SimulationReport:
         }
 
 
+@dataclass(frozen=True)
+class ValidationSquare:
+    """One fresh UMBmark square to judge a calibration by: ``robot`` drives it with
+    ``calibration`` from ``start`` (x, y [m], θ [rad]; the origin if None), its floor noise from
+    ``stream`` (None: the batch's shared ``rng``)."""
+
+    robot: RobotSpec
+    calibration: Calibration
+    start: FloatArray | None = None
+    stream: np.random.Generator | None = None
+
+
+def square_errors(
+    squares: Sequence[ValidationSquare],
+    floor: FloorSpec,
+    direction: Direction,
+    *,
+    side: float = 4.0,
+    rng: np.random.Generator | None = None,
+) -> FloatArray:
+    """True return errors (K, 3) of ``squares`` of ``side`` [m] driven ``direction``, all in
+    one batch: true − odometry in each run's start frame [m, m, rad], heading wrapped.
+
+    The one validation of the benchmark and of :func:`calibrate_in_simulation`. A square not
+    finished within the time limit (a calibration so wrong that the robot circles) gets NaN
+    errors, and so a NaN E_max,syst: the benchmark reports that calibration as failed and goes
+    on; :func:`validation_errors_many` raises instead (one calibration a user asked about).
+    """
+    batch = RunRequests()
+    route = square_route(side, direction)
+    for square in squares:
+        batch.add(
+            square.robot,
+            route,
+            square.calibration,
+            stream=square.stream,
+            start=square.start,
+            direction=direction,
+        )
+    sim, odom = batch.simulate(floor, rng=rng, on_timeout="keep")
+    return np.array(
+        [
+            end_error(run, end) if run.meta["finished"] else np.full(3, np.nan)
+            for run, end in zip(sim, odom, strict=True)
+        ]
+    )
+
+
 def validation_errors_many(
     robot: RobotSpec,
     floor: FloorSpec,
@@ -198,23 +251,32 @@ def validation_errors_many(
     one batch per direction (every calibration drives from the same start poses).
 
     Returns one dict per calibration: ``"cw"``/``"ccw"`` → (runs, 3) errors (true − odometry,
-    start frame, heading wrapped).
+    start frame, heading wrapped) (:func:`square_errors`).
+
+    Raises:
+        RuntimeError: a square did not finish within the time limit with some calibration.
     """
     results: list[dict[str, FloatArray]] = [{} for _ in calibrations]
     count = len(calibrations)
-    for direction in ("cw", "ccw"):
+    directions: tuple[Direction, Direction] = ("cw", "ccw")
+    for direction in directions:
         starts: FloatArray | None = None
         if start_region is not None:
             assert rng is not None, "random start poses need an rng"
             starts = random_start_poses(rng, runs, start_region)
-        batch = RunRequests()
-        route = square_route(side, direction)
-        for calibration in calibrations:
-            for r in range(runs):
-                start = None if starts is None else starts[r]
-                batch.add(robot, route, calibration, start=start, direction=direction)
-        sim, odom = batch.simulate(floor, rng=rng, on_timeout="raise")
-        errors = np.array([end_error(run, end) for run, end in zip(sim, odom, strict=True)])
+        squares = [
+            ValidationSquare(robot, calibration, None if starts is None else starts[r])
+            for calibration in calibrations
+            for r in range(runs)
+        ]
+        errors = square_errors(squares, floor, direction, side=side, rng=rng)
+        unfinished = sorted({k // runs for k in np.flatnonzero(np.isnan(errors).any(axis=1))})
+        if unfinished:
+            raise RuntimeError(
+                f"validation squares ({direction}) did not finish with calibration(s) "
+                f"{unfinished} within the time limit (a calibration that makes the robot "
+                "circle, or a slippery floor?)"
+            )
         for k in range(count):
             results[k][direction] = errors[k * runs : (k + 1) * runs]
     return results

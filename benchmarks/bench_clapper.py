@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.clapper import CLAPPER_FLOOR
-from odomgym.clapper_runs import PAPER_CONDITIONS, SONAR, run_clapper, summarize
 from odomgym.floor import load_floor
-from odomgym.ipec import DEFAULT_IPEC, ipec_estimator
-from odomgym.vehicle import PAPER_ERRORS, VEHICLES, VehicleSpec
+from odomgym.vehicle.ipec import DEFAULT_IPEC, ipec_estimator
+from odomgym.vehicle.paper_runs import PAPER_CONDITIONS, SONAR, run_clapper, summarize
+from odomgym.vehicle.spec import PAPER_ERRORS, VEHICLES, VehicleSpec
+from odomgym.vehicle.trial import CLAPPER_FLOOR
 
 CONFIGURATIONS = ("paper", "gated", "heading-only", "recommended")
 

@@ -1,7 +1,7 @@
 """Time the paper-size Monte Carlo of Chong & Kleeman §6.1: vectorised numpy versus a plain loop.
 
 The paper ran 10 000 runs × 10 000 partitions per table column. This times
-:func:`odomgym.montecarlo.monte_carlo` on the full size and :func:`monte_carlo_loop` (one run
+:func:`odomgym.noise.montecarlo.monte_carlo` on the full size and :func:`monte_carlo_loop` (one run
 and one partition at a time in Python) on a subset of runs, extrapolated linearly to the full
 run count — the loop costs the same per run, and the full loop would take minutes.
 
@@ -22,7 +22,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from odomgym.montecarlo import monte_carlo, monte_carlo_loop  # noqa: E402
+from odomgym.noise.montecarlo import monte_carlo, monte_carlo_loop  # noqa: E402
 
 # Table 2, column (III): L = 15 m, R = 10 m, B = 0.4 m, k_L = 0.01, k_R = 0.02 m^½.
 CASE = (15.0, 10.0, 0.4, 0.01, 0.02)

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_selfcal.py --budget 16 8 4 --picks  # 100 robots, 3 floors
     python benchmarks/bench_selfcal.py --robots 20 --json  # quicker; JSON lines for scripts
-    python benchmarks/bench_selfcal.py --noise             # re-measure MENU's floor scatter
+    python benchmarks/bench_selfcal.py --noise             # re-measure ACTION_MENU's floor scatter
     python benchmarks/bench_selfcal.py --error-budget      # what a parameter error costs
 
 Every method runs in the calibrator benchmark (:mod:`odomgym.baselines.benchmark`): the same
@@ -34,7 +34,7 @@ import numpy as np
 from scipy.stats import wilcoxon
 
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
-from odomgym.population import BENCH_FLOORS
+from odomgym.lab.population import BENCH_FLOORS
 
 METHODS = (
     "selfcal",
@@ -112,8 +112,8 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
     streams as its ``selfcal`` rows)."""
     from odomgym.baselines.benchmark import bench_floor, calibration_streams, configure, population
     from odomgym.baselines.selfcal import SelfCal
-    from odomgym.lockstep import run_lockstep
-    from odomgym.selfcal_session import MENU
+    from odomgym.lab.lockstep import run_lockstep
+    from odomgym.selfcal.menu import ACTION_MENU
 
     robots = population(config)
     indices = list(range(config.robots))
@@ -128,7 +128,7 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
                 calibration_streams(config, indices, floor_index),
                 start_region=start_region,
             )
-            counts = dict.fromkeys((item.name for item in MENU[1:]), 0)
+            counts = dict.fromkeys((item.name for item in ACTION_MENU[1:]), 0)
             for outcome in outcomes:
                 if outcome.value is None:
                     continue
@@ -151,14 +151,15 @@ def menu_picks(config: BenchConfig) -> list[dict[str, Any]]:
 def measure_noise(runs: int = 24) -> None:
     """The end-pose scatter of every menu item on the concrete floor (MenuItem.floor_std)."""
     from odomgym.floor import FLOORS
-    from odomgym.lab import experiment_route, random_start_poses, simulate_runs
+    from odomgym.lab.simulated import experiment_route, random_start_poses
+    from odomgym.odometry.runs import end_error
     from odomgym.robot import PRESETS
-    from odomgym.runs import end_error
-    from odomgym.selfcal_session import MENU
+    from odomgym.selfcal.menu import ACTION_MENU
+    from odomgym.sim.route_runs import simulate_runs
 
     robot = PRESETS["labmate"].ideal()
     print(f"{'item':<16} {'σx [mm]':>8} {'σy [mm]':>8} {'σθ [°]':>7}   (concrete, {runs} runs)")
-    for item in MENU[1:]:
+    for item in ACTION_MENU[1:]:
         assert item.experiment is not None
         rng = np.random.default_rng(5)
         sim, odom = simulate_runs(
@@ -192,7 +193,7 @@ def error_budget(robots: int, seed: int = 0) -> list[dict[str, Any]]:
     squares (same streams as the oracle); the median per-robot ratio of the oracle's
     E_max,syst to the perturbed one's (*of oracle*)."""
     from odomgym.baselines import benchmark as bench
-    from odomgym.odometry import Calibration
+    from odomgym.odometry.calibration import Calibration
 
     config = BenchConfig(robots=robots, floors=("concrete",), seed=seed)
     fleet = bench.population(config)
@@ -236,7 +237,7 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (2)")
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (0)")
     parser.add_argument("--json", action="store_true", help="JSON lines instead of tables")
-    parser.add_argument("--noise", action="store_true", help="measure MENU's floor scatter")
+    parser.add_argument("--noise", action="store_true", help="measure ACTION_MENU's floor scatter")
     parser.add_argument(
         "--error-budget",
         action="store_true",

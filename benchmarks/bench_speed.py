@@ -44,9 +44,9 @@ import pymunk.batch
 
 import odomgym
 from odomgym.floor import FLOORS
-from odomgym.lab import simulate_runs
-from odomgym.physics import World
-from odomgym.routes import square_route
+from odomgym.sim.route_runs import simulate_runs
+from odomgym.sim.routes import square_route
+from odomgym.sim.world import World
 
 
 def umbmark_run(repeats: int = 5) -> dict[str, float]:
@@ -72,9 +72,11 @@ def umbmark_run(repeats: int = 5) -> dict[str, float]:
 def clapper_run(repeats: int = 5) -> dict[str, float]:
     """The 36 m straight out and back with IPEC (``recommended``) and 20 cables, best of
     ``repeats``, and the same without IPEC (the estimator's share of the time)."""
-    from odomgym.clapper import CLAPPER_FLOOR, CableLayer, drive_vehicles, evenly, straight_path
-    from odomgym.ipec import ipec_estimator
-    from odomgym.vehicle import load_vehicle
+    from odomgym.vehicle.cable_layout import CableLayer, evenly
+    from odomgym.vehicle.ipec import ipec_estimator
+    from odomgym.vehicle.paths import straight_path
+    from odomgym.vehicle.spec import load_vehicle
+    from odomgym.vehicle.trial import CLAPPER_FLOOR, drive_vehicles
 
     spec = load_vehicle("clapper")
     floor = FLOORS[CLAPPER_FLOOR]

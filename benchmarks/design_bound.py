@@ -3,14 +3,14 @@
     python benchmarks/design_bound.py                      # 100 robots, 3 floors, 16/8/4 runs
     python benchmarks/design_bound.py --robots 20 --floor concrete --budget 8 --json
 
-The learned policy of ``selfcal`` chooses each run from :data:`odomgym.selfcal_session.MENU`.
+The learned policy of ``selfcal`` chooses each run from :data:`odomgym.selfcal.menu.ACTION_MENU`.
 Whether a better choice exists is a question of experiment design, and the trajectory filter
 answers most of it without driving a single schedule:
 
 1. **Information of one run of each item.** On each floor, the first ``--info-robots`` robots
-   of the benchmark drive every item twice; a :class:`~odomgym.selfcal_session.
+   of the benchmark drive every item twice; a :class:`~odomgym.selfcal.session.
    TrajectoryEstimator` takes all of them in (so its estimate and roughness factor settle) and
-   gives each run's information matrix (:meth:`~odomgym.selfcal_session.TrajectoryEstimator.
+   gives each run's information matrix (:meth:`~odomgym.selfcal.estimators.TrajectoryEstimator.
    run_information`). In the linearised model, given the floor's roughness, the matrix does
    not depend on the measured values — only on the item, the floor and the sensor — which is
    why a fixed schedule loses little to an adaptive policy: *room over best* is, per robot and
@@ -21,8 +21,8 @@ answers most of it without driving a single schedule:
    covariance P is the inverse of the prior's information plus its runs' (Pukelsheim 2006,
    Ch. 1), and its expected validation loss is tr(W·P), where W = Σ Jᵀ·J over the cw and ccw
    4×4 m validation squares and J is the odometry's end position's derivative with respect
-   to the parameters (:func:`~odomgym.runs.replay_with_jacobian`): the squares miss by about
-   J·δ for an estimate δ off. All C(n+8, 8) multisets are ranked (735 471 at n = 16).
+   to the parameters (:func:`~odomgym.odometry.runs.replay_with_jacobian`): the squares miss by
+   about J·δ for an estimate δ off. All C(n+8, 8) multisets are ranked (735 471 at n = 16).
 3. **The best and the benchmark's schedules, driven.** The best-ranked schedule, the
    scripted schedule (``selfcal_scripted``'s) and 4 m squares only, cw and ccw alternating
    (the item the learned policy drives, though in its own mix of directions), run as
@@ -53,15 +53,16 @@ from scipy.stats import wilcoxon
 from odomgym.baselines import benchmark as bench
 from odomgym.baselines.base import perform
 from odomgym.baselines.selfcal import SelfCalScripted, scripted_policy
-from odomgym.experiments import Experiment, ExperimentKind, Lab, SensorAccuracy
-from odomgym.lockstep import run_lockstep
-from odomgym.odometry import Calibration
-from odomgym.population import BENCH_FLOORS
-from odomgym.runs import replay_with_jacobian
-from odomgym.selfcal_session import MENU, TrajectoryEstimator
+from odomgym.lab.experiment import Experiment, ExperimentKind, Lab, SensorAccuracy
+from odomgym.lab.lockstep import run_lockstep
+from odomgym.lab.population import BENCH_FLOORS
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import replay_with_jacobian
+from odomgym.selfcal.estimators import TrajectoryEstimator
+from odomgym.selfcal.menu import ACTION_MENU
 
 FloatArray = NDArray[np.float64]
-ITEMS = tuple(item.name for item in MENU[1:])
+ITEMS = tuple(item.name for item in ACTION_MENU[1:])
 REPEATS = 2  # runs of each item per robot for the information matrices
 MAX_DESIGN_BUDGET = 20
 
@@ -87,7 +88,7 @@ def item_information(
         estimator = TrajectoryEstimator(lab.robot, getattr(lab, "sensor", SensorAccuracy()))
         nominal = Calibration()
         taken = []
-        for i, item in enumerate(MENU[1:], start=1):
+        for i, item in enumerate(ACTION_MENU[1:], start=1):
             assert item.experiment is not None
             for _ in range(REPEATS):
                 (run,) = perform(lab, item.experiment, nominal, method="design")
@@ -158,7 +159,9 @@ def interleaved(counts: NDArray[np.int64]) -> list[str]:
 
 def scripted_schedule(budget: int) -> list[str]:
     """The runs :func:`scripted_policy` drives with ``budget`` runs, by name."""
-    return [MENU[scripted_policy(np.zeros(1, np.float32), budget, k)].name for k in range(budget)]
+    return [
+        ACTION_MENU[scripted_policy(np.zeros(1, np.float32), budget, k)].name for k in range(budget)
+    ]
 
 
 def drive(

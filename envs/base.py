@@ -1,9 +1,9 @@
 """The thin shared base of odomgym's route-following envs.
 
-An env assembles a :class:`odomgym.trial.Trial` (physics + odometry + route) and defines only
+An env assembles a :class:`odomgym.sim.trial.Trial` (physics + odometry + route) and defines only
 what makes it a task: which route, the observation and action spaces, the reward and the end of
-an episode. Everything physical lives in the core (``odomgym.physics``); everything the robot
-believes lives in ``odomgym.odometry``.
+an episode. Everything physical lives in the core (``odomgym.sim.world``); everything the robot
+believes lives in ``odomgym.odometry.calibration``.
 
 Reward (all episodes, per step; each term is reported in ``info["reward_terms"]``):
 
@@ -35,14 +35,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
+from odomgym._kernels import REPORT_COLUMNS, REPORT_WIDTH, episode_report
 from odomgym.envs.info import LazyInfo
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec, load_floor
-from odomgym.odometry import Calibration, load_calibration
+from odomgym.odometry.calibration import Calibration, load_calibration
 from odomgym.robot import RobotSpec, load_robot
-from odomgym.routes import Route
-from odomgym.stepping import REPORT_COLUMNS, REPORT_WIDTH, episode_report
-from odomgym.trial import OBSERVATION_NAMES, Trial
+from odomgym.sim.routes import Route
+from odomgym.sim.trial import OBSERVATION_NAMES, Trial
 
 __all__ = [
     "FixedRoute",
@@ -67,7 +67,7 @@ class RewardWeights:
 
 
 def observation_space(shape: tuple[int, ...] = (len(OBSERVATION_NAMES),)) -> gym.spaces.Box:
-    """Observation space of the layout in :mod:`odomgym.trial` (per-entry bounds)."""
+    """Observation space of the layout in :mod:`odomgym.sim.trial` (per-entry bounds)."""
     # Finite bounds (RL libraries normalise with them): routes are far shorter than 1 km, and a
     # wheel cannot turn at ten times its speed limit.
     per_row_low = np.array([-1e3, -1e3, -np.pi, -10.0, -10.0, 0.0, -1.0, 0.0], np.float32)
@@ -173,7 +173,7 @@ class FixedRoute:
 
 class RouteEpisodes:
     """Reward, termination and ``info`` of route-following for every robot of a
-    :class:`~odomgym.trial.Trial`: the one place the single envs and the native vector env
+    :class:`~odomgym.sim.trial.Trial`: the one place the single envs and the native vector env
     compute them (arrays with a leading robot axis; a single env takes row 0).
 
     Args:
@@ -195,7 +195,7 @@ class RouteEpisodes:
     def step(self, trial: Trial, actions: FloatArray) -> FloatArray:
         """Step ``trial`` with ``actions`` (N, 2) and return this step's report rows (the columns
         of :meth:`report`, with this step's reward), made in the compiled call that follows the
-        physics (:meth:`odomgym.trial.Trial.step`)."""
+        physics (:meth:`odomgym.sim.trial.Trial.step`)."""
         out = np.empty((trial.n, REPORT_WIDTH))
         trial.step(actions, report=(self._episodes, self._weights, out))
         return out
@@ -203,7 +203,7 @@ class RouteEpisodes:
     def report(self, trial: Trial) -> FloatArray:
         """After a reset: one fresh row per robot with the reward and its terms (zero), whether
         the route is done and every ``info`` entry, in the columns of
-        :data:`odomgym.stepping.REPORT_COLUMNS` (:func:`odomgym.stepping.episode_report`; a
+        :data:`odomgym._kernels.REPORT_COLUMNS` (:func:`odomgym._kernels.episode_report`; a
         step's rewarded rows come from :meth:`step`)."""
         out = np.empty((trial.n, REPORT_WIDTH))
         world, progress = trial.world, trial.progress
@@ -419,7 +419,7 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
     def _propagate_covariance(self, trial: Trial, previous_pose: FloatArray) -> None:
         """Chong & Kleeman 1997, Eq. 23: carry the odometry covariance through this step's
         wheel travels as one constant-curvature segment."""
-        from odomgym.covariance import PoseEstimate, propagate_segment
+        from odomgym.noise.covariance import PoseEstimate, propagate_segment
 
         assert self.covariance_k is not None
         travel = trial.odometry.wheel_speed[0] * trial.dt

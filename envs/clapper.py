@@ -1,32 +1,56 @@
 """``ClapperStraight-v0`` and ``ClapperRectangle-v0``: the CLAPPER's experiments of Borenstein
 1995, §6, as Gymnasium envs.
 
-The vehicle (:mod:`odomgym.vehicle`) is two LabMate trucks joined by a compliant linkage; it
-drives a programmed path (:mod:`odomgym.clapper`) and knows where it is only through its
-estimator: IPEC (``ipec=True``, :class:`odomgym.ipec.IPEC`) or each truck's plain
-wheel odometry (``ipec=False``), or any :class:`odomgym.internal.InternalEstimator` factory
+## Description
+
+The vehicle (:mod:`odomgym.vehicle.spec`) is two LabMate trucks joined by a compliant linkage; it
+drives a programmed path (:mod:`odomgym.vehicle.trial`) and knows where it is only through its
+estimator: IPEC (``ipec=True``, :class:`odomgym.vehicle.ipec.IPEC`) or each truck's plain
+wheel odometry (``ipec=False``), or any :class:`odomgym.vehicle.estimator.InternalEstimator` factory
 passed as ``estimator``.
 
-Spaces:
-    action: ``Box(0, 1, (1,))`` — the vehicle-level motion command: the speed along the
-        programmed path as a fraction of the cruise speed (0.45 m/s, §6: "slightly below
-        0.5 m/sec"). The low-level controller steers the leading truck along the path by its
-        estimated pose, holds the other's rotary encoder at the path's expected angle and
-        keeps the linkage near its centre; it slows for curves and stops
-        at the end of each leg whatever the action asks (a command cannot drive the trucks
-        into the bearing's stops).
-    observation: ``Box((12,), float32)`` — the estimated poses of truck A and B in the frame
-        of the path (x, y [m], θ [rad] each; truck A starts at the path's first point), the
-        internal encoder readings (link length l [m], ψ_A, ψ_B [rad]), the share of the path
-        done, the leg (0, 1, …) and the reference speed [m/s].
+## Action Space
 
-Reward: the share of the path completed this step (1 in total), minus 0.001 per step; the
-truth is reported in ``info``, never rewarded (the vehicle cannot know it).
+``Box(0, 1, (1,))``: the vehicle-level motion command, the speed along the programmed path as
+a fraction of the cruise speed (0.45 m/s, §6: "slightly below 0.5 m/sec"). The low-level
+controller steers the leading truck along the path by its estimated pose, holds the other's
+rotary encoder at the path's expected angle and keeps the linkage near its centre; it slows for
+curves and stops at the end of each leg whatever the action asks (a command cannot drive the
+trucks into the bearing's stops).
 
-Episode end: terminated when the path is driven (the vehicle stops at its end); truncated by
-the registered step limit (``max_episode_steps``).
+## Observation Space
 
-``info``: ``true_poses``, ``estimated_poses`` (IPEC-corrected with ``ipec=True``),
+``Box((12,), float32)``:
+
+| idx | name | unit |
+|-----|------|------|
+| 0–2 | truck A's estimated pose in the path's frame (x, y, θ) | m, m, rad |
+| 3–5 | truck B's estimated pose (x, y, θ) | m, m, rad |
+| 6 | link length l (internal linear encoder) | m |
+| 7, 8 | ψ_A, ψ_B (internal rotary encoders) | rad |
+| 9 | share of the path done | - |
+| 10 | leg (0, 1, …) | - |
+| 11 | reference speed | m/s |
+
+## Rewards
+
+The share of the path completed this step (1 in total), minus 0.001 per step; the truth is
+reported in ``info``, never rewarded (the vehicle cannot know it).
+
+## Starting State
+
+Truck A at the path's first point facing along it (against it for a backward first leg), truck
+B one link length behind (:meth:`odomgym.vehicle.paths.VehiclePath.start_poses`); the
+estimator and each truck's odometry start at these true poses.
+
+## Episode End
+
+Terminated when the path is driven (the vehicle stops at its end); truncated by the registered
+step limit (``max_episode_steps``).
+
+## Info
+
+``true_poses``, ``estimated_poses`` (IPEC-corrected with ``ipec=True``),
 ``odometry_poses`` (each truck's own wheel odometry) — each (2, 3) for trucks A, B;
 ``link_length`` [m] and ``psi`` (2,) [rad], the internal encoder readings;
 ``correction`` (2,), the estimator's orientation corrections this step [rad];
@@ -37,35 +61,38 @@ towing force), and ``link_force_max`` the largest so far; ``cable_crossings`` (2
 many times the wheels of truck A and of truck B have passed over a cable; and, on the last
 step, ``return_error`` (the vehicle's) and ``truck_return_errors`` (2, 3).
 
-Defaults: the ``clapper`` vehicle (two calibrated LabMates), the ``concrete`` floor
-(:data:`odomgym.clapper.CLAPPER_FLOOR`, the same as the CLI's and the tests') and the
-``recommended`` IPEC configuration.
+## Arguments
 
-Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
-``"human"`` (a pygame window), with the ``[render]`` extra; ``metadata["render_fps"]`` is
-1/T_s (25 frames/s), so frames play back in real time. A frame shows the programmed path
-(grey), the cables laid so far (brown), both trucks at their true poses (blue outlines, "A"
-and "B") and at their estimated poses (thin green), the linkage between their centres with
-its current length in the header (red when it is within 1 cm of an end stop; for the encoder
-trailer, the rigid tongue), the true paths (blue), the estimator's paths (green: IPEC's, or
-plain dead reckoning with ``ipec=False``) and each truck's own wheel odometry (orange for A,
-purple for B). The view grows to keep every path on screen. With ``render_mode=None`` (the
-default) nothing is drawn or kept for drawing.
-
-Arguments (both envs): ``vehicle`` (a preset — ``clapper``, ``clapper-uncalibrated``,
-``trailer`` for the §7 encoder trailer —, a vehicle ``.toml`` path or a
-:class:`~odomgym.vehicle.VehicleSpec`), ``floor`` (a floor preset, ``.toml`` path or
-:class:`~odomgym.floor.FloorSpec`; default ``concrete``), ``bumps`` (cables laid, default 10),
-``ipec`` (True: IPEC's ``recommended`` configuration; False: each truck's plain dead reckoning),
-``estimator`` (any :class:`~odomgym.internal.InternalEstimator` factory, instead of IPEC),
+Both envs: ``vehicle`` (a preset — ``clapper``, ``clapper-uncalibrated``, ``trailer`` for the
+§7 encoder trailer —, a vehicle ``.toml`` path or a :class:`~odomgym.vehicle.spec.VehicleSpec`),
+``floor`` (a floor preset, ``.toml`` path or :class:`~odomgym.floor.FloorSpec`; default
+``concrete``), ``bumps`` (cables laid, default 10), ``ipec`` (True: IPEC's ``recommended``
+configuration; False: each truck's plain dead reckoning), ``estimator`` (any
+:class:`~odomgym.vehicle.estimator.InternalEstimator` factory, instead of IPEC),
 ``render_mode``; ``ClapperStraight-v0`` also ``length`` (of each leg [m], default 18);
 ``ClapperRectangle-v0`` also ``direction`` (``"cw"``/``"ccw"``) and ``side`` (which wheels
-cross the cables, ``"left"``/``"right"``).
+cross the cables, ``"left"``/``"right"``). Defaults: the ``clapper`` vehicle (two calibrated
+LabMates), the ``concrete`` floor (:data:`odomgym.vehicle.trial.CLAPPER_FLOOR`, the same as
+the CLI's and the tests') and the ``recommended`` IPEC configuration.
 
-Version history:
-    * v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was
-      added in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info``: a
-      compatible addition, so the version stays v0.
+## Rendering
+
+``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or ``"human"`` (a
+pygame window), with the ``[render]`` extra; ``metadata["render_fps"]`` is 1/T_s (25
+frames/s), so frames play back in real time. A frame shows the programmed path (grey), the
+cables laid so far (brown), both trucks at their true poses (blue outlines, "A" and "B") and
+at their estimated poses (thin green), the linkage between their centres with its current
+length in the header (red when it is within 1 cm of an end stop; for the encoder trailer, the
+rigid tongue), the true paths (blue), the estimator's paths (green: IPEC's, or plain dead
+reckoning with ``ipec=False``) and each truck's own wheel odometry (orange for A, purple for
+B). The view grows to keep every path on screen. With ``render_mode=None`` (the default)
+nothing is drawn or kept for drawing.
+
+## Version History
+
+* v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was added
+  in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info``: a compatible
+  addition, so the version stays v0.
 """
 
 from __future__ import annotations
@@ -77,21 +104,13 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.clapper import (
-    CLAPPER_FLOOR,
-    CableLayer,
-    EstimatorFactory,
-    VehiclePath,
-    VehicleTrial,
-    evenly,
-    rectangle_cable_positions,
-    rectangle_path,
-    straight_path,
-)
 from odomgym.envs.base import DrawsLazily, describe_action, real_array
 from odomgym.floor import CableBump, FloorSpec, load_floor
-from odomgym.ipec import ipec_estimator
-from odomgym.vehicle import VehicleSpec, load_vehicle
+from odomgym.vehicle.cable_layout import CableLayer, evenly, rectangle_cable_positions
+from odomgym.vehicle.ipec import ipec_estimator
+from odomgym.vehicle.paths import VehiclePath, rectangle_path, straight_path
+from odomgym.vehicle.spec import VehicleSpec, load_vehicle
+from odomgym.vehicle.trial import CLAPPER_FLOOR, EstimatorFactory, VehicleTrial
 
 __all__ = ["ClapperEnv", "ClapperRectangleEnv", "ClapperStraightEnv"]
 

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from odomgym.floor import CableBump, FloorSpec
 from odomgym.robot import RobotSpec
-from odomgym.routes import Route
+from odomgym.sim.routes import Route
 
 try:
     import pygame
@@ -66,16 +66,6 @@ FADED_ODOM = (245, 200, 160)
 
 Pixel = tuple[int, int]
 ToPixel = Callable[[float, float], Pixel]
-
-
-def _lighten(colour: tuple[int, int, int], amount: float) -> tuple[int, int, int]:
-    """``colour`` moved ``amount`` (0..1) of the way to white."""
-    r, g, b = colour
-    return (
-        round(r + (255 - r) * amount),
-        round(g + (255 - g) * amount),
-        round(b + (255 - b) * amount),
-    )
 
 
 class _Canvas:

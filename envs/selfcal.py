@@ -1,32 +1,40 @@
 """``SelfCalibration-v1``: choose the experiments that calibrate a robot, within a budget of runs.
 
-An episode is one calibration session (:class:`odomgym.selfcal_session.SelfCalSession`) on a
+## Description
+
+An episode is one calibration session (:class:`odomgym.selfcal.session.SelfCalSession`) on a
 freshly sampled robot: systematic errors drawn over the benchmark's ranges
-(:class:`~odomgym.population.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
+(:class:`~odomgym.lab.population.Population`: E_d ∈ [0.99, 1.01], E_b ∈ [0.95, 1.05],
 E_s ∈ [0.98, 1.02], on the LabMate) and a floor drawn from ``floors`` (the benchmark's
 ``concrete``, ``rough`` and ``cables``; on ``cables`` every run starts at a random pose on a
 field of random cables, so cables are met at random — one fixed field, not the benchmark's own,
 so the benchmark evaluates on cables the agent never trained on).
 
-Spaces:
-    action: ``Discrete(10)`` — an index into :data:`~odomgym.selfcal_session.MENU`: 0 stops
-        the session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or
-        out and back, in-place spins of 360° either way or 720°) with the reference driver and
-        the current corrections in the odometry.
-    observation: ``Box(-10, 10, (31,), float32)`` — :data:`~odomgym.baselines.selfcal.
-        OBSERVATION_LAYOUT`: budget left and size, how often each item was driven, the
-        estimated E_d, E_b, E_s and their posterior spreads, the floor-roughness estimate, the
-        last run's normalised innovation and which item it was. Everything a person at the home
-        position could know — never the truth.
-
 Each run is measured by the lab's ground-truth sensor (every pose sample with its noise,
 σ = 2 mm and 0.4°, the accuracy of Borenstein & Feng 1994, §6.3), and the estimator updates the
 corrections (iterative compensation): by default (``observe="trajectory"``) a Kalman filter
-along the whole measured run (:class:`~odomgym.selfcal_session.TrajectoryEstimator`); with
+along the whole measured run (:class:`~odomgym.selfcal.estimators.TrajectoryEstimator`); with
 ``observe="end_pose"`` a fit to the end poses alone, what a person with a tape measure at the
-home position gets (:class:`~odomgym.selfcal_session.EndPoseEstimator`).
+home position gets (:class:`~odomgym.selfcal.estimators.EndPoseEstimator`).
 
-Reward: at the end of the session, the final corrections are validated on fresh runs the agent
+## Action Space
+
+``Discrete(10)``: an index into :data:`~odomgym.selfcal.menu.ACTION_MENU`. 0 stops the
+session; 1–9 drive one run (4 m / 2 m square cw or ccw, 4 m straight one way or out and back,
+in-place spins of 360° either way or 720°) with the reference driver and the current
+corrections in the odometry.
+
+## Observation Space
+
+``Box(-10, 10, (31,), float32)``, laid out as
+:data:`~odomgym.selfcal.session.OBSERVATION_LAYOUT` names it: budget left and size, how often
+each item was driven, the estimated E_d, E_b, E_s and their posterior spreads, the
+floor-roughness estimate, the last run's normalised innovation and which item it was.
+Everything a person at the home position could know — never the truth.
+
+## Rewards
+
+At the end of the session, the final corrections are validated on fresh runs the agent
 never sees — a 4×4 m square each way and a 4 m straight run, driven on the noiseless ``smooth``
 floor by the true robot with the final corrections and without any (same start, same floor, so
 the comparison is exact and free of luck). With E the square family's E_max,syst (Borenstein &
@@ -37,33 +45,47 @@ t_f = clip(ln((E_ref,f + 1 mm) / (E_after,f + 1 mm)), −3, ln 300), and
 
 so corrections that close the squares while wrecking straight runs (or the reverse) lose.
 Stopping at once keeps the uncalibrated robot: r_T = 0 exactly. A session whose robot cannot
-finish a run (corrections so wrong that it circles) ends with :data:`FAILED_REWARD`.
+finish a run (corrections so wrong that it circles) ends with
+:data:`~odomgym.selfcal.episodes.FAILED_REWARD`.
 Shaping (``shaping`` = c, default 0.1): every step also pays c·(Φ(s′) − Φ(s)) with Φ the
 estimator's information gain (½·ln det Σ_prior/Σ_posterior) and Φ = 0 at the end — potential-
 based (Ng, Harada & Russell 1999), so it sums to exactly zero over an episode and cannot change
 which policy is best; it only credits informative runs early. (With γ = 1, which the shipped
 hyperparameters use: for γ < 1 the potential difference would have to be c·(γΦ′ − Φ).)
 
-Episode end: terminated when the agent stops, or on the step after the budget is spent (any
+## Starting State
+
+A robot drawn from ``population``, a floor from ``floors`` and a budget, nothing driven yet:
+the estimate is the nominal robot (the prior's centre).
+
+## Episode End
+
+Terminated when the agent stops, or on the step after the budget is spent (any
 action then stops; that step validates and carries the terminal reward), or when a run cannot
 finish; the registered step limit (66 ≥ budget + 1) never truncates.
 
-``info``: ``runs_used``, ``budget``, ``travel_m`` (true path length driven so far [m]),
+## Info
+
+``runs_used``, ``budget``, ``travel_m`` (true path length driven so far [m]),
 ``floor``, ``item`` (the menu item's name); at the end also ``reward_terms``,
 ``e_max_before_mm``/``e_max_after_mm`` (validation squares), ``improvement`` (their ratio),
 ``true_errors``/``estimated_errors`` (E_d, E_b, E_s), ``calibration`` and ``experiments``;
 a session whose run could not finish ends with ``failed`` (the reason) instead of the
 validation entries.
 
-Arguments: ``floors`` (benchmark floor names to draw each episode's floor from; default all
+## Arguments
+
+``floors`` (benchmark floor names to draw each episode's floor from; default all
 three), ``budget`` (runs, or a list to draw from per episode; default 16), ``shaping`` (the
-coefficient c, default 0.1), ``population`` (:class:`~odomgym.population.Population`, the ranges
-of the hidden errors), ``sensor`` (:class:`~odomgym.experiments.SensorAccuracy` of each measured
+coefficient c, default 0.1), ``population`` (:class:`~odomgym.lab.population.Population`, the ranges
+of the hidden errors), ``sensor`` (:class:`~odomgym.lab.experiment.SensorAccuracy` of each measured
 pose), ``observe`` (``"trajectory"`` or ``"end_pose"``: what the estimator sees; version 2 of the
-observation, :data:`~odomgym.selfcal_session.OBSERVATION_VERSION`), ``render_mode``.
+observation, :data:`~odomgym.selfcal.session.OBSERVATION_VERSION`), ``render_mode``.
 Reset options: ``{"floor": name, "budget": runs}``.
 
-Rendering: ``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
+## Rendering
+
+``render_mode="rgb_array"`` (an (H, W, 3) uint8 frame per ``render()``) or
 ``"human"`` (a pygame window), with the ``[render]`` extra. A frame shows the session so far:
 every run in its start frame (the robot starts at the origin heading +x), its true path (blue)
 and its odometry path as the robot computed it with the corrections it drove with (orange),
@@ -74,27 +96,26 @@ runs in order and, at the end, the validated improvement. One frame per step (on
 ``metadata["render_fps"]`` is 2. With ``render_mode=None`` (the default) no run is kept for
 drawing.
 
-Version history:
-    * v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was
-      added in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info`` (before, any
-      ``render_mode`` raised :class:`~odomgym.errors.SpecError`, which stopped
-      ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so
-      the version stays v0.
-    * v1 (odomgym 0.2.0): the estimator became the trajectory filter
-      (:class:`~odomgym.selfcal_session.TrajectoryEstimator`, ``observe="trajectory"``,
-      observation version 2). Spaces, dynamics and episode end are unchanged, but the
-      observation's values and, through the final corrections, the reward differ, so the id
-      changed. ``SelfCalibration-v0`` is still registered: it is this class with
-      ``observe="end_pose"``, whose observations, rewards and ``info`` are bit-identical to
-      v0's before the change (checked on seeds 0–2 with a fixed action sequence).
+## Version History
+
+* v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was added
+  in odomgym 0.2.0 without changing spaces, dynamics, reward or ``info`` (before, any
+  ``render_mode`` raised :class:`~odomgym.errors.SpecError`, which stopped
+  ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so the
+  version stays v0.
+* v1 (odomgym 0.2.0): the estimator became the trajectory filter
+  (:class:`~odomgym.selfcal.estimators.TrajectoryEstimator`, ``observe="trajectory"``,
+  observation version 2). Spaces, dynamics and episode end are unchanged, but the
+  observation's values and, through the final corrections, the reward differ, so the id
+  changed. ``SelfCalibration-v0`` is still registered: it is this class with
+  ``observe="end_pose"``, whose observations, rewards and ``info`` are bit-identical to v0's
+  before the change (checked on seeds 0–2 with a fixed action sequence).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -103,313 +124,41 @@ from numpy.typing import NDArray
 
 from odomgym.envs.base import DrawsLazily, describe_action
 from odomgym.errors import SpecError
-from odomgym.experiments import SensorAccuracy
-from odomgym.floor import FLOORS, FloorSpec
-from odomgym.lab import RunRequests, experiment_route, measure, random_start_poses
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
-from odomgym.population import CABLES_START_REGION, Population, check_bench_floor
-from odomgym.robot import RobotSpec
-from odomgym.routes import Route, square_route, straight_route
-from odomgym.runs import Run, end_error
-from odomgym.selfcal_session import (
-    MAX_BUDGET,
-    MENU,
-    OBSERVATION_BOUND,
-    OBSERVATION_LAYOUT,
-    SelfCalSession,
-    check_observe,
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.lab.population import (
+    Population,
+    check_bench_floor,
 )
+from odomgym.lab.simulated import experiment_route
+from odomgym.odometry.runs import to_frame
+from odomgym.selfcal.episodes import Episode, new_episode, step_episodes
+from odomgym.selfcal.estimators import check_observe
+from odomgym.selfcal.menu import ACTION_MENU
+from odomgym.selfcal.session import MAX_BUDGET, OBSERVATION_BOUND, OBSERVATION_LAYOUT
+from odomgym.sim.routes import Route
 
 __all__ = [
-    "FAILED_REWARD",
-    "STRAIGHT_WEIGHT",
-    "WORSE_PENALTY",
-    "Episode",
     "SelfCalibrationEnv",
     "menu_index",
-    "new_episode",
-    "step_episodes",
-    "validation_terms",
 ]
 
 FloatArray = NDArray[np.float64]
 
-#: Weight of the straight-run family in the terminal reward [-].
-STRAIGHT_WEIGHT = 0.25
-#: Extra weight on every family the corrections made worse than uncalibrated [-].
-WORSE_PENALTY = 2.0
-#: Clip of each family's log improvement [nats].
-TERM_CLIP = (-3.0, math.log(300.0))
-#: Added to every validation error before the ratio, so a robot that is nearly right already
-#: cannot make the ratio explode [m].
-ERROR_FLOOR = 0.001
-#: The terminal reward of a session that could not finish a run: the lowest reward any
-#: finished session can get.
-FAILED_REWARD = (1.0 + STRAIGHT_WEIGHT) * TERM_CLIP[0] + WORSE_PENALTY * 2.0 * TERM_CLIP[0]
-
-_VALIDATION_ROUTES: tuple[tuple[Route, str, str | None], ...] = (
-    (square_route(4.0, "cw"), "square", "cw"),
-    (square_route(4.0, "ccw"), "square", "ccw"),
-    (straight_route(4.0, False), "straight", None),
-)
-
-
-@dataclass(frozen=True)
-class _FloorSetup:
-    roughness: float  # k of the floor under this session's wheels [m^½]
-    cables: bool  # runs start at random poses on the cable field
-
-
-_FLOOR_SETUPS: dict[str, _FloorSetup] = {
-    # As BENCH_FLOORS builds them: the concrete and rough presets, and concrete with cables.
-    "concrete": _FloorSetup(FLOORS["concrete"].roughness, False),
-    "rough": _FloorSetup(FLOORS["rough"].roughness, False),
-    "cables": _FloorSetup(FLOORS["concrete"].roughness, True),
-}
-#: Where runs on the cable-free floors start, and where validation runs start [m]: far enough
-#: from the cable field (±18 m) that no wheel ever meets a cable.
-_PLAIN_ORIGIN = np.array([100.0, 0.0, 0.0])
-_VALIDATION_ORIGIN = np.array([-100.0, 0.0, 0.0])
-
-
-@functools.cache
-def _shared_floor() -> FloorSpec:
-    """The one floor every session of a step shares: the benchmark's cable field geometry
-    (10 mm cables, 1.5 per m², over ±18 m; a fixed layout, not the benchmark's own) with no
-    roughness of its own — each robot carries its floor's roughness as the
-    ``floor_roughness`` effect (variances add, Chong & Kleeman 1997, Eq. 4), so sessions on
-    different floors and the noiseless validation runs share one physics batch."""
-    rng = np.random.default_rng(np.random.SeedSequence([0, 1995]))
-    return FloorSpec.scattered_cables(
-        rng,
-        half_size=CABLES_START_REGION + 6.0,
-        per_square_metre=1.5,
-        roughness=0.0,
-        name="selfcal-shared",
-    )
-
-
-@dataclass
-class Episode:
-    """One session in progress on a hidden true robot (shared by the env and its batched
-    vector env)."""
-
-    robot: RobotSpec
-    floor_name: str
-    session: SelfCalSession
-    rng: np.random.Generator
-    sensor: SensorAccuracy
-    potential: float = 0.0
-    travel: float = 0.0
-    done: bool = False
-    #: Every run driven, with its menu index and the calibration it was driven with — kept
-    #: only when the env renders (None: nothing is kept).
-    trace: list[tuple[int, Run, Calibration]] | None = None
-    driven: RobotSpec = field(init=False)
-
-    def __post_init__(self) -> None:
-        k = _FLOOR_SETUPS[self.floor_name].roughness
-        self.driven = self.robot.apply_effect("floor_roughness", {"k_left": k, "k_right": k})
-
-
-def new_episode(
-    rng: np.random.Generator,
-    floors: Sequence[str],
-    budgets: Sequence[int],
-    population: Population,
-    sensor: SensorAccuracy,
-    options: Mapping[str, Any] | None = None,
-    observe: str = "trajectory",
-) -> Episode:
-    """A new session: robot, floor, budget and run stream all drawn from ``rng``.
-
-    ``options`` may fix ``floor`` (a benchmark floor name) and ``budget`` (runs).
-    """
-    opts = dict(options or {})
-    unknown = set(opts) - {"floor", "budget"}
-    if unknown:
-        raise SpecError(
-            f"unknown reset option(s) {', '.join(sorted(unknown))}; options: floor, budget",
-            field="options",
-        )
-    robot_rng, run_rng = rng.spawn(2)
-    floor_name = str(opts.get("floor", floors[int(rng.integers(len(floors)))]))
-    check_bench_floor(floor_name)
-    budget = opts.get("budget", budgets[int(rng.integers(len(budgets)))])
-    robot = population.sample(robot_rng, "selfcal-robot")
-    # The session reads only the nominal parameters.
-    session = SelfCalSession(robot, budget, sensor, observe=observe)
-    return Episode(robot, floor_name, session, run_rng, sensor)
-
-
-def _add_validation(batch: RunRequests, robot: RobotSpec, calibration: Calibration) -> list[int]:
-    """A 4 m square each way and a 4 m straight run, with ``calibration`` and without, on a
-    noiseless patch of floor (the robot without any roughness); returns their batch slots."""
-    slots = []
-    for cal in (calibration, Calibration()):
-        for route, kind, direction in _VALIDATION_ROUTES:
-            quiet = np.random.default_rng(0)  # never drawn from: k = 0 on these wheels
-            slot = batch.add(
-                robot,
-                route,
-                cal,
-                stream=quiet,
-                start=_VALIDATION_ORIGIN,
-                kind=kind,
-                direction=direction,
-            )
-            slots.append(slot)
-    return slots
-
-
-def validation_terms(
-    robots: Sequence[RobotSpec], calibrations: Sequence[Calibration]
-) -> list[dict[str, float]]:
-    """Validate each calibration on its robot: a 4 m square each way and a 4 m straight run,
-    with it and without any, on noiseless floor from the same start (one batch).
-
-    Returns per robot the errors [m] (``e_max_before``/``after``, ``straight_before``/
-    ``after``), the family terms ``t_square``/``t_straight`` [nats], ``reward`` and
-    ``finished`` (1.0 or 0.0).
-    """
-    batch = RunRequests()
-    slots = [_add_validation(batch, r, c) for r, c in zip(robots, calibrations, strict=True)]
-    runs, odom = batch.simulate(_shared_floor())
-    return [_verdict(runs, odom, own) for own in slots]
-
-
-def _verdict(runs: Sequence[Run], odom: FloatArray, slots: Sequence[int]) -> dict[str, float]:
-    finished = all(bool(runs[i].meta["finished"]) for i in slots)
-    errors = [end_error(runs[i], odom[i]) for i in slots]
-    after_sq = e_max_syst(errors[0][None], errors[1][None])
-    before_sq = e_max_syst(errors[3][None], errors[4][None])
-    after_st = float(np.hypot(*errors[2][:2]))
-    before_st = float(np.hypot(*errors[5][:2]))
-    t_sq = _term(before_sq, after_sq)
-    t_st = _term(before_st, after_st)
-    reward = t_sq + STRAIGHT_WEIGHT * t_st - WORSE_PENALTY * (max(0.0, -t_sq) + max(0.0, -t_st))
-    return {
-        "e_max_before": before_sq,
-        "e_max_after": after_sq,
-        "straight_before": before_st,
-        "straight_after": after_st,
-        "t_square": t_sq,
-        "t_straight": t_st,
-        "reward": reward if finished else FAILED_REWARD,
-        "finished": 1.0 if finished else 0.0,
-    }
-
-
-def _term(before: float, after: float) -> float:
-    value = math.log((before + ERROR_FLOOR) / (after + ERROR_FLOOR))
-    return min(max(value, TERM_CLIP[0]), TERM_CLIP[1])
-
-
-def step_episodes(
-    episodes: Sequence[Episode], actions: Sequence[int], shaping: float
-) -> list[tuple[NDArray[np.float32], float, bool, dict[str, Any]]]:
-    """Advance every episode by one action, all their runs simulated as one physics batch:
-    the experiment runs of the sessions that go on and the validation runs of those that stop.
-
-    A session whose budget is spent stops whatever the action (its observation says so: no
-    runs left). Returns ``(observation, reward, terminated, info)`` per episode.
-    """
-    batch = RunRequests()
-    experiment_slot: dict[int, int] = {}
-    validation_slots: dict[int, list[int]] = {}
-    for i, (episode, action) in enumerate(zip(episodes, actions, strict=True)):
-        if episode.done:
-            raise RuntimeError("the session has ended: call reset() before step()")
-        session = episode.session
-        experiment = session.experiment(int(action))
-        if experiment is None or session.runs_left <= 0:
-            validation_slots[i] = _add_validation(batch, episode.robot, session.calibration)
-            continue
-        if _FLOOR_SETUPS[episode.floor_name].cables:
-            poses = random_start_poses(episode.rng, 1, CABLES_START_REGION)
-            assert poses is not None
-            start = poses[0]
-        else:
-            start = _PLAIN_ORIGIN
-        experiment_slot[i] = batch.add(
-            episode.driven,
-            experiment_route(experiment),
-            session.calibration,
-            stream=episode.rng.spawn(1)[0],
-            start=start,
-            kind=experiment.kind,
-            direction=experiment.direction,
-        )
-    runs, odom = batch.simulate(_shared_floor())
-    results = []
-    for i, episode in enumerate(episodes):
-        session = episode.session
-        info: dict[str, Any] = {
-            "floor": episode.floor_name,
-            "budget": session.budget,
-            "item": MENU[int(actions[i])].name if i in experiment_slot else "stop",
-        }
-        reward = 0.0
-        terminated = False
-        if i in experiment_slot:
-            run = runs[experiment_slot[i]]
-            if episode.trace is not None:
-                episode.trace.append((int(actions[i]), run, session.calibration))
-            if run.meta["finished"]:
-                session.record(int(actions[i]), measure([run], episode.sensor, episode.rng))
-                episode.travel += run.distance
-                gain = session.estimator.information_gain
-                reward = shaping * (gain - episode.potential)
-                episode.potential = gain
-            else:
-                terminated = True
-                reward = FAILED_REWARD - shaping * episode.potential
-                info["failed"] = (
-                    f"the robot did not finish its {MENU[int(actions[i])].name} run (a "
-                    "slippery floor, or corrections that make it circle?)"
-                )
-        else:
-            terminated = True
-            verdict = _verdict(runs, odom, validation_slots[i])
-            final = -shaping * episode.potential  # Φ = 0 at the end: the shaping telescopes
-            reward = verdict["reward"] + final
-            if not verdict["finished"]:
-                info["failed"] = "the validation runs did not finish with these corrections"
-            info["reward_terms"] = {
-                "square": verdict["t_square"],
-                "straight": verdict["t_straight"],
-                "shaping": final,
-            }
-            info["e_max_before_mm"] = 1e3 * verdict["e_max_before"]
-            info["e_max_after_mm"] = 1e3 * verdict["e_max_after"]
-            after = verdict["e_max_after"]
-            info["improvement"] = verdict["e_max_before"] / max(after, 1e-9)
-        info["runs_used"] = session.runs_used
-        info["travel_m"] = episode.travel
-        if terminated:
-            episode.done = True
-            robot = episode.robot
-            info["true_errors"] = (robot.e_d, robot.e_b, robot.e_s)
-            info["estimated_errors"] = tuple(float(v) for v in session.estimator.errors)
-            info["calibration"] = session.calibration.to_dict()
-            info["experiments"] = list(session.history)
-        results.append((session.observation(), float(reward), terminated, info))
-    return results
-
 
 def menu_index(action: object) -> int:
     """``action`` as a menu index, or :class:`SpecError` (field ``action``): a whole number
-    (Python or numpy, or a 0-d array of one) in 0..len(MENU)−1."""
+    (Python or numpy, or a 0-d array of one) in 0..len(ACTION_MENU)−1."""
     value = action.item() if isinstance(action, np.ndarray) and action.shape == () else action
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise SpecError(
-            f"action must be a whole menu index 0..{len(MENU) - 1}, got {describe_action(action)}",
+            f"action must be a whole menu index 0..{len(ACTION_MENU) - 1}, "
+            f"got {describe_action(action)}",
             field="action",
         )
-    if not 0 <= int(value) < len(MENU):
+    if not 0 <= int(value) < len(ACTION_MENU):
         raise SpecError(
-            f"action must be a menu index 0..{len(MENU) - 1}, got {int(value)}", field="action"
+            f"action must be a menu index 0..{len(ACTION_MENU) - 1}, got {int(value)}",
+            field="action",
         )
     return int(value)
 
@@ -445,7 +194,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         population: the ranges the robots' systematic errors are drawn from.
         sensor: the ground-truth sensor's accuracy (each pose sample).
         observe: what the estimator sees of each run: ``"trajectory"`` (default) or
-            ``"end_pose"`` (:data:`~odomgym.selfcal_session.ESTIMATORS`).
+            ``"end_pose"`` (:data:`~odomgym.selfcal.estimators.ESTIMATORS`).
         render_mode: ``None`` (no drawing), ``"rgb_array"`` or ``"human"`` (module docs,
             "Rendering").
     """
@@ -484,7 +233,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         self.shaping = float(shaping)
         self.population = population or Population()
         self.sensor = sensor or SensorAccuracy()
-        self.action_space = gym.spaces.Discrete(len(MENU))
+        self.action_space = gym.spaces.Discrete(len(ACTION_MENU))
         bound = OBSERVATION_BOUND
         self.observation_space = gym.spaces.Box(
             -bound, bound, (len(OBSERVATION_LAYOUT),), dtype=np.float32
@@ -557,7 +306,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         if episode is None or episode.trace is None:
             raise RuntimeError("call reset() before render()")
         from odomgym.envs.render import SessionRenderer, SessionRun, SessionState
-        from odomgym.runs import replay_odometry
+        from odomgym.odometry.runs import replay_odometry
 
         if self._renderer is None:
             self._renderer = SessionRenderer(mode, self.metadata["render_fps"])
@@ -566,15 +315,15 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             odometry = replay_odometry(run, episode.robot, calibration)
             self._drawn.append(
                 SessionRun(
-                    MENU[action].name,
-                    _start_frame(run.true_pose, start),
-                    _start_frame(odometry, start),
+                    ACTION_MENU[action].name,
+                    to_frame(run.true_pose[:, :2], start),
+                    to_frame(odometry[:, :2], start),
                     bool(run.meta["finished"]),
                 )
             )
         session = episode.session
         items = sorted({action for action, _, _ in episode.trace})
-        routes = [_route_points(experiment_route(MENU[a].experiment)) for a in items]  # type: ignore[arg-type]
+        routes = [_route_points(experiment_route(ACTION_MENU[a].experiment)) for a in items]  # type: ignore[arg-type]
         state = SessionState(
             floor=episode.floor_name,
             budget=session.budget,
@@ -585,13 +334,6 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             improvement=self._improvement,
         )
         return self._renderer.draw(self._drawn, state, routes)  # type: ignore[no-any-return]
-
-
-def _start_frame(poses: FloatArray, start: FloatArray) -> FloatArray:
-    """Positions (K, 2) [m] of ``poses`` (K, 3) in the frame of ``start`` (x, y, θ)."""
-    c, s = math.cos(float(start[2])), math.sin(float(start[2]))
-    d = poses[:, :2] - start[:2]
-    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
 
 
 def _route_points(route: Route) -> FloatArray:

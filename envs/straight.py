@@ -8,9 +8,9 @@ from typing import Any
 
 from odomgym.envs.base import RewardWeights, RouteEnv
 from odomgym.floor import FloorSpec
-from odomgym.odometry import Calibration
+from odomgym.odometry.calibration import Calibration
 from odomgym.robot import RobotSpec
-from odomgym.routes import Route, straight_route
+from odomgym.sim.routes import Route, straight_route
 
 __all__ = ["StraightLineEnv", "StraightRoute"]
 
@@ -79,10 +79,11 @@ class StraightLineEnv(RouteEnv):
 
     ``robot`` (preset name, ``.toml`` path or :class:`~odomgym.robot.RobotSpec`; default
     ``"labmate"``), ``floor`` (a floor preset name, a ``.toml`` path or
-    :class:`~odomgym.floor.FloorSpec`), ``calibration`` (a :class:`~odomgym.odometry.Calibration`
-    or its ``.toml`` path), ``distance`` [m] (default 10.0), ``return_trip`` (default False;
-    also a ``reset`` option ``{"return_trip": True}``), ``dt`` [s] (control period, default
-    0.05), ``reward_weights``, ``render_mode``, ``covariance_k`` (k_L, k_R [m^½] or None).
+    :class:`~odomgym.floor.FloorSpec`), ``calibration`` (a
+    :class:`~odomgym.odometry.calibration.Calibration` or its ``.toml`` path), ``distance`` [m]
+    (default 10.0), ``return_trip`` (default False; also a ``reset`` option ``{"return_trip":
+    True}``), ``dt`` [s] (control period, default 0.05), ``reward_weights``, ``render_mode``,
+    ``covariance_k`` (k_L, k_R [m^½] or None).
 
     ## Version History
 

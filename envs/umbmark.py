@@ -8,9 +8,9 @@ from typing import Any, Literal
 
 from odomgym.envs.base import RewardWeights, RouteEnv
 from odomgym.floor import FloorSpec
-from odomgym.odometry import Calibration
+from odomgym.odometry.calibration import Calibration
 from odomgym.robot import RobotSpec
-from odomgym.routes import Route, square_route
+from odomgym.sim.routes import Route, square_route
 
 __all__ = ["SquareRoute", "UMBmarkSquareEnv"]
 
@@ -40,7 +40,7 @@ class UMBmarkSquareEnv(RouteEnv):
     pymunk rigid-body simulation with friction-limited wheels, so systematic errors (E_d, E_b,
     E_s of the robot spec) and floor effects (slip, cable bumps, roughness) make the true path
     drift from the odometry path — which is what UMBmark measures. Run it with
-    :class:`odomgym.drivers.ReferenceDriver` to perform the benchmark, or learn a policy.
+    :class:`odomgym.sim.driver.ReferenceDriver` to perform the benchmark, or learn a policy.
 
     ## Action Space
 
@@ -94,8 +94,8 @@ class UMBmarkSquareEnv(RouteEnv):
     ``robot`` (preset name, ``.toml`` path or :class:`~odomgym.robot.RobotSpec`; default
     ``"labmate"``), ``floor`` (``"smooth"``, ``"bumpy"``, ``"slippery"``, ``"rough"``, a ``.toml``
     path or :class:`~odomgym.floor.FloorSpec`), ``calibration`` (a
-    :class:`~odomgym.odometry.Calibration` or its ``.toml`` path), ``side`` [m] (default 4.0),
-    ``direction`` (``"cw"``/``"ccw"``; also a ``reset`` option ``{"direction": ...}``), ``dt``
+    :class:`~odomgym.odometry.calibration.Calibration` or its ``.toml`` path), ``side`` [m] (default
+    4.0), ``direction`` (``"cw"``/``"ccw"``; also a ``reset`` option ``{"direction": ...}``), ``dt``
     [s] (control period, default 0.05), ``reward_weights``, ``render_mode``, ``covariance_k``
     (k_L, k_R [m^½] of the wheel-noise model, or None).
 

@@ -2,7 +2,7 @@
 
 ``gymnasium.make_vec("UMBmarkSquare-v0", num_envs=256, vectorization_mode="vector_entry_point")``
 returns an :class:`OdometryVectorEnv` whose sub-envs are the robots of one
-:class:`odomgym.trial.Trial`: one pymunk space, ``pymunk.batch`` state I/O and compiled
+:class:`odomgym.sim.trial.Trial`: one pymunk space, ``pymunk.batch`` state I/O and compiled
 per-robot kernels, instead of 256 Python env objects. Spaces, reward, termination and ``info``
 are computed by the same code as the single envs' (:class:`odomgym.envs.base.RouteEpisodes`),
 and ``info`` has the layout :class:`gymnasium.vector.SyncVectorEnv` gives: every entry an array
@@ -28,6 +28,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
 
+from odomgym._kernels import REPORT_COLUMNS
 from odomgym.envs.base import (
     FixedRoute,
     RewardWeights,
@@ -40,11 +41,10 @@ from odomgym.envs.base import (
 from odomgym.envs.straight import StraightRoute
 from odomgym.envs.umbmark import SquareRoute
 from odomgym.floor import FloorSpec
-from odomgym.odometry import Calibration
+from odomgym.odometry.calibration import Calibration
 from odomgym.robot import RobotSpec
-from odomgym.routes import Route
-from odomgym.stepping import REPORT_COLUMNS
-from odomgym.trial import Trial
+from odomgym.sim.routes import Route
+from odomgym.sim.trial import Trial
 
 _REWARD = REPORT_COLUMNS["reward"][0]  # columns of the episode report
 _TERMINATED = REPORT_COLUMNS["terminated"][0]
@@ -61,7 +61,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
     Args:
         num_envs: number of robots.
         route: the route of an episode from the ``reset`` options (the single env's rule), or
-            one fixed :class:`~odomgym.routes.Route` for all.
+            one fixed :class:`~odomgym.sim.routes.Route` for all.
         robot: one spec for all, or a sequence of ``num_envs`` specs (a robot population).
         floor, calibration, dt, reward_weights: as the single envs.
         max_episode_steps: truncation limit per sub-env.

@@ -13,16 +13,16 @@ module is imported until ``gymnasium.make`` needs it):
   results made with it stay reproducible.
 
 The core API: :class:`~odomgym.robot.RobotSpec`, :class:`~odomgym.floor.FloorSpec`,
-:class:`~odomgym.physics.World`, :class:`~odomgym.odometry.Odometry`,
-:class:`~odomgym.odometry.Calibration`, :class:`~odomgym.trial.Trial`,
-:class:`~odomgym.drivers.ReferenceDriver`, :class:`~odomgym.lab.SimLab`.
+:class:`~odomgym.sim.world.World`, :class:`~odomgym.odometry.calibration.Odometry`,
+:class:`~odomgym.odometry.calibration.Calibration`, :class:`~odomgym.sim.trial.Trial`,
+:class:`~odomgym.sim.driver.ReferenceDriver`, :class:`~odomgym.lab.simulated.SimLab`.
 """
 
 from __future__ import annotations
 
 from odomgym._source_tree import install_source_tree_finder
 from odomgym.floor import FLOORS, CableBump, FloorSpec, FrictionPatch, load_floor
-from odomgym.odometry import Calibration, Odometry, load_calibration
+from odomgym.odometry.calibration import Calibration, Odometry, load_calibration
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 
 # In a source checkout (Python started in the repository root), ``odomgym/`` shadows the

@@ -243,10 +243,6 @@ class FloorSpec:
         )
         return cls(friction=friction, bumps=bumps, roughness=roughness, name=name)
 
-    def with_friction(self, friction: float) -> FloorSpec:
-        """A copy with another base friction coefficient."""
-        return dataclasses.replace(self, friction=friction)
-
 
 def _list_of_tables(value: object, name: str, path: Path | None) -> Sequence[Mapping[str, Any]]:
     if not isinstance(value, list) or not all(isinstance(v, Mapping) for v in value):

@@ -9,8 +9,8 @@ programmed into the odometry) differ from the true, physical ones. Borenstein & 
 * ``E_s = D_a / D_nominal`` — the scaling error of the mean diameter (solderspot 2014).
 
 :class:`RobotSpec` keeps the nominal parameters and the true ones side by side. The physics uses
-the true values; :class:`odomgym.odometry.Odometry` sees only the nominal ones (plus whatever
-:class:`odomgym.odometry.Calibration` a calibrator found).
+the true values; :class:`odomgym.odometry.calibration.Odometry` sees only the nominal ones (plus
+whatever :class:`odomgym.odometry.calibration.Calibration` a calibrator found).
 
 All lengths are metres, masses kilograms, speeds m/s, accelerations m/s².
 """

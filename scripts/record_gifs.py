@@ -4,7 +4,7 @@
     SDL_VIDEODRIVER=dummy python scripts/record_gifs.py --only ClapperStraight-v0
 
 Each env is made with ``render_mode="rgb_array"`` and driven by a fixed, documented policy
-(the route envs by :class:`odomgym.drivers.ReferenceDriver`, the CLAPPER at full speed along
+(the route envs by :class:`odomgym.sim.driver.ReferenceDriver`, the CLAPPER at full speed along
 its path, the self-calibration session by the shipped learned policy); about ``FRAMES``
 evenly spaced frames and the last one (held for two seconds) go into
 ``docs/assets/gifs/<env id>.gif`` with one shared palette, so a GIF stays well under the
@@ -43,7 +43,7 @@ Policy = Callable[[Any, Any], Any]
 
 
 def _route_policy(env: gym.Env[Any, Any]) -> Policy:
-    from odomgym.drivers import ReferenceDriver
+    from odomgym.sim.driver import ReferenceDriver
 
     driver = ReferenceDriver(env.unwrapped.robot)  # type: ignore[attr-defined]
     return lambda obs, _info: driver(obs).astype(np.float32)

@@ -60,7 +60,7 @@ from independent_robot import (
 )
 from numpy.typing import NDArray
 
-from odomgym.runs import Run
+from odomgym.odometry.runs import Run
 
 __all__ = ["ALIEN_EFFECTS", "EXPECTED_TERMS", "draw_effect", "generate_session"]
 

@@ -2,10 +2,10 @@
 
 This module is the "robot from somewhere else" on which the discrepancy-diagnosis workflow is
 tested. It is written from the written specification of the effects (``docs/effects.md``) only
-and deliberately does **not** use odomgym's simulator (``odomgym.physics``, ``odomgym.lab``,
-``odomgym.trial``, ``odomgym.effects``, ``odomgym.diagnose`` are never imported), so that a
-workflow that recovers the effects from these logs cannot be relying on artefacts of odomgym's
-own integrator, log rate, speed profiles or noise model.
+and deliberately does **not** use odomgym's simulator (``odomgym.sim.world``,
+``odomgym.lab.simulated``, ``odomgym.sim.trial``, ``odomgym.effects``, ``odomgym.diagnose`` are
+never imported), so that a workflow that recovers the effects from these logs cannot be relying on
+artefacts of odomgym's own integrator, log rate, speed profiles or noise model.
 
 How it differs from odomgym's simulator on purpose:
 
@@ -47,7 +47,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.runs import Run
+from odomgym.odometry.runs import Run
 
 __all__ = [
     "BUMP_SPREAD",

@@ -8,6 +8,9 @@ Every ``import`` counts — at module level, inside functions (lazy) and under
 * layers, lowest first: the core (``odomgym.*``), the envs (``odomgym.envs``), the baselines
   (``odomgym.baselines``), the command line (``odomgym.cli``); a module imports only its own
   layer and the ones below;
+* inside the core, a folder per layer: each room (a top-level module or a subpackage of
+  ``odomgym``) stands in one tier of :data:`PACKAGE_LAYERS` and imports only rooms of lower
+  tiers, so the tree itself draws the architecture (``docs/architecture.md``);
 * importing an env imports neither the benchmark runner nor Ray.
 """
 
@@ -21,6 +24,42 @@ from pathlib import Path
 
 LAYERS = ("odomgym", "odomgym.envs", "odomgym.baselines", "odomgym.cli")
 ENTRY_POINTS = {"odomgym.__main__": "odomgym.cli"}  # ``python -m odomgym`` is the command line
+
+# The rooms of the package, lowest tier first; a room imports only rooms of lower tiers (two
+# rooms of one tier never import each other). A room is a top-level module of ``odomgym``
+# (``errors``), one of its subpackages (``sim``: every module in ``odomgym/sim/``), the
+# package's own ``__init__`` (``odomgym``: the public names) or one of the three upper layers.
+PACKAGE_LAYERS: tuple[frozenset[str], ...] = tuple(
+    frozenset(tier.split())
+    for tier in (
+        "errors io interrupt _jit _source_tree",  # no odomgym import but one another's
+        "workers effects floor _kernels",  # the worker pool, the effect catalogue, the kernels
+        "robot",  # RobotSpec: nominal vs true
+        "odometry",  # dead reckoning, runs and their measures: no simulator
+        "data odomgym",  # measured logs; the package's public names
+        "sim",  # the World and what drives a robot through it
+        "lab",  # experiments, simulated and recorded labs, plans, the population
+        "vehicle selfcal",  # the two-truck vehicle; the self-calibration session
+        "diagnose noise",  # the discrepancy workflow; the random error and its fit
+        "envs",
+        "baselines",
+        "cli",
+    )
+)
+# The modules that stay at the top level of ``odomgym/``: the foundation below every layer
+# folder, and the two specs every layer reads.
+TOP_LEVEL = {
+    "odomgym.__main__",
+    "odomgym._jit",
+    "odomgym._kernels",
+    "odomgym._source_tree",
+    "odomgym.errors",
+    "odomgym.interrupt",
+    "odomgym.io",
+    "odomgym.workers",
+    "odomgym.robot",
+    "odomgym.floor",
+}
 
 
 def _modules() -> dict[str, Path]:
@@ -51,7 +90,11 @@ def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
                 parts = package.split(".")
                 parts = parts[: len(parts) - (node.level - 1)]
                 base = ".".join(parts + ([base] if base else []))
-            targets = [f"{base}.{alias.name}" for alias in node.names] + [base]
+            targets = [f"{base}.{alias.name}" for alias in node.names]
+            # ``from package import module`` depends on the module; ``from package import
+            # name`` on the package's ``__init__``.
+            if any(target not in modules for target in targets):
+                targets.append(base)
         for target in targets:
             while target and target not in modules:
                 target = target.rpartition(".")[0]
@@ -68,6 +111,19 @@ def _layer(name: str) -> int:
     return max(
         i for i, prefix in enumerate(LAYERS) if name == prefix or name.startswith(prefix + ".")
     )
+
+
+def _room(name: str) -> str:
+    """The room of a module: an upper layer, the package's ``__init__``, a top-level module or
+    a subpackage of ``odomgym``."""
+    name = ENTRY_POINTS.get(name, name)
+    if name == "odomgym":
+        return "odomgym"
+    return name.split(".")[1]
+
+
+def _tier(room: str) -> int:
+    return next(i for i, tier in enumerate(PACKAGE_LAYERS) if room in tier)
 
 
 def _graph() -> dict[str, set[str]]:
@@ -121,6 +177,35 @@ def test_no_module_imports_a_higher_layer() -> None:
     graph = _graph()
     upward = sorted(
         f"{a} -> {b}" for a, targets in graph.items() for b in targets if _layer(b) > _layer(a)
+    )
+    assert upward == []
+
+
+def test_every_room_stands_in_one_tier() -> None:
+    rooms = {_room(name) for name in _graph()}
+    placed = [room for tier in PACKAGE_LAYERS for room in tier]
+    assert len(placed) == len(set(placed))
+    assert sorted(rooms - set(placed)) == []
+
+
+def test_each_layer_is_a_folder() -> None:
+    """Below the package's ``__init__``, only the foundation modules stay at the top level of
+    ``odomgym/``; every other module lives in the folder of its layer."""
+    top = {
+        name
+        for name, path in _modules().items()
+        if name.count(".") == 1 and path.name != "__init__.py"
+    }
+    assert top == TOP_LEVEL
+
+
+def test_no_room_imports_a_room_of_its_tier_or_above() -> None:
+    graph = _graph()
+    upward = sorted(
+        f"{a} -> {b}"
+        for a, targets in graph.items()
+        for b in targets
+        if _room(a) != _room(b) and _tier(_room(b)) >= _tier(_room(a))
     )
     assert upward == []
 

@@ -201,6 +201,18 @@ def test_a_journal_of_another_configuration_is_refused(tmp_path: Path) -> None:
         Journal(path, CONFIG).read()
 
 
+def test_a_journal_of_another_format_is_refused_in_one_line(tmp_path: Path) -> None:
+    """A journal an older or newer odomgym wrote (another format version, or none) is refused
+    with one line naming both formats, never read as this one's."""
+    path = tmp_path / "journal.jsonl"
+    for header in ('{"journal": 0, "config": {}}', '{"config": {}}', "[1, 2]"):
+        path.write_text(header + '\n{"robots": [0], "rows": []}\n')
+        with pytest.raises(SpecError, match="format") as caught:
+            Journal(path, CONFIG).read()
+        assert "\n" not in str(caught.value)
+        assert "run without --resume" in str(caught.value)
+
+
 DIAGNOSE = [
     "diagnose",
     "optiodom:square/230620202042",
@@ -311,7 +323,7 @@ def test_resume_refuses_a_missing_or_different_checkpoint(
 ) -> None:
     """``--resume`` with no checkpoint, or one made with another seed: one line, no work."""
     pytest.importorskip("stable_baselines3")
-    from odomgym.baselines.selfcal_train import Checkpoints
+    from odomgym.baselines.selfcal_checkpoints import Checkpoints
 
     out = tmp_path / "train"
     args = ["train", "selfcal", "--steps", "256", "--envs", "4", "--out", str(out), "--resume"]

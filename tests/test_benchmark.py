@@ -14,8 +14,8 @@ from odomgym.baselines import UMBmark
 from odomgym.baselines.bench_report import write_outputs
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, run_chunk, summarize
 from odomgym.baselines.validation import calibrate_in_simulation, validation_errors_many
-from odomgym.lockstep import run_lockstep
-from odomgym.metrics import e_max_syst
+from odomgym.lab.lockstep import run_lockstep
+from odomgym.odometry.umbmark_measures import e_max_syst
 
 LABMATE = odomgym.PRESETS["labmate"]
 CONCRETE = odomgym.FLOORS["concrete"]
@@ -155,7 +155,7 @@ def test_benchmark_compares_budgets() -> None:
 def test_a_robot_that_cannot_finish_fails_alone() -> None:
     """One impossible calibration (odometry wheelbase × 1000: it never completes a spin) fails
     that robot only, not the robots sharing its batch."""
-    from odomgym.experiments import Experiment
+    from odomgym.lab.experiment import Experiment
 
     def procedure(lab, index):  # type: ignore[no-untyped-def]
         calibration = odomgym.Calibration(wheelbase_scale=1000.0 if index == 1 else 1.0)
@@ -247,3 +247,37 @@ def test_fraction_of_the_oracle_is_paired_by_robot() -> None:
     assert by_method["oracle"]["of_oracle_median"] == 1.0
     assert by_method["m"]["of_oracle_median"] == pytest.approx(0.5)
     assert np.isnan(summarize(rows[3:])[0]["of_oracle_median"])
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"path": "circular", "runs_per_direction": 1, "radius": 1.0},
+        {"path": "free", "free_runs": 2, "free_length": 6.0},
+    ],
+    ids=["circles", "free-paths"],
+)
+def test_a_calibrator_of_arcs_runs_through_the_lockstep_batch(options: dict[str, object]) -> None:
+    """The benchmark's path (``run_lockstep`` → ``perform_many``) drives circles and free
+    paths as ``SimLab.perform`` does: a calibrator whose experiments are arcs calibrates every
+    robot of the batch, each robot's result independent of its companions, and finds the
+    robot's wheelbase error to well within 1 % (the runs turn: positions alone determine b)."""
+    from odomgym.baselines import Trajectory
+
+    robots = [LABMATE.with_errors(1.0 + 0.002 * i, 1.0 + 0.01 * i, 1.0) for i in range(3)]
+
+    def procedure(lab, _index):  # type: ignore[no-untyped-def]
+        return Trajectory(**options).calibrate(lab)  # type: ignore[arg-type]
+
+    def rngs(n: int) -> list[np.random.Generator]:
+        return [np.random.default_rng([11, i]) for i in range(n)]
+
+    crowd = run_lockstep(procedure, robots, CONCRETE, rngs(3), start_region=2.0)
+    alone = run_lockstep(procedure, robots[:1], CONCRETE, rngs(1), start_region=2.0)
+    assert [o.error for o in crowd] == [None] * 3
+    assert alone[0].value is not None and crowd[0].value is not None
+    assert alone[0].value.calibration == crowd[0].value.calibration
+    for robot, outcome in zip(robots, crowd, strict=True):
+        assert outcome.value is not None
+        assert outcome.value.runs_used == 2  # one circle each way, or two free paths
+        assert abs(outcome.value.calibration.wheelbase_scale - robot.e_b) < 0.005

@@ -19,7 +19,7 @@ from odomgym.baselines.validation import (
 )
 from odomgym.data import read_session, resolve_data
 from odomgym.errors import SpecError
-from odomgym.experiments import Experiment, ExperimentKind
+from odomgym.lab.experiment import Experiment, ExperimentKind
 
 METHODS = sorted(CALIBRATORS)
 

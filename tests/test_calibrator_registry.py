@@ -14,8 +14,8 @@ from odomgym.baselines.base import CalibrationResult, Calibrator, square_experim
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark
 from odomgym.baselines.validation import calibrator_for_squares
 from odomgym.errors import SpecError
-from odomgym.experiments import Experiment, Lab
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import Experiment, Lab
+from odomgym.odometry.calibration import Calibration
 
 
 @dataclass(frozen=True)

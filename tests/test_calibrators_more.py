@@ -34,14 +34,15 @@ from odomgym.baselines.umbmark import (
     first_order_return_errors,
     perform_squares,
 )
-from odomgym.data import RecordedLab, read_session
-from odomgym.evaluation import evaluate
-from odomgym.experiments import Experiment
-from odomgym.lab import SimLab
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
+from odomgym.data import read_session
+from odomgym.lab.experiment import Experiment
+from odomgym.lab.recorded import RecordedLab
+from odomgym.lab.simulated import SimLab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.optiodom_measures import evaluate
+from odomgym.odometry.runs import replay_odometry, replay_with_jacobian, return_error
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import PRESETS, RobotSpec
-from odomgym.runs import replay_odometry, replay_with_jacobian, return_error
 
 TRUTH = PRESETS["labmate"].with_errors(e_d=1.004, e_b=1.02, e_s=0.995)
 START_REGION = 2.0  # [m]

@@ -12,22 +12,15 @@ import math
 import numpy as np
 import pytest
 
-from odomgym.cables import bump_extra_rotation
-from odomgym.clapper import (
-    CableLayer,
-    VehicleDriver,
-    VehicleTrial,
-    circle_path,
-    drive_vehicles,
-    evenly,
-    rectangle_cable_positions,
-    rectangle_path,
-    straight_path,
-)
 from odomgym.floor import FloorSpec
-from odomgym.internal import DeadReckoning, growth_rate
-from odomgym.ipec import estimate_wheel_diameter_ratio, ipec_configuration
-from odomgym.vehicle import VEHICLES, VehicleSpec
+from odomgym.sim.cables import bump_extra_rotation
+from odomgym.vehicle.cable_layout import CableLayer, evenly, rectangle_cable_positions
+from odomgym.vehicle.controller import VehicleDriver
+from odomgym.vehicle.estimator import DeadReckoning, growth_rate
+from odomgym.vehicle.ipec import estimate_wheel_diameter_ratio, ipec_configuration
+from odomgym.vehicle.paths import circle_path, rectangle_path, straight_path
+from odomgym.vehicle.spec import VEHICLES, VehicleSpec
+from odomgym.vehicle.trial import VehicleTrial, drive_vehicles
 
 CLAPPER = VEHICLES["clapper"]
 TRUCK = CLAPPER.truck_a

@@ -12,8 +12,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import odomgym  # noqa: F401  (registers the envs)
-from odomgym.internal import DeadReckoning
-from odomgym.ipec import IPEC
+from odomgym.vehicle.estimator import DeadReckoning
+from odomgym.vehicle.ipec import IPEC
 
 
 @pytest.mark.parametrize("env_id", ["ClapperStraight-v0", "ClapperRectangle-v0"])
@@ -55,7 +55,7 @@ def test_straight_env_with_ipec_reproduces_section_6_1() -> None:
     assert info["link_force"] == 0.0 and info["link_force_max"] == 0.0
     assert np.all(np.abs(np.degrees(info["truck_errors"][:, 2])) < 1.0)
     env = gym.make("ClapperStraight-v0")
-    assert env.unwrapped.floor.name == "concrete"  # the one stated floor (odomgym.clapper)
+    assert env.unwrapped.floor.name == "concrete"  # the one stated floor (odomgym.vehicle.trial)
 
 
 @pytest.mark.slow

@@ -3,7 +3,7 @@ the one stated floor, judged by the paper's own figures.
 
 Tolerances come from the paper (±1.0°, 5 cm, "more than 20-fold", 0.3° average measured to
 ±0.25°) or from a stated model (each cable turns a truck by the rigid-cylinder geometry of
-:func:`odomgym.cables.bump_extra_rotation` and costs the crossing wheel half that in centre
+:func:`odomgym.sim.cables.bump_extra_rotation` and costs the crossing wheel half that in centre
 travel), never from a measured value.
 """
 
@@ -14,12 +14,14 @@ import math
 import numpy as np
 import pytest
 
-from odomgym.cables import bump_extra_rotation
-from odomgym.clapper import CLAPPER_FLOOR, CableLayer, drive_vehicles, evenly, straight_path
-from odomgym.clapper_runs import PAPER_CONDITIONS, run_clapper, summarize
 from odomgym.floor import FloorSpec, load_floor
-from odomgym.ipec import ipec_estimator
-from odomgym.vehicle import VEHICLES
+from odomgym.sim.cables import bump_extra_rotation
+from odomgym.vehicle.cable_layout import CableLayer, evenly
+from odomgym.vehicle.ipec import ipec_estimator
+from odomgym.vehicle.paper_runs import PAPER_CONDITIONS, run_clapper, summarize
+from odomgym.vehicle.paths import straight_path
+from odomgym.vehicle.spec import VEHICLES
+from odomgym.vehicle.trial import CLAPPER_FLOOR, drive_vehicles
 
 CLAPPER = VEHICLES["clapper"]
 TRUCK = CLAPPER.truck_a
@@ -129,7 +131,9 @@ def test_the_old_controller_lets_the_trucks_drift_apart() -> None:
     (``steering="pose"``), the trucks drift apart without IPEC and the linkage hits its end stop
     on the smooth rectangle with cables (the inflated baseline of the earlier controller);
     holding ψ, it never does."""
-    from odomgym.clapper import VehicleDriver, rectangle_cable_positions, rectangle_path
+    from odomgym.vehicle.cable_layout import rectangle_cable_positions
+    from odomgym.vehicle.controller import VehicleDriver
+    from odomgym.vehicle.paths import rectangle_path
 
     path = rectangle_path(direction="cw")
     forces = {}
@@ -166,7 +170,7 @@ def test_run_records_carry_force_crossings_and_trucks() -> None:
 def test_trailer_readings_come_from_one_rotary_encoder() -> None:
     """The trailer's rigid tongue fixes ψ_B at 0 and the length at the tongue's; only the hitch
     encoder (ψ_A) reads anything."""
-    from odomgym.vehicle import link_readings
+    from odomgym.vehicle.spec import link_readings
 
     spec = VEHICLES["trailer"]
     poses = np.array([[[1.0, 0.0, 0.2], [0.0, 0.05, 0.1]]])
@@ -181,7 +185,7 @@ def test_trailer_is_towed_and_its_free_wheels_count_the_arc_over_a_cable() -> No
     over ten cables on the return leg, over-count like a driven wheel: its own dead reckoning
     turns by ten rigid-cylinder crossings of its 100 mm wheels on its 0.3 m track (7.9°,
     :func:`bump_extra_rotation`)."""
-    from odomgym.clapper import VehicleTrial
+    from odomgym.vehicle.trial import VehicleTrial
 
     spec = VEHICLES["trailer"]
     trailer = spec.truck_b
@@ -235,7 +239,7 @@ def test_the_sonar_measures_the_return_pose_within_its_accuracy() -> None:
     """``sonar=SONAR``: every reported return error is the true one plus at most ±2 mm and
     ±0.25° (Borenstein 1995, §6), drawn from its own stream: the runs themselves are the
     same as without it."""
-    from odomgym.clapper_runs import SONAR
+    from odomgym.vehicle.paper_runs import SONAR
 
     plain, measured = (
         run_clapper(

@@ -196,7 +196,7 @@ def test_cli_rejects_bad_seed_plot_format_and_method(
 def test_output_files_get_ordinary_permissions(tmp_path: Path) -> None:
     import os
 
-    from odomgym.odometry import Calibration
+    from odomgym.odometry.calibration import Calibration
 
     umask = os.umask(0o022)
     try:
@@ -418,7 +418,7 @@ def test_a_floor_name_means_one_floor_everywhere() -> None:
     from odomgym.baselines.benchmark import BenchConfig
     from odomgym.errors import SpecError
     from odomgym.floor import FLOORS
-    from odomgym.population import BENCH_FLOORS
+    from odomgym.lab.population import BENCH_FLOORS
 
     for name, bench_floor in BENCH_FLOORS.items():
         floor, _ = bench_floor.make(np.random.default_rng(0))
@@ -498,7 +498,7 @@ def test_every_option_of_every_command_has_help() -> None:
 def test_floor_help_lists_every_floor_each_command_accepts() -> None:
     from odomgym.cli import build_parser
     from odomgym.floor import FLOORS
-    from odomgym.population import BENCH_FLOORS
+    from odomgym.lab.population import BENCH_FLOORS
 
     checked = 0
     for name, parser in _parsers(build_parser()):
@@ -529,7 +529,7 @@ def test_run_says_which_calibration_it_applied_and_what_it_wrote(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from odomgym.data.native import read_native
-    from odomgym.odometry import Calibration
+    from odomgym.odometry.calibration import Calibration
 
     calib = tmp_path / "calib.toml"
     Calibration(c_left=0.999, c_right=1.001, wheelbase_scale=1.02).save(calib)
@@ -549,16 +549,16 @@ def test_run_says_which_calibration_it_applied_and_what_it_wrote(
 def test_run_plans_are_a_library_the_command_only_prints(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    """``odomgym run`` prints what :func:`odomgym.planning.drive_plans` returns."""
+    """``odomgym run`` prints what :func:`odomgym.lab.plans.drive_plans` returns."""
     import numpy as np
 
     from odomgym.floor import FLOORS
-    from odomgym.planning import drive_plans, square_plans
+    from odomgym.lab.plans import drive_plans, square_plans
     from odomgym.robot import PRESETS
 
     robot = PRESETS["labmate"].with_errors(None, 1.02, None)  # as --eb 1.02 does
     batch = drive_plans(
-        robot, FLOORS["smooth"], square_plans(1.0), repeats=1, rng=np.random.default_rng(3)
+        robot, FLOORS["smooth"], square_plans(1.0, runs=1), rng=np.random.default_rng(3)
     )
     assert batch.directions == ["cw", "ccw"]
     assert [run.meta["experiment"] for run in batch.runs] == ["square_cw", "square_ccw"]

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from odomgym.covariance import (
+from odomgym.noise.covariance import (
     PoseEstimate,
     arc_motion_covariance,
     classic_inconsistency,
@@ -46,7 +46,7 @@ from odomgym.covariance import (
     straight_motion_covariance,
     turn_motion_covariance,
 )
-from odomgym.montecarlo import (
+from odomgym.noise.montecarlo import (
     MonteCarloResult,
     covariance_report,
     format_report,

@@ -11,8 +11,8 @@ import pytest
 
 from odomgym.data.native import COLUMNS, experiment_kind, read_native, write_native
 from odomgym.errors import SpecError
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 HEADER = ",".join(COLUMNS)
 NAN = math.nan

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 from independent_robot import IndependentRobot, generate, rich_protocol
 
-from odomgym.cables import bump_extra_rotation
 from odomgym.diagnose.gate import model_effect, open_loop_gate
 from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
 from odomgym.diagnose.openloop import NuisanceOptions, OpenLoopData, open_loop_folds
 from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
 from odomgym.diagnose.workflow import split_runs
 from odomgym.effects import EFFECTS
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
+from odomgym.sim.cables import bump_extra_rotation
 
 ROBOT = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8, max_wheel_speed=0.6)
 

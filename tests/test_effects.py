@@ -22,11 +22,11 @@ from odomgym.effects import EFFECTS, Effect, Parameter, ReplayArrays, WorldHook,
 from odomgym.effects.registry import EFFECTS as REGISTRY
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
-from odomgym.lab import simulate_runs
-from odomgym.physics import World
+from odomgym.odometry.runs import Run
 from odomgym.robot import PRESETS, RobotSpec, load_robot
-from odomgym.routes import spin_route, square_route, straight_route
-from odomgym.runs import Run
+from odomgym.sim.route_runs import simulate_runs
+from odomgym.sim.routes import spin_route, square_route, straight_route
+from odomgym.sim.world import World
 
 NOMINAL = PRESETS["optiodom"].ideal()
 

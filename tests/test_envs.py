@@ -11,7 +11,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import odomgym
-from odomgym.drivers import ReferenceDriver
+from odomgym.sim.driver import ReferenceDriver
 
 ENV_IDS = ["UMBmarkSquare-v0", "StraightLine-v0"]
 

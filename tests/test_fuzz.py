@@ -157,7 +157,7 @@ VEHICLE = {"trucks": ["labmate", "labmate"], "link_length": 1.0}
     )
 )
 def test_vehicle_specs(fields: dict[str, Any]) -> None:
-    from odomgym.vehicle import load_vehicle
+    from odomgym.vehicle.spec import load_vehicle
 
     try:
         path = _write("vehicle.toml", {"vehicle": fields})
@@ -238,8 +238,8 @@ def _base_csv() -> list[str]:
     if not Path(CSV).exists():
         from odomgym.data.native import write_native
         from odomgym.floor import FLOORS
-        from odomgym.lab import simulate_runs
-        from odomgym.routes import square_route
+        from odomgym.sim.route_runs import simulate_runs
+        from odomgym.sim.routes import square_route
 
         runs, _ = simulate_runs(
             odomgym.PRESETS["labmate"], FLOORS["smooth"], square_route(0.5, "cw")
@@ -342,7 +342,7 @@ def test_robot_constructor(fields: dict[str, Any]) -> None:
 )
 def test_calibration_and_floor_constructors(cal: dict[str, Any], floor: dict[str, Any]) -> None:
     from odomgym.floor import FloorSpec
-    from odomgym.odometry import Calibration
+    from odomgym.odometry.calibration import Calibration
 
     for build, fields in ((Calibration, cal), (FloorSpec, floor)):
         try:
@@ -976,7 +976,7 @@ def test_read_log_garbage(layout: str, suffix: str, data: bytes, log_format: str
 
 
 # ----------------------------------------------------------------------- vehicle constructor
-VEHICLE_FIELDS = {  # the CLAPPER's (odomgym.vehicle.VEHICLES["clapper"]), trucks aside
+VEHICLE_FIELDS = {  # the CLAPPER's (odomgym.vehicle.spec.VEHICLES["clapper"]), trucks aside
     "link_length": 1.0,
     "link_min": 0.9,
     "link_max": 1.1,
@@ -1003,7 +1003,7 @@ def test_vehicle_constructor(fields: dict[str, Any], trucks: dict[str, Any]) -> 
     """``VehicleSpec(...)`` itself (not its TOML loader) with odd link, encoder and truck
     values."""
     from odomgym.robot import RobotSpec
-    from odomgym.vehicle import VehicleSpec
+    from odomgym.vehicle.spec import VehicleSpec
 
     try:
         vehicle = VehicleSpec(
@@ -1025,8 +1025,8 @@ def test_vehicle_constructor(fields: dict[str, Any], trucks: dict[str, Any]) -> 
 def test_regression_a_vehicle_truck_must_be_a_robot_spec() -> None:
     """Found by test_vehicle_constructor: VehicleSpec(truck_a="labmate") was accepted, and
     ClapperStraight-v0's reset() then raised AttributeError ('str' object has no attribute
-    'true_left_diameter') in odomgym.physics; now a SpecError naming truck_a."""
-    from odomgym.vehicle import VehicleSpec
+    'true_left_diameter') in odomgym.sim.world; now a SpecError naming truck_a."""
+    from odomgym.vehicle.spec import VehicleSpec
 
     with pytest.raises(SpecError, match=r"truck_a must be a RobotSpec .* got str 'labmate'") as e:
         VehicleSpec(truck_a="labmate", truck_b=odomgym.PRESETS["labmate"])  # type: ignore[arg-type]

@@ -31,7 +31,7 @@ from independent_robot import (
 )
 from numpy.typing import NDArray
 
-from odomgym.runs import Run
+from odomgym.odometry.runs import Run
 
 FloatArray = NDArray[np.float64]
 
@@ -106,7 +106,7 @@ SQUARES = [
 
 
 def test_independent_of_odomgym_simulator() -> None:
-    """The generator imports numpy, the standard library and odomgym.runs only."""
+    """The generator imports numpy, the standard library and odomgym.odometry.runs only."""
     tree = ast.parse((Path(__file__).parent / "independent_robot.py").read_text())
     modules: set[str] = set()
     for node in ast.walk(tree):
@@ -115,8 +115,8 @@ def test_independent_of_odomgym_simulator() -> None:
         elif isinstance(node, ast.ImportFrom):
             modules.add(node.module or "")
     odomgym = {m for m in modules if m.split(".")[0] == "odomgym"}
-    assert odomgym == {"odomgym.runs"}
-    allowed = {"numpy", "numpy.typing", "odomgym.runs"}
+    assert odomgym == {"odomgym.odometry.runs"}
+    allowed = {"numpy", "numpy.typing", "odomgym.odometry.runs"}
     assert all(
         m in allowed or m.split(".")[0] not in {"odomgym", "scipy", "pymunk"} for m in modules
     )

@@ -2,10 +2,10 @@
 
 No physics engine: the true poses are written down analytically (rigid rotations about a
 fixed point) or integrated in 1 mm sub-steps from the wheels' true ground travel, with the
-rigid-wheel-over-cable geometry of :mod:`odomgym.cables` (Borenstein 1995, Fig. 4). The
+rigid-wheel-over-cable geometry of :mod:`odomgym.sim.cables` (Borenstein 1995, Fig. 4). The
 estimators get the wheel travel the encoders report and link readings computed from the true
-poses (:func:`odomgym.internal.link_angles`), optionally quantised like the CLAPPER's 10-bit
-rotary encoders (§2).
+poses (:func:`odomgym.vehicle.estimator.link_angles`), optionally quantised like the CLAPPER's
+10-bit rotary encoders (§2).
 """
 
 from __future__ import annotations
@@ -17,8 +17,10 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from odomgym.cables import bump_extra_rotation, cable_advance, paper_bump_error
-from odomgym.internal import (
+from odomgym.odometry.calibration import Odometry, wrap_angle
+from odomgym.robot import PRESETS
+from odomgym.sim.cables import bump_extra_rotation, cable_advance, paper_bump_error
+from odomgym.vehicle.estimator import (
     DeadReckoning,
     Heading,
     InternalEstimator,
@@ -26,9 +28,7 @@ from odomgym.internal import (
     growth_rate,
     link_angles,
 )
-from odomgym.ipec import IPEC, estimate_wheel_diameter_ratio
-from odomgym.odometry import Odometry, wrap_angle
-from odomgym.robot import PRESETS
+from odomgym.vehicle.ipec import IPEC, estimate_wheel_diameter_ratio
 
 FloatArray = NDArray[np.float64]
 
@@ -105,7 +105,7 @@ def cable_drive(
 
     A 10 mm cable across the path at x = ``x_cable[i]`` (one per vehicle) lies under truck A's
     right wheel only (truck B's run ends before it gets there). The wheel's horizontal advance
-    is :func:`odomgym.cables.cable_advance` of its rim travel, integrated in 1 mm sub-steps, so
+    is :func:`odomgym.sim.cables.cable_advance` of its rim travel, integrated in 1 mm sub-steps, so
     truck A truly turns by the deficit over b while its encoders report equal travel. The link
     transmits no force (Borenstein 1995, §2), so each truck moves as if alone. Returns true
     poses (K + 1, N, 2, 3) and reported wheel travel (K, N, 2, 2) [m].
@@ -141,7 +141,7 @@ def along_track(error: FloatArray, theta: FloatArray) -> FloatArray:
 # ---------------------------------------------------------------------- Table I and §3.3
 def test_table_1_bump_errors() -> None:
     """Table I: ΔD = 2.63 mm, α = 0.44°, e_lat(10 m) = 77 mm, from the package's Eqs. 1–5
-    (:func:`odomgym.cables.paper_bump_error`), matched to the digits printed (the paper rounds;
+    (:func:`odomgym.sim.cables.paper_bump_error`), matched to the digits printed (the paper rounds;
     nothing tighter can be asserted). The World's exact rigid-cylinder geometry
     (:func:`bump_extra_rotation`) gives 3.40 mm, 0.57°, within 5 % of the paper's measured
     ≈ 0.6° per bump (§6.1)."""
@@ -159,8 +159,8 @@ def test_table_1_bump_errors() -> None:
 
 
 def test_growth_rates_section_3_3() -> None:
-    """Eqs. 6–8 (:func:`odomgym.internal.growth_rate`) with D_s = 20 mm, L = 1 m and Table I's
-    α: 0.15 mm lateral error per interval, δ = 0.01°, θ_m = 0.43°, matched to the digits
+    """Eqs. 6–8 (:func:`odomgym.vehicle.estimator.growth_rate`) with D_s = 20 mm, L = 1 m and Table
+    I's α: 0.15 mm lateral error per interval, δ = 0.01°, θ_m = 0.43°, matched to the digits
     printed. The paper's 2.3 % and 4.5 % divide its *rounded* values (0.01/0.43, 0.02/0.44);
     unrounded they are 2.0 % and 4.0 %."""
     alpha = paper_bump_error(WHEEL_RADIUS, CABLE, WHEELBASE, 10.0).heading
@@ -286,8 +286,8 @@ def test_eq_15_rotates_truck_a_about_the_non_slipping_wheel() -> None:
 
 
 def test_dead_reckoning_is_odomgym_odometry() -> None:
-    """DeadReckoning integrates each truck as :class:`odomgym.odometry.Odometry` does (the
-    same midpoint equations; 1e-12 m: rounding)."""
+    """DeadReckoning integrates each truck as :class:`odomgym.odometry.calibration.Odometry` does
+    (the same midpoint equations; 1e-12 m: rounding)."""
     rng = np.random.default_rng(3)
     odometry = Odometry([LABMATE] * 4)  # 2 vehicles × 2 trucks
     start = rng.uniform(-1.0, 1.0, (2, 2, 3))

@@ -24,17 +24,17 @@ import numpy as np
 import pytest
 from conftest import OPTIODOM
 
-from odomgym.covariance import propagate_path
-from odomgym.noise_fit import NoiseSamples, fit_noise, noise_samples, run_noise_basis
-from odomgym.noise_report import (
+from odomgym.noise.covariance import propagate_path
+from odomgym.noise.experiment import (
     fit_noise_report,
     format_noise_report,
     plot_noise_fit,
     simulate_noise_experiment,
     with_wheel_noise,
 )
+from odomgym.noise.fit import NoiseSamples, fit_noise, noise_samples, run_noise_basis
+from odomgym.odometry.runs import Run, return_error
 from odomgym.robot import PRESETS, RobotSpec
-from odomgym.runs import Run, return_error
 
 DATA = OPTIODOM  # the full OptiOdom data in shared/ when present, else the shipped sessions
 K = 0.0005  # [m^½]: the paper's parquet floor is 0.0004/0.00058

@@ -1,7 +1,7 @@
 """Floor roughness realised in the physics agrees with the closed form of Chong & Kleeman 1997.
 
 The roughness k adds white noise of variance k²·|d| to each wheel's *ground* travel inside the
-wheel–floor contact (odomgym.physics), while the encoders count the rim. So the odometry of N
+wheel–floor contact (odomgym.sim.world), while the encoders count the rim. So the odometry of N
 robots commanded identically is identical, and their true poses scatter around it with the
 covariance Chong & Kleeman 1997, Eqs. 23-28, predict along the driven wheel travels.
 """
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 import odomgym
-from odomgym.covariance import propagate_path
-from odomgym.drivers import ReferenceDriver
 from odomgym.floor import CableBump, FloorSpec
-from odomgym.physics import World
+from odomgym.noise.covariance import propagate_path
+from odomgym.sim.driver import ReferenceDriver
+from odomgym.sim.world import World
 
 ROBOT = odomgym.PRESETS["labmate"].ideal()
 RUNS = 1000

@@ -24,8 +24,8 @@ from odomgym.data.logs import read_log
 from odomgym.diagnose.gate import model_effect
 from odomgym.diagnose.nuisances import SessionNuisance, correct_run
 from odomgym.diagnose.openloop import NuisanceOptions, OpenLoopData, OpenLoopFit, fit_open_loop
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec, load_robot
-from odomgym.runs import Run
 
 ROBOT = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8, max_wheel_speed=0.6)
 GEOMETRY = model_effect(("wheel_diameter_ratio", "wheelbase", "distance_scale"), ())

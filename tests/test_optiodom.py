@@ -23,11 +23,12 @@ from conftest import OPTIODOM
 
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.umbmark import UMBmark
-from odomgym.data import ExperimentNotRecorded, RecordedLab, Session, find_sessions, read_session
+from odomgym.data import Session, find_sessions, read_session
 from odomgym.errors import SpecError
-from odomgym.evaluation import evaluate
-from odomgym.experiments import Experiment
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import Experiment
+from odomgym.lab.recorded import ExperimentNotRecorded, RecordedLab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.optiodom_measures import evaluate
 from odomgym.robot import RobotSpec
 
 # The full data set in shared/ when present, else the sessions shipped in the package.

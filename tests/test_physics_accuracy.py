@@ -10,12 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from odomgym.cables import bump_extra_rotation, cable_advance
 from odomgym.floor import CableBump, FloorSpec
-from odomgym.lab import simulate_runs
+from odomgym.odometry.runs import return_error
 from odomgym.robot import PRESETS
-from odomgym.routes import square_route, straight_route
-from odomgym.runs import return_error
+from odomgym.sim.cables import bump_extra_rotation, cable_advance
+from odomgym.sim.route_runs import simulate_runs
+from odomgym.sim.routes import square_route, straight_route
 
 LABMATE = PRESETS["labmate"]
 SIDE = 4.0

@@ -17,31 +17,26 @@ import pytest
 import odomgym  # noqa: F401  (registers the envs)
 from odomgym.baselines.selfcal import MlpPolicy, SelfCal, load_policy, scripted_policy
 from odomgym.baselines.validation import calibrate_in_simulation
-from odomgym.envs.selfcal import (
+from odomgym.envs.selfcal import SelfCalibrationEnv
+from odomgym.errors import SpecError
+from odomgym.floor import FLOORS
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.lab.population import Population
+from odomgym.odometry.calibration import Calibration
+from odomgym.robot import PRESETS
+from odomgym.selfcal.episodes import (
     FAILED_REWARD,
     STRAIGHT_WEIGHT,
     WORSE_PENALTY,
     Episode,
-    SelfCalibrationEnv,
     new_episode,
     step_episodes,
     validation_terms,
 )
-from odomgym.errors import SpecError
-from odomgym.experiments import SensorAccuracy
-from odomgym.floor import FLOORS
-from odomgym.odometry import Calibration
-from odomgym.population import Population
-from odomgym.robot import PRESETS
-from odomgym.selfcal_session import (
-    MENU,
-    OBSERVATION_LAYOUT,
-    OBSERVATION_VERSION,
-    STOP,
-    SelfCalSession,
-)
+from odomgym.selfcal.menu import ACTION_MENU, STOP
+from odomgym.selfcal.session import OBSERVATION_LAYOUT, OBSERVATION_VERSION, SelfCalSession
 
-ITEM = {item.name: k for k, item in enumerate(MENU)}
+ITEM = {item.name: k for k, item in enumerate(ACTION_MENU)}
 
 
 def _episodes(
@@ -121,7 +116,7 @@ def test_v0_keeps_the_end_pose_estimator_and_v1_filters_the_trajectory() -> None
 
 def test_spaces_and_observation_layout() -> None:
     env = SelfCalibrationEnv(budget=4)
-    assert env.action_space.n == len(MENU) == 10
+    assert env.action_space.n == len(ACTION_MENU) == 10
     assert env.observation_space.shape == (len(OBSERVATION_LAYOUT),) == (31,)
     obs, info = env.reset(seed=3, options={"floor": "rough", "budget": 2})
     assert env.observation_space.contains(obs)
@@ -331,7 +326,7 @@ def test_guard_absurd_corrections_score_low_without_an_exception() -> None:
 def test_a_run_that_cannot_finish_ends_the_session_with_the_lowest_reward(monkeypatch) -> None:
     """Simulated here by a time limit too short for a 4 m square: the session ends at once,
     says why, and scores FAILED_REWARD (minus the shaping collected, which telescopes)."""
-    import odomgym.lab as lab
+    import odomgym.sim.route_runs as lab
 
     real = lab.simulate_runs
 
@@ -354,17 +349,17 @@ def test_session_refuses_bad_budgets_and_actions() -> None:
         SelfCalSession(robot, 65)
     session = SelfCalSession(robot, 4)
     with pytest.raises(SpecError, match="menu index"):
-        session.experiment(len(MENU))
+        session.experiment(len(ACTION_MENU))
     with pytest.raises(SpecError, match="stop drives no run"):
         session.record(STOP, [])
 
 
 def test_scripted_schedule() -> None:
-    names = [MENU[scripted_policy(np.zeros(1, np.float32), 16, k)].name for k in range(17)]
+    names = [ACTION_MENU[scripted_policy(np.zeros(1, np.float32), 16, k)].name for k in range(17)]
     assert names[:4] == ["square4-cw", "square4-ccw", "straight4", "square4-cw"]
     assert names.count("straight4") == 2 and names[10] == "straight4" and names[16] == "stop"
     assert names.count("square4-cw") == names.count("square4-ccw") == 7
-    short = [MENU[scripted_policy(np.zeros(1, np.float32), 4, k)].name for k in range(4)]
+    short = [ACTION_MENU[scripted_policy(np.zeros(1, np.float32), 4, k)].name for k in range(4)]
     assert short == ["square4-cw", "square4-ccw"] * 2
 
 

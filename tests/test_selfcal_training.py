@@ -16,16 +16,13 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from odomgym.baselines.benchmark import BenchConfig, run_benchmark, summarize
 from odomgym.baselines.selfcal import load_policy
-from odomgym.baselines.selfcal_train import (
-    SelfCalVecEnv,
-    evaluate,
-    export_policy,
-    load_hyperparams,
-)
+from odomgym.baselines.selfcal_train import evaluate, export_policy, load_hyperparams
+from odomgym.baselines.selfcal_vec_env import SelfCalVecEnv
 from odomgym.cli import main
 from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
-from odomgym.selfcal_session import MENU, OBSERVATION_VERSION
+from odomgym.selfcal.menu import ACTION_MENU
+from odomgym.selfcal.session import OBSERVATION_VERSION
 
 KWARGS = {"budget": [2, 3], "floors": ["concrete", "rough", "cables"]}
 
@@ -36,7 +33,7 @@ def _rollout(venv, steps: int) -> list[np.ndarray]:
     rng = np.random.default_rng(0)
     out = [obs]
     for _ in range(steps):
-        actions = rng.integers(0, len(MENU), size=venv.num_envs)
+        actions = rng.integers(0, len(ACTION_MENU), size=venv.num_envs)
         obs, rewards, dones, infos = venv.step(actions)
         terminal = [info.get("terminal_observation", np.zeros(1)).sum() for info in infos]
         out += [obs, rewards, dones.astype(float), np.array(terminal)]

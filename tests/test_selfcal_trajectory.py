@@ -9,22 +9,23 @@ import pytest
 from test_selfcal import _episodes
 
 from odomgym.baselines.selfcal import SelfCal, SelfCalEndPose, scripted_policy
-from odomgym.envs.selfcal import Episode, SelfCalibrationEnv, step_episodes
+from odomgym.envs.selfcal import SelfCalibrationEnv
 from odomgym.errors import SpecError
-from odomgym.experiments import SensorAccuracy
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Run, replay_odometry, replay_with_jacobian
 from odomgym.robot import PRESETS
-from odomgym.runs import Run, replay_odometry, replay_with_jacobian
-from odomgym.selfcal_session import (
-    MENU,
+from odomgym.selfcal.episodes import Episode, step_episodes
+from odomgym.selfcal.estimators import (
     PRIOR_STD,
     EndPoseEstimator,
-    SelfCalSession,
     TrajectoryEstimator,
     chunk_motions,
 )
+from odomgym.selfcal.menu import ACTION_MENU
+from odomgym.selfcal.session import SelfCalSession
 
-ITEM = {item.name: k for k, item in enumerate(MENU)}
+ITEM = {item.name: k for k, item in enumerate(ACTION_MENU)}
 ROBOT = PRESETS["labmate"]
 
 

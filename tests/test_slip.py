@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from odomgym.floor import FloorSpec
-from odomgym.lab import simulate_runs
-from odomgym.physics import World
 from odomgym.robot import PRESETS, RobotSpec
-from odomgym.routes import Route, square_route, straight_route
+from odomgym.sim.route_runs import simulate_runs
+from odomgym.sim.routes import Route, square_route, straight_route
+from odomgym.sim.world import World
 
 CAREFUL = PRESETS["labmate"].ideal()  # 1 m/s² wheel acceleration limit
 HARD = dataclasses.replace(CAREFUL, max_wheel_accel=6.0)  # a "bang-bang" controller

@@ -30,9 +30,9 @@ import pytest
 from odomgym.effects import EFFECTS
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS, CableBump, FloorSpec, FrictionPatch, load_floor
-from odomgym.odometry import Calibration, load_calibration
+from odomgym.odometry.calibration import Calibration, load_calibration
 from odomgym.robot import PRESETS, RobotSpec, load_robot
-from odomgym.vehicle import ENCODER_TRAILER, VEHICLES, VehicleSpec, calibrated, load_vehicle
+from odomgym.vehicle.spec import ENCODER_TRAILER, VEHICLES, VehicleSpec, calibrated, load_vehicle
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "specs.md"
 TEXT = DOC.read_text(encoding="utf-8")

@@ -11,7 +11,7 @@ import pytest
 
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec, load_floor
-from odomgym.odometry import Calibration, load_calibration
+from odomgym.odometry.calibration import Calibration, load_calibration
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 
 
@@ -168,8 +168,8 @@ def test_a_run_longer_than_a_kilometre_is_refused_in_one_line(
     traceback); one run now drives at most MAX_RUN_LENGTH = 1 km (and turns at most 10
     revolutions), checked where routes and experiments are made."""
     from odomgym.cli import main
-    from odomgym.experiments import Experiment
-    from odomgym.routes import MAX_RUN_LENGTH, spin_route, square_route
+    from odomgym.lab.experiment import Experiment
+    from odomgym.sim.routes import MAX_RUN_LENGTH, spin_route, square_route
 
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()

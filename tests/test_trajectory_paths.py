@@ -11,12 +11,14 @@ import pytest
 
 from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.validation import calibrate_in_simulation, calibrate_on_session
-from odomgym.data import ExperimentNotRecorded, RecordedLab, read_session, resolve_data
-from odomgym.experiments import Experiment, ExperimentKind
-from odomgym.lab import SimLab, circle_plan, free_plan
-from odomgym.odometry import Calibration
+from odomgym.data import read_session, resolve_data
+from odomgym.lab.experiment import Experiment, ExperimentKind
+from odomgym.lab.recorded import ExperimentNotRecorded, RecordedLab
+from odomgym.lab.simulated import SimLab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import replay_odometry
 from odomgym.robot import PRESETS
-from odomgym.runs import replay_odometry
+from odomgym.sim.arc_runs import circle_plan, free_plan
 
 CIRCULAR = "optiodom:circular/250620202104"
 
@@ -121,9 +123,9 @@ def test_trajectory_on_simulated_circles_recovers_known_errors() -> None:
 
 
 def test_trajectory_on_simulated_free_paths_removes_the_errors() -> None:
-    """:data:`ROBOT` drives two random 10 m free paths (:func:`odomgym.lab.free_plan`); the fit
-    leaves less than 1 % of each injected parameter error, and the UMBmark validation squares
-    (Borenstein & Feng 1994, Eq. 3.3) improve accordingly.
+    """:data:`ROBOT` drives two random 10 m free paths (:func:`odomgym.sim.arc_runs.free_plan`);
+    the fit leaves less than 1 % of each injected parameter error, and the UMBmark validation
+    squares (Borenstein & Feng 1994, Eq. 3.3) improve accordingly.
 
     A requirement, not a statistical bound: on free paths the fit's standard errors understate
     the spread (b lands up to 5 of them off the truth over seeds 0–5, against at most 1.6 on

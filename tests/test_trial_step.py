@@ -1,6 +1,6 @@
 """A Trial's step is one compiled call when its World can fuse its physics into it
-(:func:`odomgym.stepping.control_step`, holding the arrays of every part in one
-:class:`~odomgym.stepping.StepArrays`); it must do exactly what the parts' own public steps do
+(:func:`odomgym._kernels.control_step`, holding the arrays of every part in one
+:class:`~odomgym._kernels.StepArrays`); it must do exactly what the parts' own public steps do
 one after another (World.step, Odometry.update, RouteProgress.update, episode_report), through
 everything that changes those arrays: resets, longer routes, a new calibration, pickling."""
 
@@ -11,12 +11,12 @@ import pickle
 import numpy as np
 import pytest
 
+from odomgym._kernels import REPORT_WIDTH, episode_report
 from odomgym.floor import FLOORS
-from odomgym.odometry import Calibration
+from odomgym.odometry.calibration import Calibration
 from odomgym.robot import PRESETS
-from odomgym.routes import square_route, straight_route
-from odomgym.stepping import REPORT_WIDTH, episode_report
-from odomgym.trial import Trial
+from odomgym.sim.routes import square_route, straight_route
+from odomgym.sim.trial import Trial
 
 N = 3
 

@@ -4,8 +4,8 @@
 around squares and along straight lines — legs of equal odometric wheel travel, on-the-spot
 quarter turns the odometry believes exact — while the true pose integrates the *true* wheel
 diameters and wheelbase. No slip, no noise, no first-order approximation: what is left after
-calibration is the methods' own model error. The real simulator (``odomgym.lab.SimLab``) adds
-physics; this lab isolates the equations.
+calibration is the methods' own model error. The real simulator (``odomgym.lab.simulated.SimLab``)
+adds physics; this lab isolates the equations.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ import pytest
 
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.umbmark import Components, UMBmark, beta_from_e_d
-from odomgym.experiments import Experiment
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
+from odomgym.lab.experiment import Experiment
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Direction, Run, return_error
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import PRESETS, RobotSpec
-from odomgym.runs import Direction, Run, return_error
 
 LABMATE = PRESETS["labmate"]
 
@@ -79,7 +79,7 @@ def drive(
 
 
 class KinematicLab:
-    """The :class:`odomgym.experiments.Lab` protocol over :func:`drive`."""
+    """The :class:`odomgym.lab.experiment.Lab` protocol over :func:`drive`."""
 
     def __init__(self, robot: RobotSpec) -> None:
         self._robot = robot

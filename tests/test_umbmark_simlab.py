@@ -15,11 +15,11 @@ import pytest
 
 from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.umbmark import UMBmark, perform_squares
-from odomgym.lab import SimLab
-from odomgym.metrics import e_max_syst
-from odomgym.odometry import Calibration
+from odomgym.lab.simulated import SimLab
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import return_error
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import PRESETS
-from odomgym.runs import return_error
 
 LABMATE = PRESETS["labmate"]
 

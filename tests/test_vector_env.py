@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import odomgym
-from odomgym.drivers import ReferenceDriver
+from odomgym.sim.driver import ReferenceDriver
 
 
 def test_make_vec_uses_the_native_vector_env() -> None:

@@ -12,10 +12,10 @@ import pytest
 
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS
-from odomgym.internal import link_angles
-from odomgym.physics import World
 from odomgym.robot import PRESETS
-from odomgym.vehicle import (
+from odomgym.sim.world import World
+from odomgym.vehicle.estimator import link_angles
+from odomgym.vehicle.spec import (
     PAPER_ERRORS,
     VEHICLES,
     VehicleSpec,
@@ -124,7 +124,8 @@ def test_error_sources_in_the_readings() -> None:
 def test_read_skew_shows_the_trucks_where_they_were() -> None:
     """Link encoders read ``read_skew`` before the wheels: a truck turning at a steady rate
     shows ψ behind the truth by rate × skew (to within a count)."""
-    from odomgym.clapper import VehicleTrial, circle_path
+    from odomgym.vehicle.paths import circle_path
+    from odomgym.vehicle.trial import VehicleTrial
 
     spec = dataclasses.replace(CLAPPER, rotary_bits=24, read_skew=0.02)
     trial = VehicleTrial(spec, FLOORS["smooth"], circle_path(direction="ccw"))

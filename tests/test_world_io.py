@@ -1,7 +1,7 @@
 """The World's two ways across the pymunk boundary give bit-identical trajectories.
 
 Compiled kernels calling Chipmunk's functions by address
-(:class:`odomgym.chipmunk_link.SpaceExchange`) and pymunk's own properties and ``Space.step``
+(:class:`odomgym.sim.chipmunk_link.SpaceExchange`) and pymunk's own properties and ``Space.step``
 (the fallback if a pymunk release changes the internals the compiled path relies on) are speed
 choices only (docs/architecture.md, "Performance design"); a robot's motion must not depend on
 them, nor on its batch.
@@ -14,10 +14,10 @@ import pickle
 import numpy as np
 import pytest
 
-from odomgym.chipmunk_link import SpaceExchange
 from odomgym.floor import FLOORS
-from odomgym.physics import World
 from odomgym.robot import PRESETS
+from odomgym.sim.chipmunk_link import SpaceExchange
+from odomgym.sim.world import World
 
 STEPS = 300
 

@@ -2,6 +2,8 @@
 
 Commands:
     ``odomgym run square|straight …``   drive runs in simulation, report return errors;
+    ``odomgym run clapper-straight|clapper-rectangle …``  the CLAPPER two-truck vehicle with
+                                         and without IPEC (Borenstein 1995, §6);
     ``odomgym calibrate METHOD …``      calibrate (simulated robot or measured session) and
                                          validate on fresh runs;
     ``odomgym bench calibrators …``     every calibrator on a robot population, three floors;
@@ -9,7 +11,8 @@ Commands:
     ``odomgym covariance …``            Chong & Kleeman closed-form covariance (+ Monte Carlo);
     ``odomgym fit-noise …``             estimate k_L, k_R from repeated runs;
     ``odomgym diagnose DATA --robot R``  where a model and a robot's logs disagree, which
-                                         catalogue effect is missing, and the gap it closes.
+                                         catalogue effect is missing, and the gap it closes;
+    ``odomgym train selfcal …``         train a self-calibration policy (the rl extra).
 
 Every command exits 0 on success, 2 on bad input (one line naming the field and, where it came
 from a file, the file and line) — output paths included, which are checked before any work —

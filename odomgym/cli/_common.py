@@ -25,8 +25,8 @@ import numpy as np
 
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS
-from odomgym.odometry import Calibration
-from odomgym.report import to_json
+from odomgym.lab.report import to_json
+from odomgym.odometry.calibration import Calibration
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 
 if TYPE_CHECKING:

@@ -30,7 +30,7 @@ JOURNAL_NAME = "journal.jsonl"
 def register(commands: Commands) -> None:
     """Add ``bench``."""
     from odomgym.baselines.benchmark import Backend
-    from odomgym.population import BENCH_FLOORS
+    from odomgym.lab.population import BENCH_FLOORS
 
     parser = commands.add_parser(
         "bench",

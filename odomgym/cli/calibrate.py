@@ -20,9 +20,8 @@ from odomgym.cli._common import (
 from odomgym.errors import SpecError
 from odomgym.floor import load_floor
 from odomgym.io import atomic_write_text
-from odomgym.odometry import Calibration
-from odomgym.planning import ros2_yaml
-from odomgym.report import format_session_report, format_simulation_report, plot_return_errors
+from odomgym.lab.report import format_session_report, format_simulation_report, plot_return_errors
+from odomgym.odometry.calibration import Calibration
 
 if TYPE_CHECKING:
     from odomgym.cli._common import Commands
@@ -100,7 +99,7 @@ def _write_outputs(args: argparse.Namespace, calibration: Calibration) -> list[s
         calibration.save(args.save)
         written.append(args.save)
     if args.export == "ros2":
-        atomic_write_text(Path(_export_path(args)), ros2_yaml(calibration))
+        atomic_write_text(Path(_export_path(args)), calibration.ros2_yaml())
         written.append(_export_path(args))
     return written
 

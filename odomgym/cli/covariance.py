@@ -68,7 +68,7 @@ def _all_finite(value: object) -> bool:
 def run(args: argparse.Namespace) -> int:
     """Compute the report, refusing inputs whose covariance overflows a double (one line, not
     a table of inf and nan), and print it (the paper's tables, or one JSON object)."""
-    from odomgym.montecarlo import covariance_report, format_report
+    from odomgym.noise.montecarlo import covariance_report, format_report
 
     too_large = SpecError(
         "the distances, wheelbase or noise constants are too large for the closed forms (the "

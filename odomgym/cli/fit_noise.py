@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     """Fit (simulating the runs first without ``--data``), then print the fits (a table, or
     one JSON object) and the plots the report says it wrote."""
     from odomgym.data import resolve_data
-    from odomgym.noise_report import fit_noise_report, format_noise_report
+    from odomgym.noise.experiment import fit_noise_report, format_noise_report
 
     report = Reporter.of(args)
     check_plot_path(args.plot)

@@ -26,9 +26,9 @@ from odomgym.cli._common import (
     robot_from,
 )
 from odomgym.floor import FloorSpec, load_floor
-from odomgym.odometry import load_calibration
-from odomgym.planning import drive_plans, square_plans, straight_plans
-from odomgym.report import format_return_errors, plot_return_errors
+from odomgym.lab.plans import drive_plans, square_plans, straight_plans
+from odomgym.lab.report import format_return_errors, plot_return_errors
+from odomgym.odometry.calibration import load_calibration
 
 if TYPE_CHECKING:
     from odomgym.cli._common import Commands
@@ -110,15 +110,14 @@ def run(args: argparse.Namespace) -> int:
     floor: FloorSpec = load_floor(args.floor)
     calibration = load_calibration(args.calibration) if args.calibration else None
     if args.path == "square":
-        plans = square_plans(args.side, args.direction)
+        plans = square_plans(args.side, args.direction, args.runs)
     else:
-        plans = straight_plans(args.distance, args.return_trip)
+        plans = straight_plans(args.distance, args.return_trip, args.runs)
     with Progress.percent(report) as bar:
         batch = drive_plans(
             robot,
             floor,
             plans,
-            repeats=args.runs,
             calibration=calibration,
             rng=np.random.default_rng(args.seed),
             progress=bar.fraction,

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 
 def register(routes: Commands) -> None:
     """Add the two CLAPPER routes to ``run``'s routes."""
-    from odomgym.clapper import CLAPPER_FLOOR
+    from odomgym.vehicle.trial import CLAPPER_FLOOR
 
     for name, what in (
         (
@@ -126,8 +126,9 @@ def run(args: argparse.Namespace) -> int:
     """Drive the experiment's conditions (the paper's, or the one ``--bumps``/``--ipec`` ask
     for), then print the settings and the runs (a table, or a JSON line per run and a
     summary) and the figure written."""
-    from odomgym.clapper import VehicleDriver
-    from odomgym.clapper_runs import (
+    from odomgym.vehicle.controller import VehicleDriver
+    from odomgym.vehicle.ipec import ipec_estimator
+    from odomgym.vehicle.paper_runs import (
         PAPER_CONDITIONS,
         SONAR,
         Condition,
@@ -136,8 +137,7 @@ def run(args: argparse.Namespace) -> int:
         run_clapper,
         summarize,
     )
-    from odomgym.ipec import ipec_estimator
-    from odomgym.vehicle import PAPER_ERRORS, load_vehicle
+    from odomgym.vehicle.spec import PAPER_ERRORS, load_vehicle
 
     report = Reporter.of(args)
     check_plot_path(args.plot)

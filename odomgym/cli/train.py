@@ -15,13 +15,13 @@ if TYPE_CHECKING:
 
 def register(commands: Commands) -> None:
     """Add ``train``."""
-    from odomgym.selfcal_session import MENU
+    from odomgym.selfcal.menu import ACTION_MENU
 
     parser = commands.add_parser(
         "train",
         help="train a self-calibration policy (needs the rl extra)",
         description="Train a policy in SelfCalibration-v1 with stable-baselines3: each step it "
-        f"picks one of {len(MENU) - 1} experiments or stops; the reward is the validated "
+        f"picks one of {len(ACTION_MENU) - 1} experiments or stops; the reward is the validated "
         "improvement of the final corrections. Writes the SB3 model, the numpy policy that "
         "odomgym calibrate selfcal --policy takes, progress.csv and a learning-curve plot.",
     )

@@ -1,14 +1,14 @@
-"""Recorded data of real robots, read into :class:`odomgym.runs.Run` records.
+"""Recorded data of real robots, read into :class:`odomgym.odometry.runs.Run` records.
 
 Formats: odomgym's native CSV (:mod:`odomgym.data.native`), the OptiOdom sessions (Sousa et al.,
 J. Intell. Robot. Syst. 105:39, 2022; :func:`read_session`, served to calibrators by
-:class:`RecordedLab`) and ROS 2 bags (:mod:`odomgym.data.rosbag2`, with the ``rosbags`` package).
-:func:`read_log` reads any of them, detecting the format. Six OptiOdom sessions ship with the
-package (:mod:`odomgym.data.samples`): :func:`sample_session`, :func:`sample_sessions`, and
-:func:`resolve_data` for the ``optiodom:<kind>/<session>`` names every data option accepts.
+:class:`odomgym.lab.recorded.RecordedLab`) and ROS 2 bags (:mod:`odomgym.data.rosbag2`, with the
+``rosbags`` package). :func:`read_log` reads any of them, detecting the format. Six OptiOdom
+sessions ship with the package (:mod:`odomgym.data.samples`): :func:`sample_session`,
+:func:`sample_sessions`, and :func:`resolve_data` for the ``optiodom:<kind>/<session>`` names every
+data option accepts.
 """
 
-from odomgym.data.lab import ExperimentNotRecorded, RecordedLab
 from odomgym.data.logs import FORMATS, detect_format, read_log
 from odomgym.data.native import read_native, write_native
 from odomgym.data.optiodom import Session, SyncWindow, find_sessions, read_session
@@ -16,8 +16,6 @@ from odomgym.data.samples import resolve_data, sample_data, sample_session, samp
 
 __all__ = [
     "FORMATS",
-    "ExperimentNotRecorded",
-    "RecordedLab",
     "Session",
     "SyncWindow",
     "detect_format",

@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Literal
 
 from odomgym.errors import SpecError
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["FORMATS", "LogFormat", "detect_format", "read_log"]
 

@@ -4,7 +4,8 @@ Why a format of its own: every robot logs differently, but a calibration needs o
 the two cumulative encoder counts and whatever the tracker measured. One flat CSV with one row
 per sample is what a user can produce from any logger with a short script, read in a
 spreadsheet, and check by eye. Both :func:`read_native` and
-:func:`odomgym.data.rosbag2.read_rosbag` produce the same :class:`odomgym.runs.Run` records.
+:func:`odomgym.data.rosbag2.read_rosbag` produce the same :class:`odomgym.odometry.runs.Run`
+records.
 
 The file has a header row with exactly these columns, in any order::
 
@@ -46,8 +47,8 @@ from numpy.typing import NDArray
 
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_text
+from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Direction, Run
 
 __all__ = ["COLUMNS", "experiment_kind", "read_native", "write_native"]
 

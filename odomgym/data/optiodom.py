@@ -1,4 +1,5 @@
-"""Reader of the OptiOdom data format, and a :class:`RecordedLab` that serves its runs.
+"""Reader of the OptiOdom data format (its sessions are served to calibrators by
+:class:`odomgym.lab.recorded.RecordedLab`).
 
 The OptiOdom data (R. B. Sousa, M. R. Petry, A. P. Moreira, P. Costa, *OptiOdom: a Generic
 Approach for Odometry Calibration of Wheeled Mobile Robots*, J. Intell. Robot. Syst. 105:39,
@@ -40,8 +41,8 @@ Conventions taken from the authors' code (``src/diff/umbmark/main.m``, ``loadDat
 * The nominal robot is the one in the session's own metadata. (The authors' scripts read the
   robot from one fixed metadata file per method; their OptiOdom and Ivanjko rows in
   ``published_results.csv`` use b = 0.2 m, D = 0.084 m for every session, their UMBmark and
-  Jung & Chung rows the session's own values.) Pass another robot to :class:`RecordedLab` to
-  reproduce the former.
+  Jung & Chung rows the session's own values.) Pass another robot to
+  :class:`~odomgym.lab.recorded.RecordedLab` to reproduce the former.
 """
 
 from __future__ import annotations
@@ -57,9 +58,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.errors import SpecError, require_positive
-from odomgym.odometry import Calibration
+from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Direction, Run
 
 __all__ = [
     "PATH_TYPES",

@@ -1,4 +1,4 @@
-"""Reader of ROS 2 bags (rosbag2: sqlite3 or MCAP) into :class:`odomgym.runs.Run` records.
+"""Reader of ROS 2 bags (rosbag2: sqlite3 or MCAP) into :class:`odomgym.odometry.runs.Run` records.
 
 Why: a ROS robot already logs what a calibration needs — wheel joint positions or raw encoder
 counts, and a motion-capture or other ground-truth pose — so recording a bag during the
@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 
 from odomgym.data.native import experiment_kind
 from odomgym.errors import SpecError
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["ENCODER_TYPES", "JOINT_TYPE", "POSE_TYPES", "read_rosbag"]
 

@@ -58,8 +58,8 @@ from odomgym.effects.discovered import (
     describe_term,
     term_by_name,
 )
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = [
     "THRESHOLDS",

@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 
 from odomgym.diagnose.likelihood import SensorNoise
 from odomgym.diagnose.replay import replay_run
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["MENU", "Separation", "SyntheticExperiment", "separating_experiment", "synthetic_run"]
 

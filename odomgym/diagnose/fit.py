@@ -49,8 +49,8 @@ from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import EFFECTS, Effect
 from odomgym.effects.registry import Spec, SpecView
 from odomgym.errors import SpecError
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 from odomgym.workers import WorkerDeath, run_tasks
 
 __all__ = [

@@ -21,11 +21,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
-from odomgym.lab import simulate_runs
-from odomgym.physics import World
+from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import RobotSpec
-from odomgym.routes import spin_route, square_route, straight_route
-from odomgym.runs import Direction, Run
+from odomgym.sim.route_runs import simulate_runs
+from odomgym.sim.routes import spin_route, square_route, straight_route
+from odomgym.sim.world import World
 
 __all__ = ["Protocol", "simulate_protocol"]
 

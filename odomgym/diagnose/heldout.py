@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 
 from odomgym.diagnose.openloop import ModelErrors
 from odomgym.diagnose.stats import bootstrap_ci
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["Baseline", "HeldOut", "compare_models", "pictured_runs"]
 

@@ -32,8 +32,8 @@ from numpy.typing import NDArray
 from odomgym._jit import inlined_kernel, kernel
 from odomgym.diagnose.replay import Replay
 from odomgym.effects import EFFECTS
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["RunLikelihood", "SensorNoise", "measurement_mask", "run_likelihood", "run_scores"]
 

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.runs import Run
+from odomgym.odometry.runs import Run
 
 __all__ = [
     "OFFSET_SIGNIFICANCE",

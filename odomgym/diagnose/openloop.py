@@ -55,9 +55,9 @@ from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import Effect
 from odomgym.errors import SpecError
-from odomgym.metrics import e_max_syst
+from odomgym.odometry.runs import Run
+from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = [
     "ModelErrors",

@@ -22,7 +22,7 @@ to what a robot can physically do:
   and as bumps they would shorten the mean travel and move E_s), each with a jump whose travel
   loss a·b is at most what a wheel loses crossing an obstacle of
   ``max_obstacle`` (the rigid-wheel-over-cylinder geometry of
-  :func:`odomgym.cables.bump_extra_rotation`; a 20 mm obstacle by default, a thick cable or a
+  :func:`odomgym.sim.cables.bump_extra_rotation`; a 20 mm obstacle by default, a thick cable or a
   door threshold, the largest a lab floor plausibly holds).
 """
 
@@ -38,12 +38,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from odomgym.cables import bump_extra_rotation
 from odomgym.diagnose.likelihood import measurement_mask
 from odomgym.diagnose.replay import Replay, replay_run, session_time, wheel_angles
 from odomgym.effects.discovered import body_modulator, term_by_name, wheel_modulator
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
+from odomgym.sim.cables import bump_extra_rotation
 
 __all__ = [
     "PLAUSIBLE_CHANGE",

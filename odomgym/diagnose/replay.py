@@ -20,8 +20,8 @@ from numpy.typing import NDArray
 
 from odomgym._jit import kernel
 from odomgym.effects import EFFECTS, ReplayArrays
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["Replay", "RunInputs", "replay_run", "session_time", "wheel_angles"]
 

@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import holm, mean_t_test
+from odomgym.odometry.runs import Run, rotate_into
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = ["Finding", "RunResidual", "localise", "run_residuals"]
 
@@ -89,9 +89,8 @@ def run_residuals(runs: Sequence[Run], spec: RobotSpec) -> list[RunResidual]:
         index = np.flatnonzero(measured)[1:]
         d = run.true_pose[index] - rep.tracked[index]
         heading = rep.pose[index, 2]
-        c, s = np.cos(heading), np.sin(heading)
         dtheta = np.mod(d[:, 2] + math.pi, 2 * math.pi) - math.pi
-        residual = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], dtheta], 1)
+        residual = np.column_stack([rotate_into(d[:, 0], d[:, 1], heading), dtheta])
         dt = np.maximum(np.diff(run.time), 1e-9)
         speed = rep.ds / dt
         omega = rep.dtheta / dt

@@ -128,8 +128,8 @@ from odomgym.diagnose.where import Finding, localise, run_residuals
 from odomgym.effects import EFFECTS, TERMS, DiscoveredTerms, Effect
 from odomgym.errors import SpecError
 from odomgym.io import atomic_write_bytes
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.runs import Run
 
 __all__ = [
     "DISCOVERED",

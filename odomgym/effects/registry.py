@@ -10,7 +10,7 @@ to four faces, each optional:
 
 * **spec** — how its values live in a :class:`~odomgym.robot.RobotSpec` (by default in
   ``spec.effects[name]``; the geometric effects map onto the true diameters and wheelbase);
-* **world** — a :class:`WorldHook` that the pymunk :class:`~odomgym.physics.World` calls at fixed
+* **world** — a :class:`WorldHook` that the pymunk :class:`~odomgym.sim.world.World` calls at fixed
   stages of its step (transmission, contact velocities, perturbations, the tracked point), so an
   env built from the spec *behaves* like the robot;
 * **replay** — the same equations applied to a logged run's encoder counts (:class:`ReplayArrays`,
@@ -80,7 +80,7 @@ class SpecView(Protocol):
 
 class WorldView(Protocol):
     """What a :class:`WorldHook` reads and changes in the World's step
-    (:class:`odomgym.physics.World` is one). Arrays are per robot, N rows."""
+    (:class:`odomgym.sim.world.World` is one). Arrays are per robot, N rows."""
 
     n: int
 
@@ -170,11 +170,6 @@ class Effect:
     can say)."""
 
     # ------------------------------------------------------------------ values
-    @classmethod
-    def parameter_names(cls) -> tuple[str, ...]:
-        """The parameters' names, in order."""
-        return tuple(p.name for p in cls.parameters)
-
     @classmethod
     def absent_values(cls) -> dict[str, float]:
         """The values at which the effect is absent."""

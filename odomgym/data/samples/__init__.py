@@ -19,7 +19,7 @@ do the same from Python, :func:`sample_sessions` lists the names.
 
 Why unpacked into a cache rather than read from the package in place: the readers take real
 folders (they glob, list and open files by path, and
-:func:`odomgym.noise_report.published_calibration` finds ``published_results.csv`` two folders
+:func:`odomgym.noise.experiment.published_calibration` finds ``published_results.csv`` two folders
 above a session), and the CSV files take 4.65 MB raw but 1.45 MB as one ``.tar.xz`` per
 session, so the package ships the archives and each session is unpacked once, on first use,
 into ``$XDG_CACHE_HOME/odomgym`` (``~/.cache/odomgym`` when unset or relative). The cache

@@ -1,0 +1,671 @@
+"""The physics World: differential-drive robots as pymunk rigid bodies with friction-limited wheels.
+
+One :class:`World` holds a *batch* of N robots in one pymunk space (they do not interact); the
+single-robot envs are a batch of one. The per-wheel arithmetic of a step (wheel controllers,
+encoders, contact velocities, floor effects) runs in numba-compiled loops over the robots
+(:mod:`odomgym._kernels`), and body state crosses into Chipmunk and back once per physics
+substep, from compiled code that calls Chipmunk's functions by address
+(:mod:`odomgym.sim.chipmunk_link`): with no effect hooks on a plain floor a whole step, Chipmunk's
+steps included, is one compiled call, which a :class:`~odomgym.sim.trial.Trial` makes part of its
+own (measured in ``benchmarks/bench_speed.py``; docs/architecture.md, "Performance design").
+
+Model, per robot (top-down, no gravity in the plane):
+
+* **Chassis** — a dynamic body of the robot's mass and yaw inertia, its origin at the axle
+  midpoint (the odometry reference point).
+* **Wheel–floor contact** — the pymunk ``tank.py`` idiom: each drive wheel is a pivot joint
+  between the chassis (at the wheel's contact point, ±b_true/2 to the side) and a per-wheel
+  kinematic "ground" body that moves with the velocity the contact point *would* have if the
+  wheel rolled without slipping. ``max_bias = 0`` makes the joint act on velocities only, and
+  ``max_force = μ·N`` caps the force it may apply at Coulomb friction, isotropically (a friction
+  circle). When a manoeuvre asks for more force than μ·N — hard acceleration, a fast turn, low
+  μ — the joint saturates and the wheel slips: slip *emerges*, nothing scripts it.
+* **Wheel drive** — each wheel's angular rate follows its command through a velocity controller
+  with an acceleration limit (a stiff motor: the rate does not depend on the ground force).
+  The rim travels ``ω·r_true`` per second; the encoder counts the true wheel rotation,
+  quantised to whole counts.
+* **Floor** — the ground body's velocity is the rim velocity corrected by the floor: over a
+  cable the horizontal advance follows the rigid-wheel-over-cylinder geometry
+  (:func:`odomgym.sim.cables.cable_advance`), on a rough floor it carries white noise of variance
+  k²·|d| (Chong & Kleeman 1997, Eq. 4), and friction patches change μ.
+* **Effects** — the robot spec's further effects (:mod:`odomgym.effects`: backlash, wheel toe,
+  turn skid, bumps, wheel roughness, a tracked point offset) act through hooks at fixed stages of
+  the step (transmission, contact velocities before and after the floor, the tracked point). The
+  World asks the registry for them and knows no effect by name.
+
+Units: metres, radians, seconds, kilograms, newtons. Wheel index 0 is the left wheel, 1 the right.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pymunk
+from numpy.typing import NDArray
+
+from odomgym._kernels import (
+    STEP_BAD_READ_BACK,
+    STEP_NOT_FINITE,
+    check_step_status,
+    drive_plain,
+    drive_wheels,
+    exchange,
+    floor_kernel,
+    midstep_translation,
+    new_state,
+    rim_from_wheel_step,
+    state_views,
+    step_plain,
+)
+from odomgym.effects import EFFECTS, WorldHook
+from odomgym.floor import FloorSpec
+from odomgym.robot import RobotSpec
+from odomgym.sim.cables import CableGrid, apply_cable_deficits
+from odomgym.sim.chipmunk_link import SpaceExchange
+
+__all__ = ["GRAVITY", "World"]
+
+GRAVITY = 9.81  # m/s²
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+_NOISE_BLOCK = 256  # roughness draws per robot fetched at once
+
+
+class World:
+    """N differential-drive robots on one floor, stepped together.
+
+    Args:
+        robots: one :class:`RobotSpec` per robot (a single spec for a batch of one).
+        floor: the floor all robots share.
+        dt: control period [s]: commands are held and encoders sampled once per ``dt``.
+            Default 0.05 s, the 20 Hz odometry rate of the OptiOdom robot whose measured
+            sessions ship with the package (:mod:`odomgym.data.samples`; the CLAPPER sampled at
+            40 ms, Borenstein 1995, §3.1).
+        substeps: physics steps per control period (each of ``dt/substeps`` seconds).
+        iterations: Chipmunk solver iterations per step. The two wheel joints of a chassis are
+            coupled; with Chipmunk's warm start (last step's impulses applied first) they
+            converge within a few iterations. Default 10: against 20, the return errors of
+            4×4 m UMBmark squares (ideal robot; LabMate on the ``bumpy`` floor; LabMate at
+            μ = 0.1, slipping by metres) differ by at most 0.01 mm and 0.0002°, far below one
+            encoder count; 8 gives 0.05 mm, 6 gives 0.5 mm. The solver is most of a step's cost
+            (256 robots: 230 µs at 20, 133 µs at 10), hence the choice.
+        rng: source of floor-roughness noise, required when ``floor.roughness > 0``: one
+            Generator (each robot gets its own child stream, ``rng.spawn``) or one Generator
+            per robot. Per-robot streams make a robot's noise independent of which other robots
+            share its batch.
+        track_slip: accumulate each wheel's slip distance in ``slip`` (costs ~5 µs a step).
+        links: compliant linkages ``(i, j, min, max)`` between the centres of robots i and j:
+            free while the centre distance lies in [min, max] [m], a hard stop at either end
+            (a pymunk ``SlideJoint``): the CLAPPER's linear bearing (Borenstein 1995, §2;
+            :mod:`odomgym.vehicle.spec`). Without links the robots do not interact.
+        hitches: towing hitches ``(i, j, length)``: robot j's point ``length`` [m] ahead of
+            its axle midpoint (the end of a rigid tongue) pinned to robot i's axle midpoint, a
+            free rotary joint (a pymunk ``PivotJoint``): the encoder trailer of Borenstein
+            1995, §7, towed by robot i.
+
+    State arrays (read them, do not write them; shapes use N robots):
+        ``pose`` (N, 3) true x, y [m], θ [rad] of the axle midpoint;
+        ``velocity`` (N, 3) true ẋ, ẏ [m/s], θ̇ [rad/s];
+        ``wheel_rate`` (N, 2) wheel angular rates [rad/s];
+        ``wheel_angle`` (N, 2) accumulated wheel rotation [rad];
+        ``counts`` (N, 2) encoder counts (int64, quantised true rotation);
+        ``slip`` (N, 2) accumulated |rim travel − ground travel| of each wheel [m];
+        ``time`` simulated time [s].
+
+    Arrays effect hooks may change during a step (:class:`odomgym.effects.WorldHook`):
+        ``rim_speed`` (N, 2) rim speed of each wheel this substep [m/s];
+        ``ground_velocity`` (N, 2, 2) no-slip velocity of each wheel contact [m/s];
+        ``wheel_roughness`` (N, 2) k of each wheel [m^½] (set once, in ``configure``).
+    """
+
+    def __init__(
+        self,
+        robots: RobotSpec | Sequence[RobotSpec],
+        floor: FloorSpec | None = None,
+        *,
+        dt: float = 0.05,
+        substeps: int = 1,
+        iterations: int = 10,
+        rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
+        track_slip: bool = False,
+        links: Sequence[tuple[int, int, float, float]] = (),
+        hitches: Sequence[tuple[int, int, float]] = (),
+    ) -> None:
+        specs = [robots] if isinstance(robots, RobotSpec) else list(robots)
+        if not specs:
+            raise ValueError("World needs at least one robot")
+        self.links = tuple((int(i), int(j), float(lo), float(hi)) for i, j, lo, hi in links)
+        for i, j, lo, hi in self.links:
+            if not (0 <= i < len(specs) and 0 <= j < len(specs) and i != j):
+                raise ValueError(f"a link joins two different robots of the batch, got {i}, {j}")
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+                raise ValueError(f"a link's range needs 0 <= min < max [m], got {lo}, {hi}")
+        self.hitches = tuple((int(i), int(j), float(length)) for i, j, length in hitches)
+        for i, j, length in self.hitches:
+            if not (0 <= i < len(specs) and 0 <= j < len(specs) and i != j):
+                raise ValueError(f"a hitch joins two different robots of the batch, got {i}, {j}")
+            if not (math.isfinite(length) and length > 0.0):
+                raise ValueError(f"a hitch's tongue must be a positive length [m], got {length}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be a whole number >= 1, got {substeps!r}")
+        self.robots: tuple[RobotSpec, ...] = tuple(specs)
+        self.floor = floor if floor is not None else FloorSpec()
+        self._noise_streams: list[np.random.Generator] = []
+        self._noise_block = np.zeros((len(specs), _NOISE_BLOCK, 2))
+        self._noise_next = _NOISE_BLOCK  # forces a refill at the first use
+        self.dt = float(dt)
+        self.substeps = int(substeps)
+        self.iterations = int(iterations)
+        self.n = len(specs)
+
+        # Per-robot parameters as arrays, shape (N,) or (N, 2) for [left, right].
+        self.true_radius = np.array(
+            [[0.5 * s.true_left_diameter, 0.5 * s.true_right_diameter] for s in specs]
+        )
+        self.nominal_radius = np.array([0.5 * s.wheel_diameter for s in specs])
+        self.half_track = np.array([0.5 * s.true_wheelbase for s in specs])
+        self.ticks_per_rad = np.array([s.ticks_per_rev / (2.0 * np.pi) for s in specs])
+        self.max_rate = np.array([s.max_wheel_speed for s in specs]) / self.nominal_radius
+        self.max_rate_step = (
+            np.array([s.max_wheel_accel for s in specs]) / self.nominal_radius * self.dt / substeps
+        )
+        self._lateral = np.stack([self.half_track, -self.half_track], axis=1)  # (N, 2) [m]
+        self.normal_force = np.array(
+            [0.5 * s.mass * GRAVITY * s.drive_load_fraction for s in specs]
+        )
+        self._h = self.dt / self.substeps
+        self._unit_scale = np.ones(self.n)
+        self.track_slip = track_slip
+        self._has_bumps = bool(self.floor.bumps)
+        max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
+        self._bump_grid = CableGrid.build(self.floor, float(self.true_radius.max()), 1.5 * max_step)
+        self._has_patches = bool(self.floor.patches)
+        self.wheel_roughness = np.full((self.n, 2), self.floor.roughness)
+        self._hooks = self._effect_hooks()
+        for hook in self._hooks:
+            hook.configure(self)
+        self._rough = bool(np.any(self.wheel_roughness > 0.0))
+        self._modifies_ground = self._has_bumps or self._has_patches or self._rough
+        self._transmission = [h for h in self._hooks if h.has_transmission]
+        self._shape = [h for h in self._hooks if h.has_shape]
+        self._perturb = [h for h in self._hooks if h.has_perturb]
+        self._tracked = [h for h in self._hooks if h.has_tracked]
+        self._plain = not (
+            self._transmission or self._shape or self._perturb or self._modifies_ground
+        )
+        # The per-robot state in one array (one argument of a compiled call; pose, velocity,
+        # wheel rates and angles are views of it) and the arrays of other shapes, all updated
+        # in place from here on.
+        self._state = new_state(
+            self.max_rate, self.max_rate_step, self.true_radius, self.ticks_per_rad, self.half_track
+        )
+        self._bind_state()
+        self.counts = np.zeros((self.n, 2), dtype=np.int64)
+        self.slip = np.zeros((self.n, 2))
+        self._ground_v = np.zeros((self.n, 2, 2))  # [robot, wheel, (vx, vy)] [m/s]
+        self._contact = np.zeros((self.n, 2, 2))  # [robot, wheel, (x, y)] [m]
+        self._no_noise = np.zeros((self.n, 2))
+        self._clock = np.zeros(1)  # simulated time [s], an array so compiled steps advance it
+        self._bind_noise(rng)
+
+        self._build_space()
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+    def _effect_hooks(self) -> list[WorldHook]:
+        """One hook per registered effect that some robot of the batch carries."""
+        hooks: list[WorldHook] = []
+        for name, effect in EFFECTS.items():
+            rows = [spec.effect_values(name) for spec in self.robots]
+            if all(r is None for r in rows):
+                continue
+            absent = effect.absent_values()
+            values = np.array(
+                [[(r or absent).get(p, absent[p]) for p in absent] for r in rows], dtype=float
+            )
+            hook = effect.world_hook(self, values)
+            if hook is not None:
+                hooks.append(hook)
+        return hooks
+
+    def _bind_noise(self, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> None:
+        """Give each robot its own noise stream: roughness draws, then one child per hook."""
+        random_hooks = [h for h in self._hooks if h.needs_rng]
+        if not (self._rough or random_hooks):
+            return
+        if rng is None:
+            raise ValueError(
+                "a rough floor or a robot with noise effects needs rng=np.random.Generator"
+            )
+        streams = rng.spawn(self.n) if isinstance(rng, np.random.Generator) else list(rng)
+        if len(streams) != self.n:
+            raise ValueError(f"need one noise Generator per robot ({self.n})")
+        self._noise_streams = streams
+        if random_hooks:
+            # Each robot's stream spawns one child per random hook, so a robot's draws depend
+            # neither on its batch nor on the roughness draws.
+            children = [stream.spawn(len(random_hooks)) for stream in streams]
+            for k, hook in enumerate(random_hooks):
+                hook.bind_rng([robot_children[k] for robot_children in children])
+
+    @property
+    def uses_noise(self) -> bool:
+        """True if some robot draws random numbers (a rough floor or a random effect)."""
+        return bool(self._noise_streams)
+
+    def rebind_noise(
+        self, indices: Sequence[int] | NDArray[np.intp], streams: Sequence[np.random.Generator]
+    ) -> None:
+        """Give robots ``indices`` new noise streams, as if each had a World of its own built
+        with ``streams[k]``: a vector env's sub-env, reset with its own seed, draws what a
+        single env reset with that seed would (call before :meth:`reset` of those robots).
+
+        The roughness draws continue from the new stream at the shared block position (a
+        stream's draws do not depend on how they are chunked); every random effect hook gets
+        its children of the stream, in the order :meth:`_bind_noise` gives them.
+        """
+        random_hooks = [h for h in self._hooks if h.needs_rng]
+        if not (self._rough or random_hooks):
+            return
+        if len(streams) != len(indices):
+            raise ValueError("need one noise Generator per robot index")
+        start = self._noise_next
+        for i, stream in zip(indices, streams, strict=True):
+            i = int(i)
+            self._noise_streams[i] = stream
+            if random_hooks:
+                children = stream.spawn(len(random_hooks))
+                for hook, child in zip(random_hooks, children, strict=True):
+                    hook.rebind_rng(i, child)
+            if start < _NOISE_BLOCK:
+                self._noise_block[i, start:] = stream.standard_normal((_NOISE_BLOCK - start, 2))
+
+    @property
+    def substep(self) -> float:
+        """Length of one physics substep [s] (``dt / substeps``)."""
+        return self._h
+
+    @property
+    def rim_speed(self) -> FloatArray:
+        """Rim speed of each wheel during the current substep (N, 2) [m/s]."""
+        return self._rim_speed
+
+    @property
+    def ground_velocity(self) -> FloatArray:
+        """No-slip velocity of each wheel contact (N, 2, 2) [m/s] for the current substep."""
+        return self._ground_v
+
+    @property
+    def has_tracked_point(self) -> bool:
+        """True if some robot's tracked point differs from its axle midpoint."""
+        return bool(self._tracked)
+
+    def tracked_pose(self) -> FloatArray:
+        """The poses (N, 3) a tracking system reports: the true pose, moved to the tracked point
+        by effects such as ``gt_sensor_offset``."""
+        pose = self.pose.copy()
+        for hook in self._tracked:
+            pose = hook.tracked(pose)
+        return pose
+
+    def _build_space(self) -> None:
+        space = pymunk.Space()
+        space.iterations = self.iterations
+        space.gravity = (0.0, 0.0)
+        self.space = space
+        self._chassis: list[pymunk.Body] = []
+        self._ground: list[pymunk.Body] = []  # [2i] left, [2i+1] right
+        self._joints: list[pymunk.PivotJoint] = []
+        for spec, half in zip(self.robots, self.half_track, strict=True):
+            chassis = pymunk.Body(spec.mass, spec.moment_of_inertia)
+            space.add(chassis)
+            self._chassis.append(chassis)
+            for side in (+1.0, -1.0):  # left wheel at +y (body frame), right at −y
+                ground = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+                space.add(ground)
+                joint = pymunk.PivotJoint(chassis, ground, (0.0, side * half), (0.0, 0.0))
+                joint.max_bias = 0.0  # velocity-level only: friction, not a spring
+                joint.collide_bodies = False
+                space.add(joint)
+                self._ground.append(ground)
+                self._joints.append(joint)
+        self._links: list[pymunk.SlideJoint] = []
+        for i, j, lo, hi in self.links:
+            link = pymunk.SlideJoint(self._chassis[i], self._chassis[j], (0, 0), (0, 0), lo, hi)
+            link.collide_bodies = False
+            space.add(link)
+            self._links.append(link)
+        self._hitches: list[pymunk.PivotJoint] = []
+        for i, j, length in self.hitches:
+            hitch = pymunk.PivotJoint(self._chassis[i], self._chassis[j], (0, 0), (length, 0))
+            hitch.collide_bodies = False
+            space.add(hitch)
+            self._hitches.append(hitch)
+        self._friction = np.full((self.n, 2), np.nan)
+        self._set_friction(np.full((self.n, 2), self.floor.friction))
+        self._io = SpaceExchange(space, self._chassis, self._ground)
+
+    def _bind_state(self) -> None:
+        """The World's arrays that are views of the packed state (``substep.STATE_COLUMNS``)."""
+        views = state_views(self._state)
+        self._params = views["params"]
+        self.pose = views["pose"]
+        self.velocity = views["velocity"]
+        self.wheel_rate = views["wheel_rate"]
+        self.wheel_angle = views["wheel_angle"]
+        self._rim_speed = views["rim_speed"]
+        self._motor_step = views["motor_step"]
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        del state["_io"]  # C structures pointing at this space; the unpickled one gets its own
+        for name in ("_params", "pose", "velocity", "wheel_rate", "wheel_angle"):
+            del state[name]  # views, which pickling would turn into copies
+        del state["_rim_speed"], state["_motor_step"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._bind_state()
+        self._io = SpaceExchange(self.space, self._chassis, self._ground)
+
+    # ------------------------------------------------------------------ reset
+    def reset(
+        self, poses: FloatArray | None = None, indices: NDArray[np.intp] | None = None
+    ) -> None:
+        """Place robots at rest at ``poses`` (K, 3) [m, m, rad] (default: the origin).
+
+        ``indices`` selects which robots (default: all). Wheel rates, angles, encoder counts and
+        accumulated slip of those robots restart from zero.
+        """
+        if indices is None:
+            indices = np.arange(self.n)
+            self._clock[0] = 0.0
+            self._rim_speed[:] = 0.0
+            self._motor_step[:] = 0.0
+            self._contact[:] = 0.0
+        indices = np.asarray(indices, dtype=np.intp)
+        targets = np.zeros((len(indices), 3)) if poses is None else np.asarray(poses, dtype=float)
+        if targets.shape != (len(indices), 3) or not np.all(np.isfinite(targets)):
+            raise ValueError(f"poses must be a finite array of shape ({len(indices)}, 3)")
+        for row, i in enumerate(indices):
+            chassis = self._chassis[i]
+            chassis.position = (float(targets[row, 0]), float(targets[row, 1]))
+            chassis.angle = float(targets[row, 2])
+            chassis.velocity = (0.0, 0.0)
+            chassis.angular_velocity = 0.0
+            for ground in self._ground[2 * i : 2 * i + 2]:
+                ground.position = chassis.position
+                ground.velocity = (0.0, 0.0)
+        self.pose[indices] = targets
+        self.velocity[indices] = 0.0
+        self._ground_v[indices] = 0.0
+        self.wheel_rate[indices] = 0.0
+        self.wheel_angle[indices] = 0.0
+        self.counts[indices] = 0
+        self.slip[indices] = 0.0
+        for hook in getattr(self, "_hooks", ()):
+            hook.reset(indices)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, wheel_rate_cmd: FloatArray, scale: FloatArray | None = None) -> None:
+        """Advance one control period with commanded wheel rates (N, 2) [rad/s].
+
+        With ``scale`` (N,), robot i's wheel rates are ``wheel_rate_cmd[i] · scale[i]`` (the
+        envs pass actions in [−1, 1] and each robot's top wheel rate). Commands beyond the
+        robot's ``max_wheel_speed`` are clipped to it; a non-finite command raises ValueError
+        (the envs check their actions before they get here).
+        """
+        command = self.commands(wheel_rate_cmd)
+        if scale is None:
+            scale = self._unit_scale
+        h = self._h
+        io = self._io
+        if self._plain and io.compiled:
+            # No effect hooks, a plain floor: whole substeps (wheels, contact velocities, their
+            # mid-step turn, Chipmunk's step and the read-back) in one compiled call, one per
+            # substep only when the slip (numpy, see _accumulate_slip) is tracked in between.
+            per_call = 1 if self.track_slip else self.substeps
+            for _ in range(self.substeps // per_call):
+                check_step_status(
+                    step_plain(
+                        command,
+                        scale,
+                        self._state,
+                        self.counts,
+                        self._ground_v,
+                        io.addresses,
+                        io.heads,
+                        io.buffer,
+                        io.bodies,
+                        h,
+                        per_call,
+                    )
+                )
+                if self.track_slip:
+                    self._accumulate_slip(h)
+        else:
+            for _ in range(self.substeps):
+                # The wheels (and, on a plain floor, the mid-step turn), then every stage.
+                drive = drive_plain if self._plain else drive_wheels
+                if not drive(
+                    command,
+                    scale,
+                    self._params,
+                    self.pose,
+                    h,
+                    self.wheel_rate,
+                    self.wheel_angle,
+                    self.counts,
+                    self._rim_speed,
+                    self._ground_v,
+                    self._motor_step,
+                ):
+                    check_step_status(STEP_NOT_FINITE)
+                if not self._plain:
+                    self._effect_stages(h)
+                self._exchange(h)
+                if self.track_slip:
+                    self._accumulate_slip(h)
+        self._clock[0] += self.dt
+
+    def commands(self, wheel_rate_cmd: Any) -> FloatArray:
+        """``wheel_rate_cmd`` as the (N, 2) float64 array a step takes (any array-like of N×2
+        numbers, reshaped if need be); ValueError if it has another number of entries."""
+        command = np.asarray(wheel_rate_cmd, dtype=np.float64)
+        if command.shape != (self.n, 2):
+            if command.size != 2 * self.n:
+                raise ValueError(
+                    f"wheel_rate_cmd must have shape ({self.n}, 2), got {command.shape}"
+                )
+            command = command.reshape(self.n, 2)
+        return command
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s] since the World was built or last reset as a whole."""
+        return float(self._clock[0])
+
+    @property
+    def fuses_substeps(self) -> bool:
+        """True if a whole step runs as one compiled call (no effect hooks, a plain floor, the
+        compiled Chipmunk link, slip not tracked), which a caller may then make part of a
+        larger compiled step (:func:`odomgym._kernels.control_step`) with
+        :meth:`step_arrays`."""
+        return self._plain and self._io.compiled and not self.track_slip
+
+    def step_arrays(
+        self,
+    ) -> tuple[
+        FloatArray,
+        IntArray,
+        FloatArray,
+        NDArray[np.uint64],
+        NDArray[np.int32],
+        FloatArray,
+        NDArray[np.uint64],
+        FloatArray,
+    ]:
+        """The arrays a fused step (:func:`odomgym._kernels.step_plain`) works on, in the
+        order of :data:`odomgym._kernels.STEP_FIELDS`: packed state, encoder counts, contact
+        velocities, the Chipmunk link's addresses, headers, buffer and bodies, and the clock
+        (1,) [s]. They stay the same arrays for the World's life."""
+        io = self._io
+        return (
+            self._state,
+            self.counts,
+            self._ground_v,
+            io.addresses,
+            io.heads,
+            io.buffer,
+            io.bodies,
+            self._clock,
+        )
+
+    def _exchange(self, h: float) -> None:
+        """The ground bodies take their contact velocities, Chipmunk steps by ``h`` [s], and
+        ``pose``/``velocity`` take the chassis' new state.
+
+        ``pose`` is the raw Chipmunk pose advanced by v·h: Chipmunk integrates positions at the
+        *start* of its next step with the velocities just solved, so this is where the motion of
+        this step (already counted by the encoders) puts the robot, and the configuration at
+        which the next step's contact velocities will be solved.
+        """
+        io = self._io
+        if not io.compiled:
+            io.exchange_in_python(self._ground_v, h, self.pose, self.velocity)
+        elif not exchange(
+            io.addresses,
+            io.heads,
+            io.buffer,
+            io.bodies,
+            self._ground_v,
+            h,
+            self.pose,
+            self.velocity,
+        ):
+            check_step_status(STEP_BAD_READ_BACK)
+
+    def _effect_stages(self, h: float) -> None:
+        """After the wheels, one substep's contact velocities through every stage: transmission
+        hooks, shape hooks, the floor, perturbation hooks, then the mid-step turn."""
+        if self._transmission:
+            for hook in self._transmission:
+                hook.transmission(self._motor_step)
+            rim_from_wheel_step(
+                self._motor_step,
+                self._params,
+                self.pose,
+                h,
+                self._rim_speed,
+                self._ground_v,
+            )
+        for hook in self._shape:
+            hook.shape(self, h)
+        if self._modifies_ground:
+            self._floor_effects(h)
+        for hook in self._perturb:
+            hook.perturb(self, h)
+        midstep_translation(self._ground_v, self.pose, self._params, h)
+
+    def _accumulate_slip(self, h: float) -> None:
+        """Contact point velocity v + ω × r = v − ω·l·(cos θ, sin θ) against its ground body's.
+
+        Uses the heading at which the step was solved (pose − ω·h), like the ground velocity.
+        """
+        theta = self.pose[:, 2:3] - self.velocity[:, 2:3] * h
+        cos_t, sin_t = np.cos(theta), np.sin(theta)
+        omega_l = self.velocity[:, 2:3] * self._lateral
+        slip = np.hypot(
+            self.velocity[:, 0:1] - omega_l * cos_t - self._ground_v[:, :, 0],
+            self.velocity[:, 1:2] - omega_l * sin_t - self._ground_v[:, :, 1],
+        )
+        self.slip += slip * h
+
+    def _floor_effects(self, h: float) -> None:
+        """Cables, friction patches and roughness acting on the no-slip ground velocity.
+
+        Scalar kernels, not numpy: numpy's vectorised sin/cos and complex products may round
+        differently with the array length (SIMD paths), which would make a robot's trajectory
+        depend on how many robots share its batch.
+        """
+        noise = self._standard_normal() if self._rough else self._no_noise
+        floor_kernel(
+            self.pose,
+            self._lateral,
+            self._rim_speed,
+            noise,
+            self.wheel_roughness,
+            h,
+            self._contact,
+            self._ground_v,
+        )
+        if self._has_bumps:
+            apply_cable_deficits(
+                self._contact,
+                self.pose,
+                self._rim_speed,
+                h,
+                self.true_radius,
+                self._bump_grid,
+                self._ground_v,
+            )
+        if self._has_patches:
+            self._set_friction(
+                self.floor.friction_at(self._contact[:, :, 0], self._contact[:, :, 1])
+            )
+
+    def _standard_normal(self) -> FloatArray:
+        """Next (N, 2) standard normal draws, robot i's from its own stream.
+
+        Drawn in blocks of ``_NOISE_BLOCK`` steps per robot, so the per-step cost does not grow
+        with one Python call per robot.
+        """
+        if self._noise_next == _NOISE_BLOCK:
+            for i, stream in enumerate(self._noise_streams):
+                self._noise_block[i] = stream.standard_normal((_NOISE_BLOCK, 2))
+            self._noise_next = 0
+        draws = self._noise_block[:, self._noise_next, :]
+        self._noise_next += 1
+        return draws
+
+    def _set_friction(self, mu: FloatArray) -> None:
+        changed = np.argwhere(mu != self._friction)
+        for i, side in changed:
+            self._joints[2 * i + side].max_force = float(mu[i, side] * self.normal_force[i])
+        self._friction = mu
+
+    def lay_floor(self, floor: FloorSpec) -> None:
+        """Change the cables, patches and friction under the robots between steps, as an
+        experimenter lays cables before a return leg (Borenstein 1995, §6.1). The roughness
+        must stay as it was (each robot's noise stream was bound to it at construction)."""
+        if floor.roughness != self.floor.roughness:
+            raise ValueError(
+                f"lay_floor keeps the roughness ({self.floor.roughness}), got {floor.roughness}"
+            )
+        self.floor = floor
+        self._has_bumps = bool(floor.bumps)
+        max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
+        self._bump_grid = CableGrid.build(floor, float(self.true_radius.max()), 1.5 * max_step)
+        self._has_patches = bool(floor.patches)
+        self._modifies_ground = self._has_bumps or self._has_patches or self._rough
+        self._plain = not (
+            self._transmission or self._shape or self._perturb or self._modifies_ground
+        )
+        self._set_friction(np.full((self.n, 2), floor.friction))
+
+    def link_forces(self) -> FloatArray:
+        """Force of each link's last step [N] (zero while the linkage is inside its range)."""
+        h = self.dt / self.substeps
+        return np.array([link.impulse / h for link in self._links])
+
+    def hitch_forces(self) -> FloatArray:
+        """Force each hitch passed in the last step [N] (the towing force)."""
+        h = self.dt / self.substeps
+        return np.array([abs(hitch.impulse) / h for hitch in self._hitches])
