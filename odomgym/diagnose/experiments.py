@@ -19,7 +19,13 @@ from odomgym.diagnose.replay import replay_run
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["MENU", "Separation", "SyntheticExperiment", "separating_experiment", "synthetic_run"]
+__all__ = [
+    "SEPARATING_EXPERIMENTS",
+    "Separation",
+    "SyntheticExperiment",
+    "separating_experiment",
+    "synthetic_run",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -42,7 +48,7 @@ def _square(side: float, sign: float, v: float) -> tuple[tuple[float, float, flo
     return tuple(legs)
 
 
-MENU: tuple[SyntheticExperiment, ...] = (
+SEPARATING_EXPERIMENTS: tuple[SyntheticExperiment, ...] = (
     SyntheticExperiment("straight 4 m one way", ((0.3, 0.0, 4 / 0.3),), "drive 4 m straight"),
     SyntheticExperiment(
         "straight 4 m out and back",
@@ -113,7 +119,7 @@ def separating_experiment(
     most, in sensor standard deviations (largest over the run, position and heading); returns
     it and every experiment's separation."""
     scores = []
-    for experiment in MENU:
+    for experiment in SEPARATING_EXPERIMENTS:
         run = synthetic_run(experiment, first)
         a = replay_run(run, first).tracked
         b = replay_run(run, second).tracked

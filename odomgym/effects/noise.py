@@ -4,10 +4,11 @@
   noise of variance k²·|d|, with its own k per wheel. The World adds it to the floor's own
   roughness (variances add).
 * ``floor_bumps`` — each wheel meets bumps as a Poisson process of ``rate`` per metre of its
-  travel; crossing one, it turns more than it advances (the rigid-wheel-over-cable over-count
-  of :func:`odomgym.floor.bump_extra_rotation`), by a·b so the heading jumps by ±a: +a under the
-  left wheel, −a under the right. In the World the lost travel is spread over 5 cm of the wheel's
-  travel, as a real wheel climbs over a cable; the draws come from the robot's own stream.
+  travel; crossing one, it turns more than it advances (the rigid-wheel-over-cable
+  over-count of :func:`odomgym.sim.cables.bump_extra_rotation`), by a·b so the heading jumps by
+  ±a: +a under the left wheel, −a under the right. In the World the lost travel is spread over
+  5 cm of the wheel's travel, as a real wheel climbs over a cable; the draws come from the
+  robot's own stream.
 
 Roughness does not move the mean of the disagreement; bumps do a little — their losses always
 shorten a wheel's travel, by ``rate``·a·b per metre on average, which the replay applies. The
