@@ -199,6 +199,12 @@ def main(argv: list[str] | None = None) -> int:
         help="K/N: diagnose only folds K, K+N, … (run N processes with --jobs 1 on N cores, "
         "then once without --shard to print the table from their files)",
     )
+    parser.add_argument(
+        "--table-only",
+        action="store_true",
+        help="print the table of the folds already in --out, diagnosing none (missing folds "
+        "are listed)",
+    )
     args = parser.parse_args(argv)
     try:
         shard, shards = (int(v) for v in args.shard.split("/"))
@@ -215,19 +221,26 @@ def main(argv: list[str] | None = None) -> int:
     sessions = list(dict.fromkeys(sessions_of(runs)))
     folds = []
     mine = sessions[shard - 1 :: shards]
+    missing = []
     for session in tqdm(mine, desc="leave one session out", file=sys.stderr):
         path = out / f"fold-{session}.json"
         if path.is_file():
             folds.append(json.loads(path.read_text(encoding="utf-8")))
             continue
+        if args.table_only:
+            missing.append(session)
+            continue
         result = fold(runs, robot, session, args.jobs)
         atomic_write_text(path, json.dumps(result, indent=1, default=float))
         folds.append(result)
     summary = summarise(folds)
+    summary["missing_folds"] = missing
     if args.json:
         print(json.dumps({"folds": folds, "summary": summary}, default=float))
     else:
         print(table(folds, summary))
+        if missing:
+            print(f"\nNot diagnosed yet ({len(missing)} of {len(sessions)}): {', '.join(missing)}")
     return 0
 
 
