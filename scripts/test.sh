@@ -45,6 +45,4 @@ SITE="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$SITE"
 rm -rf "$SITE"
 echo "== pytest (every test, slow ones included, on ${PYTEST_WORKERS:-auto} xdist workers)"
-# --dist loadgroup: tests marked xdist_group("…") share one worker, so an expensive
-# module-scoped fixture (the 14 June sessions diagnosed together) is built once, not per worker.
-"$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}" --dist loadgroup
+"$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}"

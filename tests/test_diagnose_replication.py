@@ -32,9 +32,6 @@ from odomgym.effects import EFFECTS
 from odomgym.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
-# One worker builds the module's fixture (one diagnosis of 102 runs) for all its tests
-# (scripts/test.sh runs xdist with --dist loadgroup).
-pytestmark = pytest.mark.xdist_group("june-sessions")
 
 
 def _gather(folder: Path) -> Path:
@@ -49,16 +46,14 @@ def _gather(folder: Path) -> Path:
     return gathered
 
 
-@pytest.fixture(scope="module")
-def june(tmp_path_factory: pytest.TempPathFactory) -> Diagnosis:
+def _diagnose_june(tmp_path_factory: pytest.TempPathFactory) -> Diagnosis:
     model = load_robot(ROOT / "examples" / "optiodom_nominal.toml")
     runs, _ = read_log(_gather(tmp_path_factory.mktemp("june")), robot=model, format="optiodom")
     assert len({r.meta["session"] for r in runs}) == 14
     return diagnose(runs, model, DiagnoseConfig(jobs=2), baseline=TrajectoryBaseline())
 
 
-@pytest.mark.slow
-def test_the_diagnosed_model_predicts_sessions_it_never_saw_better(june: Diagnosis) -> None:
+def _the_diagnosed_model_predicts_sessions_it_never_saw_better(june: Diagnosis) -> None:
     held = june.held_out
     assert held is not None and held.split == "sessions"
     report = held.as_dict()
@@ -72,8 +67,7 @@ def test_the_diagnosed_model_predicts_sessions_it_never_saw_better(june: Diagnos
     assert june.verdict != "unconfirmed"
 
 
-@pytest.mark.slow
-def test_every_kept_effect_and_term_passed_the_open_loop_check(june: Diagnosis) -> None:
+def _every_kept_effect_and_term_passed_the_open_loop_check(june: Diagnosis) -> None:
     kept = {(step.kind, step.name) for step in june.gate if step.kept}
     for name in june.systematic_effects:
         partner_of_noise = any(name in EFFECTS[n].partners for n in june.noise_model)
@@ -86,8 +80,7 @@ def test_every_kept_effect_and_term_passed_the_open_loop_check(june: Diagnosis) 
         assert (name in june.noise_model) == check["accepted"], check
 
 
-@pytest.mark.slow
-def test_the_mean_wheel_diameter_comes_out_below_nominal(june: Diagnosis) -> None:
+def _the_mean_wheel_diameter_comes_out_below_nominal(june: Diagnosis) -> None:
     e_s = june.parameters["distance_scale"]["e_s"]
     assert e_s["value"] + 2 * e_s["stderr"] < 1.0, e_s
     assert e_s["value"] > 0.985, e_s
@@ -96,8 +89,7 @@ def test_the_mean_wheel_diameter_comes_out_below_nominal(june: Diagnosis) -> Non
         assert 0.995 < e_b < 1.02, e_b
 
 
-@pytest.mark.slow
-def test_nuisances_are_reported_per_session_never_as_robot_effects(june: Diagnosis) -> None:
+def _nuisances_are_reported_per_session_never_as_robot_effects(june: Diagnosis) -> None:
     sessions = [n.session for n in june.nuisances]
     assert len(sessions) == len(set(sessions)) >= 9
     assert all(n.frame for n in june.nuisances)
@@ -105,3 +97,14 @@ def test_nuisances_are_reported_per_session_never_as_robot_effects(june: Diagnos
     assert "wheel_toe" not in june.named_effects
     assert "gt_sensor_offset" not in june.named_effects
     assert not math.isnan(june.gap_after)
+
+
+@pytest.mark.slow
+def test_the_june_sessions_diagnosed_together(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """One diagnosis of the 102 runs (minutes on two cores), every check of the module docstring
+    on it: one test, so that parallel workers never build it twice."""
+    june = _diagnose_june(tmp_path_factory)
+    _the_diagnosed_model_predicts_sessions_it_never_saw_better(june)
+    _every_kept_effect_and_term_passed_the_open_loop_check(june)
+    _the_mean_wheel_diameter_comes_out_below_nominal(june)
+    _nuisances_are_reported_per_session_never_as_robot_effects(june)
