@@ -160,6 +160,17 @@ def _fold_means(per_run: FloatArray, folds: Sequence[Sequence[int]]) -> FloatArr
     return np.array([float(np.mean(per_run[list(f)])) for f in folds])
 
 
+def _fold_difference(
+    a: FloatArray, b: FloatArray, folds: Sequence[Sequence[int]]
+) -> tuple[float, float]:
+    """Mean over the folds of (fold mean of ``a`` − fold mean of ``b``) and its standard error
+    (inf with one fold): the paired comparison both the gate and the estimator choice use."""
+    diff = _fold_means(a, folds) - _fold_means(b, folds)
+    mean = float(np.mean(diff))
+    spread = float(np.std(diff, ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else math.inf
+    return mean, spread
+
+
 class FilterLinearisation:
     """The filter's view of every proposal at once, for the gate's cheap filter estimates.
 
@@ -343,11 +354,7 @@ def open_loop_gate(
                 smaller, smaller_cv, _ = fitted(rest, begin, current.nuisances)
             else:
                 smaller, smaller_cv = nominal_fit, nominal_cv
-            diff = _fold_means(current_cv, folds) - _fold_means(smaller_cv, folds)
-            mean = float(np.mean(diff))
-            spread = (
-                float(np.std(diff, ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else math.inf
-            )
+            mean, spread = _fold_difference(current_cv, smaller_cv, folds)
             lenient = kind == "effect" and name in chosen_by_rounds
             step = GateStep(
                 kind=kind,
@@ -426,10 +433,8 @@ class SystematicFit:
     def better_than(self, other: SystematicFit, folds: Sequence[Sequence[int]]) -> bool:
         """Whether this fit predicts the left-out folds better than ``other`` by more than one
         standard error of the folds' paired differences (one fold: never)."""
-        diff = _fold_means(self.cv_error, folds) - _fold_means(other.cv_error, folds)
-        if len(diff) < 2:
-            return False
-        return float(np.mean(diff) + np.std(diff, ddof=1) / math.sqrt(len(diff))) < 0.0
+        mean, spread = _fold_difference(self.cv_error, other.cv_error, folds)
+        return mean + spread < 0.0
 
 
 def _quoted(by_session: float, by_run: float) -> float:
