@@ -11,9 +11,14 @@ import numpy as np
 import pytest
 from independent_robot import IndependentRobot, generate, rich_protocol
 
-from odomgym.diagnose.gate import model_effect, open_loop_gate
+from odomgym.diagnose.gate import MAX_INFLATION, model_effect, open_loop_gate
 from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
-from odomgym.diagnose.openloop import NuisanceOptions, OpenLoopData, open_loop_folds
+from odomgym.diagnose.openloop import (
+    NuisanceOptions,
+    OpenLoopData,
+    open_loop_folds,
+    variance_inflation,
+)
 from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
 from odomgym.diagnose.workflow import split_runs
 from odomgym.effects import EFFECTS
@@ -177,3 +182,61 @@ def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term() -> None:
     assert first.kept and first.after_mm < first.before_mm
     assert not second.kept and second.rule == "one standard error"
     assert abs(gate.fit.spec.e_b - 1.01) < 0.001
+
+
+def test_a_term_the_sessions_frames_absorb_is_not_identifiable(runs: list[Run]) -> None:
+    """With every session's frame fitted, a constant crab angle only trades against the frames'
+    yaw and the tracked heading, so its variance inflation is unbounded: the gate refuses it as
+    "not identifiable" whatever it does to the held-out error (on June OptiOdom sessions such a
+    term made E_s and E_b 1.00 ± 2.4), and the wheelbase keeps a finite standard error."""
+    robot = IndependentRobot(effects={"wheelbase": {"e_b": 1.01}})
+    tagged = _tagged(
+        generate(robot, rich_protocol(), np.random.default_rng(31)),
+        [(f"s{k}", "square") for k in range(4)],
+    )
+    proposed = EFFECTS["wheelbase"].write(ROBOT, {"e_b": 1.01})
+    proposed = model_effect((), ("crab_one",)).write(  # type: ignore[union-attr]
+        proposed, {"discovered.crab_one": 0.01}
+    )
+    gate = open_loop_gate(
+        OpenLoopData(tagged, 0.25, ROBOT.wheelbase),
+        ROBOT,
+        proposed,
+        ["wheelbase"],
+        ["crab_one"],
+        NuisanceOptions(frames=True),
+        open_loop_folds(tagged),
+    )
+    assert gate.effects == ["wheelbase"] and gate.terms == []
+    crab = next(s for s in gate.steps if s.name == "crab_one")
+    assert not crab.kept and crab.rule == "not identifiable" and crab.inflation > MAX_INFLATION
+    wheelbase = next(s for s in gate.steps if s.name == "wheelbase")
+    assert wheelbase.kept and math.isnan(wheelbase.inflation)
+    assert gate.fit.stderr_sessions["wheelbase.e_b"] < 1e-3
+    assert abs(gate.fit.spec.e_b - 1.01) < 0.001
+
+
+def test_variance_inflation_is_one_over_one_minus_r_squared() -> None:
+    """Two columns of correlation ρ inflate each other's variance by 1 / (1 − ρ²) (Kutner et al.
+    2005, §10.5), whatever their scales; an orthogonal column is not inflated; a column that is a
+    combination of others is infinitely inflated."""
+    rng = np.random.default_rng(5)
+    a, b, c = rng.standard_normal((3, 400))
+    a -= a.mean()
+    b -= b.mean()
+    c -= c.mean()
+    b -= (a @ b) / (a @ a) * a  # orthogonal to a
+    rho = 0.8
+    mixed = rho * a / np.linalg.norm(a) + math.sqrt(1 - rho**2) * b / np.linalg.norm(b)
+    jac = np.column_stack([3.0 * a, 0.01 * mixed])
+    normal = jac.T @ jac
+    vif = variance_inflation(normal, np.linalg.inv(normal))
+    assert vif == pytest.approx([1 / (1 - rho**2)] * 2, rel=1e-9)
+    ortho = np.column_stack([a, b])
+    assert variance_inflation(ortho.T @ ortho, np.linalg.inv(ortho.T @ ortho)) == pytest.approx(
+        [1.0, 1.0], rel=1e-9
+    )
+    singular = np.column_stack([a, b, a - 2.0 * b, c])
+    normal = singular.T @ singular
+    vif = variance_inflation(normal, np.linalg.pinv(normal))
+    assert np.all(np.isinf(vif[:3])) and vif[3] == pytest.approx(1.0, abs=0.2)

@@ -20,7 +20,12 @@ is missing takes part of the curvature and predicts worse than nothing). The rul
 * a discovered term (a sinusoid's sine and cosine together) stays if it lowers the error by more
   than one standard error of the folds' differences —
   the one-standard-error rule (Breiman, Friedman, Olshen & Stone 1984, §3.4.3; Hastie,
-  Tibshirani & Friedman 2009, §7.10): a term must earn its place against the smaller model.
+  Tibshirani & Friedman 2009, §7.10): a term must earn its place against the smaller model;
+* and only if the open-loop fit can tell it from the rest of the model: a term whose variance
+  inflation factor in the fit exceeds :data:`MAX_INFLATION` is a combination of the geometry
+  and the sessions' nuisances (a constant crab angle with the sessions' frames fitted),
+  whatever it does to the error: it would only make the parameters a user copies arbitrary
+  (rule ``"not identifiable"``; :func:`odomgym.diagnose.openloop.variance_inflation`).
 
 Every model is fitted two ways, and judged by whichever predicts the folds better: by least
 squares on the open-loop error (:func:`odomgym.diagnose.openloop.fit_open_loop`, jointly with the
@@ -78,6 +83,14 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 DISCOVERED = "discovered"
+MAX_INFLATION = 1e6
+"""The largest variance inflation factor a discovered term may have in the open-loop fit
+(module docstring). VIF = 1 / (1 − R²) with R² of the term's column regressed on the others
+(Kutner, Nachtsheim, Neter & Li 2005, §10.5), so 10⁶ is a column within 10⁻³ (relative norm)
+of the others' span: the bound :func:`odomgym.diagnose.discover.library_jacobian` drops a
+term at. Not the textbook 10 for *harmful* collinearity: the geometry is itself that collinear
+(on the June OptiOdom sessions E_d's VIF is ≈ 700 beside a turn skid) and still well
+determined; this bound refuses only what the data cannot determine at all."""
 
 
 @dataclass(frozen=True)
@@ -93,9 +106,13 @@ class GateStep:
             (runs weigh equally).
         difference, stderr: mean over the folds of the change of their mean square error, and
             its standard error [mm²].
-        rule: the rule it had to pass (``"lower"`` or ``"one standard error"``).
+        rule: the rule it had to pass (``"lower"`` or ``"one standard error"``), or
+            ``"not identifiable"``: a term whose variance inflation exceeded
+            :data:`MAX_INFLATION`.
         estimator: whose fold refits predicted the folds better, and so were compared:
             ``"open loop"`` or ``"filter"`` (:class:`FilterLinearisation`).
+        inflation: the largest variance inflation factor of its parameters in the open-loop
+            fit of the model with it (NaN for catalogue effects, which are not judged by it).
     """
 
     kind: str
@@ -107,6 +124,7 @@ class GateStep:
     stderr: float
     rule: str
     estimator: str = "open loop"
+    inflation: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -356,29 +374,41 @@ def open_loop_gate(
                 smaller, smaller_cv = nominal_fit, nominal_cv
             mean, spread = _fold_difference(current_cv, smaller_cv, folds)
             lenient = kind == "effect" and name in chosen_by_rounds
+            inflation = (
+                max(current.inflation.get(f"{DISCOVERED}.{t}", math.inf) for t in term_names)
+                if kind == "term"
+                else math.nan
+            )
+            confounded = inflation > MAX_INFLATION
             step = GateStep(
                 kind=kind,
                 name=name,
-                kept=mean < 0.0 if lenient else mean + spread < 0.0,
+                kept=False if confounded else (mean < 0.0 if lenient else mean + spread < 0.0),
                 before_mm=1e3 * math.sqrt(float(np.mean(smaller_cv))),
                 after_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
                 difference=1e6 * mean,
                 stderr=1e6 * spread,
-                rule="lower" if lenient else "one standard error",
+                rule="not identifiable"
+                if confounded
+                else ("lower" if lenient else "one standard error"),
                 estimator=current_estimator,
+                inflation=inflation,
             )
             trials[member] = (step, smaller, smaller_cv)
             tested[member] = step
         failing = [m for m in model if not trials[m][0].kept]
         if not failing:
             break
-        # The least useful proposal goes (the largest change, a term's counted with its
-        # standard error), and the rest are tested again without it.
+        # A term the fit cannot identify goes first (the most inflated), else the least useful
+        # proposal (the largest change, a term's counted with its standard error); the rest
+        # are tested again without it.
         worst = max(
             failing,
             key=lambda m: (
+                trials[m][0].rule == "not identifiable",
+                trials[m][0].inflation if trials[m][0].rule == "not identifiable" else 0.0,
                 trials[m][0].difference
-                + (trials[m][0].stderr if trials[m][0].rule != "lower" else 0.0)
+                + (trials[m][0].stderr if trials[m][0].rule != "lower" else 0.0),
             ),
         )
         removed.append(trials[worst][0])

@@ -55,7 +55,7 @@ from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import Effect
 from odomgym.errors import SpecError
-from odomgym.odometry.runs import Run
+from odomgym.odometry.runs import Run, rotate_into
 from odomgym.odometry.umbmark_measures import e_max_syst
 from odomgym.robot import RobotSpec
 
@@ -71,6 +71,7 @@ __all__ = [
     "pose_errors",
     "predicted_path",
     "run_errors",
+    "variance_inflation",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -426,6 +427,8 @@ class OpenLoopFit:
         nuisances: each session's fitted nuisances.
         options: which nuisances were fitted.
         run_error: each run's mean square combined error at the fit [m²].
+        inflation: every parameter's variance inflation factor (:func:`variance_inflation`),
+            by the other parameters and the sessions' nuisances together.
     """
 
     spec: RobotSpec
@@ -439,6 +442,7 @@ class OpenLoopFit:
     problem: _Problem = field(repr=False)
     x: FloatArray = field(repr=False)
     blocks: tuple[list[FloatArray], list[FloatArray], list[FloatArray]] = field(repr=False)
+    inflation: dict[str, float] = field(default_factory=dict)
 
     @property
     def error(self) -> float:
@@ -497,14 +501,16 @@ def fit_open_loop(
     )
     x, res, robot, own = _levenberg_marquardt(problem, np.concatenate(x0))
     fitted = build(x[: problem.size])
-    se_runs, se_sessions = _clustered_errors(problem, robot, own, res)
+    se_runs, se_sessions, vif = _clustered_errors(problem, robot, own, res)
     values = effect.read(fitted) if effect is not None else {}
     stderr_runs: dict[str, float] = {}
     stderr_sessions: dict[str, float] = {}
+    inflation: dict[str, float] = {}
     if effect is not None:
         for k, p in enumerate(effect.parameters):
             stderr_runs[p.name] = float(se_runs[k] * p.scale)
             stderr_sessions[p.name] = float(se_sessions[k] * p.scale)
+            inflation[p.name] = float(vif[k])
     nuisances = {}
     for s in order:
         se = np.full(4, math.nan)
@@ -524,28 +530,51 @@ def fit_open_loop(
         problem=problem,
         x=x,
         blocks=(robot, own, res),
+        inflation=inflation,
     )
 
 
 def _clustered_errors(
     problem: _Problem, robot: list[FloatArray], own: list[FloatArray], res: list[FloatArray]
-) -> tuple[FloatArray, FloatArray]:
-    """Run- and session-clustered standard errors of every fitted parameter (fit units)."""
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Run- and session-clustered standard errors of every fitted parameter (fit units), and
+    every parameter's variance inflation factor (:func:`variance_inflation`)."""
     a, _ = problem.normal(robot, own, res, range(len(res)))
     if len(a) == 0:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0)
     try:
         cov: FloatArray = np.asarray(np.linalg.inv(a), dtype=np.float64)
     except np.linalg.LinAlgError:
         nan = np.full(len(a), math.nan)
-        return nan, nan
+        return nan, nan, np.full(len(a), math.inf)
     scores = np.array([problem.score(robot, own, res, j) for j in range(len(res))])
     by_run = clustered_covariance(cov, scores, list(range(len(res))))
     by_session = clustered_covariance(cov, scores, list(problem.data.sessions))
     return (
         np.sqrt(np.maximum(np.diag(by_run), 0.0)),
         np.sqrt(np.maximum(np.diag(by_session), 0.0)),
+        variance_inflation(a, cov),
     )
+
+
+def variance_inflation(normal: FloatArray, inverse: FloatArray) -> FloatArray:
+    """Variance inflation factor of every parameter of a least-squares fit with normal matrix
+    ``normal`` (JᵀJ, the sessions' nuisance columns included) and its ``inverse``:
+    VIF_k = (JᵀJ)⁻¹_kk · (JᵀJ)_kk, the factor by which the other columns inflate parameter k's
+    variance over a fit of k alone (Kutner, Nachtsheim, Neter & Li 2005, §10.5; invariant to
+    the columns' scales; ≥ 1 in exact arithmetic). ∞ where a parameter's column has no length
+    or the matrix is singular in it (numerically: a VIF below 1 or beyond 1e12).
+
+    Why: a grammar term can be a combination of the fitted geometry and the sessions' nuisances
+    — a constant crab angle is a frame yaw with the opposite tracked-heading offset, so with
+    the sessions' frames fitted it only moves them; its least-squares value is then arbitrary
+    and the geometry's standard errors explode (on June OptiOdom sessions: E_s and E_b 1.00 ±
+    2.4). The open-loop gate refuses such a term (:data:`odomgym.diagnose.gate.MAX_INFLATION`)."""
+    diagonal = np.diag(normal)
+    vif = np.diag(inverse) * diagonal
+    valid = (diagonal > 0.0) & np.isfinite(vif) & (vif >= 1.0 - 1e-9) & (vif < 1e12)
+    out: FloatArray = np.where(valid, vif, math.inf)
+    return out
 
 
 def _session_time(run: Run, index: int) -> tuple[float, int]:
@@ -708,10 +737,8 @@ def evaluate_open_loop(
         if run.kind == "square" and run.direction in ("cw", "ccw"):
             last = np.flatnonzero(np.isfinite(error[:, :2]).all(axis=1))[-1]
             theta0 = float(correct_run(run, nuisance).true_pose[0, 2])
-            c, s = math.cos(theta0), math.sin(theta0)
-            ex, ey = error[last, 0], error[last, 1]
-            start_frame = np.array([c * ex + s * ey, -s * ex + c * ey])
-            ends.setdefault(data.sessions[j], {}).setdefault(run.direction, []).append(start_frame)
+            in_start = rotate_into(error[last : last + 1, 0], error[last : last + 1, 1], theta0)
+            ends.setdefault(data.sessions[j], {}).setdefault(run.direction, []).append(in_start[0])
     kept_paths = {
         str(data.runs[j].meta.get("run", j + 1)): predicted_path(
             data.runs[j], spec, known.get(data.sessions[j])
