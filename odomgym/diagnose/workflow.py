@@ -74,6 +74,7 @@ from odomgym.diagnose.fit import (
 )
 from odomgym.diagnose.gate import (
     FilterLinearisation,
+    GateResult,
     GateStep,
     SystematicFit,
     filter_estimate,
@@ -971,16 +972,23 @@ def _with_clock(
     return out
 
 
-def _significant_effects(state: DiagnosisState) -> list[str]:
-    """Every systematic catalogue effect some round found significant (named, absorbed or
-    beaten by another), in the order first found: the open-loop gate's pool. Those tied in a
-    last round that ended ``ambiguous`` stay out: the data cannot tell them apart, and the
-    verdict says so with the experiment that would."""
-    found = [c.name for c in state.candidates if c.significant]
+def _tied_effects(state: DiagnosisState) -> list[str]:
+    """The systematic effects tied in a last round that ended ``ambiguous`` (none otherwise)."""
     last = state.rounds[-1] if state.rounds else None
-    tied = set(last.tied) if last is not None and last.verdict == "ambiguous" else set()
+    if last is None or last.verdict != "ambiguous":
+        return []
+    return [n for n in last.tied if not EFFECTS[n].noise]
+
+
+def _significant_effects(state: DiagnosisState, *, tied: bool) -> list[str]:
+    """Every systematic catalogue effect some round found significant (named, absorbed or
+    beaten by another), in the order first found: the open-loop gate's pool. With ``tied``
+    false, those tied in a last round that ended ``ambiguous`` (:func:`_tied_effects`) stay
+    out."""
+    found = [c.name for c in state.candidates if c.significant]
+    out = set(_tied_effects(state)) if not tied else set()
     return [
-        n for n in dict.fromkeys([*state.named, *found]) if not EFFECTS[n].noise and n not in tied
+        n for n in dict.fromkeys([*state.named, *found]) if not EFFECTS[n].noise and n not in out
     ]
 
 
@@ -1185,31 +1193,44 @@ def diagnose(
     plausible_terms = [size.term for size in sizes if size.plausible]
     # 3. The open-loop gate: each proposal in turn must lower the error of predicting the
     # held-out folds (whole sessions, or blocks of time) open loop.
-    proposed_effects = _significant_effects(state)
+    # Effects the likelihood could not tell apart (a last round ended ``ambiguous``) are
+    # proposed too, each under the one-standard-error rule: if the open-loop prediction of
+    # left-out folds needs every one of them beside the others, the tie is resolved (on June
+    # OptiOdom sessions a turn skid tied with the distance scale, and the folds needed both);
+    # if it keeps only some, it could not tell them apart either — the gate is run again
+    # without them, and the verdict stays ambiguous with its separating experiment.
+    tied = _tied_effects(state)
     # The filter's estimates, linearised at the rounds' model, without a noise effect's mean part
     # (floor bumps shorten the travel: their partner takes it in the fits).
     base = state.model.spec
     for name in state.named:
         if EFFECTS[name].noise and type(EFFECTS[name]).replay is not Effect.replay:
             base = EFFECTS[name].write(base, EFFECTS[name].absent_values())
-    linearised = FilterLinearisation(
-        data, Model(base, state.model.sensor), proposed_effects, plausible_terms
-    )
-    gate = open_loop_gate(
-        open_data,
-        robot,
-        state.model.spec,
-        proposed_effects,
-        plausible_terms,
-        options,
-        open_loop_folds(fit_runs),
-        start=nuisances,
-        nominal=nominal,
-        report=report,
-        filtered=linearised,
-        corrected=OpenLoopData(fit_corrected, interval, length),
-        named=[n for n in state.named if not EFFECTS[n].noise],
-    )
+
+    def gated(proposed_effects: list[str]) -> GateResult:
+        linearised = FilterLinearisation(
+            data, Model(base, state.model.sensor), proposed_effects, plausible_terms
+        )
+        return open_loop_gate(
+            open_data,
+            robot,
+            state.model.spec,
+            proposed_effects,
+            plausible_terms,
+            options,
+            open_loop_folds(fit_runs),
+            start=nuisances,
+            nominal=nominal,
+            report=report,
+            filtered=linearised,
+            corrected=OpenLoopData(fit_corrected, interval, length),
+            named=[n for n in state.named if not EFFECTS[n].noise],
+        )
+
+    gate = gated(_significant_effects(state, tied=True))
+    resolved = bool(tied) and set(tied) <= set(gate.effects)
+    if tied and not resolved:
+        gate = gated(_significant_effects(state, tied=False))
     # 4. The estimator of the kept model's values: the filter's (efficient when its noise model
     # is right), unless the open-loop fit's (what the held-out comparison measures, robust to a
     # wrong noise model) predicts the left-out folds better by one standard error. Between two
@@ -1315,6 +1336,8 @@ def diagnose(
     held_corrected = correct_runs(held_runs, models[DIAGNOSED].nuisances)
     found_anything = bool(named) or bool(gate.terms)
     last = state.rounds[-1].verdict if state.rounds else "none"
+    if resolved:
+        last = "explained"  # the open-loop gate told the tied effects apart
     verdict, final_test = _final_test(
         Dataset.of(held_corrected, interval), final_model, found_anything, last, cfg.alpha, cfg.seed
     )
@@ -1326,6 +1349,7 @@ def diagnose(
         # confirmed (never "explained" on a proposal the open-loop check refused).
         verdict = "unconfirmed"
     final_test["absorbed"] = absorbed
+    final_test["tie_resolved_open_loop"] = tied if resolved else []
     report("shrink", 1.0)
     gaps = _shrink(held_corrected, robot, final_model, cfg)
     return Diagnosis(
