@@ -194,6 +194,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.effects.noise",
             "odomgym.effects.sensor",
             "odomgym.effects.discovered",
+            "odomgym.effects.term_replay",
         ),
     ),
     "diagnose": (
@@ -201,6 +202,11 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         "Where a model and a robot disagree, and what is missing (docs/diagnose.md).",
         (
             "odomgym.diagnose.workflow",
+            "odomgym.diagnose.config",
+            "odomgym.diagnose.results",
+            "odomgym.diagnose.journal",
+            "odomgym.diagnose.rounds",
+            "odomgym.diagnose.verdict",
             "odomgym.diagnose.replay",
             "odomgym.diagnose.likelihood",
             "odomgym.diagnose.stats",

@@ -1,6 +1,6 @@
 """The open-loop gate: keep only what predicts the robot better on data the fit never saw.
 
-The rounds of :mod:`odomgym.diagnose.workflow` name catalogue effects and discover grammar terms
+The rounds (:mod:`odomgym.diagnose.rounds`) name catalogue effects and discover grammar terms
 by likelihood, whose noise model can absorb what the systematic part lacks: on real logs the
 whitened gap then "closes" while the model predicts the robot worse (a real-robot diagnosis went
 from 108 to 163 mm of open-loop error on held-out sessions while its whitened gap said 99 %

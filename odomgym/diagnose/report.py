@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.diagnose.workflow import GAP_METRIC, Diagnosis
+from odomgym.diagnose.results import GAP_METRIC, Diagnosis
 from odomgym.effects import EFFECTS
 
 __all__ = ["format_markdown", "write_outputs"]

@@ -1,7 +1,8 @@
 """The statistical tests of the diagnose workflow, on plain numbers and arrays.
 
 Kept apart from the fitting (:mod:`odomgym.diagnose.fit`) and the workflow
-(:mod:`odomgym.diagnose.workflow`) so that each test can be checked against known numbers on its
+(:mod:`odomgym.diagnose.workflow`, :mod:`odomgym.diagnose.rounds`,
+:mod:`odomgym.diagnose.verdict`) so that each test can be checked against known numbers on its
 own (tests/test_diagnose_stats.py), and so that the dependency runs one way: workflow → fit →
 stats. This module imports numpy and scipy only.
 

@@ -1,0 +1,407 @@
+"""The rounds of Which/Add (``docs/diagnose.md``, steps 4–8): catalogue candidates scored
+against the current model, the grammar's score test, discovery, the noise model last, and the
+backward check.
+
+:func:`run_round` is one round: every candidate of a stage is fitted beside the wheel-noise
+nuisance (:data:`NUISANCE`), scored by the Kalman filter's cross-validated log-likelihood
+[nats] and tested family-wise (:mod:`odomgym.diagnose.fit`, :mod:`odomgym.diagnose.stats`);
+when no systematic candidate is significant, the grammar's score test decides whether discovery
+(:mod:`odomgym.diagnose.discover`) runs or the noise effects may compete. What every round
+shares is a frozen :class:`RoundContext`; what the rounds have found so far, a
+:class:`DiagnosisState` each round updates. :func:`_backward_check` runs once after the last
+round.
+
+The rounds are the likelihood half of the workflow: everything here judges a model by the
+filter's score, whose noise model can absorb what the systematic part lacks. The steps after
+them (:mod:`odomgym.diagnose.gate`, :mod:`odomgym.diagnose.verdict`,
+:func:`odomgym.diagnose.workflow.diagnose`) judge by the open-loop error of predicting runs the
+fit never saw, in mm and degrees; a module of their own keeps that line visible.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from odomgym.diagnose.config import DiagnoseConfig
+from odomgym.diagnose.discover import (
+    Discovery,
+    StructureTest,
+    discover,
+    library_jacobian,
+    structure_test,
+)
+from odomgym.diagnose.experiments import separating_experiment
+from odomgym.diagnose.fit import (
+    CandidateFit,
+    Dataset,
+    FitJob,
+    Joint,
+    Model,
+    cross_validate,
+    evaluate,
+    fit_candidate,
+    fit_noise,
+    fit_noise_model,
+    run_fit_jobs,
+)
+from odomgym.diagnose.journal import FitJournal
+from odomgym.diagnose.results import Candidate, Round
+from odomgym.diagnose.stats import (
+    combine_bonferroni,
+    likelihood_ratio,
+    lr_test,
+    max_t_test,
+    whiteness_p,
+)
+from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
+from odomgym.robot import RobotSpec
+
+__all__ = [
+    "DISCOVERED",
+    "NUISANCE",
+    "ROUND_GOES_ON",
+    "DiagnosisState",
+    "RoundContext",
+    "run_round",
+]
+
+
+NUISANCE = "floor_roughness"
+"""The noise effect fitted as a nuisance beside every systematic candidate
+(:mod:`odomgym.diagnose.workflow`, step 4)."""
+
+
+DISCOVERED = "discovered"
+"""The grammar's effect: never a catalogue candidate, only the discovery pass adds to it."""
+
+
+def _consistency(data: Dataset, model: Model) -> float:
+    """p-value that ``model``'s whitened innovations on ``data`` are white noise
+    (:func:`odomgym.diagnose.stats.whiteness_p`: per-run means and pooled lag-1 correlation,
+    Bonferroni-combined)."""
+    ev = evaluate(data, model.spec, model.sensor)
+    return whiteness_p(ev.whitened, data.masks)
+
+
+@dataclass(frozen=True)
+class RoundContext:
+    """What every round of Which/Add shares: fixed once the runs are split and the folds drawn.
+
+    Attributes:
+        data: the fit runs.
+        folds: cross-validation folds (indices into ``data``).
+        nuisance: the wheel-noise effect fitted beside every systematic candidate
+            (:data:`NUISANCE`; None if it is not registered).
+        stages: the candidate stages of a round in order — (stage name, effect names, the
+            nuisance fitted beside them) — :mod:`odomgym.diagnose.workflow`, steps 4 and 7.
+        config: the settings.
+        rng: the workflow's random stream (it drew the split and the folds; the max-T tests
+            continue it, so a round's numbers depend on the rounds before it, as they always
+            have).
+        report: progress callback; also where a swallowed stop request is raised.
+        journal: where finished candidate fits are stored and found (None: nowhere).
+    """
+
+    data: Dataset
+    folds: list[list[int]]
+    nuisance: Effect | None
+    stages: list[tuple[str, list[str], Effect | None]]
+    config: DiagnoseConfig
+    rng: np.random.Generator
+    report: Callable[[str, float], None]
+    journal: FitJournal | None = None
+
+
+@dataclass
+class DiagnosisState:
+    """What the rounds have found so far; :func:`run_round` updates it.
+
+    Attributes:
+        model: the current model (robot with the effects added so far, fitted sensor noise).
+        before_discovery: the robot model before the first discovered term joined (what the
+            discovered terms' evidence is shown against).
+        named: the catalogue effects named, in the order first named.
+        parameters: each named effect's parameters, ``{effect: {parameter: entry}}``
+            (:meth:`odomgym.diagnose.fit.CandidateFit.entry`).
+        passes: every discovery pass.
+        rounds: every finished round.
+    """
+
+    model: Model
+    before_discovery: RobotSpec
+    named: list[str] = field(default_factory=list)
+    parameters: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    passes: list[Discovery] = field(default_factory=list)
+    rounds: list[Round] = field(default_factory=list)
+
+    @property
+    def candidates(self) -> list[Candidate]:
+        """Every candidate scored, round after round."""
+        return [c for r in self.rounds for c in r.candidates]
+
+
+def _score_candidates(
+    ctx: RoundContext,
+    effects: Sequence[Effect],
+    base: Model,
+    nuisance: Effect | None,
+    where: tuple[int, str],
+) -> tuple[list[Candidate], list[CandidateFit]]:
+    """Fit, cross-validate and test ``effects`` against the current model ``base`` (in round and
+    stage ``where``): each candidate's likelihood-ratio test (Bonferroni over ``effects``), its
+    held-out gain, and the max-T sign-flip test over runs."""
+    number, stage = where
+    data, cfg, journal = ctx.data, ctx.config, ctx.journal
+    spec, sensor = base.spec, base.sensor
+    current = CandidateFit(
+        "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
+    )
+    base_cv = cross_validate(data, current, None, ctx.folds)
+    jobs = [
+        FitJob(
+            data, base, e.name, nuisance.name if nuisance and nuisance is not e else None, ctx.folds
+        )
+        for e in effects
+    ]
+    keys = [journal.key(job) for job in jobs] if journal is not None else []
+    stored = {k: journal.get(keys[k]) for k in range(len(jobs))} if journal is not None else {}
+    done = {k: fit for k, fit in stored.items() if fit is not None}
+
+    def finished(k: int, fit: CandidateFit) -> None:
+        if journal is not None:
+            journal.record(keys[k], fit)
+        done[k] = fit
+        ctx.report(f"round {number}: {effects[k].name}", len(done) / len(effects))
+
+    # Each fit is recorded as soon as it is done, in whatever order they finish.
+    todo = {k: jobs[k] for k in range(len(jobs)) if k not in done}
+    run_fit_jobs(todo, cfg.jobs, finished)
+    fits = [done[k] for k in range(len(jobs))]
+    improvements = np.array([f.cv_loglik - base_cv for f in fits])
+    t, p_flip = max_t_test(improvements, ctx.rng)
+    candidates = []
+    for k, f in enumerate(fits):
+        lr = likelihood_ratio(float(np.sum(f.loglik - current.loglik)))
+        dof = len(EFFECTS[f.name].parameters) + sum(
+            len(EFFECTS[p].parameters) for p in EFFECTS[f.name].partners
+        )
+        p_family = lr_test(lr, dof, len(fits))
+        gain = float(improvements[k].sum())
+        candidates.append(
+            Candidate(
+                round=number,
+                stage=stage,
+                name=f.name,
+                values=f.values,
+                stderr=f.stderr,
+                cv_gain=gain,
+                cv_improvement=float(improvements[k].mean()),
+                lr=lr,
+                p_family=p_family,
+                t=float(t[k]),
+                p_sign_flip=float(p_flip[k]),
+                significant=bool(p_family < 0.5 * cfg.alpha and gain > 0.0),
+            )
+        )
+    return candidates, fits
+
+
+def _refit_named(
+    data: Dataset,
+    model: Model,
+    named: Sequence[str],
+    parameters: dict[str, dict[str, dict[str, float]]],
+    nuisance: Effect | None,
+) -> RobotSpec:
+    """Every named systematic effect refitted jointly (``fit.Joint``; the wheel noise as
+    nuisance beside them) once a second one has joined: each keeps its own share, not what it
+    absorbed while it was alone. ``parameters`` takes the joint values and standard errors."""
+    systematic = [EFFECTS[n] for n in named if not EFFECTS[n].noise]
+    if len(systematic) < 2:
+        return model.spec
+    joint = Joint(systematic)
+    fit = fit_candidate(data, model.spec, model.sensor, joint, nuisance)
+    for name, values in joint.split(fit.values).items():
+        parameters[name] = {key: fit.entry(f"{name}.{key}", value) for key, value in values.items()}
+    return joint.write(model.spec, fit.values)
+
+
+def _backward_check(data: Dataset, model: Model, named: Sequence[str], alpha: float) -> list[str]:
+    """Named systematic effects that the final model no longer needs: the likelihood-ratio test
+    of the final model against it without the effect (sensor noise refitted) does not pass α/2
+    after a Bonferroni correction over the named effects."""
+    spec, sensor = model.spec, model.sensor
+    systematic = [n for n in named if not EFFECTS[n].noise]
+    if len(systematic) + (1 if spec.effect_values(DISCOVERED) else 0) < 2:
+        return []
+    full = float(evaluate(data, spec, sensor, whitened=False).loglik.sum())
+    out = []
+    for name in systematic:
+        effect = EFFECTS[name]
+        reduced, reduced_sensor, _ = fit_noise(
+            data, effect.write(spec, effect.absent_values()), sensor
+        )
+        without = float(evaluate(data, reduced, reduced_sensor, whitened=False).loglik.sum())
+        p = lr_test(likelihood_ratio(full - without), len(effect.parameters), len(systematic))
+        if p >= 0.5 * alpha:
+            out.append(name)
+    return out
+
+
+def _discovery_record(passes: Sequence[Discovery]) -> list[dict[str, Any]]:
+    """Every discovery pass for ``report.json`` (empty if the structure never called for one)."""
+    return [
+        {
+            "structure": found.structure.as_dict(),
+            "threshold": found.threshold,
+            "cv_sse_by_threshold": found.cv_path,
+            "selected": found.selected,
+            "rejected": found.rejected,
+            "kept": found.terms,
+            "cv_gain": found.cv_gain,
+            "not_identifiable": found.dropped,
+        }
+        for found in passes
+    ]
+
+
+ROUND_GOES_ON = ("explained", "discovered")
+"""Round verdicts after which another round follows (something joined the model)."""
+
+
+def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
+    """One round of Which/Add (:mod:`odomgym.diagnose.workflow`, steps 4–7): score the stages'
+    candidates against ``state.model``, decide the round's verdict, and — when an effect is named
+    or a term discovered — add it to ``state.model``. The round is appended to ``state.rounds``
+    and returned; another round follows if its verdict is in :data:`ROUND_GOES_ON`."""
+    cfg, data, report = ctx.config, ctx.data, ctx.report
+    model = state.model
+    candidates: list[Candidate] = []
+    fits: list[CandidateFit] = []
+    round_candidates: list[Candidate] = []
+    base = model
+    structure: StructureTest | None = None
+    stopped: str | None = None
+    for stage, stage_names, helper in ctx.stages:
+        if stage == "noise" and structure is None:
+            # Is the systematic structure exhausted? Score test of the whole grammar on the
+            # innovations of the model with its wheel noise (the nuisance) fitted.
+            report(f"round {number}: structure", 0.0)
+            lib = fit_noise_model(data, model, ctx.nuisance)
+            library = library_jacobian(data, lib.spec, lib.sensor)
+            structure = structure_test(library, seed=cfg.seed + number)
+            # Discovery runs again only after a pass that found terms.
+            again = not state.passes or bool(state.passes[-1].terms)
+            if structure.p_value < 0.5 * cfg.alpha and cfg.discover and again:
+                report(f"round {number}: discovery", 0.0)
+                latest = discover(
+                    data,
+                    lib.spec,
+                    lib.sensor,
+                    ctx.folds,
+                    alpha=cfg.alpha,
+                    nuisance=ctx.nuisance,
+                    library=library,
+                    structure=structure,
+                )
+                state.passes.append(latest)
+                if latest.terms and latest.fit is not None:
+                    stopped = "discovered"
+                    break
+            if structure.p_consistent < 0.5 * cfg.alpha:
+                # Structure shared by the runs: no noise effect may stand in for it.
+                stopped = "structured"
+                break
+        effects = [EFFECTS[n] for n in stage_names]
+        if not effects:
+            continue
+        base = fit_noise_model(data, model, helper)
+        candidates, fits = _score_candidates(ctx, effects, base, helper, (number, stage))
+        round_candidates.extend(candidates)
+        if any(c.significant for c in candidates):
+            break
+    consistency = _consistency(data, base)
+    structure_info = structure.as_dict() if structure is not None else None
+
+    def finish(
+        verdict: str,
+        winner: str | None = None,
+        tied: list[str] | None = None,
+        separating: dict[str, Any] | None = None,
+    ) -> Round:
+        done = Round(
+            number,
+            verdict,
+            winner,
+            tied if tied is not None else [],
+            separating,
+            round_candidates,
+            consistency,
+            structure_info,
+        )
+        state.rounds.append(done)
+        return done
+
+    found = state.passes[-1] if state.passes else None
+    if stopped == "discovered" and found is not None and found.fit is not None:
+        if not model.spec.effect_values(DISCOVERED):
+            state.before_discovery = model.spec
+        spec = DiscoveredTerms(found.terms).write(model.spec, found.fit.values)
+        state.model = fit_noise_model(data, Model(spec, model.sensor))
+        return finish("discovered", DISCOVERED)
+    significant = [k for k, c in enumerate(candidates) if c.significant]
+    if stopped == "structured" or not significant:
+        p_struct = structure.p_value if structure is not None else 1.0
+        p_left = combine_bonferroni(consistency, p_struct)
+        return finish("none" if p_left >= 0.5 * cfg.alpha else "unexplained")
+    best = max(significant, key=lambda k: candidates[k].cv_gain)
+    tied = [best] + [
+        k
+        for k in significant
+        if k != best and candidates[best].cv_gain - candidates[k].cv_gain < cfg.tie_nats
+    ]
+    if len(tied) > 1:
+        runner = max((k for k in tied if k != best), key=lambda k: candidates[k].cv_gain)
+        found_experiment, _ = separating_experiment(
+            fits[best].spec, fits[runner].spec, model.sensor
+        )
+        separating = {
+            "between": [fits[best].name, fits[runner].name],
+            "experiment": found_experiment.experiment,
+            "separation_mm": 1e3 * found_experiment.position,
+            "separation_deg": math.degrees(found_experiment.heading),
+            "separation_sigma": found_experiment.sigma,
+        }
+        return finish("ambiguous", None, [fits[k].name for k in tied], separating)
+    winner = fits[best]
+    # An effect already in the model may win again (refitted once others joined): its
+    # parameters are updated, it is listed once, where it was first added.
+    if winner.name not in state.named:
+        state.named.append(winner.name)
+    state.parameters[winner.name] = {
+        key: winner.entry(key, value) for key, value in winner.values.items()
+    }
+    done = finish("explained", winner.name)
+    # Only the named effect joins the model (not the nuisance wheel noise fitted beside a
+    # systematic effect); the sensor noise is refitted for it. A noise effect fitted jointly
+    # with a systematic partner (bumps with the distance scale) brings the partner's refit.
+    spec = EFFECTS[winner.name].write(model.spec, winner.values)
+    spec = _refit_named(
+        data, Model(spec, model.sensor), state.named, state.parameters, ctx.nuisance
+    )
+    for partner_name in EFFECTS[winner.name].partners:
+        partner = EFFECTS[partner_name]
+        refit = partner.read(winner.spec)
+        spec = partner.write(spec, refit)
+        if partner_name in state.parameters:
+            state.parameters[partner_name] = {
+                key: {**state.parameters[partner_name][key], "value": value}
+                for key, value in refit.items()
+            }
+    state.model = fit_noise_model(data, Model(spec, model.sensor))
+    return done
