@@ -32,7 +32,9 @@ below points. The steps, numbered as in ``docs/diagnose.md`` (which gives each i
     large for what the robot did is a stand-in, reported and not kept.
 11. **The open-loop gate** (:func:`odomgym.diagnose.gate.open_loop_gate`, its pool
     :func:`odomgym.diagnose.verdict._significant_effects`): each proposal in turn is kept only
-    if it lowers the error of predicting left-out folds (sessions, or blocks) open loop.
+    if it lowers the error of predicting left-out folds (sessions, or blocks) open loop, and a
+    discovered term only if the open-loop fit can identify it; effects tied in a last
+    ``ambiguous`` round are resolved here when the folds need every one of them.
 12. **The estimator** of the kept model's values (:mod:`odomgym.diagnose.gate`) — the filter's,
     unless the open-loop fit's predicts the left-out folds better by one standard error.
 13. **Noise effects, checked** (:func:`odomgym.diagnose.physical.check_bumps`,
@@ -300,11 +302,11 @@ def diagnose(
         time_offset=cfg.time_offset, frames=use_frames, max_time_offset=cfg.max_time_offset
     )
     interval, length = cfg.checkpoint_interval, float(robot.wheelbase)
-    # 1. The recording's nuisances, fitted jointly with the geometry (E_d, E_b, E_s) so that a
-    # curving straight is not read as a tilted frame, nor a scale as a clock. A time offset is
-    # removed only where the data show one (module docstring of odomgym.diagnose.nuisances):
-    # resampling the counts at a spurious offset adds the acceleration-correlated disagreement
-    # the filter is most sensitive to.
+    # Step 2 (module docstring): the recording's nuisances, fitted jointly with the geometry (E_d,
+    # E_b, E_s) so that a curving straight is not read as a tilted frame, nor a scale as a clock. A
+    # time offset is removed only where the data show one (module docstring of
+    # odomgym.diagnose.nuisances): resampling the counts at a spurious offset adds the acceleration-
+    # correlated disagreement the filter is most sensitive to.
     report("measurement nuisances", 0.0)
     geometry = model_effect(GEOMETRY, [])
     clock = {
@@ -375,13 +377,13 @@ def diagnose(
         state.model = Model(spec, state.model.sensor)
         state.named.remove(name)
         state.parameters.pop(name, None)
-    # 2. Physical sizes: a discovered term implausible at the data's operating range is a
+    # Step 10: physical sizes: a discovered term implausible at the data's operating range is a
     # stand-in (for a clock, a frame or a mechanism the grammar lacks), reported, not kept.
     proposed_terms = _discovered_order(state)
     present = state.model.spec.effect_values(DISCOVERED) or {}
     sizes = [term_size(fit_corrected, state.model.spec, t, present[t]) for t in proposed_terms]
     plausible_terms = [size.term for size in sizes if size.plausible]
-    # 3. The open-loop gate: each proposal in turn must lower the error of predicting the
+    # Step 11: the open-loop gate: each proposal in turn must lower the error of predicting the
     # held-out folds (whole sessions, or blocks of time) open loop.
     # Effects the likelihood could not tell apart (a last round ended ``ambiguous``) are
     # proposed too, each under the one-standard-error rule: if the open-loop prediction of
@@ -421,11 +423,11 @@ def diagnose(
     resolved = bool(tied) and set(tied) <= set(gate.effects)
     if tied and not resolved:
         gate = gated(_significant_effects(state, tied=False))
-    # 4. The estimator of the kept model's values: the filter's (efficient when its noise model
-    # is right), unless the open-loop fit's (what the held-out comparison measures, robust to a
-    # wrong noise model) predicts the left-out folds better by one standard error. Between two
-    # estimators that predict equally well the efficient one wins: an open-loop estimate chosen
-    # on fold noise leaves the filter a residual it can see (E_d 3e-5 off on a simulated robot).
+    # Step 12: the estimator of the kept model's values: the filter's (efficient when its noise
+    # model is right), unless the open-loop fit's (what the held-out comparison measures, robust to
+    # a wrong noise model) predicts the left-out folds better by one standard error. Between two
+    # estimators that predict equally well the efficient one wins: an open-loop estimate chosen on
+    # fold noise leaves the filter a residual it can see (E_d 3e-5 off on a simulated robot).
     kept = list(gate.effects)
     chosen = open_loop_estimate(gate.fit, gate.cv_error)
     corrected_final = correct_runs(timed, gate.fit.nuisances)
@@ -446,7 +448,7 @@ def diagnose(
         estimators["filter"] = filtered.fold_error(gate.folds)
         if not chosen.better_than(filtered, gate.folds):
             chosen = filtered
-    # 5. Noise effects: named by the rounds' held-out likelihood; floor bumps only with their
+    # Step 13: noise effects: named by the rounds' held-out likelihood; floor bumps only with their
     # signature and a size the floor can produce. One with a mean part (bumps shorten travel)
     # is fitted beside its systematic partners, and how far it moved E_d, E_b, E_s is reported.
     noise_checks: dict[str, dict[str, Any]] = {}
@@ -491,7 +493,7 @@ def diagnose(
         parameters[name] = state.parameters.get(name, {})
     report("held-out test", 1.0)
     final_model = fit_noise_model(kf_data, Model(spec, state.model.sensor))
-    # 5. The held-out runs: the model as given, the diagnosed one and the baseline, open loop.
+    # Step 14: the held-out runs: the model as given, the diagnosed one and the baseline, open loop.
     models = {AS_GIVEN: as_given}
     final_nuisances = _with_clock(gate.fit.nuisances, clock)
     models[DIAGNOSED] = evaluate_open_loop(
