@@ -20,6 +20,7 @@ from odomgym.diagnose.openloop import (
     variance_inflation,
 )
 from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
+from odomgym.diagnose.report import _rule as report_rule
 from odomgym.diagnose.workflow import split_runs
 from odomgym.effects import EFFECTS
 from odomgym.odometry.runs import Run
@@ -210,6 +211,7 @@ def test_a_term_the_sessions_frames_absorb_is_not_identifiable(runs: list[Run]) 
     assert gate.effects == ["wheelbase"] and gate.terms == []
     crab = next(s for s in gate.steps if s.name == "crab_one")
     assert not crab.kept and crab.rule == "not identifiable" and crab.inflation > MAX_INFLATION
+    assert report_rule(crab).startswith("not identifiable (VIF ")  # report.md says why
     wheelbase = next(s for s in gate.steps if s.name == "wheelbase")
     assert wheelbase.kept and math.isnan(wheelbase.inflation)
     assert gate.fit.stderr_sessions["wheelbase.e_b"] < 1e-3

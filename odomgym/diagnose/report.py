@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from odomgym.diagnose.gate import GateStep
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis
 from odomgym.effects import EFFECTS
 
@@ -314,6 +315,14 @@ def _nuisance_lines(d: Diagnosis) -> list[str]:
     return lines
 
 
+def _rule(step: GateStep) -> str:
+    """A gate step's rule, with the variance inflation that made a term unidentifiable."""
+    if step.rule == "not identifiable":
+        inflation = "∞" if math.isinf(step.inflation) else f"{step.inflation:.2g}"
+        return f"not identifiable (VIF {inflation})"
+    return step.rule
+
+
 def _check_lines(d: Diagnosis) -> list[str]:
     """The open-loop check of every proposal, the stand-ins and the noise checks."""
     lines: list[str] = []
@@ -322,7 +331,8 @@ def _check_lines(d: Diagnosis) -> list[str]:
             "## Open-loop check of every proposal (held-out folds of the fit runs)",
             "",
             "Each proposal of the rounds, in order, had to lower the error of predicting the "
-            "left-out folds open loop (a discovered term by more than one standard error).",
+            "left-out folds open loop (a discovered term by more than one standard error, and "
+            "only if the open-loop fit can identify it: variance inflation ≤ 10⁶).",
             "",
             "| kind | name | before [mm] | with it [mm] | change ± s.e. [mm²] | rule | kept |",
             "|---|---|---|---|---|---|---|",
@@ -330,7 +340,7 @@ def _check_lines(d: Diagnosis) -> list[str]:
         for step in d.gate:
             lines.append(
                 f"| {step.kind} | {step.name} | {step.before_mm:.2f} | {step.after_mm:.2f} | "
-                f"{step.difference:+.3g} ± {step.stderr:.2g} | {step.rule} | "
+                f"{step.difference:+.3g} ± {step.stderr:.2g} | {_rule(step)} | "
                 f"{'yes' if step.kept else 'no'} |"
             )
         lines.append("")
