@@ -46,6 +46,7 @@ from tqdm import tqdm
 from odomgym.baselines.trajectory import TrajectoryBaseline
 from odomgym.data import sample_session, sample_sessions
 from odomgym.data.logs import read_log
+from odomgym.diagnose.config import GATE_ORDERS
 from odomgym.diagnose.heldout import AS_GIVEN, BASELINE, DIAGNOSED
 from odomgym.diagnose.nuisances import sessions_of
 from odomgym.diagnose.openloop import NuisanceOptions, evaluate_open_loop
@@ -72,13 +73,16 @@ def gather_june(folder: Path) -> Path:
     return folder
 
 
-def fold(runs: list[Any], robot: RobotSpec, left_out: str, jobs: int) -> dict[str, Any]:
+def fold(
+    runs: list[Any], robot: RobotSpec, left_out: str, jobs: int, gate_order: str = "joint"
+) -> dict[str, Any]:
     """Diagnose every session but ``left_out``; predict ``left_out`` with the three models."""
     labels = sessions_of(runs)
     train = [r for r, s in zip(runs, labels, strict=True) if s != left_out]
     test = [r for r, s in zip(runs, labels, strict=True) if s == left_out]
     start = time.perf_counter()
-    result = diagnose(train, robot, DiagnoseConfig(jobs=jobs), baseline=TrajectoryBaseline())
+    config = DiagnoseConfig(jobs=jobs, gate_order=gate_order)
+    result = diagnose(train, robot, config, baseline=TrajectoryBaseline())
     seconds = time.perf_counter() - start
     options = NuisanceOptions(frames=True)
     models = {AS_GIVEN: robot, DIAGNOSED: result.model}
@@ -99,6 +103,7 @@ def fold(runs: list[Any], robot: RobotSpec, left_out: str, jobs: int) -> dict[st
         )
     return {
         "left_out": left_out,
+        "gate_order": gate_order,
         "runs": len(test),
         "seconds": seconds,
         "verdict": result.verdict,
@@ -109,6 +114,7 @@ def fold(runs: list[Any], robot: RobotSpec, left_out: str, jobs: int) -> dict[st
         "sessions_fitted": len(set(sessions_of(train))),
         "geometry": geometry,
         "left_out_open_loop": errors,
+        "gate": [step.as_dict() for step in result.gate],
     }
 
 
@@ -206,6 +212,20 @@ def main(argv: list[str] | None = None) -> int:
         "then once without --shard to print the table from their files)",
     )
     parser.add_argument(
+        "--gate-order",
+        default="joint",
+        choices=GATE_ORDERS,
+        help="DiagnoseConfig.gate_order: how the open-loop gate eliminates (default: joint)",
+    )
+    parser.add_argument(
+        "--sessions",
+        nargs="+",
+        default=None,
+        metavar="SESSION",
+        help="leave out only these sessions (default: every one); the table shows the folds "
+        "in --out",
+    )
+    parser.add_argument(
         "--table-only",
         action="store_true",
         help="print the table of the folds already in --out, diagnosing none (missing folds "
@@ -226,6 +246,11 @@ def main(argv: list[str] | None = None) -> int:
         runs, _ = read_log(data, robot=robot, format="optiodom")
     sessions = list(dict.fromkeys(sessions_of(runs)))
     folds = []
+    if args.sessions:
+        unknown = sorted(set(args.sessions) - set(sessions))
+        if unknown:
+            parser.error(f"--sessions: not in the data: {', '.join(unknown)}")
+        sessions = [s for s in sessions if s in args.sessions]
     mine = sessions[shard - 1 :: shards]
     missing = []
     for session in tqdm(mine, desc="leave one session out", file=sys.stderr):
@@ -236,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.table_only:
             missing.append(session)
             continue
-        result = fold(runs, robot, session, args.jobs)
+        result = fold(runs, robot, session, args.jobs, args.gate_order)
         atomic_write_text(path, json.dumps(result, indent=1, default=float))
         folds.append(result)
     summary = summarise(folds)

@@ -6,7 +6,9 @@
 #   VENV=/tmp/v bash scripts/test.sh
 #
 # pytest runs the WHOLE suite, tests marked slow included, on parallel workers (pytest-xdist,
-# part of the test extra): -n auto starts one worker per CPU, 2 on the 2-core CI machine. There
+# part of the test extra): -n auto starts one worker per CPU, 2 on the 2-core CI machine, and
+# --dist worksteal lets a worker that runs dry take tests queued for the other (the six-minute
+# June diagnosis starts first: tests/conftest.py orders the longest tests ahead). There
 # it took 7.4 min against 9.7 min serially (idle machine; not 2x: many tests already run worker
 # processes or threads of their own). PYTEST_WORKERS overrides the count (0: serially, in this
 # process, e.g. to read a failure without xdist in the way).
@@ -45,4 +47,4 @@ SITE="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$SITE"
 rm -rf "$SITE"
 echo "== pytest (every test, slow ones included, on ${PYTEST_WORKERS:-auto} xdist workers)"
-"$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}"
+"$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}" --dist worksteal

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from independent_robot import IndependentRobot, generate, rich_protocol
 
-from odomgym.diagnose.gate import MAX_INFLATION, model_effect, open_loop_gate
+from odomgym.diagnose.config import DiagnoseConfig
+from odomgym.diagnose.gate import MAX_INFLATION, GateResult, model_effect, open_loop_gate
 from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
 from odomgym.diagnose.openloop import (
     NuisanceOptions,
@@ -23,6 +24,7 @@ from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
 from odomgym.diagnose.report import _rule as report_rule
 from odomgym.diagnose.workflow import split_runs
 from odomgym.effects import EFFECTS
+from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 from odomgym.sim.cables import bump_extra_rotation
@@ -183,6 +185,39 @@ def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term() -> None:
     assert first.kept and first.after_mm < first.before_mm
     assert not second.kept and second.rule == "one standard error"
     assert abs(gate.fit.spec.e_b - 1.01) < 0.001
+
+
+def test_catalogue_first_decides_the_effects_without_the_terms() -> None:
+    """``gate_order="catalogue first"``: the catalogue effects are eliminated on their own —
+    the same effects and the same held-out errors as a gate offered no terms at all — and a term
+    is then judged against the model of those effects, which it cannot remove (a 1 % wheelbase
+    error, a made-up right_sin1: the wheelbase stays, the term goes by the one-standard-error
+    rule, its "without" error the effects-only model's)."""
+    robot = IndependentRobot(effects={"wheelbase": {"e_b": 1.01}})
+    runs = generate(robot, rich_protocol(), np.random.default_rng(31))
+    proposed = EFFECTS["wheelbase"].write(ROBOT, {"e_b": 1.01})
+    proposed = model_effect((), ("right_sin1",)).write(  # type: ignore[union-attr]
+        proposed, {"discovered.right_sin1": 0.01}
+    )
+    data = OpenLoopData(runs, 0.25, ROBOT.wheelbase)
+    folds = open_loop_folds(runs)
+
+    def gate(terms: list[str], order: str) -> GateResult:
+        return open_loop_gate(
+            data, ROBOT, proposed, ["wheelbase"], terms, NuisanceOptions(), folds, order=order
+        )
+
+    staged, alone = gate(["right_sin1"], "catalogue first"), gate([], "joint")
+    assert staged.effects == alone.effects == ["wheelbase"] and staged.terms == []
+    effect, term = staged.steps
+    assert effect == alone.steps[0]
+    assert term.name == "right_sin1" and not term.kept and term.rule == "one standard error"
+    assert term.before_mm == pytest.approx(alone.steps[0].after_mm, abs=1e-3)
+    assert abs(staged.fit.spec.e_b - 1.01) < 0.001
+    with pytest.raises(ValueError, match="order"):
+        gate([], "terms first")
+    with pytest.raises(SpecError, match="gate_order"):
+        DiagnoseConfig(gate_order="terms first")
 
 
 def test_a_term_the_sessions_frames_absorb_is_not_identifiable(runs: list[Run]) -> None:

@@ -100,6 +100,7 @@ def _nuisances_are_reported_per_session_never_as_robot_effects(june: Diagnosis) 
 
 
 @pytest.mark.slow
+@pytest.mark.longest
 def test_the_june_sessions_diagnosed_together(tmp_path_factory: pytest.TempPathFactory) -> None:
     """One diagnosis of the 102 runs (minutes on two cores), every check of the module docstring
     on it: one test, so that parallel workers never build it twice."""

@@ -16,7 +16,10 @@ from dataclasses import dataclass
 from odomgym.effects import EFFECTS
 from odomgym.errors import SpecError
 
-__all__ = ["DiagnoseConfig"]
+__all__ = ["GATE_ORDERS", "DiagnoseConfig"]
+
+GATE_ORDERS = ("joint", "catalogue first")
+"""How the open-loop gate may eliminate proposals (:attr:`DiagnoseConfig.gate_order`)."""
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,11 @@ class DiagnoseConfig:
             what named floor bumps may do (:mod:`odomgym.diagnose.physical`).
         max_bump_rate: the most obstacle crossings per metre of a wheel's travel the floor is
             assumed to hold [1/m].
+        gate_order: how the open-loop gate (:func:`odomgym.diagnose.gate.open_loop_gate`)
+            eliminates: ``"joint"`` (the default) the catalogue effects and the discovered
+            terms together; ``"catalogue first"`` the catalogue effects alone, then the terms
+            on top of the effects kept, so that a term cannot displace a named mechanism it
+            resembles (experimental: docs/diagnose.md, "Leave one session out").
     """
 
     holdout: float = 0.3
@@ -69,6 +77,7 @@ class DiagnoseConfig:
     max_time_offset: float = 1.0
     max_obstacle: float = 0.02
     max_bump_rate: float = 1.0
+    gate_order: str = "joint"
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:
@@ -89,6 +98,12 @@ class DiagnoseConfig:
             raise SpecError(
                 f"max_bump_rate must lie in (0, 100] per metre, got {self.max_bump_rate!r}",
                 field="max_bump_rate",
+            )
+        if self.gate_order not in GATE_ORDERS:
+            raise SpecError(
+                f"gate_order must be one of {', '.join(map(repr, GATE_ORDERS))}, "
+                f"got {self.gate_order!r}",
+                field="gate_order",
             )
         if self.max_rounds < 1 or self.folds < 2:
             raise SpecError("max_rounds must be >= 1 and folds >= 2", field="max_rounds")

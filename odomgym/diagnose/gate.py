@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.diagnose.config import GATE_ORDERS
 from odomgym.diagnose.fit import (
     Dataset,
     Joint,
@@ -298,6 +299,7 @@ def open_loop_gate(
     filtered: FilterLinearisation | None = None,
     corrected: OpenLoopData | None = None,
     named: Sequence[str] | None = None,
+    order: str = "joint",
 ) -> GateResult:
     """Keep those of ``effects`` and ``terms`` (their values in ``proposed``, the rounds'
     model) that the held-out folds confirm, by backward elimination from all of them on
@@ -305,7 +307,12 @@ def open_loop_gate(
     (default: all of ``effects``); the others must pass the one-standard-error rule, as terms do.
     ``nominal``: the model as given already fitted (its nuisances) on ``data``; ``start``:
     nuisances to start from; ``filtered`` and ``corrected``: the filter's linearisation and the
-    runs it was made on, nuisances removed (without them, the open-loop fit alone)."""
+    runs it was made on, nuisances removed (without them, the open-loop fit alone). ``order``:
+    ``"joint"`` eliminates effects and terms together; ``"catalogue first"`` the catalogue
+    effects alone, then the terms with the kept effects fixed (:class:`odomgym.diagnose.config.
+    DiagnoseConfig`'s ``gate_order``)."""
+    if order not in GATE_ORDERS:
+        raise ValueError(f"order must be one of {GATE_ORDERS}, got {order!r}")
     chosen_by_rounds = set(effects if named is None else named)
     proposals = [("effect", n) for n in effects] + [("term", n) for n in term_proposals(terms)]
 
@@ -342,90 +349,118 @@ def open_loop_gate(
         nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
     )
     nominal_cv, _ = held_out(nominal_fit, [])
-    model = list(proposals)
-    effect_names, term_names = parts(model)
-    current, current_cv, current_estimator = (
-        fitted(model, spec_with(robot, proposed, effect_names, term_names), start)
-        if model
-        else (nominal_fit, nominal_cv, "open loop")
-    )
-    removed: list[GateStep] = []
-    tested: dict[tuple[str, str], GateStep] = {}
-    round_number = 0
-    while model:
-        round_number += 1
-        trials: dict[tuple[str, str], tuple[GateStep, OpenLoopFit, FloatArray]] = {}
-        for k, member in enumerate(model):
-            if report is not None:
-                report(f"open-loop check {round_number}: {member[1]}", k / len(model))
-            kind, name = member
-            rest = [m for m in model if m != member]
-            # The smaller model starts from the larger one's fit, the proposal made absent.
-            effect_names, term_names = parts([member])
-            begin = current.spec
-            for e in effect_names:
-                begin = EFFECTS[e].write(begin, EFFECTS[e].absent_values())
-            if term_names:
-                chosen = DiscoveredTerms(term_names)
-                begin = chosen.write(begin, dict.fromkeys(term_names, 0.0))
-            if rest:
-                smaller, smaller_cv, _ = fitted(rest, begin, current.nuisances)
-            else:
-                smaller, smaller_cv = nominal_fit, nominal_cv
-            mean, spread = _fold_difference(current_cv, smaller_cv, folds)
-            lenient = kind == "effect" and name in chosen_by_rounds
-            inflation = (
-                max(current.inflation.get(f"{DISCOVERED}.{t}", math.inf) for t in term_names)
-                if kind == "term"
-                else math.nan
-            )
-            confounded = inflation > MAX_INFLATION
-            step = GateStep(
-                kind=kind,
-                name=name,
-                kept=False if confounded else (mean < 0.0 if lenient else mean + spread < 0.0),
-                before_mm=1e3 * math.sqrt(float(np.mean(smaller_cv))),
-                after_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
-                difference=1e6 * mean,
-                stderr=1e6 * spread,
-                rule="not identifiable"
-                if confounded
-                else ("lower" if lenient else "one standard error"),
-                estimator=current_estimator,
-                inflation=inflation,
-            )
-            trials[member] = (step, smaller, smaller_cv)
-            tested[member] = step
-        failing = [m for m in model if not trials[m][0].kept]
-        if not failing:
-            break
-        # A term the fit cannot identify goes first (the most inflated), else the least useful
-        # proposal (the largest change, a term's counted with its standard error); the rest
-        # are tested again without it.
-        worst = max(
-            failing,
-            key=lambda m: (
-                trials[m][0].rule == "not identifiable",
-                trials[m][0].inflation if trials[m][0].rule == "not identifiable" else 0.0,
-                trials[m][0].difference
-                + (trials[m][0].stderr if trials[m][0].rule != "lower" else 0.0),
-            ),
+
+    def keys_of(members: Sequence[tuple[str, str]]) -> list[str]:
+        joint = model_effect(*parts(members))
+        return [p.name for p in joint.parameters] if joint is not None else []
+
+    def eliminate(
+        model: list[tuple[str, str]], fixed: list[tuple[str, str]]
+    ) -> tuple[OpenLoopFit, FloatArray, list[GateStep], list[GateStep]]:
+        """Backward elimination of ``model``'s proposals, ``fixed`` always in the model and
+        never tested; returns the final fit, its fold errors, the kept steps and the removed
+        ones (``model`` is left holding the kept proposals)."""
+        everything = fixed + model
+        effect_names, term_names = parts(everything)
+        current, current_cv, current_estimator = (
+            fitted(everything, spec_with(robot, proposed, effect_names, term_names), start)
+            if everything
+            else (nominal_fit, nominal_cv, "open loop")
         )
-        removed.append(trials[worst][0])
-        model.remove(worst)
-        _, current, current_cv = trials[worst]
-        current_estimator = "open loop"
-        if model:
-            effect_names, term_names = parts(model)
-            joint = model_effect(effect_names, term_names)
-            keys = [p.name for p in joint.parameters] if joint is not None else []
-            current_cv, current_estimator = held_out(current, keys)
+        removed: list[GateStep] = []
+        tested: dict[tuple[str, str], GateStep] = {}
+        round_number = 0
+        while model:
+            round_number += 1
+            trials: dict[tuple[str, str], tuple[GateStep, OpenLoopFit, FloatArray]] = {}
+            for k, member in enumerate(model):
+                if report is not None:
+                    report(f"open-loop check {round_number}: {member[1]}", k / len(model))
+                kind, name = member
+                rest = fixed + [m for m in model if m != member]
+                # The smaller model starts from the larger one's fit, the proposal made absent.
+                effect_names, term_names = parts([member])
+                begin = current.spec
+                for e in effect_names:
+                    begin = EFFECTS[e].write(begin, EFFECTS[e].absent_values())
+                if term_names:
+                    chosen = DiscoveredTerms(term_names)
+                    begin = chosen.write(begin, dict.fromkeys(term_names, 0.0))
+                if rest:
+                    smaller, smaller_cv, _ = fitted(rest, begin, current.nuisances)
+                else:
+                    smaller, smaller_cv = nominal_fit, nominal_cv
+                mean, spread = _fold_difference(current_cv, smaller_cv, folds)
+                lenient = kind == "effect" and name in chosen_by_rounds
+                inflation = (
+                    max(current.inflation.get(f"{DISCOVERED}.{t}", math.inf) for t in term_names)
+                    if kind == "term"
+                    else math.nan
+                )
+                confounded = inflation > MAX_INFLATION
+                step = GateStep(
+                    kind=kind,
+                    name=name,
+                    kept=False if confounded else (mean < 0.0 if lenient else mean + spread < 0.0),
+                    before_mm=1e3 * math.sqrt(float(np.mean(smaller_cv))),
+                    after_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
+                    difference=1e6 * mean,
+                    stderr=1e6 * spread,
+                    rule="not identifiable"
+                    if confounded
+                    else ("lower" if lenient else "one standard error"),
+                    estimator=current_estimator,
+                    inflation=inflation,
+                )
+                trials[member] = (step, smaller, smaller_cv)
+                tested[member] = step
+            failing = [m for m in model if not trials[m][0].kept]
+            if not failing:
+                break
+            # A term the fit cannot identify goes first (the most inflated), else the least
+            # useful proposal (the largest change, a term's counted with its standard error);
+            # the rest are tested again without it.
+            worst = max(
+                failing,
+                key=lambda m: (
+                    trials[m][0].rule == "not identifiable",
+                    trials[m][0].inflation if trials[m][0].rule == "not identifiable" else 0.0,
+                    trials[m][0].difference
+                    + (trials[m][0].stderr if trials[m][0].rule != "lower" else 0.0),
+                ),
+            )
+            removed.append(trials[worst][0])
+            model.remove(worst)
+            _, current, current_cv = trials[worst]
+            current_estimator = "open loop"
+            if fixed or model:
+                current_cv, current_estimator = held_out(current, keys_of(fixed + model))
+            else:
+                current_cv = nominal_cv
+        return current, current_cv, [tested[m] for m in model], removed
+
+    effect_proposals = [m for m in proposals if m[0] == "effect"]
+    term_members = [m for m in proposals if m[0] == "term"]
+    if order == "catalogue first":
+        # The catalogue effects on their own, then the discovered terms on the model they kept
+        # (those effects fixed): a term must earn its place beside the named mechanisms and
+        # cannot displace one it merely resembles.
+        current, current_cv, kept_effects, removed_effects = eliminate(effect_proposals, [])
+        if term_members:
+            current, current_cv, kept_terms, removed_terms = eliminate(
+                term_members, effect_proposals
+            )
         else:
-            current_cv = nominal_cv
-    kept_steps = [tested[m] for m in model]
+            kept_terms, removed_terms = [], []
+        steps = kept_effects + kept_terms + removed_effects + removed_terms
+        model = effect_proposals + term_members
+    else:
+        model = list(proposals)
+        current, current_cv, kept_steps, removed = eliminate(model, [])
+        steps = kept_steps + removed
     effect_names, term_names = parts(model)
     return GateResult(
-        kept_steps + removed,
+        steps,
         effect_names,
         term_names,
         current,

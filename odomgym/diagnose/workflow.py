@@ -417,6 +417,7 @@ def diagnose(
             filtered=linearised,
             corrected=OpenLoopData(fit_corrected, interval, length),
             named=[n for n in state.named if not EFFECTS[n].noise],
+            order=cfg.gate_order,
         )
 
     gate = gated(_significant_effects(state, tied=True))
