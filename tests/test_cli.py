@@ -373,6 +373,30 @@ def test_diagnose_refuses_to_replace_the_working_folder(
     _one_line_error(capsys, "error: --out ", "holds the working folder")
 
 
+def test_diagnose_gate_order_reaches_the_workflow(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--gate-order catalogue-first`` sets ``DiagnoseConfig.gate_order`` to "catalogue
+    first" (the default: "joint"); an unknown order is refused by the parser, before any work."""
+    import odomgym.diagnose.workflow as workflow
+
+    seen: list[str] = []
+
+    def stop(runs: object, robot: object, config: workflow.DiagnoseConfig, **_: object) -> None:
+        seen.append(config.gate_order)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(workflow, "diagnose", stop)
+    session = "optiodom:square/230620202042"
+    for option, expected in ([], "joint"), (["--gate-order", "catalogue-first"], "catalogue first"):
+        out = tmp_path / expected.replace(" ", "-")
+        code = main(["diagnose", session, "--robot", "optiodom", "--out", str(out), *option])
+        assert code == 130 and seen[-1] == expected and not out.exists()  # stopped: no output
+    with pytest.raises(SystemExit) as stopped:
+        main(["diagnose", session, "--robot", "optiodom", "--gate-order", "terms-first"])
+    assert stopped.value.code == 2 and "--gate-order" in capsys.readouterr().err
+
+
 def test_output_check_accepts_new_nested_paths_and_leaves_nothing(tmp_path: Path) -> None:
     """A path whose folders do not exist yet is fine (they are created when writing); the
     check's probe file is removed again."""

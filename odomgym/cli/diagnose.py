@@ -64,6 +64,14 @@ def register(commands: Commands) -> None:
         "catalogue leaves structure",
     )
     parser.add_argument(
+        "--gate-order",
+        choices=["joint", "catalogue-first"],
+        default="joint",
+        help="how the open-loop gate eliminates proposals: effects and discovered terms "
+        "together (joint, the default), or the catalogue effects alone, then the terms on "
+        "the effects kept (catalogue-first; experimental, docs/diagnose.md)",
+    )
+    parser.add_argument(
         "--session-frames",
         choices=["auto", "on", "off"],
         default="auto",
@@ -149,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
         max_time_offset=args.max_time_offset,
         max_obstacle=args.max_obstacle,
         max_bump_rate=args.max_bump_rate,
+        gate_order=args.gate_order.replace("-", " "),
     )
     out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
     check_output(out, option="--out", folder=True, swap=True)
