@@ -74,7 +74,7 @@ def gather_june(folder: Path) -> Path:
 
 
 def fold(
-    runs: list[Any], robot: RobotSpec, left_out: str, jobs: int, gate_order: str = "joint"
+    runs: list[Any], robot: RobotSpec, left_out: str, jobs: int, gate_order: str = "catalogue first"
 ) -> dict[str, Any]:
     """Diagnose every session but ``left_out``; predict ``left_out`` with the three models."""
     labels = sessions_of(runs)
@@ -213,9 +213,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--gate-order",
-        default="joint",
+        default="catalogue first",
         choices=GATE_ORDERS,
-        help="DiagnoseConfig.gate_order: how the open-loop gate eliminates (default: joint)",
+        help="DiagnoseConfig.gate_order: how the open-loop gate eliminates (default: catalogue "
+        "first)",
     )
     parser.add_argument(
         "--sessions",

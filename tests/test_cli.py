@@ -376,8 +376,8 @@ def test_diagnose_refuses_to_replace_the_working_folder(
 def test_diagnose_gate_order_reaches_the_workflow(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """``--gate-order catalogue-first`` sets ``DiagnoseConfig.gate_order`` to "catalogue
-    first" (the default: "joint"); an unknown order is refused by the parser, before any work."""
+    """``--gate-order joint`` sets ``DiagnoseConfig.gate_order`` to "joint" (the default:
+    "catalogue first"); an unknown order is refused by the parser, before any work."""
     import odomgym.diagnose.workflow as workflow
 
     seen: list[str] = []
@@ -388,7 +388,7 @@ def test_diagnose_gate_order_reaches_the_workflow(
 
     monkeypatch.setattr(workflow, "diagnose", stop)
     session = "optiodom:square/230620202042"
-    for option, expected in ([], "joint"), (["--gate-order", "catalogue-first"], "catalogue first"):
+    for option, expected in ([], "catalogue first"), (["--gate-order", "joint"], "joint"):
         out = tmp_path / expected.replace(" ", "-")
         code = main(["diagnose", session, "--robot", "optiodom", "--out", str(out), *option])
         assert code == 130 and seen[-1] == expected and not out.exists()  # stopped: no output

@@ -65,11 +65,11 @@ def register(commands: Commands) -> None:
     )
     parser.add_argument(
         "--gate-order",
-        choices=["joint", "catalogue-first"],
-        default="joint",
-        help="how the open-loop gate eliminates proposals: effects and discovered terms "
-        "together (joint, the default), or the catalogue effects alone, then the terms on "
-        "the effects kept (catalogue-first; experimental, docs/diagnose.md)",
+        choices=["catalogue-first", "joint"],
+        default="catalogue-first",
+        help="how the open-loop gate eliminates proposals: the catalogue effects alone, then "
+        "the discovered terms on the effects kept (catalogue-first, the default), or effects "
+        "and terms together (joint, the order before; docs/diagnose.md)",
     )
     parser.add_argument(
         "--session-frames",
