@@ -161,15 +161,25 @@ def test_bumps_need_their_signature_and_a_size_the_floor_can_make() -> None:
     assert not frequent.plausible and "per metre" in frequent.reason
 
 
-def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term() -> None:
-    """A robot with a 1 % wheelbase error: the wheelbase lowers the held-out open-loop error and
-    is kept; a term that is not there (right_sin1 at 1 %) raises it and is dropped."""
+@pytest.fixture(scope="module")
+def wheelbase_case() -> tuple[list[Run], RobotSpec]:
+    """Runs of a robot with a 1 % wheelbase error, and the model the rounds would propose for
+    them: that wheelbase and a made-up term (right_sin1 at 1 %)."""
     robot = IndependentRobot(effects={"wheelbase": {"e_b": 1.01}})
     runs = generate(robot, rich_protocol(), np.random.default_rng(31))
     proposed = EFFECTS["wheelbase"].write(ROBOT, {"e_b": 1.01})
     proposed = model_effect((), ("right_sin1",)).write(  # type: ignore[union-attr]
         proposed, {"discovered.right_sin1": 0.01}
     )
+    return runs, proposed
+
+
+def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term(
+    wheelbase_case: tuple[list[Run], RobotSpec],
+) -> None:
+    """A robot with a 1 % wheelbase error: the wheelbase lowers the held-out open-loop error and
+    is kept; a term that is not there (right_sin1 at 1 %) raises it and is dropped."""
+    runs, proposed = wheelbase_case
     data = OpenLoopData(runs, 0.25, ROBOT.wheelbase)
     gate = open_loop_gate(
         data,
@@ -187,18 +197,15 @@ def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term() -> None:
     assert abs(gate.fit.spec.e_b - 1.01) < 0.001
 
 
-def test_catalogue_first_decides_the_effects_without_the_terms() -> None:
+def test_catalogue_first_decides_the_effects_without_the_terms(
+    wheelbase_case: tuple[list[Run], RobotSpec],
+) -> None:
     """``gate_order="catalogue first"``: the catalogue effects are eliminated on their own —
     the same effects and the same held-out errors as a gate offered no terms at all — and a term
     is then judged against the model of those effects, which it cannot remove (a 1 % wheelbase
     error, a made-up right_sin1: the wheelbase stays, the term goes by the one-standard-error
     rule, its "without" error the effects-only model's)."""
-    robot = IndependentRobot(effects={"wheelbase": {"e_b": 1.01}})
-    runs = generate(robot, rich_protocol(), np.random.default_rng(31))
-    proposed = EFFECTS["wheelbase"].write(ROBOT, {"e_b": 1.01})
-    proposed = model_effect((), ("right_sin1",)).write(  # type: ignore[union-attr]
-        proposed, {"discovered.right_sin1": 0.01}
-    )
+    runs, proposed = wheelbase_case
     data = OpenLoopData(runs, 0.25, ROBOT.wheelbase)
     folds = open_loop_folds(runs)
 
