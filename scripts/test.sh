@@ -8,10 +8,10 @@
 # pytest runs the WHOLE suite, tests marked slow included, on parallel workers (pytest-xdist,
 # part of the test extra): -n auto starts one worker per CPU, 2 on the 2-core CI machine, and
 # --dist worksteal lets a worker that runs dry take tests queued for the other (the six-minute
-# June diagnosis starts first: tests/conftest.py orders the longest tests ahead). There
-# it took 7.4 min against 9.7 min serially (idle machine; not 2x: many tests already run worker
-# processes or threads of their own). PYTEST_WORKERS overrides the count (0: serially, in this
-# process, e.g. to read a failure without xdist in the way).
+# June diagnosis starts first: tests/conftest.py orders the longest tests ahead). On the idle
+# 2-core machine the suite took 16 min 41 s on two workers before that ordering (30 min of
+# CPU; the June diagnosis alone 6 min). PYTEST_WORKERS overrides the count (0: serially, in
+# this process, e.g. to read a failure without xdist in the way).
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
