@@ -11,7 +11,12 @@ contiguous blocks of runs with one session). It works backwards from the model w
 proposal (backward elimination): each proposal is tested against the model without it, the least
 useful one that fails goes, and the rest are tested again — tested one at a time on a model
 missing the others, a real effect can look useless (a scale fitted while a large diameter ratio
-is missing takes part of the curvature and predicts worse than nothing). The rules:
+is missing takes part of the curvature and predicts worse than nothing). In the workflow's
+default order (``order="catalogue first"``) the catalogue effects are eliminated on their own
+first and the discovered terms then on top of the effects kept, which stay fixed: eliminated
+together, a term could displace a mechanism it resembles, and on the June OptiOdom sessions 7 of
+14 leave-one-session-out folds kept another model (all 14 keep the same five effects in this
+order). The rules:
 
 * a catalogue effect the rounds named stays if the mean held-out error over the folds is lower
   with it; one they found significant but did not name (beaten by another in the filter's
