@@ -10,7 +10,8 @@
 # --dist worksteal lets a worker that runs dry take tests queued for the other (the six-minute
 # June diagnosis starts first: tests/conftest.py orders the longest tests ahead). On the idle
 # 2-core machine the suite took 16 min 41 s on two workers before that ordering (30 min of
-# CPU; the June diagnosis alone 6 min). PYTEST_WORKERS overrides the count (0: serially, in
+# CPU; the June diagnosis alone 6 min), and 18 min 11 s after it (no gain: the total work
+# bounds it, not the order). PYTEST_WORKERS overrides the count (0: serially, in
 # this process, e.g. to read a failure without xdist in the way).
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
