@@ -16,9 +16,11 @@ from odomgym.diagnose.fit import Dataset, fit_noise
 from odomgym.diagnose.likelihood import (
     SensorNoise,
     _filter,
+    _gauss_update,
     _model_arrays,
-    _residual,
+    _update3,
     run_likelihood,
+    run_residual,
     run_scores,
 )
 from odomgym.diagnose.replay import _headings, _positions, replay_run
@@ -165,7 +167,7 @@ def test_compiled_filter_is_its_source_run_by_python() -> None:
             mask = mask.copy()
             mask[::7, 2] = False  # some samples with two measured rows
             rep = replay_run(run, spec)
-            arrays = (*_model_arrays(rep, spec, SENSOR), _residual(run, rep, mask), mask)
+            arrays = (*_model_arrays(rep, spec, SENSOR), run_residual(run, rep, mask), mask)
             for gaussian, update in ((False, True), (True, True), (True, False)):
                 compiled_gap = np.full((len(run.time), 2), np.nan)
                 python_gap = compiled_gap.copy()
@@ -175,6 +177,71 @@ def test_compiled_filter_is_its_source_run_by_python() -> None:
                 assert compiled[1].tobytes() == python[1].tobytes()
                 assert compiled[2] == python[2]
                 assert compiled_gap.tobytes() == python_gap.tobytes()
+
+
+def test_scalar_filter_is_the_array_filter_bit_for_bit() -> None:
+    """The filter's scalar state and its three-row scalar update (``scalar=True``, what every
+    caller runs) give the bytes of the array path it replaced (``scalar=False``: the general
+    Kalman update and mixture collapse at every sample): log-likelihood, whitened innovations,
+    count and open-loop gap; with no noise effect, wheel noise, the jump mixture and Gaussian
+    jumps, and with samples of one and two measured rows among the three-row ones."""
+    runs = generate_session({"floor_bumps": {"value": 0.02}}, np.random.default_rng(21))[:3]
+    data = Dataset.of(runs, 0.25)
+    rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 1e-3, "k_right": 1.2e-3})
+    bumpy = EFFECTS["floor_bumps"].write(rough, {"rate": 0.5, "heading_jump": 0.01})
+    checked = 0
+    for spec in (MODEL, rough, bumpy):
+        for run, full in zip(data.runs, data.masks, strict=True):
+            partial = full.copy()
+            partial[::7, 2] = False  # position only
+            partial[3::11, :2] = False  # heading only
+            for mask in (full, partial):
+                rep = replay_run(run, spec)
+                arrays = (*_model_arrays(rep, spec, SENSOR), run_residual(run, rep, mask), mask)
+                for gaussian, update in ((False, True), (True, True), (True, False)):
+                    gaps = [np.full((len(run.time), 2), np.nan) for _ in range(2)]
+                    fast = _filter(*arrays, gaussian, update, gaps[0], True)
+                    slow = _filter(*arrays, gaussian, update, gaps[1], False)
+                    assert _bits(fast[0]) == _bits(slow[0])
+                    assert fast[1].tobytes() == slow[1].tobytes()
+                    assert fast[2] == slow[2]
+                    assert gaps[0].tobytes() == gaps[1].tobytes()
+                    checked += int(update and np.isfinite(fast[0]) and fast[2] > 0)
+    assert checked == 3 * 3 * 2 * 2
+
+
+def test_scalar_update_is_the_general_update_bit_for_bit() -> None:
+    """:func:`_update3` on scalars is :func:`_gauss_update` with three rows, bit for bit, on
+    random priors and on the awkward values the products with H's zeros and ones decide:
+    signed zeros, a singular prior, infinities and NaN."""
+    rng = np.random.default_rng(22)
+    cases = []
+    for _ in range(200):
+        a = rng.standard_normal((3, 3)) * 10.0 ** rng.uniform(-4, 1)
+        cases.append((a @ a.T, rng.standard_normal(3), rng.standard_normal(5)))
+    cases.append((np.zeros((3, 3)), np.zeros(3), np.zeros(5)))
+    cases.append((-0.0 * np.ones((3, 3)), np.array([-0.0, 0.0, -0.0]), np.array([-0.0] * 5)))
+    cases.append((np.full((3, 3), np.inf), np.ones(3), np.ones(5)))
+    cases.append((np.eye(3), np.array([np.nan, 0.0, 1.0]), np.ones(5)))
+    for prior, mean, extra in cases:
+        ox, oy, z0, z1, z2 = extra
+        r = np.array([4e-6, 4e-6, 2.5e-5])
+        h = np.array([[1.0, 0.0, -oy], [0.0, 1.0, ox], [0.0, 0.0, 1.0]])
+        # The innovation as the filter forms it for the general update (_update3 forms its own).
+        nu = np.array(
+            [
+                z - (h[a, 0] * mean[0] + h[a, 1] * mean[1] + h[a, 2] * mean[2])
+                for a, z in enumerate((z0, z1, z2))
+            ]
+        )
+        sol, post_mean, post_cov = np.zeros(3), np.zeros(3), np.zeros((3, 3))
+        with np.errstate(all="ignore"):
+            fit = _gauss_update(
+                prior, mean, h, nu, r, 3, np.zeros((4, 3, 3)), sol, np.zeros(3), post_mean, post_cov
+            )
+            got = _update3(*prior.ravel(), *mean, ox, oy, *r, z0, z1, z2)
+        want = (fit, *sol, *post_mean, *post_cov.ravel())
+        assert np.array(got).tobytes() == np.array(want).tobytes()
 
 
 def test_compiled_integration_is_numpy_cumsum_bit_for_bit() -> None:

@@ -35,7 +35,14 @@ from odomgym.effects import EFFECTS
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["RunLikelihood", "SensorNoise", "measurement_mask", "run_likelihood", "run_scores"]
+__all__ = [
+    "RunLikelihood",
+    "SensorNoise",
+    "measurement_mask",
+    "run_likelihood",
+    "run_residual",
+    "run_scores",
+]
 
 FloatArray = NDArray[np.float64]
 _MAX_JUMPS = 3
@@ -78,8 +85,8 @@ def measurement_mask(run: Run, min_interval: float) -> NDArray[np.bool_]:
 def process_noise(spec: RobotSpec, travel: FloatArray) -> tuple[FloatArray, FloatArray, float]:
     """Per-sample wheel variance (n, 2) [m²], expected wheel jumps (n, 2) and the travel each
     jump loses [m], from the spec's noise effects."""
-    variance = np.zeros_like(travel)
-    jumps = np.zeros_like(travel)
+    variance = np.zeros(travel.shape)  # not zeros_like: a Python function, ~6 µs a call
+    jumps = np.zeros(travel.shape)
     size = 0.0
     for name, values in spec.effect_dict().items():
         effect = EFFECTS.get(name)
@@ -110,7 +117,7 @@ def run_likelihood(
     """Filter ``run``'s disagreement with ``replay`` under ``spec``'s noise and ``sensor``."""
     loglik, whitened, count = _filter(
         *_model_arrays(replay, spec, sensor),
-        _residual(run, replay, mask),
+        run_residual(run, replay, mask),
         mask,
         gaussian_jumps,
         True,
@@ -127,6 +134,7 @@ def run_scores(
     mask: NDArray[np.bool_],
     *,
     whitened: bool,
+    residual: FloatArray | None = None,
 ) -> tuple[float, FloatArray | None]:
     """``run``'s log-likelihood with the jump mixture and, if ``whitened``, its whitened
     innovations with the jumps as their variance: :func:`run_likelihood`'s ``loglik`` without
@@ -135,9 +143,12 @@ def run_scores(
     Why one function: the two filters differ only at samples where a wheel jump is expected
     (``gaussian_jumps`` is read nowhere else), so without any — every model but one carrying
     ``floor_bumps`` — one pass gives both, bit-identical to two; the process noise and the
-    residual are computed once either way."""
+    residual are computed once either way. ``residual``: :func:`run_residual` of this run,
+    replay and mask if the caller keeps it (a noise fit replays nothing, so its residuals stay
+    put over the fit's hundreds of evaluations)."""
     arrays = _model_arrays(replay, spec, sensor)
-    residual = _residual(run, replay, mask)
+    if residual is None:
+        residual = run_residual(run, replay, mask)
     no_expected = np.zeros((0, 2))
     loglik, white, _ = _filter(*arrays, residual, mask, False, True, no_expected)
     if not whitened:
@@ -148,7 +159,7 @@ def run_scores(
     return float(loglik), white
 
 
-def _residual(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FloatArray:
+def run_residual(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FloatArray:
     """Measured minus predicted tracked pose (T, 3) where ``mask`` holds, else 0; the heading
     difference wrapped to [−π, π) [rad]."""
     residual = np.where(mask, run.true_pose - replay.tracked, 0.0)
@@ -196,7 +207,7 @@ def expected_square_gap(
     return expected
 
 
-@kernel
+@inlined_kernel
 def _propagate(mat: FloatArray, ux: float, uy: float) -> None:
     """mat ← F·mat·Fᵀ in place for F = I + u·e_θᵀ, u = (ux, uy, 0): a heading error moves later
     positions by δθ × displacement. Scalar code: this runs once per logged sample."""
@@ -213,7 +224,7 @@ def _propagate(mat: FloatArray, ux: float, uy: float) -> None:
     mat[2, 1] = mat[1, 2]
 
 
-@kernel
+@inlined_kernel
 def _add_outer(mat: FloatArray, weight: float, gx: float, gy: float, gt: float) -> None:
     """mat += weight·g·gᵀ in place, g = (gx, gy, gt)."""
     mat[0, 0] += weight * gx * gx
@@ -303,6 +314,112 @@ def _gauss_update(
     return -0.5 * (dim * math.log(2.0 * math.pi) + logdet + quad)
 
 
+# What _update3 returns: the innovation's log density, the whitened innovation (3), the
+# posterior mean (3) and the posterior covariance row by row (9).
+_Update3 = tuple[
+    float, float, float, float, float, float, float, float,
+    float, float, float, float, float, float, float, float,
+]  # fmt: skip
+
+
+@inlined_kernel
+def _update3(
+    p00: float, p01: float, p02: float,
+    p10: float, p11: float, p12: float,
+    p20: float, p21: float, p22: float,
+    m0: float, m1: float, m2: float,
+    ox: float, oy: float,
+    r0: float, r1: float, r2: float,
+    z0: float, z1: float, z2: float,
+) -> _Update3:  # fmt: skip
+    """:func:`_gauss_update` for all three pose components measured, on scalars: prior P
+    (p00…p22), mean m, the tracked point's offset (ox, oy) [m] from the axle, measurement
+    variances r [m², m², rad²] and the measured residual z.
+
+    Why a second copy: held in scalars, the state stays in registers, where the array version
+    goes through memory at every step because the compiler must assume the arrays alias
+    (~2.5× less filter time). Bit-identical to :func:`_gauss_update` with ``dim`` 3: the same
+    operations in the same order, the products with H's zeros and ones included (they decide
+    the sign of a zero and carry a NaN), which ``tests/test_likelihood.py`` checks on June
+    runs."""
+    h02 = -oy
+    h12 = ox
+    n0 = z0 - (1.0 * m0 + 0.0 * m1 + h02 * m2)
+    n1 = z1 - (0.0 * m0 + 1.0 * m1 + h12 * m2)
+    n2 = z2 - (0.0 * m0 + 0.0 * m1 + 1.0 * m2)
+    # H·P
+    a00 = 1.0 * p00 + 0.0 * p10 + h02 * p20
+    a01 = 1.0 * p01 + 0.0 * p11 + h02 * p21
+    a02 = 1.0 * p02 + 0.0 * p12 + h02 * p22
+    a10 = 0.0 * p00 + 1.0 * p10 + h12 * p20
+    a11 = 0.0 * p01 + 1.0 * p11 + h12 * p21
+    a12 = 0.0 * p02 + 1.0 * p12 + h12 * p22
+    a20 = 0.0 * p00 + 0.0 * p10 + 1.0 * p20
+    a21 = 0.0 * p01 + 0.0 * p11 + 1.0 * p21
+    a22 = 0.0 * p02 + 0.0 * p12 + 1.0 * p22
+    # S = H·P·Hᵀ + R (lower triangle)
+    s00 = a00 * 1.0 + a01 * 0.0 + a02 * h02
+    s00 += r0
+    s10 = a10 * 1.0 + a11 * 0.0 + a12 * h02
+    s11 = a10 * 0.0 + a11 * 1.0 + a12 * h12
+    s11 += r1
+    s20 = a20 * 1.0 + a21 * 0.0 + a22 * h02
+    s21 = a20 * 0.0 + a21 * 1.0 + a22 * h12
+    s22 = a20 * 0.0 + a21 * 0.0 + a22 * 1.0
+    s22 += r2
+    l00 = math.sqrt(max(s00, 1e-300))
+    logdet = 0.0 + 2.0 * math.log(l00)
+    l10 = s10 / l00
+    l11 = math.sqrt(max(s11 - l10 * l10, 1e-300))
+    logdet += 2.0 * math.log(l11)
+    l20 = s20 / l00
+    l21 = (s21 - l20 * l10) / l11
+    l22 = math.sqrt(max(s22 - l20 * l20 - l21 * l21, 1e-300))
+    logdet += 2.0 * math.log(l22)
+    w0 = n0 / l00
+    quad = 0.0 + w0 * w0
+    w1 = (n1 - l10 * w0) / l11
+    quad += w1 * w1
+    w2 = (n2 - l20 * w0 - l21 * w1) / l22
+    quad += w2 * w2
+    # X = S⁻¹·(H·P), column by column
+    y0 = a00 / l00
+    y1 = (a10 - l10 * y0) / l11
+    y2 = (a20 - l20 * y0 - l21 * y1) / l22
+    x20 = y2 / l22
+    x10 = (y1 - l21 * x20) / l11
+    x00 = (y0 - l10 * x10 - l20 * x20) / l00
+    y0 = a01 / l00
+    y1 = (a11 - l10 * y0) / l11
+    y2 = (a21 - l20 * y0 - l21 * y1) / l22
+    x21 = y2 / l22
+    x11 = (y1 - l21 * x21) / l11
+    x01 = (y0 - l10 * x11 - l20 * x21) / l00
+    y0 = a02 / l00
+    y1 = (a12 - l10 * y0) / l11
+    y2 = (a22 - l20 * y0 - l21 * y1) / l22
+    x22 = y2 / l22
+    x12 = (y1 - l21 * x22) / l11
+    x02 = (y0 - l10 * x12 - l20 * x22) / l00
+    t2 = w2 / l22
+    t1 = (w1 - l21 * t2) / l11
+    t0 = (w0 - l10 * t1 - l20 * t2) / l00
+    q0 = m0 + a00 * t0 + a10 * t1 + a20 * t2
+    q1 = m1 + a01 * t0 + a11 * t1 + a21 * t2
+    q2 = m2 + a02 * t0 + a12 * t1 + a22 * t2
+    c00 = p00 - a00 * x00 - a10 * x10 - a20 * x20
+    c01 = p01 - a00 * x01 - a10 * x11 - a20 * x21
+    c02 = p02 - a00 * x02 - a10 * x12 - a20 * x22
+    c10 = p10 - a01 * x00 - a11 * x10 - a21 * x20
+    c11 = p11 - a01 * x01 - a11 * x11 - a21 * x21
+    c12 = p12 - a01 * x02 - a11 * x12 - a21 * x22
+    c20 = p20 - a02 * x00 - a12 * x10 - a22 * x20
+    c21 = p21 - a02 * x01 - a12 * x11 - a22 * x21
+    c22 = p22 - a02 * x02 - a12 * x12 - a22 * x22
+    fit = -0.5 * (3 * math.log(2.0 * math.pi) + logdet + quad)
+    return (fit, w0, w1, w2, q0, q1, q2, c00, c01, c02, c10, c11, c12, c20, c21, c22)
+
+
 @kernel
 def _filter(
     pose: FloatArray,
@@ -319,7 +436,17 @@ def _filter(
     gaussian_jumps: bool,
     update: bool,
     expected: FloatArray,
+    scalar: bool = True,
 ) -> tuple[float, FloatArray, int]:
+    """The filter of the module docstring over one run: log-likelihood (``update``), whitened
+    innovations (3T,) and the count of measured values; with ``update`` False, the open-loop
+    expected squared gap into ``expected`` instead.
+
+    The state (covariance, mean) is held in scalars between samples, and a sample with all
+    three components measured and no jump mixture takes the scalar update :func:`_update3`
+    and a one-component collapse written out (exp(0) = 1, log(1) = 0 exactly, so skipping
+    them changes no bit). ``scalar`` False takes the array path of :func:`_gauss_update`
+    everywhere instead: the reference the tests hold the fast one to, bit for bit."""
     n_samples = pose.shape[0]
     whitened = np.zeros(3 * n_samples)
     count = 0
@@ -333,6 +460,20 @@ def _filter(
     hinv[1, 2] = -ox
     r0 = np.diag(sigma**2)
     cov = hinv @ r0 @ hinv.T
+    # The state: covariance c (row by row) and mean m, in scalars (see the docstring); ``cov``
+    # and ``mean`` hold them only while the array path runs.
+    c00 = cov[0, 0]
+    c01 = cov[0, 1]
+    c02 = cov[0, 2]
+    c10 = cov[1, 0]
+    c11 = cov[1, 1]
+    c12 = cov[1, 2]
+    c20 = cov[2, 0]
+    c21 = cov[2, 1]
+    c22 = cov[2, 2]
+    m0 = 0.0
+    m1 = 0.0
+    m2 = 0.0
     mean = np.zeros(3)
     a0 = 0.0  # expected jumps since the last update
     vacc = np.zeros((3, 3))  # Σ μ·(Φg)(Φg)ᵀ of those jumps, propagated to the current sample
@@ -347,17 +488,31 @@ def _filter(
     s_nu = np.zeros(3)
     weights = np.zeros(_MAX_JUMPS + 1)
     logs = np.zeros(_MAX_JUMPS + 1)
+    shares = np.zeros(_MAX_JUMPS + 1)
     means = np.zeros((_MAX_JUMPS + 1, 3))
     covs = np.zeros((_MAX_JUMPS + 1, 3, 3))
+    r_x = sigma[0] ** 2
+    r_y = sigma[1] ** 2
+    r_t = sigma[2] ** 2
     for k in range(1, n_samples):
         m = k - 1
-        # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): scalar code, no
-        # temporaries (this loop runs once per logged sample).
+        # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): the operations of
+        # _propagate and _add_outer on the scalar state (this loop runs once per logged sample).
         ux = -(pose[k, 1] - pose[m, 1])
         uy = pose[k, 0] - pose[m, 0]
-        mean[0] += ux * mean[2]
-        mean[1] += uy * mean[2]
-        _propagate(cov, ux, uy)
+        m0 += ux * m2
+        m1 += uy * m2
+        p20 = c20
+        p21 = c21
+        p22 = c22
+        c00 += 2.0 * ux * p20 + ux * ux * p22
+        c11 += 2.0 * uy * p21 + uy * uy * p22
+        c01 += ux * p21 + uy * p20 + ux * uy * p22
+        c10 = c01
+        c02 += ux * p22
+        c20 = c02
+        c12 += uy * p22
+        c21 = c12
         if a0 > 0.0:
             _propagate(vacc, ux, uy)
         mid = pose[m, 2] + 0.5 * dtheta[m]
@@ -376,26 +531,109 @@ def _filter(
             gy = 0.5 * s - sign * half * c
             gt = -sign / wheelbase
             if var > 0.0:
-                _add_outer(cov, var, gx, gy, gt)
+                c00 += var * gx * gx
+                c11 += var * gy * gy
+                c22 += var * gt * gt
+                c01 += var * gx * gy
+                c10 = c01
+                c02 += var * gx * gt
+                c20 = c02
+                c12 += var * gy * gt
+                c21 = c12
             if mu > 0.0 and not gaussian_jumps:
                 a0 += mu
                 _add_outer(vacc, mu * size * size, gx, gy, gt)
         if not (mask[k, 0] or mask[k, 1] or mask[k, 2]):
             continue
+        ox = tracked[k, 0] - pose[k, 0]
+        oy = tracked[k, 1] - pose[k, 1]
         if not update:
             # Open loop: the expected squared position disagreement (tracked point) from
             # noise alone, E|z_xy|² = tr(H P Hᵀ)_xy + 2σ², jumps as their variance.
-            ox = tracked[k, 0] - pose[k, 0]
-            oy = tracked[k, 1] - pose[k, 1]
-            vx = cov[0, 0] - 2.0 * oy * cov[0, 2] + oy * oy * cov[2, 2]
-            vy = cov[1, 1] + 2.0 * ox * cov[1, 2] + ox * ox * cov[2, 2]
+            vx = c00 - 2.0 * oy * c02 + oy * oy * c22
+            vy = c11 + 2.0 * ox * c12 + ox * ox * c22
             expected[k, 0] = vx + vy + sigma[0] ** 2 + sigma[1] ** 2
-            expected[k, 1] = cov[2, 2] + sigma[2] ** 2
+            expected[k, 1] = c22 + sigma[2] ** 2
             continue
-        # Measurement: tracked point = axle + R(θ)·o, linearised in δθ. Work arrays are
-        # preallocated (this runs once per measured sample).
-        ox = tracked[k, 0] - pose[k, 0]
-        oy = tracked[k, 1] - pose[k, 1]
+        mixture = a0 > 0.0 and not gaussian_jumps
+        if scalar and mask[k, 0] and mask[k, 1] and mask[k, 2] and not mixture:
+            # The usual case (all three components measured, no jump expected): one update
+            # and the collapse of a one-component mixture, its weight exactly 1 when the
+            # log density is finite (else the general expressions, which carry the NaN).
+            (fit, w0, w1, w2, q0, q1, q2, d00, d01, d02, d10, d11, d12, d20, d21, d22) = _update3(
+                c00 + 0 * v1[0, 0],
+                c01 + 0 * v1[0, 1],
+                c02 + 0 * v1[0, 2],
+                c10 + 0 * v1[1, 0],
+                c11 + 0 * v1[1, 1],
+                c12 + 0 * v1[1, 2],
+                c20 + 0 * v1[2, 0],
+                c21 + 0 * v1[2, 1],
+                c22 + 0 * v1[2, 2],
+                m0,
+                m1,
+                m2,
+                ox,
+                oy,
+                r_x,
+                r_y,
+                r_t,
+                residual[k, 0],
+                residual[k, 1],
+                residual[k, 2],
+            )
+            logs0 = math.log(1.0) + fit
+            whitened[3 * k] = w0
+            whitened[3 * k + 1] = w1
+            whitened[3 * k + 2] = w2
+            if math.isfinite(logs0):
+                loglik += logs0 + 0.0
+                weight = 1.0
+            else:
+                top = max(-math.inf, logs0)
+                total = 0.0 + math.exp(logs0 - top)
+                loglik += top + math.log(total)
+                weight = math.exp(logs0 - top) / total
+            m0 = 0.0 + weight * q0
+            m1 = 0.0 + weight * q1
+            m2 = 0.0 + weight * q2
+            e0 = q0 - m0
+            e1 = q1 - m1
+            e2 = q2 - m2
+            c00 = 0.0 + weight * (d00 + e0 * (q0 - m0))
+            c01 = 0.0 + weight * (d01 + e0 * (q1 - m1))
+            c02 = 0.0 + weight * (d02 + e0 * (q2 - m2))
+            c10 = 0.0 + weight * (d10 + e1 * (q0 - m0))
+            c11 = 0.0 + weight * (d11 + e1 * (q1 - m1))
+            c12 = 0.0 + weight * (d12 + e1 * (q2 - m2))
+            c20 = 0.0 + weight * (d20 + e2 * (q0 - m0))
+            c21 = 0.0 + weight * (d21 + e2 * (q1 - m1))
+            c22 = 0.0 + weight * (d22 + e2 * (q2 - m2))
+            sym = 0.5 * (c01 + c10)
+            c01 = sym
+            c10 = sym
+            sym = 0.5 * (c02 + c20)
+            c02 = sym
+            c20 = sym
+            sym = 0.5 * (c12 + c21)
+            c12 = sym
+            c21 = sym
+            count += 3
+            continue
+        # Otherwise the array path: measured rows, the jump mixture, the general collapse.
+        # Work arrays are preallocated (this runs once per measured sample).
+        cov[0, 0] = c00
+        cov[0, 1] = c01
+        cov[0, 2] = c02
+        cov[1, 0] = c10
+        cov[1, 1] = c11
+        cov[1, 2] = c12
+        cov[2, 0] = c20
+        cov[2, 1] = c21
+        cov[2, 2] = c22
+        mean[0] = m0
+        mean[1] = m1
+        mean[2] = m2
         dim = 0
         for j in range(3):
             if mask[k, j]:
@@ -414,7 +652,7 @@ def _filter(
             rdiag[a] = sigma[j] ** 2
         n_comp = 1
         weights[0] = 1.0
-        if a0 > 0.0 and not gaussian_jumps:
+        if mixture:
             # Jump mixture: v1 = the covariance one jump since the last update adds.
             n_comp = _MAX_JUMPS + 1
             total = 0.0
@@ -432,17 +670,51 @@ def _filter(
             vacc[:, :] = 0.0
         top = -math.inf
         for j in range(n_comp):
-            for a in range(3):
-                for b in range(3):
-                    prior[a, b] = cov[a, b] + j * v1[a, b]
-            # All three components measured (the usual case): the update compiled for three
-            # rows, its loops unrolled (~25 % less filter time, the same operations).
             post_mean, post_cov = means[j], covs[j]
-            if dim == 3:
-                fit = _gauss_update(
-                    prior, mean, h, nu, rdiag, 3, work, sol, s_nu, post_mean, post_cov
+            if dim == 3 and scalar:
+                (
+                    fit,
+                    sol[0],
+                    sol[1],
+                    sol[2],
+                    means[j, 0],
+                    means[j, 1],
+                    means[j, 2],
+                    covs[j, 0, 0],
+                    covs[j, 0, 1],
+                    covs[j, 0, 2],
+                    covs[j, 1, 0],
+                    covs[j, 1, 1],
+                    covs[j, 1, 2],
+                    covs[j, 2, 0],
+                    covs[j, 2, 1],
+                    covs[j, 2, 2],
+                ) = _update3(
+                    c00 + j * v1[0, 0],
+                    c01 + j * v1[0, 1],
+                    c02 + j * v1[0, 2],
+                    c10 + j * v1[1, 0],
+                    c11 + j * v1[1, 1],
+                    c12 + j * v1[1, 2],
+                    c20 + j * v1[2, 0],
+                    c21 + j * v1[2, 1],
+                    c22 + j * v1[2, 2],
+                    m0,
+                    m1,
+                    m2,
+                    ox,
+                    oy,
+                    r_x,
+                    r_y,
+                    r_t,
+                    residual[k, 0],
+                    residual[k, 1],
+                    residual[k, 2],
                 )
             else:
+                for a in range(3):
+                    for b in range(3):
+                        prior[a, b] = cov[a, b] + j * v1[a, b]
                 fit = _gauss_update(
                     prior, mean, h, nu, rdiag, dim, work, sol, s_nu, post_mean, post_cov
                 )
@@ -453,18 +725,19 @@ def _filter(
             top = max(top, logs[j])
         total = 0.0
         for j in range(n_comp):
-            total += math.exp(logs[j] - top)
+            shares[j] = math.exp(logs[j] - top)  # once: each is read three times
+            total += shares[j]
         loglik += top + math.log(total)
         for a in range(3):
             mean[a] = 0.0
             for b in range(3):
                 cov[a, b] = 0.0
         for j in range(n_comp):
-            weight = math.exp(logs[j] - top) / total
+            weight = shares[j] / total
             for a in range(3):
                 mean[a] += weight * means[j, a]
         for j in range(n_comp):
-            weight = math.exp(logs[j] - top) / total
+            weight = shares[j] / total
             for a in range(3):
                 da = means[j, a] - mean[a]
                 for b in range(3):
@@ -474,5 +747,17 @@ def _filter(
                 sym = 0.5 * (cov[a, b] + cov[b, a])
                 cov[a, b] = sym
                 cov[b, a] = sym
+        c00 = cov[0, 0]
+        c01 = cov[0, 1]
+        c02 = cov[0, 2]
+        c10 = cov[1, 0]
+        c11 = cov[1, 1]
+        c12 = cov[1, 2]
+        c20 = cov[2, 0]
+        c21 = cov[2, 1]
+        c22 = cov[2, 2]
+        m0 = mean[0]
+        m1 = mean[1]
+        m2 = mean[2]
         count += dim
     return loglik, whitened, count
