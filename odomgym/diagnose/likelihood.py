@@ -314,6 +314,31 @@ def _gauss_update(
     return -0.5 * (dim * math.log(2.0 * math.pi) + logdet + quad)
 
 
+@inlined_kernel
+def _forward3(
+    b0: float, b1: float, b2: float,
+    l00: float, l10: float, l11: float, l20: float, l21: float, l22: float,
+) -> tuple[float, float, float]:  # fmt: skip
+    """L⁻¹·b for the lower-triangular 3×3 factor L (forward substitution, in
+    :func:`_gauss_update`'s order of operations)."""
+    y0 = b0 / l00
+    y1 = (b1 - l10 * y0) / l11
+    y2 = (b2 - l20 * y0 - l21 * y1) / l22
+    return y0, y1, y2
+
+
+@inlined_kernel
+def _back3(
+    y0: float, y1: float, y2: float,
+    l00: float, l10: float, l11: float, l20: float, l21: float, l22: float,
+) -> tuple[float, float, float]:  # fmt: skip
+    """L⁻ᵀ·y (back substitution, in :func:`_gauss_update`'s order of operations)."""
+    x2 = y2 / l22
+    x1 = (y1 - l21 * x2) / l11
+    x0 = (y0 - l10 * x1 - l20 * x2) / l00
+    return x0, x1, x2
+
+
 # What _update3 returns: the innovation's log density, the whitened innovation (3), the
 # posterior mean (3) and the posterior covariance row by row (9).
 _Update3 = tuple[
@@ -376,34 +401,19 @@ def _update3(
     l21 = (s21 - l20 * l10) / l11
     l22 = math.sqrt(max(s22 - l20 * l20 - l21 * l21, 1e-300))
     logdet += 2.0 * math.log(l22)
-    w0 = n0 / l00
+    w0, w1, w2 = _forward3(n0, n1, n2, l00, l10, l11, l20, l21, l22)  # the whitened innovation L⁻¹ν
     quad = 0.0 + w0 * w0
-    w1 = (n1 - l10 * w0) / l11
     quad += w1 * w1
-    w2 = (n2 - l20 * w0 - l21 * w1) / l22
     quad += w2 * w2
-    # X = S⁻¹·(H·P), column by column
-    y0 = a00 / l00
-    y1 = (a10 - l10 * y0) / l11
-    y2 = (a20 - l20 * y0 - l21 * y1) / l22
-    x20 = y2 / l22
-    x10 = (y1 - l21 * x20) / l11
-    x00 = (y0 - l10 * x10 - l20 * x20) / l00
-    y0 = a01 / l00
-    y1 = (a11 - l10 * y0) / l11
-    y2 = (a21 - l20 * y0 - l21 * y1) / l22
-    x21 = y2 / l22
-    x11 = (y1 - l21 * x21) / l11
-    x01 = (y0 - l10 * x11 - l20 * x21) / l00
-    y0 = a02 / l00
-    y1 = (a12 - l10 * y0) / l11
-    y2 = (a22 - l20 * y0 - l21 * y1) / l22
-    x22 = y2 / l22
-    x12 = (y1 - l21 * x22) / l11
-    x02 = (y0 - l10 * x12 - l20 * x22) / l00
-    t2 = w2 / l22
-    t1 = (w1 - l21 * t2) / l11
-    t0 = (w0 - l10 * t1 - l20 * t2) / l00
+    # X = S⁻¹·(H·P), column by column; S⁻¹ν = L⁻ᵀ·(L⁻¹ν).
+    y0, y1, y2 = _forward3(a00, a10, a20, l00, l10, l11, l20, l21, l22)
+    x00, x10, x20 = _back3(y0, y1, y2, l00, l10, l11, l20, l21, l22)
+    y0, y1, y2 = _forward3(a01, a11, a21, l00, l10, l11, l20, l21, l22)
+    x01, x11, x21 = _back3(y0, y1, y2, l00, l10, l11, l20, l21, l22)
+    y0, y1, y2 = _forward3(a02, a12, a22, l00, l10, l11, l20, l21, l22)
+    x02, x12, x22 = _back3(y0, y1, y2, l00, l10, l11, l20, l21, l22)
+    t0, t1, t2 = _back3(w0, w1, w2, l00, l10, l11, l20, l21, l22)
+    # Posterior mean m + (H·P)ᵀ·S⁻¹ν and covariance P − (H·P)ᵀ·X, in _gauss_update's order.
     q0 = m0 + a00 * t0 + a10 * t1 + a20 * t2
     q1 = m1 + a01 * t0 + a11 * t1 + a21 * t2
     q2 = m2 + a02 * t0 + a12 * t1 + a22 * t2
@@ -418,6 +428,42 @@ def _update3(
     c22 = p22 - a02 * x02 - a12 * x12 - a22 * x22
     fit = -0.5 * (3 * math.log(2.0 * math.pi) + logdet + quad)
     return (fit, w0, w1, w2, q0, q1, q2, c00, c01, c02, c10, c11, c12, c20, c21, c22)
+
+
+@inlined_kernel
+def _component_update(
+    c00: float, c01: float, c02: float,
+    c10: float, c11: float, c12: float,
+    c20: float, c21: float, c22: float,
+    v1: FloatArray, jumps: int,
+    m0: float, m1: float, m2: float,
+    ox: float, oy: float,
+    r0: float, r1: float, r2: float,
+    residual: FloatArray, k: int,
+) -> _Update3:  # fmt: skip
+    """:func:`_update3` of the jump mixture's component with ``jumps`` jumps since the last
+    update at sample ``k``: prior c + jumps·v1 as the array path forms it (for no jump
+    c + 0·v1, which is c but for the sign of a zero)."""
+    return _update3(
+        c00 + jumps * v1[0, 0], c01 + jumps * v1[0, 1], c02 + jumps * v1[0, 2],
+        c10 + jumps * v1[1, 0], c11 + jumps * v1[1, 1], c12 + jumps * v1[1, 2],
+        c20 + jumps * v1[2, 0], c21 + jumps * v1[2, 1], c22 + jumps * v1[2, 2],
+        m0, m1, m2, ox, oy, r0, r1, r2,
+        residual[k, 0], residual[k, 1], residual[k, 2],
+    )  # fmt: skip
+
+
+_Entries = tuple[float, float, float, float, float, float, float, float, float]
+
+
+@inlined_kernel
+def _entries(mat: FloatArray) -> _Entries:
+    """A 3×3 matrix's nine entries, row by row (to hold it in scalars)."""
+    return (
+        mat[0, 0], mat[0, 1], mat[0, 2],
+        mat[1, 0], mat[1, 1], mat[1, 2],
+        mat[2, 0], mat[2, 1], mat[2, 2],
+    )  # fmt: skip
 
 
 @kernel
@@ -462,15 +508,7 @@ def _filter(
     cov = hinv @ r0 @ hinv.T
     # The state: covariance c (row by row) and mean m, in scalars (see the docstring); ``cov``
     # and ``mean`` hold them only while the array path runs.
-    c00 = cov[0, 0]
-    c01 = cov[0, 1]
-    c02 = cov[0, 2]
-    c10 = cov[1, 0]
-    c11 = cov[1, 1]
-    c12 = cov[1, 2]
-    c20 = cov[2, 0]
-    c21 = cov[2, 1]
-    c22 = cov[2, 2]
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _entries(cov)
     m0 = 0.0
     m1 = 0.0
     m2 = 0.0
@@ -560,28 +598,12 @@ def _filter(
             # The usual case (all three components measured, no jump expected): one update
             # and the collapse of a one-component mixture, its weight exactly 1 when the
             # log density is finite (else the general expressions, which carry the NaN).
-            (fit, w0, w1, w2, q0, q1, q2, d00, d01, d02, d10, d11, d12, d20, d21, d22) = _update3(
-                c00 + 0 * v1[0, 0],
-                c01 + 0 * v1[0, 1],
-                c02 + 0 * v1[0, 2],
-                c10 + 0 * v1[1, 0],
-                c11 + 0 * v1[1, 1],
-                c12 + 0 * v1[1, 2],
-                c20 + 0 * v1[2, 0],
-                c21 + 0 * v1[2, 1],
-                c22 + 0 * v1[2, 2],
-                m0,
-                m1,
-                m2,
-                ox,
-                oy,
-                r_x,
-                r_y,
-                r_t,
-                residual[k, 0],
-                residual[k, 1],
-                residual[k, 2],
-            )
+            (fit, w0, w1, w2, q0, q1, q2, d00, d01, d02, d10, d11, d12, d20, d21, d22) = (
+                _component_update(
+                    c00, c01, c02, c10, c11, c12, c20, c21, c22, v1, 0,
+                    m0, m1, m2, ox, oy, r_x, r_y, r_t, residual, k,
+                )
+            )  # fmt: skip
             logs0 = math.log(1.0) + fit
             whitened[3 * k] = w0
             whitened[3 * k + 1] = w1
@@ -689,28 +711,10 @@ def _filter(
                     covs[j, 2, 0],
                     covs[j, 2, 1],
                     covs[j, 2, 2],
-                ) = _update3(
-                    c00 + j * v1[0, 0],
-                    c01 + j * v1[0, 1],
-                    c02 + j * v1[0, 2],
-                    c10 + j * v1[1, 0],
-                    c11 + j * v1[1, 1],
-                    c12 + j * v1[1, 2],
-                    c20 + j * v1[2, 0],
-                    c21 + j * v1[2, 1],
-                    c22 + j * v1[2, 2],
-                    m0,
-                    m1,
-                    m2,
-                    ox,
-                    oy,
-                    r_x,
-                    r_y,
-                    r_t,
-                    residual[k, 0],
-                    residual[k, 1],
-                    residual[k, 2],
-                )
+                ) = _component_update(
+                    c00, c01, c02, c10, c11, c12, c20, c21, c22, v1, j,
+                    m0, m1, m2, ox, oy, r_x, r_y, r_t, residual, k,
+                )  # fmt: skip
             else:
                 for a in range(3):
                     for b in range(3):
@@ -747,15 +751,7 @@ def _filter(
                 sym = 0.5 * (cov[a, b] + cov[b, a])
                 cov[a, b] = sym
                 cov[b, a] = sym
-        c00 = cov[0, 0]
-        c01 = cov[0, 1]
-        c02 = cov[0, 2]
-        c10 = cov[1, 0]
-        c11 = cov[1, 1]
-        c12 = cov[1, 2]
-        c20 = cov[2, 0]
-        c21 = cov[2, 1]
-        c22 = cov[2, 2]
+        c00, c01, c02, c10, c11, c12, c20, c21, c22 = _entries(cov)
         m0 = mean[0]
         m1 = mean[1]
         m2 = mean[2]
