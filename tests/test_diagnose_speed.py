@@ -23,7 +23,7 @@ from odomgym.diagnose.likelihood import (
     run_residual,
     run_scores,
 )
-from odomgym.diagnose.replay import _headings, _positions, replay_run
+from odomgym.diagnose.replay import _headings, _measure, _positions, _start_pose, replay_run
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
 from odomgym.robot import RobotSpec
@@ -242,6 +242,30 @@ def test_scalar_update_is_the_general_update_bit_for_bit() -> None:
             got = _update3(*prior.ravel(), *mean, ox, oy, *r, z0, z1, z2)
         want = (fit, *sol, *post_mean, *post_cov.ravel())
         assert np.array(got).tobytes() == np.array(want).tobytes()
+
+
+def test_start_pose_stops_early_with_the_bytes_of_three_steps() -> None:
+    """The replay's start pose (the axle pose whose tracked point is the first measured pose)
+    stops iterating once a step leaves the pose as it was; it is the bytes of the three
+    steps it took before, for models without a measurement stage (one step), with a tracked
+    point offset (rigid: still moving in the last bits) and at poses with signed zeros."""
+    rng = np.random.default_rng(23)
+    models: list[list[tuple[str, dict[str, float]]]] = [
+        [],
+        [("turn_skid", {"gain": 0.3}), ("backlash", {"angle": 0.01})],
+        [("gt_sensor_offset", {"dx": 0.031, "dy": -0.012})],
+        [("gt_sensor_offset", {"dx": 0.0, "dy": 0.0})],
+    ]
+    poses = [rng.standard_normal(3) for _ in range(20)]
+    poses += [np.array([-0.0, 0.0, -0.0]), np.array([0.0, -0.0, np.pi])]
+    for effects in models:
+        for measured in poses:
+            target = measured[None, :]
+            pose = target.copy()
+            arrays = ReplayArrays(dt=np.zeros(0), wheel=np.zeros((0, 2)))
+            for _ in range(3):  # the iteration as it was: always three steps
+                pose = pose + (target - _measure(pose, effects, arrays))
+            assert _start_pose(measured, effects).tobytes() == pose[0].tobytes()
 
 
 def test_compiled_integration_is_numpy_cumsum_bit_for_bit() -> None:

@@ -206,12 +206,20 @@ def _measure(
 
 def _start_pose(measured: FloatArray, effects: list[tuple[str, dict[str, float]]]) -> FloatArray:
     """The axle pose whose tracked point is the measured first pose (fixed-point iteration:
-    exact in two steps for rigid offsets, which do not change the heading)."""
+    exact in two steps for rigid offsets, which do not change the heading).
+
+    The iteration stops early once a step leaves the pose's bytes as they were: ``_measure``
+    is a function of the pose alone, so every further step would give those bytes again (the
+    common case, a model without a measurement stage, takes one step instead of three)."""
     target = np.asarray(measured, dtype=float)[None, :]
     pose = target.copy()
     arrays = ReplayArrays(dt=np.zeros(0), wheel=np.zeros((0, 2)))
     for _ in range(3):
         seen = _measure(pose, effects, arrays)
-        pose = pose + (target - seen)
+        moved = pose + (target - seen)
+        settled = moved.tobytes() == pose.tobytes()
+        pose = moved
+        if settled:
+            break
     start: FloatArray = pose[0]
     return start
