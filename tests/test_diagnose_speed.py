@@ -19,6 +19,7 @@ from odomgym.diagnose.likelihood import (
     _gauss_update,
     _model_arrays,
     _update3,
+    _wheel_gains,
     run_likelihood,
     run_residual,
     run_scores,
@@ -157,7 +158,8 @@ def test_compiled_filter_is_its_source_run_by_python() -> None:
     loops unrolled); run by the Python interpreter (``py_func``), the same source calls the
     update compiled for any number of rows. Both give the same bytes: log-likelihood,
     whitened innovations, count — with the jump mixture, with Gaussian jumps, and the
-    open-loop expected gap."""
+    open-loop expected gap; and so do the wheel gains it takes (cosines and sines of numba
+    and of Python's ``math``)."""
     runs = generate_session({"floor_bumps": {"value": 0.02}}, np.random.default_rng(9))[:3]
     data = Dataset.of(runs, 0.25)
     rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 1e-3, "k_right": 1.2e-3})
@@ -177,6 +179,9 @@ def test_compiled_filter_is_its_source_run_by_python() -> None:
                 assert compiled[1].tobytes() == python[1].tobytes()
                 assert compiled[2] == python[2]
                 assert compiled_gap.tobytes() == python_gap.tobytes()
+            # The wheel gains the filter takes, kept once per replay: the same bytes too.
+            args = (rep.pose, rep.ds, rep.dtheta, rep.wheelbase)
+            assert _wheel_gains(*args).tobytes() == _wheel_gains.py_func(*args).tobytes()
 
 
 def test_scalar_filter_is_the_array_filter_bit_for_bit() -> None:

@@ -43,7 +43,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares, minimize
 
-from odomgym.diagnose.likelihood import SensorNoise, measurement_mask, run_residual, run_scores
+from odomgym.diagnose.likelihood import (
+    FilterInputs,
+    SensorNoise,
+    filter_inputs,
+    measurement_mask,
+    run_scores,
+)
 from odomgym.diagnose.replay import Replay, RunInputs, replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import EFFECTS, Effect
@@ -162,11 +168,11 @@ def evaluate(
     *,
     whitened: bool = True,
     replays: list[Replay] | None = None,
-    residuals: list[FloatArray] | None = None,
+    kept: list[FilterInputs] | None = None,
 ) -> Evaluation:
-    """Replay every run through ``spec`` and filter it; ``replays`` and ``residuals``: each
-    run's replay through ``spec`` and its :func:`~odomgym.diagnose.likelihood.run_residual`,
-    if the caller keeps them (see :func:`_fixed_replays`).
+    """Replay every run through ``spec`` and filter it; ``replays`` and ``kept``: each run's
+    replay through ``spec`` and its :func:`~odomgym.diagnose.likelihood.filter_inputs`, if
+    the caller keeps them (see :func:`_fixed_replays`).
 
     The runs are independent, and the filter (compiled, releasing the GIL) takes most of the
     time, so they are shared among :func:`_threads` threads; each run's numbers do not depend on
@@ -175,10 +181,8 @@ def evaluate(
     def one(j: int) -> tuple[Replay, float, FloatArray | None]:
         run, mask = data.runs[j], data.masks[j]
         rep = replays[j] if replays is not None else data.replay(j, spec)
-        residual = residuals[j] if residuals is not None else None
-        loglik, white = run_scores(
-            run, rep, spec, sensor, mask, whitened=whitened, residual=residual
-        )
+        inputs = kept[j] if kept is not None else None
+        loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened, kept=inputs)
         return rep, loglik, white
 
     def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
@@ -334,32 +338,32 @@ def fit_noise(
 
 def _fixed_replays(
     data: Dataset, spec: RobotSpec, effects: Sequence[Effect]
-) -> tuple[list[Replay] | None, list[FloatArray] | None]:
-    """Every run's replay through ``spec`` and its residual, kept for a fit that varies only
-    ``effects``' noise parameters and the sensor σ; (None, None) if one of the effects moves
-    the replay.
+) -> tuple[list[Replay] | None, list[FilterInputs] | None]:
+    """Every run's replay through ``spec`` and its filter inputs (residual, wheel gains), kept
+    for a fit that varies only ``effects``' noise parameters and the sensor σ; (None, None) if
+    one of the effects moves the replay.
 
     Why: the noise parameters change the filter's covariances, never its mean, so a noise
-    fit's hundreds of evaluations replay the same runs and subtract the same poses; kept, the
-    filter is all that is left of each (the same function on the same inputs: the same
-    bytes)."""
+    fit's hundreds of evaluations replay the same runs, subtract the same poses and linearise
+    about the same path; kept, the filter's own update is all that is left of each (the same
+    functions on the same inputs: the same bytes)."""
     if _moves_mean(effects):
         return None, None
     reps = [data.replay(j, spec) for j in range(len(data))]
     triples = zip(data.runs, reps, data.masks, strict=True)
-    return reps, [run_residual(run, rep, mask) for run, rep, mask in triples]
+    return reps, [filter_inputs(run, rep, mask) for run, rep, mask in triples]
 
 
 def _fit_noise(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, chosen: list[Effect], warm: bool
 ) -> tuple[RobotSpec, SensorNoise, float]:
     """:func:`fit_noise` itself (without its memo)."""
-    reps, residuals = _fixed_replays(data, spec, chosen)
+    reps, kept = _fixed_replays(data, spec, chosen)
     x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
 
     def objective(x: FloatArray) -> float:
         s, n = build(x)
-        ev = evaluate(data, s, n, whitened=False, replays=reps, residuals=residuals)
+        ev = evaluate(data, s, n, whitened=False, replays=reps, kept=kept)
         return -float(ev.loglik.sum())
 
     start = np.clip(x0, low, high)
@@ -418,13 +422,13 @@ def noise_curvature(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
     log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
-    reps, residuals = _fixed_replays(data, spec, effects)
+    reps, kept = _fixed_replays(data, spec, effects)
     x0, _, _, build = _noise_vector(spec, sensor, effects, at_current=True)
     step = 0.05
 
     def per_run(x: FloatArray) -> FloatArray:
         s, n = build(x)
-        return evaluate(data, s, n, whitened=False, replays=reps, residuals=residuals).loglik
+        return evaluate(data, s, n, whitened=False, replays=reps, kept=kept).loglik
 
     p = len(x0)
     f0 = per_run(x0)

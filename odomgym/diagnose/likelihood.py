@@ -36,8 +36,10 @@ from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
 __all__ = [
+    "FilterInputs",
     "RunLikelihood",
     "SensorNoise",
+    "filter_inputs",
     "measurement_mask",
     "run_likelihood",
     "run_residual",
@@ -134,7 +136,7 @@ def run_scores(
     mask: NDArray[np.bool_],
     *,
     whitened: bool,
-    residual: FloatArray | None = None,
+    kept: FilterInputs | None = None,
 ) -> tuple[float, FloatArray | None]:
     """``run``'s log-likelihood with the jump mixture and, if ``whitened``, its whitened
     innovations with the jumps as their variance: :func:`run_likelihood`'s ``loglik`` without
@@ -143,20 +145,66 @@ def run_scores(
     Why one function: the two filters differ only at samples where a wheel jump is expected
     (``gaussian_jumps`` is read nowhere else), so without any — every model but one carrying
     ``floor_bumps`` — one pass gives both, bit-identical to two; the process noise and the
-    residual are computed once either way. ``residual``: :func:`run_residual` of this run,
-    replay and mask if the caller keeps it (a noise fit replays nothing, so its residuals stay
-    put over the fit's hundreds of evaluations)."""
-    arrays = _model_arrays(replay, spec, sensor)
-    if residual is None:
-        residual = run_residual(run, replay, mask)
+    residual are computed once either way. ``kept``: :func:`filter_inputs` of this run,
+    replay and mask if the caller keeps them (a noise fit replays nothing, so they stay put
+    over the fit's hundreds of evaluations)."""
+    if kept is None:
+        kept = filter_inputs(run, replay, mask)
+    arrays = _model_arrays(replay, spec, sensor, kept.gains)
+    residual = kept.residual
     no_expected = np.zeros((0, 2))
     loglik, white, _ = _filter(*arrays, residual, mask, False, True, no_expected)
     if not whitened:
         return float(loglik), None
-    jumps = arrays[6]
+    jumps = arrays[4]
     if np.any(jumps > 0.0):
         _, white, _ = _filter(*arrays, residual, mask, True, True, no_expected)
     return float(loglik), white
+
+
+@dataclass(frozen=True)
+class FilterInputs:
+    """What the filter takes from a run and its replay alone, whatever the noise model.
+
+    Attributes:
+        residual: :func:`run_residual` (T, 3).
+        gains: each wheel's travel mapped to the pose, G = ∂(x, y, θ)/∂(d_L, d_R) (n, 2, 3)
+            [m/m, m/m, rad/m], linearised through the midpoint equations at every interval.
+    """
+
+    residual: FloatArray
+    gains: FloatArray
+
+
+def filter_inputs(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FilterInputs:
+    """:class:`FilterInputs` of ``run`` replayed as ``replay``, measured where ``mask`` holds."""
+    return FilterInputs(run_residual(run, replay, mask), _replay_gains(replay))
+
+
+def _replay_gains(replay: Replay) -> FloatArray:
+    return _wheel_gains(replay.pose, replay.ds, replay.dtheta, replay.wheelbase)
+
+
+@kernel
+def _wheel_gains(
+    pose: FloatArray, ds: FloatArray, dtheta: FloatArray, wheelbase: float
+) -> FloatArray:
+    """G (n, 2, 3) of :class:`FilterInputs` from the axle poses (T, 3), the increments ds [m]
+    and dθ [rad] (n,) and the wheelbase [m]: what the filter computed at every sample before
+    (a cosine and a sine each), kept once per replay (the same operations, the same bytes)."""
+    n = ds.shape[0]
+    gains = np.empty((n, 2, 3))
+    for m in range(n):
+        mid = pose[m, 2] + 0.5 * dtheta[m]
+        c = math.cos(mid)
+        s = math.sin(mid)
+        half = ds[m] / (2.0 * wheelbase)
+        for w in range(2):
+            sign = 1.0 if w == 0 else -1.0
+            gains[m, w, 0] = 0.5 * c + sign * half * s
+            gains[m, w, 1] = 0.5 * s - sign * half * c
+            gains[m, w, 2] = -sign / wheelbase
+    return gains
 
 
 def run_residual(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FloatArray:
@@ -168,19 +216,16 @@ def run_residual(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FloatArra
 
 
 def _model_arrays(
-    replay: Replay, spec: RobotSpec, sensor: SensorNoise
-) -> tuple[
-    FloatArray, FloatArray, FloatArray, FloatArray, float, FloatArray, FloatArray, float, FloatArray
-]:
+    replay: Replay, spec: RobotSpec, sensor: SensorNoise, gains: FloatArray | None = None
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, FloatArray]:
     """The replay's motion, ``spec``'s process noise and ``sensor``'s sigmas in the order the
-    compiled ``_filter`` takes them (it accepts arrays and scalars only)."""
+    compiled ``_filter`` takes them (it accepts arrays and scalars only); ``gains``: the
+    replay's :class:`FilterInputs` gains if the caller keeps them."""
     variance, jumps, size = process_noise(spec, replay.travel)
     return (
         replay.pose,
         replay.tracked,
-        replay.ds,
-        replay.dtheta,
-        replay.wheelbase,
+        _replay_gains(replay) if gains is None else gains,
         variance,
         jumps,
         size,
@@ -470,9 +515,7 @@ def _entries(mat: FloatArray) -> _Entries:
 def _filter(
     pose: FloatArray,
     tracked: FloatArray,
-    ds: FloatArray,
-    dtheta: FloatArray,
-    wheelbase: float,
+    gains: FloatArray,
     variance: FloatArray,
     jumps: FloatArray,
     size: float,
@@ -553,10 +596,6 @@ def _filter(
         c21 = c12
         if a0 > 0.0:
             _propagate(vacc, ux, uy)
-        mid = pose[m, 2] + 0.5 * dtheta[m]
-        c = math.cos(mid)
-        s = math.sin(mid)
-        half = ds[m] / (2.0 * wheelbase)
         for w in range(2):
             var = variance[m, w]
             mu = jumps[m, w]
@@ -564,10 +603,9 @@ def _filter(
                 var += mu * size * size
             if var == 0.0 and mu == 0.0:
                 continue
-            sign = 1.0 if w == 0 else -1.0
-            gx = 0.5 * c + sign * half * s
-            gy = 0.5 * s - sign * half * c
-            gt = -sign / wheelbase
+            gx = gains[m, w, 0]
+            gy = gains[m, w, 1]
+            gt = gains[m, w, 2]
             if var > 0.0:
                 c00 += var * gx * gx
                 c11 += var * gy * gy
