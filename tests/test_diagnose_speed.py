@@ -27,6 +27,7 @@ from odomgym.diagnose.likelihood import (
 from odomgym.diagnose.replay import _headings, _measure, _positions, _start_pose, replay_run
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
+from odomgym.effects.registry import scale_columns
 from odomgym.robot import RobotSpec
 
 MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8)
@@ -271,6 +272,26 @@ def test_start_pose_stops_early_with_the_bytes_of_three_steps() -> None:
             for _ in range(3):  # the iteration as it was: always three steps
                 pose = pose + (target - _measure(pose, effects, arrays))
             assert _start_pose(measured, effects).tobytes() == pose[0].tobytes()
+
+
+def test_column_scaling_is_numpys_broadcast_bit_for_bit() -> None:
+    """``scale_columns`` (the replay's wheel radii, the wheel noise's k²) gives the bytes of
+    numpy's broadcast product, signed zeros, infinities and NaN included, for two columns and
+    for three, and the wheel noise it computes is that of ``|travel| * k²``."""
+    rng = np.random.default_rng(24)
+    for columns in (2, 3):
+        matrix = rng.standard_normal((500, columns)) * 10.0 ** rng.uniform(-8, 3, (500, columns))
+        matrix[:4] = [[-0.0] * columns, [0.0] * columns, [np.inf] * columns, [np.nan] * columns]
+        for factors in (rng.standard_normal(columns), np.array([-0.0, 1e-300, 3.0][:columns])):
+            with np.errstate(invalid="ignore"):  # inf · 0 is NaN on both sides
+                expected = matrix * factors
+                got = scale_columns(matrix, tuple(factors))
+            assert got.tobytes() == expected.tobytes()
+    travel = rng.standard_normal((300, 2)) * 0.01
+    values = {"k_left": 2.3e-4, "k_right": 1.7e-3}
+    k2 = np.array([values["k_left"] ** 2, values["k_right"] ** 2])
+    got = EFFECTS["floor_roughness"].wheel_variance(values, travel)
+    assert got is not None and got.tobytes() == (np.abs(travel) * k2).tobytes()
 
 
 def test_compiled_integration_is_numpy_cumsum_bit_for_bit() -> None:

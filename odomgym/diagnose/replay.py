@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from odomgym._jit import kernel
 from odomgym.effects import EFFECTS, ReplayArrays
+from odomgym.effects.registry import scale_columns
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
@@ -108,12 +109,12 @@ def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Re
     )
     for name, values in effects:
         EFFECTS[name].replay("transmission", values, arrays)
-    travel = arrays.wheel * radius
+    travel = scale_columns(arrays.wheel, radius)
     wheelbase = float(spec.true_wheelbase)
     arrays.travel = travel
     arrays.ds = 0.5 * (travel[:, 0] + travel[:, 1])
     arrays.dtheta = (travel[:, 1] - travel[:, 0]) / wheelbase
-    arrays.crab = np.zeros_like(dt)
+    arrays.crab = np.zeros(len(dt))  # not zeros_like: a Python function, ~6 µs a call
     for name, values in effects:
         EFFECTS[name].replay("body", values, arrays)
     start = _start_pose(run.true_pose[0], effects)

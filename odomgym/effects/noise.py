@@ -25,7 +25,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
+from odomgym.effects.registry import (
+    Effect,
+    Parameter,
+    ReplayArrays,
+    WorldHook,
+    WorldView,
+    scale_columns,
+)
 
 __all__ = ["BUMP_SPREAD", "FloorBumps", "FloorRoughness"]
 
@@ -51,9 +58,7 @@ class FloorRoughness(Effect):
         return _RoughnessHook(values.copy())
 
     def wheel_variance(self, values: Mapping[str, float], travel: FloatArray) -> FloatArray | None:
-        k2 = np.array([values["k_left"] ** 2, values["k_right"] ** 2])
-        out: FloatArray = np.abs(travel) * k2
-        return out
+        return scale_columns(np.abs(travel), (values["k_left"] ** 2, values["k_right"] ** 2))
 
 
 class _RoughnessHook(WorldHook):

@@ -45,6 +45,7 @@ __all__ = [
     "WorldView",
     "get_effect",
     "register_effect",
+    "scale_columns",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -248,6 +249,19 @@ class Effect:
         track and turns it by ±e/b: the heading jumps of bumps."""
         del values, travel, wheelbase
         return None
+
+
+def scale_columns(matrix: FloatArray, factors: Sequence[float] | FloatArray) -> FloatArray:
+    """``matrix`` (n, k) with column j multiplied by ``factors[j]``: the products of
+    ``matrix * np.array(factors)``, element by element the same, computed column by column.
+
+    Why: numpy broadcasts a row of two over thousands of rows slowly (~20 µs for (2450, 2),
+    ~5 µs column by column), and the replay and the wheel noise do it for every run of every
+    likelihood evaluation (wheel rotations times radii, |travel| times k²)."""
+    out = np.empty(matrix.shape)
+    for j, factor in enumerate(factors):
+        np.multiply(matrix[:, j], factor, out=out[:, j])
+    return out
 
 
 @dataclass
