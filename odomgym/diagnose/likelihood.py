@@ -529,7 +529,9 @@ def _filter(
 ) -> tuple[float, FloatArray, int]:
     """The filter of the module docstring over one run: log-likelihood (``update``), whitened
     innovations (3T,) and the count of measured values; with ``update`` False, the open-loop
-    expected squared gap into ``expected`` instead.
+    expected squared gap into ``expected`` instead. ``gains``: the replay's wheel gains G
+    (n, 2, 3) of :class:`FilterInputs`; ``variance``, ``jumps``, ``size``: the process noise
+    of :func:`process_noise`; ``sigma``: the sensor's σ (x, y [m], θ [rad]).
 
     The state (covariance, mean) is held in scalars between samples, and a sample with all
     three components measured and no jump mixture takes the scalar update :func:`_update3`
