@@ -182,6 +182,7 @@ def filter_inputs(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FilterIn
 
 
 def _replay_gains(replay: Replay) -> FloatArray:
+    """:func:`_wheel_gains` of ``replay``."""
     return _wheel_gains(replay.pose, replay.ds, replay.dtheta, replay.wheelbase)
 
 
@@ -410,8 +411,8 @@ def _update3(
     goes through memory at every step because the compiler must assume the arrays alias
     (~2.5× less filter time). Bit-identical to :func:`_gauss_update` with ``dim`` 3: the same
     operations in the same order, the products with H's zeros and ones included (they decide
-    the sign of a zero and carry a NaN), which ``tests/test_likelihood.py`` checks on June
-    runs."""
+    the sign of a zero and carry a NaN), which ``tests/test_diagnose_speed.py`` checks on
+    random and degenerate priors and through the whole filter."""
     h02 = -oy
     h12 = ox
     n0 = z0 - (1.0 * m0 + 0.0 * m1 + h02 * m2)
