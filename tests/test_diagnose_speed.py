@@ -24,6 +24,8 @@ from odomgym.diagnose.likelihood import (
     run_residual,
     run_scores,
 )
+from odomgym.diagnose.nuisances import SessionNuisance
+from odomgym.diagnose.openloop import _KEPT_INPUTS, OpenLoopData, _errors, pose_errors
 from odomgym.diagnose.replay import _headings, _measure, _positions, _start_pose, replay_run
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
@@ -152,6 +154,27 @@ def test_replays_from_kept_inputs_are_replays_from_scratch() -> None:
         inputs = data.inputs[j][spec.ticks_per_rev]
         assert "discovered.sin1" in inputs.memo
         assert not inputs.motor.flags.writeable
+
+
+def test_open_loop_replays_from_kept_inputs_are_replays_from_scratch() -> None:
+    """The open-loop fit keeps each run's replay inputs per time offset: every replay, at the
+    offset it was built for, after other offsets, after they were evicted and in a subset, is
+    the bytes of :func:`pose_errors` (a fresh replay of the corrected run)."""
+    runs = generate_session(
+        {"out_of_round": {"value": 0.01, "phase": 1.0}}, np.random.default_rng(8)
+    )[:2]
+    data = OpenLoopData(runs, 0.25, MODEL.wheelbase)
+    terms = {"right_sin1": 0.01, "left_accel": 0.02}
+    spec = DiscoveredTerms(list(terms)).write(MODEL, terms)
+    offsets = [0.0, 0.05, -0.0, 0.12, -0.07, 0.3, 0.05, 0.0]  # more than are kept per run
+    for tau in offsets:
+        nuisance = SessionNuisance("s", time_offset=tau, dx=0.01, yaw=0.02, frame=True)
+        for part, index in ((data, (0, 1)), (data.subset([1]), (1,))):
+            for k, j in enumerate(index):
+                kept = _errors(part, k, spec, nuisance)
+                assert kept.tobytes() == pose_errors(runs[j], spec, nuisance).tobytes()
+    assert 0 < len(data.inputs[0]) <= _KEPT_INPUTS
+    assert data.subset([1]).inputs[0] is data.inputs[1]
 
 
 def test_compiled_filter_is_its_source_run_by_python() -> None:

@@ -51,7 +51,7 @@ from odomgym.diagnose.nuisances import (
     offset_is_significant,
     sessions_of,
 )
-from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.replay import Replay, RunInputs, replay_run
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import Effect
 from odomgym.errors import SpecError
@@ -78,6 +78,7 @@ FloatArray = NDArray[np.float64]
 _NUISANCE_SCALE = np.array([0.01, 1e-3, 1e-3, 1e-2])  # τ [s], dx, dy [m], δ [rad]: fit units
 _NUISANCE_BOUND = np.array([math.inf, 1.0, 1.0, math.inf])  # |dx|, |dy| < 1 m
 _GRID_STEP = 0.05  # [s]: the time-offset grid of the starting search
+_KEPT_INPUTS = 4  # replay inputs kept per run (OpenLoopData.replay)
 
 
 @dataclass(frozen=True)
@@ -114,6 +115,28 @@ class OpenLoopData:
         self.sessions = sessions_of(self.runs)
         # Runs weigh equally: each run's residuals are divided by √(its measured samples).
         self.weights = [1.0 / math.sqrt(max(int(m.any(axis=1).sum()), 1)) for m in self.masks]
+        self.inputs: list[dict[tuple[float, float], RunInputs]] = [{} for _ in self.runs]
+
+    def replay(
+        self, j: int, spec: RobotSpec, nuisance: SessionNuisance | None
+    ) -> tuple[Run, Replay]:
+        """Run ``j`` with ``nuisance`` removed, and its replay through ``spec``.
+
+        What the replay takes from the run alone (:class:`~odomgym.diagnose.replay.RunInputs`)
+        is kept per time offset and encoder resolution (the only parts of a nuisance and a model
+        it depends on): a fit replays every run hundreds of times, mostly at one time offset,
+        and building them took a third of each replay. A few are kept per run (the offset moves
+        while it is fitted); the replay is the one :func:`replay_run` makes without them."""
+        fixed = correct_run(self.runs[j], nuisance)
+        offset = nuisance.time_offset if nuisance is not None else 0.0
+        key = (offset, float(spec.ticks_per_rev))
+        held = self.inputs[j]
+        inputs = held.get(key)
+        if inputs is None:
+            if len(held) >= _KEPT_INPUTS:
+                held.clear()
+            inputs = held[key] = RunInputs.of(fixed, spec.ticks_per_rev)
+        return fixed, replay_run(fixed, spec, inputs)
 
     def subset(self, index: Sequence[int]) -> OpenLoopData:
         out = OpenLoopData.__new__(OpenLoopData)
@@ -122,6 +145,7 @@ class OpenLoopData:
         out.masks = [self.masks[j] for j in index]
         out.sessions = [self.sessions[j] for j in index]
         out.weights = [self.weights[j] for j in index]
+        out.inputs = [self.inputs[j] for j in index]
         return out
 
     def __len__(self) -> int:
@@ -137,7 +161,12 @@ def pose_errors(run: Run, spec: RobotSpec, nuisance: SessionNuisance | None) -> 
     """Measured − predicted poses (T, 3) [m, m, rad] of ``run`` replayed open loop through
     ``spec`` with ``nuisance`` removed; heading wrapped to [−π, π); NaN where not measured."""
     fixed = correct_run(run, nuisance)
-    error = fixed.true_pose - replay_run(fixed, spec).tracked
+    return _measured_minus(fixed, replay_run(fixed, spec))
+
+
+def _measured_minus(fixed: Run, replayed: Replay) -> FloatArray:
+    """``fixed``'s measured poses minus ``replayed``'s tracked ones, heading wrapped."""
+    error = fixed.true_pose - replayed.tracked
     error[:, 2] = _wrap(error[:, 2])
     return error
 
@@ -155,10 +184,23 @@ def predicted_path(run: Run, spec: RobotSpec, nuisance: SessionNuisance | None) 
     return out
 
 
-def _residual(
+def _errors(
     data: OpenLoopData, j: int, spec: RobotSpec, nuisance: SessionNuisance | None
 ) -> FloatArray:
-    error = pose_errors(data.runs[j], spec, nuisance)
+    """:func:`pose_errors` of run ``j`` of ``data``, with the inputs it keeps."""
+    return _measured_minus(*data.replay(j, spec, nuisance))
+
+
+def _residual(
+    data: OpenLoopData,
+    j: int,
+    spec: RobotSpec,
+    nuisance: SessionNuisance | None,
+    error: FloatArray | None = None,
+) -> FloatArray:
+    """Run ``j``'s weighted combined-error residuals; ``error``: its :func:`_errors` if the
+    caller has them (they are not changed)."""
+    error = _errors(data, j, spec, nuisance) if error is None else error.copy()
     error[:, 2] *= data.length
     out: FloatArray = error[data.masks[j]] * data.weights[j]
     return out
@@ -229,8 +271,8 @@ def _procrustes_yaw(
     cross = dot = 0.0
     guess = SessionNuisance("", time_offset=time_offset)
     for j in members:
-        fixed = correct_run(data.runs[j], guess)
-        predicted = replay_run(fixed, spec).tracked
+        fixed, replayed = data.replay(j, spec, guess)
+        predicted = replayed.tracked
         rows = data.masks[j][:, 0] & data.masks[j][:, 1]
         w2 = data.weights[j] ** 2
         a = predicted[rows, :2] - fixed.true_pose[0, :2]
@@ -726,14 +768,14 @@ def evaluate_open_loop(
     ends: dict[str, dict[str, list[FloatArray]]] = {}
     for j, run in enumerate(data.runs):
         nuisance = known.get(data.sessions[j])
-        error = pose_errors(run, spec, nuisance)
+        error = _errors(data, j, spec, nuisance)
         measured: NDArray[np.bool_] = np.asarray(np.isfinite(error[:, :2]).all(axis=1))
         measured[np.flatnonzero(measured)[0]] = False
         position[j] = math.sqrt(float(np.mean(np.sum(error[measured, :2] ** 2, axis=1))))
         head = error[measured, 2]
         head = head[np.isfinite(head)]
         heading[j] = math.sqrt(float(np.mean(head**2))) if len(head) else math.nan
-        combined[j] = float(np.sum(_residual(data, j, spec, nuisance) ** 2))
+        combined[j] = float(np.sum(_residual(data, j, spec, nuisance, error) ** 2))
         if run.kind == "square" and run.direction in ("cw", "ccw"):
             last = np.flatnonzero(np.isfinite(error[:, :2]).all(axis=1))[-1]
             theta0 = float(correct_run(run, nuisance).true_pose[0, 2])
