@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from alien_robot import generate_session
 
+from odomgym.diagnose.discover import library_jacobian
 from odomgym.diagnose.fit import Dataset, fit_noise
 from odomgym.diagnose.likelihood import (
     SensorNoise,
@@ -175,6 +176,21 @@ def test_open_loop_replays_from_kept_inputs_are_replays_from_scratch() -> None:
                 assert kept.tobytes() == pose_errors(runs[j], spec, nuisance).tobytes()
     assert 0 < len(data.inputs[0]) <= _KEPT_INPUTS
     assert data.subset([1]).inputs[0] is data.inputs[1]
+
+
+def test_library_from_forked_processes_is_the_serial_one_bit_for_bit() -> None:
+    """The grammar library's evaluations shared among two forked processes give the bytes of
+    one process: base innovations, every derivative column, the kept and dropped terms."""
+    runs = generate_session({"sideslip": {"value": 0.06}}, np.random.default_rng(22))[:4]
+    data = Dataset.of(runs, 0.25)
+    terms = ["crab_lateral_signed", "left_accel", "right_sin1", "yaw_lateral", "left_cos2"]
+    serial = library_jacobian(data, MODEL, SENSOR, terms)
+    forked = library_jacobian(Dataset.of(runs, 0.25), MODEL, SENSOR, terms, processes=2)
+    assert (forked.terms, forked.dropped) == (serial.terms, serial.dropped)
+    assert len(serial.terms) >= 3
+    pairs = zip(serial.residual + serial.jacobian, forked.residual + forked.jacobian, strict=True)
+    for a, b in pairs:
+        assert a.tobytes() == b.tobytes()
 
 
 def test_compiled_filter_is_its_source_run_by_python() -> None:

@@ -44,7 +44,7 @@ from odomgym.diagnose.fit import (
     cross_validate,
     evaluate,
     fit_candidate,
-    whitened_stack,
+    whitened_stacks,
 )
 from odomgym.diagnose.likelihood import SensorNoise
 from odomgym.diagnose.physical import term_modulator
@@ -105,17 +105,18 @@ def library_jacobian(
     spec: RobotSpec,
     sensor: SensorNoise,
     terms: Sequence[str] | None = None,
+    *,
+    processes: int = 1,
 ) -> Library:
     """Every run's whitened innovations at ``spec`` and their derivatives with respect to each
     term's coefficient (central differences about the spec's current value); columns the runs
     cannot separate from earlier ones are dropped (relative residual norm below 1e-3 after
-    projecting on the kept columns)."""
+    projecting on the kept columns). ``processes``: the evaluations (two per term) are shared
+    among that many forked processes (:func:`~odomgym.diagnose.fit.whitened_stacks`; the same
+    numbers)."""
     names = list(terms) if terms is not None else [t.name for t in TERMS]
-    _, base = whitened_stack(data, spec, sensor)
-    columns: list[list[FloatArray]] = [[] for _ in data.runs]
-    kept: list[str] = []
-    dropped: list[str] = []
-    basis: list[FloatArray] = []
+    steps: list[tuple[float, float]] = []
+    specs = [spec]
     for name in names:
         effect = DiscoveredTerms([name])
         current = effect.read(spec)[name]
@@ -123,8 +124,17 @@ def library_jacobian(
         bound = effect.parameters[0]
         high = min(current + h, bound.high)
         low = max(current - h, bound.low)
-        _, plus = whitened_stack(data, effect.write(spec, {name: high}), sensor)
-        _, minus = whitened_stack(data, effect.write(spec, {name: low}), sensor)
+        steps.append((high, low))
+        specs += [effect.write(spec, {name: high}), effect.write(spec, {name: low})]
+    stacks = whitened_stacks(data, specs, sensor, processes)
+    base = stacks[0]
+    columns: list[list[FloatArray]] = [[] for _ in data.runs]
+    kept: list[str] = []
+    dropped: list[str] = []
+    basis: list[FloatArray] = []
+    for k, name in enumerate(names):
+        high, low = steps[k]
+        plus, minus = stacks[1 + 2 * k], stacks[2 + 2 * k]
         per_run = [(p - m) / (high - low) for p, m in zip(plus, minus, strict=True)]
         stacked = np.concatenate(per_run)
         norm = float(np.linalg.norm(stacked))

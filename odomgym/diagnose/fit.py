@@ -508,6 +508,58 @@ def whitened_stack(
     return np.concatenate(ev.whitened), ev.whitened
 
 
+# What the forked workers of :func:`whitened_stacks` read: set in the parent just before the
+# fork, so every worker inherits the runs and their kept inputs instead of receiving them.
+_SHARED_STACKS: tuple[Dataset, SensorNoise] | None = None
+
+
+def _stack_task(spec: RobotSpec, attempt: int) -> list[FloatArray]:
+    """One spec's per-run whitened innovations in a worker of :func:`whitened_stacks`."""
+    del attempt
+    assert _SHARED_STACKS is not None, "a whitened_stacks task outside its forked worker"
+    data, sensor = _SHARED_STACKS
+    return whitened_stack(data, spec, sensor)[1]
+
+
+def whitened_stacks(
+    data: Dataset, specs: Sequence[RobotSpec], sensor: SensorNoise, processes: int = 1
+) -> list[list[FloatArray]]:
+    """The per-run whitened innovations of :func:`whitened_stack` for every spec of ``specs``,
+    in order.
+
+    With ``processes`` > 1, two or more specs and the ``fork`` start method, the specs are
+    shared among forked worker processes (:func:`odomgym.workers.run_tasks`), which inherit
+    ``data``; each spec's numbers are those one process computes (bit-identical). Why
+    processes: a replay is mostly Python, so the evaluation threads of :func:`evaluate` share
+    one core for it; a finite-difference library (two evaluations per term) is many
+    independent evaluations."""
+    global _SHARED_STACKS
+    if processes < 2 or len(specs) < 2 or "fork" not in mp.get_all_start_methods():
+        return [whitened_stack(data, spec, sensor)[1] for spec in specs]
+
+    def died(death: WorkerDeath[int]) -> bool:
+        raise RuntimeError(
+            f"a diagnose worker died (exit code {death.exitcode}) while evaluating model "
+            f"{death.key + 1} of {len(specs)}"
+        )
+
+    out: dict[int, list[FloatArray]] = {}
+    close_thread_pool()  # no thread of the evaluation pool may be alive across the fork
+    _SHARED_STACKS = (data, sensor)
+    try:
+        run_tasks(
+            _stack_task,
+            enumerate(specs),
+            processes=processes,
+            finished=out.__setitem__,
+            died=died,
+            start_method="fork",
+        )
+    finally:
+        _SHARED_STACKS = None
+    return [out[k] for k in range(len(specs))]
+
+
 @dataclass
 class CandidateFit:
     """One candidate effect fitted to the fit runs."""

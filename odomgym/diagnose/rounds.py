@@ -293,7 +293,7 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
             # innovations of the model with its wheel noise (the nuisance) fitted.
             report(f"round {number}: structure", 0.0)
             lib = fit_noise_model(data, model, ctx.nuisance)
-            library = library_jacobian(data, lib.spec, lib.sensor)
+            library = library_jacobian(data, lib.spec, lib.sensor, processes=cfg.jobs)
             structure = structure_test(library, seed=cfg.seed + number)
             # Discovery runs again only after a pass that found terms.
             again = not state.passes or bool(state.passes[-1].terms)
