@@ -28,6 +28,7 @@ from odomgym.diagnose.likelihood import (
 from odomgym.diagnose.nuisances import SessionNuisance
 from odomgym.diagnose.openloop import _KEPT_INPUTS, OpenLoopData, _errors, pose_errors
 from odomgym.diagnose.replay import _headings, _measure, _positions, _start_pose, replay_run
+from odomgym.diagnose.stats import _null_max, sign_matrix, studentised
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
 from odomgym.effects.registry import scale_columns
@@ -191,6 +192,24 @@ def test_library_from_forked_processes_is_the_serial_one_bit_for_bit() -> None:
     pairs = zip(serial.residual + serial.jacobian, forked.residual + forked.jacobian, strict=True)
     for a, b in pairs:
         assert a.tobytes() == b.tobytes()
+
+
+def test_max_t_null_from_blocks_of_patterns_is_one_pattern_at_a_time() -> None:
+    """The max-T test's null distribution computed for blocks of sign patterns is, byte for
+    byte, ``studentised(d * s).max()`` one pattern at a time: random and exact patterns, one
+    and many candidates, a candidate with no spread (its t is +inf or 0) and tiny and large
+    scales."""
+    rng = np.random.default_rng(0)
+    for trial in range(40):
+        candidates, runs = int(rng.integers(1, 12)), int(rng.integers(2, 120))
+        d = rng.standard_normal((candidates, runs)) * 10.0 ** rng.uniform(-6, 3)
+        if trial % 5 == 0:
+            d[0] = 0.0
+        if trial % 7 == 0:
+            d[-1] = 1.5
+        signs = sign_matrix(runs, np.random.default_rng(trial), 1000)
+        one_by_one = np.array([studentised(d * s).max() for s in signs])
+        assert _null_max(d, signs).tobytes() == one_by_one.tobytes()
 
 
 def test_compiled_filter_is_its_source_run_by_python() -> None:
