@@ -26,13 +26,20 @@ from odomgym.diagnose.likelihood import (
     run_scores,
 )
 from odomgym.diagnose.nuisances import SessionNuisance
-from odomgym.diagnose.openloop import _KEPT_INPUTS, OpenLoopData, _errors, pose_errors
+from odomgym.diagnose.openloop import (
+    _KEPT_INPUTS,
+    OpenLoopData,
+    _errors,
+    _residual,
+    pose_errors,
+)
 from odomgym.diagnose.replay import _headings, _measure, _positions, _start_pose, replay_run
 from odomgym.diagnose.stats import _null_max, sign_matrix, studentised
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
 from odomgym.effects.registry import scale_columns
 from odomgym.robot import RobotSpec
+from odomgym.workers import run_tasks
 
 MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8)
 SENSOR = SensorNoise(0.002, 0.005)
@@ -175,18 +182,35 @@ def test_open_loop_replays_from_kept_inputs_are_replays_from_scratch() -> None:
             for k, j in enumerate(index):
                 kept = _errors(part, k, spec, nuisance)
                 assert kept.tobytes() == pose_errors(runs[j], spec, nuisance).tobytes()
+                # Residuals from errors the caller has: the same, the errors left as they were.
+                given = kept.copy()
+                from_given = _residual(part, k, spec, nuisance, given)
+                assert from_given.tobytes() == _residual(part, k, spec, nuisance).tobytes()
+                assert given.tobytes() == kept.tobytes()
     assert 0 < len(data.inputs[0]) <= _KEPT_INPUTS
     assert data.subset([1]).inputs[0] is data.inputs[1]
 
 
-def test_library_from_forked_processes_is_the_serial_one_bit_for_bit() -> None:
+def test_library_from_forked_processes_is_the_serial_one_bit_for_bit(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """The grammar library's evaluations shared among two forked processes give the bytes of
     one process: base innovations, every derivative column, the kept and dropped terms."""
     runs = generate_session({"sideslip": {"value": 0.06}}, np.random.default_rng(22))[:4]
     data = Dataset.of(runs, 0.25)
     terms = ["crab_lateral_signed", "left_accel", "right_sin1", "yaw_lateral", "left_cos2"]
     serial = library_jacobian(data, MODEL, SENSOR, terms)
+    from odomgym.diagnose import fit as fit_module
+
+    forks: list[int] = []
+
+    def counted(*args: object, **kwargs: object) -> None:
+        forks.append(kwargs["processes"])  # type: ignore[arg-type]
+        run_tasks(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(fit_module, "run_tasks", counted)
     forked = library_jacobian(Dataset.of(runs, 0.25), MODEL, SENSOR, terms, processes=2)
+    assert forks == [2]  # the evaluations did go to two forked processes
     assert (forked.terms, forked.dropped) == (serial.terms, serial.dropped)
     assert len(serial.terms) >= 3
     pairs = zip(serial.residual + serial.jacobian, forked.residual + forked.jacobian, strict=True)
@@ -201,7 +225,7 @@ def test_max_t_null_from_blocks_of_patterns_is_one_pattern_at_a_time() -> None:
     scales."""
     rng = np.random.default_rng(0)
     for trial in range(40):
-        candidates, runs = int(rng.integers(1, 12)), int(rng.integers(2, 120))
+        candidates, runs = int(rng.integers(1, 12)), int(rng.integers(2, 300))
         d = rng.standard_normal((candidates, runs)) * 10.0 ** rng.uniform(-6, 3)
         if trial % 5 == 0:
             d[0] = 0.0

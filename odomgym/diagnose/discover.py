@@ -117,6 +117,7 @@ def library_jacobian(
     names = list(terms) if terms is not None else [t.name for t in TERMS]
     steps: list[tuple[float, float]] = []
     specs = [spec]
+    labels = ["the model itself"]
     for name in names:
         effect = DiscoveredTerms([name])
         current = effect.read(spec)[name]
@@ -126,16 +127,33 @@ def library_jacobian(
         low = max(current - h, bound.low)
         steps.append((high, low))
         specs += [effect.write(spec, {name: high}), effect.write(spec, {name: low})]
-    stacks = whitened_stacks(data, specs, sensor, processes)
-    base = stacks[0]
+        labels += [f"term {name} at {high:g}", f"term {name} at {low:g}"]
+    base: list[FloatArray] = []
+    waiting: dict[int, list[FloatArray]] = {}  # one side of a term's difference
+    derivatives: dict[int, list[FloatArray]] = {}
+
+    def use(index: int, stack: list[FloatArray]) -> None:
+        # Each term's central difference as soon as both sides are in (the stacks are not
+        # all kept: they add up to hundreds of MB on large data).
+        if index == 0:
+            base.extend(stack)
+            return
+        k = (index - 1) // 2
+        other = waiting.pop(k, None)
+        if other is None:
+            waiting[k] = stack
+            return
+        plus, minus = (stack, other) if index % 2 == 1 else (other, stack)
+        high, low = steps[k]
+        derivatives[k] = [(p - m) / (high - low) for p, m in zip(plus, minus, strict=True)]
+
+    whitened_stacks(data, specs, sensor, use, processes, labels)
     columns: list[list[FloatArray]] = [[] for _ in data.runs]
     kept: list[str] = []
     dropped: list[str] = []
     basis: list[FloatArray] = []
     for k, name in enumerate(names):
-        high, low = steps[k]
-        plus, minus = stacks[1 + 2 * k], stacks[2 + 2 * k]
-        per_run = [(p - m) / (high - low) for p, m in zip(plus, minus, strict=True)]
+        per_run = derivatives.pop(k)
         stacked = np.concatenate(per_run)
         norm = float(np.linalg.norm(stacked))
         residual = stacked.copy()

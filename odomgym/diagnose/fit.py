@@ -522,28 +522,42 @@ def _stack_task(spec: RobotSpec, attempt: int) -> list[FloatArray]:
 
 
 def whitened_stacks(
-    data: Dataset, specs: Sequence[RobotSpec], sensor: SensorNoise, processes: int = 1
-) -> list[list[FloatArray]]:
+    data: Dataset,
+    specs: Sequence[RobotSpec],
+    sensor: SensorNoise,
+    use: Callable[[int, list[FloatArray]], None],
+    processes: int = 1,
+    labels: Sequence[str] | None = None,
+) -> None:
     """The per-run whitened innovations of :func:`whitened_stack` for every spec of ``specs``,
-    in order.
+    handed to ``use(index, stack)`` as each is ready (so a caller can reduce them as they come
+    and never hold them all: 73 stacks of ~2 MB for a 40-run library).
 
-    With ``processes`` > 1, two or more specs and the ``fork`` start method, the specs are
-    shared among forked worker processes (:func:`odomgym.workers.run_tasks`), which inherit
-    ``data``; each spec's numbers are those one process computes (bit-identical). Why
-    processes: a replay is mostly Python, so the evaluation threads of :func:`evaluate` share
-    one core for it; a finite-difference library (two evaluations per term) is many
-    independent evaluations."""
+    With ``processes`` > 1, two or more specs, the ``fork`` start method and not inside a
+    worker process already, the specs are shared among forked worker processes
+    (:func:`odomgym.workers.run_tasks`), which inherit ``data``, and ``use`` sees them in the
+    order they finish; else they are evaluated here, in order. Each spec's numbers are those
+    one process computes (bit-identical). Why processes: a replay is mostly Python, so the
+    evaluation threads of :func:`evaluate` share one core for it; a finite-difference library
+    (two evaluations per term) is many independent evaluations. ``labels``: what to call each
+    spec if its worker dies (default: its number).
+
+    A spec whose evaluation raises in a worker surfaces as :class:`odomgym.workers.TaskFailed`
+    (as a candidate fit's does in :func:`run_fit_jobs`)."""
     global _SHARED_STACKS
-    if processes < 2 or len(specs) < 2 or "fork" not in mp.get_all_start_methods():
-        return [whitened_stack(data, spec, sensor)[1] for spec in specs]
+    nested = mp.current_process().daemon  # a worker process may not start its own
+    if processes < 2 or len(specs) < 2 or nested or "fork" not in mp.get_all_start_methods():
+        for k, spec in enumerate(specs):
+            use(k, whitened_stack(data, spec, sensor)[1])
+        return
+    names = list(labels) if labels is not None else [f"model {k + 1}" for k in range(len(specs))]
 
     def died(death: WorkerDeath[int]) -> bool:
         raise RuntimeError(
-            f"a diagnose worker died (exit code {death.exitcode}) while evaluating model "
-            f"{death.key + 1} of {len(specs)}"
+            f"a diagnose worker died (exit code {death.exitcode}) while evaluating "
+            f"{names[death.key]} ({death.key + 1} of {len(specs)})"
         )
 
-    out: dict[int, list[FloatArray]] = {}
     close_thread_pool()  # no thread of the evaluation pool may be alive across the fork
     _SHARED_STACKS = (data, sensor)
     try:
@@ -551,13 +565,12 @@ def whitened_stacks(
             _stack_task,
             enumerate(specs),
             processes=processes,
-            finished=out.__setitem__,
+            finished=use,
             died=died,
             start_method="fork",
         )
     finally:
         _SHARED_STACKS = None
-    return [out[k] for k in range(len(specs))]
 
 
 @dataclass

@@ -105,7 +105,8 @@ class NuisanceOptions:
 
 class OpenLoopData:
     """Runs with the samples whose open-loop error counts (:func:`measurement_mask`: measured
-    components, one sample per ``interval``, never the first) and each run's weight."""
+    components, one sample per ``interval``, never the first) and each run's weight, and the
+    replay inputs kept for its runs (:meth:`replay`; a subset shares them)."""
 
     def __init__(self, runs: Sequence[Run], interval: float, length: float) -> None:
         self.runs = list(runs)

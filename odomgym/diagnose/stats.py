@@ -209,6 +209,7 @@ def _null_max(d: FloatArray, signs: FloatArray) -> FloatArray:
     of patterns at once. The same numbers: each mean and standard deviation is the same
     reduction over a run axis of the same length (``tests/test_diagnose_speed.py`` compares
     the bytes); one pattern at a time took ~0.1 s a candidate round."""
+    d = np.ascontiguousarray(d)  # the run axis contiguous, as in each row of the loop
     blocks = [
         studentised(d[None, :, :] * signs[k : k + _FLIP_CHUNK, None, :]).max(axis=1)
         for k in range(0, len(signs), _FLIP_CHUNK)
