@@ -13,17 +13,19 @@ import pytest
 from alien_robot import generate_session
 
 from odomgym.diagnose.discover import library_jacobian
-from odomgym.diagnose.fit import Dataset, fit_noise
+from odomgym.diagnose.fit import Dataset, _fixed_replays, evaluate, fit_noise
 from odomgym.diagnose.likelihood import (
     SensorNoise,
     _filter,
     _gauss_update,
     _model_arrays,
+    _pose_residual,
     _update3,
     _wheel_gains,
     run_likelihood,
     run_residual,
     run_scores,
+    stacked_process_noise,
 )
 from odomgym.diagnose.nuisances import SessionNuisance
 from odomgym.diagnose.openloop import (
@@ -413,3 +415,66 @@ def test_a_repeated_noise_fit_is_the_first_one() -> None:
     fit_noise(data, MODEL, SensorNoise(0.002, 0.005), None)
     fit_noise(data, MODEL, SensorNoise(0.002, 0.005), rough, warm=True)
     assert len(data.noise_fits) == 3
+
+
+def _numpy_residual(measured: np.ndarray, predicted: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The residual as numpy expressions (the path :func:`_pose_residual` replaced)."""
+    residual = np.where(mask, measured - predicted, 0.0)
+    residual[:, 2] = np.mod(residual[:, 2] + np.pi, 2.0 * np.pi) - np.pi
+    return residual
+
+
+def test_compiled_residual_is_numpys_where_and_mod_bit_for_bit() -> None:
+    """The heading wrap of :func:`run_residual` is numpy's float remainder: the same bytes on
+    random headings over many turns, at the wrap's edges (odd multiples of π, ±0.0, values a
+    rounding away from them), and through NaN and infinity, for masked and unmasked samples."""
+    rng = np.random.default_rng(21)
+    edges = np.array(
+        [0.0, -0.0, np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 2 * np.pi, -2 * np.pi, 1e-300, -1e-300]
+    )
+    near = np.concatenate([np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf)])
+    headings = np.concatenate(
+        [rng.uniform(-40.0, 40.0, 500), edges, near, [np.nan, np.inf, -np.inf, 1e17, -1e17]]
+    )
+    n = len(headings)
+    measured = rng.normal(0.0, 3.0, (n, 3))
+    measured[:, 2] = headings
+    predicted = rng.normal(0.0, 3.0, (n, 3))
+    predicted[: n // 2, 2] = 0.0  # the heading difference is then exactly the edge value
+    predicted[n // 2 :, 2] = -0.0
+    rng.shuffle(predicted[n // 2 :])
+    for mask in (np.ones((n, 3), dtype=bool), rng.random((n, 3)) < 0.5):
+        with np.errstate(invalid="ignore"):
+            want = _numpy_residual(measured, predicted, mask)
+        assert _pose_residual(measured, predicted, mask).tobytes() == want.tobytes()
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(6))[:3]
+    data = Dataset.of(runs, 0.25)
+    for run, mask in zip(data.runs, data.masks, strict=True):
+        rep = replay_run(run, MODEL)
+        want = _numpy_residual(run.true_pose, rep.tracked, mask)
+        assert run_residual(run, rep, mask).tobytes() == want.tobytes()
+
+
+def test_noise_fit_evaluations_with_stacked_process_noise_are_per_run_bit_for_bit() -> None:
+    """A noise fit evaluates kept replays with the process noise of all runs computed in one
+    call on their stacked travel; each run's variance, jumps and log-likelihood are the bytes
+    of the run alone, with roughness, bumps and both (two effects adding variances)."""
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:5]
+    data = Dataset.of(runs, 0.25)
+    rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
+    bumps = EFFECTS["floor_bumps"].write(MODEL, {"rate": 0.3, "heading_jump": 0.004})
+    both = EFFECTS["floor_bumps"].write(rough, {"rate": 0.3, "heading_jump": 0.004})
+    fixed = _fixed_replays(data, rough, [EFFECTS["floor_roughness"]])
+    assert fixed is not None and len(fixed.travel) == sum(len(r.time) - 1 for r in runs)
+    for spec in (MODEL, rough, bumps, both):
+        stacked = stacked_process_noise(spec, fixed.travel, fixed.rows)
+        for rep, (variance, jumps, size) in zip(fixed.replays, stacked, strict=True):
+            alone = _model_arrays(rep, spec, SENSOR)
+            assert variance.tobytes() == alone[3].tobytes()
+            assert jumps.tobytes() == alone[4].tobytes() and _bits(size) == _bits(alone[5])
+        kept = evaluate(data, spec, SENSOR, whitened=False, fixed=fixed)
+        plain = [
+            run_scores(run, rep, spec, SENSOR, mask, whitened=False)[0]
+            for run, rep, mask in zip(data.runs, fixed.replays, data.masks, strict=True)
+        ]
+        assert kept.loglik.tobytes() == np.array(plain).tobytes()

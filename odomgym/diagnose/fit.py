@@ -49,6 +49,7 @@ from odomgym.diagnose.likelihood import (
     filter_inputs,
     measurement_mask,
     run_scores,
+    stacked_process_noise,
 )
 from odomgym.diagnose.replay import Replay, RunInputs, replay_run
 from odomgym.diagnose.stats import clustered_covariance
@@ -161,28 +162,67 @@ class Evaluation:
     replays: list[Replay]
 
 
+@dataclass(frozen=True)
+class FixedReplays:
+    """Every run's replay through one spec and what the filter takes from it, kept for a fit
+    that varies only noise parameters (see :func:`_fixed_replays`).
+
+    Attributes:
+        replays: each run's replay.
+        inputs: each run's :func:`~odomgym.diagnose.likelihood.filter_inputs`.
+        travel: every run's wheel travel stacked (ΣN, 2) [m], for
+            :func:`~odomgym.diagnose.likelihood.stacked_process_noise`.
+        rows: run j's rows of ``travel``.
+    """
+
+    replays: list[Replay]
+    inputs: list[FilterInputs]
+    travel: FloatArray
+    rows: list[slice]
+
+    @classmethod
+    def of(cls, replays: list[Replay], inputs: list[FilterInputs]) -> FixedReplays:
+        ends = np.cumsum([len(r.travel) for r in replays]).tolist()
+        starts = [0, *ends[:-1]]
+        rows = [slice(a, b) for a, b in zip(starts, ends, strict=True)]
+        travel = np.concatenate([r.travel for r in replays]) if replays else np.zeros((0, 2))
+        return cls(replays, inputs, travel, rows)
+
+
 def evaluate(
     data: Dataset,
     spec: RobotSpec,
     sensor: SensorNoise,
     *,
     whitened: bool = True,
-    replays: list[Replay] | None = None,
-    kept: list[FilterInputs] | None = None,
+    fixed: FixedReplays | None = None,
 ) -> Evaluation:
-    """Replay every run through ``spec`` and filter it; ``replays`` and ``kept``: each run's
-    replay through ``spec`` and its :func:`~odomgym.diagnose.likelihood.filter_inputs`, if
-    the caller keeps them (see :func:`_fixed_replays`).
+    """Replay every run through ``spec`` and filter it; ``fixed``: each run's replay through
+    ``spec`` and its filter inputs, if the caller keeps them (a noise fit, see
+    :func:`_fixed_replays`: then the process noise of all runs is computed in one call).
 
     The runs are independent, and the filter (compiled, releasing the GIL) takes most of the
     time, so they are shared among :func:`_threads` threads; each run's numbers do not depend on
     which thread computed them, and they are gathered in run order (bit-identical results)."""
+    noise = stacked_process_noise(spec, fixed.travel, fixed.rows) if fixed is not None else None
 
     def one(j: int) -> tuple[Replay, float, FloatArray | None]:
         run, mask = data.runs[j], data.masks[j]
-        rep = replays[j] if replays is not None else data.replay(j, spec)
-        inputs = kept[j] if kept is not None else None
-        loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened, kept=inputs)
+        if fixed is not None and noise is not None:
+            rep = fixed.replays[j]
+            loglik, white = run_scores(
+                run,
+                rep,
+                spec,
+                sensor,
+                mask,
+                whitened=whitened,
+                kept=fixed.inputs[j],
+                noise=noise[j],
+            )
+        else:
+            rep = data.replay(j, spec)
+            loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened)
         return rep, loglik, white
 
     def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
@@ -338,32 +378,32 @@ def fit_noise(
 
 def _fixed_replays(
     data: Dataset, spec: RobotSpec, effects: Sequence[Effect]
-) -> tuple[list[Replay] | None, list[FilterInputs] | None]:
+) -> FixedReplays | None:
     """Every run's replay through ``spec`` and its filter inputs (residual, wheel gains), kept
-    for a fit that varies only ``effects``' noise parameters and the sensor σ; (None, None) if
-    one of the effects moves the replay.
+    for a fit that varies only ``effects``' noise parameters and the sensor σ; None if one of
+    the effects moves the replay.
 
     Why: the noise parameters change the filter's covariances, never its mean, so a noise
     fit's hundreds of evaluations replay the same runs, subtract the same poses and linearise
     about the same path; kept, the filter's own update is all that is left of each (the same
     functions on the same inputs: the same bytes)."""
     if _moves_mean(effects):
-        return None, None
+        return None
     reps = [data.replay(j, spec) for j in range(len(data))]
     triples = zip(data.runs, reps, data.masks, strict=True)
-    return reps, [filter_inputs(run, rep, mask) for run, rep, mask in triples]
+    return FixedReplays.of(reps, [filter_inputs(run, rep, mask) for run, rep, mask in triples])
 
 
 def _fit_noise(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, chosen: list[Effect], warm: bool
 ) -> tuple[RobotSpec, SensorNoise, float]:
     """:func:`fit_noise` itself (without its memo)."""
-    reps, kept = _fixed_replays(data, spec, chosen)
+    fixed = _fixed_replays(data, spec, chosen)
     x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
 
     def objective(x: FloatArray) -> float:
         s, n = build(x)
-        ev = evaluate(data, s, n, whitened=False, replays=reps, kept=kept)
+        ev = evaluate(data, s, n, whitened=False, fixed=fixed)
         return -float(ev.loglik.sum())
 
     start = np.clip(x0, low, high)
@@ -422,13 +462,13 @@ def noise_curvature(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per-run log-likelihood (J,), gradient (J, P) and Hessian (J, P, P) in the
     log-parameters of :func:`fit_noise` (central differences), for one-step fold refits."""
-    reps, kept = _fixed_replays(data, spec, effects)
+    fixed = _fixed_replays(data, spec, effects)
     x0, _, _, build = _noise_vector(spec, sensor, effects, at_current=True)
     step = 0.05
 
     def per_run(x: FloatArray) -> FloatArray:
         s, n = build(x)
-        return evaluate(data, s, n, whitened=False, replays=reps, kept=kept).loglik
+        return evaluate(data, s, n, whitened=False, fixed=fixed).loglik
 
     p = len(x0)
     f0 = per_run(x0)

@@ -37,6 +37,7 @@ from odomgym.robot import RobotSpec
 
 __all__ = [
     "FilterInputs",
+    "ProcessNoise",
     "RunLikelihood",
     "SensorNoise",
     "filter_inputs",
@@ -44,6 +45,7 @@ __all__ = [
     "run_likelihood",
     "run_residual",
     "run_scores",
+    "stacked_process_noise",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -84,9 +86,18 @@ def measurement_mask(run: Run, min_interval: float) -> NDArray[np.bool_]:
     return measured & keep[:, None]
 
 
-def process_noise(spec: RobotSpec, travel: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+ProcessNoise = tuple[FloatArray, FloatArray, float]
+"""What :func:`process_noise` returns: wheel variance (n, 2) [m²], expected jumps (n, 2) and
+the travel one jump loses [m]."""
+
+
+def process_noise(spec: RobotSpec, travel: FloatArray) -> ProcessNoise:
     """Per-sample wheel variance (n, 2) [m²], expected wheel jumps (n, 2) and the travel each
-    jump loses [m], from the spec's noise effects."""
+    jump loses [m], from the spec's noise effects.
+
+    Every noise effect's variance and jump rate is a function of each sample's travel alone
+    (element by element), so ``travel`` may be several runs' travel stacked: each run's rows
+    of the result are the bytes :func:`process_noise` gives for that run alone."""
     variance = np.zeros(travel.shape)  # not zeros_like: a Python function, ~6 µs a call
     jumps = np.zeros(travel.shape)
     size = 0.0
@@ -137,6 +148,7 @@ def run_scores(
     *,
     whitened: bool,
     kept: FilterInputs | None = None,
+    noise: ProcessNoise | None = None,
 ) -> tuple[float, FloatArray | None]:
     """``run``'s log-likelihood with the jump mixture and, if ``whitened``, its whitened
     innovations with the jumps as their variance: :func:`run_likelihood`'s ``loglik`` without
@@ -147,10 +159,12 @@ def run_scores(
     ``floor_bumps`` — one pass gives both, bit-identical to two; the process noise and the
     residual are computed once either way. ``kept``: :func:`filter_inputs` of this run,
     replay and mask if the caller keeps them (a noise fit replays nothing, so they stay put
-    over the fit's hundreds of evaluations)."""
+    over the fit's hundreds of evaluations). ``noise``: :func:`process_noise` of ``spec`` and
+    this replay's travel if the caller computed it (for all runs at once, see
+    :func:`stacked_process_noise`)."""
     if kept is None:
         kept = filter_inputs(run, replay, mask)
-    arrays = _model_arrays(replay, spec, sensor, kept.gains)
+    arrays = _model_arrays(replay, spec, sensor, kept.gains, noise)
     residual = kept.residual
     no_expected = np.zeros((0, 2))
     loglik, white, _ = _filter(*arrays, residual, mask, False, True, no_expected)
@@ -160,6 +174,21 @@ def run_scores(
     if np.any(jumps > 0.0):
         _, white, _ = _filter(*arrays, residual, mask, True, True, no_expected)
     return float(loglik), white
+
+
+def stacked_process_noise(
+    spec: RobotSpec, travel: FloatArray, rows: list[slice]
+) -> list[ProcessNoise]:
+    """:func:`process_noise` of every run whose travel is ``travel[rows[j]]``, from one call on
+    the stacked travel (ΣN, 2) [m]; each run's arrays are views of the stacked result.
+
+    Why: a noise fit evaluates the same replays hundreds of times with new noise parameters,
+    and the Python around each run's :func:`process_noise` (the effects' lookup, a dozen
+    small numpy calls) cost about a tenth of the filter's own time per run; once per
+    evaluation it is paid once for all runs. Element by element the same operations, so the
+    same bytes (``tests/test_diagnose_speed.py``)."""
+    variance, jumps, size = process_noise(spec, travel)
+    return [(variance[r], jumps[r], size) for r in rows]
 
 
 @dataclass(frozen=True)
@@ -211,18 +240,52 @@ def _wheel_gains(
 def run_residual(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FloatArray:
     """Measured minus predicted tracked pose (T, 3) where ``mask`` holds, else 0; the heading
     difference wrapped to [−π, π) [rad]."""
-    residual = np.where(mask, run.true_pose - replay.tracked, 0.0)
-    residual[:, 2] = np.mod(residual[:, 2] + math.pi, 2.0 * math.pi) - math.pi
-    return residual
+    return _pose_residual(
+        np.asarray(run.true_pose, dtype=np.float64),
+        np.asarray(replay.tracked, dtype=np.float64),
+        np.asarray(mask, dtype=np.bool_),
+    )
+
+
+_TWO_PI = 2.0 * math.pi
+
+
+@kernel
+def _pose_residual(
+    measured: FloatArray, predicted: FloatArray, mask: NDArray[np.bool_]
+) -> FloatArray:
+    """:func:`run_residual` on arrays: numpy's ``np.where(mask, measured − predicted, 0)`` and
+    ``np.mod(θ + π, 2π) − π`` written out, element by element the same operations (numpy's
+    float remainder: ``fmod``, plus 2π when it is non-zero and negative, +0.0 when it is
+    zero). Compiled because a systematic fit computes it for every run at every evaluation, and
+    numpy's five passes over the (T, 3) array cost a third of a replay."""
+    n = measured.shape[0]
+    out = np.empty((n, 3))
+    for k in range(n):
+        for c in range(3):
+            out[k, c] = measured[k, c] - predicted[k, c] if mask[k, c] else 0.0
+        mod = np.fmod(out[k, 2] + math.pi, _TWO_PI)
+        if mod != 0.0:  # NaN included, as numpy's ``if (mod)``
+            if mod < 0.0:
+                mod += _TWO_PI
+        else:
+            mod = 0.0
+        out[k, 2] = mod - math.pi
+    return out
 
 
 def _model_arrays(
-    replay: Replay, spec: RobotSpec, sensor: SensorNoise, gains: FloatArray | None = None
+    replay: Replay,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    gains: FloatArray | None = None,
+    noise: ProcessNoise | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float, FloatArray]:
     """The replay's motion, ``spec``'s process noise and ``sensor``'s sigmas in the order the
-    compiled ``_filter`` takes them (it accepts arrays and scalars only); ``gains``: the
-    replay's :class:`FilterInputs` gains if the caller keeps them."""
-    variance, jumps, size = process_noise(spec, replay.travel)
+    compiled ``_filter`` takes them (it accepts arrays and scalars only); ``gains`` and
+    ``noise``: the replay's :class:`FilterInputs` gains and :func:`process_noise` if the caller
+    has them."""
+    variance, jumps, size = process_noise(spec, replay.travel) if noise is None else noise
     return (
         replay.pose,
         replay.tracked,
@@ -578,52 +641,61 @@ def _filter(
     r_x = sigma[0] ** 2
     r_y = sigma[1] ** 2
     r_t = sigma[2] ** 2
-    for k in range(1, n_samples):
-        m = k - 1
-        # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): the operations of
-        # _propagate and _add_outer on the scalar state (this loop runs once per logged sample).
-        ux = -(pose[k, 1] - pose[m, 1])
-        uy = pose[k, 0] - pose[m, 0]
-        m0 += ux * m2
-        m1 += uy * m2
-        p20 = c20
-        p21 = c21
-        p22 = c22
-        c00 += 2.0 * ux * p20 + ux * ux * p22
-        c11 += 2.0 * uy * p21 + uy * uy * p22
-        c01 += ux * p21 + uy * p20 + ux * uy * p22
-        c10 = c01
-        c02 += ux * p22
-        c20 = c02
-        c12 += uy * p22
-        c21 = c12
-        if a0 > 0.0:
-            _propagate(vacc, ux, uy)
-        for w in range(2):
-            var = variance[m, w]
-            mu = jumps[m, w]
-            if mu > 0.0 and gaussian_jumps:
-                var += mu * size * size
-            if var == 0.0 and mu == 0.0:
-                continue
-            gx = gains[m, w, 0]
-            gy = gains[m, w, 1]
-            gt = gains[m, w, 2]
-            if var > 0.0:
-                c00 += var * gx * gx
-                c11 += var * gy * gy
-                c22 += var * gt * gt
-                c01 += var * gx * gy
-                c10 = c01
-                c02 += var * gx * gt
-                c20 = c02
-                c12 += var * gy * gt
-                c21 = c12
-            if mu > 0.0 and not gaussian_jumps:
-                a0 += mu
-                _add_outer(vacc, mu * size * size, gx, gy, gt)
+    k = 0
+    while k < n_samples - 1:
+        k += 1
+        # Sample after sample up to the next measured one (or the last), in a loop of its own:
+        # there the compiler keeps the state in registers, where in the loop with the update
+        # it spilled part of it to memory at every sample (~2× the time per sample).
+        while True:
+            m = k - 1
+            # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): the operations of
+            # _propagate and _add_outer on the scalar state (this loop runs once per logged sample).
+            ux = -(pose[k, 1] - pose[m, 1])
+            uy = pose[k, 0] - pose[m, 0]
+            m0 += ux * m2
+            m1 += uy * m2
+            p20 = c20
+            p21 = c21
+            p22 = c22
+            c00 += 2.0 * ux * p20 + ux * ux * p22
+            c11 += 2.0 * uy * p21 + uy * uy * p22
+            c01 += ux * p21 + uy * p20 + ux * uy * p22
+            c10 = c01
+            c02 += ux * p22
+            c20 = c02
+            c12 += uy * p22
+            c21 = c12
+            if a0 > 0.0:
+                _propagate(vacc, ux, uy)
+            for w in range(2):
+                var = variance[m, w]
+                mu = jumps[m, w]
+                if mu > 0.0 and gaussian_jumps:
+                    var += mu * size * size
+                if var == 0.0 and mu == 0.0:
+                    continue
+                gx = gains[m, w, 0]
+                gy = gains[m, w, 1]
+                gt = gains[m, w, 2]
+                if var > 0.0:
+                    c00 += var * gx * gx
+                    c11 += var * gy * gy
+                    c22 += var * gt * gt
+                    c01 += var * gx * gy
+                    c10 = c01
+                    c02 += var * gx * gt
+                    c20 = c02
+                    c12 += var * gy * gt
+                    c21 = c12
+                if mu > 0.0 and not gaussian_jumps:
+                    a0 += mu
+                    _add_outer(vacc, mu * size * size, gx, gy, gt)
+            if mask[k, 0] or mask[k, 1] or mask[k, 2] or k == n_samples - 1:
+                break
+            k += 1
         if not (mask[k, 0] or mask[k, 1] or mask[k, 2]):
-            continue
+            continue  # the last sample, not measured: the loop ends
         ox = tracked[k, 0] - pose[k, 0]
         oy = tracked[k, 1] - pose[k, 1]
         if not update:
