@@ -459,7 +459,7 @@ def test_noise_fit_evaluations_with_stacked_process_noise_are_per_run_bit_for_bi
     """A noise fit evaluates kept replays with the process noise of all runs computed in one
     call on their stacked travel; each run's variance, jumps and log-likelihood are the bytes
     of the run alone, with roughness, bumps and both (two effects adding variances)."""
-    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:5]
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:3]
     data = Dataset.of(runs, 0.25)
     rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
     bumps = EFFECTS["floor_bumps"].write(MODEL, {"rate": 0.3, "heading_jump": 0.004})
@@ -478,3 +478,59 @@ def test_noise_fit_evaluations_with_stacked_process_noise_are_per_run_bit_for_bi
             for run, rep, mask in zip(data.runs, fixed.replays, data.masks, strict=True)
         ]
         assert kept.loglik.tobytes() == np.array(plain).tobytes()
+
+
+def test_filter_updates_every_measured_sample_once_whatever_the_gaps() -> None:
+    """The filter propagates between measured samples in a loop of its own; at the edges of
+    that loop — runs of one and two samples, a last sample not measured, long gaps, nothing
+    measured after the start — every measured component after the first sample is counted
+    once, trailing unmeasured samples change no byte of the result, the open-loop gap is
+    written exactly at the measured samples, and the compiled kernel is its Python source."""
+    run = generate_session({"floor_bumps": {"value": 0.02}}, np.random.default_rng(13))[0]
+    spec = EFFECTS["floor_bumps"].write(
+        EFFECTS["floor_roughness"].write(MODEL, {"k_left": 1e-3, "k_right": 1.2e-3}),
+        {"rate": 0.5, "heading_jump": 0.01},
+    )
+    rep = replay_run(run, spec)
+    pose, tracked, gains, variance, jumps, size, sigma = _model_arrays(rep, spec, SENSOR)
+    full = np.isfinite(run.true_pose)
+    n = len(run.time)
+    gappy = full.copy()
+    gappy[5 : n // 2] = False  # a long gap
+    gappy[::11, 1] = False  # samples with two measured rows
+    gappy[-3:] = False  # the last samples not measured
+    start_only = np.zeros_like(full)
+    start_only[0] = True
+
+    def run_filter(mask: np.ndarray, stop: int, gaussian: bool, update: bool) -> tuple:
+        residual = run_residual(run, rep, mask)[:stop]
+        gap = np.full((stop, 2), np.nan)
+        args = (
+            pose[:stop], tracked[:stop], gains[: stop - 1], variance[: stop - 1],
+            jumps[: stop - 1], size, sigma, residual, mask[:stop], gaussian, update, gap,
+        )  # fmt: skip
+        compiled = _filter(*args)
+        python = _filter.py_func(*(*args[:-1], gap.copy()))
+        assert _bits(compiled[0]) == _bits(python[0]) and compiled[2] == python[2]
+        assert compiled[1].tobytes() == python[1].tobytes()
+        return compiled, gap
+
+    for mask in (full, gappy, start_only):
+        for stop in (1, 2, 3, n):
+            for gaussian, update in ((False, True), (True, True), (True, False)):
+                (_, _, count), gap = run_filter(mask, stop, gaussian, update)
+                measured = mask[1:stop]
+                if update:
+                    assert count == int(measured.sum())
+                else:
+                    rows = np.flatnonzero(measured.any(axis=1)) + 1
+                    assert np.isfinite(gap[rows]).all()
+                    assert np.isnan(np.delete(gap, rows, axis=0)).all()
+    # Trailing unmeasured samples: the bytes of the run cut after its last measured sample.
+    last = int(np.flatnonzero(gappy.any(axis=1))[-1]) + 1
+    for gaussian in (False, True):
+        (long_ll, long_white, long_count), _ = run_filter(gappy, n, gaussian, True)
+        (cut_ll, cut_white, cut_count), _ = run_filter(gappy, last, gaussian, True)
+        assert _bits(long_ll) == _bits(cut_ll) and long_count == cut_count
+        assert long_white[: 3 * last].tobytes() == cut_white.tobytes()
+        assert not long_white[3 * last :].any()

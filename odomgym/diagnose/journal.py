@@ -3,9 +3,9 @@ disk, so that an interrupted ``odomgym diagnose --resume`` goes on where it stop
 
 A matter of files, not of statistics, hence apart from the rounds that fill it
 (:mod:`odomgym.diagnose.rounds`): it knows a fit only by the SHA-256 of its job
-(:meth:`odomgym.diagnose.fit.FitJob.key_parts`) and odomgym's version, and the command line
-(:mod:`odomgym.cli.diagnose`) makes it, resumes from it and clears it once the report is
-written.
+(:meth:`odomgym.diagnose.fit.FitJob.key_parts`), odomgym's version and :data:`ARITHMETIC`, and
+the command line (:mod:`odomgym.cli.diagnose`) makes it, resumes from it and clears it once the
+report is written.
 """
 
 from __future__ import annotations
@@ -18,7 +18,12 @@ from pathlib import Path
 from odomgym.diagnose.fit import CandidateFit, FitJob
 from odomgym.io import atomic_write_bytes
 
-__all__ = ["FitJournal"]
+__all__ = ["ARITHMETIC", "FitJournal"]
+
+ARITHMETIC = 2
+"""Raised whenever a change moves the fitted numbers (not just the speed) within one odomgym
+version, so a journal written before it is not resumed into a report after it. 2: the BLAS
+libraries on one thread during a diagnosis (the last digits of every fit moved)."""
 
 
 class FitJournal:
@@ -27,11 +32,12 @@ class FitJournal:
 
     A fit is a deterministic function of its job (the fit runs, the current model and sensor
     noise, the candidate's and nuisance's names, the folds), so a fit is stored under the
-    SHA-256 of the pickled job and odomgym's version, and a resumed diagnosis is identical to
-    an uninterrupted one (tests/test_bench_resume.py). Each file is written whole (a temporary
-    file renamed). A changed dataset or setting only misses the stored fits. The files are
-    pickles: resume only from a journal you wrote. An effect is known by its name: after
-    changing the code of an effect you registered, start afresh rather than resume.
+    SHA-256 of the pickled job, odomgym's version and :data:`ARITHMETIC`, and a resumed
+    diagnosis is identical to an uninterrupted one (tests/test_bench_resume.py). Each file is
+    written whole (a temporary file renamed). A changed dataset or setting only misses the
+    stored fits. The files are pickles: resume only from a journal you wrote. An effect is
+    known by its name: after changing the code of an effect you registered, start afresh
+    rather than resume.
     """
 
     def __init__(self, folder: str | Path, *, resume: bool = False) -> None:
@@ -44,7 +50,8 @@ class FitJournal:
         """The file name of ``job``'s fit: the hash of its :meth:`FitJob.key_parts`."""
         from odomgym import __version__
 
-        return hashlib.sha256(pickle.dumps((__version__, job.key_parts()), protocol=5)).hexdigest()
+        parts = (__version__, ARITHMETIC, job.key_parts())
+        return hashlib.sha256(pickle.dumps(parts, protocol=5)).hexdigest()
 
     def get(self, key: str) -> CandidateFit | None:
         """The stored fit, or ``None`` (none stored, or a file that does not load)."""

@@ -240,11 +240,16 @@ def _wheel_gains(
 def run_residual(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FloatArray:
     """Measured minus predicted tracked pose (T, 3) where ``mask`` holds, else 0; the heading
     difference wrapped to [−π, π) [rad]."""
-    return _pose_residual(
-        np.asarray(run.true_pose, dtype=np.float64),
-        np.asarray(replay.tracked, dtype=np.float64),
-        np.asarray(mask, dtype=np.bool_),
-    )
+    measured = np.asarray(run.true_pose, dtype=np.float64)
+    predicted = np.asarray(replay.tracked, dtype=np.float64)
+    kept = np.asarray(mask, dtype=np.bool_)
+    if not (measured.shape == predicted.shape == kept.shape and measured.shape[1:] == (3,)):
+        # the compiled pass checks no bounds (numpy's where raised on a mismatch)
+        raise ValueError(
+            f"run_residual: poses {measured.shape}, replay {predicted.shape} and mask "
+            f"{kept.shape} must all be (T, 3)"
+        )
+    return _pose_residual(measured, predicted, kept)
 
 
 _TWO_PI = 2.0 * math.pi

@@ -289,7 +289,10 @@ def diagnose(
     threads wait for the next call by spinning, which took about a third of the CPU time of a
     diagnosis on 2 cores from the filter and the replays (``perf``: ``blas_thread_server``).
     One thread also makes the results independent of the machine's core count: a threaded dot
-    product of long vectors sums its parts in an order that depends on the thread count."""
+    product of long vectors sums its parts in an order that depends on the thread count. The
+    limit is the process's while the diagnosis runs (other threads of the caller's get it too)
+    and the caller's setting is back afterwards; threadpoolctl changes it only from the thread
+    that controls OpenBLAS, so call :func:`diagnose` from the main thread for these bytes."""
     cfg = config if config is not None else DiagnoseConfig()
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(runs, robot, cfg, baseline, progress, journal)

@@ -237,7 +237,11 @@ class Effect:
 
     # ------------------------------------------------------------------ noise face
     def wheel_variance(self, values: Mapping[str, float], travel: FloatArray) -> FloatArray | None:
-        """Extra variance of each wheel's ground travel per sample (n, 2) [m²], or None."""
+        """Extra variance of each wheel's ground travel per sample (n, 2) [m²], or None.
+
+        Each row must depend on that sample's ``travel`` alone (element by element): a noise
+        fit passes the travel of all its runs stacked in one array
+        (:func:`odomgym.diagnose.likelihood.stacked_process_noise`)."""
         del values, travel
         return None
 
@@ -246,7 +250,8 @@ class Effect:
     ) -> tuple[FloatArray, float] | None:
         """Sparse losses of wheel travel: (expected number per sample and wheel (n, 2), travel
         lost per jump [m]), or None. A loss e on one wheel moves the pose by −e/2 along the
-        track and turns it by ±e/b: the heading jumps of bumps."""
+        track and turns it by ±e/b: the heading jumps of bumps. As for
+        :meth:`wheel_variance`, each row must depend on that sample's ``travel`` alone."""
         del values, travel, wheelbase
         return None
 
