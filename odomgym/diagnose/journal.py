@@ -20,10 +20,9 @@ from odomgym.io import atomic_write_bytes
 
 __all__ = ["ARITHMETIC", "FitJournal"]
 
-ARITHMETIC = 2
+ARITHMETIC = 1
 """Raised whenever a change moves the fitted numbers (not just the speed) within one odomgym
-version, so a journal written before it is not resumed into a report after it. 2: the BLAS
-libraries on one thread during a diagnosis (the last digits of every fit moved)."""
+version, so a journal written before it is not resumed into a report after it."""
 
 
 class FitJournal:
