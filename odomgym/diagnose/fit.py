@@ -204,25 +204,19 @@ def evaluate(
     The runs are independent, and the filter (compiled, releasing the GIL) takes most of the
     time, so they are shared among :func:`_threads` threads; each run's numbers do not depend on
     which thread computed them, and they are gathered in run order (bit-identical results)."""
-    noise = stacked_process_noise(spec, fixed.travel, fixed.rows) if fixed is not None else None
+    noise = stacked_process_noise(spec, fixed.travel, fixed.rows) if fixed is not None else []
 
     def one(j: int) -> tuple[Replay, float, FloatArray | None]:
         run, mask = data.runs[j], data.masks[j]
-        if fixed is not None and noise is not None:
-            rep = fixed.replays[j]
-            loglik, white = run_scores(
-                run,
-                rep,
-                spec,
-                sensor,
-                mask,
-                whitened=whitened,
-                kept=fixed.inputs[j],
-                noise=noise[j],
-            )
-        else:
+        if fixed is None:
             rep = data.replay(j, spec)
             loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened)
+        else:
+            rep = fixed.replays[j]
+            kept, own = fixed.inputs[j], noise[j]
+            loglik, white = run_scores(
+                run, rep, spec, sensor, mask, whitened=whitened, kept=kept, noise=own
+            )
         return rep, loglik, white
 
     def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:

@@ -650,8 +650,8 @@ def _filter(
     while k < n_samples - 1:
         k += 1
         # Sample after sample up to the next measured one (or the last), in a loop of its own:
-        # there the compiler keeps the state in registers, where in the loop with the update
-        # it spilled part of it to memory at every sample (~2× the time per sample).
+        # there the compiler keeps more of the state in registers than in the loop with the
+        # update (48 against 57 µs for a 2 455-sample run propagated without updates).
         while True:
             m = k - 1
             # δ ← F·δ, P ← F·P·Fᵀ + G·Q·Gᵀ with F = I + u·e_θᵀ, u = (−Δy, Δx, 0): the operations of
