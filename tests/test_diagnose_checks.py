@@ -6,17 +6,26 @@ magnitude, and the open-loop gate's rules.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 from independent_robot import IndependentRobot, generate, rich_protocol
 
+from odomgym.diagnose import openloop as openloop_module
 from odomgym.diagnose.config import DiagnoseConfig
-from odomgym.diagnose.gate import MAX_INFLATION, GateResult, model_effect, open_loop_gate
+from odomgym.diagnose.gate import (
+    MAX_INFLATION,
+    GateResult,
+    fit_nested,
+    model_effect,
+    open_loop_gate,
+)
 from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
 from odomgym.diagnose.openloop import (
     NuisanceOptions,
     OpenLoopData,
+    fit_open_loop,
     open_loop_folds,
     variance_inflation,
 )
@@ -219,7 +228,11 @@ def test_catalogue_first_decides_the_effects_without_the_terms(
     effect, term = staged.steps
     assert effect == alone.steps[0]
     assert term.name == "right_sin1" and not term.kept and term.rule == "one standard error"
-    assert term.before_mm == pytest.approx(alone.steps[0].after_mm, abs=1e-3)
+    assert term.before_mm == alone.steps[0].after_mm
+    # the model left when the term goes is the effects-only fit itself, not a refit of it from
+    # the term's model (gate.fit_nested)
+    assert staged.fit.values == alone.fit.values
+    assert np.array_equal(staged.cv_error, alone.cv_error)
     assert abs(staged.fit.spec.e_b - 1.01) < 0.001
     with pytest.raises(ValueError, match="order"):
         gate([], "terms first")
@@ -284,3 +297,36 @@ def test_variance_inflation_is_one_over_one_minus_r_squared() -> None:
     normal = singular.T @ singular
     vif = variance_inflation(normal, np.linalg.pinv(normal))
     assert np.all(np.isinf(vif[:3])) and vif[3] == pytest.approx(1.0, abs=0.2)
+
+
+def test_a_fit_stopped_above_the_model_it_nests_is_fitted_again_from_that_model(
+    wheelbase_case: tuple[list[Run], RobotSpec], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A least-squares fit of wheelbase + right_sin1 that stops where it started, far from the
+    optimum (e_b 1.2), ends above the fit of the wheelbase alone, a point it could reach (the
+    term at zero); :func:`fit_nested` fits it again from there and lands on the robot's 1 %."""
+    runs, _ = wheelbase_case
+    data = OpenLoopData(runs, 0.25, ROBOT.wheelbase)
+    options = NuisanceOptions()
+    base = fit_open_loop(data, ROBOT, EFFECTS["wheelbase"], options)
+    joint = model_effect(["wheelbase"], ["right_sin1"])
+    assert joint is not None
+    far = joint.write(ROBOT, {"wheelbase.e_b": 1.2, "discovered.right_sin1": 0.0})
+    real = openloop_module._levenberg_marquardt
+    calls: list[int] = []
+
+    def stops_first_time(problem: Any, x0: Any, max_iterations: int = 30) -> Any:
+        calls.append(max_iterations)
+        return real(problem, x0, 0 if len(calls) == 1 else max_iterations)
+
+    monkeypatch.setattr(openloop_module, "_levenberg_marquardt", stops_first_time)
+    stopped = fit_open_loop(data, far, joint, options)
+    assert stopped.error > base.error  # the premise: stuck above the smaller model
+    calls.clear()
+    fit = fit_nested(data, far, joint, options, None, base)
+    assert len(calls) == 2  # stopped, then fitted again from the wheelbase alone
+    assert fit.error <= base.error
+    assert abs(fit.spec.e_b - 1.01) < 0.001
+    calls.clear()
+    assert fit_nested(data, base.spec, joint, options, base.nuisances, base).error <= base.error
+    assert len(calls) == 1  # a fit that ends at or below it is not redone
