@@ -8,6 +8,8 @@ equality of the bytes, not a tolerance. The threaded evaluation's identity is te
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from alien_robot import generate_session
@@ -534,3 +536,29 @@ def test_filter_updates_every_measured_sample_once_whatever_the_gaps() -> None:
         assert _bits(long_ll) == _bits(cut_ll) and long_count == cut_count
         assert long_white[: 3 * last].tobytes() == cut_white.tobytes()
         assert not long_white[3 * last :].any()
+
+
+def test_a_forked_worker_that_dies_stops_the_diagnosis_naming_its_task(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Both forked paths of the workflow — the candidate fits (``run_fit_jobs``) and the
+    library's evaluations (``whitened_stacks``) — turn a worker killed mid-task (here it exits
+    with 86, as an out-of-memory kill would end it) into a RuntimeError saying what it was
+    doing, instead of waiting for it forever or retrying a task that kills every worker."""
+    from types import SimpleNamespace
+
+    from odomgym.diagnose import fit as fit_module
+
+    def dies(*args: object) -> None:
+        os._exit(86)
+
+    monkeypatch.setattr(fit_module, "_run_job", dies)
+    jobs = {0: SimpleNamespace(effect="wheelbase"), 1: SimpleNamespace(effect="turn_skid")}
+    with pytest.raises(RuntimeError, match=r"exit code 86\) while fitting (wheelbase|turn_skid)"):
+        fit_module.run_fit_jobs(jobs, 2, lambda k, fit: None)  # type: ignore[arg-type]
+    monkeypatch.setattr(fit_module, "_stack_task", dies)
+    runs = generate_session({}, np.random.default_rng(3))[:2]
+    with pytest.raises(RuntimeError, match=r"while evaluating model [12] \([12] of 2\)"):
+        fit_module.whitened_stacks(
+            Dataset.of(runs, 0.25), [MODEL, MODEL], SENSOR, lambda k, s: None, processes=2
+        )

@@ -35,9 +35,10 @@ import multiprocessing as mp
 import os
 import pickle
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,7 +59,7 @@ from odomgym.effects.registry import Spec, SpecView
 from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.workers import WorkerDeath, run_tasks
+from odomgym.workers import Handler, WorkerDeath, run_tasks
 
 __all__ = [
     "CandidateFit",
@@ -579,32 +580,56 @@ def whitened_stacks(
     A spec whose evaluation raises in a worker surfaces as :class:`odomgym.workers.TaskFailed`
     (as a candidate fit's does in :func:`run_fit_jobs`)."""
     global _SHARED_STACKS
-    nested = mp.current_process().daemon  # a worker process may not start its own
-    if processes < 2 or len(specs) < 2 or nested or "fork" not in mp.get_all_start_methods():
+    if not _forks(processes, len(specs)):
         for k, spec in enumerate(specs):
             use(k, whitened_stack(data, spec, sensor)[1])
         return
     names = list(labels) if labels is not None else [f"model {k + 1}" for k in range(len(specs))]
-
-    def died(death: WorkerDeath[int]) -> bool:
-        raise RuntimeError(
-            f"a diagnose worker died (exit code {death.exitcode}) while evaluating "
-            f"{names[death.key]} ({death.key + 1} of {len(specs)})"
-        )
-
-    close_thread_pool()  # no thread of the evaluation pool may be alive across the fork
     _SHARED_STACKS = (data, sensor)
     try:
-        run_tasks(
+        _run_forked(
             _stack_task,
             enumerate(specs),
-            processes=processes,
-            finished=use,
-            died=died,
-            start_method="fork",
+            processes,
+            use,
+            lambda k: f"evaluating {names[k]} ({k + 1} of {len(specs)})",
         )
     finally:
         _SHARED_STACKS = None
+
+
+def _forks(processes: int, tasks: int) -> bool:
+    """Whether :func:`whitened_stacks` and :func:`run_fit_jobs` share ``tasks`` among
+    ``processes`` forked workers: more than one of each, the ``fork`` start method available,
+    and not inside a worker process already (a daemon process may not start its own)."""
+    return (
+        processes > 1
+        and tasks > 1
+        and not mp.current_process().daemon
+        and "fork" in mp.get_all_start_methods()
+    )
+
+
+def _run_forked(
+    task: Handler,
+    items: Iterable[tuple[int, object]],
+    processes: int,
+    finished: Callable[[int, Any], None],
+    doing: Callable[[int], str],
+) -> None:
+    """``task`` on every ``(key, item)`` of ``items`` in forked workers
+    (:func:`odomgym.workers.run_tasks`), each result handed to ``finished(key, result)`` as it
+    comes; a worker that dies stops everything with a RuntimeError saying what it was
+    ``doing(key)``. The evaluation pool's threads are closed first: no thread may be alive
+    across a fork (a child inherits the lock state, not the threads)."""
+    close_thread_pool()
+
+    def died(death: WorkerDeath[int]) -> bool:
+        raise RuntimeError(
+            f"a diagnose worker died (exit code {death.exitcode}) while {doing(death.key)}"
+        )
+
+    run_tasks(task, items, processes=processes, finished=finished, died=died, start_method="fork")
 
 
 @dataclass
@@ -877,23 +902,13 @@ def run_fit_jobs(
     the candidate; the fits already finished (journalled by ``finished``) stay for a resume.
     """
     todo = list(jobs)
-    if processes > 1 and len(todo) > 1 and "fork" in mp.get_all_start_methods():
-        # No thread of this process's evaluation pool may be alive across the fork.
-        close_thread_pool()
-
-        def died(death: WorkerDeath[int]) -> bool:
-            raise RuntimeError(
-                f"a diagnose worker died (exit code {death.exitcode}) while fitting "
-                f"{jobs[death.key].effect}"
-            )
-
-        run_tasks(
+    if _forks(processes, len(todo)):
+        _run_forked(
             _run_job,
             ((k, jobs[k]) for k in todo),
-            processes=processes,
-            finished=finished,
-            died=died,
-            start_method="fork",
+            processes,
+            finished,
+            lambda k: f"fitting {jobs[k].effect}",
         )
     else:
         for k in todo:
