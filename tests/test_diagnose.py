@@ -24,10 +24,12 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+import threadpoolctl
 from independent_robot import IndependentRobot, generate, rich_protocol
 
 from odomgym.cli import main
 from odomgym.data.native import write_native
+from odomgym.diagnose import workflow
 from odomgym.diagnose.generate import NOMINAL_ROBOT, hidden_effect_trial
 from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
 from odomgym.effects import catalogue
@@ -246,3 +248,35 @@ def test_a_run_without_measured_pose_after_the_start_is_refused(tmp_path: Path) 
 
     with pytest.raises(SpecError, match="no measured pose"):
         diagnose(runs, MODEL, DiagnoseConfig(holdout=0.25))
+
+
+def _blas_threads() -> list[int]:
+    return [int(lib["num_threads"]) for lib in threadpoolctl.threadpool_info()
+            if lib["user_api"] == "blas"]  # fmt: skip
+
+
+def test_diagnose_runs_its_blas_on_one_thread_and_gives_the_threads_back(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Inside :func:`diagnose` every BLAS library numpy and scipy loaded runs on one thread
+    (OpenBLAS's spinning idle threads took a third of a diagnosis's CPU on 2 cores, and a
+    threaded dot product's rounding depends on the thread count); after it, error or not, the
+    caller's setting is back."""
+    runs = _independent({}, seed=4)[:4]
+    seen: list[list[int]] = []
+
+    class Stop(Exception):
+        pass
+
+    def spy(*args: object, **kwargs: object) -> None:
+        seen.append(_blas_threads())
+        raise Stop
+
+    monkeypatch.setattr(workflow, "split_runs", spy)
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        outside = _blas_threads()
+        with pytest.raises(Stop):
+            diagnose(runs, MODEL)
+        after = _blas_threads()
+    assert outside and seen == [[1] * len(outside)]
+    assert after == outside

@@ -20,9 +20,11 @@ from odomgym.io import atomic_write_bytes
 
 __all__ = ["ARITHMETIC", "FitJournal"]
 
-ARITHMETIC = 1
+ARITHMETIC = 2
 """Raised whenever a change moves the fitted numbers (not just the speed) within one odomgym
-version, so a journal written before it is not resumed into a report after it."""
+version, so a journal written before it is not resumed into a report after it. 2: the BLAS
+libraries on one thread during a diagnosis (the last digits of every fit moved) and the open-loop
+gate's nested fits (:func:`odomgym.diagnose.gate.fit_nested`)."""
 
 
 class FitJournal:

@@ -61,6 +61,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from odomgym import interrupt
 from odomgym.diagnose.config import DiagnoseConfig
@@ -282,11 +283,30 @@ def diagnose(
     every finished candidate fit there, and take the fits it already holds
     (:class:`FitJournal`: an interrupted diagnosis resumed gives the same result).
 
-    The BLAS libraries numpy and scipy load keep their own thread count. Running them on one
-    thread here made a diagnosis ~25 % faster on 2 cores (their idle threads spin between
-    calls) but moved its results in their last digits, which turned two leave-one-session-out
-    folds of the June sessions into a different, worse model (README, "Speed")."""
+    The BLAS libraries numpy and scipy load run on one thread here (threadpoolctl, for the
+    whole diagnosis and the worker processes it forks). Why: the workflow's linear algebra is
+    small (3×3 covariances, least-squares systems of a few parameters), and OpenBLAS's idle
+    threads wait for the next call by spinning, which took about a third of the CPU time of a
+    diagnosis on 2 cores from the filter and the replays (``perf``: ``blas_thread_server``).
+    One thread also makes the results independent of the machine's core count: a threaded dot
+    product of long vectors sums its parts in an order that depends on the thread count. The
+    limit is the process's while the diagnosis runs (other threads of the caller's get it too)
+    and the caller's setting is back afterwards; threadpoolctl changes it only from the thread
+    that controls OpenBLAS, so call :func:`diagnose` from the main thread for these bytes."""
     cfg = config if config is not None else DiagnoseConfig()
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(runs, robot, cfg, baseline, progress, journal)
+
+
+def _diagnose(
+    runs: Sequence[Run],
+    robot: RobotSpec,
+    cfg: DiagnoseConfig,
+    baseline: Baseline | None,
+    progress: Callable[[str, float], None] | None,
+    journal: FitJournal | None,
+) -> Diagnosis:
+    """:func:`diagnose` itself, its BLAS on one thread."""
 
     def report(stage: str, fraction: float) -> None:
         interrupt.check()  # a stop request a finalizer swallowed (odomgym.interrupt)
