@@ -18,7 +18,7 @@ import pytest
 from alien_robot import EXPECTED_TERMS, generate_session
 from independent_robot import IndependentRobot, generate, rich_protocol
 
-from odomgym.diagnose.discover import library_jacobian, structure_test
+from odomgym.diagnose.discover import best_threshold, library_jacobian, structure_test
 from odomgym.diagnose.fit import Dataset, fit_noise
 from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
 from odomgym.diagnose.likelihood import SensorNoise
@@ -306,3 +306,16 @@ def test_session_frames_are_measurement_nuisances_not_robot_effects() -> None:
             assert se < largest_se, f
     assert "wheel_toe" not in result.named_effects
     assert result.systematic_effects == [], result.named_effects
+
+
+def test_the_threshold_path_ignores_differences_of_rounding() -> None:
+    """STLSQ's cross-validated threshold: the least held-out sum of squares wins, but sums equal
+    to rounding — a threshold that zeroes every coefficient gives "none"'s sum in another order
+    (on the June OptiOdom sessions 52268.98028182433 against …434, and the other way round with
+    the BLAS on another thread count) — go to the first in the path's order, "none" first."""
+    none = 52268.98028182433
+    assert best_threshold({"none": none, "13": none + 9.0, "16": none + 1e-11}) == "none"
+    assert best_threshold({"none": none, "13": none + 9.0, "16": none - 1e-11}) == "none"
+    assert best_threshold({"none": none, "13": none - 9.0, "16": none - 9.0 + 1e-11}) == "13"
+    assert best_threshold({"none": none, "13": none - 9.0, "16": none - 9.1}) == "16"
+    assert best_threshold({"none": none, "13": none - 1e-3}) == "13"  # 2e-8 relative: real
