@@ -273,10 +273,12 @@ def test_diagnose_runs_its_blas_on_one_thread_and_gives_the_threads_back(
         raise Stop
 
     monkeypatch.setattr(workflow, "split_runs", spy)
+    if not _blas_threads():
+        pytest.skip("threadpoolctl finds no BLAS library in this process")
     with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
         outside = _blas_threads()
         with pytest.raises(Stop):
             diagnose(runs, MODEL)
         after = _blas_threads()
-    assert outside and seen == [[1] * len(outside)]
+    assert seen == [[1] * len(outside)]
     assert after == outside

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from independent_robot import IndependentRobot, generate, rich_protocol
 
+from odomgym.diagnose import gate as gate_module
 from odomgym.diagnose import openloop as openloop_module
 from odomgym.diagnose.config import DiagnoseConfig
 from odomgym.diagnose.gate import (
@@ -330,3 +331,38 @@ def test_a_fit_stopped_above_the_model_it_nests_is_fitted_again_from_that_model(
     calls.clear()
     assert fit_nested(data, base.spec, joint, options, base.nuisances, base).error <= base.error
     assert len(calls) == 1  # a fit that ends at or below it is not redone
+
+
+def test_a_proposal_left_out_takes_the_robots_given_value(
+    wheelbase_case: tuple[list[Run], RobotSpec], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A robot given with a calibrated wheelbase (E_b 1.0095): the gate's model "without the
+    wheelbase" keeps that E_b — the robot as given, as the empty model is — not the effect's
+    absent value 1; so the fit of a smaller model is a point of every larger one
+    (:func:`fit_nested`)."""
+    runs, _ = wheelbase_case
+    data = OpenLoopData(runs, 0.25, ROBOT.wheelbase)
+    given = EFFECTS["wheelbase"].write(ROBOT, {"e_b": 1.0095})
+    proposed = EFFECTS["distance_scale"].write(
+        EFFECTS["wheelbase"].write(ROBOT, {"e_b": 1.01}), {"e_s": 1.001}
+    )
+    real = gate_module.fit_open_loop
+    starts: list[tuple[float, list[str]]] = []
+
+    def spy(data: Any, spec: RobotSpec, effect: Any = None, *args: Any) -> Any:
+        names = [p.name for p in effect.parameters] if effect is not None else []
+        starts.append((EFFECTS["wheelbase"].read(spec)["e_b"], names))
+        return real(data, spec, effect, *args)
+
+    monkeypatch.setattr(gate_module, "fit_open_loop", spy)
+    open_loop_gate(
+        data,
+        given,
+        proposed,
+        ["wheelbase", "distance_scale"],
+        [],
+        NuisanceOptions(),
+        open_loop_folds(runs),
+    )
+    without = [e_b for e_b, names in starts if "wheelbase.e_b" not in names]
+    assert without and all(e_b == pytest.approx(1.0095, abs=1e-12) for e_b in without)

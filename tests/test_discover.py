@@ -319,3 +319,7 @@ def test_the_threshold_path_ignores_differences_of_rounding() -> None:
     assert best_threshold({"none": none, "13": none - 9.0, "16": none - 9.0 + 1e-11}) == "13"
     assert best_threshold({"none": none, "13": none - 9.0, "16": none - 9.1}) == "16"
     assert best_threshold({"none": none, "13": none - 1e-3}) == "13"  # 2e-8 relative: real
+    low = none - 50.0  # two thresholds tied to rounding: the first (the smaller) of them
+    assert best_threshold({"none": none, "13": low + 1e-11, "16": low}) == "13"
+    assert best_threshold({"none": none, "13": float("nan"), "16": low}) == "16"
+    assert best_threshold({"none": float("nan"), "13": float("inf")}) == "none"

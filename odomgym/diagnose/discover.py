@@ -297,11 +297,15 @@ BLAS's thread count."""
 def best_threshold(path: Mapping[str, float]) -> str:
     """The key of ``path`` (``"none"``, then the thresholds in the order tried) with the least
     held-out sum of squares; of keys within :data:`TIE` of it (relative to "none"'s), the
-    first — "none" before any threshold — so that the choice does not turn on the last digits
-    of the arithmetic."""
-    best = min(path.values())
-    tolerance = TIE * abs(path.get("none", best))
-    return next(k for k, v in path.items() if v <= best + tolerance)
+    first — "none" before any threshold, a smaller threshold before a larger — so that the
+    choice does not turn on the last digits of the arithmetic. Keys whose sum is not finite are
+    never chosen ("none" if no key has a finite sum)."""
+    finite = {k: v for k, v in path.items() if math.isfinite(v)}
+    if not finite:
+        return "none"
+    best = min(finite.values())
+    tolerance = TIE * abs(finite.get("none", best))
+    return next(k for k, v in finite.items() if v <= best + tolerance)
 
 
 def _stlsq_normal(gram: FloatArray, moment: FloatArray, threshold: float) -> FloatArray:

@@ -197,15 +197,15 @@ def fit_nested(
     """The open-loop fit of ``effect`` from ``begin`` (and ``nuisances``), never ending above
     ``base``, the fit of a model nested in it.
 
-    Why: ``base``'s robot and nuisances are a point of the larger model (the parameters it
-    lacks at their given values), so a least-squares fit of the larger model that stops above
-    ``base``'s error stopped in a worse basin than one it could reach; it is fitted again from
-    ``base`` and the lower of the two kept. Without it a term-laden start could leave a model
-    far from its own optimum: in one June OptiOdom leave-one-session-out fold the catalogue
-    effects, refitted from the last term's model after that term was eliminated, came out at
-    E_b 0.93 (50 mm of held-out error) where the same effects fitted alone gave E_b 1.0014
-    (2.5 mm) — and which of the two came out was decided by the last digits of the
-    arithmetic."""
+    Why: ``base``'s robot and nuisances are a point of the larger model (the gate gives every
+    proposal a model lacks the robot's given value, in ``base`` and ``begin`` alike), so a
+    least-squares fit of the larger model that stops above ``base``'s error stopped in a worse
+    basin than one it could reach; it is fitted again from ``base`` and the lower of the two
+    kept. Without it a term-laden start could leave a model far from its own optimum: in one
+    June OptiOdom leave-one-session-out fold the catalogue effects, refitted from the last
+    term's model after that term was eliminated, came out at E_b 0.93 (50 mm of held-out error)
+    where the same effects fitted alone gave E_b 1.0014 (2.5 mm) — and which of the two came out
+    was decided by the last digits of the arithmetic."""
     fit = fit_open_loop(data, begin, effect, options, nuisances)
     if effect is not None and fit.error > base.error:
         again = fit_open_loop(data, base.spec, effect, options, base.nuisances)
@@ -388,7 +388,7 @@ def open_loop_gate(
     nominal_fit = (
         nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
     )
-    nominal_cv, _ = held_out(nominal_fit, [])
+    nominal_cv, nominal_estimator = held_out(nominal_fit, [])
 
     def keys_of(members: Sequence[tuple[str, str]]) -> list[str]:
         joint = model_effect(*parts(members))
@@ -421,14 +421,17 @@ def open_loop_gate(
                     report(f"open-loop check {round_number}: {member[1]}", k / len(model))
                 kind, name = member
                 rest = fixed + [m for m in model if m != member]
-                # The smaller model starts from the larger one's fit, the proposal made absent.
+                # The smaller model starts from the larger one's fit, the proposal back at the
+                # robot's given value (absent for a robot that carries none): "without" is the
+                # robot as given in that respect, as the empty model is the robot as given, so
+                # the fit of ``fixed`` alone is a point of every model tested (fit_nested).
                 effect_names, term_names = parts([member])
                 begin = current.spec
                 for e in effect_names:
-                    begin = EFFECTS[e].write(begin, EFFECTS[e].absent_values())
+                    begin = EFFECTS[e].write(begin, EFFECTS[e].read(robot))
                 if term_names:
                     chosen = DiscoveredTerms(term_names)
-                    begin = chosen.write(begin, dict.fromkeys(term_names, 0.0))
+                    begin = chosen.write(begin, chosen.read(robot))
                 if len(rest) > len(fixed):
                     smaller, smaller_cv, _ = fitted(rest, begin, current.nuisances, base[0])
                 else:
@@ -484,7 +487,7 @@ def open_loop_gate(
 
     effect_proposals = [m for m in proposals if m[0] == "effect"]
     term_members = [m for m in proposals if m[0] == "term"]
-    nominal_base = (nominal_fit, nominal_cv, "open loop")
+    nominal_base = (nominal_fit, nominal_cv, nominal_estimator)
     if order == "catalogue first":
         # The catalogue effects on their own, then the discovered terms on the model they kept
         # (those effects fixed): a term must earn its place beside the named mechanisms and
