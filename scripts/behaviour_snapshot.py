@@ -218,6 +218,7 @@ def job_env_traces(work: Path, out: Path) -> None:
         obs, reward, term, trunc, info = env.step(env.action_space.sample())
         digest.update(np.asarray(obs).tobytes())
         digest.update(np.asarray(reward).tobytes())
+        digest.update(repr(sorted((k, repr(v)) for k, v in info.items())).encode())
     env.close()
     lines.append(f"vector UMBmarkSquare-v0 x4 sha={digest.hexdigest()}")
     (out / "traces.txt").write_text("\n".join(lines) + "\n")

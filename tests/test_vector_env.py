@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import gymnasium as gym
@@ -181,3 +182,30 @@ def test_partial_reset_with_reset_mask_matches_sync_vector_env() -> None:
         out.append(envs.reset(seed=[None, 9, None], options={"reset_mask": mask}))
         results.append(out)
     _assert_same(results[0], results[1])
+
+
+def test_a_step_info_read_later_is_the_one_read_at_its_step() -> None:
+    """The native vector env's ``info`` is made at its first read (``LazyInfo``): read after
+    many later steps, autoresets and a reset, it equals a twin env's info read at once, with
+    ``return_error`` where episodes ended. Nothing it is made from changes after its step, not
+    even when the caller writes into the arrays the step returned."""
+    from odomgym.envs.info import LazyInfo
+
+    robot = odomgym.PRESETS["navbot"]
+    kwargs = {"robot": robot, "floor": "rough", "distance": 0.3, "return_trip": False}
+    envs, twin = (gym.make_vec("StraightLine-v0", num_envs=3, **kwargs) for _ in range(2))
+    obs, _ = envs.reset(seed=[5, 11, 7])
+    twin.reset(seed=[5, 11, 7])
+    driver = ReferenceDriver(robot)
+    unread, read_at_once = [], []
+    for _ in range(200):
+        actions = driver(obs).astype(np.float32)
+        obs, _, terminated, _, info = envs.step(actions)
+        terminated[:] = False  # the caller's array: the info keeps its own copy
+        unread.append(info)
+        read_at_once.append(copy.deepcopy(dict(twin.step(actions)[4])))
+    envs.reset(seed=1)
+    assert sum("return_error" in info for info in read_at_once) >= 3
+    for lazy, eager in zip(unread, read_at_once, strict=True):
+        assert isinstance(lazy, LazyInfo)
+        _assert_same(dict(lazy), eager)
