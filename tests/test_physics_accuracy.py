@@ -120,3 +120,48 @@ def test_return_error_replay_matches_live_odometry() -> None:
     live = runs[0].true_pose[-1] - odom[0]
     np.testing.assert_allclose(replayed[:2], live[:2], atol=1e-9)
     assert replayed[2] == pytest.approx(live[2], abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_cable_grid_lists_each_cell_the_cables_that_reach_it(seed: int) -> None:
+    """The cable index (``CableGrid``) against a brute-force one: a cable is listed in every
+    cell its reach (half its length along its axis, the contact half-width plus one step
+    across) overlaps, and a cell lists its cables in index order — the lookup the compiled
+    contact code relies on, whatever the cables' angles and the field's size."""
+    from odomgym.lab.population import cable_field
+    from odomgym.sim.cables import CableGrid
+
+    rng = np.random.default_rng(seed)
+    floor = (
+        cable_field(rng, roughness=0.0, name="t")
+        if seed == 0
+        else FloorSpec(
+            name="t",
+            bumps=tuple(
+                CableBump(x=x, y=y, angle=a, diameter=0.01, length=length)
+                for x, y, a, length in zip(
+                    rng.uniform(-3, 3, 40),
+                    rng.uniform(-2, 5, 40),
+                    rng.uniform(-math.pi, math.pi, 40),
+                    rng.uniform(0.1, 1.2, 40),
+                    strict=True,
+                )
+            ),
+        )
+    )
+    wheel_radius, step = 0.1, 0.02 * seed + 0.01
+    grid = CableGrid.build(floor, wheel_radius, step)
+    cx, cy, ax, ay, half, radius, _ = floor.bump_arrays()
+    reach = 2.0 * np.sqrt(wheel_radius * radius) + step + 1e-6
+    listed: list[list[int]] = [[] for _ in range(grid.nx * grid.ny)]
+    for m in range(cx.size):
+        ex = abs(ax[m]) * half[m] + abs(ay[m]) * reach[m]
+        ey = abs(ay[m]) * half[m] + abs(ax[m]) * reach[m]
+        x0, x1 = (int((cx[m] + s * ex - grid.origin_x) // grid.cell) for s in (-1, 1))
+        y0, y1 = (int((cy[m] + s * ey - grid.origin_y) // grid.cell) for s in (-1, 1))
+        for gy in range(y0, y1 + 1):
+            for gx in range(x0, x1 + 1):
+                listed[gy * grid.nx + gx].append(m)
+    assert grid.starts.shape == (grid.nx * grid.ny + 1,)
+    for c, expected in enumerate(listed):
+        assert grid.items[grid.starts[c] : grid.starts[c + 1]].tolist() == expected, c

@@ -237,18 +237,22 @@ class CableGrid(NamedTuple):
         origin_y = float(np.min(cy - extent_y)) - cell
         nx = math.ceil((float(np.max(cx + extent_x)) - origin_x) / cell) + 1
         ny = math.ceil((float(np.max(cy + extent_y)) - origin_y) / cell) + 1
-        buckets: list[list[int]] = [[] for _ in range(nx * ny)]
-        for m in range(cx.size):
-            x_lo = int((cx[m] - extent_x[m] - origin_x) // cell)
-            x_hi = int((cx[m] + extent_x[m] - origin_x) // cell)
-            y_lo = int((cy[m] - extent_y[m] - origin_y) // cell)
-            y_hi = int((cy[m] + extent_y[m] - origin_y) // cell)
-            for gy in range(y_lo, y_hi + 1):
-                for gx in range(x_lo, x_hi + 1):
-                    buckets[gy * nx + gx].append(m)
+        # Every (cell, cable) pair of each cable's block of cells, cables in index order, then
+        # grouped by cell with a stable sort: each cell lists its cables in index order. (Numpy's
+        # float floor division is Python's, so the blocks are the per-cable loop's to the bit.)
+        x_lo = ((cx - extent_x - origin_x) // cell).astype(np.int64)
+        x_hi = ((cx + extent_x - origin_x) // cell).astype(np.int64)
+        y_lo = ((cy - extent_y - origin_y) // cell).astype(np.int64)
+        y_hi = ((cy + extent_y - origin_y) // cell).astype(np.int64)
+        width = x_hi - x_lo + 1
+        count = width * (y_hi - y_lo + 1)
+        cable = np.repeat(np.arange(cx.size, dtype=np.int64), count)
+        first = np.cumsum(count) - count  # where each cable's block begins
+        k = np.arange(cable.size, dtype=np.int64) - first[cable]  # row-major within the block
+        cells = (y_lo[cable] + k // width[cable]) * nx + x_lo[cable] + k % width[cable]
+        items = cable[np.argsort(cells, kind="stable")]
         starts = np.zeros(nx * ny + 1, dtype=np.int64)
-        starts[1:] = np.cumsum([len(b) for b in buckets])
-        items = np.array([m for b in buckets for m in b], dtype=np.int64)
+        starts[1:] = np.cumsum(np.bincount(cells, minlength=nx * ny))
         return cls(
             cx, cy, ax, ay, half_len, radius, origin_x, origin_y, cell, nx, ny, starts, items
         )
