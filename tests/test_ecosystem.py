@@ -168,9 +168,10 @@ def test_a_bad_render_mode_is_refused_naming_it() -> None:
 
 
 def _small(algo: str) -> dict[str, object]:
-    """Settings that keep a test's rollouts to a few hundred steps (the defaults collect 2048
-    steps before PPO's first update)."""
-    return {"ppo": {"n_steps": 64, "batch_size": 32}, "a2c": {}, "dqn": {"learning_starts": 32}}[
+    """Settings that make 64 steps learn (the defaults collect 2048 steps before PPO's first
+    update): two PPO rollouts and updates, thirteen A2C updates, twelve DQN gradient steps.
+    A step of ``SelfCalibration-v1`` is a whole run, so steps are what a test pays for."""
+    return {"ppo": {"n_steps": 32, "batch_size": 32}, "a2c": {}, "dqn": {"learning_starts": 16}}[
         algo
     ]
 
@@ -195,7 +196,7 @@ _SLOW = pytest.mark.slow
 @pytest.mark.parametrize("algo", ["ppo", "a2c", "dqn"])
 def test_sb3_one_liner_learns(env_id: str, algo: str) -> None:
     """``PPO("MlpPolicy", env_id)`` (and A2C; DQN where the actions are Discrete): SB3 makes
-    the env from its id with ``render_mode="rgb_array"`` and learns a few hundred steps."""
+    the env from its id with ``render_mode="rgb_array"`` and learns for 64 steps."""
     sb3 = pytest.importorskip("stable_baselines3")
     spec = gym.spec(env_id)
     discrete = env_id == "SelfCalibration-v1"
@@ -205,8 +206,8 @@ def test_sb3_one_liner_learns(env_id: str, algo: str) -> None:
     made = model.get_env().envs[0].unwrapped
     assert made.spec is not None and made.spec.id == spec.id
     assert made.render_mode == "rgb_array"  # the path that used to stop with a SpecError
-    model.learn(256)
-    assert model.num_timesteps >= 256
+    model.learn(64)
+    assert model.num_timesteps >= 64
     obs = model.get_env().reset()
     action, _ = model.predict(obs, deterministic=True)
     assert model.get_env().action_space.contains(action[0])
@@ -218,13 +219,13 @@ def test_sb3_one_liner_learns(env_id: str, algo: str) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", ["ppo", "a2c", "dqn"])
 def test_rl_zoo3_trains_from_the_shipped_hyperparameters(algo: str, tmp_path: Path) -> None:
-    """The README's zoo command with the shipped file, shortened to a few hundred steps (fewer
-    sessions per rollout: everything else — policy, gamma, net_arch, env_kwargs — as
-    shipped)."""
+    """The README's zoo command with the shipped file, shortened to 64 steps: two rollouts of
+    two sessions (PPO and A2C: two updates; DQN: learning from step 16). Everything else —
+    policy, gamma, net_arch, env_kwargs — as shipped."""
     pytest.importorskip("rl_zoo3")
     conf = resources.files("odomgym.data.hyperparams") / f"{algo}.yml"
-    sizes = {"ppo": ["n_envs:2", "n_steps:64", "batch_size:64"], "a2c": ["n_envs:2"]}
-    sizes["dqn"] = ["n_envs:2", "learning_starts:64"]
+    sizes = {"ppo": ["n_envs:2", "n_steps:16", "batch_size:32"], "a2c": ["n_envs:2"]}
+    sizes["dqn"] = ["n_envs:2", "learning_starts:16"]
     command = [
         sys.executable,
         "-m",
@@ -238,7 +239,7 @@ def test_rl_zoo3_trains_from_the_shipped_hyperparameters(algo: str, tmp_path: Pa
         "-conf",
         str(conf),
         "-n",
-        "256",
+        "64",
         "-f",
         str(tmp_path),
         "--eval-freq",
