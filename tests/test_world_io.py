@@ -34,19 +34,29 @@ def _drive(world: World, commands: np.ndarray) -> np.ndarray:
     return np.hstack([world.pose, world.velocity, world.counts, world.slip])
 
 
+def _streams(n: int) -> list[np.random.Generator]:
+    """For each of n robots the noise stream a one-robot World seeded 3 gives its robot."""
+    return [np.random.default_rng(3).spawn(1)[0] for _ in range(n)]
+
+
 @pytest.mark.parametrize("substeps", [1, 2])
 @pytest.mark.parametrize("track_slip", [False, True])
-@pytest.mark.parametrize("floor", ["smooth", "bumpy"])
+@pytest.mark.parametrize("floor", ["smooth", "bumpy", "rough"])
 def test_compiled_and_pymunk_exchange_agree(
     floor: str, track_slip: bool, substeps: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """Also the three substep paths: whole compiled substeps on a plain floor
+    (``step_plain``), on cables or a rough floor (``step_floor``, its roughness draws crossing
+    blocks of 256 in 600 substeps), and the staged path stage by stage, which the fallback and
+    ``track_slip`` take."""
     robot = PRESETS["labmate"]
     options = {"track_slip": track_slip, "substeps": substeps}
-    single = World(robot, FLOORS[floor], **options)
-    batch = World([robot] * 4, FLOORS[floor], **options)
+    single = World(robot, FLOORS[floor], rng=_streams(1), **options)
+    batch = World([robot] * 4, FLOORS[floor], rng=_streams(4), **options)
     assert single._io.compiled and batch._io.compiled
+    assert single._floor_only == (floor != "smooth")
     monkeypatch.setattr(SpaceExchange, "_link", lambda self: False)
-    fallback = World(robot, FLOORS[floor], **options)
+    fallback = World(robot, FLOORS[floor], rng=_streams(1), **options)
     assert not fallback._io.compiled
     expected = _drive(fallback, _commands(1))[0]
     np.testing.assert_array_equal(_drive(single, _commands(1))[0], expected)

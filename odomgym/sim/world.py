@@ -46,9 +46,12 @@ import numpy as np
 import pymunk
 from numpy.typing import NDArray
 
+from odomgym._jit import kernel
 from odomgym._kernels import (
+    STATE_COLUMNS,
     STEP_BAD_READ_BACK,
     STEP_NOT_FINITE,
+    STEP_OK,
     check_step_status,
     drive_plain,
     drive_wheels,
@@ -191,14 +194,11 @@ class World:
         for hook in self._hooks:
             hook.configure(self)
         self._rough = bool(np.any(self.wheel_roughness > 0.0))
-        self._modifies_ground = self._has_bumps or self._has_patches or self._rough
         self._transmission = [h for h in self._hooks if h.has_transmission]
         self._shape = [h for h in self._hooks if h.has_shape]
         self._perturb = [h for h in self._hooks if h.has_perturb]
         self._tracked = [h for h in self._hooks if h.has_tracked]
-        self._plain = not (
-            self._transmission or self._shape or self._perturb or self._modifies_ground
-        )
+        self._classify()
         # The per-robot state in one array (one argument of a compiled call; pose, velocity,
         # wheel rates and angles are views of it) and the arrays of other shapes, all updated
         # in place from here on.
@@ -218,6 +218,16 @@ class World:
         self.reset()
 
     # ------------------------------------------------------------------ construction
+    def _classify(self) -> None:
+        """Which substep path the floor and the hooks allow: ``_plain`` (nothing acts between
+        the wheels and Chipmunk: :func:`odomgym._kernels.step_plain`), ``_floor_only`` (the
+        floor's roughness and cables act, no hook and no friction patch: :func:`step_floor`),
+        else the staged path, stage by stage from Python."""
+        self._modifies_ground = self._has_bumps or self._has_patches or self._rough
+        hooked = bool(self._transmission or self._shape or self._perturb)
+        self._plain = not (hooked or self._modifies_ground)
+        self._floor_only = not (self._plain or hooked or self._has_patches)
+
     def _effect_hooks(self) -> list[WorldHook]:
         """One hook per registered effect that some robot of the batch carries."""
         hooks: list[WorldHook] = []
@@ -450,6 +460,42 @@ class World:
                 )
                 if self.track_slip:
                     self._accumulate_slip(h)
+        elif self._floor_only and io.compiled and not self.track_slip:
+            # Rough floors and cables without hooks (every benchmark floor, the
+            # self-calibration env's): whole substeps in compiled calls, each as long as the
+            # roughness draws fetched so far last, the stages' arithmetic in their order.
+            left = self.substeps
+            while left:
+                if self._rough:
+                    self._refill_noise()
+                count = min(left, _NOISE_BLOCK - self._noise_next) if self._rough else left
+                check_step_status(
+                    step_floor(
+                        command,
+                        scale,
+                        self._state,
+                        self.counts,
+                        self._ground_v,
+                        io.addresses,
+                        io.heads,
+                        io.buffer,
+                        io.bodies,
+                        h,
+                        count,
+                        self._lateral,
+                        self.wheel_roughness,
+                        self._noise_block,
+                        self._noise_next,
+                        self._rough,
+                        self._contact,
+                        self._bump_grid,
+                        self._has_bumps,
+                        self.true_radius,
+                    )
+                )
+                if self._rough:
+                    self._noise_next += count
+                left -= count
         else:
             for _ in range(self.substeps):
                 # The wheels (and, on a plain floor, the mid-step turn), then every stage.
@@ -627,13 +673,17 @@ class World:
         Drawn in blocks of ``_NOISE_BLOCK`` steps per robot, so the per-step cost does not grow
         with one Python call per robot.
         """
+        self._refill_noise()
+        draws = self._noise_block[:, self._noise_next, :]
+        self._noise_next += 1
+        return draws
+
+    def _refill_noise(self) -> None:
+        """Fetch the next block of roughness draws if every draw of this one was used."""
         if self._noise_next == _NOISE_BLOCK:
             for i, stream in enumerate(self._noise_streams):
                 self._noise_block[i] = stream.standard_normal((_NOISE_BLOCK, 2))
             self._noise_next = 0
-        draws = self._noise_block[:, self._noise_next, :]
-        self._noise_next += 1
-        return draws
 
     def _set_friction(self, mu: FloatArray) -> None:
         changed = np.argwhere(mu != self._friction)
@@ -654,10 +704,7 @@ class World:
         max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
         self._bump_grid = CableGrid.build(floor, float(self.true_radius.max()), 1.5 * max_step)
         self._has_patches = bool(floor.patches)
-        self._modifies_ground = self._has_bumps or self._has_patches or self._rough
-        self._plain = not (
-            self._transmission or self._shape or self._perturb or self._modifies_ground
-        )
+        self._classify()
         self._set_friction(np.full((self.n, 2), floor.friction))
 
     def link_forces(self) -> FloatArray:
@@ -669,3 +716,59 @@ class World:
         """Force each hitch passed in the last step [N] (the towing force)."""
         h = self.dt / self.substeps
         return np.array([abs(hitch.impulse) / h for hitch in self._hitches])
+
+
+# The packed state's columns (first, stop), as constants the compiled step slices by.
+_PARAMS, _POSE, _VELOCITY, _RATE, _ANGLE, _RIM, _MOTOR = STATE_COLUMNS.values()
+
+
+@kernel
+def step_floor(
+    command: FloatArray,
+    scale: FloatArray,
+    state: FloatArray,
+    counts: IntArray,
+    ground_v: FloatArray,
+    addresses: NDArray[np.uint64],
+    heads: NDArray[np.int32],
+    buffer: FloatArray,
+    bodies: NDArray[np.uint64],
+    h: float,
+    substeps: int,
+    lateral: FloatArray,
+    roughness: FloatArray,
+    noise: FloatArray,
+    first_draw: int,
+    rough: bool,
+    contact: FloatArray,
+    grid: CableGrid,
+    bumps: bool,
+    true_radius: FloatArray,
+) -> int:
+    """``substeps`` whole substeps of a World whose floor alone acts between the wheels and
+    Chipmunk (roughness, cables; no hook, no friction patch): the staged path's calls in its
+    order — wheels (:func:`~odomgym._kernels.drive_wheels`), floor
+    (:func:`~odomgym._kernels.floor_kernel` with substep s's draws ``noise[:, first_draw + s]``
+    when ``rough``), cables (:func:`~odomgym.sim.cables.apply_cable_deficits` when ``bumps``),
+    mid-step turn, Chipmunk — so the same arithmetic, without a Python round trip per stage.
+    Returns ``STEP_OK``, ``STEP_NOT_FINITE`` or ``STEP_BAD_READ_BACK``."""
+    params = state[:, _PARAMS[0] : _PARAMS[1]]
+    pose = state[:, _POSE[0] : _POSE[1]]
+    velocity = state[:, _VELOCITY[0] : _VELOCITY[1]]
+    rate = state[:, _RATE[0] : _RATE[1]]
+    angle = state[:, _ANGLE[0] : _ANGLE[1]]
+    rim_speed = state[:, _RIM[0] : _RIM[1]]
+    motor_step = state[:, _MOTOR[0] : _MOTOR[1]]
+    for s in range(substeps):
+        if not drive_wheels(
+            command, scale, params, pose, h, rate, angle, counts, rim_speed, ground_v, motor_step
+        ):
+            return STEP_NOT_FINITE
+        draws = noise[:, first_draw + s, :] if rough else noise[:, 0, :]
+        floor_kernel(pose, lateral, rim_speed, draws, roughness, h, contact, ground_v)
+        if bumps:
+            apply_cable_deficits(contact, pose, rim_speed, h, true_radius, grid, ground_v)
+        midstep_translation(ground_v, pose, params, h)
+        if not exchange(addresses, heads, buffer, bodies, ground_v, h, pose, velocity):
+            return STEP_BAD_READ_BACK
+    return STEP_OK
