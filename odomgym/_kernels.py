@@ -73,6 +73,7 @@ __all__ = [
     "rim_from_wheel_step",
     "route_update",
     "start_frame",
+    "state_parts",
     "state_views",
     "step_plain",
     "write_ground",
@@ -462,6 +463,24 @@ def exchange(
 
 
 @inlined_kernel
+def state_parts(
+    state: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The views of a packed state (:data:`STATE_COLUMNS`) a compiled substep works on:
+    params, pose, velocity, wheel rate, wheel angle, rim speed, motor step
+    (:func:`state_views` is the named Python version)."""
+    return (
+        state[:, :_POSE],
+        state[:, _POSE : _POSE + 3],
+        state[:, _VELOCITY : _VELOCITY + 3],
+        state[:, _RATE : _RATE + 2],
+        state[:, _ANGLE : _ANGLE + 2],
+        state[:, _RIM : _RIM + 2],
+        state[:, _MOTOR : _MOTOR + 2],
+    )
+
+
+@inlined_kernel
 def step_plain(
     command: FloatArray,
     scale: FloatArray,
@@ -479,13 +498,7 @@ def step_plain(
     contact velocities and their mid-step turn (:func:`drive_plain`), then Chipmunk
     (:func:`exchange`), on the World's packed ``state`` (:data:`STATE_COLUMNS`). Returns
     ``STEP_OK``, ``STEP_NOT_FINITE`` or ``STEP_BAD_READ_BACK``."""
-    params = state[:, :_POSE]
-    pose = state[:, _POSE : _POSE + 3]
-    velocity = state[:, _VELOCITY : _VELOCITY + 3]
-    rate = state[:, _RATE : _RATE + 2]
-    angle = state[:, _ANGLE : _ANGLE + 2]
-    rim_speed = state[:, _RIM : _RIM + 2]
-    motor_step = state[:, _MOTOR : _MOTOR + 2]
+    params, pose, velocity, rate, angle, rim_speed, motor_step = state_parts(state)
     for _ in range(substeps):
         if not drive_plain(
             command, scale, params, pose, h, rate, angle, counts, rim_speed, ground_v, motor_step

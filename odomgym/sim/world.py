@@ -48,7 +48,6 @@ from numpy.typing import NDArray
 
 from odomgym._jit import kernel
 from odomgym._kernels import (
-    STATE_COLUMNS,
     STEP_BAD_READ_BACK,
     STEP_NOT_FINITE,
     STEP_OK,
@@ -60,6 +59,7 @@ from odomgym._kernels import (
     midstep_translation,
     new_state,
     rim_from_wheel_step,
+    state_parts,
     state_views,
     step_plain,
 )
@@ -437,27 +437,26 @@ class World:
             scale = self._unit_scale
         h = self._h
         io = self._io
+        # What both compiled substep paths take first.
+        arrays = (
+            command,
+            scale,
+            self._state,
+            self.counts,
+            self._ground_v,
+            io.addresses,
+            io.heads,
+            io.buffer,
+            io.bodies,
+            h,
+        )
         if self._plain and io.compiled:
             # No effect hooks, a plain floor: whole substeps (wheels, contact velocities, their
             # mid-step turn, Chipmunk's step and the read-back) in one compiled call, one per
             # substep only when the slip (numpy, see _accumulate_slip) is tracked in between.
             per_call = 1 if self.track_slip else self.substeps
             for _ in range(self.substeps // per_call):
-                check_step_status(
-                    step_plain(
-                        command,
-                        scale,
-                        self._state,
-                        self.counts,
-                        self._ground_v,
-                        io.addresses,
-                        io.heads,
-                        io.buffer,
-                        io.bodies,
-                        h,
-                        per_call,
-                    )
-                )
+                check_step_status(step_plain(*arrays, per_call))
                 if self.track_slip:
                     self._accumulate_slip(h)
         elif self._floor_only and io.compiled and not self.track_slip:
@@ -471,16 +470,7 @@ class World:
                 count = min(left, _NOISE_BLOCK - self._noise_next) if self._rough else left
                 check_step_status(
                     step_floor(
-                        command,
-                        scale,
-                        self._state,
-                        self.counts,
-                        self._ground_v,
-                        io.addresses,
-                        io.heads,
-                        io.buffer,
-                        io.bodies,
-                        h,
+                        *arrays,
                         count,
                         self._lateral,
                         self.wheel_roughness,
@@ -718,10 +708,6 @@ class World:
         return np.array([abs(hitch.impulse) / h for hitch in self._hitches])
 
 
-# The packed state's columns (first, stop), as constants the compiled step slices by.
-_PARAMS, _POSE, _VELOCITY, _RATE, _ANGLE, _RIM, _MOTOR = STATE_COLUMNS.values()
-
-
 @kernel
 def step_floor(
     command: FloatArray,
@@ -752,13 +738,7 @@ def step_floor(
     when ``rough``), cables (:func:`~odomgym.sim.cables.apply_cable_deficits` when ``bumps``),
     mid-step turn, Chipmunk — so the same arithmetic, without a Python round trip per stage.
     Returns ``STEP_OK``, ``STEP_NOT_FINITE`` or ``STEP_BAD_READ_BACK``."""
-    params = state[:, _PARAMS[0] : _PARAMS[1]]
-    pose = state[:, _POSE[0] : _POSE[1]]
-    velocity = state[:, _VELOCITY[0] : _VELOCITY[1]]
-    rate = state[:, _RATE[0] : _RATE[1]]
-    angle = state[:, _ANGLE[0] : _ANGLE[1]]
-    rim_speed = state[:, _RIM[0] : _RIM[1]]
-    motor_step = state[:, _MOTOR[0] : _MOTOR[1]]
+    params, pose, velocity, rate, angle, rim_speed, motor_step = state_parts(state)
     for s in range(substeps):
         if not drive_wheels(
             command, scale, params, pose, h, rate, angle, counts, rim_speed, ground_v, motor_step
