@@ -7,12 +7,12 @@
 #
 # pytest runs the WHOLE suite, tests marked slow included, on parallel workers (pytest-xdist,
 # part of the test extra): -n auto starts one worker per CPU, 2 on the 2-core CI machine, and
-# --dist worksteal lets a worker that runs dry take tests queued for the other (the six-minute
-# June diagnosis starts first: tests/conftest.py orders the longest tests ahead). On the idle
-# 2-core machine the suite took 16 min 41 s on two workers before that ordering (30 min of
-# CPU; the June diagnosis alone 6 min), and 18 min 11 s after it (no gain: the total work
-# bounds it, not the order). PYTEST_WORKERS overrides the count (0: serially, in
-# this process, e.g. to read a failure without xdist in the way).
+# --dist worksteal lets a worker that runs dry take tests queued for the other (the June
+# diagnosis, 2-3 minutes, starts first: tests/conftest.py orders the longest tests ahead). The
+# total work bounds the suite, not the order: 9 min 15 s on two workers from a fresh clone on
+# the idle 2-core machine (2026-11-27; 19 min of CPU), 16 min 41 s a month of speed-ups
+# before. PYTEST_WORKERS overrides the count (0: serially, in this process, e.g. to read a
+# failure without xdist in the way).
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
