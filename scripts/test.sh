@@ -10,8 +10,8 @@
 # --dist worksteal lets a worker that runs dry take tests queued for the other (the June
 # diagnosis, 2-3 minutes, starts first: tests/conftest.py orders the longest tests ahead). The
 # total work bounds the suite, not the order: 9 min 15 s on two workers from a fresh clone on
-# the idle 2-core machine (2026-11-27; 19 min of CPU), 16 min 41 s a month of speed-ups
-# before. PYTEST_WORKERS overrides the count (0: serially, in this process, e.g. to read a
+# the idle 2-core machine (2026-11-27; 19 min of CPU), against 16 min 41 s when that order
+# was introduced. PYTEST_WORKERS overrides the count (0: serially, in this process, e.g. to read a
 # failure without xdist in the way).
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
