@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from odomgym.vehicle.paths import (
     Leg,
     VehiclePath,
+    interp_float,
     offset_at,
     point_at,
     reference_at,
@@ -84,8 +85,8 @@ class VehicleDriver:
         self._s = np.zeros(n)
         self._v = np.zeros(n)
         self._s_b = np.full(n, np.nan)  # truck B's reference arc length at the last step
-        self._arcs = [leg.arc_length for leg in path.legs]
-        self._limits = [self._speed_limit(leg) for leg in path.legs]
+        self._arcs = [leg.polyline.arc for leg in path.legs]
+        self._limits = [self._speed_limit(leg).tolist() for leg in path.legs]
 
     def _speed_limit(self, leg: Leg) -> FloatArray:
         """Largest reference speed at each point of ``leg`` [m/s]: the cruise speed, slowed for
@@ -156,9 +157,9 @@ class VehicleDriver:
             if k >= len(self._path.legs) or k > self._leg.min():
                 continue  # finished, or waiting for the others at the end of its leg
             leg, arc = self._path.legs[k], self._arcs[k]
-            total = float(arc[-1])
+            total = arc[-1]
             # Reference speed: accelerate to the cruise speed, slow for curves and the stop.
-            v_max = float(np.interp(self._s[i], arc, self._limits[k]))
+            v_max = interp_float(float(self._s[i]), arc, self._limits[k])
             if self._s[i] < total:
                 v_max = max(v_max, 0.02)  # never stall short of the end
             wanted = v_max if speed is None else min(v_max, float(speed[i]) * self.cruise_speed)
@@ -176,12 +177,12 @@ class VehicleDriver:
             # the direction the trucks face, i.e. ahead in the direction of travel when reversing.
             line = leg.polyline
             ref_a = point_at(line, float(self._s[i]))
-            s_b = offset_at(line, float(self._s[i]), l0, -leg.direction)
+            s_b = offset_at(line, float(self._s[i]), l0, -leg.direction, ref_a[:2])
             ref_b = reference_at(line, s_b)
             # B's reference moves at its own rate (slower than A's where A turns away from it);
             # a link longer than l0 makes the trailing truck speed up, the leading one slow down.
             previous = self._s_b[i]
-            v_b_ref = v if np.isnan(previous) else (s_b - previous) / dt
+            v_b_ref = v if math.isnan(previous) else (s_b - previous) / dt
             self._s_b[i] = s_b
             v_b = v_b_ref + leg.direction * self.k_link * (float(link_length[i]) - l0)
             refs = ((0, ref_a, v), (1, ref_b, v_b))
@@ -226,7 +227,9 @@ class VehicleDriver:
         v_ref: float,
         direction: float,
         half_track: float,
-    ) -> FloatArray:
+    ) -> tuple[float, float]:
+        """Kanayama et al. 1990's tracking law: the (left, right) wheel speeds [m/s] that bring
+        a truck at ``pose`` onto the moving reference ``ref`` (x, y, heading, curvature)."""
         x_r, y_r, heading_r, curvature = ref
         theta = pose[2] + (math.pi if direction < 0 else 0.0)
         c, s = math.cos(theta), math.sin(theta)
@@ -238,4 +241,4 @@ class VehicleDriver:
         omega = v_ref * curvature + v_ref * (self.k_y * e_y + self.k_theta * math.sin(e_theta))
         if direction < 0:
             v = -v
-        return np.array([v - omega * half_track, v + omega * half_track])
+        return v - omega * half_track, v + omega * half_track

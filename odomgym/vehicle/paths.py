@@ -30,6 +30,7 @@ __all__ = [
     "VehiclePath",
     "circle_path",
     "extended_at",
+    "interp_float",
     "offset_at",
     "point_at",
     "rectangle_path",
@@ -200,23 +201,59 @@ def reference_at(line: Polyline, s: float) -> tuple[float, float, float, float]:
 
 def point_at(line: Polyline, s: float) -> tuple[float, float, float, float]:
     """Position, tangent heading and curvature of the polyline at arc length ``s``."""
-    arc = line.arc
-    last = len(arc) - 2
-    k = min(max(bisect.bisect_right(arc, s) - 1, 0), last)
-    t = (s - arc[k]) / max(arc[k + 1] - arc[k], 1e-12)
+    k, t = _locate(line, s)
     x = line.x[k] + t * (line.x[k + 1] - line.x[k])
     y = line.y[k] + t * (line.y[k + 1] - line.y[k])
     heading = line.heading[k]
+    last = len(line.arc) - 2
     j = min(k + 1, last)
     if j > k:
-        step = max(arc[j + 1] - arc[k], 1e-9) / 2.0
+        step = max(line.arc[j + 1] - line.arc[k], 1e-9) / 2.0
         curvature = wrap_float(line.heading[j] - heading) / step
     else:
         curvature = 0.0
     return x, y, heading, curvature
 
 
-def offset_at(line: Polyline, s: float, distance: float, side: float) -> float:
+def _locate(line: Polyline, s: float) -> tuple[int, float]:
+    """The segment ``k`` holding arc length ``s`` (the first or last one beyond the ends) and
+    the fraction ``t`` of it at ``s``."""
+    arc = line.arc
+    k = min(max(bisect.bisect_right(arc, s) - 1, 0), len(arc) - 2)
+    return k, (s - arc[k]) / max(arc[k + 1] - arc[k], 1e-12)
+
+
+def interp_float(x: float, xp: list[float], fp: list[float]) -> float:
+    """``float(np.interp(x, xp, fp))`` for one float on increasing ``xp`` (at least two
+    points), in numpy's arithmetic (``numpy/_core/src/multiarray/compiled_base.c``,
+    ``arr_interp``): the end values outside ``xp``, ``fp[j]`` at a knot, else
+    slope·(x − xp[j]) + fp[j] (from the right knot if that is NaN). Why: the controller asks
+    it every control step, where numpy's call on a scalar cost ~5 µs."""
+    if x != x:  # NaN
+        return math.nan
+    if x < xp[0]:
+        return fp[0]
+    if x >= xp[-1]:
+        return fp[-1]
+    j = bisect.bisect_right(xp, x) - 1
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    value = slope * (x - xp[j]) + fp[j]
+    if value != value:
+        value = slope * (x - xp[j + 1]) + fp[j + 1]
+        if value != value and fp[j] == fp[j + 1]:
+            value = fp[j]
+    return value
+
+
+def offset_at(
+    line: Polyline,
+    s: float,
+    distance: float,
+    side: float,
+    start: tuple[float, float] | None = None,
+) -> float:
     """Arc length of the path point at straight-line ``distance`` [m] from the point at ``s``:
     behind it (``side`` −1) or ahead of it (+1) along the polyline, on the straight extension
     of its first or last segment beyond the ends.
@@ -224,15 +261,17 @@ def offset_at(line: Polyline, s: float, distance: float, side: float) -> float:
     Found by marching along the path by the chord's shortfall: a chord is never longer than
     its arc, so each step lands short of (or on) the point and the shortfall shrinks — one step
     on a straight, a few in a turn — to 1e-10 m; bisection takes over should a path fold back
-    on itself so that the march stalls."""
-    ax, ay = extended_at(line, s)
+    on itself so that the march stalls. ``start``: :func:`extended_at` at ``s``, if the caller
+    has it (the controller has just looked up the point at ``s``)."""
+    ax, ay = extended_at(line, s) if start is None else start
     t = s
+    x, y = ax, ay
     for _ in range(64):
-        x, y = extended_at(line, t)
         gap = distance - math.hypot(ax - x, ay - y)
         if gap <= 1e-10:
             return t
         t += side * gap
+        x, y = extended_at(line, t)
     near, far = s, s + side * 3.0 * distance
     for _ in range(64):  # the chord grows monotonically from ``near`` to ``far``
         mid = 0.5 * (near + far)
@@ -257,5 +296,5 @@ def extended_at(line: Polyline, s: float) -> tuple[float, float]:
         return line.x[-1] + scale * (line.x[-1] - line.x[-2]), line.y[-1] + scale * (
             line.y[-1] - line.y[-2]
         )
-    x, y, _, _ = point_at(line, s)
-    return x, y
+    k, t = _locate(line, s)  # :func:`point_at`'s position, without its heading and curvature
+    return line.x[k] + t * (line.x[k + 1] - line.x[k]), line.y[k] + t * (line.y[k + 1] - line.y[k])

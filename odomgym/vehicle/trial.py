@@ -22,7 +22,13 @@ from numpy.typing import NDArray
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration, Odometry, wrap_angle
 from odomgym.sim.world import World
-from odomgym.vehicle.cable_layout import CableLayer, cable_arrays, free_wheel_rim
+from odomgym.vehicle.cable_layout import (
+    CableLayer,
+    cable_arrays,
+    crossings,
+    free_wheel_rim,
+    wheel_sides,
+)
 from odomgym.vehicle.controller import VehicleDriver
 from odomgym.vehicle.estimator import DeadReckoning, InternalEstimator, link_angles, link_length
 from odomgym.vehicle.paths import VehiclePath
@@ -227,7 +233,7 @@ class VehicleTrial:
         if self._cable_geometry is not None:
             self._count_crossings(truth)
         self.corrections += self.estimator.correction
-        length = link_length(truth)
+        length = np.hypot(truth[:, 0, 0] - truth[:, 1, 0], truth[:, 0, 1] - truth[:, 1, 1])
         self.link_range[:, 0] = np.minimum(self.link_range[:, 0], length)
         self.link_range[:, 1] = np.maximum(self.link_range[:, 1], length)
         self.link_force = np.maximum(self.link_force, self.current_link_force())
@@ -279,24 +285,17 @@ class VehicleTrial:
         changed sides of a cable's axis while within the cable's length."""
         side, within = self._wheel_sides(truth)
         if self._cable_side is not None:
-            crossed = (side != self._cable_side) & (side != 0) & within
-            per_wheel = crossed.sum(axis=1)
-            self.cable_crossings[0, 0] += int(per_wheel[:2].sum())
-            self.cable_crossings[0, 1] += int(per_wheel[2:].sum())
+            truck_a, truck_b = crossings(side, self._cable_side, within)
+            self.cable_crossings[0, 0] += truck_a
+            self.cable_crossings[0, 1] += truck_b
         self._cable_side = side
 
     def _wheel_sides(self, truth: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
         """For each wheel (A left, A right, B left, B right) and laid cable: the side of the
         cable's axis its contact point is on (±1) and whether it lies within the cable's
-        length."""
+        length (:func:`~odomgym.vehicle.cable_layout.wheel_sides`)."""
         assert self._cable_geometry is not None
-        cx, cy, ax, ay, half = self._cable_geometry
-        points = wheel_contacts(truth[0], self.world.half_track[:2]).reshape(4, 2)
-        px = points[:, 0:1] - cx[None, :]
-        py = points[:, 1:2] - cy[None, :]
-        side = np.sign(px * -ay[None, :] + py * ax[None, :])
-        within = np.abs(px * ax[None, :] + py * ay[None, :]) <= half[None, :]
-        return side, within
+        return wheel_sides(truth[0], self.world.half_track[:2], *self._cable_geometry)
 
     def errors(self) -> tuple[FloatArray, FloatArray]:
         """(vehicle error (N, 3), truck errors (N, 2, 3)): true minus estimated, headings
