@@ -82,6 +82,7 @@ class VehicleDriver:
     def plan(self, path: VehiclePath, n: int) -> None:
         self._path = path
         self._leg = np.zeros(n, dtype=np.int64)
+        self._first_leg = 0  # self._leg.min(), kept as it changes (asked every control step)
         self._s = np.zeros(n)
         self._v = np.zeros(n)
         self._s_b = np.full(n, np.nan)  # truck B's reference arc length at the last step
@@ -128,7 +129,7 @@ class VehicleDriver:
     def leg(self) -> int:
         """The leg every vehicle is on or has finished (vehicles wait at the end of a leg
         until all have arrived, so that the floor can change between legs)."""
-        return int(self._leg.min())
+        return self._first_leg
 
     def act(
         self,
@@ -154,21 +155,24 @@ class VehicleDriver:
         out = np.zeros((n, 2, 2))
         for i in range(n):
             k = int(self._leg[i])
-            if k >= len(self._path.legs) or k > self._leg.min():
+            if k >= len(self._path.legs) or k > self._first_leg:
                 continue  # finished, or waiting for the others at the end of its leg
             leg, arc = self._path.legs[k], self._arcs[k]
             total = arc[-1]
             # Reference speed: accelerate to the cruise speed, slow for curves and the stop.
-            v_max = interp_float(float(self._s[i]), arc, self._limits[k])
-            if self._s[i] < total:
+            s, v_last = float(self._s[i]), float(self._v[i])  # Python floats: cheaper here
+            v_max = interp_float(s, arc, self._limits[k])
+            if s < total:
                 v_max = max(v_max, 0.02)  # never stall short of the end
             wanted = v_max if speed is None else min(v_max, float(speed[i]) * self.cruise_speed)
-            v = min(max(wanted, self._v[i] - self.accel * dt), self._v[i] + self.accel * dt)
+            v = min(max(wanted, v_last - self.accel * dt), v_last + self.accel * dt)
             v = max(0.0, min(v, v_max))
             self._v[i] = v
-            self._s[i] = min(total, self._s[i] + v * dt)
-            if self._s[i] >= total and v < 1e-3:
+            s = min(total, s + v * dt)
+            self._s[i] = s
+            if s >= total and v < 1e-3:
                 self._leg[i] = k + 1
+                self._first_leg = int(self._leg.min())
                 self._s[i] = 0.0
                 self._v[i] = 0.0
                 self._s_b[i] = np.nan
@@ -176,12 +180,12 @@ class VehicleDriver:
             # Truck A leads forwards and trails backwards: B's reference is l0 behind A's in
             # the direction the trucks face, i.e. ahead in the direction of travel when reversing.
             line = leg.polyline
-            ref_a = point_at(line, float(self._s[i]))
-            s_b = offset_at(line, float(self._s[i]), l0, -leg.direction, ref_a[:2])
+            ref_a = point_at(line, s)
+            s_b = offset_at(line, s, l0, -leg.direction, ref_a[:2])
             ref_b = reference_at(line, s_b)
             # B's reference moves at its own rate (slower than A's where A turns away from it);
             # a link longer than l0 makes the trailing truck speed up, the leading one slow down.
-            previous = self._s_b[i]
+            previous = float(self._s_b[i])
             v_b_ref = v if math.isnan(previous) else (s_b - previous) / dt
             self._s_b[i] = s_b
             v_b = v_b_ref + leg.direction * self.k_link * (float(link_length[i]) - l0)
@@ -231,9 +235,10 @@ class VehicleDriver:
         """Kanayama et al. 1990's tracking law: the (left, right) wheel speeds [m/s] that bring
         a truck at ``pose`` onto the moving reference ``ref`` (x, y, heading, curvature)."""
         x_r, y_r, heading_r, curvature = ref
-        theta = pose[2] + (math.pi if direction < 0 else 0.0)
+        x, y, heading = pose.tolist()
+        theta = heading + (math.pi if direction < 0 else 0.0)
         c, s = math.cos(theta), math.sin(theta)
-        dx, dy = x_r - pose[0], y_r - pose[1]
+        dx, dy = x_r - x, y_r - y
         e_x = c * dx + s * dy
         e_y = -s * dx + c * dy
         e_theta = wrap_float(heading_r - theta)

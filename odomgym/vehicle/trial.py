@@ -227,7 +227,8 @@ class VehicleTrial:
             shown[:, :, 2] = truth[:, :, 2] + f * wrap_angle(
                 self._previous_truth[:, :, 2] - truth[:, :, 2]
             )
-        self._previous_truth = truth.copy()
+        if self.spec.read_skew > 0.0:  # the only reader of the previous truth
+            self._previous_truth = truth.copy()
         self.reading = link_readings(self.spec, shown, self._reading_rng)
         self.estimated = self.estimator.update(travel, self.reading)
         if self._cable_geometry is not None:
