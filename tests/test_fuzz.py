@@ -1214,6 +1214,7 @@ def test_regression_a_selfcal_action_error_is_one_line() -> None:
         (["train", "selfcal", "--envs", "99999999999999999999"], "at most 1024"),
         (["diagnose", "x", "--jobs", "99999999999999999999"], "at most 1024"),
         (["train", "selfcal", "--seed", "-1"], "must be >= 0"),
+        (["train", "selfcal", "--eval-sessions", "0"], "must be >= 1"),
         (["train", "selfcal", "--seed", "4294967296"], "at most 2**32 - 1"),
     ],
 )

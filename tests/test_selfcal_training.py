@@ -130,6 +130,8 @@ def test_train_command_writes_the_policy_and_its_record(tmp_path, capsys) -> Non
             "4",
             "--workers",
             "1",
+            "--eval-sessions",
+            "2",
             "--out",
             str(out),
             "--json",
@@ -138,10 +140,12 @@ def test_train_command_writes_the_policy_and_its_record(tmp_path, capsys) -> Non
     assert code == 0, capsys.readouterr().err
     summary = json.loads(capsys.readouterr().out)
     assert summary["steps"] == 64
+    assert summary["evaluation"]["failures"] == 0 and summary["evaluation"]["runs_mean"] > 0
     for name in ("policy.npz", "model.zip", "policy.json", "progress.csv", "learning_curve.png"):
         assert (out / name).stat().st_size > 0
     meta = json.loads((out / "policy.json").read_text())
     assert meta["command"].startswith("odomgym train selfcal --algo ppo --steps 64 --envs 4")
+    assert meta["command"].endswith("--eval-sessions 2")  # the evaluation as it was run
     assert load_policy(str(out / "policy.npz")).meta["steps"] == 64
     code = main(
         ["calibrate", "selfcal", "--policy", str(out / "policy.npz"), "--runs", "1", "--json"]

@@ -68,6 +68,13 @@ def register(commands: Commands) -> None:
         help="go on from the checkpoint an interrupted training left in --out (same --algo, "
         "--envs, --seed and --hyperparams) to --steps in all",
     )
+    parser.add_argument(
+        "--eval-sessions",
+        type=processes,
+        metavar="N",
+        help="held-out sessions the trained policy is evaluated on, stepped together in one "
+        "batch (default 32; the evaluation only reports, it never changes the policy)",
+    )
     parser.add_argument("--json", action="store_true", help="one JSON object instead of text")
     parser.set_defaults(handler=run)
 
@@ -94,10 +101,14 @@ def run(args: argparse.Namespace) -> int:
     params = load_hyperparams(args.algo, args.hyperparams)  # one-line errors before any work
     steps = args.steps or int(params.get("n_timesteps", 100_000))
     envs = args.envs or int(params.get("n_envs", 8))
+    eval_seeds = EVAL_SEEDS
+    if args.eval_sessions is not None:  # the first N of the held-out seeds, more if need be
+        eval_seeds = tuple(range(EVAL_SEEDS[0], EVAL_SEEDS[0] + args.eval_sessions))
     command = (
         f"odomgym train selfcal --algo {args.algo} --steps {steps} --envs {envs} "
         f"--workers {args.workers} --seed {args.seed} --out {args.out}"
         + (f" --hyperparams {args.hyperparams}" if args.hyperparams else "")
+        + (f" --eval-sessions {args.eval_sessions}" if args.eval_sessions is not None else "")
     )
     result = train(
         algo=args.algo,
@@ -109,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
         hyperparams=args.hyperparams,
         progress=report.shows_progress,
         command=command,
+        eval_seeds=eval_seeds,
         checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY,
         resume=args.resume,
     )
@@ -127,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         ev = result.evaluation
         report.text(
             f"trained {args.algo} for {result.steps} steps in {result.wall_time_s / 60:.1f} min; "
-            f"on {len(EVAL_SEEDS)} held-out sessions: mean reward "
+            f"on {len(eval_seeds)} held-out sessions: mean reward "
             f"{ev['reward_mean']:.2f}, mean ln(E_max before/after) "
             f"{ev['log_improvement_mean']:.2f}, {ev['runs_mean']:.1f} runs"
         )
