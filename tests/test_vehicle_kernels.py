@@ -1,6 +1,7 @@
 """The compiled and scalar pieces of a CLAPPER control step against the numpy expressions they
 replaced, bit for bit: the encoder readings, the wheels' sides of laid cables and the crossing
-count, the controller's speed-limit interpolation and the path look-ups. Why bit for bit: a run
+count, the controller's speed-limit interpolation, and the follower's reference (``offset_at``)
+given the point the controller has just looked up. Why bit for bit: a run
 of the vehicle is chaotic enough (IPEC's corrections are rounded to encoder counts) that a last-
 bit difference in one step would change the run."""
 
@@ -17,11 +18,15 @@ from odomgym.odometry.calibration import wrap_angle
 from odomgym.robot import PRESETS
 from odomgym.vehicle.cable_layout import cable_arrays, crossings, wheel_sides
 from odomgym.vehicle.paths import (
+    Polyline,
+    VehiclePath,
     circle_path,
     extended_at,
     interp_float,
     offset_at,
+    point_at,
     rectangle_path,
+    straight_path,
 )
 from odomgym.vehicle.spec import VehicleSpec, link_readings
 
@@ -81,25 +86,35 @@ def test_encoder_readings_are_numpys_to_the_bit(changes: dict[str, object]) -> N
     assert reading.length.tobytes() == length.tobytes()
 
 
+def _numpy_sides(
+    poses: np.ndarray, half_track: np.ndarray, geometry: tuple[np.ndarray, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The wheels' sides and reach of each cable as numpy arrays compute them (the reference)."""
+    cx, cy, ax, ay, half = geometry
+    left = np.stack([-np.sin(poses[:, 2]), np.cos(poses[:, 2])], axis=1) * half_track[:, None]
+    points = np.stack([poses[:, :2] + left, poses[:, :2] - left], axis=1).reshape(4, 2)
+    px = points[:, 0:1] - cx[None, :]
+    py = points[:, 1:2] - cy[None, :]
+    side = np.sign(px * -ay[None, :] + py * ax[None, :])
+    return side, np.abs(px * ax[None, :] + py * ay[None, :]) <= half[None, :]
+
+
 def test_wheel_sides_and_crossings_are_numpys() -> None:
     rng = np.random.default_rng(2)
     cables = tuple(
         CableBump(x=x, y=y, angle=a, diameter=0.01, length=0.3)
         for x, y, a in rng.uniform((-1.0, -1.0, -math.pi), (1.0, 1.0, math.pi), (25, 3))
     )
-    cx, cy, ax, ay, half = geometry = cable_arrays(cables)
+    geometry = cable_arrays(cables)
     half_track = np.array([0.28, 0.31])
     before = None
     total = [0, 0]
     for _ in range(300):
         poses = np.column_stack([rng.uniform(-1.0, 1.0, (2, 2)), rng.uniform(-4.0, 4.0, 2)])
         side, within = wheel_sides(poses, half_track, *geometry)
-        left = np.stack([-np.sin(poses[:, 2]), np.cos(poses[:, 2])], axis=1) * half_track[:, None]
-        points = np.stack([poses[:, :2] + left, poses[:, :2] - left], axis=1).reshape(4, 2)
-        px = points[:, 0:1] - cx[None, :]
-        py = points[:, 1:2] - cy[None, :]
-        assert side.tobytes() == np.sign(px * -ay[None, :] + py * ax[None, :]).tobytes()
-        assert np.array_equal(within, np.abs(px * ax[None, :] + py * ay[None, :]) <= half[None, :])
+        want_side, want_within = _numpy_sides(poses, half_track, geometry)
+        assert side.tobytes() == want_side.tobytes()
+        assert np.array_equal(within, want_within)
         if before is not None:
             crossed = ((side != before) & (side != 0) & within).sum(axis=1)
             counted = crossings(side, before, within)
@@ -110,12 +125,27 @@ def test_wheel_sides_and_crossings_are_numpys() -> None:
     assert min(total) > 0  # the random poses do cross cables: the count is exercised
 
 
+def test_a_wheel_on_a_cable_axis_is_on_neither_side_as_numpy_says() -> None:
+    """Cables centred exactly on each wheel, their axes at 2 rad (cos < 0 < sin): the side's
+    sum is −0.0, whose sign numpy gives as +0.0 (numba's ``np.sign`` would keep −0.0)."""
+    poses = np.array([[0.3, -0.2, 0.4], [-0.7, 0.1, 0.5]])
+    half_track = np.array([0.28, 0.31])
+    left = np.stack([-np.sin(poses[:, 2]), np.cos(poses[:, 2])], axis=1) * half_track[:, None]
+    points = np.stack([poses[:, :2] + left, poses[:, :2] - left], axis=1).reshape(4, 2)
+    cables = tuple(CableBump(x=x, y=y, angle=2.0, diameter=0.01, length=0.3) for x, y in points)
+    geometry = cable_arrays(cables)
+    side, _ = wheel_sides(poses, half_track, *geometry)
+    want, _ = _numpy_sides(poses, half_track, geometry)
+    assert np.all(np.diag(want) == 0.0)
+    assert side.tobytes() == want.tobytes()
+
+
 def test_interp_float_is_numpys_interp() -> None:
     rng = np.random.default_rng(4)
     for trial in range(400):
-        xp = np.unique(rng.uniform(-5.0, 5.0, rng.integers(2, 30)))
-        if len(xp) < 2:
-            continue
+        xp = np.sort(rng.uniform(-5.0, 5.0, rng.integers(2, 30)))
+        if trial % 3 == 0:
+            xp = np.sort(np.round(xp))  # repeated knots
         fp = rng.uniform(-2.0, 2.0, len(xp))
         if trial % 4 == 0:
             fp = np.round(fp)  # flat stretches
@@ -125,11 +155,38 @@ def test_interp_float_is_numpys_interp() -> None:
             assert np.float64(interp_float(float(x), xp.tolist(), fp.tolist())).tobytes() == want
 
 
-@pytest.mark.parametrize("path", [rectangle_path(), circle_path(2.0)], ids=["rectangle", "circle"])
-def test_offset_at_given_its_start_is_the_same(path: object) -> None:
-    """The controller passes the point it has just looked up; the march is the same."""
-    line = path.legs[0].polyline  # type: ignore[attr-defined]
-    for s in np.linspace(0.0, line.arc[-1], 400).tolist():
+def _march(line: Polyline, s: float, distance: float, side: float) -> float:
+    """:func:`offset_at` as it was before it took ``start`` (the reference)."""
+    ax, ay = extended_at(line, s)
+    t = s
+    for _ in range(64):
+        x, y = extended_at(line, t)
+        gap = distance - math.hypot(ax - x, ay - y)
+        if gap <= 1e-10:
+            return t
+        t += side * gap
+    near, far = s, s + side * 3.0 * distance
+    for _ in range(64):
+        mid = 0.5 * (near + far)
+        x, y = extended_at(line, mid)
+        if math.hypot(ax - x, ay - y) < distance:
+            near = mid
+        else:
+            far = mid
+    return 0.5 * (near + far)
+
+
+@pytest.mark.parametrize(
+    "path",
+    [rectangle_path(), circle_path(2.0), straight_path(18.0)],
+    ids=["rectangle", "circle", "straight"],
+)
+def test_offset_at_is_the_march_it_was_given_the_controllers_start(path: VehiclePath) -> None:
+    """The controller passes the position :func:`point_at` has just given it; on the leg (its
+    arc lengths 0 … length) the result is the old march's, bit for bit."""
+    line = path.legs[-1].polyline
+    for s in [*np.linspace(0.0, line.arc[-1], 400).tolist(), line.arc[-1]]:
         for side in (-1.0, 1.0):
-            alone = offset_at(line, s, 1.0, side)
-            assert offset_at(line, s, 1.0, side, extended_at(line, s)) == alone
+            want = _march(line, s, 1.0, side)
+            assert offset_at(line, s, 1.0, side) == want
+            assert offset_at(line, s, 1.0, side, point_at(line, s)[:2]) == want

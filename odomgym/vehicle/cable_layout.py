@@ -201,7 +201,8 @@ def wheel_sides(
 
     Compiled because a CLAPPER run asks it every control step once cables lie on the floor,
     where numpy's dozen calls on (4, K) arrays were a sixth of the step; the same operations
-    as those calls, element by element (sine and cosine as libm's, like numpy's)."""
+    as those calls, element by element (sine and cosine as libm's, like numpy's; the sign
+    written out as numpy's: +0.0 on the axis, where numba's ``np.sign`` keeps −0.0)."""
     count = cx.shape[0]
     side = np.empty((4, count))
     within = np.empty((4, count), dtype=np.bool_)
@@ -218,7 +219,15 @@ def wheel_sides(
             for k in range(count):
                 px = wx - cx[k]
                 py = wy - cy[k]
-                side[row, k] = np.sign(px * -ay[k] + py * ax[k])
+                across = px * -ay[k] + py * ax[k]
+                if across > 0.0:
+                    side[row, k] = 1.0
+                elif across < 0.0:
+                    side[row, k] = -1.0
+                elif across == 0.0:
+                    side[row, k] = 0.0
+                else:  # NaN, as it came
+                    side[row, k] = across
                 within[row, k] = abs(px * ax[k] + py * ay[k]) <= half[k]
     return side, within
 

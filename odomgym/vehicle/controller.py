@@ -185,7 +185,7 @@ class VehicleDriver:
             ref_b = reference_at(line, s_b)
             # B's reference moves at its own rate (slower than A's where A turns away from it);
             # a link longer than l0 makes the trailing truck speed up, the leading one slow down.
-            previous = float(self._s_b[i])
+            previous = self._s_b[i]  # numpy's float: NaN, not an exception, should dt be 0
             v_b_ref = v if math.isnan(previous) else (s_b - previous) / dt
             self._s_b[i] = s_b
             v_b = v_b_ref + leg.direction * self.k_link * (float(link_length[i]) - l0)
@@ -235,10 +235,9 @@ class VehicleDriver:
         """Kanayama et al. 1990's tracking law: the (left, right) wheel speeds [m/s] that bring
         a truck at ``pose`` onto the moving reference ``ref`` (x, y, heading, curvature)."""
         x_r, y_r, heading_r, curvature = ref
-        x, y, heading = pose.tolist()
-        theta = heading + (math.pi if direction < 0 else 0.0)
+        theta = pose[2] + (math.pi if direction < 0 else 0.0)
         c, s = math.cos(theta), math.sin(theta)
-        dx, dy = x_r - x, y_r - y
+        dx, dy = x_r - pose[0], y_r - pose[1]
         e_x = c * dx + s * dy
         e_y = -s * dx + c * dy
         e_theta = wrap_float(heading_r - theta)

@@ -229,8 +229,8 @@ def interp_float(x: float, xp: list[float], fp: list[float]) -> float:
     ``arr_interp``): the end values outside ``xp``, ``fp[j]`` at a knot, else
     slope·(x − xp[j]) + fp[j] (from the right knot if that is NaN). Why: the controller asks
     it every control step, where numpy's call on a scalar cost ~5 µs."""
-    if x != x:  # NaN
-        return math.nan
+    if x != x:  # NaN: numpy gives it back as it came
+        return x
     if x < xp[0]:
         return fp[0]
     if x >= xp[-1]:
@@ -262,7 +262,8 @@ def offset_at(
     its arc, so each step lands short of (or on) the point and the shortfall shrinks — one step
     on a straight, a few in a turn — to 1e-10 m; bisection takes over should a path fold back
     on itself so that the march stalls. ``start``: :func:`extended_at` at ``s``, if the caller
-    has it (the controller has just looked up the point at ``s``)."""
+    has it (the controller has just looked up the point at ``s`` with :func:`point_at`, whose
+    position is the same for 0 ≤ s ≤ the leg's length, not beyond its ends)."""
     ax, ay = extended_at(line, s) if start is None else start
     t = s
     x, y = ax, ay

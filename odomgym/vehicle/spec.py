@@ -349,7 +349,7 @@ _NO_JITTER = np.zeros((0, 2))
 
 
 def _is_poses(poses: Any) -> bool:
-    """True for a float64 array of shape (N, 2, 3), N ≥ 1 (no copy or check needed)."""
+    """True for a float64 array of shape (N, 2, 3) (no copy or check needed)."""
     return (
         isinstance(poses, np.ndarray)
         and poses.dtype == np.float64

@@ -227,8 +227,7 @@ class VehicleTrial:
             shown[:, :, 2] = truth[:, :, 2] + f * wrap_angle(
                 self._previous_truth[:, :, 2] - truth[:, :, 2]
             )
-        if self.spec.read_skew > 0.0:  # the only reader of the previous truth
-            self._previous_truth = truth.copy()
+            self._previous_truth = truth.copy()  # read only here
         self.reading = link_readings(self.spec, shown, self._reading_rng)
         self.estimated = self.estimator.update(travel, self.reading)
         if self._cable_geometry is not None:
@@ -293,8 +292,8 @@ class VehicleTrial:
 
     def _wheel_sides(self, truth: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
         """For each wheel (A left, A right, B left, B right) and laid cable: the side of the
-        cable's axis its contact point is on (±1) and whether it lies within the cable's
-        length (:func:`~odomgym.vehicle.cable_layout.wheel_sides`)."""
+        cable's axis its contact point is on (±1, 0 on the axis) and whether it lies within the
+        cable's length (:func:`~odomgym.vehicle.cable_layout.wheel_sides`)."""
         assert self._cable_geometry is not None
         return wheel_sides(truth[0], self.world.half_track[:2], *self._cable_geometry)
 
