@@ -126,7 +126,7 @@ def link_angles(poses: ArrayLike) -> tuple[FloatArray, FloatArray]:
 def link_geometry(poses: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
     """:func:`link_angles` and the centre distance l (N,) [m] in one pass over poses
     (N, 2, 3): what a simulator's encoders read every sampling interval."""
-    p = check_poses(poses)
+    p = check_poses(poses, copy=False)
     dx = p[:, 0, 0] - p[:, 1, 0]
     dy = p[:, 0, 1] - p[:, 1, 1]
     theta_link = np.arctan2(dy, dx)
@@ -137,7 +137,7 @@ def link_geometry(poses: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]
 def link_length(poses: ArrayLike) -> FloatArray:
     """The centre distance l (N,) [m] of truck poses (N, 2, 3): what an ideal linear encoder
     reads."""
-    p = check_poses(poses)
+    p = check_poses(poses, copy=False)
     return np.asarray(np.hypot(p[:, 0, 0] - p[:, 1, 0], p[:, 0, 1] - p[:, 1, 1]))
 
 
@@ -188,9 +188,11 @@ def check_heading(heading: object) -> Heading:
     raise ValueError(f"heading must be one of {_HEADINGS}, got {heading!r}")
 
 
-def check_poses(poses: ArrayLike, n: int | None = None) -> FloatArray:
-    """``poses`` as a (N, 2, 3) float array (N = ``n`` if given), or :class:`ValueError`."""
-    p = np.array(poses, dtype=np.float64)
+def check_poses(poses: ArrayLike, n: int | None = None, *, copy: bool = True) -> FloatArray:
+    """``poses`` as a (N, 2, 3) float array (N = ``n`` if given), or :class:`ValueError`.
+    ``copy`` False: a float64 array comes back as it is, for a caller that only reads it (the
+    CLAPPER's every control step, where the copy was wasted)."""
+    p = np.array(poses, dtype=np.float64) if copy else np.asarray(poses, dtype=np.float64)
     if p.ndim != 3 or p.shape[1:] != (2, 3) or (n is not None and p.shape[0] != n):
         want = f"({n}, 2, 3)" if n is not None else "(N, 2, 3)"
         raise ValueError(f"poses must have shape {want} [vehicle][truck][x, y, θ], got {p.shape}")

@@ -317,7 +317,7 @@ def link_readings(
     bit), the rest from the compiled :func:`_read_link`: a CLAPPER run reads its encoders every
     control step, where numpy's fifteen calls on one vehicle's arrays were a seventh of it.
     """
-    p = poses if _is_poses(poses) else check_poses(poses)
+    p = check_poses(poses, copy=False)
     dx = p[:, 0, 0] - p[:, 1, 0]
     dy = p[:, 0, 1] - p[:, 1, 1]
     jittered = spec.rotary_jitter > 0.0
@@ -346,16 +346,6 @@ def link_readings(
 
 
 _NO_JITTER = np.zeros((0, 2))
-
-
-def _is_poses(poses: Any) -> bool:
-    """True for a float64 array of shape (N, 2, 3) (no copy or check needed)."""
-    return (
-        isinstance(poses, np.ndarray)
-        and poses.dtype == np.float64
-        and poses.ndim == 3
-        and poses.shape[1:] == (2, 3)
-    )
 
 
 @kernel

@@ -233,7 +233,7 @@ class VehicleTrial:
         if self._cable_geometry is not None:
             self._count_crossings(truth)
         self.corrections += self.estimator.correction
-        length = np.hypot(truth[:, 0, 0] - truth[:, 1, 0], truth[:, 0, 1] - truth[:, 1, 1])
+        length = link_length(truth)
         self.link_range[:, 0] = np.minimum(self.link_range[:, 0], length)
         self.link_range[:, 1] = np.maximum(self.link_range[:, 1], length)
         self.link_force = np.maximum(self.link_force, self.current_link_force())
