@@ -25,6 +25,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.diagnose.nuisances import correct_runs
 from odomgym.diagnose.openloop import ModelErrors
 from odomgym.diagnose.stats import bootstrap_ci
 from odomgym.odometry.runs import Run
@@ -93,6 +94,11 @@ class HeldOut:
         if BASELINE not in self.models:
             return None
         return self._combined(DIAGNOSED) <= self._combined(BASELINE)
+
+    def corrected(self, runs: Sequence[Run]) -> list[Run]:
+        """The held-out ``runs`` with the nuisances the diagnosed model got on their sessions
+        removed (what the filter's tests and the spread are scored on)."""
+        return correct_runs(runs, self.models[DIAGNOSED].nuisances)
 
     def as_dict(self) -> dict[str, Any]:
         """The report's ``held_out_open_loop`` entry."""

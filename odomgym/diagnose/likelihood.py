@@ -39,10 +39,12 @@ __all__ = [
     "FilterInputs",
     "ProcessNoise",
     "RunLikelihood",
+    "RunPredictive",
     "SensorNoise",
     "filter_inputs",
     "measurement_mask",
     "run_likelihood",
+    "run_predictive",
     "run_residual",
     "run_scores",
     "stacked_process_noise",
@@ -137,6 +139,56 @@ def run_likelihood(
         np.zeros((0, 2)),
     )
     return RunLikelihood(float(loglik), whitened, int(count))
+
+
+LEVEL_DRAWS = 2000
+"""Standard-normal draws (fixed, seeded) on which :func:`run_predictive` estimates the
+coverage level of a jump mixture's predictive region: its Monte Carlo error is at most
+√(0.25/2000) ≈ 0.011 per sample, and averages out over a run's samples."""
+
+_DRAWS = np.random.default_rng(20261128).standard_normal((LEVEL_DRAWS, 3))
+
+
+@dataclass(frozen=True)
+class RunPredictive:
+    """A run's open-loop errors scored by the model's predictive distribution.
+
+    Attributes:
+        loglik: log predictive density of the whole sequence of disagreements at the measured
+            samples [nats] — the prediction-error decomposition, i.e. the joint density of the
+            run's open-loop errors (Schweppe 1965), the jump mixture included.
+        levels: for each measured sample (in time order), the probability the one-step
+            predictive distribution gives its smallest covariance ellipsoid that holds the
+            observed error: the sample lies inside the model's q-region exactly when its
+            level is ≤ q.
+    """
+
+    loglik: float
+    levels: FloatArray
+
+
+def run_predictive(
+    run: Run, replay: Replay, spec: RobotSpec, sensor: SensorNoise, mask: NDArray[np.bool_]
+) -> RunPredictive:
+    """``run``'s disagreement with ``replay`` scored under ``spec``'s noise effects and
+    ``sensor``: the filter of :func:`run_likelihood` (the jump mixture exact to its three
+    jumps per interval), and where each measured error falls in its predictive distribution
+    (:class:`RunPredictive`)."""
+    levels = np.full(len(run.time), np.nan)
+    loglik, _, _ = _filter(
+        *_model_arrays(replay, spec, sensor),
+        run_residual(run, replay, mask),
+        mask,
+        False,
+        True,
+        np.zeros((0, 2)),
+        True,
+        levels,
+        _DRAWS,
+    )
+    measured: NDArray[np.bool_] = np.array(np.asarray(mask, dtype=bool).any(axis=1))
+    measured[0] = False
+    return RunPredictive(float(loglik), levels[measured])
 
 
 def run_scores(
@@ -580,6 +632,118 @@ def _entries(mat: FloatArray) -> _Entries:
     )  # fmt: skip
 
 
+_SQRT2 = math.sqrt(2.0)
+_SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
+
+
+@inlined_kernel
+def _chi2_cdf(q: float, dim: int) -> float:
+    """P(χ²_dim ≤ q) for dim = 1, 2, 3, in closed form (Abramowitz & Stegun 1964, 26.4.4–5:
+    erf for one degree of freedom, the exponential for two, erf less a Gaussian term for three):
+    the probability a Gaussian predictive distribution gives its ellipsoid through a point whose
+    squared Mahalanobis distance is ``q``."""
+    if not q > 0.0:
+        return 0.0
+    r = math.sqrt(q)
+    if dim == 1:
+        return math.erf(r / _SQRT2)
+    if dim == 2:
+        return 1.0 - math.exp(-0.5 * q)
+    return math.erf(r / _SQRT2) - _SQRT_2_OVER_PI * r * math.exp(-0.5 * q)
+
+
+@inlined_kernel
+def _small_cholesky(mat: FloatArray, dim: int, out: FloatArray) -> None:
+    """Lower Cholesky factor of the leading ``dim`` × ``dim`` block of ``mat`` into ``out``
+    (dim ≤ 3; a non-positive pivot is floored at 1e-300, as in :func:`_gauss_update`)."""
+    for a in range(dim):
+        for b in range(a + 1):
+            acc = mat[a, b]
+            for c in range(b):
+                acc -= out[a, c] * out[b, c]
+            if a == b:
+                out[a, a] = math.sqrt(max(acc, 1e-300))
+            else:
+                out[a, b] = acc / out[b, b]
+
+
+@inlined_kernel
+def _solve_lower(chol: FloatArray, dim: int, b: FloatArray, out: FloatArray) -> float:
+    """out = L⁻¹·b (forward substitution over ``dim`` rows); returns |out|²."""
+    total = 0.0
+    for a in range(dim):
+        acc = b[a]
+        for c in range(a):
+            acc -= chol[a, c] * out[c]
+        out[a] = acc / chol[a, a]
+        total += out[a] * out[a]
+    return total
+
+
+@inlined_kernel
+def _mixture_level(
+    prior: FloatArray,
+    v1: FloatArray,
+    h: FloatArray,
+    rdiag: FloatArray,
+    nu: FloatArray,
+    dim: int,
+    weights: FloatArray,
+    n_comp: int,
+    draws: FloatArray,
+    work: FloatArray,
+) -> float:
+    """The probability the jump mixture's predictive distribution gives the ellipsoid of its
+    moment-matched covariance through the innovation ``nu``: Σ_j w_j · P(x_jᵀ S̄⁻¹ x_j ≤
+    νᵀ S̄⁻¹ ν), x_j ~ N(0, S_j), S_j = H (P + j·V₁) Hᵀ + R, S̄ = Σ_j w_j S_j. Each component's
+    probability is the share of the fixed standard-normal ``draws`` (M, 3) mapped through its
+    Cholesky factor that fall inside (a Poisson scale mixture has no closed form); a Gaussian
+    predictive (no jump expected) takes :func:`_chi2_cdf` instead. ``work`` (6, 3, 3) is
+    scratch space."""
+    base = work[0]  # H·P·Hᵀ + R
+    step = work[1]  # H·V₁·Hᵀ
+    mean_cov = work[2]  # S̄
+    chol_mean = work[3]
+    chol_j = work[4]
+    vec = work[5]  # rows 0 and 1: two scratch vectors
+    for a in range(dim):
+        for b in range(dim):
+            acc_p = 0.0
+            acc_v = 0.0
+            for c in range(3):
+                for d in range(3):
+                    acc_p += h[a, c] * prior[c, d] * h[b, d]
+                    acc_v += h[a, c] * v1[c, d] * h[b, d]
+            base[a, b] = acc_p + (rdiag[a] if a == b else 0.0)
+            step[a, b] = acc_v
+    expected_jumps = 0.0
+    for j in range(n_comp):
+        expected_jumps += weights[j] * j
+    for a in range(dim):
+        for b in range(dim):
+            mean_cov[a, b] = base[a, b] + expected_jumps * step[a, b]
+    _small_cholesky(mean_cov, dim, chol_mean)
+    observed = _solve_lower(chol_mean, dim, nu, vec[0])
+    level = 0.0
+    count = draws.shape[0]
+    for j in range(n_comp):
+        for a in range(dim):
+            for b in range(dim):
+                mean_cov[a, b] = base[a, b] + j * step[a, b]
+        _small_cholesky(mean_cov, dim, chol_j)
+        inside = 0
+        for m in range(count):
+            for a in range(dim):
+                acc = 0.0
+                for c in range(a + 1):
+                    acc += chol_j[a, c] * draws[m, c]
+                vec[1, a] = acc
+            if _solve_lower(chol_mean, dim, vec[1], vec[0]) <= observed:
+                inside += 1
+        level += weights[j] * inside / count
+    return level
+
+
 @kernel
 def _filter(
     pose: FloatArray,
@@ -595,6 +759,8 @@ def _filter(
     update: bool,
     expected: FloatArray,
     scalar: bool = True,
+    levels: FloatArray | None = None,
+    draws: FloatArray | None = None,
 ) -> tuple[float, FloatArray, int]:
     """The filter of the module docstring over one run: log-likelihood (``update``), whitened
     innovations (3T,) and the count of measured values; with ``update`` False, the open-loop
@@ -606,8 +772,22 @@ def _filter(
     three components measured and no jump mixture takes the scalar update :func:`_update3`
     and a one-component collapse written out (exp(0) = 1, log(1) = 0 exactly, so skipping
     them changes no bit). ``scalar`` False takes the array path of :func:`_gauss_update`
-    everywhere instead: the reference the tests hold the fast one to, bit for bit."""
+    everywhere instead: the reference the tests hold the fast one to, bit for bit.
+
+    ``levels`` (T,) and ``draws`` (M, 3), given together (:func:`run_predictive`): at every
+    measured sample, ``levels`` receives the probability the one-step predictive distribution
+    gives the smallest ellipsoid of its covariance that holds the observed innovation — a
+    region's coverage level, uniform on [0, 1] when the model is right (Rosenblatt 1952); the
+    jump mixture's is estimated on the standard-normal ``draws`` (:func:`_mixture_level`). Left
+    out, the function compiles without that code (numba prunes branches on an absent argument).
+
+    One piece, not split into a propagation and an update kernel: the state lives in scalars
+    across both (see above), and a call boundary between them would cost it its registers."""
     n_samples = pose.shape[0]
+    if levels is not None:
+        level_work = np.zeros((6, 3, 3))
+    else:
+        level_work = np.zeros((0, 3, 3))
     whitened = np.zeros(3 * n_samples)
     count = 0
     loglik = 0.0
@@ -723,6 +903,8 @@ def _filter(
                 )
             )  # fmt: skip
             logs0 = math.log(1.0) + fit
+            if levels is not None:
+                levels[k] = _chi2_cdf(w0 * w0 + w1 * w1 + w2 * w2, 3)
             whitened[3 * k] = w0
             whitened[3 * k + 1] = w1
             whitened[3 * k + 2] = w2
@@ -845,6 +1027,16 @@ def _filter(
                 for a in range(dim):
                     whitened[3 * k + rows[a]] = sol[a]
             top = max(top, logs[j])
+        if levels is not None:
+            if not mixture:
+                quad = 0.0
+                for a in range(dim):
+                    quad += sol[a] * sol[a]
+                levels[k] = _chi2_cdf(quad, dim)
+            elif draws is not None:
+                levels[k] = _mixture_level(
+                    cov, v1, h, rdiag, nu, dim, weights, n_comp, draws, level_work
+                )
         total = 0.0
         for j in range(n_comp):
             shares[j] = math.exp(logs[j] - top)  # once: each is read three times

@@ -108,7 +108,9 @@ class Diagnosis:
     nuisances: list[SessionNuisance] = field(default_factory=list)
     gate: list[GateStep] = field(default_factory=list)
     stand_ins: list[dict[str, Any]] = field(default_factory=list)
+    refused_terms: list[dict[str, Any]] = field(default_factory=list)
     noise_checks: dict[str, dict[str, Any]] = field(default_factory=dict)
+    spread: list[dict[str, Any]] = field(default_factory=list)
     geometry_check: dict[str, dict[str, Any]] = field(default_factory=dict)
     filter_parameters: dict[str, dict[str, float]] = field(default_factory=dict)
     estimators: dict[str, Any] = field(default_factory=dict)
@@ -128,6 +130,7 @@ class Diagnosis:
         """The JSON report (``report.json``): the held-out open-loop comparison first."""
         return {
             "verdict": self.verdict,
+            "confirmations": self.final_test.get("confirmations", []),
             "held_out_open_loop": self.held_out.as_dict() if self.held_out else None,
             "systematic_effects": self.systematic_effects,
             "discovered": self.discovered,
@@ -139,7 +142,9 @@ class Diagnosis:
             "terms_tried": self.terms_tried,
             "terms_kept": len(self.discovered),
             "stand_ins": self.stand_ins,
+            "refused_terms": self.refused_terms,
             "noise_checks": self.noise_checks,
+            "spread_check": self.spread,
             "geometry_with_and_without_noise": self.geometry_check,
             "filter_parameters": self.filter_parameters,
             "estimator": self.estimators,

@@ -234,10 +234,21 @@ def _refit_named(
 def _backward_check(data: Dataset, model: Model, named: Sequence[str], alpha: float) -> list[str]:
     """Named systematic effects that the final model no longer needs: the likelihood-ratio test
     of the final model against it without the effect (sensor noise refitted) does not pass α/2
-    after a Bonferroni correction over the named effects."""
+    after a Bonferroni correction over the named effects.
+
+    With one systematic effect named and nothing after it, its own round's test stands; the
+    check runs once a second systematic effect, a discovered term or a noise effect whose mean
+    it partners joined (floor bumps shorten the travel as a smaller distance scale does: named
+    first for that mean, the distance scale is absorbed once the bumps carry it)."""
     spec, sensor = model.spec, model.sensor
     systematic = [n for n in named if not EFFECTS[n].noise]
-    if len(systematic) + (1 if spec.effect_values(DISCOVERED) else 0) < 2:
+    partnered = any(
+        p in systematic
+        for n in named
+        if EFFECTS[n].noise and type(EFFECTS[n]).replay is not Effect.replay
+        for p in EFFECTS[n].partners
+    )
+    if len(systematic) + (1 if spec.effect_values(DISCOVERED) else 0) < 2 and not partnered:
         return []
     full = float(evaluate(data, spec, sensor, whitened=False).loglik.sum())
     out = []

@@ -1,22 +1,25 @@
-"""The steps after the rounds (``docs/diagnose.md``, steps 9–15) that have no module of their
+"""The steps after the rounds (``docs/diagnose.md``, steps 7–15) that have no module of their
 own: what the rounds' proposals become, and the verdict on the held-out runs.
 
 * the open-loop gate's pool (:func:`_significant_effects`), the discovered terms in the order
   the passes found them (:func:`_discovered_order`) and how many grammar terms were tried
-  (:func:`_terms_tried`) — steps 10–11;
-* the kept model's parameters (:func:`_parameters`), its discovered terms with their evidence
-  (:func:`_kept_terms`), and how far a noise effect with a mean part moved E_d, E_b, E_s
-  (:func:`_geometry_moves`) — steps 12–13;
-* the verdict on the held-out runs (:func:`_final_test`: the grammar's score test and the
-  whiteness test, Bonferroni-combined) — step 9, which step 14 may turn into ``unconfirmed``;
+  (:func:`_terms_tried`) — steps 7–8;
+* the real-size rule for kept terms (:func:`real_size`) — step 10;
+* the kept model's parameters (:func:`_parameters`, :func:`noise_parameters`), its discovered
+  terms with their evidence and their size at the data's operating range (:func:`_kept_terms`),
+  and how far a noise effect with a mean part moved E_d, E_b, E_s (:func:`_geometry_moves`);
+* the verdict (:func:`verdict_of`): which yardstick confirmed what — the open-loop error for
+  the systematic model, the spread for each noise effect — and the grammar's score test and
+  the whiteness test on the held-out runs (:func:`_final_test`, Bonferroni-combined) — step 14;
 * the whitened gap, a diagnostic (:func:`_shrink` over :func:`_gaps`: the held-out runs' RMS
   whitened innovation under the model as given and the diagnosed one, with bootstrap intervals,
   and their open-loop disagreement in mm and degrees beside it) — step 15.
 
-Only :func:`odomgym.diagnose.workflow.diagnose` calls them, in the order of the steps, hence
-private; they live here so that the orchestration reads as the list of steps. Each is a function
-of its arguments (seeded where it draws). The headline comparison in plain units is
-:mod:`odomgym.diagnose.heldout`; the gate and the two estimators, :mod:`odomgym.diagnose.gate`.
+Only :func:`odomgym.diagnose.workflow.diagnose` calls them, in the order of the steps; they live
+here so that the orchestration reads as the list of steps. Each is a function of its arguments
+(seeded where it draws). The headline comparison in plain units is
+:mod:`odomgym.diagnose.heldout`; the gate and the two estimators, :mod:`odomgym.diagnose.gate`;
+the spread, :mod:`odomgym.diagnose.spread`.
 """
 
 from __future__ import annotations
@@ -37,21 +40,26 @@ from odomgym.diagnose.discover import (
     term_sentence,
 )
 from odomgym.diagnose.fit import Dataset, Model
-from odomgym.diagnose.gate import SystematicFit
+from odomgym.diagnose.gate import SystematicFit, term_proposals
+from odomgym.diagnose.heldout import AS_GIVEN, DIAGNOSED, HeldOut
 from odomgym.diagnose.likelihood import (
     SensorNoise,
     expected_square_gap,
     measurement_mask,
     run_likelihood,
 )
+from odomgym.diagnose.physical import term_size
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.rounds import DISCOVERED, ROUND_GOES_ON, DiagnosisState, _consistency
+from odomgym.diagnose.spread import SpreadCheck
 from odomgym.diagnose.stats import bootstrap_ci, combine_bonferroni, reducible_fraction, rms
+from odomgym.diagnose.steps import SystematicModel, TermRefusal
 from odomgym.effects import EFFECTS, TERMS
+from odomgym.effects.discovered import operating_phrase, term_by_name
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__: list[str] = []  # private helpers of odomgym.diagnose.workflow.diagnose
+__all__ = ["noise_parameters", "real_size", "verdict_of"]
 
 
 FloatArray = NDArray[np.float64]
@@ -207,7 +215,9 @@ def _kept_terms(
     runs: Sequence[Run],
 ) -> list[dict[str, Any]]:
     """``report.json``'s ``discovered`` list for the kept ``terms``: each at its final value
-    with its standard error, and the binned channel data behind it."""
+    with its standard error, its size at the data's operating range (the change it makes at the
+    95th percentile of its modulator, :func:`odomgym.diagnose.physical.term_size`) and the
+    binned channel data behind it."""
     merged: dict[str, dict[str, Any]] = {}
     for found in state.passes:
         for entry in found.entries():
@@ -217,13 +227,84 @@ def _kept_terms(
     out = []
     for t in terms:
         entry = dict(merged[t])
+        size = term_size(runs, chosen.spec, t, values[t])
         entry["discovery_coefficient"] = entry["coefficient"]
         entry["coefficient"] = values[t]
         entry["stderr"] = errors[t]
-        entry["sentence"] = term_sentence(t, values, errors)
+        entry["operating"] = size.operating
+        entry["change_at_operating"] = size.change
+        entry["sentence"] = (
+            f"{term_sentence(t, values, errors)}; "
+            f"{operating_phrase(t, size.change, size.operating)}"
+        )
         entry["evidence"] = channel_evidence(runs, state.before_discovery, t)
         out.append(entry)
     return out
+
+
+def _largest_stderr(entry: dict[str, float]) -> float:
+    """The largest of the standard errors the report gives for a parameter (model-based, run-
+    and session-clustered), NaN when none is finite."""
+    finite = [
+        float(entry[k])
+        for k in ("stderr", "stderr_runs", "stderr_sessions")
+        if k in entry and math.isfinite(float(entry[k]))
+    ]
+    return max(finite) if finite else math.nan
+
+
+def real_size(
+    chosen: SystematicFit, terms: Sequence[str], passes: Sequence[Discovery]
+) -> list[TermRefusal]:
+    """Step 10: the kept ``terms`` that are not a real size. A term stays only if its final
+    coefficient is at least two of its largest standard errors (:func:`_largest_stderr`:
+    session-clustered where there are sessions) from zero and has the sign the discovery
+    proposed; a sinusoid (sine and cosine together) by its amplitude, its phase within 90° of
+    the proposed one. A term that fails only moved the fit within its noise — or moved it the
+    other way than the data it was discovered on said (on real logs a crab angle was kept at
+    +16.7° ± 19.2° per m²/s² after the discovery proposed −13.3°)."""
+    proposed: dict[str, float] = {}
+    for found in passes:
+        for entry in found.entries():
+            proposed[entry["term"]] = float(entry["coefficient"])
+    out = []
+    for proposal in term_proposals(terms):
+        parts = proposal.split("+")
+        entries = [chosen.entries[f"{DISCOVERED}.{t}"] for t in parts]
+        value = np.array([float(e["value"]) for e in entries])
+        given = np.array([proposed.get(t, math.nan) for t in parts])
+        errors = [_largest_stderr(e) for e in entries]
+        se = max(errors) if all(math.isfinite(e) for e in errors) else math.nan
+        size, given_size = float(np.hypot.reduce(value)), float(np.hypot.reduce(given))
+        if len(parts) == 1:
+            size, given_size = float(value[0]), float(given[0])
+        agrees = float(value @ given) > 0.0
+        unit = term_by_name(parts[0]).unit
+        reasons = []
+        if not math.isfinite(se):
+            reasons.append("it has no finite standard error")
+        elif not abs(size) >= 2.0 * se:
+            reasons.append(f"within two standard errors of zero ({size:+.3g} ± {se:.2g} {unit})")
+        if not agrees:
+            reasons.append(
+                f"the opposite {'phase' if len(parts) > 1 else 'sign'} to the one the "
+                f"discovery proposed ({given_size:+.3g} {unit})"
+            )
+        if reasons:
+            out.append(TermRefusal(proposal, size, se, given_size, "; ".join(reasons)))
+    return out
+
+
+def noise_parameters(
+    state: DiagnosisState, name: str, spec: RobotSpec
+) -> dict[str, dict[str, float]]:
+    """A kept noise effect's parameters at their final values in ``spec`` (refitted on the
+    final systematic model, step 11), with the standard errors of the rounds' fit."""
+    entries = state.parameters.get(name, {})
+    return {
+        key: {**entries.get(key, {}), "value": value}
+        for key, value in EFFECTS[name].read(spec).items()
+    }
 
 
 def _parameters(
@@ -241,27 +322,98 @@ def _parameters(
     return out
 
 
+_GEOMETRY_KEYS = {
+    "wheel_diameter_ratio.e_d": "E_d",
+    "wheelbase.e_b": "E_b",
+    "distance_scale.e_s": "E_s",
+}
+
+
 def _geometry_moves(
-    without: SystematicFit, with_noise: SystematicFit, noise: Sequence[str]
+    spec: RobotSpec, spread: Sequence[SpreadCheck], entries: dict[str, dict[str, float]]
 ) -> dict[str, dict[str, Any]]:
-    """E_d, E_b, E_s fitted without and with the noise effects that move the mean: each value,
-    the change, its standard error and whether the change is within it, naming the noise
-    effects that moved it."""
+    """E_d, E_b, E_s of the final model (``spec``) and of each model without a noise effect
+    that moves the mean (its partners refitted, :func:`odomgym.diagnose.spread.model_without`):
+    each value, the change, the standard error of the kept value (``entries``; NaN where the
+    gate did not keep the parameter: it is the value given) and whether the change is within
+    it, naming the noise effect that moved it."""
     out: dict[str, dict[str, Any]] = {}
-    for name, key in (
-        ("wheel_diameter_ratio", "e_d"),
-        ("wheelbase", "e_b"),
-        ("distance_scale", "e_s"),
-    ):
-        before = float(getattr(without.spec, key))
-        after = float(getattr(with_noise.spec, key))
-        se = without.entries.get(f"{name}.{key}", {}).get("stderr", math.nan)
-        out[f"E_{key[-1]}"] = {
-            "without_noise_effects": before,
-            "with_noise_effects": after,
-            "change": after - before,
-            "stderr": se,
-            "within_errors": bool(abs(after - before) <= se) if math.isfinite(se) else None,
-            "moved_by": list(noise) if before != after else [],
-        }
+    for check in spread:
+        for key, label in _GEOMETRY_KEYS.items():
+            if key not in check.without:
+                continue
+            with_noise = float(getattr(spec, label.lower()))
+            without = float(check.without[key])
+            se = float(entries.get(key, {}).get("stderr", math.nan))
+            out[label] = {
+                "without_noise_effects": without,
+                "with_noise_effects": with_noise,
+                "change": with_noise - without,
+                "stderr": se,
+                "within_errors": bool(abs(with_noise - without) <= se)
+                if math.isfinite(se)
+                else None,
+                "moved_by": [check.effect] if with_noise != without else [],
+            }
     return out
+
+
+def _confirmations(
+    found: SystematicModel, held: HeldOut, spread: Sequence[SpreadCheck]
+) -> list[dict[str, Any]]:
+    """Which yardstick confirmed what on the held-out runs: the kept systematic model (effects
+    and terms together) by the open-loop error against the model as given; each kept noise
+    effect by its spread (:class:`odomgym.diagnose.spread.SpreadCheck`)."""
+    out: list[dict[str, Any]] = []
+    names = [*found.gate.effects, *found.gate.terms]
+    if names:
+        models = held.as_dict()["models"]
+        out.append(
+            {
+                "kind": "systematic",
+                "names": names,
+                "yardstick": "open-loop error",
+                "confirmed": held.better_than_as_given,
+                "as_given_mm": models[AS_GIVEN]["combined_rms_mm"],
+                "diagnosed_mm": models[DIAGNOSED]["combined_rms_mm"],
+            }
+        )
+    for check in spread:
+        out.append({"kind": "noise", "names": [check.effect], **check.as_dict()})
+    return out
+
+
+def verdict_of(
+    held_runs: Sequence[Run],
+    found: SystematicModel,
+    final: Model,
+    held: HeldOut,
+    spread: Sequence[SpreadCheck],
+    state: DiagnosisState,
+    cfg: DiagnoseConfig,
+) -> tuple[str, dict[str, Any]]:
+    """Step 14: the verdict and the ``final_test`` record. Each finding is judged by the
+    yardstick of its kind (:func:`_confirmations`); the held-out runs' score and whiteness
+    tests (:func:`_final_test`) say whether structure is left. ``unconfirmed``: nothing kept
+    is confirmed, or the rounds proposed effects or terms and the gate kept none (the model
+    stays as given — never ``explained`` on a proposal the open-loop check refused); ``partly
+    confirmed``: some findings confirmed, others not (the report says which)."""
+    gate = found.gate
+    noise = [check.effect for check in spread]
+    found_anything = bool(gate.effects) or bool(gate.terms) or bool(noise)
+    last = state.rounds[-1].verdict if state.rounds else "none"
+    if found.resolved:
+        last = "explained"  # the open-loop gate told the tied effects apart
+    held_data = Dataset.of(held.corrected(held_runs), cfg.checkpoint_interval)
+    verdict, final_test = _final_test(held_data, final, found_anything, last, cfg.alpha, cfg.seed)
+    confirmations = _confirmations(found, held, spread)
+    confirmed = [c for c in confirmations if c["confirmed"]]
+    if found_anything and not confirmed:
+        verdict = "unconfirmed"
+    elif found_anything and len(confirmed) < len(confirmations):
+        verdict = "partly confirmed"
+    elif not found_anything and gate.steps:
+        verdict = "unconfirmed"
+    final_test["confirmations"] = confirmations
+    final_test["tie_resolved_open_loop"] = found.tied if found.resolved else []
+    return verdict, final_test

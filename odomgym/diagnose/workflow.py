@@ -1,10 +1,12 @@
 """The discrepancy workflow: where the model and the robot disagree, which effect is missing,
-add it, and show on data the fit never saw that the updated model predicts the robot better.
+add it, and show on data the fit never saw that the updated model predicts the robot better —
+each kind of effect judged in the units it acts in.
 
 :func:`diagnose` takes logged runs (any source: :mod:`odomgym.data`) and a robot model and returns
 a :class:`~odomgym.diagnose.results.Diagnosis`. This module holds the orchestration — the order
 of the steps and what passes between them — and the split; each step's work lives where the list
-below points. The steps, numbered as in ``docs/diagnose.md`` (which gives each in full):
+below points. :func:`_diagnose` reads as this list, one call per step, numbered as in
+``docs/diagnose.md`` (which gives each in full):
 
 1. **Split** (:func:`split_runs`): whole sessions are held out, or with one session, per
    experiment family a contiguous block of runs in time. Nothing is fitted on them.
@@ -13,38 +15,37 @@ below points. The steps, numbered as in ``docs/diagnose.md`` (which gives each i
    with E_d, E_b, E_s (:func:`odomgym.diagnose.openloop.fit_open_loop`) and removed from the
    runs.
 3. **Where** (:mod:`odomgym.diagnose.where`) the model as given disagrees.
-4. **Which — systematic effects first** (:func:`odomgym.diagnose.rounds.run_round`): catalogue
-   effects, each beside the wheel noise as nuisance, scored by the Kalman filter's
-   cross-validated likelihood and tested family-wise (:mod:`odomgym.diagnose.fit`); tied winners
-   end the round ``ambiguous`` with a separating experiment
-   (:mod:`odomgym.diagnose.experiments`).
-5. **Is the systematic structure exhausted?** The grammar's score test
-   (:func:`odomgym.diagnose.discover.structure_test`, in the round).
-6. **Discovery** (:func:`odomgym.diagnose.discover.discover`), when it finds structure: sparse
-   regression over the error grammar.
-7. **The noise model, last** (the round's noise stages): only when no structure is left.
-8. **Backward check** (:func:`odomgym.diagnose.rounds._backward_check`): a named systematic
-   effect the final model no longer needs is removed (``absorbed``).
-9. **Verdict, on held-out runs** (:func:`odomgym.diagnose.verdict._final_test`): the grammar's
-   score test and a whiteness test on the held-out runs decide ``explained`` / ``partly
-   explained`` (or ``ambiguous``, ``unexplained``, ``none``).
-10. **Physical sizes** (:func:`odomgym.diagnose.physical.term_size`): a discovered term too
-    large for what the robot did is a stand-in, reported and not kept.
-11. **The open-loop gate** (:func:`odomgym.diagnose.gate.open_loop_gate`, its pool
-    :func:`odomgym.diagnose.verdict._significant_effects`): each proposal in turn is kept only
-    if it lowers the error of predicting left-out folds (sessions, or blocks) open loop, and a
-    discovered term only if the open-loop fit can identify it; effects tied in a last
-    ``ambiguous`` round are resolved here when the folds need every one of them.
-12. **The estimator** of the kept model's values (:mod:`odomgym.diagnose.gate`) — the filter's,
-    unless the open-loop fit's predicts the left-out folds better by one standard error.
-13. **Noise effects, checked** (:func:`odomgym.diagnose.physical.check_bumps`,
-    :func:`odomgym.diagnose.verdict._geometry_moves`): floor bumps only with their signature
-    and a size the floor can produce; how far a noise effect with a mean part moved E_d, E_b,
-    E_s is reported.
-14. **Held-out verdict** (:mod:`odomgym.diagnose.heldout`): the held-out runs predicted open loop
-    by the model as given, the diagnosed model and a baseline calibration, in mm and degrees —
-    the headline; a model that does not predict the held-out runs better than the model as
-    given, or proposals of which the open-loop gate kept none, are ``unconfirmed``.
+4. **The rounds** (:func:`odomgym.diagnose.rounds.run_round`), the likelihood's proposals:
+   systematic catalogue effects first, each beside the wheel noise as nuisance, scored by the
+   Kalman filter's cross-validated likelihood; when none is left, the grammar's score test and
+   the discovery's sparse regression (:mod:`odomgym.diagnose.discover`); the noise model last.
+5. **Backward check** (:func:`odomgym.diagnose.rounds._backward_check`): a named systematic
+   effect the final model no longer needs is removed (``absorbed``) — also the partner whose
+   mean a noise effect named later took over (the distance scale beside floor bumps).
+6. **Noise effects' signature and size** (:func:`odomgym.diagnose.physical.check_bumps`): floor
+   bumps only with heavy-tailed jumps in steady driving and a size the floor can produce. A kept
+   noise effect's mean part (bumps shorten the travel) belongs to it from here on: it is in the
+   robot every later open-loop fit starts from.
+7. **Physical sizes** (:func:`odomgym.diagnose.physical.term_size`): a discovered term too large
+   for what the robot did is a stand-in, reported and not kept.
+8. **The open-loop gate** (:func:`odomgym.diagnose.gate.open_loop_gate`): each systematic
+   proposal is kept only if it lowers the error of predicting left-out folds (sessions, or
+   blocks) open loop; effects tied in a last ``ambiguous`` round are resolved here when the
+   folds need every one of them.
+9. **The estimator** of the kept model's values (:mod:`odomgym.diagnose.gate`) — the filter's,
+   unless the open-loop fit's predicts the left-out folds better by one standard error.
+10. **A kept term is a real size** (:func:`odomgym.diagnose.verdict.real_size`): at least two
+    standard errors from zero with the sign the discovery proposed, or it is refused and steps
+    8–10 run again without it.
+11. **The noise model refitted** on the final systematic model (maximum likelihood).
+12. **Held out, open loop** (:mod:`odomgym.diagnose.heldout`): the held-out runs predicted by the
+    model as given, the diagnosed model and a baseline calibration, in mm and degrees — the
+    yardstick of systematic effects and terms.
+13. **Held out, spread** (:mod:`odomgym.diagnose.spread`): each kept noise effect against the
+    model without it, refitted, by the log predictive density of the held-out runs' open-loop
+    errors and the coverage of its 50 % and 95 % regions — the yardstick of noise effects.
+14. **Verdict** (:func:`odomgym.diagnose.verdict.verdict_of`): which yardstick confirmed what;
+    the grammar's score test and a whiteness test on the held-out runs.
 15. **The whitened gap, a diagnostic** (:func:`odomgym.diagnose.verdict._shrink`).
 
 The settings are :class:`~odomgym.diagnose.config.DiagnoseConfig`; finished candidate fits are
@@ -69,6 +70,7 @@ from odomgym.diagnose.fit import (
     Dataset,
     Model,
     candidate_effects,
+    fit_noise,
     fit_noise_model,
     folds_for,
     strata,
@@ -88,6 +90,7 @@ from odomgym.diagnose.heldout import (
     BASELINE,
     DIAGNOSED,
     Baseline,
+    HeldOut,
     compare_models,
     pictured_runs,
 )
@@ -101,14 +104,15 @@ from odomgym.diagnose.nuisances import (
     sessions_of,
 )
 from odomgym.diagnose.openloop import (
+    ModelErrors,
     NuisanceOptions,
     OpenLoopData,
-    cross_validate_open_loop,
+    OpenLoopFit,
     evaluate_open_loop,
     fit_open_loop,
     open_loop_folds,
 )
-from odomgym.diagnose.physical import check_bumps, term_size
+from odomgym.diagnose.physical import TermSize, check_bumps, term_size
 
 # Candidate, Round and GAP_METRIC are re-exported (``as``): they were importable from here
 # before the split without being in ``__all__``, and stay so.
@@ -126,9 +130,16 @@ from odomgym.diagnose.rounds import (
     _discovery_record,
     run_round,
 )
+from odomgym.diagnose.spread import SpreadCheck, judge_spread, model_without
+from odomgym.diagnose.steps import (
+    NoiseNamed,
+    Recording,
+    RunSplit,
+    SystematicModel,
+    TermRefusal,
+)
 from odomgym.diagnose.verdict import (
     _discovered_order,
-    _final_test,
     _geometry_moves,
     _kept_terms,
     _parameters,
@@ -136,8 +147,11 @@ from odomgym.diagnose.verdict import (
     _significant_effects,
     _terms_tried,
     _tied_effects,
+    noise_parameters,
+    real_size,
+    verdict_of,
 )
-from odomgym.diagnose.where import localise, run_residuals
+from odomgym.diagnose.where import Finding, localise, run_residuals
 from odomgym.effects import EFFECTS, Effect
 from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
@@ -298,15 +312,18 @@ def diagnose(
         return _diagnose(runs, robot, cfg, baseline, progress, journal)
 
 
+Report = Callable[[str, float], None]
+
+
 def _diagnose(
     runs: Sequence[Run],
     robot: RobotSpec,
     cfg: DiagnoseConfig,
     baseline: Baseline | None,
-    progress: Callable[[str, float], None] | None,
+    progress: Report | None,
     journal: FitJournal | None,
 ) -> Diagnosis:
-    """:func:`diagnose` itself, its BLAS on one thread."""
+    """:func:`diagnose` itself, its BLAS on one thread: the steps of the module docstring."""
 
     def report(stage: str, fraction: float) -> None:
         interrupt.check()  # a stop request a finalizer swallowed (odomgym.interrupt)
@@ -315,70 +332,133 @@ def _diagnose(
 
     _check_runs(runs)
     rng = np.random.default_rng(cfg.seed)
-    fit_index, held_index, split = split_runs(runs, cfg.holdout, rng)
-    fit_runs = [runs[j] for j in fit_index]
-    held_runs = [runs[j] for j in held_index]
-    if len(fit_runs) < 2:
+    split = _split(runs, cfg, rng)  # 1
+    rec = _measurement_nuisances(split, robot, cfg, report)  # 2
+    as_given, findings = _where(split, rec, robot, cfg, report)  # 3
+    state = _rounds(rec, robot, cfg, rng, report, journal)  # 4
+    absorbed = _backward(rec, state, cfg)  # 5
+    noise = _noise_effects(rec, state, cfg)  # 6
+    sizes = _term_sizes(rec, state)  # 7
+    found = _systematic(rec, robot, state, noise, sizes, cfg, report)  # 8–10
+    final, noise = _noise_refit(found, state, noise)  # 11
+    held = _held_out(split, rec, robot, found, as_given, baseline, cfg, report)  # 12
+    spread = _spread(split, held, final, noise, found, cfg, report)  # 13
+    verdict, final_test = verdict_of(split.held, found, final, held, spread, state, cfg)  # 14
+    report("shrink", 1.0)
+    gaps = _shrink(held.corrected(split.held), robot, final, cfg)  # 15
+    final_test["absorbed"] = absorbed
+    final_test["noise_carried_by_the_rest"] = noise.vanished
+    return _diagnosis(runs, robot, split, rec, state, findings, noise, sizes, found, final,
+                      held, spread, verdict, final_test, gaps)  # fmt: skip
+
+
+def _split(runs: Sequence[Run], cfg: DiagnoseConfig, rng: np.random.Generator) -> RunSplit:
+    """Step 1: :func:`split_runs`, and the runs on each side."""
+    fit_index, held_index, kind = split_runs(runs, cfg.holdout, rng)
+    if len(fit_index) < 2:
         raise SpecError("too few runs left to fit after the hold-out split", field="holdout")
-    use_frames = cfg.session_frames
-    if use_frames is None:
-        use_frames = len(set(sessions_of(runs))) >= 2
+    return RunSplit(
+        fit_index,
+        held_index,
+        kind,
+        [runs[j] for j in fit_index],
+        [runs[j] for j in held_index],
+    )
+
+
+def _measurement_nuisances(
+    split: RunSplit, robot: RobotSpec, cfg: DiagnoseConfig, report: Report
+) -> Recording:
+    """Step 2: the recording's nuisances, fitted jointly with the geometry (E_d, E_b, E_s) so
+    that a curving straight is not read as a tilted frame, nor a scale as a clock. A time
+    offset is removed only where the data show one (module docstring of
+    :mod:`odomgym.diagnose.nuisances`): resampling the counts at a spurious offset adds the
+    acceleration-correlated disagreement the filter is most sensitive to."""
+    report("measurement nuisances", 0.0)
+    frames_on = cfg.session_frames
+    if frames_on is None:
+        frames_on = len(set(sessions_of([*split.fit, *split.held]))) >= 2
     clock_options = NuisanceOptions(
-        time_offset=cfg.time_offset, frames=use_frames, max_time_offset=cfg.max_time_offset
+        time_offset=cfg.time_offset, frames=frames_on, max_time_offset=cfg.max_time_offset
     )
     interval, length = cfg.checkpoint_interval, float(robot.wheelbase)
-    # Step 2 (module docstring): the recording's nuisances, fitted jointly with the geometry (E_d,
-    # E_b, E_s) so that a curving straight is not read as a tilted frame, nor a scale as a clock. A
-    # time offset is removed only where the data show one (module docstring of
-    # odomgym.diagnose.nuisances): resampling the counts at a spurious offset adds the acceleration-
-    # correlated disagreement the filter is most sensitive to.
-    report("measurement nuisances", 0.0)
     geometry = model_effect(GEOMETRY, [])
     clock = {
         s: _significant_offset(n)
         for s, n in fit_open_loop(
-            OpenLoopData(fit_runs, interval, length), robot, geometry, clock_options
+            OpenLoopData(split.fit, interval, length), robot, geometry, clock_options
         ).nuisances.items()
     }
-    timed = correct_runs(fit_runs, clock)
-    options = NuisanceOptions(time_offset=False, frames=use_frames)
+    timed = correct_runs(split.fit, clock)
+    options = NuisanceOptions(time_offset=False, frames=frames_on)
     open_data = OpenLoopData(timed, interval, length)
-    nuisances = (
+    frames = (
         fit_open_loop(open_data, robot, geometry, options).nuisances
-        if use_frames
+        if frames_on
         else {s: SessionNuisance(s, n.runs) for s, n in clock.items()}
     )
-    fit_corrected = correct_runs(timed, nuisances)
-    data = Dataset.of(fit_corrected, interval)
-    names = cfg.candidates or tuple(EFFECTS)
-    if use_frames:
-        names = tuple(n for n in names if n not in SESSION_EFFECTS)
-    model = fit_noise_model(data, Model(robot, SensorNoise(*cfg.initial_sensor)))
-    # The model as given, open loop: its own nuisances; the held-out sessions' on their own.
-    nominal = fit_open_loop(open_data, robot, None, options, nuisances)
-    pictured = pictured_runs(held_runs)
+    corrected = correct_runs(timed, frames)
+    # The model as given, open loop: its own nuisances (the held-out sessions' on their own).
+    nominal = fit_open_loop(open_data, robot, None, options, frames)
+    return Recording(
+        clock=clock,
+        frames=frames,
+        timed=timed,
+        corrected=corrected,
+        data=Dataset.of(corrected, interval),
+        open_data=open_data,
+        options=options,
+        clock_options=clock_options,
+        nominal=nominal,
+        frames_on=frames_on,
+        pictured=pictured_runs(split.held),
+    )
+
+
+def _where(
+    split: RunSplit, rec: Recording, robot: RobotSpec, cfg: DiagnoseConfig, report: Report
+) -> tuple[ModelErrors, list[Finding]]:
+    """Step 3: where the model as given disagrees, over the fit runs and the held-out ones —
+    and, for the latter's nuisances, the held-out runs predicted open loop by the model as
+    given (step 12's first row)."""
     as_given = evaluate_open_loop(
         AS_GIVEN,
-        held_runs,
+        split.held,
         robot,
-        _with_clock(nominal.nuisances, clock),
-        clock_options,
-        interval,
-        length,
-        pictured,
+        _with_clock(rec.nominal.nuisances, rec.clock),
+        rec.clock_options,
+        rec.open_data.interval,
+        rec.open_data.length,
+        rec.pictured,
     )
     report("where", 0.0)
-    shown = [*fit_corrected, *correct_runs(held_runs, as_given.nuisances)]
-    findings = localise(run_residuals(shown, robot), cfg.alpha)
+    shown = [*rec.corrected, *correct_runs(split.held, as_given.nuisances)]
+    return as_given, localise(run_residuals(shown, robot), cfg.alpha)
+
+
+def _rounds(
+    rec: Recording,
+    robot: RobotSpec,
+    cfg: DiagnoseConfig,
+    rng: np.random.Generator,
+    report: Report,
+    journal: FitJournal | None,
+) -> DiagnosisState:
+    """Step 4: the rounds — systematic effects first, then (once their structure is
+    exhausted) discovery, then the noise model: a noise effect may stand for nothing a
+    systematic term explains. With the sessions' frames fitted, the catalogue effects they make
+    unidentifiable (:data:`~odomgym.diagnose.nuisances.SESSION_EFFECTS`) are no candidates."""
+    names = cfg.candidates or tuple(EFFECTS)
+    if rec.frames_on:
+        names = tuple(n for n in names if n not in SESSION_EFFECTS)
+    model = fit_noise_model(rec.data, Model(robot, SensorNoise(*cfg.initial_sensor)))
     nuisance = EFFECTS.get(NUISANCE)
     excluded = (NUISANCE, DISCOVERED)
     systematic = [e.name for e in candidate_effects(excluded) if not e.noise and e.name in names]
     noise = [e.name for e in candidate_effects(excluded) if e.noise and e.name in names]
-    # Systematic effects first, then (once their structure is exhausted) discovery, then the
-    # noise model: a noise effect may stand for nothing a systematic term explains.
     ctx = RoundContext(
-        data=data,
-        folds=folds_for(fit_corrected, min(cfg.folds, len(fit_corrected)), rng),
+        data=rec.data,
+        folds=folds_for(rec.corrected, min(cfg.folds, len(rec.corrected)), rng),
         nuisance=nuisance,
         stages=[
             ("mean", systematic, nuisance),
@@ -394,219 +474,391 @@ def _diagnose(
     for number in range(1, cfg.max_rounds + 1):
         if run_round(number, ctx, state).verdict not in ROUND_GOES_ON:
             break
-    # Backward check: a systematic effect named early may have stood in for what a later one
-    # (or a discovered term) explains better; each must still be significant in the final model.
-    absorbed = _backward_check(data, state.model, state.named, cfg.alpha)
+    return state
+
+
+def _backward(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> list[str]:
+    """Step 5: a systematic effect named early may have stood in for what a later one (or a
+    discovered term, or a noise effect's mean part) explains better; each must still be
+    significant in the final model, or it is removed (``absorbed``)."""
+    absorbed = _backward_check(rec.data, state.model, state.named, cfg.alpha)
     for name in absorbed:
         spec = EFFECTS[name].write(state.model.spec, EFFECTS[name].absent_values())
         state.model = Model(spec, state.model.sensor)
         state.named.remove(name)
         state.parameters.pop(name, None)
-    # Step 10: physical sizes: a discovered term implausible at the data's operating range is a
-    # stand-in (for a clock, a frame or a mechanism the grammar lacks), reported, not kept.
-    proposed_terms = _discovered_order(state)
+    return absorbed
+
+
+def _noise_effects(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> NoiseNamed:
+    """Step 6: the noise effects the rounds named, kept only with their signature in the data
+    and a size the floor can produce (floor bumps: :func:`odomgym.diagnose.physical.
+    check_bumps`, on the rounds' systematic model without the bumps' mean loss)."""
+    kept: list[str] = []
+    checks: dict[str, dict[str, Any]] = {}
+    for name in (n for n in state.named if EFFECTS[n].noise):
+        effect = EFFECTS[name]
+        values = effect.read(state.model.spec)
+        if effect.wheel_jumps(values, np.ones((1, 2)), rec.open_data.length) is not None:
+            check = check_bumps(
+                rec.corrected,
+                effect.write(state.model.spec, effect.absent_values()),
+                values,
+                max_obstacle=cfg.max_obstacle,
+                max_rate=cfg.max_bump_rate,
+                interval=rec.open_data.interval,
+                alpha=0.5 * cfg.alpha,
+            )
+            checks[name] = check.as_dict()
+            if not check.accepted:
+                continue
+        kept.append(name)
+    return NoiseNamed(
+        kept=kept,
+        refused=[n for n in state.named if EFFECTS[n].noise and n not in kept],
+        checks=checks,
+        values={n: EFFECTS[n].read(state.model.spec) for n in kept},
+        partners_named=tuple(n for n in state.named if not EFFECTS[n].noise),
+    )
+
+
+def _term_sizes(rec: Recording, state: DiagnosisState) -> list[TermSize]:
+    """Step 7: every discovered term of the rounds judged at the data's operating range: one
+    too large for what the robot did is a stand-in (for a clock, a frame or a mechanism the
+    grammar lacks), reported, not proposed."""
     present = state.model.spec.effect_values(DISCOVERED) or {}
-    sizes = [term_size(fit_corrected, state.model.spec, t, present[t]) for t in proposed_terms]
-    plausible_terms = [size.term for size in sizes if size.plausible]
-    # Step 11: the open-loop gate: each proposal in turn must lower the error of predicting the
-    # held-out folds (whole sessions, or blocks of time) open loop.
-    # Effects the likelihood could not tell apart (a last round ended ``ambiguous``) are
-    # proposed too, each under the one-standard-error rule: if the open-loop prediction of
-    # left-out folds needs every one of them beside the others, the tie is resolved (on June
-    # OptiOdom sessions a turn skid tied with the distance scale, and the folds needed both);
-    # if it keeps only some, it could not tell them apart either — the gate is run again
-    # without them, and the verdict stays ambiguous with its separating experiment.
+    return [
+        term_size(rec.corrected, state.model.spec, t, present[t]) for t in _discovered_order(state)
+    ]
+
+
+MAX_SIZE_PASSES = 4
+"""Most passes of steps 8–10: each pass after the first has refused at least one term."""
+
+
+def _systematic(
+    rec: Recording,
+    robot: RobotSpec,
+    state: DiagnosisState,
+    noise: NoiseNamed,
+    sizes: Sequence[TermSize],
+    cfg: DiagnoseConfig,
+    report: Report,
+) -> SystematicModel:
+    """Steps 8–10: the open-loop gate, the estimator, and the real-size rule for terms —
+    again without a term the rule refused, until every kept term passes.
+
+    The gate's robot *as given* carries the kept noise effects' mean parts (floor bumps'
+    shortened travel): a noise effect's mean belongs to it, and a systematic partner (the
+    distance scale) must earn its place on top of it, not for it."""
+    base_robot = noise.with_means(robot)
+    nominal = (
+        rec.nominal
+        if base_robot is robot
+        else fit_open_loop(rec.open_data, base_robot, None, rec.options, rec.frames)
+    )
+    terms = [size.term for size in sizes if size.plausible]
+    refused: list[TermRefusal] = []
+    for _ in range(MAX_SIZE_PASSES):
+        gate, tied, resolved = _gate(rec, base_robot, nominal, state, noise, terms, cfg, report)
+        chosen, estimators, corrected = _estimate(rec, state, gate, report)
+        failing = real_size(chosen, gate.terms, state.passes)
+        if not failing:
+            break
+        refused.extend(failing)
+        out = {t for f in failing for t in f.term.split("+")}
+        terms = [t for t in terms if t not in out]
+    return SystematicModel(
+        gate, chosen, estimators, corrected, tied, resolved, refused, rec.open_data.interval
+    )
+
+
+def _gate(
+    rec: Recording,
+    robot: RobotSpec,
+    nominal: OpenLoopFit,
+    state: DiagnosisState,
+    noise: NoiseNamed,
+    terms: Sequence[str],
+    cfg: DiagnoseConfig,
+    report: Report,
+) -> tuple[GateResult, list[str], bool]:
+    """Step 8: the open-loop gate on the proposals of the rounds (:func:`odomgym.diagnose.
+    verdict._significant_effects`) and the plausible ``terms``: each must lower the error of
+    predicting the held-out folds (whole sessions, or blocks of time) open loop.
+
+    Effects the likelihood could not tell apart (a last round ended ``ambiguous``) are
+    proposed too, each under the one-standard-error rule: if the open-loop prediction of
+    left-out folds needs every one of them beside the others, the tie is resolved (on June
+    OptiOdom sessions a turn skid tied with the distance scale, and the folds needed both); if
+    it keeps only some, it could not tell them apart either — the gate is run again without
+    them, and the verdict stays ambiguous with its separating experiment. Returns the gate, the
+    tied effects and whether the tie was resolved."""
     tied = _tied_effects(state)
-    # The filter's estimates, linearised at the rounds' model, without a noise effect's mean part
-    # (floor bumps shorten the travel: their partner takes it in the fits).
+    # The filter's estimates, linearised at the rounds' model without the mean part of a noise
+    # effect step 6 refused (a kept one is in ``robot``, the start of every open-loop fit).
     base = state.model.spec
-    for name in state.named:
-        if EFFECTS[name].noise and type(EFFECTS[name]).replay is not Effect.replay:
-            base = EFFECTS[name].write(base, EFFECTS[name].absent_values())
+    for name in noise.refused:
+        base = EFFECTS[name].write(base, EFFECTS[name].absent_values())
 
     def gated(proposed_effects: list[str]) -> GateResult:
         linearised = FilterLinearisation(
-            data, Model(base, state.model.sensor), proposed_effects, plausible_terms
+            rec.data, Model(base, state.model.sensor), proposed_effects, terms
         )
         return open_loop_gate(
-            open_data,
+            rec.open_data,
             robot,
             state.model.spec,
             proposed_effects,
-            plausible_terms,
-            options,
-            open_loop_folds(fit_runs),
-            start=nuisances,
+            terms,
+            rec.options,
+            open_loop_folds(rec.timed),
+            start=rec.frames,
             nominal=nominal,
             report=report,
             filtered=linearised,
-            corrected=OpenLoopData(fit_corrected, interval, length),
+            corrected=OpenLoopData(rec.corrected, rec.open_data.interval, rec.open_data.length),
             named=[n for n in state.named if not EFFECTS[n].noise],
             order=cfg.gate_order,
         )
 
-    gate = gated(_significant_effects(state, tied=True))
+    pool = [n for n in _significant_effects(state, tied=True) if n not in noise.took_over]
+    gate = gated(pool)
     resolved = bool(tied) and set(tied) <= set(gate.effects)
     if tied and not resolved:
-        gate = gated(_significant_effects(state, tied=False))
-    # Step 12: the estimator of the kept model's values: the filter's (efficient when its noise
-    # model is right), unless the open-loop fit's (what the held-out comparison measures, robust to
-    # a wrong noise model) predicts the left-out folds better by one standard error. Between two
-    # estimators that predict equally well the efficient one wins: an open-loop estimate chosen on
-    # fold noise leaves the filter a residual it can see (E_d 3e-5 off on a simulated robot).
-    kept = list(gate.effects)
+        gate = gated([n for n in _significant_effects(state, tied=False) if n in pool])
+    return gate, tied, resolved
+
+
+def _estimate(
+    rec: Recording, state: DiagnosisState, gate: GateResult, report: Report
+) -> tuple[SystematicFit, dict[str, float], list[Run]]:
+    """Step 9: the estimator of the kept model's values: the filter's (efficient when its noise
+    model is right), unless the open-loop fit's (what the held-out comparison measures, robust
+    to a wrong noise model) predicts the left-out folds better by one standard error. Between
+    two estimators that predict equally well the efficient one wins: an open-loop estimate
+    chosen on fold noise leaves the filter a residual it can see (E_d 3e-5 off on a simulated
+    robot). Returns the chosen fit, each estimator's fold error [m²] and the fit runs with the
+    kept model's nuisances removed."""
     chosen = open_loop_estimate(gate.fit, gate.cv_error)
-    corrected_final = correct_runs(timed, gate.fit.nuisances)
-    kf_data = Dataset.of(corrected_final, interval)
-    corrected_open = OpenLoopData(corrected_final, interval, length)
-    effect = model_effect(kept, gate.terms)
-
-    def by_filter(spec_start: RobotSpec, effect_now: Effect) -> SystematicFit:
-        start_model = fit_noise_model(kf_data, Model(spec_start, state.model.sensor), nuisance)
-        return filter_estimate(
-            kf_data, start_model, effect_now, nuisance, corrected_open, gate.folds, spec_start
-        )
-
+    corrected = correct_runs(rec.timed, gate.fit.nuisances)
     estimators: dict[str, float] = {"open loop": chosen.fold_error(gate.folds)}
+    effect = model_effect(gate.effects, gate.terms)
     if effect is not None:
         report("estimator", 1.0)
-        filtered = by_filter(spec_with(gate.fit.spec, state.model.spec, kept, gate.terms), effect)
+        kf_data = Dataset.of(corrected, rec.open_data.interval)
+        nuisance = EFFECTS.get(NUISANCE)
+        start = spec_with(gate.fit.spec, state.model.spec, gate.effects, gate.terms)
+        start_model = fit_noise_model(kf_data, Model(start, state.model.sensor), nuisance)
+        filtered = filter_estimate(
+            kf_data,
+            start_model,
+            effect,
+            nuisance,
+            OpenLoopData(corrected, rec.open_data.interval, rec.open_data.length),
+            gate.folds,
+            start,
+        )
         estimators["filter"] = filtered.fold_error(gate.folds)
         if not chosen.better_than(filtered, gate.folds):
             chosen = filtered
-    # Step 13: noise effects: named by the rounds' held-out likelihood; floor bumps only with their
-    # signature and a size the floor can produce. One with a mean part (bumps shorten travel)
-    # is fitted beside its systematic partners, and how far it moved E_d, E_b, E_s is reported.
-    noise_checks: dict[str, dict[str, Any]] = {}
-    noise_kept: list[str] = []
-    for name in (n for n in state.named if EFFECTS[n].noise):
-        values = EFFECTS[name].read(state.model.spec)
-        if EFFECTS[name].wheel_jumps(values, np.ones((1, 2)), length) is not None:
-            check = check_bumps(
-                corrected_final,
-                chosen.spec,
-                values,
-                max_obstacle=cfg.max_obstacle,
-                max_rate=cfg.max_bump_rate,
-                interval=interval,
-                alpha=0.5 * cfg.alpha,
-            )
-            noise_checks[name] = check.as_dict()
-            if not check.accepted:
-                continue
-        noise_kept.append(name)
-    spec = chosen.spec
-    for name in noise_kept:
-        spec = EFFECTS[name].write(spec, EFFECTS[name].read(state.model.spec))
-    geometry_check: dict[str, dict[str, Any]] = {}
-    moving = [n for n in noise_kept if type(EFFECTS[n]).replay is not Effect.replay]
-    if moving:
-        kept += [p for n in moving for p in EFFECTS[n].partners if p not in kept]
-        joint = model_effect(kept, gate.terms)
-        assert joint is not None  # the partners at least
-        if chosen.estimator == "filter":
-            refit = by_filter(spec, joint)
-        else:
-            again = fit_open_loop(open_data, spec, joint, options, gate.fit.nuisances)
-            refit = open_loop_estimate(
-                again, cross_validate_open_loop(open_data, again, gate.folds)
-            )
-        geometry_check = _geometry_moves(chosen, refit, moving)
-        chosen, spec = refit, refit.spec
-    named = kept + noise_kept
-    parameters = _parameters(chosen, kept)
-    for name in noise_kept:
-        parameters[name] = state.parameters.get(name, {})
+    return chosen, estimators, corrected
+
+
+def _noise_refit(
+    found: SystematicModel, state: DiagnosisState, noise: NoiseNamed
+) -> tuple[Model, NoiseNamed]:
+    """Step 11: the final model — the chosen systematic values and the kept noise effects,
+    whose parameters and the sensor noise are refitted by maximum likelihood on the fit runs
+    under it (the rounds fitted them beside a systematic model the gate may since have
+    changed). A noise effect the refit takes to the floor of its range (the fit's "absent":
+    a tenth of its parameters' scale) was carried by the rest of the model and leaves it."""
+    spec = found.chosen.spec
+    for name in noise.kept:
+        spec = EFFECTS[name].write(spec, noise.values[name])
+    data = Dataset.of(found.corrected, found.interval)
+    kept = list(noise.kept)
+    sensor = state.model.sensor
+    while True:
+        effects = [EFFECTS[n] for n in kept]
+        refit, sensor, _ = fit_noise(data, spec, sensor, *effects, warm=bool(effects))
+        vanished = [n for n in kept if _at_floor(EFFECTS[n], EFFECTS[n].read(refit))]
+        if not vanished:
+            break
+        for name in vanished:
+            spec = EFFECTS[name].write(spec, EFFECTS[name].absent_values())
+            kept.remove(name)
+    return Model(refit, sensor), dataclasses.replace(
+        noise, kept=kept, vanished=[n for n in noise.kept if n not in kept]
+    )
+
+
+def _at_floor(effect: Effect, values: Mapping[str, float]) -> bool:
+    """Whether a noise effect's fitted ``values`` make it absent once every parameter at the
+    noise fit's floor (a tenth of its scale, :func:`odomgym.diagnose.fit.fit_noise`) is read as
+    absent."""
+    floor = {p.name: (0.1 * p.scale * (1.0 + 1e-6), p.absent) for p in effect.parameters}
+    read = {k: (floor[k][1] if v <= floor[k][0] else v) for k, v in values.items()}
+    return effect.is_absent(read)
+
+
+def _final_nuisances(rec: Recording, found: SystematicModel) -> dict[str, SessionNuisance]:
+    """The fit sessions' nuisances under the diagnosed model: the gate's frames, the clock of
+    step 2."""
+    return _with_clock(found.gate.fit.nuisances, rec.clock)
+
+
+def _held_out(
+    split: RunSplit,
+    rec: Recording,
+    robot: RobotSpec,
+    found: SystematicModel,
+    as_given: ModelErrors,
+    baseline: Baseline | None,
+    cfg: DiagnoseConfig,
+    report: Report,
+) -> HeldOut:
+    """Step 12: the held-out runs predicted open loop by the model as given, the diagnosed
+    model and the baseline (:mod:`odomgym.diagnose.heldout`) — the yardstick of systematic
+    effects and terms."""
     report("held-out test", 1.0)
-    final_model = fit_noise_model(kf_data, Model(spec, state.model.sensor))
-    # Step 14: the held-out runs: the model as given, the diagnosed one and the baseline, open loop.
+    interval, length = rec.open_data.interval, rec.open_data.length
     models = {AS_GIVEN: as_given}
-    final_nuisances = _with_clock(gate.fit.nuisances, clock)
     models[DIAGNOSED] = evaluate_open_loop(
-        DIAGNOSED, held_runs, spec, final_nuisances, clock_options, interval, length, pictured
+        DIAGNOSED,
+        split.held,
+        found.chosen.spec,
+        _final_nuisances(rec, found),
+        rec.clock_options,
+        interval,
+        length,
+        rec.pictured,
     )
     baseline_name, baseline_geometry = None, None
     if baseline is not None:
         report("baseline", 1.0)
-        base_spec = baseline(fit_corrected, robot)
-        base_fit = fit_open_loop(open_data, base_spec, None, options, nuisances)
+        base_spec = baseline(rec.corrected, robot)
+        base_fit = fit_open_loop(rec.open_data, base_spec, None, rec.options, rec.frames)
         models[BASELINE] = evaluate_open_loop(
             BASELINE,
-            held_runs,
+            split.held,
             base_spec,
-            _with_clock(base_fit.nuisances, clock),
-            clock_options,
+            _with_clock(base_fit.nuisances, rec.clock),
+            rec.clock_options,
             interval,
             length,
-            pictured,
+            rec.pictured,
         )
         baseline_name = baseline.name
         baseline_geometry = {"E_d": base_spec.e_d, "E_b": base_spec.e_b, "E_s": base_spec.e_s}
     truth = {
-        _run_id(held_runs[j], j): np.column_stack(
-            [held_runs[j].time - held_runs[j].time[0], held_runs[j].true_pose[:, :2]]
+        _run_id(split.held[j], j): np.column_stack(
+            [split.held[j].time - split.held[j].time[0], split.held[j].true_pose[:, :2]]
         )
-        for j in pictured
+        for j in rec.pictured
     }
-    held_out = compare_models(
-        split, models, np.random.default_rng(cfg.seed + 2), baseline_name, baseline_geometry, truth
+    return compare_models(
+        split.kind,
+        models,
+        np.random.default_rng(cfg.seed + 2),
+        baseline_name,
+        baseline_geometry,
+        truth,
     )
-    held_corrected = correct_runs(held_runs, models[DIAGNOSED].nuisances)
-    found_anything = bool(named) or bool(gate.terms)
-    last = state.rounds[-1].verdict if state.rounds else "none"
-    if resolved:
-        last = "explained"  # the open-loop gate told the tied effects apart
-    verdict, final_test = _final_test(
-        Dataset.of(held_corrected, interval), final_model, found_anything, last, cfg.alpha, cfg.seed
-    )
-    if found_anything and not held_out.better_than_as_given:
-        verdict = "unconfirmed"
-    elif not found_anything and gate.steps:
-        # The likelihood proposed effects or terms, none lowered the error of predicting
-        # left-out folds open loop: the model stays as given, and the report says what was not
-        # confirmed (never "explained" on a proposal the open-loop check refused).
-        verdict = "unconfirmed"
-    final_test["absorbed"] = absorbed
-    final_test["tie_resolved_open_loop"] = tied if resolved else []
-    report("shrink", 1.0)
-    gaps = _shrink(held_corrected, robot, final_model, cfg)
+
+
+def _spread(
+    split: RunSplit,
+    held: HeldOut,
+    final: Model,
+    noise: NoiseNamed,
+    found: SystematicModel,
+    cfg: DiagnoseConfig,
+    report: Report,
+) -> list[SpreadCheck]:
+    """Step 13: each kept noise effect judged by the spread it predicts on the held-out runs
+    (:func:`odomgym.diagnose.spread.judge_spread`) against the model without it, refitted on
+    the fit runs."""
+    if not noise.kept:
+        return []
+    report("held-out spread", 1.0)
+    fit_data = Dataset.of(found.corrected, found.interval)
+    runs = held.corrected(split.held)
+    return [
+        judge_spread(
+            name,
+            runs,
+            final,
+            model_without(fit_data, final, name, noise.kept),
+            cfg.checkpoint_interval,
+        )
+        for name in noise.kept
+    ]
+
+
+def _diagnosis(
+    runs: Sequence[Run],
+    robot: RobotSpec,
+    split: RunSplit,
+    rec: Recording,
+    state: DiagnosisState,
+    findings: list[Finding],
+    noise: NoiseNamed,
+    sizes: Sequence[TermSize],
+    found: SystematicModel,
+    final: Model,
+    held: HeldOut,
+    spread: Sequence[SpreadCheck],
+    verdict: str,
+    final_test: dict[str, Any],
+    gaps: dict[str, Any],
+) -> Diagnosis:
+    """The :class:`~odomgym.diagnose.results.Diagnosis` of the steps' results."""
+    gate, chosen = found.gate, found.chosen
+    kept = list(gate.effects)
+    fit_nuisances = _final_nuisances(rec, found)
+    parameters = _parameters(chosen, kept)
+    for name in noise.kept:
+        parameters[name] = noise_parameters(state, name, final.spec)
     return Diagnosis(
         verdict=verdict,
-        named_effects=named,
+        named_effects=kept + noise.kept,
         parameters=parameters,
         initial=robot,
-        model=spec,
-        sensor=final_model.sensor,
+        model=final.spec,
+        sensor=final.sensor,
         rounds=state.rounds,
         candidates=state.candidates,
         findings=findings,
-        discovered=_kept_terms(state, gate.terms, chosen, corrected_final),
+        discovered=_kept_terms(state, gate.terms, chosen, found.corrected),
         discovery=_discovery_record(state.passes),
         final_test=final_test,
         nuisances=[
-            *final_nuisances.values(),
+            *fit_nuisances.values(),
             *(
                 dataclasses.replace(n, held_out=True)
-                for s, n in models[DIAGNOSED].nuisances.items()
-                if s not in final_nuisances
+                for s, n in held.models[DIAGNOSED].nuisances.items()
+                if s not in fit_nuisances
             ),
         ],
         estimators={
             "chosen": chosen.estimator,
-            "held_out_fold_rms_mm": {k: 1e3 * math.sqrt(v) for k, v in estimators.items()},
+            "held_out_fold_rms_mm": {k: 1e3 * math.sqrt(v) for k, v in found.estimators.items()},
         },
-        held_out=held_out,
+        held_out=held,
         gate=gate.steps,
         stand_ins=[size.as_dict() for size in sizes if not size.plausible],
-        noise_checks=noise_checks,
-        geometry_check=geometry_check,
+        refused_terms=[r.as_dict() for r in found.refused],
+        noise_checks=noise.checks,
+        spread=[check.as_dict() for check in spread],
+        geometry_check=_geometry_moves(final.spec, spread, chosen.entries),
         filter_parameters={
             name: {key: entry["value"] for key, entry in state.parameters[name].items()}
             for name in state.named
             if name in state.parameters
         },
         terms_tried=_terms_tried(state.passes),
-        fit_runs=[_run_id(runs[j], j) for j in fit_index],
-        holdout_runs=[_run_id(runs[j], j) for j in held_index],
+        fit_runs=[_run_id(runs[j], j) for j in split.fit_index],
+        holdout_runs=[_run_id(runs[j], j) for j in split.held_index],
         **gaps,
     )

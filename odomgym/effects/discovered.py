@@ -75,6 +75,7 @@ __all__ = [
     "DiscoveredTerms",
     "Term",
     "describe_term",
+    "operating_phrase",
     "term_by_name",
 ]
 
@@ -247,6 +248,27 @@ def describe_term(name: str, value: float, stderr: float = math.nan) -> str:
         )
     verb = "over-rotates" if value > 0 else "under-rotates"
     return f"the robot {verb} {words}: {_fmt(term, abs(value))} {_per(term)}{err}{tail}"
+
+
+def operating_phrase(name: str, change: float, operating: float) -> str:
+    """What term ``name`` does at the data's operating range, in words: the change ``change``
+    it makes (a fraction of its channel, radians of crab) at ``operating``, the 95th percentile
+    of its modulator's magnitude, e.g. "at |a| = 0.42 m/s² (95th percentile) it changes the
+    left wheel's travel by 0.31 %"."""
+    term = _BY_NAME[name]
+    unit = _MOD_UNIT[term.modulator]
+    where = (
+        f"at |{term.modulator}| = {operating:.3g} {unit} (95th percentile of the data)"
+        if unit
+        else "wherever it acts"
+    )
+    if term.channel == "crab":
+        what = f"turns the direction of travel by {math.degrees(change):.3g}°"
+    elif term.wheel:
+        what = f"changes the {term.channel} wheel's travel by {100 * change:.3g} %"
+    else:
+        what = f"changes the yaw increment by {100 * change:.3g} %"
+    return f"{where} it {what}"
 
 
 def _per(term: Term) -> str:
