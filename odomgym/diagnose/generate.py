@@ -15,6 +15,7 @@ World under one of two documented protocols and returns runs as a tracking syste
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any, Literal
 
 import numpy as np
@@ -24,7 +25,7 @@ from odomgym.floor import FloorSpec
 from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import RobotSpec
 from odomgym.sim.route_runs import simulate_runs
-from odomgym.sim.routes import spin_route, square_route, straight_route
+from odomgym.sim.routes import Route, spin_route, square_route, straight_route
 from odomgym.sim.world import World
 
 __all__ = ["Protocol", "simulate_protocol"]
@@ -35,11 +36,16 @@ _DIRECTIONS: tuple[Direction, ...] = ("cw", "ccw")
 
 
 def _arc(
-    robot: RobotSpec, radius: float, speed: float, sign: float, rng: np.random.Generator
+    robot: RobotSpec,
+    radius: float,
+    speed: float,
+    sign: float,
+    rng: np.random.Generator,
+    floor: FloorSpec,
 ) -> Run:
-    """An open-loop half circle: ramp up, hold (v, ω = v/R), ramp down, at 20 Hz."""
+    """An open-loop half circle on ``floor``: ramp up, hold (v, ω = v/R), ramp down, at 20 Hz."""
     dt = 0.05
-    world = World(robot, FloorSpec(), dt=dt, rng=rng)
+    world = World(robot, floor, dt=dt, rng=rng)
     half_b = 0.5 * robot.wheelbase
     r_nom = 0.5 * robot.wheel_diameter
     omega = sign * speed / radius
@@ -57,44 +63,60 @@ def _arc(
     return Run("free", np.array(times), np.array(counts), np.array(poses))
 
 
+FloorDraw = Callable[[np.random.Generator], FloorSpec]
+"""A floor drawn afresh for every run (e.g. a new layout of cables): what a robot meets when
+each run starts somewhere else on a cluttered floor."""
+
+
 def simulate_protocol(
     robot: RobotSpec,
     protocol: Protocol,
     rng: np.random.Generator,
     *,
     sensor: tuple[float, float] = (0.001, 0.002),
-    floor: FloorSpec | None = None,
+    floor: FloorSpec | FloorDraw | None = None,
 ) -> list[Run]:
     """Runs of ``robot`` under ``protocol`` (module docstring), logged with sensor noise
-    ``sensor`` = (position σ [m], heading σ [rad])."""
-    ground = floor if floor is not None else FloorSpec()
+    ``sensor`` = (position σ [m], heading σ [rad]). ``floor``: one floor for every run, or a
+    function drawing each run's floor from ``rng`` (then every run is driven on its own floor,
+    one after the other)."""
+
+    def drive(route: Route, repeats: int = 1, **options: float) -> list[Run]:
+        if callable(floor):
+            out: list[Run] = []
+            for _ in range(repeats):
+                runs, _ = simulate_runs(robot, floor(rng), route, rng=rng, **options)
+                out.extend(runs)
+            return out
+        ground = floor if floor is not None else FloorSpec()
+        runs, _ = simulate_runs(robot, ground, route, rng=rng, repeats=repeats, **options)
+        return runs
+
+    def floor_of() -> FloorSpec:
+        if callable(floor):
+            return floor(rng)
+        return floor if floor is not None else FloorSpec()
+
     plans: list[tuple[str, list[Run]]] = []
     if protocol == "umbmark":
         for d in _DIRECTIONS:
-            runs, _ = simulate_runs(robot, ground, square_route(1.5, d), rng=rng, repeats=5)
-            plans.append((f"square_{d}", runs))
+            plans.append((f"square_{d}", drive(square_route(1.5, d), 5)))
     else:
         for d in _DIRECTIONS:
-            runs, _ = simulate_runs(robot, ground, square_route(1.5, d), rng=rng, repeats=2)
-            plans.append((f"square_{d}", runs))
-        runs, _ = simulate_runs(robot, ground, straight_route(3.0, True), rng=rng, repeats=2)
-        plans.append(("straight_return", runs))
-        runs, _ = simulate_runs(robot, ground, straight_route(3.0), rng=rng, repeats=2)
-        plans.append(("straight_oneway", runs))
+            plans.append((f"square_{d}", drive(square_route(1.5, d), 2)))
+        plans.append(("straight_return", drive(straight_route(3.0, True), 2)))
+        plans.append(("straight_oneway", drive(straight_route(3.0), 2)))
         for speed, tag in ((0.1, "slow"), (0.3, "fast")):
             for angle in (90, 180, 360):
                 for d in _DIRECTIONS:
-                    runs, _ = simulate_runs(
-                        robot,
-                        ground,
+                    runs = drive(
                         spin_route(math.radians(angle), d),
-                        rng=rng,
                         cruise_speed=min(speed, robot.max_wheel_speed),
                     )
                     plans.append((f"spin_{d}_{angle}_{tag}", runs))
         for speed, tag in ((0.15, "slow"), (0.35, "fast")):
             for sign, d in ((-1.0, "cw"), (1.0, "ccw")):
-                plans.append((f"arc_{d}_{tag}", [_arc(robot, 1.0, speed, sign, rng)]))
+                plans.append((f"arc_{d}_{tag}", [_arc(robot, 1.0, speed, sign, rng, floor_of())]))
     out: list[Run] = []
     for label, runs in plans:
         for run in runs:

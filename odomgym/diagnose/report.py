@@ -62,47 +62,174 @@ def report_json(diagnosis: Diagnosis) -> str:
 
 
 def format_markdown(diagnosis: Diagnosis, data: str) -> str:
-    """``report.md``: what a person reads first."""
+    """``report.md``: what a person reads first — one story. The verdict, then the decisions
+    (what each yardstick kept or refused on held-out data, and why), then the figures behind
+    them, each once; the rounds' likelihood numbers come last, marked as the proposals they
+    are."""
     d = diagnosis
     lines = [f"# odomgym diagnose: {data}", ""]
+    lines += _verdict_lines(d)
+    lines += _decision_lines(d)
+    lines += _held_out_lines(d)
+    lines += _spread_lines(d)
+    lines += _parameter_lines(d)
+    lines += _nuisance_lines(d)
+    lines += _check_lines(d)
+    lines += _proposal_lines(d)
+    lines += _diagnostic_lines(d)
+    lines += _where_lines(d)
+    return "\n".join(lines) + "\n"
+
+
+def _confirmed_words(d: Diagnosis) -> tuple[list[str], list[str]]:
+    """Each held-out confirmation in words: (confirmed, not confirmed)."""
+    yes: list[str] = []
+    no: list[str] = []
+    for c in d.final_test.get("confirmations", []):
+        names = ", ".join(f"**{n}**" for n in c["names"])
+        if c["yardstick"] == "open-loop error":
+            words = (
+                f"{names} by the open-loop error of the held-out runs "
+                f"({c['as_given_mm']:.1f} mm as given → {c['diagnosed_mm']:.1f} mm)"
+            )
+        else:
+            words = f"{names} by the spread it predicts ({_spread_words(c)})"
+        (yes if c["confirmed"] else no).append(words)
+    return yes, no
+
+
+def _spread_words(c: dict[str, Any]) -> str:
+    """A spread check in a few words: the score difference and the regions' coverage."""
+    cover = ", ".join(f"{k} % region {100 * v:.0f} %" for k, v in c["coverage"].items())
+    return (
+        f"log score {c['difference']:+.1f} ± {c['stderr']:.2g} nats per held-out "
+        f"{c['units'][:-1]}; {cover}"
+    )
+
+
+def _verdict_lines(d: Diagnosis) -> list[str]:
+    """The verdict and what it rests on, in one paragraph."""
     final = d.final_test
     left = final.get("residual_follows")
     found = _found(d)
+    yes, no = _confirmed_words(d)
+    confirmed = "; ".join(yes)
     verdicts = {
-        "explained": f"the model was missing {found}; on the held-out runs the residuals of the "
-        "updated model show no dependence on any term of the grammar and look white",
-        "partly explained": f"the model was missing {found}, but structure is left on the "
-        f"held-out runs: the residuals follow **{left}** most (score z = "
-        f"{final.get('residual_follows_z', math.nan):.1f}; held-out test p = "
+        "explained": f"the model was missing {found}. Confirmed on the held-out runs: "
+        f"{confirmed}; their residuals under the updated model show no dependence on any term "
+        "of the grammar and look white",
+        "partly explained": f"the model was missing {found}. Confirmed on the held-out runs: "
+        f"{confirmed}; but structure is left there: the residuals follow **{left}** most "
+        f"(score z = {final.get('residual_follows_z', math.nan):.1f}; held-out test p = "
         f"{final.get('held_out_p', math.nan):.2g})",
+        "partly confirmed": f"the fit runs pointed to {found}. Confirmed on the held-out runs: "
+        f"{confirmed}. **Not** confirmed: {'; '.join(no)} — read those as proposals, not "
+        "findings",
         "ambiguous": "several effects explain the data equally well (see below)",
         "unexplained": "the model disagrees with the data beyond noise, and neither the catalogue "
         f"nor the grammar's terms explain it (the residuals follow **{left}** most)",
         "none": "the model already matches the data within noise",
         "unconfirmed": (
-            f"the fit runs pointed to {found}, but the updated model does **not** "
-            "predict the held-out runs better open loop than the model as given: nothing here "
-            "is a finding to copy into the robot"
+            f"the fit runs pointed to {found}, but the held-out runs do **not** confirm it "
+            f"({'; '.join(no)}): nothing here is a finding to copy into the robot"
             if found != "nothing"
             else f"the fit runs' likelihood proposed {_refused(d)}, but none of it lowered "
             "the error of predicting left-out folds open loop (the open-loop check below): the "
             "model stays as given, and nothing here is a finding to copy into the robot"
         ),
     }
-    lines += [f"**Verdict: {d.verdict}** — {verdicts.get(d.verdict, d.verdict)}.", ""]
-    lines += _held_out_lines(d)
-    lines += [
-        f"- **Systematic effects:** {', '.join(d.systematic_effects) or 'none'}",
-        f"- **Discovered (outside the catalogue):** "
-        f"{'; '.join(e['sentence'] for e in d.discovered) or 'none'}",
-        f"- **Noise model:** {', '.join(d.noise_model) or 'sensor noise only'}",
-    ]
+    return [f"**Verdict: {d.verdict}** — {verdicts.get(d.verdict, d.verdict)}.", ""]
+
+
+def _decision_lines(d: Diagnosis) -> list[str]:
+    """What was kept and what was refused, each with the yardstick that decided and why."""
+    final = d.final_test
+    lines = ["## What was kept, and why", ""]
+    kept = [step for step in d.gate if step.kept]
+    for step in kept:
+        lines.append(
+            f"- kept **{step.name}** ({step.kind}): the open-loop check of left-out folds, "
+            f"{step.before_mm:.2f} → {step.after_mm:.2f} mm (rule: {_rule(step)})"
+        )
+    for name in d.noise_model:
+        lines.append(
+            f"- kept **{name}** (noise effect): named by the rounds' held-out likelihood"
+            + (", its signature and size checked" if name in d.noise_checks else "")
+        )
+    refused = [step for step in d.gate if not step.kept]
+    for step in refused:
+        lines.append(
+            f"- refused **{step.name}** ({step.kind}): {step.before_mm:.2f} → "
+            f"{step.after_mm:.2f} mm on left-out folds did not pass the rule "
+            f"({_rule(step)})"
+        )
+    for entry in d.refused_terms:
+        lines.append(f"- refused **{entry['term']}** (term): {entry['reason']}")
+    for name, check in d.noise_checks.items():
+        if not check["accepted"]:
+            lines.append(f"- refused **{name}** (noise effect): {check['reason']}")
+    for name in final.get("noise_carried_by_the_rest", []):
+        lines.append(
+            f"- dropped **{name}** (noise effect): refitted on the final model it went to "
+            "the floor of its range — the rest of the model carries it"
+        )
     if final.get("absorbed"):
         lines.append(
-            f"- Named on the way but not needed by the final model (backward check): "
-            f"{', '.join(final['absorbed'])}"
+            "- absorbed by the backward check (named on the way, not needed by the final "
+            f"likelihood): {', '.join(final['absorbed'])}"
+        )
+    if len(lines) == 2:
+        lines.append("- nothing was proposed")
+    yes, no = _confirmed_words(d)
+    lines.append("")
+    if yes or no:
+        lines.append("On the held-out runs, each by the yardstick of its kind:")
+        lines.append("")
+        lines += [f"- confirmed: {w}" for w in yes]
+        lines += [f"- **not confirmed**: {w}" for w in no]
+        lines.append("")
+    return lines
+
+
+def _spread_lines(d: Diagnosis) -> list[str]:
+    """The noise effects' yardstick: the held-out spread against the model without each."""
+    if not d.spread:
+        return []
+    lines = [
+        "## Noise effects on held-out runs: the spread they predict",
+        "",
+        "Log predictive density of each held-out run's open-loop errors (all measured samples "
+        "jointly) under the model with the effect and without it (refitted on the fit runs), "
+        "and the share of the held-out errors inside the model's 50 % and 95 % predictive "
+        "regions (40–60 % and 90–98 % required).",
+        "",
+        "| noise effect | score with − without [nats] | per | 50 % region | 95 % region "
+        "| confirmed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c in d.spread:
+        lines.append(
+            f"| {c['effect']} | {c['difference']:+.1f} ± {c['stderr']:.2g} | "
+            f"{c['units'][:-1]} ({c['unit_count']}) | {100 * c['coverage']['50']:.0f} % | "
+            f"{100 * c['coverage']['95']:.0f} % | "
+            f"{'yes' if c['confirmed'] else 'no: ' + c['reason']} |"
         )
     lines.append("")
+    for key, entry in d.geometry_check.items():
+        if entry["moved_by"]:
+            lines.append(
+                f"- {key} {entry['with_noise_effects']:.5f} with {', '.join(entry['moved_by'])}"
+                f" (its mean part belongs to it); {entry['without_noise_effects']:.5f} in the "
+                "model without it, refitted"
+            )
+    if d.geometry_check:
+        lines.append("")
+    return lines
+
+
+def _parameter_lines(d: Diagnosis) -> list[str]:
+    """The kept effects' values and the discovered terms."""
+    lines: list[str] = []
     bounded: list[str] = []
     for title, group in (
         ("Systematic effects", d.systematic_effects),
@@ -124,10 +251,12 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
                 edge = key in limits and limits[key].at_limit(value)
                 if edge:
                     bounded.append(f"{name}.{key}")
+                errors = " | ".join(
+                    _error(entry.get(k, math.nan))
+                    for k in ("stderr", "stderr_runs", "stderr_sessions")
+                )
                 lines.append(
-                    f"| {name} | {key} | {value:.6g}{' (bound)' if edge else ''} | "
-                    f"{entry['stderr']:.2g} | {entry.get('stderr_runs', math.nan):.2g} | "
-                    f"{entry.get('stderr_sessions', math.nan):.2g} |"
+                    f"| {name} | {key} | {value:.6g}{' (bound)' if edge else ''} | {errors} |"
                 )
         lines.append("")
     if d.discovered:
@@ -135,21 +264,20 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
             "## Discovered terms",
             "",
             "Terms of the error grammar (channel × modulator, `docs/diagnose.md`) found by sparse "
-            "regression on the residuals the catalogue left, kept only if each passes its "
-            "family-wise test and together they raise the held-out likelihood; saved in "
-            "`model.toml` as `[robot.effects.discovered]`, so the envs apply them.",
+            "regression on the residuals the catalogue left, kept by the open-loop check and "
+            "at a real size (at least two standard errors from zero, the sign the discovery "
+            "proposed); saved in `model.toml` as `[robot.effects.discovered]`, so the envs "
+            "apply them.",
             "",
-            "| term | channel | modulator | coefficient | standard error | reading |",
-            "|---|---|---|---|---|---|",
+            "| term | coefficient | standard error | reading |",
+            "|---|---|---|---|",
         ]
         for e in d.discovered:
             lines.append(
-                f"| `{e['term']}` | {e['channel']} | {e['modulator']} | {e['coefficient']:.4g} "
+                f"| `{e['term']}` | {e['coefficient']:.4g} "
                 f"{'' if e['unit'] == '1' else e['unit']} | {e['stderr']:.2g} | {e['sentence']} |"
             )
         lines.append("")
-    lines += _nuisance_lines(d)
-    lines += _check_lines(d)
     if bounded:
         lines += [
             f"At the edge of its allowed range: {', '.join(bounded)}. The effect stands in "
@@ -160,8 +288,8 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
     for name in d.named_effects:
         if EFFECTS[name].confounded:
             lines += [f"Also consistent with `{name}`: {EFFECTS[name].confounded}.", ""]
-    last = d.rounds[-1]
-    if last.verdict == "ambiguous" and last.separating:
+    last = d.rounds[-1] if d.rounds else None
+    if last is not None and last.verdict == "ambiguous" and last.separating:
         sep = last.separating
         lines += [
             f"Tied in round {last.number}: {', '.join(last.tied)}. The experiment that would "
@@ -171,43 +299,54 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
             f"{sep['separation_sigma']:.1f} × the sensor noise fitted on these data).",
             "",
         ]
-    lines += [
-        "## The gap on held-out runs",
+    return lines
+
+
+def _error(value: float) -> str:
+    """A standard error for a table: two digits, or a dash where none was computed."""
+    return f"{value:.2g}" if math.isfinite(value) else "—"
+
+
+def _decision_of(d: Diagnosis, name: str) -> str:
+    """What became of a proposal of the rounds, in a few words."""
+    if name in d.named_effects:
+        return "kept"
+    gate = {step.name: step for step in d.gate}
+    if name in gate:
+        return f"refused by the open-loop check ({_rule(gate[name])})"
+    if name in d.final_test.get("absorbed", []):
+        return "absorbed (backward check)"
+    if name in d.noise_checks and not d.noise_checks[name]["accepted"]:
+        return "refused (signature or size)"
+    if name in d.final_test.get("noise_carried_by_the_rest", []):
+        return "carried by the rest of the model"
+    return "not proposed"
+
+
+def _proposal_lines(d: Diagnosis) -> list[str]:
+    """The rounds: the likelihood's proposals, with what became of each."""
+    lines = [
+        "## The rounds: the likelihood's proposals",
         "",
-        f"Held out: {len(d.holdout_runs)} runs ({', '.join(d.holdout_runs)}); fitted on "
-        f"{len(d.fit_runs)}. Gap = {GAP_METRIC}.",
-        "",
-        "| | gap (1 = noise) | 95 % interval | position RMS [mm] | heading RMS [°] |",
-        "|---|---|---|---|---|",
-        f"| model as given | {d.gap_before:.2f} | "
-        f"{d.gap_ci['before'][0]:.2f}–{d.gap_ci['before'][1]:.2f} | "
-        f"{d.physical['gap_position_mm'][0]:.2f} | {d.physical['gap_heading_deg'][0]:.3f} |",
-        f"| updated model | {d.gap_after:.2f} | "
-        f"{d.gap_ci['after'][0]:.2f}–{d.gap_ci['after'][1]:.2f} | "
-        f"{d.physical['gap_position_mm'][1]:.2f} | {d.physical['gap_heading_deg'][1]:.3f} |",
-        f"| noise alone | {d.noise_floor:.2f} | | | |",
-        "",
-        f"Fraction of the reducible gap closed: {d.fraction_closed:.2f} "
-        f"(95 % interval {d.fraction_ci[0]:.2f}–{d.fraction_ci[1]:.2f}). Sensor noise fitted: "
-        f"{1e3 * d.sensor.position:.2f} mm, {math.degrees(d.sensor.heading):.3f}°.",
-        "",
-        "## Candidates",
-        "",
-        "Held-out gain: log-likelihood gained on runs left out of the fit (cross-validation), "
-        "summed over the fit runs; LR: in-sample likelihood ratio 2Δℓ, its p-value "
-        "Bonferroni-corrected over the candidates; sign flips: family-wise max-T p over runs.",
+        "These are proposals, scored on the fit runs by the Kalman filter's likelihood; the "
+        "decisions above are what the held-out checks made of them. Held-out gain: "
+        "log-likelihood gained on runs left out of the fit (cross-validation), summed over the "
+        "fit runs; LR: in-sample likelihood ratio 2Δℓ, its p-value Bonferroni-corrected over "
+        "the candidates; sign flips: family-wise max-T p over runs; proposed: significant by "
+        "the likelihood (the values are the round's fit, not the final ones).",
         "",
         "| round | stage | effect | held-out gain [nats] | LR | p (family-wise) | p (sign flips) "
-        "| fitted |",
-        "|---|---|---|---|---|---|---|---|",
+        "| proposed | proposal's values | decision |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in d.rounds:
         for c in sorted(r.candidates, key=lambda c: (c.stage, -c.cv_gain)):
             fitted = ", ".join(f"{k} = {v:.4g}" for k, v in c.values.items())
-            mark = " ✔" if c.significant else ""
+            decision = _decision_of(d, c.name) if c.significant else "—"
             lines.append(
-                f"| {r.number} | {c.stage} | {c.name}{mark} | {c.cv_gain:.1f} | {c.lr:.1f} | "
-                f"{c.p_family:.2g} | {c.p_sign_flip:.2g} | {fitted} |"
+                f"| {r.number} | {c.stage} | {c.name} | {c.cv_gain:.1f} | {c.lr:.1f} | "
+                f"{c.p_family:.2g} | {c.p_sign_flip:.2g} | {'yes' if c.significant else 'no'} "
+                f"| {fitted} | {decision} |"
             )
     lines += ["", "Rounds:", ""]
     for r in d.rounds:
@@ -218,7 +357,38 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
             else ""
         )
         lines.append(f"- round {r.number}: {r.verdict} {r.winner or ''}{extra}")
-    lines += ["", "## Where the model as given disagrees (Holm-corrected tests)", ""]
+    lines.append("")
+    return lines
+
+
+def _diagnostic_lines(d: Diagnosis) -> list[str]:
+    """The whitened gap: a diagnostic of the noise model, not a yardstick (its open-loop
+    figures are the held-out table's)."""
+    return [
+        "## Diagnostic: the whitened gap on held-out runs",
+        "",
+        f"Held out: {len(d.holdout_runs)} runs ({', '.join(d.holdout_runs)}); fitted on "
+        f"{len(d.fit_runs)}. Gap = {GAP_METRIC}. A statement about the noise model: a wider "
+        "noise model shrinks it without moving a single prediction.",
+        "",
+        "| | gap (1 = noise) | 95 % interval |",
+        "|---|---|---|",
+        f"| model as given | {d.gap_before:.2f} | "
+        f"{d.gap_ci['before'][0]:.2f}–{d.gap_ci['before'][1]:.2f} |",
+        f"| updated model | {d.gap_after:.2f} | "
+        f"{d.gap_ci['after'][0]:.2f}–{d.gap_ci['after'][1]:.2f} |",
+        f"| noise alone | {d.noise_floor:.2f} | |",
+        "",
+        f"Fraction of the reducible gap closed: {d.fraction_closed:.2f} "
+        f"(95 % interval {d.fraction_ci[0]:.2f}–{d.fraction_ci[1]:.2f}). Sensor noise fitted: "
+        f"{1e3 * d.sensor.position:.2f} mm, {math.degrees(d.sensor.heading):.3f}°.",
+        "",
+    ]
+
+
+def _where_lines(d: Diagnosis) -> list[str]:
+    """Where the model as given disagrees, and which experiments reveal which effect."""
+    lines = ["## Where the model as given disagrees (Holm-corrected tests)", ""]
     lines += [
         "| view | group | component | n | mean | 95 % interval | p |",
         "|---|---|---|---|---|---|---|",
@@ -232,7 +402,7 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
     lines += ["", "Which experiments reveal which effect:", ""]
     for name, effect in EFFECTS.items():
         lines.append(f"- `{name}`: {effect.reveals}")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def _held_out_lines(d: Diagnosis) -> list[str]:
@@ -324,13 +494,13 @@ def _rule(step: GateStep) -> str:
 
 
 def _check_lines(d: Diagnosis) -> list[str]:
-    """The open-loop check of every proposal, the stand-ins and the noise checks."""
+    """The open-loop check of every systematic proposal and the stand-ins."""
     lines: list[str] = []
     if d.gate:
         lines += [
             "## Open-loop check of every proposal (held-out folds of the fit runs)",
             "",
-            "Each proposal of the rounds, in order, had to lower the error of predicting the "
+            "Each systematic proposal of the rounds had to lower the error of predicting the "
             "left-out folds open loop (a discovered term by more than one standard error, and "
             "only if the open-loop fit can identify it: variance inflation ≤ 10⁶).",
             "",
@@ -357,19 +527,6 @@ def _check_lines(d: Diagnosis) -> list[str]:
             "",
         ]
         lines += [f"- `{s['term']}` = {s['coefficient']:.4g}: {s['reason']}" for s in d.stand_ins]
-        lines.append("")
-    for name, check in d.noise_checks.items():
-        verdict = "named" if check["accepted"] else f"not named: {check['reason']}"
-        lines += [f"Noise effect `{name}` proposed by the rounds — {verdict}.", ""]
-    moved = {k: v for k, v in d.geometry_check.items() if v["moved_by"]}
-    for key, entry in moved.items():
-        lines.append(
-            f"- {key}: {entry['without_noise_effects']:.5f} without the noise effects, "
-            f"{entry['with_noise_effects']:.5f} with {', '.join(entry['moved_by'])} "
-            f"(change {entry['change']:+.5f}, standard error {entry['stderr']:.2g}"
-            f"{'' if entry['within_errors'] else ': beyond it'})"
-        )
-    if moved:
         lines.append("")
     return lines
 
