@@ -324,6 +324,177 @@ def term_proposals(terms: Sequence[str]) -> list[str]:
     return out
 
 
+Member = tuple[str, str]
+"""A proposal of the gate: (``"effect"`` or ``"term"``, its name)."""
+
+Scored = tuple[OpenLoopFit, FloatArray, str]
+"""A model's open-loop fit, each fit run's held-out mean square error under it [m²], and the
+estimator whose fold refits gave those errors."""
+
+
+def _parts(members: Sequence[Member]) -> tuple[list[str], list[str]]:
+    """The catalogue effects and the grammar terms of ``members`` (a sinusoid's two terms)."""
+    return (
+        [n for k, n in members if k == "effect"],
+        [t for k, n in members if k == "term" for t in n.split("+")],
+    )
+
+
+def _keys_of(members: Sequence[Member]) -> list[str]:
+    """The ``EFFECT.PARAMETER`` keys of ``members``' joint effect."""
+    joint = model_effect(*_parts(members))
+    return [p.name for p in joint.parameters] if joint is not None else []
+
+
+@dataclass
+class _Elimination:
+    """What every backward elimination of :func:`open_loop_gate` shares: the data, the folds,
+    the robot as given and the rounds' values, how each model is fitted and judged."""
+
+    data: OpenLoopData
+    robot: RobotSpec
+    proposed: RobotSpec
+    options: NuisanceOptions
+    folds: Sequence[Sequence[int]]
+    start: Mapping[str, SessionNuisance] | None
+    lenient: set[str]
+    report: Callable[[str, float], None] | None
+    filtered: FilterLinearisation | None
+    corrected: OpenLoopData | None
+
+    def held_out(self, fit: OpenLoopFit, keys: Sequence[str]) -> tuple[FloatArray, str]:
+        """The fold errors of a model by the better of the two estimators: the open-loop fit
+        (``fit``) or the filter's, linearised (``filtered``, on ``corrected``)."""
+        by_open_loop = cross_validate_open_loop(self.data, fit, self.folds)
+        if self.filtered is None or self.corrected is None:
+            return by_open_loop, "open loop"
+        by_filter = self.filtered.cross_validate(keys, self.corrected, self.folds)
+        if np.mean(_fold_means(by_filter, self.folds)) < np.mean(
+            _fold_means(by_open_loop, self.folds)
+        ):
+            return by_filter, "filter"
+        return by_open_loop, "open loop"
+
+    def fitted(
+        self,
+        members: Sequence[Member],
+        begin: RobotSpec,
+        nuisances: Mapping[str, SessionNuisance] | None,
+        base: OpenLoopFit,
+    ) -> Scored:
+        """``members`` fitted from ``begin`` (never worse than ``base``, :func:`fit_nested`)
+        and judged on the folds."""
+        joint = model_effect(*_parts(members))
+        fit = fit_nested(self.data, begin, joint, self.options, nuisances, base)
+        cv, estimator = self.held_out(fit, _keys_of(members))
+        return fit, cv, estimator
+
+    def without(self, member: Member, current: OpenLoopFit) -> RobotSpec:
+        """Where the model without ``member`` starts: the larger model's fit with the proposal
+        back at the robot's given value (absent for a robot that carries none) — "without" is
+        the robot as given in that respect, as the empty model is the robot as given, so the
+        fit of the fixed proposals alone is a point of every model tested (:func:`fit_nested`)."""
+        effect_names, term_names = _parts([member])
+        begin = current.spec
+        for e in effect_names:
+            begin = EFFECTS[e].write(begin, EFFECTS[e].read(self.robot))
+        if term_names:
+            chosen = DiscoveredTerms(term_names)
+            begin = chosen.write(begin, chosen.read(self.robot))
+        return begin
+
+    def trial(
+        self,
+        member: Member,
+        model: Sequence[Member],
+        fixed: Sequence[Member],
+        current: Scored,
+        base: Scored,
+    ) -> tuple[GateStep, OpenLoopFit, FloatArray]:
+        """``member`` tested against the model without it (the rest of ``model`` and
+        ``fixed``): its step, and the smaller model's fit and fold errors."""
+        kind, name = member
+        fit, cv, estimator = current
+        rest = [*fixed, *(m for m in model if m != member)]
+        if len(rest) > len(fixed):
+            smaller, smaller_cv, _ = self.fitted(
+                rest, self.without(member, fit), fit.nuisances, base[0]
+            )
+        else:
+            smaller, smaller_cv, _ = base  # the model without it is ``fixed`` alone: known
+        mean, spread = _fold_difference(cv, smaller_cv, self.folds)
+        lenient = kind == "effect" and name in self.lenient
+        _, term_names = _parts([member])
+        inflation = (
+            max(fit.inflation.get(f"{DISCOVERED}.{t}", math.inf) for t in term_names)
+            if kind == "term"
+            else math.nan
+        )
+        confounded = inflation > MAX_INFLATION
+        step = GateStep(
+            kind=kind,
+            name=name,
+            kept=False if confounded else (mean < 0.0 if lenient else mean + spread < 0.0),
+            before_mm=1e3 * math.sqrt(float(np.mean(smaller_cv))),
+            after_mm=1e3 * math.sqrt(float(np.mean(cv))),
+            difference=1e6 * mean,
+            stderr=1e6 * spread,
+            rule="not identifiable"
+            if confounded
+            else ("lower" if lenient else "one standard error"),
+            estimator=estimator,
+            inflation=inflation,
+        )
+        return step, smaller, smaller_cv
+
+    def eliminate(
+        self, model: list[Member], fixed: list[Member], base: Scored
+    ) -> tuple[Scored, list[GateStep], list[GateStep]]:
+        """Backward elimination of ``model``'s proposals, ``fixed`` always in the model and
+        never tested, ``base`` the fit, fold errors and estimator of ``fixed`` alone; returns
+        the final model's, the kept steps and the removed ones (``model`` is left holding the
+        kept proposals)."""
+        everything = fixed + model
+        current = (
+            self.fitted(everything, spec_with(self.robot, self.proposed, *_parts(everything)),
+                        self.start, base[0])
+            if model
+            else base
+        )  # fmt: skip
+        removed: list[GateStep] = []
+        tested: dict[Member, GateStep] = {}
+        round_number = 0
+        while model:
+            round_number += 1
+            trials: dict[Member, tuple[GateStep, OpenLoopFit, FloatArray]] = {}
+            for k, member in enumerate(model):
+                if self.report is not None:
+                    self.report(f"open-loop check {round_number}: {member[1]}", k / len(model))
+                trials[member] = self.trial(member, model, fixed, current, base)
+                tested[member] = trials[member][0]
+            failing = [m for m in model if not trials[m][0].kept]
+            if not failing:
+                break
+            worst = max(failing, key=lambda m: _removal_order(trials[m][0]))
+            removed.append(trials[worst][0])
+            model.remove(worst)
+            smaller = trials[worst][1]
+            current = (smaller, *self.held_out(smaller, _keys_of(fixed + model))) if model else base
+        return current, [tested[m] for m in model], removed
+
+
+def _removal_order(step: GateStep) -> tuple[bool, float, float]:
+    """Which failing proposal goes first: a term the fit cannot identify (the most inflated),
+    else the least useful one (the largest change, a term's counted with its standard error);
+    the rest are tested again without it."""
+    unidentifiable = step.rule == "not identifiable"
+    return (
+        unidentifiable,
+        step.inflation if unidentifiable else 0.0,
+        step.difference + (step.stderr if step.rule != "lower" else 0.0),
+    )
+
+
 def open_loop_gate(
     data: OpenLoopData,
     robot: RobotSpec,
@@ -352,162 +523,44 @@ def open_loop_gate(
     DiagnoseConfig`'s ``gate_order``)."""
     if order not in GATE_ORDERS:
         raise ValueError(f"order must be one of {GATE_ORDERS}, got {order!r}")
-    chosen_by_rounds = set(effects if named is None else named)
-    proposals = [("effect", n) for n in effects] + [("term", n) for n in term_proposals(terms)]
-
-    def parts(members: Sequence[tuple[str, str]]) -> tuple[list[str], list[str]]:
-        return (
-            [n for k, n in members if k == "effect"],
-            [t for k, n in members if k == "term" for t in n.split("+")],
-        )
-
-    def held_out(fit: OpenLoopFit, keys: Sequence[str]) -> tuple[FloatArray, str]:
-        """The fold errors of a model by the better of the two estimators: the open-loop fit
-        (``fit``) or the filter's, linearised (``filtered``, on ``corrected``)."""
-        by_open_loop = cross_validate_open_loop(data, fit, folds)
-        if filtered is None or corrected is None:
-            return by_open_loop, "open loop"
-        by_filter = filtered.cross_validate(keys, corrected, folds)
-        if np.mean(_fold_means(by_filter, folds)) < np.mean(_fold_means(by_open_loop, folds)):
-            return by_filter, "filter"
-        return by_open_loop, "open loop"
-
-    def fitted(
-        members: Sequence[tuple[str, str]],
-        begin: RobotSpec,
-        nuisances: Mapping[str, SessionNuisance] | None,
-        base: OpenLoopFit,
-    ) -> tuple[OpenLoopFit, FloatArray, str]:
-        effect_names, term_names = parts(members)
-        joint = model_effect(effect_names, term_names)
-        fit = fit_nested(data, begin, joint, options, nuisances, base)
-        keys = [p.name for p in joint.parameters] if joint is not None else []
-        cv, estimator = held_out(fit, keys)
-        return fit, cv, estimator
-
+    gate = _Elimination(
+        data,
+        robot,
+        proposed,
+        options,
+        folds,
+        start,
+        set(effects if named is None else named),
+        report,
+        filtered,
+        corrected,
+    )
+    effect_members: list[Member] = [("effect", n) for n in effects]
+    term_members: list[Member] = [("term", n) for n in term_proposals(terms)]
     nominal_fit = (
         nominal if nominal is not None else fit_open_loop(data, robot, None, options, start)
     )
-    nominal_cv, nominal_estimator = held_out(nominal_fit, [])
-
-    def keys_of(members: Sequence[tuple[str, str]]) -> list[str]:
-        joint = model_effect(*parts(members))
-        return [p.name for p in joint.parameters] if joint is not None else []
-
-    def eliminate(
-        model: list[tuple[str, str]],
-        fixed: list[tuple[str, str]],
-        base: tuple[OpenLoopFit, FloatArray, str],
-    ) -> tuple[OpenLoopFit, FloatArray, str, list[GateStep], list[GateStep]]:
-        """Backward elimination of ``model``'s proposals, ``fixed`` always in the model and
-        never tested, ``base`` the fit, fold errors and estimator of ``fixed`` alone; returns
-        the final fit, its fold errors and estimator, the kept steps and the removed ones
-        (``model`` is left holding the kept proposals)."""
-        everything = fixed + model
-        effect_names, term_names = parts(everything)
-        current, current_cv, current_estimator = (
-            fitted(everything, spec_with(robot, proposed, effect_names, term_names), start, base[0])
-            if model
-            else base
-        )
-        removed: list[GateStep] = []
-        tested: dict[tuple[str, str], GateStep] = {}
-        round_number = 0
-        while model:
-            round_number += 1
-            trials: dict[tuple[str, str], tuple[GateStep, OpenLoopFit, FloatArray]] = {}
-            for k, member in enumerate(model):
-                if report is not None:
-                    report(f"open-loop check {round_number}: {member[1]}", k / len(model))
-                kind, name = member
-                rest = fixed + [m for m in model if m != member]
-                # The smaller model starts from the larger one's fit, the proposal back at the
-                # robot's given value (absent for a robot that carries none): "without" is the
-                # robot as given in that respect, as the empty model is the robot as given, so
-                # the fit of ``fixed`` alone is a point of every model tested (fit_nested).
-                effect_names, term_names = parts([member])
-                begin = current.spec
-                for e in effect_names:
-                    begin = EFFECTS[e].write(begin, EFFECTS[e].read(robot))
-                if term_names:
-                    chosen = DiscoveredTerms(term_names)
-                    begin = chosen.write(begin, chosen.read(robot))
-                if len(rest) > len(fixed):
-                    smaller, smaller_cv, _ = fitted(rest, begin, current.nuisances, base[0])
-                else:
-                    # The model without it is ``fixed`` alone: its fit is known exactly.
-                    smaller, smaller_cv, _ = base
-                mean, spread = _fold_difference(current_cv, smaller_cv, folds)
-                lenient = kind == "effect" and name in chosen_by_rounds
-                inflation = (
-                    max(current.inflation.get(f"{DISCOVERED}.{t}", math.inf) for t in term_names)
-                    if kind == "term"
-                    else math.nan
-                )
-                confounded = inflation > MAX_INFLATION
-                step = GateStep(
-                    kind=kind,
-                    name=name,
-                    kept=False if confounded else (mean < 0.0 if lenient else mean + spread < 0.0),
-                    before_mm=1e3 * math.sqrt(float(np.mean(smaller_cv))),
-                    after_mm=1e3 * math.sqrt(float(np.mean(current_cv))),
-                    difference=1e6 * mean,
-                    stderr=1e6 * spread,
-                    rule="not identifiable"
-                    if confounded
-                    else ("lower" if lenient else "one standard error"),
-                    estimator=current_estimator,
-                    inflation=inflation,
-                )
-                trials[member] = (step, smaller, smaller_cv)
-                tested[member] = step
-            failing = [m for m in model if not trials[m][0].kept]
-            if not failing:
-                break
-            # A term the fit cannot identify goes first (the most inflated), else the least
-            # useful proposal (the largest change, a term's counted with its standard error);
-            # the rest are tested again without it.
-            worst = max(
-                failing,
-                key=lambda m: (
-                    trials[m][0].rule == "not identifiable",
-                    trials[m][0].inflation if trials[m][0].rule == "not identifiable" else 0.0,
-                    trials[m][0].difference
-                    + (trials[m][0].stderr if trials[m][0].rule != "lower" else 0.0),
-                ),
-            )
-            removed.append(trials[worst][0])
-            model.remove(worst)
-            _, current, current_cv = trials[worst]
-            if model:
-                current_cv, current_estimator = held_out(current, keys_of(fixed + model))
-            else:
-                current, current_cv, current_estimator = base
-        return current, current_cv, current_estimator, [tested[m] for m in model], removed
-
-    effect_proposals = [m for m in proposals if m[0] == "effect"]
-    term_members = [m for m in proposals if m[0] == "term"]
-    nominal_base = (nominal_fit, nominal_cv, nominal_estimator)
+    nominal_cv, nominal_estimator = gate.held_out(nominal_fit, [])
+    as_given: Scored = (nominal_fit, nominal_cv, nominal_estimator)
     if order == "catalogue first":
         # The catalogue effects on their own, then the discovered terms on the model they kept
         # (those effects fixed): a term must earn its place beside the named mechanisms and
         # cannot displace one it merely resembles.
-        current, current_cv, estimator, kept_effects, removed_effects = eliminate(
-            effect_proposals, [], nominal_base
-        )
+        kept_model, kept_effects, removed_effects = gate.eliminate(effect_members, [], as_given)
+        kept_terms: list[GateStep] = []
+        removed_terms: list[GateStep] = []
         if term_members:
-            current, current_cv, _, kept_terms, removed_terms = eliminate(
-                term_members, effect_proposals, (current, current_cv, estimator)
+            kept_model, kept_terms, removed_terms = gate.eliminate(
+                term_members, effect_members, kept_model
             )
-        else:
-            kept_terms, removed_terms = [], []
         steps = kept_effects + kept_terms + removed_effects + removed_terms
-        model = effect_proposals + term_members
+        model = effect_members + term_members
     else:
-        model = list(proposals)
-        current, current_cv, _, kept_steps, removed = eliminate(model, [], nominal_base)
+        model = effect_members + term_members
+        kept_model, kept_steps, removed = gate.eliminate(model, [], as_given)
         steps = kept_steps + removed
-    effect_names, term_names = parts(model)
+    effect_names, term_names = _parts(model)
+    current, current_cv, _ = kept_model
     return GateResult(
         steps,
         effect_names,

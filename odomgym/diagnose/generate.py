@@ -81,15 +81,19 @@ def simulate_protocol(
     function drawing each run's floor from ``rng`` (then every run is driven on its own floor,
     one after the other)."""
 
-    def drive(route: Route, repeats: int = 1, **options: float) -> list[Run]:
+    def drive(route: Route, repeats: int = 1, cruise_speed: float = 0.2) -> list[Run]:
         if callable(floor):
             out: list[Run] = []
             for _ in range(repeats):
-                runs, _ = simulate_runs(robot, floor(rng), route, rng=rng, **options)
+                runs, _ = simulate_runs(
+                    robot, floor(rng), route, rng=rng, cruise_speed=cruise_speed
+                )
                 out.extend(runs)
             return out
         ground = floor if floor is not None else FloorSpec()
-        runs, _ = simulate_runs(robot, ground, route, rng=rng, repeats=repeats, **options)
+        runs, _ = simulate_runs(
+            robot, ground, route, rng=rng, repeats=repeats, cruise_speed=cruise_speed
+        )
         return runs
 
     def floor_of() -> FloorSpec:
