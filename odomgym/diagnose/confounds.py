@@ -1,0 +1,924 @@
+"""Confounds, derived from the data at hand: where robot effects and measurement errors give the
+same logs.
+
+A fitted robot effect is a statement about the robot only if nothing else produces the same
+logs. Some things do, exactly: a ground-truth frame scaled by 0.5 % is a robot whose wheels are
+0.5 % larger and whose wheelbase is 0.5 % wider; a rigid body yawed on the robot is a wheel toe.
+Which such confounds exist depends on the model *and* on the runs (closed squares measured at
+their end points cannot tell a common scale of wheels and wheelbase from nothing at all), so
+they are derived here from the data, not listed by hand.
+
+**The joint Jacobian** (:func:`joint_jacobian`). The columns are the derivatives of the weighted
+open-loop residuals that :func:`odomgym.diagnose.openloop.fit_open_loop` minimises (all runs
+stacked) with respect to
+
+* the robot's parameters as the fit parametrises them (catalogue effects, grammar terms: the
+  fit's :class:`~odomgym.effects.Effect` or :class:`~odomgym.diagnose.fit.Joint`), per unit of
+  each parameter: the fit's own Jacobian block, reused;
+* per session, the measurement nuisances diagnose fits (:mod:`odomgym.diagnose.nuisances`): the
+  time offset τ [s], the tracked point dx, dy [m], the frame yaw δ [rad] — also where the fit
+  does not fit them (one session): the confound exists whether or not it is fitted. Where the
+  fit has them, its Jacobian block is reused;
+* per session, errors of the ground-truth system itself (:class:`GroundTruthError`): a rigid
+  motion of its frame (translation [m], rotation [rad]), a scale of its frame [-] and a clock
+  rate [-].
+
+A nuisance is an error *of the recording*: the logs were made with it, and the residuals are
+computed after removing it (the convention of :func:`odomgym.diagnose.nuisances.correct_run`).
+The columns the fit lacks are forward differences along the fitted model's own prediction — the
+logs with every measured pose replaced by the pose the fitted model predicts there — so they are
+the model's structural sensitivities (identifiability as a property of the model and the
+experiment, not of the noise: Bellman & Åström 1970). On the measured poses themselves a
+rotation of the whole frame would turn the residual vectors by 90° and show a column of the size
+of the noise; along the prediction it is zero, as it should be.
+
+**Invisible nuisances.** A nuisance whose change of the residuals is below
+:data:`INVISIBLE` of its change of the logs (the measured poses, or the prediction through the
+counts) is one the replay absorbs — every replay starts at the first measured pose, so a rigid
+motion of the whole frame moves prediction and measurement alike. It is reported as invisible
+(:attr:`JointJacobian.invisible`) and left out, never as a confound.
+
+**Confounds** (:func:`derive_confounds`). With every column scaled to unit norm, a direction
+whose singular value is below :data:`RELATIVE_SINGULAR_VALUE` (10⁻³) of the largest is one in
+which the data cannot tell its parts apart: the bound at which
+:func:`odomgym.diagnose.discover.library_jacobian` drops a term and the gate's variance
+inflation bound (VIF 10⁶: Kutner, Nachtsheim, Neter & Li 2005, §10.5) refuses one. The
+near-null space (Golub & Van Loan 2013, §5.4: the numerical rank by the SVD) is given a basis of
+sparse directions by Gauss–Jordan elimination with the robot's columns as pivots, so that each
+direction names one robot parameter's partners; directions without a robot parameter are
+dropped (they are the nuisances' own affair).
+
+**Moved?** The fitted change of the robot's parameters from the model as given is projected on
+a confound's robot part; against the standard error of that projection (session-clustered with
+two or more sessions, else run-clustered, as the fit's own errors: Liang & Zeger 1986) it has
+*moved* beyond :data:`MOVED` standard errors. Its two readings are then: the robot changed by
+the projection (the measurement as fitted), or the robot as given along the direction and the
+nuisances changed by the opposite amount — the same residuals.
+
+**Which experiment separates them.** Each experiment of
+:data:`odomgym.diagnose.experiments.SEPARATING_EXPERIMENTS` (the nominal robot's counts) is
+replayed under both readings; the one whose predicted logs differ most, in units of the sensor's
+noise, is named. Where no robot experiment moves the two readings apart by more than
+:data:`RELATIVE_SINGULAR_VALUE` of what the robot part alone moves (an exact confound: a frame
+scale), the measurement check of the nuisance is named instead (:attr:`NuisanceKind.check`).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odomgym.diagnose.experiments import SEPARATING_EXPERIMENTS, synthetic_run
+from odomgym.diagnose.fit import Joint, build_within
+from odomgym.diagnose.likelihood import SensorNoise
+from odomgym.diagnose.nuisances import SessionNuisance, correct_run
+from odomgym.diagnose.openloop import _NUISANCE_SCALE, OpenLoopData, OpenLoopFit, _residual
+from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.stats import clustered_covariance
+from odomgym.effects import Parameter
+from odomgym.odometry.runs import Run
+from odomgym.robot import RobotSpec
+
+__all__ = [
+    "INVISIBLE",
+    "MOVED",
+    "NUISANCE_KINDS",
+    "RELATIVE_SINGULAR_VALUE",
+    "Confound",
+    "GroundTruthError",
+    "JointJacobian",
+    "NuisanceKind",
+    "derive_confounds",
+    "joint_jacobian",
+    "remove_nuisances",
+]
+
+FloatArray = NDArray[np.float64]
+RELATIVE_SINGULAR_VALUE = 1e-3
+"""A direction of the unit-column joint Jacobian whose singular value is below this fraction of
+the largest is a confound (module docstring)."""
+INVISIBLE = 1e-6
+"""A nuisance whose change of the residuals is below this fraction of its change of the logs is
+invisible: numerically zero (finite differences leave ~1e-11), far below any real sensitivity."""
+MOVED = 2.0
+"""A fit has moved along a confound when its projection exceeds this many standard errors."""
+_KEPT = 1e-3  # components of a reported direction below this (unit vector) are dropped
+_SHOWN = 0.05  # components a sentence names
+_LINEAR = 0.01  # the separations' move, in units of one parameter scale (first order)
+
+
+@dataclass(frozen=True)
+class NuisanceKind:
+    """One kind of measurement error, per session.
+
+    Attributes:
+        name: the column's name (``"gt.scale"``; ``"gt.scale[SESSION]"`` with several sessions).
+        unit: its SI unit.
+        step: the forward-difference step of its column [unit].
+        reading: how a value reads, a format with ``{value}`` in ``display`` units.
+        display: the factor from ``unit`` to the display unit (1e3 for s → ms).
+        check: the measurement that determines it, independently of the robot.
+    """
+
+    name: str
+    unit: str
+    step: float
+    reading: str
+    display: float
+    check: str
+
+
+_MARKERS = "measure the rigid body's markers against the axle (its origin and forward axis)"
+NUISANCE_KINDS: tuple[NuisanceKind, ...] = (
+    NuisanceKind(
+        "time_offset",
+        "s",
+        1e-3,
+        "the encoder log lagging the ground truth by {value:+.1f} ms",
+        1e3,
+        "timestamp a common event (a sharp start of motion) on both clocks",
+    ),
+    NuisanceKind(
+        "tracked_dx",
+        "m",
+        1e-4,
+        "the tracked point {value:+.2f} mm ahead of the axle",
+        1e3,
+        _MARKERS,
+    ),
+    NuisanceKind(
+        "tracked_dy", "m", 1e-4, "the tracked point {value:+.2f} mm left of the axle", 1e3, _MARKERS
+    ),
+    NuisanceKind(
+        "frame_yaw",
+        "rad",
+        1e-4,
+        "the tracked body's frame yawed {value:+.3f}° from the robot's axis",
+        math.degrees(1.0),
+        _MARKERS,
+    ),
+    NuisanceKind(
+        "gt.translation_x",
+        "m",
+        1e-4,
+        "the ground-truth frame moved {value:+.2f} mm along x",
+        1e3,
+        "none needed: a translation of the frame does not change the logs' replay",
+    ),
+    NuisanceKind(
+        "gt.translation_y",
+        "m",
+        1e-4,
+        "the ground-truth frame moved {value:+.2f} mm along y",
+        1e3,
+        "none needed: a translation of the frame does not change the logs' replay",
+    ),
+    NuisanceKind(
+        "gt.rotation",
+        "rad",
+        1e-4,
+        "the ground-truth frame rotated {value:+.3f}°",
+        math.degrees(1.0),
+        "none needed: a rotation of the whole frame does not change the logs' replay",
+    ),
+    NuisanceKind(
+        "gt.scale",
+        "-",
+        1e-4,
+        "the ground-truth frame scaled by {value:+.3f} %",
+        100.0,
+        "measure a known distance (a calibrated bar, a tape between two markers) with the "
+        "ground-truth system",
+    ),
+    NuisanceKind(
+        "gt.clock_rate",
+        "-",
+        1e-5,
+        "the ground truth's clock running {value:+.0f} ppm fast",
+        1e6,
+        "timestamp a common event on both clocks at the start and at the end of a long session",
+    ),
+)
+"""Every nuisance of the joint Jacobian, in the order of :func:`remove_nuisances`' values: the
+session's (τ, dx, dy, δ) of :class:`~odomgym.diagnose.nuisances.SessionNuisance`, then the
+fields of :class:`GroundTruthError`."""
+_SESSION_KINDS = 4  # the first four are SessionNuisance's values
+
+
+@dataclass(frozen=True)
+class GroundTruthError:
+    """Errors of the ground-truth system of one session, as perturbations of what it logs.
+
+    A true tracked pose (p, θ) in the ground truth's ideal frame is logged as
+    ((1 + scale)·R(rotation)·p + (translation_x, translation_y), θ + rotation): the frame's
+    scale and rotation are about its origin. Because every replay starts at the first measured
+    pose, the point they are about does not matter to the residuals (a translation of the whole
+    frame is invisible, :data:`INVISIBLE`).
+
+    ``clock_rate`` ρ: the ground truth's clock runs fast by ρ relative to the encoders': an event
+    at encoder time t is stamped t_ref + (1 + ρ)·(t − t_ref), t_ref the session's start (where
+    the run records it, ``Run.meta["session_time"]`` at its first sample) or else the run's
+    first sample. A constant offset between the clocks is the time offset τ of
+    :class:`~odomgym.diagnose.nuisances.SessionNuisance`.
+
+    Attributes:
+        translation_x, translation_y: [m]. rotation: [rad]. scale, clock_rate: [-].
+    """
+
+    translation_x: float = 0.0
+    translation_y: float = 0.0
+    rotation: float = 0.0
+    scale: float = 0.0
+    clock_rate: float = 0.0
+
+    def apply(self, run: Run) -> Run:
+        """``run`` (the truth) as the ground-truth system with these errors would log it."""
+        return self._map(run, inverse=False)
+
+    def remove(self, run: Run) -> Run:
+        """``run`` (as logged) with these errors removed: the exact inverse of :meth:`apply`
+        (to the linear interpolation of the counts for the clock rate)."""
+        return self._map(run, inverse=True)
+
+    def _map(self, run: Run, inverse: bool) -> Run:
+        if self == GroundTruthError():
+            return run
+        pose = np.array(run.true_pose, dtype=np.float64, copy=True)
+        c, s = math.cos(self.rotation), math.sin(self.rotation)
+        x, y = pose[:, 0].copy(), pose[:, 1].copy()
+        if inverse:
+            x, y = x - self.translation_x, y - self.translation_y
+            k = 1.0 / (1.0 + self.scale)
+            pose[:, 0] = k * (c * x + s * y)
+            pose[:, 1] = k * (-s * x + c * y)
+            pose[:, 2] -= self.rotation
+        else:
+            k = 1.0 + self.scale
+            pose[:, 0] = k * (c * x - s * y) + self.translation_x
+            pose[:, 1] = k * (s * x + c * y) + self.translation_y
+            pose[:, 2] += self.rotation
+        counts = run.counts
+        if self.clock_rate != 0.0:
+            start = float(run.time[0]) - float(run.meta.get("session_time", 0.0))  # type: ignore[arg-type]
+            rate = 1.0 / (1.0 + self.clock_rate) if inverse else 1.0 + self.clock_rate
+            at = start + rate * (run.time - start)
+            raw = run.counts.astype(np.float64)
+            counts = np.stack([np.interp(at, run.time, raw[:, w]) for w in range(2)], axis=1)
+        return dataclasses.replace(run, counts=counts, true_pose=pose)
+
+
+def remove_nuisances(run: Run, values: Sequence[float] | FloatArray, session: str = "") -> Run:
+    """``run`` with the nuisances ``values`` (one per :data:`NUISANCE_KINDS`) removed: the
+    ground-truth system's errors first (they act on what it logged), then the session's time
+    offset, tracked point and yaw (:func:`~odomgym.diagnose.nuisances.correct_run`)."""
+    v = np.asarray(values, dtype=np.float64)
+    error = GroundTruthError(*(float(a) for a in v[_SESSION_KINDS:]))
+    own = SessionNuisance(session, frame=True).with_values(v[:_SESSION_KINDS])
+    return correct_run(error.remove(run), own)
+
+
+@dataclass(frozen=True)
+class _Column:
+    name: str
+    parameter: Parameter | None  # a robot column
+    kind: int  # index into NUISANCE_KINDS (−1 for a robot column)
+    session: str
+
+
+@dataclass(frozen=True, eq=False)
+class JointJacobian:
+    """The joint Jacobian of a fit's open-loop residuals (module docstring).
+
+    Attributes:
+        names: every visible column: the robot's parameters, then each session's nuisances.
+        robot: how many of them are the robot's.
+        matrix: the columns (rows: every run's weighted residuals stacked), per unit of each
+            column's quantity (a parameter's own unit; :attr:`NuisanceKind.unit`).
+        norms: each column's norm (zero for a robot parameter the data do not see).
+        invisible: the nuisances the replay absorbs (left out of ``names``).
+        fit, data: what it was computed for (:meth:`residuals` evaluates them exactly).
+    """
+
+    names: tuple[str, ...]
+    robot: int
+    matrix: FloatArray
+    norms: FloatArray
+    invisible: tuple[str, ...]
+    columns: tuple[_Column, ...]
+    fit: OpenLoopFit
+    data: OpenLoopData
+
+    def residuals(self, step: Mapping[str, float]) -> FloatArray:
+        """The stacked weighted residuals with the named columns changed by ``step`` (in their
+        units) from the fit, evaluated exactly on the data (not linearised): what a confound's
+        direction must leave unchanged."""
+        fit, data = self.fit, self.data
+        problem = fit.problem
+        by_name = {c.name: c for c in self.columns}
+        du = np.zeros(problem.size)
+        values = {s: np.zeros(len(NUISANCE_KINDS)) for s in problem.sessions}
+        for s in problem.sessions:
+            values[s][:_SESSION_KINDS] = problem.nuisance(fit.x, s).values
+        for name, amount in step.items():
+            column = by_name[name]
+            if column.parameter is not None:
+                du[self.names.index(name)] = amount / column.parameter.scale
+            else:
+                values[column.session][column.kind] += amount
+        spec = problem.build(fit.x[: problem.size] + du)
+        return _stacked(data, spec, values, data.runs)
+
+
+def _column_name(kind: NuisanceKind, session: str, several: bool) -> str:
+    return f"{kind.name}[{session}]" if several else kind.name
+
+
+def _robot_parameters(fit: OpenLoopFit) -> list[tuple[str, Parameter]]:
+    """The fit's robot parameters, named as the fit's values are (``EFFECT.PARAMETER``)."""
+    effect = fit.effect
+    if effect is None:
+        return []
+    if isinstance(effect, Joint):
+        return [(p.name, p) for p in effect.parameters]
+    return [(f"{effect.name}.{p.name}", p) for p in effect.parameters]
+
+
+def _stacked(
+    data: OpenLoopData,
+    spec: RobotSpec,
+    values: Mapping[str, FloatArray],
+    runs: Sequence[Run],
+) -> FloatArray:
+    """Every run's weighted residuals (:func:`odomgym.diagnose.openloop._residual`, as the fit
+    computes them) with its session's nuisances ``values`` removed from ``runs``, stacked."""
+    view = copy.copy(data)
+    view.inputs = [{} for _ in runs]  # the replay inputs depend on the runs' counts
+    view.runs = [
+        GroundTruthError(*values[s][_SESSION_KINDS:]).remove(r)
+        for r, s in zip(runs, data.sessions, strict=True)
+    ]
+    parts = []
+    for j, session in enumerate(data.sessions):
+        own = SessionNuisance(session, frame=True).with_values(values[session][:_SESSION_KINDS])
+        parts.append(_residual(view, j, spec, own))
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _measured(
+    data: OpenLoopData, runs: Sequence[Run], values: Mapping[str, FloatArray]
+) -> FloatArray:
+    """The measured part of the residuals alone (the corrected poses, weighted and masked as
+    the residuals; heading × the fit's length), stacked: what a nuisance does to the logs."""
+    parts = []
+    for j, (run, session) in enumerate(zip(runs, data.sessions, strict=True)):
+        pose = remove_nuisances(run, values[session], session).true_pose.copy()
+        pose[:, 2] *= data.length
+        parts.append(pose[data.masks[j]] * data.weights[j])
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _uncorrected(pose: FloatArray, measured: FloatArray, nuisance: SessionNuisance) -> FloatArray:
+    """The raw poses whose :func:`~odomgym.diagnose.nuisances.correct_run` is ``pose``: heading
+    θ + δ, position p + R(θ)·(dx, dy) — where the measured row has a heading (a row without one
+    keeps its position, as the correction does); NaN where ``measured`` is."""
+    out = np.array(pose, dtype=np.float64, copy=True)
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    has = np.isfinite(measured[:, 2])
+    out[:, 0] += np.where(has, c * nuisance.dx - s * nuisance.dy, 0.0)
+    out[:, 1] += np.where(has, s * nuisance.dx + c * nuisance.dy, 0.0)
+    out[:, 2] += nuisance.yaw
+    out[~np.isfinite(measured)] = np.nan
+    return out
+
+
+def joint_jacobian(data: OpenLoopData, fit: OpenLoopFit) -> JointJacobian:
+    """The joint Jacobian of ``fit``'s open-loop residuals on ``data`` (module docstring): the
+    fit's own blocks where it has them, and one evaluation of every run per other nuisance kind
+    (all sessions at once), along the fitted model's prediction."""
+    problem = fit.problem
+    if len(problem.data) != len(data):
+        raise ValueError("the fit was made on other data")
+    robot_blocks, own_blocks, _ = fit.blocks
+    sessions = list(problem.sessions)
+    several = len(sessions) >= 2
+    rows = [len(b) for b in fit.blocks[2]]
+    which = np.concatenate(
+        [np.full(n, sessions.index(s)) for n, s in zip(rows, data.sessions, strict=True)]
+    ).astype(int)
+    robot = _robot_parameters(fit)
+    names: list[str] = [n for n, _ in robot]
+    columns: list[_Column] = [_Column(n, p, -1, "") for n, p in robot]
+    blocks: list[FloatArray] = []
+    if robot:
+        stacked = np.concatenate(robot_blocks)
+        blocks.extend(stacked[:, k] / p.scale for k, (_, p) in enumerate(robot))
+    fitted = {s: np.zeros(len(NUISANCE_KINDS)) for s in sessions}
+    for s in sessions:
+        fitted[s][:_SESSION_KINDS] = problem.nuisance(fit.x, s).values
+    # The fitted model's own logs: every measured pose replaced by its prediction.
+    own = {s: problem.nuisance(fit.x, s) for s in sessions}
+    clean: list[Run] = []
+    for j, run in enumerate(data.runs):
+        nuisance = own[data.sessions[j]]
+        _, replayed = data.replay(j, fit.spec, nuisance)
+        pose = _uncorrected(replayed.tracked, run.true_pose, nuisance)
+        clean.append(dataclasses.replace(run, true_pose=pose))
+    clean_base = _stacked(data, fit.spec, fitted, clean)
+    data_measured = _measured(data, data.runs, fitted)
+    clean_measured = _measured(data, clean, fitted)
+    invisible: list[str] = []
+    active = list(problem.active)
+    for k, kind in enumerate(NUISANCE_KINDS):
+        moved = {s: v.copy() for s, v in fitted.items()}
+        for v in moved.values():
+            v[k] += kind.step
+        if k in active:  # the fit's own column, per unit of the nuisance
+            i = active.index(k)
+            change = np.concatenate(own_blocks)[:, i] / _NUISANCE_SCALE[k]
+            logs = (_measured(data, data.runs, moved) - data_measured) / kind.step
+        else:
+            change = (_stacked(data, fit.spec, moved, clean) - clean_base) / kind.step
+            logs = (_measured(data, clean, moved) - clean_measured) / kind.step
+        for index, session in enumerate(sessions):
+            mine = which == index
+            column = np.where(mine, change, 0.0)
+            size = float(np.linalg.norm(column))
+            seen = max(
+                float(np.linalg.norm(logs[mine])), float(np.linalg.norm((logs - change)[mine]))
+            )
+            name = _column_name(kind, session, several)
+            if not (size > INVISIBLE * seen) or not math.isfinite(size):
+                invisible.append(name)
+                continue
+            names.append(name)
+            columns.append(_Column(name, None, k, session))
+            blocks.append(column)
+    matrix = np.stack(blocks, axis=1) if blocks else np.zeros((int(sum(rows)), 0))
+    return JointJacobian(
+        names=tuple(names),
+        robot=len(robot),
+        matrix=matrix,
+        norms=np.linalg.norm(matrix, axis=0),
+        invisible=tuple(invisible),
+        columns=tuple(columns),
+        fit=fit,
+        data=data,
+    )
+
+
+@dataclass(frozen=True)
+class Component:
+    """One part of a confound's direction.
+
+    Attributes:
+        name: the column (a robot parameter ``EFFECT.PARAMETER``, or a nuisance).
+        weight: its share of the unit direction, every column scaled to unit norm first.
+        per_unit: the change of the quantity itself for a unit move along the direction [unit].
+        unit: the quantity's SI unit.
+        robot: whether it is one of the robot's parameters.
+    """
+
+    name: str
+    weight: float
+    per_unit: float
+    unit: str
+    robot: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Confound:
+    """A direction in which the robot's parameters and the nuisances give the same logs.
+
+    Attributes:
+        components: the direction (unit vector over unit-norm columns; components below 1e-3
+            dropped), robot parameters first.
+        relative_singular_value: |J̃·v| / the largest singular value of J̃, J̃ the joint
+            Jacobian with unit columns (0 for a robot parameter the data do not see).
+        move, move_stderr: the fitted change of the robot from the model as given, projected on
+            the direction's robot part, and its standard error (direction units; NaN where the
+            fit cannot give one).
+        moved: |move| > :data:`MOVED` · move_stderr.
+        fitted: whether the fit has every part of the direction free (robot parameters and
+            fitted nuisances): then its values along it are set by a signal below the rule's
+            bound, and the gate's variance inflation refuses such a term.
+        robot_reading: the first reading — each robot parameter's change by ``move`` [its unit].
+        nuisance_reading: the second — each nuisance's value, the robot as given along the
+            direction [its unit]; empty for a direction of robot parameters alone.
+        experiment: the menu's experiment whose predicted logs under the two readings differ
+            most (None where none does: an exact confound, or a robot parameter seen by none).
+        separation_sigma: by how much, the larger of position and heading in sensor σ, at the
+            move ``probe``.
+        probe: the move the separations are given at: |move| where the fit moved, else a
+            reference move, the largest robot component changed by its parameter's scale.
+        separations: every experiment's separation at ``probe`` [sensor σ].
+        check: where no robot experiment separates the readings, the measurement that does
+            (:attr:`NuisanceKind.check` of the largest nuisance component).
+    """
+
+    components: tuple[Component, ...]
+    relative_singular_value: float
+    move: float
+    move_stderr: float
+    moved: bool
+    fitted: bool
+    robot_reading: tuple[tuple[str, float], ...]
+    nuisance_reading: tuple[tuple[str, float], ...]
+    experiment: str | None
+    separation_sigma: float
+    probe: float
+    separations: tuple[tuple[str, float], ...]
+    check: str | None
+
+    @property
+    def robot(self) -> tuple[str, ...]:
+        """The robot parameters involved."""
+        return tuple(c.name for c in self.components if c.robot)
+
+    @property
+    def nuisances(self) -> tuple[str, ...]:
+        """The nuisances involved."""
+        return tuple(c.name for c in self.components if not c.robot)
+
+    def direction(self) -> str:
+        """The direction as named components, largest first (those of at least 0.05)."""
+        shown = sorted(self.components, key=lambda c: -abs(c.weight))
+        return ", ".join(f"{c.name} {c.weight:+.2f}" for c in shown if abs(c.weight) >= _SHOWN)
+
+    def sentence(self) -> str:
+        """One sentence for the report: the direction, whether the fit moved along it, the
+        two readings and what separates them."""
+        where = f"({self.direction()}; relative singular value {self.relative_singular_value:.1e})"
+        shown = [c for c in self.components if abs(c.weight) >= _SHOWN]
+        robot = [c.name for c in shown if c.robot] or list(self.robot)
+        others = [c.name for c in shown if not c.robot]
+        if others:
+            head = f"{_names(robot)} trade against {_names(_kinds(others))} {where}"
+        elif len(self.robot) > 1:
+            head = f"{_names(robot)} cannot be told apart on these data {where}"
+        else:
+            head = f"{_names(robot)} is not seen by these data {where}"
+        if self.moved:
+            second = (
+                f"{_nuisance_text(self.nuisance_reading)} with the robot as given"
+                if self.nuisance_reading
+                else "the robot as given"
+            )
+            body = (
+                f"the fit moved along it by {abs(self.move) / self.move_stderr:.1f} standard "
+                f"errors, so the logs read equally as the robot with "
+                f"{_robot_text(self.robot_reading, self.components)} or as {second}"
+            )
+        elif self.fitted:
+            body = "the fit has every part of it free, so its values along it are not determined"
+        elif math.isfinite(self.move_stderr) and self.move_stderr > 0:
+            body = (
+                f"the fit did not move along it ({abs(self.move) / self.move_stderr:.1f} "
+                "standard errors)"
+            )
+        else:
+            body = "the fit cannot give its values along it a standard error"
+        if self.experiment is not None:
+            tail = (
+                f"the experiment '{self.experiment}' separates them by "
+                f"{self.separation_sigma:.1f} σ of the sensor"
+            )
+        elif self.check is not None:
+            tail = f"no robot experiment separates them: {self.check}"
+        else:
+            tail = "no experiment of the menu separates them"
+        return f"{head}: {body}; {tail}."
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-safe (non-finite numbers as None)."""
+        return {
+            "components": [c.as_dict() for c in self.components],
+            "relative_singular_value": _finite(self.relative_singular_value),
+            "move": _finite(self.move),
+            "move_stderr": _finite(self.move_stderr),
+            "moved": self.moved,
+            "fitted": self.fitted,
+            "robot_reading": {k: _finite(v) for k, v in self.robot_reading},
+            "nuisance_reading": {k: _finite(v) for k, v in self.nuisance_reading},
+            "experiment": self.experiment,
+            "separation_sigma": _finite(self.separation_sigma),
+            "probe": _finite(self.probe),
+            "separations": {k: _finite(v) for k, v in self.separations},
+            "check": self.check,
+            "sentence": self.sentence(),
+        }
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _names(names: Sequence[str]) -> str:
+    return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
+
+
+def _kinds(names: Sequence[str]) -> list[str]:
+    """Nuisance column names without their sessions, each once."""
+    return list(dict.fromkeys(n.split("[", 1)[0] for n in names))
+
+
+def _robot_text(reading: Sequence[tuple[str, float]], components: Sequence[Component]) -> str:
+    """Each robot parameter's change, a dimensionless one in per cent."""
+    units = {c.name: c.unit for c in components}
+    return ", ".join(
+        f"{name} {100.0 * value:+.3f} %"
+        if units[name] == "-"
+        else f"{name} {value:+.4g} {units[name]}"
+        for name, value in reading
+    )
+
+
+def _nuisance_text(reading: Sequence[tuple[str, float]]) -> str:
+    """Each nuisance kind's value, the mean over its sessions where there are several."""
+    by_kind: dict[str, list[float]] = {}
+    for name, value in reading:
+        by_kind.setdefault(name.split("[", 1)[0], []).append(value)
+    kinds = {k.name: k for k in NUISANCE_KINDS}
+    parts = []
+    for name, values in by_kind.items():
+        kind = kinds[name]
+        text = kind.reading.format(value=float(np.mean(values)) * kind.display)
+        parts.append(text + (f" (mean of {len(values)} sessions)" if len(values) > 1 else ""))
+    return _names(parts)
+
+
+def _sparse_basis(null: FloatArray, robot: int) -> list[FloatArray]:
+    """A basis of the span of ``null``'s columns made of sparse directions, one per robot
+    parameter it involves: Gauss–Jordan elimination of ``null``ᵀ with the robot's columns
+    (the first ``robot``) preferred as pivots, largest entry first; then each robot direction
+    made orthogonal to the directions without a robot parameter (they are the nuisances' own
+    trade-offs, not part of it). Returns the robot directions."""
+    rows = null.T.copy()
+    pivots: list[int] = []
+    for i in range(len(rows)):
+        rest = rows[i:]
+        rest /= np.linalg.norm(rest, axis=1, keepdims=True)
+        free = np.ones(rows.shape[1], dtype=bool)
+        free[pivots] = False
+        size = np.abs(rest) * free
+        mine = size[:, :robot]
+        pick = mine if mine.size and float(mine.max()) >= 10 * _KEPT else size
+        r, c = (int(a) for a in np.unravel_index(int(np.argmax(pick)), pick.shape))
+        rows[[i, i + r]] = rows[[i + r, i]]
+        rows[i] /= rows[i, c]
+        for o in range(len(rows)):
+            if o != i:
+                rows[o] -= rows[o, c] * rows[i]
+        pivots.append(c)
+    own = [rows[i] for i, p in enumerate(pivots) if p >= robot]
+    out = []
+    basis = np.linalg.qr(np.array(own).T)[0] if own else np.zeros((rows.shape[1], 0))
+    for i, p in enumerate(pivots):
+        if p < robot:
+            v = rows[i] - basis @ (basis.T @ rows[i])
+            out.append(v / np.linalg.norm(v))
+    return out
+
+
+def _robot_covariance(fit: OpenLoopFit) -> FloatArray:
+    """The cluster-robust covariance of the fit's robot parameters (fit units): by session with
+    two or more sessions, else by run (:func:`odomgym.diagnose.openloop._clustered_errors`'s
+    sandwich); NaN where the normal matrix cannot be inverted."""
+    problem = fit.problem
+    robot, own, res = fit.blocks
+    a, _ = problem.normal(robot, own, res, range(len(res)))
+    size = problem.size
+    try:
+        cov: FloatArray = np.asarray(np.linalg.inv(a), dtype=np.float64)
+    except np.linalg.LinAlgError:
+        return np.full((size, size), math.nan)
+    scores = np.array([problem.score(robot, own, res, j) for j in range(len(res))])
+    sessions = list(problem.data.sessions)
+    labels: list[object] = list(sessions) if len(set(sessions)) >= 2 else list(range(len(res)))
+    return clustered_covariance(cov, scores, labels)[:size, :size]
+
+
+def _separations(
+    jacobian: JointJacobian,
+    given: RobotSpec,
+    components: Sequence[Component],
+    reference: float,
+    sensor: SensorNoise,
+) -> tuple[list[tuple[str, float]], list[float]]:
+    """Every menu experiment's separation of the two readings [sensor σ] and the largest change
+    the robot part alone makes there [sensor σ], for a move ``reference`` along the direction:
+    the first reading is the fitted robot without nuisances; the second the robot moved back by
+    ``reference`` along the direction's robot part with the nuisances it names (each kind's
+    mean over its sessions), its predicted logs compared with the first's."""
+    problem = jacobian.fit.problem
+    index = {name: k for k, name in enumerate(jacobian.names)}
+    du = np.zeros(problem.size)
+    nuisance: dict[int, list[float]] = {}
+    by_name = {c.name: c for c in jacobian.columns}
+    for part in components:
+        column = by_name[part.name]
+        if column.parameter is not None:
+            du[index[part.name]] = -reference * part.per_unit / column.parameter.scale
+        else:
+            nuisance.setdefault(column.kind, []).append(-reference * part.per_unit)
+    values = np.zeros(len(NUISANCE_KINDS))
+    for kind, moved in nuisance.items():
+        values[kind] = float(np.mean(moved))
+    first = jacobian.fit.spec
+    second = build_within(problem.build, jacobian.fit.x[: problem.size], du)
+    scale = np.array([sensor.position, sensor.position, sensor.heading])
+    out: list[tuple[str, float]] = []
+    effects: list[float] = []
+    for experiment in SEPARATING_EXPERIMENTS:
+        run = synthetic_run(experiment, given)
+        logged = dataclasses.replace(run, true_pose=replay_run(run, first).tracked)
+        fixed = remove_nuisances(logged, values)
+        apart = fixed.true_pose - replay_run(fixed, second).tracked
+        alone = logged.true_pose - replay_run(logged, second).tracked
+        out.append((experiment.name, _in_sigma(apart, scale)))
+        effects.append(_in_sigma(alone, scale))
+    return out, effects
+
+
+def _in_sigma(error: FloatArray, scale: FloatArray) -> float:
+    """The larger of the largest position and heading difference, in sensor σ."""
+    position = float(np.max(np.hypot(error[:, 0], error[:, 1])))
+    heading = float(np.max(np.abs(np.mod(error[:, 2] + math.pi, 2 * math.pi) - math.pi)))
+    return max(position / max(float(scale[0]), 1e-12), heading / max(float(scale[2]), 1e-12))
+
+
+def derive_confounds(
+    data: OpenLoopData,
+    fit: OpenLoopFit,
+    given: RobotSpec,
+    *,
+    sensor: SensorNoise | None = None,
+    jacobian: JointJacobian | None = None,
+) -> list[Confound]:
+    """Every confound of ``fit``'s robot parameters on ``data`` (module docstring), strongest
+    first, with whether the fit moved along it from ``given``, its two readings and the
+    experiment or measurement that separates them.
+
+    Args:
+        data: the runs ``fit`` was fitted on.
+        fit: an open-loop fit (:func:`~odomgym.diagnose.openloop.fit_open_loop`).
+        given: the model as given (the robot the fitted changes are measured from).
+        sensor: the ground-truth sensor's noise, the unit of the separations (1 mm, 2 mrad
+            unless given).
+        jacobian: :func:`joint_jacobian` of ``fit`` on ``data``, if the caller has it (it also
+            lists the invisible nuisances).
+    """
+    noise = sensor if sensor is not None else SensorNoise(0.001, 0.002)
+    jac = jacobian if jacobian is not None else joint_jacobian(data, fit)
+    robot = jac.robot
+    if robot == 0:
+        return []
+    seen = np.flatnonzero(jac.norms > 0)
+    unseen = [k for k in range(robot) if jac.norms[k] == 0]
+    scaled = jac.matrix[:, seen] / jac.norms[seen]
+    _, singular, vt = np.linalg.svd(scaled, full_matrices=False)
+    largest = float(singular[0]) if len(singular) else 1.0
+    null = vt[singular < RELATIVE_SINGULAR_VALUE * largest].T
+    directions: list[FloatArray] = []
+    for v in _sparse_basis(null, int(np.sum(seen < robot))) if null.size else []:
+        full = np.zeros(len(jac.names))
+        full[seen] = v
+        directions.append(full)
+    for k in unseen:
+        full = np.zeros(len(jac.names))
+        full[k] = 1.0
+        directions.append(full)
+    parameters = [c.parameter for c in jac.columns[:robot]]
+    scales = np.array([p.scale for p in parameters if p is not None])
+    reads = _robot_parameters(fit)
+    given_values = fit.effect.read(given) if fit.effect is not None else {}
+    keys = [n if n in fit.values else n.split(".", 1)[1] for n, _ in reads]
+    change = np.array([fit.values[k] - given_values[k] for k in keys])
+    physical = np.diag(scales) @ _robot_covariance(fit) @ np.diag(scales)
+    out = []
+    kept: list[FloatArray] = []
+    unit = np.zeros_like(jac.matrix)
+    unit[:, seen] = scaled
+    for found in directions:
+        v = _on_support(unit, found, np.abs(found) >= _KEPT, largest)
+        # Robot against robot: the robot part alone is a confound too (the data cannot tell
+        # those parameters apart even with every nuisance known): report it so.
+        alone = _on_support(unit, v, (np.abs(v) > 0) & (np.arange(len(v)) < robot), largest)
+        if _relative(unit, alone, largest) < RELATIVE_SINGULAR_VALUE:
+            v = alone
+        top = int(np.argmax(np.abs(v[:robot])))
+        v *= math.copysign(1.0, v[top])
+        if any(abs(float(v @ w)) > 1.0 - 1e-6 for w in kept):
+            continue  # two robot directions with the same robot-alone confound
+        kept.append(v)
+        sigma = _relative(unit, v, largest)
+        norms = np.where(jac.norms > 0, jac.norms, 1.0)
+        per_unit = np.where(jac.norms > 0, v / norms, v)
+        components = tuple(
+            Component(
+                jac.names[k],
+                float(v[k]),
+                float(per_unit[k]),
+                _unit(jac.columns[k]),
+                bool(k < robot),
+            )
+            for k in np.flatnonzero(v)
+        )
+        out.append(_assess(jac, given, components, v, per_unit, change, physical, sigma, noise))
+    return sorted(out, key=lambda c: c.relative_singular_value)
+
+
+def _relative(unit: FloatArray, v: FloatArray, largest: float) -> float:
+    """|J̃·v| / the largest singular value, J̃ the unit-column Jacobian."""
+    return float(np.linalg.norm(unit @ v)) / largest
+
+
+def _on_support(
+    unit: FloatArray, v: FloatArray, support: NDArray[np.bool_], largest: float
+) -> FloatArray:
+    """The unit direction on ``support`` whose residual change is least (the last right
+    singular vector of those columns), if it stays a confound; else ``v`` (normalised). A
+    direction cut to its larger components is then the best one on them, not a truncation
+    (which would leave |J̃·v| at the size of the components dropped)."""
+    if support.any():
+        _, _, vt = np.linalg.svd(unit[:, support], full_matrices=False)
+        best = np.zeros(len(v))
+        best[support] = vt[-1]
+        if _relative(unit, best, largest) < RELATIVE_SINGULAR_VALUE or not v.any():
+            return best
+    return v / np.linalg.norm(v)
+
+
+def _unit(column: _Column) -> str:
+    if column.parameter is not None:
+        return column.parameter.unit
+    return NUISANCE_KINDS[column.kind].unit
+
+
+def _assess(
+    jac: JointJacobian,
+    given: RobotSpec,
+    components: tuple[Component, ...],
+    v: FloatArray,
+    per_unit: FloatArray,
+    change: FloatArray,
+    covariance: FloatArray,
+    sigma: float,
+    sensor: SensorNoise,
+) -> Confound:
+    """The confound along unit direction ``v``: the fit's move along it (the fitted ``change``
+    of the robot in physical units, its ``covariance``), the readings and the separations."""
+    robot = jac.robot
+    part = v[:robot]
+    weight = part / float(part @ part)
+    norms = jac.norms[:robot]
+    move = float(weight @ (norms * change))
+    spread = float(weight @ (norms[:, None] * covariance * norms[None, :]) @ weight)
+    stderr = math.sqrt(spread) if spread >= 0 else math.nan
+    moved = math.isfinite(stderr) and abs(move) > MOVED * stderr
+    robot_reading = tuple((c.name, move * c.per_unit) for c in components if c.robot)
+    nuisance_reading = tuple((c.name, -move * c.per_unit) for c in components if not c.robot)
+    robot_parts = [c for c in components if c.robot]
+    scales = {c.name: c.parameter.scale for c in jac.columns[:robot] if c.parameter is not None}
+    unit_move = 1.0 / max(abs(c.per_unit) / scales[c.name] for c in robot_parts)
+    # First order: at 1 % of a parameter scale the second-order terms are 1e-5 of the first.
+    reference = _LINEAR * unit_move
+    separations, effects = _separations(jac, given, components, reference, sensor)
+    probe = abs(move) if moved else unit_move
+    ratio = probe / reference
+    separations = [(name, value * ratio) for name, value in separations]
+    best = max(separations, key=lambda item: item[1])
+    exact = best[1] <= RELATIVE_SINGULAR_VALUE * max(effects) * ratio
+    experiment = None if exact or best[1] == 0.0 else best[0]
+    check = None
+    by_name = {c.name: c for c in jac.columns}
+    nuisance_parts = [c for c in components if not c.robot]
+    if experiment is None and nuisance_parts:
+        biggest = max(nuisance_parts, key=lambda c: abs(c.weight))
+        check = NUISANCE_KINDS[by_name[biggest.name].kind].check
+    active = set(jac.fit.problem.active)
+    fitted = all(by_name[c.name].kind in active for c in nuisance_parts)
+    return Confound(
+        components=components,
+        relative_singular_value=sigma,
+        move=move,
+        move_stderr=stderr,
+        moved=moved,
+        fitted=fitted,
+        robot_reading=robot_reading,
+        nuisance_reading=nuisance_reading,
+        experiment=experiment,
+        separation_sigma=best[1],
+        probe=probe,
+        separations=tuple(separations),
+        check=check,
+    )
