@@ -132,7 +132,8 @@ class Confound:
             reference move, the largest robot component changed by its parameter's scale.
         separations: every experiment's separation at ``probe`` [sensor σ].
         check: where no robot experiment separates the readings, the measurement that does
-            (:attr:`NuisanceKind.check` of the largest nuisance component).
+            (:attr:`odomgym.diagnose.sensitivity.NuisanceKind.check` of the largest nuisance
+            component).
     """
 
     components: tuple[Component, ...]
@@ -384,8 +385,8 @@ def derive_confounds(
         given: the model as given (the robot the fitted changes are measured from).
         sensor: the ground-truth sensor's noise, the unit of the separations (1 mm, 2 mrad
             unless given).
-        jacobian: :func:`joint_jacobian` of ``fit`` on ``data``, if the caller has it (it also
-            lists the invisible nuisances).
+        jacobian: :func:`~odomgym.diagnose.sensitivity.joint_jacobian` of ``fit`` on
+            ``data``, if the caller has it (it also lists the invisible nuisances).
     """
     noise = sensor if sensor is not None else SensorNoise(0.001, 0.002)
     jac = jacobian if jacobian is not None else joint_jacobian(data, fit)

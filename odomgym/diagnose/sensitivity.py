@@ -17,14 +17,14 @@ module lays the two side by side: the derivatives of the weighted open-loop resi
 
 A nuisance is an error *of the recording*: the logs were made with it, and the residuals are
 computed after removing it (:func:`remove_nuisances`; the convention of
-:func:`odomgym.diagnose.nuisances.correct_run`). The columns the fit lacks are forward
+:func:`odomgym.diagnose.nuisances.correct_run`). The columns the fit lacks are central
 differences along the fitted model's own prediction — the logs with every measured pose
 replaced by the pose the fitted model predicts there — so they are the model's structural
 sensitivities: identifiability as a property of the model and the experiment, not of the noise
 (Bellman & Åström 1970, "On structural identifiability", Mathematical Biosciences 7). On the
 measured poses themselves a rotation of the whole frame would turn the residual vectors by 90°
 and show a column the size of the noise; along the prediction it is zero, as it should be. Each
-costs one residual evaluation of every run (all sessions at once, as the fit's own Jacobian).
+costs two residual evaluations of every run (all sessions at once, as the fit's own Jacobian).
 
 **Invisible nuisances.** A nuisance whose change of the residuals is below :data:`INVISIBLE` of
 its change of the logs — of the measured poses, or of the prediction through the counts — is
@@ -77,7 +77,7 @@ class NuisanceKind:
     Attributes:
         name: the column's name (``"gt.scale"``; ``"gt.scale[SESSION]"`` with several sessions).
         unit: its SI unit.
-        step: the forward-difference step of its column [unit].
+        step: the central-difference step of its column [unit].
         reading: how a value reads, a format with ``{value}`` in ``display`` units.
         display: the factor from ``unit`` to the display unit (1e3 for s → ms).
         check: the measurement that determines it, independently of the robot.
@@ -96,7 +96,7 @@ NUISANCE_KINDS: tuple[NuisanceKind, ...] = (
     NuisanceKind(
         "time_offset",
         "s",
-        1e-3,
+        1e-4,  # the fit's own step (1e-2 of its 10 ms unit): well inside a 50–100 ms sample
         "the encoder log lagging the ground truth by {value:+.1f} ms",
         1e3,
         "timestamp a common event (a sharp start of motion) on both clocks",
@@ -373,6 +373,15 @@ def _uncorrected(pose: FloatArray, measured: FloatArray, nuisance: SessionNuisan
     return out
 
 
+def _shifted(values: Mapping[str, FloatArray], kind: int, step: float) -> dict[str, FloatArray]:
+    """Every session's nuisances with nuisance ``kind`` moved by ``step`` (all sessions at once:
+    a session's nuisances touch only its runs)."""
+    out = {s: v.copy() for s, v in values.items()}
+    for v in out.values():
+        v[kind] += step
+    return out
+
+
 def joint_jacobian(data: OpenLoopData, fit: OpenLoopFit) -> JointJacobian:
     """The joint Jacobian of ``fit``'s open-loop residuals on ``data`` (module docstring): the
     fit's own blocks where it has them, and one evaluation of every run per other nuisance kind
@@ -405,22 +414,25 @@ def joint_jacobian(data: OpenLoopData, fit: OpenLoopFit) -> JointJacobian:
         _, replayed = data.replay(j, fit.spec, nuisance)
         pose = _uncorrected(replayed.tracked, run.true_pose, nuisance)
         clean.append(dataclasses.replace(run, true_pose=pose))
-    clean_base = _stacked(data, fit.spec, fitted, clean)
     data_measured = _measured(data, data.runs, fitted)
-    clean_measured = _measured(data, clean, fitted)
     invisible: list[str] = []
     active = list(problem.active)
     for k, kind in enumerate(NUISANCE_KINDS):
-        moved = {s: v.copy() for s, v in fitted.items()}
-        for v in moved.values():
-            v[k] += kind.step
+        plus, minus = _shifted(fitted, k, kind.step), _shifted(fitted, k, -kind.step)
         if k in active:  # the fit's own column, per unit of the nuisance
             i = active.index(k)
             change = np.concatenate(own_blocks)[:, i] / _NUISANCE_SCALE[k]
-            logs = (_measured(data, data.runs, moved) - data_measured) / kind.step
+            logs = (_measured(data, data.runs, plus) - data_measured) / kind.step
         else:
-            change = (_stacked(data, fit.spec, moved, clean) - clean_base) / kind.step
-            logs = (_measured(data, clean, moved) - clean_measured) / kind.step
+            # Central differences: the counts are interpolated linearly between samples, so a
+            # time shift has a kink at every whole sample — at τ = 0 among them — where a
+            # one-sided difference would take one side's slope.
+            change = (
+                _stacked(data, fit.spec, plus, clean) - _stacked(data, fit.spec, minus, clean)
+            ) / (2.0 * kind.step)
+            logs = (_measured(data, clean, plus) - _measured(data, clean, minus)) / (
+                2.0 * kind.step
+            )
         for index, session in enumerate(sessions):
             mine = which == index
             column = np.where(mine, change, 0.0)
