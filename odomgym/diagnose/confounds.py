@@ -23,9 +23,12 @@ robot against robot (the data cannot tell those parameters apart even with every
 known); directions without a robot parameter are the nuisances' own affair and are dropped.
 
 **Moved?** The fitted change of the robot's parameters from the model as given is projected on
-a confound's robot part; against the standard error of that projection (session-clustered with
-two or more sessions, else run-clustered, as the fit's own errors: Liang & Zeger 1986) it has
-*moved* beyond :data:`MOVED` standard errors. Its two readings are then: the robot changed by
+a confound's robot part; against the standard error of that projection (cluster-robust, as the
+fit's own errors: Liang & Zeger 1986; session-clustered with two or more sessions but never
+below run-clustered, since with few sessions their sandwich has no spread along most
+directions) it has *moved* beyond :data:`MOVED` standard errors; never along a direction the fit
+is free along (robot-against-robot, or against nuisances it fits), whose values there are set
+by a signal below the rule's bound. Its two readings are then: the robot changed by
 the projection (the measurement as fitted), or the robot as given along the direction and the
 nuisances changed by the opposite amount — to first order the same residuals.
 
@@ -115,12 +118,12 @@ class Confound:
         relative_singular_value: |J̃·v| / the largest singular value of J̃, J̃ the joint
             Jacobian with unit columns (0 for a robot parameter the data do not see).
         move, move_stderr: the fitted change of the robot from the model as given, projected on
-            the direction's robot part, and its standard error (direction units; NaN where the
-            fit cannot give one).
-        moved: |move| > :data:`MOVED` · move_stderr.
+            the direction's robot part, and its standard error (direction units; ∞ where the
+            fit is free along the direction, NaN where it cannot give one).
+        moved: |move| > :data:`MOVED` · move_stderr (never where ``fitted``).
         fitted: whether the fit has every part of the direction free (robot parameters and
             fitted nuisances): then its values along it are set by a signal below the rule's
-            bound, and the gate's variance inflation refuses such a term.
+            bound (the gate's variance inflation refuses such a term), not moved.
         robot_reading: the first reading — each robot parameter's change by ``move`` [its unit].
         nuisance_reading: the second — each nuisance's value, the robot as given along the
             direction [its unit]; empty for a direction of robot parameters alone.
@@ -300,22 +303,31 @@ def _sparse_basis(null: FloatArray, robot: int) -> list[FloatArray]:
     return out
 
 
-def _robot_covariance(fit: OpenLoopFit) -> FloatArray:
-    """The cluster-robust covariance of the fit's robot parameters (fit units): by session with
-    two or more sessions, else by run (:func:`odomgym.diagnose.openloop._clustered_errors`'s
-    sandwich); NaN where the normal matrix cannot be inverted."""
+def _robot_covariances(fit: OpenLoopFit) -> list[FloatArray]:
+    """Cluster-robust covariances of the fit's robot parameters (fit units): run-clustered, and
+    with two or more sessions session-clustered too — the sandwiches of
+    :func:`odomgym.diagnose.openloop._clustered_errors` (Liang & Zeger 1986) — with the normal
+    matrix inverted without the directions the 1e-3 rule calls unidentifiable (eigenvalues of
+    the unit-scaled normal matrix below (1e-3)²): a confound the fit is free along (a toe
+    against fitted frame yaws) must not spread its rounding noise into the others' errors.
+    Where every direction is identifiable this is the plain inverse."""
     problem = fit.problem
     robot, own, res = fit.blocks
     a, _ = problem.normal(robot, own, res, range(len(res)))
-    size = problem.size
-    try:
-        cov: FloatArray = np.asarray(np.linalg.inv(a), dtype=np.float64)
-    except np.linalg.LinAlgError:
-        return np.full((size, size), math.nan)
+    diagonal = np.sqrt(np.maximum(np.diag(a), 0.0))
+    seen = diagonal > 0
+    inverse = 1.0 / np.where(seen, diagonal, 1.0)
+    values, vectors = np.linalg.eigh(a * np.outer(inverse, inverse))
+    keep = values > RELATIVE_SINGULAR_VALUE**2 * float(np.max(values, initial=0.0))
+    pseudo = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
+    cov: FloatArray = pseudo * np.outer(inverse, inverse) * np.outer(seen, seen)
     scores = np.array([problem.score(robot, own, res, j) for j in range(len(res))])
     sessions = list(problem.data.sessions)
-    labels: list[object] = list(sessions) if len(set(sessions)) >= 2 else list(range(len(res)))
-    return clustered_covariance(cov, scores, labels)[:size, :size]
+    groups: list[list[object]] = [list(range(len(res)))]
+    if len(set(sessions)) >= 2:
+        groups.append(list(sessions))
+    size = problem.size
+    return [clustered_covariance(cov, scores, labels)[:size, :size] for labels in groups]
 
 
 def _separations(
@@ -414,37 +426,35 @@ def derive_confounds(
     given_values = fit.effect.read(given) if fit.effect is not None else {}
     keys = [n if n in fit.values else n.split(".", 1)[1] for n, _ in reads]
     change = np.array([fit.values[k] - given_values[k] for k in keys])
-    physical = np.diag(scales) @ _robot_covariance(fit) @ np.diag(scales)
+    physical = [np.diag(scales) @ c @ np.diag(scales) for c in _robot_covariances(fit)]
     out = []
     kept: list[FloatArray] = []
     unit = np.zeros_like(jac.matrix)
     unit[:, seen] = scaled
+    kinds: dict[int, NDArray[np.bool_]] = {}
+    for k, column in enumerate(jac.columns[robot:], start=robot):
+        kinds.setdefault(column.kind, np.zeros(len(jac.names), dtype=bool))[k] = True
+    norms = np.where(jac.norms > 0, jac.norms, 1.0)
     for found in directions:
-        v = _on_support(unit, found, np.abs(found) >= _KEPT, largest)
-        # Robot against robot: the robot part alone is a confound too (the data cannot tell
-        # those parameters apart even with every nuisance known): report it so.
-        alone = _on_support(unit, v, (np.abs(v) > 0) & (np.arange(len(v)) < robot), largest)
-        if _relative(unit, alone, largest) < RELATIVE_SINGULAR_VALUE:
-            v = alone
-        top = int(np.argmax(np.abs(v[:robot])))
-        v *= math.copysign(1.0, v[top])
-        if any(abs(float(v @ w)) > 1.0 - 1e-6 for w in kept):
-            continue  # two robot directions with the same robot-alone confound
-        kept.append(v)
-        sigma = _relative(unit, v, largest)
-        norms = np.where(jac.norms > 0, jac.norms, 1.0)
-        per_unit = np.where(jac.norms > 0, v / norms, v)
-        components = tuple(
-            Component(
-                jac.names[k],
-                float(v[k]),
-                float(per_unit[k]),
-                jac.columns[k].unit,
-                bool(k < robot),
+        for v in _partners(unit, found, robot, list(kinds.values()), largest):
+            top = int(np.argmax(np.abs(v[:robot])))
+            v *= math.copysign(1.0, v[top])
+            if any(abs(float(v @ w)) > 1.0 - 1e-6 for w in kept):
+                continue  # found again from another robot direction
+            kept.append(v)
+            per_unit = np.where(jac.norms > 0, v / norms, v)
+            components = tuple(
+                Component(
+                    jac.names[k],
+                    float(v[k]),
+                    float(per_unit[k]),
+                    jac.columns[k].unit,
+                    bool(k < robot),
+                )
+                for k in np.flatnonzero(v)
             )
-            for k in np.flatnonzero(v)
-        )
-        out.append(_assess(jac, given, components, v, per_unit, change, physical, sigma, noise))
+            sigma = _relative(unit, v, largest)
+            out.append(_assess(jac, given, components, v, change, physical, sigma, noise))
     return sorted(out, key=lambda c: c.relative_singular_value)
 
 
@@ -453,20 +463,52 @@ def _relative(unit: FloatArray, v: FloatArray, largest: float) -> float:
     return float(np.linalg.norm(unit @ v)) / largest
 
 
-def _on_support(
-    unit: FloatArray, v: FloatArray, support: NDArray[np.bool_], largest: float
-) -> FloatArray:
-    """The unit direction on ``support`` whose residual change is least (the last right
-    singular vector of those columns), if it stays a confound; else ``v`` (normalised). A
-    direction cut to its larger components is then the best one on them, not a truncation
-    (which would leave |J̃·v| at the size of the components dropped)."""
-    if support.any():
-        _, _, vt = np.linalg.svd(unit[:, support], full_matrices=False)
-        best = np.zeros(len(v))
-        best[support] = vt[-1]
-        if _relative(unit, best, largest) < RELATIVE_SINGULAR_VALUE or not v.any():
-            return best
-    return v / np.linalg.norm(v)
+def _best_on(unit: FloatArray, support: NDArray[np.bool_]) -> FloatArray:
+    """The unit direction on ``support`` whose residual change is least: the last right
+    singular vector of those columns (zero elsewhere)."""
+    _, _, vt = np.linalg.svd(unit[:, support], full_matrices=False)
+    best = np.zeros(unit.shape[1])
+    best[support] = vt[-1]
+    return best
+
+
+def _trimmed(unit: FloatArray, v: FloatArray, largest: float) -> FloatArray:
+    """``v`` without its components below 1e-3: the best direction on the rest if that is still
+    a confound (a truncation alone would leave |J̃·v| at the size of what was dropped), else
+    ``v`` itself."""
+    support = np.abs(v) >= _KEPT * float(np.max(np.abs(v)))
+    best = _best_on(unit, support)
+    return best if _relative(unit, best, largest) < RELATIVE_SINGULAR_VALUE else v
+
+
+def _partners(
+    unit: FloatArray,
+    found: FloatArray,
+    robot: int,
+    kinds: Sequence[NDArray[np.bool_]],
+    largest: float,
+) -> list[FloatArray]:
+    """The confounds a near-null direction ``found`` stands for, each as sparse as the data
+    allow: its robot part alone if that is a confound (robot against robot); else one
+    direction for each kind of nuisance (all its sessions' columns) that completes the robot
+    part alone — a robot parameter may trade against two nuisances separately (E_s against a
+    frame scale and against a clock rate on constant-speed runs), and one direction mixing them
+    would hide both; else ``found`` itself (its nuisances needed together)."""
+    v = _trimmed(unit, found / np.linalg.norm(found), largest)
+    mine = (np.abs(v) > 0) & (np.arange(len(v)) < robot)
+    alone = _best_on(unit, mine)
+    if _relative(unit, alone, largest) < RELATIVE_SINGULAR_VALUE:
+        return [_trimmed(unit, alone, largest)]
+    out = []
+    for columns in kinds:
+        w = _best_on(unit, mine | columns)
+        if (
+            _relative(unit, w, largest) < RELATIVE_SINGULAR_VALUE
+            and float(np.max(np.abs(w[columns]))) >= _KEPT
+            and float(np.max(np.abs(w[mine]))) >= _KEPT
+        ):
+            out.append(_trimmed(unit, w, largest))
+    return out or [v]
 
 
 def _assess(
@@ -474,21 +516,34 @@ def _assess(
     given: RobotSpec,
     components: tuple[Component, ...],
     v: FloatArray,
-    per_unit: FloatArray,
     change: FloatArray,
-    covariance: FloatArray,
+    covariances: Sequence[FloatArray],
     sigma: float,
     sensor: SensorNoise,
 ) -> Confound:
     """The confound along unit direction ``v``: the fit's move along it (the fitted ``change``
-    of the robot in physical units, its ``covariance``), the readings and the separations."""
+    of the robot in physical units, its ``covariances``), the readings and the separations."""
     robot = jac.robot
     part = v[:robot]
     weight = part / float(part @ part)
     norms = jac.norms[:robot]
     move = float(weight @ (norms * change))
-    spread = float(weight @ (norms[:, None] * covariance * norms[None, :]) @ weight)
-    stderr = math.sqrt(spread) if spread >= 0 else math.nan
+    by_name = {c.name: c for c in jac.columns}
+    nuisance_parts = [c for c in components if not c.robot]
+    active = set(jac.fit.problem.active)
+    fitted = all(by_name[c.name].kind in active for c in nuisance_parts)
+    if fitted:  # free in the fit: its values along it are set by a signal below the bound
+        stderr = math.inf
+    else:
+        # Session-clustered where there are sessions, but never below run-clustered: the
+        # sessions' scores sum to zero at the fit, so with G sessions their sandwich has rank
+        # G − 1 and, with two or three, no spread along most directions (Cameron & Miller
+        # 2015 on few clusters).
+        spreads = [
+            float(weight @ (norms[:, None] * c * norms[None, :]) @ weight) for c in covariances
+        ]
+        finite = [v for v in spreads if math.isfinite(v)]
+        stderr = math.sqrt(max(max(finite), 0.0)) if finite else math.nan
     moved = math.isfinite(stderr) and abs(move) > MOVED * stderr
     robot_reading = tuple((c.name, move * c.per_unit) for c in components if c.robot)
     nuisance_reading = tuple((c.name, -move * c.per_unit) for c in components if not c.robot)
@@ -505,13 +560,9 @@ def _assess(
     exact = best[1] <= RELATIVE_SINGULAR_VALUE * max(effects) * ratio
     experiment = None if exact or best[1] == 0.0 else best[0]
     check = None
-    by_name = {c.name: c for c in jac.columns}
-    nuisance_parts = [c for c in components if not c.robot]
     if experiment is None and nuisance_parts:
         biggest = max(nuisance_parts, key=lambda c: abs(c.weight))
         check = NUISANCE_KINDS[by_name[biggest.name].kind].check
-    active = set(jac.fit.problem.active)
-    fitted = all(by_name[c.name].kind in active for c in nuisance_parts)
     return Confound(
         components=components,
         relative_singular_value=sigma,
