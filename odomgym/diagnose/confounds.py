@@ -15,12 +15,15 @@ value is below :data:`RELATIVE_SINGULAR_VALUE` (10⁻³) of the largest is one i
 cannot tell its parts apart: the bound at which
 :func:`odomgym.diagnose.discover.library_jacobian` drops a term and the gate's variance
 inflation bound (VIF 10⁶; Kutner, Nachtsheim, Neter & Li 2005, §10.5) refuses one. The
-near-null space (the numerical rank by the singular value decomposition: Golub & Van Loan 2013,
-*Matrix Computations*, 4th ed., §5.4) gets a basis of sparse directions by Gauss–Jordan
-elimination with the robot's columns as pivots, each then re-solved on its own components
-(:func:`_on_support`); a direction whose robot part alone is a confound too is reported as
-robot against robot (the data cannot tell those parameters apart even with every nuisance
-known); directions without a robot parameter are the nuisances' own affair and are dropped.
+near-null space (numerical rank from the singular value decomposition: Golub & Van Loan 2013,
+*Matrix Computations*, 4th ed., §5.5) gets a basis by Gauss–Jordan elimination with the
+robot's columns as pivots, and each direction is made as sparse as the data allow
+(:func:`_partners`): its robot part alone where that is a confound too — robot against robot,
+the data cannot tell those parameters apart even with every nuisance known — else one
+direction for each kind of nuisance that completes it alone (E_s trades against a frame scale
+and, on constant-speed runs, against a clock rate: two confounds, not one mixing both).
+Directions without a robot parameter are the nuisances' own affair and are dropped. A weak
+column is not a confound: its parameter is imprecise, which its standard error says.
 
 **Moved?** The fitted change of the robot's parameters from the model as given is projected on
 a confound's robot part; against the standard error of that projection (cluster-robust, as the
