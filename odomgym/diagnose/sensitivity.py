@@ -384,8 +384,8 @@ def _shifted(values: Mapping[str, FloatArray], kind: int, step: float) -> dict[s
 
 def joint_jacobian(data: OpenLoopData, fit: OpenLoopFit) -> JointJacobian:
     """The joint Jacobian of ``fit``'s open-loop residuals on ``data`` (module docstring): the
-    fit's own blocks where it has them, and one evaluation of every run per other nuisance kind
-    (all sessions at once), along the fitted model's prediction."""
+    fit's own blocks where it has them, and for every other nuisance kind a central difference
+    along the fitted model's prediction (two evaluations of every run, all sessions at once)."""
     problem = fit.problem
     if len(problem.data) != len(data):
         raise ValueError("the fit was made on other data")
