@@ -12,7 +12,7 @@ The expectations are analytic (``docs/diagnose.md``, "Confounds"):
 * a clock rate is nearly a distance scale (with a time offset) while the robot cruises at
   constant speed, and separable where it stops (the counts stop, a scale does not);
 * closed squares measured at their end points do not see a common scale of the wheels and the
-  wheelbase (Borenstein & Feng 1996's UMBmark: the corners see E_s/E_b only).
+  wheelbase (Borenstein & Feng 1994's UMBmark squares: the corners see E_s/E_b only).
 
 The data come from the independent generator (``tests/independent_robot.py``), 10 Hz logs with
 1 mm / 2 mrad sensor noise.
