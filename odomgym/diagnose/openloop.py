@@ -6,13 +6,15 @@ roboticist uses a model for (dead reckoning, or a simulator that behaves like th
 cannot be gamed by a noise model that merely widens the predicted spread, as a whitened gap can.
 
 **Error.** A run's logged counts are replayed through the model (:func:`odomgym.diagnose.replay.
-replay_run`) from its first measured pose, after its session's measurement nuisances are removed
-(:mod:`odomgym.diagnose.nuisances`); the error at every measured sample after the first is
-measured − predicted: position [m], heading [rad]. The *combined* error of a sample is
-|Δp|² + (L·Δθ)², L = the model's nominal wheelbase [m/rad] (a heading error weighs as the
-displacement it makes at the wheels); a run's mean square error is its mean over the samples, one
-per ``interval`` seconds; runs weigh equally. The reports give position and heading RMS
-separately, over every measured sample.
+replay_run`) after its session's measurement nuisances are removed
+(:mod:`odomgym.diagnose.nuisances`), and the prediction is placed where the measured poses of the
+run's first :data:`ALIGN_WINDOW` seconds put it (:func:`aligned_prediction`: one sample would
+carry its tracker noise into every later prediction); the error at every measured sample after
+that window is measured − predicted: position [m], heading [rad]. The *combined* error of a
+sample is |Δp|² + (L·Δθ)², L = the model's nominal wheelbase [m/rad] (a heading error weighs as
+the displacement it makes at the wheels); a run's mean square error is its mean over the
+samples, one per ``interval`` seconds; runs weigh equally. The reports give position and heading
+RMS separately, over every measured sample after the window.
 
 **Fit.** Least squares on those errors (:func:`fit_open_loop`, :func:`scipy.optimize.least_squares`,
 trust-region reflective): a model's systematic parameters jointly with each session's nuisances
@@ -170,28 +172,39 @@ ALIGN_WINDOW = 0.5
 (:func:`aligned_prediction`); their errors are not counted."""
 
 
+ALIGN_TURN = 0.02
+"""The most the prediction may have turned since the start at a sample the alignment uses
+[rad]: where the robot has turned, effects that act through turning (a wheelbase, backlash at
+the first reversal of a spin) have begun to act, and an alignment there would take their signal
+for the tracker's noise."""
+
+
 def _in_window(run: Run) -> NDArray[np.bool_]:
-    """The samples within :data:`ALIGN_WINDOW` of ``run``'s first."""
+    """The samples within :data:`ALIGN_WINDOW` of ``run``'s first (whose errors are not
+    counted)."""
     inside: NDArray[np.bool_] = np.asarray(run.time - run.time[0] <= ALIGN_WINDOW + 1e-9)
     return inside
 
 
 def aligned_prediction(fixed: Run, replayed: Replay) -> FloatArray:
     """``replayed``'s tracked poses (T, 3) moved rigidly onto ``fixed``'s measured poses of its
-    first :data:`ALIGN_WINDOW` seconds: turned about the start by the mean heading difference
-    there, then shifted by the mean position difference.
+    first :data:`ALIGN_WINDOW` seconds, before the prediction has turned by
+    :data:`ALIGN_TURN`: turned about the start by the mean heading difference there, then
+    shifted by the mean position difference.
 
     Why: the replay starts at the first measured pose, so that one sample's tracker noise moves
     every later prediction — a 2 mrad heading error is 6 mm after 3 m — and on a robot with a
     1 mm / 0.11° tracker it decided more comparisons of small effects than the effects did.
     Aligning a prediction on several measured poses is the practice of trajectory evaluation
     (Zhang & Scaramuzza 2018, trajectory alignment); aligning only on the first half second
-    keeps it open loop, and takes from an effect only what it does in that half second. A log
+    keeps it open loop, and takes from an effect only what it does in that half second before
+    any turn (a straight's first 15 cm; in a spin, the samples before the wheels move). A log
     measured at its end points (UMBmark) has one pose there: the alignment is then the
     anchor."""
     predicted = np.array(replayed.tracked, dtype=np.float64)
     measured = fixed.true_pose
-    inside = _in_window(fixed)
+    turned = np.abs(predicted[:, 2] - predicted[0, 2]) <= ALIGN_TURN
+    inside = _in_window(fixed) & turned
     heading = measured[inside, 2] - predicted[inside, 2]
     heading = heading[np.isfinite(heading)]
     turn = (

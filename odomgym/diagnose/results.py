@@ -111,6 +111,7 @@ class Diagnosis:
     refused_terms: list[dict[str, Any]] = field(default_factory=list)
     noise_checks: dict[str, dict[str, Any]] = field(default_factory=dict)
     spread: list[dict[str, Any]] = field(default_factory=list)
+    confounds: list[dict[str, Any]] = field(default_factory=list)
     geometry_check: dict[str, dict[str, Any]] = field(default_factory=dict)
     filter_parameters: dict[str, dict[str, float]] = field(default_factory=dict)
     estimators: dict[str, Any] = field(default_factory=dict)
@@ -145,6 +146,7 @@ class Diagnosis:
             "refused_terms": self.refused_terms,
             "noise_checks": self.noise_checks,
             "spread_check": self.spread,
+            "confounds": self.confounds,
             "geometry_with_and_without_noise": self.geometry_check,
             "filter_parameters": self.filter_parameters,
             "estimator": self.estimators,

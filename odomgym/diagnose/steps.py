@@ -22,7 +22,7 @@ from odomgym.effects import EFFECTS, Effect
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["NoiseNamed", "Recording", "RunSplit", "SystematicModel", "TermRefusal"]
+__all__ = ["Backward", "NoiseNamed", "Recording", "RunSplit", "SystematicModel", "TermRefusal"]
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,16 @@ class Recording:
     nominal: OpenLoopFit
     frames_on: bool
     pictured: list[int]
+
+
+@dataclass(frozen=True)
+class Backward:
+    """Step 5: the named effects the final model no longer needs (``absorbed``), and the
+    effects an earlier round found significant that are not significant added to it
+    (``unsupported``: no proposals of the gate)."""
+
+    absorbed: list[str]
+    unsupported: list[str]
 
 
 def _moves_mean(name: str) -> bool:

@@ -1,4 +1,4 @@
-"""The steps after the rounds (``docs/diagnose.md``, steps 7–15) that have no module of their
+"""The steps after the rounds (``docs/diagnose.md``, steps 7–16) that have no module of their
 own: what the rounds' proposals become, and the verdict on the held-out runs.
 
 * the open-loop gate's pool (:func:`_significant_effects`), the discovered terms in the order
@@ -9,11 +9,12 @@ own: what the rounds' proposals become, and the verdict on the held-out runs.
   terms with their evidence and their size at the data's operating range (:func:`_kept_terms`),
   and how far a noise effect with a mean part moved E_d, E_b, E_s (:func:`_geometry_moves`);
 * the verdict (:func:`verdict_of`): which yardstick confirmed what — the open-loop error for
-  the systematic model, the spread for each noise effect — and the grammar's score test and
-  the whiteness test on the held-out runs (:func:`_final_test`, Bonferroni-combined) — step 14;
+  the systematic model, the spread for each noise effect — whether the values moved along a
+  confound, and the grammar's score test and the whiteness test on the held-out runs
+  (:func:`_final_test`, Bonferroni-combined) — step 15;
 * the whitened gap, a diagnostic (:func:`_shrink` over :func:`_gaps`: the held-out runs' RMS
   whitened innovation under the model as given and the diagnosed one, with bootstrap intervals,
-  and their open-loop disagreement in mm and degrees beside it) — step 15.
+  and their open-loop disagreement in mm and degrees beside it) — step 16.
 
 Only :func:`odomgym.diagnose.workflow.diagnose` calls them, in the order of the steps; they live
 here so that the orchestration reads as the list of steps. Each is a function of its arguments
@@ -32,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.diagnose.config import DiagnoseConfig
+from odomgym.diagnose.confounds import Confound
 from odomgym.diagnose.discover import (
     Discovery,
     channel_evidence,
@@ -389,15 +391,19 @@ def verdict_of(
     final: Model,
     held: HeldOut,
     spread: Sequence[SpreadCheck],
+    confounds: Sequence[Confound],
     state: DiagnosisState,
     cfg: DiagnoseConfig,
 ) -> tuple[str, dict[str, Any]]:
-    """Step 14: the verdict and the ``final_test`` record. Each finding is judged by the
+    """Step 15: the verdict and the ``final_test`` record. Each finding is judged by the
     yardstick of its kind (:func:`_confirmations`); the held-out runs' score and whiteness
     tests (:func:`_final_test`) say whether structure is left. ``unconfirmed``: nothing kept
     is confirmed, or the rounds proposed effects or terms and the gate kept none (the model
     stays as given — never ``explained`` on a proposal the open-loop check refused); ``partly
-    confirmed``: some findings confirmed, others not (the report says which)."""
+    confirmed``: some findings confirmed, others not (the report says which); ``confounded``:
+    everything confirmed and no structure left, but the fitted values moved along a confound
+    (:mod:`odomgym.diagnose.confounds`) — the logs read equally as a measurement error, and
+    the report names both readings and what would separate them."""
     gate = found.gate
     noise = [check.effect for check in spread]
     found_anything = bool(gate.effects) or bool(gate.terms) or bool(noise)
@@ -414,6 +420,8 @@ def verdict_of(
         verdict = "partly confirmed"
     elif not found_anything and gate.steps:
         verdict = "unconfirmed"
+    if verdict == "explained" and any(c.moved for c in confounds):
+        verdict = "confounded"
     final_test["confirmations"] = confirmations
     final_test["tie_resolved_open_loop"] = found.tied if found.resolved else []
     return verdict, final_test

@@ -44,9 +44,13 @@ below points. :func:`_diagnose` reads as this list, one call per step, numbered 
 13. **Held out, spread** (:mod:`odomgym.diagnose.spread`): each kept noise effect against the
     model without it, refitted, by the log predictive density of the held-out runs' open-loop
     errors and the coverage of its 50 % and 95 % regions — the yardstick of noise effects.
-14. **Verdict** (:func:`odomgym.diagnose.verdict.verdict_of`): which yardstick confirmed what;
-    the grammar's score test and a whiteness test on the held-out runs.
-15. **The whitened gap, a diagnostic** (:func:`odomgym.diagnose.verdict._shrink`).
+14. **Confounds** (:mod:`odomgym.diagnose.confounds`): the directions in which the kept robot
+    parameters and measurement nuisances make the same logs, derived from the data's joint
+    Jacobian, and whether the fitted values moved along one.
+15. **Verdict** (:func:`odomgym.diagnose.verdict.verdict_of`): which yardstick confirmed what;
+    never a plain ``explained`` along a confound; the grammar's score test and a whiteness test
+    on the held-out runs.
+16. **The whitened gap, a diagnostic** (:func:`odomgym.diagnose.verdict._shrink`).
 
 The settings are :class:`~odomgym.diagnose.config.DiagnoseConfig`; finished candidate fits are
 kept in a :class:`~odomgym.diagnose.journal.FitJournal` for ``--resume``. Every public name of
@@ -66,6 +70,7 @@ from threadpoolctl import threadpool_limits
 
 from odomgym import interrupt
 from odomgym.diagnose.config import DiagnoseConfig
+from odomgym.diagnose.confounds import Confound, derive_confounds
 from odomgym.diagnose.fit import (
     Dataset,
     Model,
@@ -128,10 +133,12 @@ from odomgym.diagnose.rounds import (
     RoundContext,
     _backward_check,
     _discovery_record,
+    _forward_check,
     run_round,
 )
 from odomgym.diagnose.spread import SpreadCheck, judge_spread, model_without
 from odomgym.diagnose.steps import (
+    Backward,
     NoiseNamed,
     Recording,
     RunSplit,
@@ -336,20 +343,24 @@ def _diagnose(
     rec = _measurement_nuisances(split, robot, cfg, report)  # 2
     as_given, findings = _where(split, rec, robot, cfg, report)  # 3
     state = _rounds(rec, robot, cfg, rng, report, journal)  # 4
-    absorbed = _backward(rec, state, cfg)  # 5
+    backward = _backward(rec, state, cfg)  # 5
     noise = _noise_effects(rec, state, cfg)  # 6
     sizes = _term_sizes(rec, state)  # 7
-    found = _systematic(rec, robot, state, noise, sizes, cfg, report)  # 8–10
+    found = _systematic(rec, robot, state, backward, noise, sizes, cfg, report)  # 8–10
     final, noise = _noise_refit(found, state, noise)  # 11
     held = _held_out(split, rec, robot, found, as_given, baseline, cfg, report)  # 12
     spread = _spread(split, held, final, noise, found, cfg, report)  # 13
-    verdict, final_test = verdict_of(split.held, found, final, held, spread, state, cfg)  # 14
+    confounds = _confounds(rec, robot, found, noise, final, report)  # 14
+    verdict, final_test = verdict_of(  # 15
+        split.held, found, final, held, spread, confounds, state, cfg
+    )
     report("shrink", 1.0)
-    gaps = _shrink(held.corrected(split.held), robot, final, cfg)  # 15
-    final_test["absorbed"] = absorbed
+    gaps = _shrink(held.corrected(split.held), robot, final, cfg)  # 16
+    final_test["absorbed"] = backward.absorbed
+    final_test["unsupported"] = backward.unsupported
     final_test["noise_carried_by_the_rest"] = noise.vanished
     return _diagnosis(runs, robot, split, rec, state, findings, noise, sizes, found, final,
-                      held, spread, verdict, final_test, gaps)  # fmt: skip
+                      held, spread, confounds, verdict, final_test, gaps)  # fmt: skip
 
 
 def _split(runs: Sequence[Run], cfg: DiagnoseConfig, rng: np.random.Generator) -> RunSplit:
@@ -477,17 +488,26 @@ def _rounds(
     return state
 
 
-def _backward(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> list[str]:
+def _backward(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> Backward:
     """Step 5: a systematic effect named early may have stood in for what a later one (or a
-    discovered term, or a noise effect's mean part) explains better; each must still be
-    significant in the final model, or it is removed (``absorbed``)."""
+    discovered term, or a noise effect) explains better; each must still be significant in the
+    final model, or it is removed (``absorbed``). An effect an earlier round found significant
+    but never named is proposed to the gate only if it is significant added to the final model
+    (``unsupported`` otherwise: :func:`odomgym.diagnose.rounds._forward_check`)."""
     absorbed = _backward_check(rec.data, state.model, state.named, cfg.alpha)
     for name in absorbed:
         spec = EFFECTS[name].write(state.model.spec, EFFECTS[name].absent_values())
         state.model = Model(spec, state.model.sensor)
         state.named.remove(name)
         state.parameters.pop(name, None)
-    return absorbed
+    last = state.rounds[-1] if state.rounds else None
+    in_last = {c.name for c in last.candidates if c.significant} if last is not None else set()
+    earlier = [
+        n
+        for n in _significant_effects(state, tied=True)
+        if n not in state.named and n not in absorbed and n not in in_last
+    ]
+    return Backward(absorbed, _forward_check(rec.data, state.model, earlier, cfg.alpha))
 
 
 def _noise_effects(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> NoiseNamed:
@@ -540,6 +560,7 @@ def _systematic(
     rec: Recording,
     robot: RobotSpec,
     state: DiagnosisState,
+    backward: Backward,
     noise: NoiseNamed,
     sizes: Sequence[TermSize],
     cfg: DiagnoseConfig,
@@ -560,7 +581,9 @@ def _systematic(
     terms = [size.term for size in sizes if size.plausible]
     refused: list[TermRefusal] = []
     for _ in range(MAX_SIZE_PASSES):
-        gate, tied, resolved = _gate(rec, base_robot, nominal, state, noise, terms, cfg, report)
+        gate, tied, resolved = _gate(
+            rec, base_robot, nominal, state, backward, noise, terms, cfg, report
+        )
         chosen, estimators, corrected = _estimate(rec, state, gate, report)
         failing = real_size(chosen, gate.terms, state.passes)
         if not failing:
@@ -578,6 +601,7 @@ def _gate(
     robot: RobotSpec,
     nominal: OpenLoopFit,
     state: DiagnosisState,
+    backward: Backward,
     noise: NoiseNamed,
     terms: Sequence[str],
     cfg: DiagnoseConfig,
@@ -622,7 +646,8 @@ def _gate(
             order=cfg.gate_order,
         )
 
-    pool = [n for n in _significant_effects(state, tied=True) if n not in noise.took_over]
+    out = {*noise.took_over, *backward.unsupported}
+    pool = [n for n in _significant_effects(state, tied=True) if n not in out]
     gate = gated(pool)
     resolved = bool(tied) and set(tied) <= set(gate.effects)
     if tied and not resolved:
@@ -796,6 +821,39 @@ def _spread(
     ]
 
 
+def _confounds(
+    rec: Recording,
+    robot: RobotSpec,
+    found: SystematicModel,
+    noise: NoiseNamed,
+    final: Model,
+    report: Report,
+) -> list[Confound]:
+    """Step 14: the directions in which the kept robot parameters and the measurement
+    nuisances (those fitted, those that are not, and errors of the ground-truth system itself)
+    make the same logs on the fit runs, derived from their joint Jacobian
+    (:func:`odomgym.diagnose.confounds.derive_confounds`), with whether the fitted values
+    moved along one beyond their errors."""
+    if not (found.gate.effects or found.gate.terms):
+        return []
+    report("confounds", 1.0)
+    return derive_confounds(
+        rec.open_data, found.gate.fit, noise.with_means(robot), sensor=final.sensor
+    )
+
+
+def _in_order_added(
+    state: DiagnosisState, effects: Sequence[str], noise: Sequence[str]
+) -> list[str]:
+    """The kept catalogue effects — systematic ``effects`` and ``noise`` effects — in the order
+    the rounds named them (an effect named again after others joined keeps its first place),
+    then those the gate kept that the rounds found significant without naming them: the order
+    in which the diagnosis added them to the model."""
+    kept = {*effects, *noise}
+    first = [n for n in state.named if n in kept]
+    return first + [n for n in effects if n not in first]
+
+
 def _diagnosis(
     runs: Sequence[Run],
     robot: RobotSpec,
@@ -809,6 +867,7 @@ def _diagnosis(
     final: Model,
     held: HeldOut,
     spread: Sequence[SpreadCheck],
+    confounds: Sequence[Confound],
     verdict: str,
     final_test: dict[str, Any],
     gaps: dict[str, Any],
@@ -822,7 +881,7 @@ def _diagnosis(
         parameters[name] = noise_parameters(state, name, final.spec)
     return Diagnosis(
         verdict=verdict,
-        named_effects=kept + noise.kept,
+        named_effects=_in_order_added(state, kept, noise.kept),
         parameters=parameters,
         initial=robot,
         model=final.spec,
@@ -851,6 +910,7 @@ def _diagnosis(
         refused_terms=[r.as_dict() for r in found.refused],
         noise_checks=noise.checks,
         spread=[check.as_dict() for check in spread],
+        confounds=[c.as_dict() for c in confounds],
         geometry_check=_geometry_moves(final.spec, spread, chosen.entries),
         filter_parameters={
             name: {key: entry["value"] for key, entry in state.parameters[name].items()}
