@@ -92,7 +92,7 @@ from odomgym.diagnose.heldout import (
     pictured_runs,
 )
 from odomgym.diagnose.journal import FitJournal
-from odomgym.diagnose.likelihood import SensorNoise, measurement_mask
+from odomgym.diagnose.likelihood import SensorNoise
 from odomgym.diagnose.nuisances import (
     SESSION_EFFECTS,
     SessionNuisance,
@@ -126,6 +126,7 @@ from odomgym.diagnose.rounds import (
     _discovery_record,
     run_round,
 )
+from odomgym.diagnose.screen import usable_runs
 from odomgym.diagnose.verdict import (
     _discovered_order,
     _final_test,
@@ -225,19 +226,6 @@ def split_runs(
     return fit, sorted(held), split
 
 
-def _check_runs(runs: Sequence[Run]) -> None:
-    """At least three runs, each with a measured pose after its first sample."""
-    if len(runs) < 3:
-        raise SpecError(f"diagnose needs at least 3 runs, got {len(runs)}", field="runs")
-    for run in runs:
-        if not measurement_mask(run, 0.0).any():
-            raise SpecError(
-                f"run {run.meta.get('run', '?')} has no measured pose after its first sample",
-                field="x",
-                source=run.source,
-            )
-
-
 def _significant_offset(nuisance: SessionNuisance) -> SessionNuisance:
     """``nuisance``'s time offset alone (the frame is refitted at that offset), zero — with its
     standard error kept — where :func:`~odomgym.diagnose.nuisances.offset_is_significant` says
@@ -313,7 +301,8 @@ def _diagnose(
         if progress is not None:
             progress(stage, fraction)
 
-    _check_runs(runs)
+    # Each run from its first full pose; runs with too little ground truth set aside.
+    runs, skipped = usable_runs(runs, robot)
     rng = np.random.default_rng(cfg.seed)
     fit_index, held_index, split = split_runs(runs, cfg.holdout, rng)
     fit_runs = [runs[j] for j in fit_index]
@@ -608,5 +597,6 @@ def _diagnose(
         terms_tried=_terms_tried(state.passes),
         fit_runs=[_run_id(runs[j], j) for j in fit_index],
         holdout_runs=[_run_id(runs[j], j) for j in held_index],
+        skipped_runs=[s.as_dict() for s in skipped],
         **gaps,
     )
