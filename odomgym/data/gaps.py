@@ -43,7 +43,13 @@ from numpy.typing import NDArray
 
 from odomgym.odometry.runs import Run
 
-__all__ = ["END_SLACK_COUNTS", "first_full_pose", "mark_held_poses", "measured_end"]
+__all__ = [
+    "END_SLACK_COUNTS",
+    "first_full_pose",
+    "held_poses",
+    "mark_held_poses",
+    "measured_end",
+]
 
 END_SLACK_COUNTS = 2
 """Encoder counts a wheel may move after a run's last measured pose for that pose still to be
@@ -75,10 +81,15 @@ def mark_held_poses(run: Run) -> tuple[Run, int]:
         return run, 0
     marked = pose.copy()
     marked[held] = np.nan
-    before = run.meta.get("held_poses", 0)
-    count = (before if isinstance(before, int) else 0) + len(held)
-    meta = {**run.meta, "held_poses": count}
+    meta = {**run.meta, "held_poses": held_poses(run) + len(held)}
     return dataclasses.replace(run, true_pose=marked, meta=meta), len(held)
+
+
+def held_poses(run: Run) -> int:
+    """How many of ``run``'s rows :func:`mark_held_poses` has made gaps (``meta["held_poses"]``,
+    0 if none)."""
+    count = run.meta.get("held_poses", 0)
+    return count if isinstance(count, int) else 0
 
 
 def first_full_pose(run: Run) -> int | None:
