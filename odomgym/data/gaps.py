@@ -8,8 +8,9 @@ in the way, the edge of the tracked volume). A log shows it in one of two ways:
   measured there. Every step of ``odomgym diagnose`` takes them as they come: a replay is
   compared with the measured rows only.
 * **a held pose**: the tracker, or the logger behind it, keeps writing the last pose it had.
-  The issue that brought this module in had OptiTrack logs in which 45 % of the samples were
-  such held values; the shipped OptiOdom sessions hold a handful (5 of 58 845 rows). A held
+  The OptiTrack logs that brought this module in held 45 % of their samples (their logger
+  wrote them as empty cells; another writes the repeated pose); the shipped OptiOdom sessions
+  hold a handful (5 of 58 845 rows). A held
   pose says "the robot stood still" while its wheels turned: a fit would read it as slip, a
   time offset or a scale error. :func:`mark_held_poses` finds them and makes them gaps.
 

@@ -17,15 +17,19 @@ run or sets it aside:
    One is enough on purpose: an UMBmark-style log measures a run's first and last rows only,
    and that is a complete experiment.
 4. **The run's motion seen.** The ground truth must follow the run through at least
-   :data:`MIN_COVERAGE` of its wheel motion: the encoder counts turned (both wheels, summed)
-   between the start and the last measured position, over those of the whole logged run. Why:
-   the diagnosis compares the runs of one experiment by their final disagreement
-   (:mod:`odomgym.diagnose.where`) and weighs every held-out run equally
-   (:mod:`odomgym.diagnose.heldout`); a run seen over a small part of its motion reports the
-   disagreement of a shorter experiment than its label says, near zero for every model, and
-   would dilute both. Half bounds that mismatch to a factor of two in path length and keeps
-   every run the tracker lost only in its second half. A run whose wheels never turned has
-   nothing to miss and passes.
+   :data:`MIN_COVERAGE` (a quarter) of its wheel motion: the encoder counts turned (both
+   wheels, summed) between the start and the last measured position, over those of the whole
+   logged run. Why: a run the tracker lost right after its start reports the disagreement of a
+   run a fraction as long — near zero, the sensor's noise, for every model — yet it weighs as
+   much as any other run in the held-out comparison (:mod:`odomgym.diagnose.heldout`: runs
+   weigh equally), which it would dilute more than its few samples inform the fits. (Its final
+   disagreement is no final one either; :mod:`odomgym.diagnose.where` leaves such finals out
+   by itself.) Why a quarter, not a half: the fits use every measured sample of a run however
+   far it was followed, so the cut should take only runs that are mostly unseen. On logs like
+   the issue's — the independent generator's 24-run protocol with 45 % of the ground truth lost
+   in bursts of 0.8 s on average, ten seeds — a quarter sets aside 4 % of the runs (short
+   spins lost in their first second), a half would set aside 7 %. A run whose wheels never
+   turned has nothing to miss and passes.
 
 A diagnosis needs :data:`MIN_RUNS` usable runs (:func:`usable_runs`): fewer stop it with one
 line naming the runs set aside and why.
@@ -50,7 +54,7 @@ __all__ = ["MIN_COVERAGE", "MIN_MEASURED", "MIN_RUNS", "SkippedRun", "screen_run
 
 MIN_MEASURED = 1
 """Fewest measured positions after a run's start pose (module docstring, rule 3)."""
-MIN_COVERAGE = 0.5
+MIN_COVERAGE = 0.25
 """Least share of a run's wheel motion its ground truth must follow (module docstring, rule 4)."""
 MIN_RUNS = 3
 """Fewest usable runs a diagnosis needs: at least two to fit and one to hold out, and a
