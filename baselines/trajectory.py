@@ -298,24 +298,26 @@ class TrajectoryBaseline:
         """The robot with the geometry fitted to ``runs``.
 
         Raises:
-            SpecError: the runs cannot determine it (:func:`fit_trajectories`), saying that
+            SpecError: the runs cannot determine it (:func:`fit_trajectories`), or determine
+                it so poorly that the fit leaves the range a robot may have (runs that all
+                drive straight, or all turn in place, nearly singular), saying that
                 ``odomgym diagnose --no-baseline`` leaves the baseline out.
         """
         try:
             fit = fit_trajectories(runs, robot, heading_weight=self.heading_weight)
+            b = fit.parameters["wheelbase"]
+            right, left = fit.parameters["right_diameter"], fit.parameters["left_diameter"]
+            return robot.with_errors(
+                e_d=right / left,
+                e_b=b / robot.wheelbase,
+                e_s=0.5 * (right + left) / robot.wheel_diameter,
+            )
         except SpecError as exc:
             raise SpecError(
                 f"the baseline calibration cannot be fitted to these runs: {exc} (--no-baseline "
                 "leaves it out)",
                 field=exc.field,
             ) from None
-        b = fit.parameters["wheelbase"]
-        right, left = fit.parameters["right_diameter"], fit.parameters["left_diameter"]
-        return robot.with_errors(
-            e_d=right / left,
-            e_b=b / robot.wheelbase,
-            e_s=0.5 * (right + left) / robot.wheel_diameter,
-        )
 
 
 #: The runs :class:`Trajectory` can ask a lab for: each turns while it moves, so positions

@@ -124,6 +124,8 @@ def test_a_run_starts_at_its_first_full_pose() -> None:
         usable.meta["wheel_angle0"], [0.1 + 280 * per_count, 0.2 + 140 * per_count]
     )
     assert usable.meta["trimmed_rows"] == 3 and usable.meta["run"] == "1"
+    (alone,), _ = screen_runs([run])  # without the encoder resolution the angles cannot move
+    assert "wheel_angle0" not in alone.meta
 
 
 def _moving(seen: str) -> Run:
@@ -207,6 +209,21 @@ def test_the_baseline_fits_through_gaps_and_wrong_way_unwrapped_headings() -> No
     assert fits[0].residuals == int(
         np.isfinite(np.concatenate([r.true_pose[1:] for r in gappy])).sum()
     )
+
+
+def test_runs_that_cannot_determine_the_baseline_are_an_input_error() -> None:
+    """Straight runs alone leave the baseline's fit nearly singular (it wanders off to wheels
+    of 4 mm); at rest, singular: either is the data's limit, said in one line that names the
+    way out, not an internal error."""
+    straights = generate(
+        IndependentRobot(), [Manoeuvre("straight", size=1.0)] * 3, np.random.default_rng(0)
+    )
+    resting = [dataclasses.replace(run, counts=np.zeros_like(run.counts)) for run in straights]
+    for runs in (straights, resting):
+        with pytest.raises(SpecError, match="cannot be fitted to these runs: ") as caught:
+            TrajectoryBaseline()(runs, MODEL)
+        assert str(caught.value).endswith("(--no-baseline leaves it out)")
+        assert "\n" not in str(caught.value)
 
 
 def test_held_out_errors_count_each_component_where_it_was_measured() -> None:

@@ -28,8 +28,8 @@ run or sets it aside:
    far it was followed, so the cut should take only runs that are mostly unseen. On logs like
    the issue's — the independent generator's 24-run protocol with 45 % of the ground truth lost
    in bursts of 0.8 s on average, ten seeds — a quarter sets aside 4 % of the runs (short
-   spins lost in their first second), a half would set aside 7 %. A run whose wheels never
-   turned has nothing to miss and passes.
+   spins the tracker lost early), a half would set aside 7 %. A run whose wheels never turned
+   has nothing to miss and passes.
 
 A diagnosis needs :data:`MIN_RUNS` usable runs (:func:`usable_runs`): fewer stop it with one
 line naming the runs set aside and why.
