@@ -77,22 +77,29 @@ IntArray = NDArray[np.intp]
 
 
 def sample_indices(run: Run, sample_distance: float | None = None) -> IntArray:
-    """The samples of ``run`` whose errors enter the cost (never the first, always the last).
+    """The measured samples of ``run`` whose errors enter the cost (never the first, always the
+    last measured one). Samples without ground truth (gaps: NaN poses) are never picked.
 
-    ``None``: every sample. Otherwise the first sample after each further ``sample_distance``
-    metres of ground-truth travel (the authors' ``sampleDist``), and the last one; a run that
-    turns in place and never travels that far contributes its last sample only.
+    ``None``: every measured sample. Otherwise the first measured sample after each further
+    ``sample_distance`` metres of ground-truth travel (the authors' ``sampleDist``; across a
+    gap, the straight line between the measured positions on either side), and the last one; a
+    run that turns in place and never travels that far contributes its last sample only.
     """
-    n = len(run.time)
-    if sample_distance is None:
-        return np.arange(1, n, dtype=np.intp)
-    if not sample_distance > 0.0:
+    if sample_distance is not None and not sample_distance > 0.0:
         raise ValueError(f"sample_distance must be > 0 [m], got {sample_distance}")
-    steps = np.hypot(*np.diff(run.true_pose[:, :2], axis=0).T)
-    travelled = np.concatenate([[0.0], np.cumsum(steps)])
-    marks = np.floor(travelled / sample_distance)
-    picked = np.flatnonzero(np.diff(marks) > 0) + 1
-    return np.unique(np.concatenate([picked, [n - 1]])).astype(np.intp)
+    pose = run.true_pose
+    known: NDArray[np.bool_] = np.asarray(np.isfinite(pose).any(axis=1))
+    measured = np.flatnonzero(known[1:]) + 1
+    if sample_distance is None or not len(measured):
+        return measured.astype(np.intp)
+    placed = np.flatnonzero(np.isfinite(pose[:, :2]).all(axis=1))
+    if not len(placed):
+        return measured[-1:].astype(np.intp)
+    steps = np.hypot(*np.diff(pose[placed, :2], axis=0).T)
+    travelled = np.interp(measured, placed, np.concatenate([[0.0], np.cumsum(steps)]))
+    marks = np.floor(np.concatenate([[0.0], travelled]) / sample_distance)
+    picked = measured[np.diff(marks) > 0]
+    return np.unique(np.concatenate([picked, measured[-1:]])).astype(np.intp)
 
 
 @dataclass(frozen=True)
@@ -156,14 +163,29 @@ def fit_trajectories(
         loss: :func:`scipy.optimize.least_squares` loss (``"linear"``; ``"soft_l1"`` or
             ``"huber"`` to down-weight outliers such as slip), with scale 5 mm.
 
+    Ground-truth gaps (NaN pose components) are left out of the cost component by component:
+    a residual exists where its measured value does. Heading errors are wrapped to [−π, π), so
+    a heading unwrapped the wrong way round across a gap (``odomgym.data.native``) costs
+    nothing.
+
     Raises:
-        ValueError: no runs, or runs that do not determine the parameters at all (a singular
-            Jacobian, e.g. only straight runs).
+        SpecError: runs that do not determine the parameters at all (a singular Jacobian, e.g.
+            only straight runs), a run whose first sample has no full pose (the odometry
+            starts there), or runs without a measured pose after their first sample.
+        ValueError: no runs, or a negative ``heading_weight``.
     """
     if not runs:
         raise ValueError("trajectory optimisation needs at least one run")
     if not heading_weight >= 0.0:
         raise ValueError(f"heading_weight must be >= 0 [m/rad], got {heading_weight}")
+    for run in runs:
+        if not np.isfinite(run.true_pose[0]).all():
+            raise SpecError(
+                "trajectory optimisation replays each run from its first ground-truth pose, "
+                "but this run's first sample has no full pose (x, y and theta)",
+                field="x",
+                source=run.source,
+            )
     start = initial if initial is not None else Calibration()
     base = start.parameters(robot)
     rows = [0, 1, 2] if heading_weight > 0.0 else [0, 1]
@@ -172,6 +194,14 @@ def fit_trajectories(
     truth = np.concatenate(
         [run.true_pose[idx][:, rows] for run, idx in zip(runs, chosen, strict=True)]
     )
+    measured = np.isfinite(truth)  # the residuals there are; gaps are left out
+    placed = measured[:, 0] & measured[:, 1]
+    if not measured.any():
+        raise SpecError(
+            "trajectory optimisation needs measured poses after the runs' first samples, and "
+            "these runs have none",
+            field="x",
+        )
 
     def calibration_at(x: FloatArray) -> Calibration:
         return Calibration.from_parameters(
@@ -184,7 +214,8 @@ def fit_trajectories(
     cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
 
     def evaluate(x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Errors (samples, rows) [m, rad] and the weighted Jacobian (samples·rows, 3)."""
+        """Errors (samples, rows) [m, rad], NaN in gaps, heading wrapped, and the weighted
+        Jacobian of the measured ones (measured components, 3)."""
         key = np.asarray(x, dtype=float).tobytes()
         if key not in cache:
             cache.clear()
@@ -195,23 +226,28 @@ def fit_trajectories(
                 poses.append(pose[idx][:, rows])
                 jacs.append(jac[idx][:, rows, :])
             errors = np.concatenate(poses) - truth
-            jacobian = (np.concatenate(jacs) * weights[None, :, None]).reshape(-1, 3)
+            if len(rows) == 3:
+                errors[:, 2] = np.mod(errors[:, 2] + math.pi, 2.0 * math.pi) - math.pi
+            jacobian = (np.concatenate(jacs) * weights[None, :, None])[measured]
             cache[key] = (errors, jacobian)
         return cache[key]
 
     def residual(x: FloatArray) -> FloatArray:
-        weighted: FloatArray = (evaluate(x)[0] * weights).reshape(-1)
+        weighted: FloatArray = (evaluate(x)[0] * weights)[measured]
         return weighted
 
     def rms_position(errors: FloatArray) -> float:
-        return float(np.sqrt(np.mean(errors[:, 0] ** 2 + errors[:, 1] ** 2)))
+        if not placed.any():
+            return math.nan
+        return float(np.sqrt(np.mean(errors[placed, 0] ** 2 + errors[placed, 1] ** 2)))
 
     x0 = np.zeros(3)
     errors0, jacobian0 = evaluate(x0)
     if np.linalg.matrix_rank(jacobian0) < 3:
-        raise ValueError(
+        raise SpecError(
             "the runs do not tell D_L, D_R and b apart (singular Jacobian): they need both "
-            "straight travel and turning"
+            "straight travel and turning",
+            field="runs",
         )
     solution = least_squares(
         residual,
@@ -259,14 +295,29 @@ class TrajectoryBaseline:
     name: str = "trajectory optimisation (Sousa et al. 2022), heading weight 0.2 m/rad"
 
     def __call__(self, runs: Sequence[Run], robot: RobotSpec) -> RobotSpec:
-        fit = fit_trajectories(runs, robot, heading_weight=self.heading_weight)
-        b = fit.parameters["wheelbase"]
-        right, left = fit.parameters["right_diameter"], fit.parameters["left_diameter"]
-        return robot.with_errors(
-            e_d=right / left,
-            e_b=b / robot.wheelbase,
-            e_s=0.5 * (right + left) / robot.wheel_diameter,
-        )
+        """The robot with the geometry fitted to ``runs``.
+
+        Raises:
+            SpecError: the runs cannot determine it (:func:`fit_trajectories`), or determine
+                it so poorly that the fit leaves the range a robot may have (runs that all
+                drive straight, or all turn in place, nearly singular), saying that
+                ``odomgym diagnose --no-baseline`` leaves the baseline out.
+        """
+        try:
+            fit = fit_trajectories(runs, robot, heading_weight=self.heading_weight)
+            b = fit.parameters["wheelbase"]
+            right, left = fit.parameters["right_diameter"], fit.parameters["left_diameter"]
+            return robot.with_errors(
+                e_d=right / left,
+                e_b=b / robot.wheelbase,
+                e_s=0.5 * (right + left) / robot.wheel_diameter,
+            )
+        except SpecError as exc:
+            raise SpecError(
+                f"the baseline calibration cannot be fitted to these runs: {exc} (--no-baseline "
+                "leaves it out)",
+                field=exc.field,
+            ) from None
 
 
 #: The runs :class:`Trajectory` can ask a lab for: each turns while it moves, so positions

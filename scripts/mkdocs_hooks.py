@@ -183,6 +183,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.data.native",
             "odomgym.data.rosbag2",
             "odomgym.data.logs",
+            "odomgym.data.gaps",
             "odomgym.data.samples",
             "odomgym.data.hyperparams",
             "odomgym.data.policies",
@@ -202,6 +203,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         "Where a model and a robot disagree, and what is missing (docs/diagnose.md).",
         (
             "odomgym.diagnose.workflow",
+            "odomgym.diagnose.screen",
             "odomgym.diagnose.config",
             "odomgym.diagnose.results",
             "odomgym.diagnose.journal",

@@ -408,6 +408,85 @@ def test_output_check_accepts_new_nested_paths_and_leaves_nothing(tmp_path: Path
     assert list(tmp_path.iterdir()) == []
 
 
+# ------------------------------------------------------------------------- internal errors
+def _three_straight_runs(folder: Path) -> Path:
+    """A native log of three short straight runs, every pose measured."""
+    import numpy as np
+
+    from odomgym.data.native import write_native
+    from odomgym.odometry.runs import Run
+
+    steps = np.arange(6)
+    runs = [
+        Run(
+            kind="straight",
+            time=0.1 * steps,
+            counts=np.column_stack([40 * steps, 40 * steps]),
+            true_pose=np.column_stack([0.01 * steps + k, np.zeros(6), np.full(6, 0.1 * k)]),
+            meta={"run": f"r{k}"},
+        )
+        for k in range(3)
+    ]
+    path = folder / "straight.csv"
+    write_native(path, runs)
+    return path
+
+
+def _failing_split(error: Exception) -> object:
+    def fail(*args: object, **kwargs: object) -> None:
+        raise error
+
+    return fail
+
+
+@pytest.mark.parametrize(
+    "error", [RuntimeError("boom,\n  over two lines"), ValueError("x must be finite")]
+)
+def test_an_internal_error_is_one_line_naming_it_a_bug_exit_3(
+    error: Exception,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A failure inside the library that no input check raised (here the workflow's split
+    fails) is odomgym's bug, and said to be: exit 3, one line naming the exception, no
+    traceback, no output. A ValueError included: diagnose used to present every ValueError as
+    the user's input error (exit 2)."""
+    import odomgym.diagnose.workflow as workflow
+
+    monkeypatch.setattr(workflow, "split_runs", _failing_split(error))
+    out = tmp_path / "out"
+    argv = ["diagnose", str(_three_straight_runs(tmp_path)), "--robot", "labmate"]
+    assert main([*argv, "--out", str(out)]) == 3
+    stdout, stderr = capsys.readouterr()
+    assert stdout == "" and "Traceback" not in stderr and not out.exists()
+    lines = stderr.strip().splitlines()
+    kind, text = type(error).__name__, " ".join(str(error).split())
+    assert lines == [
+        f"odomgym: internal error: {kind}: {text} — a bug in odomgym, not in your input; please "
+        "report it with the command line and the output of odomgym --debug diagnose …"
+    ]
+
+
+def test_debug_shows_an_internal_errors_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``odomgym --debug COMMAND`` shows the full traceback of an internal error instead of
+    the one line (still exit 3); an input error stays one line."""
+    import odomgym.diagnose.workflow as workflow
+
+    monkeypatch.setattr(workflow, "split_runs", _failing_split(RuntimeError("boom")))
+    data = str(_three_straight_runs(tmp_path))
+    argv = ["--debug", "diagnose", data, "--robot", "labmate", "--out", str(tmp_path / "o")]
+    assert main(argv) == 3
+    stderr = capsys.readouterr().err
+    assert stderr.startswith("Traceback (most recent call last):")
+    assert "in _diagnose" in stderr and stderr.rstrip().endswith("RuntimeError: boom")
+    assert "internal error" not in stderr
+    assert main(["--debug", "diagnose", data, "--robot", "no-such-robot"]) == 2
+    _one_line_error(capsys, "unknown robot")
+
+
 # ---------------------------------------------------------------------------------- bench
 def test_bench_backend_ray_without_ray_is_one_line(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]

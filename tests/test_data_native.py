@@ -126,6 +126,32 @@ def test_reads_a_hand_written_log(tmp_path: Path) -> None:
     assert (free.kind, free.direction, free.source) == ("free", None, f"{path}:6")
 
 
+def test_gaps_are_read_as_logged(tmp_path: Path) -> None:
+    """Empty pose cells are gaps wherever they are: on a run's first rows (a tracker that
+    found the marker late: the rows stay, counts and time from the run's first row), or on
+    every row of a run (the tracker never saw it). Deciding what a diagnosis can use is the
+    screening's (odomgym.diagnose.screen), not the reader's."""
+    path = _write(
+        tmp_path,
+        HEADER,
+        _row(th=""),
+        _row(t=0.5, left=3, right=4, x="", y="", th=""),
+        _row(t=1, left=9, right=10, x=0.1),
+        _row(run="r2", x="", y="", th=""),
+        _row(run="r2", t=1, left=5, right=5, x="", y="", th=""),
+    )
+    late, blind = read_native(path)
+    assert np.isnan(late.true_pose[0, 2]) and not np.isnan(late.true_pose[0, :2]).any()
+    assert np.isnan(late.true_pose[1]).all()
+    np.testing.assert_array_equal(late.true_pose[2], [0.1, 0.0, 0.0])
+    np.testing.assert_array_equal(late.counts, [[0, 0], [3, 4], [9, 10]])
+    assert np.isnan(blind.true_pose).all() and blind.meta["lines"] == (5, 6)
+    again = tmp_path / "again.csv"
+    write_native(again, [late, blind])  # what is read writes back, gaps included
+    for read, written in zip(read_native(again), (late, blind), strict=True):
+        np.testing.assert_array_equal(read.true_pose, written.true_pose)
+
+
 @pytest.mark.parametrize(
     ("label", "kind", "direction"),
     [
@@ -216,24 +242,6 @@ BAD: dict[str, tuple[list[str], str, int, str | None]] = {
     "only x": ([HEADER, _row(), _row(t=1, y="")], "'x' is given but 'y' is empty", 3, "y"),
     "only y": ([HEADER, _row(), _row(t=1, x="")], "'y' is given but 'x' is empty", 3, "x"),
     "theta alone": ([HEADER, _row(), _row(t=1, x="", y="")], "'theta' is given but", 3, "x"),
-    "no ground truth": (
-        [
-            HEADER,
-            _row(),
-            _row(t=1),
-            _row(run="r2", x="", y="", th=""),
-            _row(run="r2", t=1, x="", y="", th=""),
-        ],
-        "run 'r2' \\(lines 4–5\\) has no ground truth",
-        4,
-        "x",
-    ),
-    "first pose incomplete": (
-        [HEADER, _row(th=""), _row(t=1)],
-        "starts without a full pose on line 2 \\(theta empty\\)",
-        2,
-        "theta",
-    ),
     "one row": (
         [HEADER, _row(), _row(t=1), _row(run="r2")],
         "run 'r2' has only one row \\(line 4\\)",
@@ -306,7 +314,6 @@ def test_count_jumps_are_checked_against_the_robot(tmp_path: Path) -> None:
         ("inf", "theta of sample 2 is infinite"),
         ("half", "sample 1 has only one of x and y"),
         ("lone theta", "sample 1 has theta without x and y"),
-        ("first", r"first sample has no full pose \(theta is NaN\)"),
         ("time", "time must increase"),
         ("nan time", "time of sample 3 is nan"),
         ("duplicate id", "same id as run 1"),
@@ -323,8 +330,6 @@ def test_write_refuses_runs_it_could_not_read_back(
         pose[1, 0] = NAN
     elif change == "lone theta":
         pose[1, :2] = NAN
-    elif change == "first":
-        pose[0, 2] = NAN
     elif change == "time":
         time[5] = time[4]
     elif change == "nan time":

@@ -303,17 +303,51 @@ def test_bad_arguments_and_topics(joint_bag: Path, options: dict[str, Any], patt
         assert str(joint_bag) in str(info.value)
 
 
-def test_first_sample_needs_a_pose(tmp_path: Path) -> None:
+def test_wheel_samples_before_the_first_pose_are_gaps(tmp_path: Path) -> None:
+    """A tracker that starts half a second after the wheel log: the wheel samples before its
+    first pose have none (NaN, a gap at the run's start: diagnose's screening starts the run at
+    its first pose), the others are interpolated as ever."""
     late = [ns + 500 * MS for ns in mocap_times()]
     bag = write_bag(
         tmp_path / "late", {"/joint_states": joint_stream(), "/mocap/pose": pose_stream(times=late)}
     )
-    with pytest.raises(
-        SpecError,
-        match=r"late.*first /joint_states sample \(1700000000\.003000000 "
-        r"s\) comes before the first /mocap/pose message .*1700000000\.500000000",
-    ):
-        _read(bag)
+    (run,) = read_rosbag(bag, robot=ROBOT, pose_topic="/mocap/pose", joint_topic="/joint_states")
+    stamps = np.array(joint_times())
+    before = stamps < late[0]
+    assert before.sum() == 25  # 3, 23, …, 483 ms
+    assert np.isnan(run.true_pose[before]).all()
+    assert np.isfinite(run.true_pose[~before & (stamps <= late[-1])]).all()
+
+
+def test_read_log_takes_poses_the_tracker_held_as_gaps(tmp_path: Path) -> None:
+    """A motion-capture stream that repeats the pose of t = 1 s until t = 2 s while the robot
+    drives on: the wheel samples whose interpolated pose is that held one are gaps
+    (odomgym.data.gaps.mark_held_poses, which read_log applies to every format), the first
+    wheel sample at that pose stays, and the run says how many it lost."""
+    from odomgym.data.logs import read_log
+
+    msgtype = "geometry_msgs/msg/PoseStamped"
+    held = EPOCH + 1000 * MS
+    messages = [
+        (ns + 2 * MS, _pose_msg(msgtype, ns, *true_pose((min(ns, held) - EPOCH) * 1e-9)))
+        if ns <= EPOCH + 2000 * MS
+        else (ns + 2 * MS, _pose_msg(msgtype, ns, *true_pose((ns - EPOCH) * 1e-9)))
+        for ns in mocap_times()
+    ]
+    bag = write_bag(
+        tmp_path / "held", {"/joint_states": joint_stream(), "/mocap/pose": (msgtype, messages)}
+    )
+    (run,), _ = read_log(
+        bag, robot=ROBOT, format="rosbag", pose_topic="/mocap/pose", joint_topic="/joint_states"
+    )
+    stamps = np.array(joint_times())
+    # Wheel samples in [1.0, 2.0] s interpolate between two held messages: 1.003 s (the first
+    # at the held pose) is kept, 1.023 … 1.983 s are gaps; 2.003 s is past the last held one.
+    lost = (stamps > held + 3 * MS) & (stamps < EPOCH + 2000 * MS)
+    assert run.meta["held_poses"] == lost.sum() == 49
+    assert np.isnan(run.true_pose[lost]).all()
+    seen = stamps <= mocap_times()[-1]  # the wheel log runs on past the tracker's
+    assert np.isfinite(run.true_pose[~lost & seen]).all()
 
 
 def test_empty_topic_duplicates_and_bad_messages(tmp_path: Path) -> None:

@@ -241,13 +241,17 @@ def test_cli_bad_log_names_file_line_and_field(
     assert not (tmp_path / "o").exists()
 
 
-def test_a_run_without_measured_pose_after_the_start_is_refused(tmp_path: Path) -> None:
-    runs = _independent({}, seed=2)[:4]
+def test_too_few_runs_with_ground_truth_is_one_line_naming_the_runs_set_aside() -> None:
+    """A run without a measured pose after its start is set aside (odomgym.diagnose.screen);
+    with fewer than three usable runs left the diagnosis stops in one line that names it."""
+    runs = _independent({}, seed=2)[:3]
     runs[0].true_pose[1:] = math.nan
     from odomgym.errors import SpecError
 
-    with pytest.raises(SpecError, match="no measured pose"):
+    with pytest.raises(SpecError, match="only 2 of 3 have it; set aside: run 000 ") as caught:
         diagnose(runs, MODEL, DiagnoseConfig(holdout=0.25))
+    assert "no measured position after its first full pose" in str(caught.value)
+    assert "\n" not in str(caught.value) and caught.value.field == "x"
 
 
 def _blas_threads() -> list[int]:

@@ -117,9 +117,7 @@ def test_a_merely_widened_covariance_is_refused(rough_logs: tuple[list, list]) -
     data = Dataset.of(fit, 0.25)
     right = _rough(K)
     without = model_without(data, right, "floor_roughness", ["floor_roughness"])
-    assert EFFECTS["floor_roughness"].is_absent(
-        EFFECTS["floor_roughness"].read(without.spec)
-    )
+    assert EFFECTS["floor_roughness"].is_absent(EFFECTS["floor_roughness"].read(without.spec))
     check = judge_spread("floor_roughness", held, right, without, 0.25)
     assert check.confirmed, check.reason
     wide = judge_spread("floor_roughness", held, _rough(3 * K), without, 0.25)

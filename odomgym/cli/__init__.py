@@ -14,11 +14,21 @@ Commands:
                                          catalogue effect is missing, and the gap it closes;
     ``odomgym train selfcal …``         train a self-calibration policy (the rl extra).
 
-Every command exits 0 on success, 2 on bad input (one line naming the field and, where it came
-from a file, the file and line) — output paths included, which are checked before any work —
-and 1 if the machine refuses a write after all (a full disk); it never leaves a half-written
-output file. After its results it says what it wrote (``wrote: …``) and, where odometry is
-driven, which calibration it applied.
+Exit codes, the same for every command:
+
+* **0** — done;
+* **1** — the machine refused a write after all (a full disk; every output path is checked
+  before any work);
+* **2** — bad input: one line ``odomgym: error: …`` naming the field and, where it came from a
+  file, the file and line (output paths included);
+* **3** — an internal error: anything else that went wrong is a bug in odomgym, not in the
+  input, and is said to be one in one line (``odomgym: internal error: <type>: <message> — a
+  bug in odomgym …``); ``odomgym --debug COMMAND …`` shows its full traceback instead, for the
+  report;
+* **130** / **143** — stopped by Ctrl-C / SIGTERM (workers stopped, nothing half-written).
+
+No command leaves a half-written output file. After its results a command says what it wrote
+(``wrote: …``) and, where odometry is driven, which calibration it applied.
 
 Layout: one module per command (``odomgym/cli/<command>.py``, each with ``register`` adding
 its parser and ``run`` doing the work), and :mod:`odomgym.cli._common` for what they share —
@@ -55,7 +65,16 @@ from odomgym.cli._common import seed as _seed
 from odomgym.errors import SpecError
 from odomgym.interrupt import Interrupted
 
-__all__ = ["_check_output", "_count", "_positive", "_seed", "build_parser", "main"]
+__all__ = [
+    "INTERNAL_ERROR",
+    "_check_output",
+    "_count",
+    "_positive",
+    "_seed",
+    "build_parser",
+    "internal_error",
+    "main",
+]
 
 COMMANDS: tuple[Command, ...] = (
     run,
@@ -80,6 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
         "on measured logs.",
     )
     parser.add_argument("--version", action="version", version=f"odomgym {__version__}")
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="on an internal error (a bug in odomgym, exit 3) show the full traceback instead "
+        "of one line (give it before the command)",
+    )
     commands = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", help="what to do (COMMAND --help)"
     )
@@ -98,10 +123,25 @@ def _on_signal(signum: int, frame: object) -> None:
     interrupt.stop(143, "stopped by SIGTERM")
 
 
+INTERNAL_ERROR = 3
+"""The exit code of an internal error (module docstring)."""
+
+
+def internal_error(exc: Exception, command: str) -> str:
+    """The one line that reports ``exc``, raised by ``command``, as a bug in odomgym."""
+    message = " ".join(str(exc).split())  # one line, whatever the exception's text holds
+    what = f"{type(exc).__name__}: {message}" if message else type(exc).__name__
+    return (
+        f"internal error: {what} — a bug in odomgym, not in your input; please report it with "
+        f"the command line and the output of odomgym --debug {command} …"
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``odomgym`` command."""
+    """Entry point of the ``odomgym`` command (exit codes: module docstring)."""
     import signal
     import threading
+    import traceback
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -131,6 +171,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         notice(f"error: {where}{exc.strerror or exc}")
         return 1
+    except Exception as exc:
+        # Every input problem is a SpecError, so anything else is odomgym's own failure: say
+        # so, rather than present it as the user's input error or drop a traceback on them.
+        if args.debug:
+            traceback.print_exc()
+        else:
+            notice(internal_error(exc, args.command))
+        return INTERNAL_ERROR
     finally:
         interrupt.reset()
         for number, handler_before in previous.items():

@@ -317,6 +317,12 @@ class Reporter:
         stderr with ``--json`` so that stdout stays machine-readable."""
         print(text, file=sys.stderr if self.json else sys.stdout)
 
+    def notice(self, text: str) -> None:
+        """A notice about the input that the command works around (a run set aside): one line
+        on stderr, prefixed ``odomgym:``, in every mode — it is neither a result nor a status
+        of the output, and stdout stays machine-readable."""
+        notice(text)
+
     def wrote(self, paths: Iterable[str | Path]) -> None:
         """The ``wrote: …`` status line naming every file written, in order; none if none."""
         names = [str(p) for p in paths]

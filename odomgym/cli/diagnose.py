@@ -137,9 +137,11 @@ def run(args: argparse.Namespace) -> int:
     """Read the logs, diagnose (resuming from the journal with ``--resume``), replace ``--out``
     with the report, then print it (Markdown, or report.json) and the files written."""
     from odomgym.baselines.trajectory import TrajectoryBaseline
+    from odomgym.data.gaps import held_poses
     from odomgym.data.logs import read_log
     from odomgym.data.samples import resolve_data
     from odomgym.diagnose.report import format_markdown, report_json, write_outputs
+    from odomgym.diagnose.screen import usable_runs
     from odomgym.diagnose.workflow import DiagnoseConfig, FitJournal, diagnose
 
     report = Reporter.of(args)
@@ -175,18 +177,25 @@ def run(args: argparse.Namespace) -> int:
     model = robot if robot is not None else nominal
     if model is None:
         raise SpecError("give the robot model with --robot robot.toml", field="robot")
+    # What the diagnosis will set aside, said before its minutes of work (it screens the runs
+    # again and records the same in report.json); too few usable runs stop here in one line.
+    _, skipped = usable_runs(runs, model)
+    for one in skipped:
+        report.notice(str(one))
+    held = [held_poses(run) for run in runs]
+    if any(held):
+        poses = f"{sum(held)} held pose" + ("s" if sum(held) > 1 else "")
+        report.notice(
+            f"{poses} (the tracker repeated its last pose while the wheels turned) taken as "
+            f"gaps in {sum(1 for n in held if n)} of {len(runs)} runs"
+        )
     # Every finished candidate fit is kept beside the output (which is replaced whole), so an
     # interrupted diagnosis resumes with --resume; it is removed once the outputs are written.
     journal = FitJournal(out.parent / f"{out.name}.journal", resume=args.resume)
     with Progress(report, "diagnose", leave=False) as bar:
-        try:
-            diagnosis = diagnose(
-                runs, model, config, baseline=baseline, progress=bar.stage, journal=journal
-            )
-        except ValueError as exc:
-            if isinstance(exc, SpecError):
-                raise
-            raise SpecError(str(exc)) from None
+        diagnosis = diagnose(
+            runs, model, config, baseline=baseline, progress=bar.stage, journal=journal
+        )
     if journal.reused:
         report.status(f"resumed: {journal.reused} candidate fits taken from {journal.folder}")
     written = write_outputs(diagnosis, out, str(data))

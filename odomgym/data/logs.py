@@ -5,6 +5,11 @@ or a folder of sessions, :mod:`odomgym.data.optiodom`) and ``rosbag`` (ROS 2 bag
 :mod:`odomgym.data.rosbag2`). Without ``format`` the layout decides: a ``.csv`` file is native,
 a folder holding ``*_metadata.csv`` files is OptiOdom, a bag folder (``metadata.yaml``) or an
 ``.mcap``/``.db3`` file is a ROS 2 bag.
+
+Every format's runs come out the same way: poses a tracker held while the wheels turned are made
+gaps (:func:`odomgym.data.gaps.mark_held_poses`; how many, per run, in ``meta["held_poses"]``),
+and a run is returned as it was logged otherwise — rows before its first full pose, or a run
+without one, included (:func:`odomgym.diagnose.screen.screen_runs` decides what can be used).
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
+from odomgym.data.gaps import mark_held_poses
 from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
@@ -54,9 +60,33 @@ def read_log(
     left_joint: str = "left_wheel_joint",
     right_joint: str = "right_wheel_joint",
 ) -> tuple[list[Run], RobotSpec | None]:
-    """Read every run of ``path``; returns the runs and, for OptiOdom data, the nominal robot of
-    its (first) session's metadata (``None`` for other formats)."""
-    where = Path(path)
+    """Read every run of ``path``; returns the runs, their held poses made gaps (module
+    docstring), and, for OptiOdom data, the nominal robot of its (first) session's metadata
+    (``None`` for other formats)."""
+    runs, nominal = _read(
+        Path(path),
+        robot,
+        format,
+        pose_topic,
+        joint_topic,
+        encoder_topic,
+        left_joint,
+        right_joint,
+    )
+    return [mark_held_poses(run)[0] for run in runs], nominal
+
+
+def _read(
+    where: Path,
+    robot: RobotSpec | None,
+    format: LogFormat | None,
+    pose_topic: str | None,
+    joint_topic: str | None,
+    encoder_topic: str | None,
+    left_joint: str,
+    right_joint: str,
+) -> tuple[list[Run], RobotSpec | None]:
+    """:func:`read_log` as the format's reader gives the runs."""
     kind = format if format is not None else detect_format(where)
     if kind not in FORMATS:
         raise SpecError(f"unknown format {kind!r}; formats: {', '.join(FORMATS)}", field="format")

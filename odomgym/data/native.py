@@ -22,8 +22,10 @@ The file has a header row with exactly these columns, in any order::
   frame. A cell is EMPTY where nothing was measured (an UMBmark-style log measures only the
   first and last rows of a run); ``nan`` written as text is an error, so a logging bug cannot
   pass for a gap. ``x`` and ``y`` come together; ``theta`` may be missing where they are given
-  (a position-only tracker). A run's FIRST row needs the full pose: odometry is replayed from
-  the measured start pose.
+  (a position-only tracker). Any row may be empty, the first ones too (a tracker that found the
+  marker only after the logger started): odometry is replayed from a run's first FULL pose, so
+  ``odomgym diagnose`` starts the run there (:func:`odomgym.diagnose.screen.screen_runs`, which
+  also sets aside a run with too little ground truth, one without any included).
 
 Headings are unwrapped over a run's measured rows (``np.unwrap`` on the non-empty thetas
 only): rows more than π apart in heading with nothing measured between them are taken to be
@@ -110,8 +112,9 @@ def read_native(path: str | Path, *, robot: RobotSpec | None = None) -> list[Run
             that far; the log dropped rows or the counter overflowed).
 
     Returns:
-        Runs with ``time`` from 0 [s], ``counts`` from (0, 0), ``true_pose`` NaN where not
-        measured and heading unwrapped over the measured rows, ``kind`` and ``direction`` from
+        Runs as logged (rows before the first measured pose included) with ``time`` from 0
+        [s], ``counts`` from (0, 0), ``true_pose`` NaN where not measured and heading
+        unwrapped over the measured rows, ``kind`` and ``direction`` from
         the experiment label, ``source`` ``"<file>:<first line>"`` and ``meta`` holding
         ``run``, ``experiment``, ``format`` (``"native"``) and ``lines`` (first, last).
 
@@ -122,8 +125,8 @@ def read_native(path: str | Path, *, robot: RobotSpec | None = None) -> list[Run
             non-numeric or non-finite cell; non-whole counts; time not increasing within a
             run; a run whose rows are not contiguous or whose label changes; a count jump
             beyond what a wheel can turn (with ``robot``); only one of ``x``, ``y``, or
-            ``theta`` without them; a run with fewer than two rows, with no measured pose, or
-            without a full pose on its first row.
+            ``theta`` without them; a run with fewer than two rows. (Too little ground truth in
+            a run is no defect of the file: empty pose cells are gaps.)
     """
     file = Path(path)
     return _parse(_read_text(file), str(file), robot)
@@ -360,22 +363,6 @@ def _finish(group: _Group, source: str) -> Run:
             source=where,
         )
     pose = np.array([r.pose for r in rows], dtype=np.float64)
-    if np.all(np.isnan(pose[:, 0])):
-        raise SpecError(
-            f"run {group.run!r} ({group.lines}) has no ground truth: x, y and theta are empty "
-            "on every row",
-            field="x",
-            source=where,
-        )
-    missing = [c for c, v in zip(_POSE, first.pose, strict=True) if math.isnan(v)]
-    if missing:
-        raise SpecError(
-            f"run {group.run!r} starts without a full pose on line {first.line} "
-            f"({', '.join(missing)} empty): x, y and theta are all needed at a run's first row, "
-            "because odometry is replayed from the measured start pose",
-            field=missing[0],
-            source=where,
-        )
     measured = ~np.isnan(pose[:, 2])
     pose[measured, 2] = np.unwrap(pose[measured, 2])
     time = np.array([r.t for r in rows], dtype=np.float64)
@@ -413,7 +400,7 @@ def write_native(
         SpecError: nothing is written if ``experiments`` has the wrong length, two runs share an
             id, an id or label is empty or holds a line break, or a run could not be read back:
             non-finite time or counts, infinite pose, time not increasing, only one of x/y,
-            theta without x/y, or an incomplete first pose.
+            or theta without x/y.
         OSError: the file cannot be written (nothing is left behind).
     """
     target = Path(path)
@@ -501,9 +488,3 @@ def _check_writable(run: Run, what: str) -> None:
     lone = np.flatnonzero(nan[:, 0] & ~nan[:, 2])
     if lone.size:
         raise SpecError(f"{what}: sample {lone[0]} has theta without x and y", field="x")
-    if nan[0].any():
-        missing = [c for c, m in zip(_POSE, nan[0], strict=True) if m]
-        raise SpecError(
-            f"{what}: the first sample has no full pose ({', '.join(missing)} is NaN)",
-            field=missing[0],
-        )

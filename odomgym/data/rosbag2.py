@@ -14,8 +14,9 @@ What is read:
 * The ground truth is ``geometry_msgs/msg/PoseStamped``, ``PoseWithCovarianceStamped`` or
   ``nav_msgs/msg/Odometry``: x, y [m] and yaw = atan2(2(wz + xy), 1 − 2(y² + z²)) [rad]. It is
   linearly interpolated (x, y and unwrapped yaw) onto each wheel sample's time; wheel samples
-  outside the pose stream's time span get a NaN pose, and the first must have one (a replay
-  starts from the measured start pose). Interpolation bridges gaps in the pose stream.
+  outside the pose stream's time span get a NaN pose (a tracker started late or stopped early:
+  a replay starts from the first measured pose, :func:`odomgym.diagnose.screen.screen_runs`).
+  Interpolation bridges gaps in the pose stream.
 * Times are header stamps [ns], or the bag's receive time where a message has no header or a
   zero stamp. Both streams must share a clock.
 
@@ -100,9 +101,8 @@ def read_rosbag(
             ``encoder_topic``; no bag at ``path``; an unreadable bag; a missing topic (listing
             the bag's topics); a wrong message type; a topic without messages; wheel joints
             absent from the JointState (listing those present); a malformed message; counts of
-            ±2⁶² or more; repeated time stamps; fewer than two wheel samples; no pose at the
-            first wheel sample; poses too large to interpolate; the ``rosbags`` package not
-            installed.
+            ±2⁶² or more; repeated time stamps; fewer than two wheel samples; poses too large
+            to interpolate; the ``rosbags`` package not installed.
     """
     if (joint_topic is None) == (encoder_topic is None):
         raise SpecError(
@@ -240,7 +240,7 @@ def _read_bag(
         )
     poses = _decode(raw[pose_topic], pose_type, api, pose_topic, source, _pose_values)
     _check_distinct(poses.times, pose_topic, source)
-    true_pose = _interpolate(poses, wheel_times, wheel_topic, source)
+    true_pose = _interpolate(poses, wheel_times, source)
 
     start = int(wheel_times[0])
     kind, direction = experiment_kind(label)
@@ -429,21 +429,10 @@ def _seconds(ns: int) -> str:
     return f"{sign}{whole}.{fraction:09d}"
 
 
-def _interpolate(
-    poses: _Stream, times: NDArray[np.int64], wheel_topic: str, source: str
-) -> FloatArray:
+def _interpolate(poses: _Stream, times: NDArray[np.int64], source: str) -> FloatArray:
     """Pose (x, y, unwrapped yaw) at each of ``times`` [ns], NaN outside the pose stream."""
     start = int(times[0])
     first, last = int(poses.times[0]), int(poses.times[-1])
-    if not first <= start <= last:
-        relation = "before the first" if start < first else "after the last"
-        raise SpecError(
-            f"the first {wheel_topic} sample ({_seconds(start)} s) comes {relation} "
-            f"{poses.topic} message (which span {_seconds(first)}–{_seconds(last)} s): a run "
-            "needs a pose at its start",
-            field=poses.topic,
-            source=source,
-        )
     at = (times - start).astype(np.float64) * 1e-9
     pose_at = (poses.times - start).astype(np.float64) * 1e-9
     values = np.asarray(poses.values, dtype=np.float64)
@@ -452,7 +441,8 @@ def _interpolate(
     with np.errstate(over="ignore", invalid="ignore"):  # refused just below
         for column, series in enumerate((values[:, 0], values[:, 1], yaw)):
             result[:, column] = np.interp(at, pose_at, series, left=np.nan, right=np.nan)
-    overflowed = np.flatnonzero((times <= last) & ~np.isfinite(result).all(axis=1))
+    inside = (times >= first) & (times <= last)
+    overflowed = np.flatnonzero(inside & ~np.isfinite(result).all(axis=1))
     if overflowed.size:
         stamp = int(times[overflowed[0]])
         raise SpecError(

@@ -639,14 +639,19 @@ def filter_estimate(
     (``open_data``: the same runs, nuisances removed) replayed open loop. The values are
     written onto ``base`` (the nuisance's fitted wheel noise is not a finding)."""
     fit = fit_candidate(data, start.spec, start.sensor, effect, nuisance)
-    _, _, _, build = systematic_vector(fit.spec, effect)
+    u0, _, _, build = systematic_vector(fit.spec, effect)
     cv = np.empty(len(data))
     for fold in folds:
         held = set(fold)
         train = [j for j in range(len(data)) if j not in held]
-        a = np.sum([fit.jacobian[j].T @ fit.jacobian[j] for j in train], axis=0)
-        b = np.sum([fit.jacobian[j].T @ fit.whitened[j] for j in train], axis=0)
-        step = gauss_newton_step(a, b)
+        step = np.zeros(len(u0))
+        # A fold holding every run (one fit run per experiment family: every family's block
+        # falls in the last fold) leaves nothing to step on: its parameters stay at the full
+        # fit, as the open-loop fold step leaves columns no training run touches.
+        if train:
+            a = np.sum([fit.jacobian[j].T @ fit.jacobian[j] for j in train], axis=0)
+            b = np.sum([fit.jacobian[j].T @ fit.whitened[j] for j in train], axis=0)
+            step = gauss_newton_step(a, b)
         cv[list(fold)] = run_errors(
             open_data.subset(list(fold)), build_within(build, np.zeros(len(step)), step)
         )

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.diagnose.nuisances import correct_runs
-from odomgym.diagnose.openloop import ModelErrors
+from odomgym.diagnose.openloop import ModelErrors, rms_over_runs
 from odomgym.diagnose.stats import bootstrap_ci
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
@@ -49,10 +49,6 @@ class Baseline(Protocol):
         ...
 
     def __call__(self, runs: Sequence[Run], robot: RobotSpec) -> RobotSpec: ...
-
-
-def _rms(values: FloatArray) -> float:
-    return float(np.sqrt(np.mean(values**2))) if len(values) else math.nan
 
 
 @dataclass
@@ -148,13 +144,17 @@ def compare_models(
             "position_mm": [
                 1e3 * v
                 for v in bootstrap_ci(
-                    [diagnosed.position, ref.position], lambda a, b: _rms(a) - _rms(b), rng
+                    [diagnosed.position, ref.position],
+                    lambda a, b: rms_over_runs(a) - rms_over_runs(b),
+                    rng,
                 )
             ],
             "heading_deg": [
                 math.degrees(v)
                 for v in bootstrap_ci(
-                    [diagnosed.heading, ref.heading], lambda a, b: _rms(a) - _rms(b), rng
+                    [diagnosed.heading, ref.heading],
+                    lambda a, b: rms_over_runs(a) - rms_over_runs(b),
+                    rng,
                 )
             ],
         }

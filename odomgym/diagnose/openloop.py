@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.data.gaps import measured_end
 from odomgym.diagnose.fit import build_within, gauss_newton_step, strata, systematic_vector
 from odomgym.diagnose.likelihood import measurement_mask
 from odomgym.diagnose.nuisances import (
@@ -72,6 +73,7 @@ __all__ = [
     "open_loop_folds",
     "pose_errors",
     "predicted_path",
+    "rms_over_runs",
     "run_errors",
     "variance_inflation",
 ]
@@ -757,6 +759,14 @@ def run_errors(data: OpenLoopData, spec: RobotSpec) -> FloatArray:
     return np.array([float(np.sum(_residual(data, j, spec, None) ** 2)) for j in range(len(data))])
 
 
+def rms_over_runs(values: FloatArray) -> float:
+    """Root mean square of per-run RMS errors, runs weighing equally, over the runs that
+    measured the quantity: a run of a position-only tracker has no heading error (NaN), and
+    counts in the position RMS only. NaN when no run measured it."""
+    finite = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(finite**2))) if len(finite) else math.nan
+
+
 @dataclass
 class ModelErrors:
     """One model's open-loop errors on a set of runs, in plain units.
@@ -765,11 +775,14 @@ class ModelErrors:
         label: which model (``"as given"``, ``"diagnosed"``, ``"baseline"``).
         runs: the runs' ids; sessions: their sessions.
         position, heading: each run's RMS position [m] and heading [rad] error over its
-            measured samples after the first.
+            measured samples after the first (NaN for a run that measured no heading after
+            its start: a position-only tracker).
         combined: each run's mean square combined error at the fit's samples [m²].
         nuisances: the nuisances used per session (fitted with this model).
         e_max_syst: per session with squares both ways, Borenstein & Feng's E_max,syst [m]
-            of the predicted return positions (1994, Eq. 3.3).
+            of the predicted return positions (1994, Eq. 3.3), of the squares whose return
+            was measured (:func:`odomgym.data.gaps.measured_end`: not those whose ground truth
+            stops before their wheels do).
         paths: for the runs asked for, the predicted positions of the tracked point (T, 2) [m]
             in the ground truth's own frame (what a plot shows beside the measured path).
     """
@@ -787,12 +800,12 @@ class ModelErrors:
     @property
     def position_rms(self) -> float:
         """RMS position error over the runs (runs weigh equally) [m]."""
-        return float(np.sqrt(np.mean(self.position**2))) if len(self.position) else math.nan
+        return rms_over_runs(self.position)
 
     @property
     def heading_rms(self) -> float:
-        """RMS heading error over the runs (runs weigh equally) [rad]."""
-        return float(np.sqrt(np.mean(self.heading**2))) if len(self.heading) else math.nan
+        """RMS heading error over the runs with a measured heading (runs weigh equally) [rad]."""
+        return rms_over_runs(self.heading)
 
     def summary(self) -> dict[str, Any]:
         """The report's entry, in mm and degrees."""
@@ -802,6 +815,11 @@ class ModelErrors:
             "combined_rms_mm": 1e3 * float(np.sqrt(np.mean(self.combined))),
             "e_max_syst_mm": {s: 1e3 * v for s, v in self.e_max_syst.items()},
         }
+
+
+def _rms_rows(squares: FloatArray) -> float:
+    """The root of the mean of ``squares`` [m², rad²]; NaN for no rows."""
+    return math.sqrt(float(np.mean(squares))) if len(squares) else math.nan
 
 
 def evaluate_open_loop(
@@ -841,14 +859,15 @@ def evaluate_open_loop(
     for j, run in enumerate(data.runs):
         nuisance = known.get(data.sessions[j])
         error = _errors(data, j, spec, nuisance)
-        measured: NDArray[np.bool_] = np.asarray(np.isfinite(error[:, :2]).all(axis=1))
-        position[j] = math.sqrt(float(np.mean(np.sum(error[measured, :2] ** 2, axis=1))))
-        head = error[measured, 2]
-        head = head[np.isfinite(head)]
-        heading[j] = math.sqrt(float(np.mean(head**2))) if len(head) else math.nan
+        # After the start (row 0, where the replay begins), each component where measured.
+        later = np.arange(len(error)) > 0
+        placed = later & np.isfinite(error[:, :2]).all(axis=1)
+        headed = later & np.isfinite(error[:, 2])
+        position[j] = _rms_rows(np.sum(error[placed, :2] ** 2, axis=1))
+        heading[j] = _rms_rows(error[headed, 2] ** 2)
         combined[j] = float(np.sum(_residual(data, j, spec, nuisance, error) ** 2))
-        if run.kind == "square" and run.direction in ("cw", "ccw"):
-            last = np.flatnonzero(np.isfinite(error[:, :2]).all(axis=1))[-1]
+        last = measured_end(run)
+        if run.kind == "square" and run.direction in ("cw", "ccw") and last is not None:
             theta0 = float(correct_run(run, nuisance).true_pose[0, 2])
             in_start = rotate_into(error[last : last + 1, 0], error[last : last + 1, 1], theta0)
             ends.setdefault(data.sessions[j], {}).setdefault(run.direction, []).append(in_start[0])

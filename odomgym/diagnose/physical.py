@@ -220,7 +220,10 @@ def _steady_increments(runs: Sequence[Run], spec: RobotSpec, interval: float) ->
             high, low = np.max(np.abs(seg), axis=0), np.min(np.abs(seg), axis=0)
             if np.any(high - low > 0.2 * high):
                 continue
-            out.append(np.atleast_1d(error[b] - error[a]))
+            # Wrapped: across a gap the measured heading may have been unwrapped the wrong way
+            # round (odomgym.data.native), and an increment is small anyway.
+            step = error[b] - error[a]
+            out.append(np.atleast_1d(np.mod(step + np.pi, 2.0 * np.pi) - np.pi))
     return np.concatenate(out) if out else np.zeros(0)
 
 

@@ -91,7 +91,8 @@ def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Re
 
     ``inputs``: ``run``'s :class:`RunInputs`, if the caller keeps them (made here when not
     given, or when made for another encoder resolution). The first sample must carry a full
-    measured pose (the readers check it).
+    measured pose (:func:`odomgym.diagnose.screen.screen_runs` starts every run of a diagnosis
+    at its first one).
     """
     effects = _effects_of(spec)
     if inputs is None or inputs.ticks_per_rev != spec.ticks_per_rev:

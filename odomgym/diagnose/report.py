@@ -612,7 +612,11 @@ _STYLES = {  # (colour, line style) of each model's path
 def _paths_plot(d: Diagnosis, folder: Path) -> str:
     """``held_out_paths.png``: for a few held-out runs, the measured path and the open-loop
     predictions of the model as given, the diagnosed model and the baseline, in metres; below
-    each, the three position errors over time (the paths alone hide millimetres)."""
+    each, the three position errors over time (the paths alone hide millimetres).
+
+    Where the ground truth has gaps the measured path and the errors are drawn at the measured
+    samples only: lines break at a gap, and every measured sample is marked, so that a sample
+    between two gaps shows and no line stands for what was not measured."""
     from matplotlib.figure import Figure
 
     assert d.held_out is not None
@@ -628,7 +632,11 @@ def _paths_plot(d: Diagnosis, folder: Path) -> str:
         err_ax = fig.add_subplot(grid[2 * row + 1, col])
         truth = held.truth[name]
         time, xy = truth[:, 0], truth[:, 1:]
-        ax.plot(xy[:, 0], xy[:, 1], "k-", lw=2.2, alpha=0.35, label="ground truth")
+        gappy = bool(np.isnan(xy).any())
+        dot = "." if gappy else None
+        ax.plot(
+            xy[:, 0], xy[:, 1], "k-", lw=2.2, alpha=0.35, label="ground truth", marker=dot, ms=3
+        )
         for label, model in held.models.items():
             if name not in model.paths:
                 continue
@@ -643,8 +651,8 @@ def _paths_plot(d: Diagnosis, folder: Path) -> str:
                 lw=1.2,
                 label=f"{label}: {1e3 * model.position[index]:.1f} mm RMS",
             )
-            error = 1e3 * np.hypot(*(path - xy).T)
-            err_ax.plot(time, error, color=colour, linestyle=style, lw=1.0)
+            error = 1e3 * np.hypot(*(path - xy).T)  # NaN in the gaps: the line breaks
+            err_ax.plot(time, error, color=colour, linestyle=style, lw=1.0, marker=dot, ms=3)
         ax.plot(xy[0, 0], xy[0, 1], "ko", ms=4)
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x [m]")

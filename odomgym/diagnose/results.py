@@ -79,7 +79,9 @@ class Diagnosis:
     The headline is :attr:`held_out`: the open-loop prediction of the held-out runs (whole
     sessions when there are several) by the model as given, the diagnosed model and a baseline
     calibration, in mm and degrees (:mod:`odomgym.diagnose.heldout`). The whitened gap
-    (``gap_*``) is a diagnostic of the noise model beside it.
+    (``gap_*``) is a diagnostic of the noise model beside it. :attr:`skipped_runs`: the runs
+    set aside for too little ground truth (:mod:`odomgym.diagnose.screen`), each ``run``,
+    ``source`` and ``reason``.
     """
 
     verdict: str
@@ -116,6 +118,7 @@ class Diagnosis:
     filter_parameters: dict[str, dict[str, float]] = field(default_factory=dict)
     estimators: dict[str, Any] = field(default_factory=dict)
     terms_tried: int = 0
+    skipped_runs: list[dict[str, str]] = field(default_factory=list)
 
     @property
     def systematic_effects(self) -> list[str]:
@@ -176,6 +179,7 @@ class Diagnosis:
             "where": [f.as_dict() for f in self.findings],
             "fit_runs": self.fit_runs,
             "holdout_runs": self.holdout_runs,
+            "skipped_runs": self.skipped_runs,
             "holdout_gaps": self.holdout_gaps,
             **{key: {"before": v[0], "after": v[1]} for key, v in self.physical.items()},
             "model": self.model.to_dict(),

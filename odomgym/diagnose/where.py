@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.data.gaps import measured_end
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import holm, mean_t_test
 from odomgym.odometry.runs import Run, rotate_into
@@ -43,7 +44,8 @@ class RunResidual:
     Attributes:
         label: the experiment label; turn: "cw", "ccw" or "none" from the predicted net turn.
         time: measured sample times (K,) [s]; residual: (K, 3) along, cross [m], heading [rad].
-        final: the last measured sample's residual (3,).
+        final: the last measured sample's residual (3,) if it is the run's end pose
+            (:func:`odomgym.data.gaps.measured_end`), else NaN.
         classes: per-sample manoeuvre class of the replay (n,): 0 stop, 1 straight,
             2 in-place turn, 3 arc; speed (n,) [m/s], omega (n,) [rad/s]; reversal (n,) bool.
     """
@@ -108,7 +110,12 @@ def run_residuals(runs: Sequence[Run], spec: RobotSpec) -> list[RunResidual]:
                     last = sign[m, w]
         net = float(rep.pose[-1, 2] - rep.pose[0, 2])
         turn = "none" if abs(net) < 0.5 else ("ccw" if net > 0 else "cw")
-        final = residual[-1] if len(residual) else np.full(3, np.nan)
+        # The final disagreement is the run's only where its end pose was measured (the wheels
+        # did not turn after the last measured position): a tracker that lost the robot before
+        # it stopped saw a shorter run than its experiment's others.
+        final = (
+            residual[-1] if len(residual) and measured_end(run) is not None else np.full(3, np.nan)
+        )
         out.append(
             RunResidual(
                 str(run.meta.get("experiment", run.kind)),
@@ -157,9 +164,14 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
             cross = np.zeros(len(r.ds) + 1)
             cross[r.index] = r.residual[:, 1]
             # Heading disagreement gained between consecutive measured samples, attributed to
-            # the manoeuvre that dominated in between.
+            # the manoeuvre that dominated in between — only where one manoeuvre (or stops)
+            # filled the interval: across a gap in the ground truth the robot may have driven
+            # straight and turned, and what each added cannot be told apart.
             for a, b in zip(r.index[:-1], r.index[1:], strict=True):
                 span = slice(a, b)
+                moving = r.classes[span][r.classes[span] != 0]
+                if np.any(moving != moving[:1]):
+                    continue
                 cls = np.bincount(r.classes[span], minlength=4).argmax()
                 dh = gained[b] - gained[a]
                 dc = cross[b] - cross[a]
@@ -187,7 +199,10 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
                     unit = "rad/rad"
                 component = "cross" if "cross" in group else "heading"
                 rows.append(("manoeuvres", group, component, unit, np.array(values)))
-    tested = [(row, mean_t_test(row[4])) for row in rows]
+    # A group without a single measured value (runs whose ground truth stopped before their
+    # wheels did, a position-only tracker's headings) is no test: it is left out of the table
+    # and of the Holm family.
+    tested = [(row, mean_t_test(row[4])) for row in rows if np.isfinite(row[4]).any()]
     pvals = np.array([t[3] for _, t in tested])
     adjusted = holm(pvals)
     findings = []

@@ -100,7 +100,7 @@ from odomgym.diagnose.heldout import (
     pictured_runs,
 )
 from odomgym.diagnose.journal import FitJournal
-from odomgym.diagnose.likelihood import SensorNoise, measurement_mask
+from odomgym.diagnose.likelihood import SensorNoise
 from odomgym.diagnose.nuisances import (
     SESSION_EFFECTS,
     SessionNuisance,
@@ -136,6 +136,7 @@ from odomgym.diagnose.rounds import (
     _forward_check,
     run_round,
 )
+from odomgym.diagnose.screen import SkippedRun, usable_runs
 from odomgym.diagnose.spread import SpreadCheck, judge_spread, model_without
 from odomgym.diagnose.steps import (
     Backward,
@@ -246,19 +247,6 @@ def split_runs(
     return fit, sorted(held), split
 
 
-def _check_runs(runs: Sequence[Run]) -> None:
-    """At least three runs, each with a measured pose after its first sample."""
-    if len(runs) < 3:
-        raise SpecError(f"diagnose needs at least 3 runs, got {len(runs)}", field="runs")
-    for run in runs:
-        if not measurement_mask(run, 0.0).any():
-            raise SpecError(
-                f"run {run.meta.get('run', '?')} has no measured pose after its first sample",
-                field="x",
-                source=run.source,
-            )
-
-
 def _significant_offset(nuisance: SessionNuisance) -> SessionNuisance:
     """``nuisance``'s time offset alone (the frame is refitted at that offset), zero — with its
     standard error kept — where :func:`~odomgym.diagnose.nuisances.offset_is_significant` says
@@ -337,7 +325,8 @@ def _diagnose(
         if progress is not None:
             progress(stage, fraction)
 
-    _check_runs(runs)
+    # Each run from its first full pose; runs with too little ground truth set aside.
+    runs, skipped = usable_runs(runs, robot)
     rng = np.random.default_rng(cfg.seed)
     split = _split(runs, cfg, rng)  # 1
     rec = _measurement_nuisances(split, robot, cfg, report)  # 2
@@ -359,8 +348,8 @@ def _diagnose(
     final_test["absorbed"] = backward.absorbed
     final_test["unsupported"] = backward.unsupported
     final_test["noise_carried_by_the_rest"] = noise.vanished
-    return _diagnosis(runs, robot, split, rec, state, findings, noise, sizes, found, final,
-                      held, spread, confounds, verdict, final_test, gaps)  # fmt: skip
+    return _diagnosis(runs, skipped, robot, split, rec, state, findings, noise, sizes, found,
+                      final, held, spread, confounds, verdict, final_test, gaps)  # fmt: skip
 
 
 def _split(runs: Sequence[Run], cfg: DiagnoseConfig, rng: np.random.Generator) -> RunSplit:
@@ -856,6 +845,7 @@ def _in_order_added(
 
 def _diagnosis(
     runs: Sequence[Run],
+    skipped: Sequence[SkippedRun],
     robot: RobotSpec,
     split: RunSplit,
     rec: Recording,
@@ -920,5 +910,6 @@ def _diagnosis(
         terms_tried=_terms_tried(state.passes),
         fit_runs=[_run_id(runs[j], j) for j in split.fit_index],
         holdout_runs=[_run_id(runs[j], j) for j in split.held_index],
+        skipped_runs=[s.as_dict() for s in skipped],
         **gaps,
     )
