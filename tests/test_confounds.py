@@ -136,7 +136,11 @@ def test_a_frame_scaled_by_half_a_percent_reads_as_wheels_and_wheelbase_half_a_p
     moves E_s and E_b by +0.5 % together; the confound says so, reads it equally as the frame
     scaled by +0.5 %, and names the measurement check (no robot experiment separates them).
     Tolerance: three standard errors of the projection (about 1e-4 each), and 5e-5 between the
-    two readings (first order: the columns are taken at the fitted, scaled model)."""
+    two readings (first order: the columns are taken at the fitted, scaled model). The
+    confound is within the 1e-3 rule, not exact: the open-loop error aligns each prediction on
+    the measured poses of a run's first half second, and a frame scaled about a point far
+    from the run moves those poses by a little more than the scaled robot moves its
+    prediction there."""
     scaled = []
     for run in clean_runs:
         pose = run.true_pose.copy()
@@ -145,7 +149,7 @@ def test_a_frame_scaled_by_half_a_percent_reads_as_wheels_and_wheelbase_half_a_p
     _, _, jac, confounds = fitted(scaled, GEOMETRY)
     confound = only(confounds, {"wheelbase.e_b", "distance_scale.e_s"})
     assert confound.nuisances == ("gt.scale",)
-    assert confound.relative_singular_value < 1e-4
+    assert confound.relative_singular_value < RELATIVE_SINGULAR_VALUE
     # Analytically a common change: per unit of the direction, E_s, E_b and −scale alike.
     e_s, e_b = per_unit(confound, "distance_scale.e_s"), per_unit(confound, "wheelbase.e_b")
     assert e_b == pytest.approx(e_s, rel=1e-3)
@@ -163,9 +167,11 @@ def test_a_frame_scaled_by_half_a_percent_reads_as_wheels_and_wheelbase_half_a_p
 
 
 def test_a_wheel_toe_on_one_session_is_a_frame_yaw() -> None:
-    """A 5 mrad wheel toe fitted beside the geometry on one session: it trades exactly against
-    the frame yaw (which diagnose does not fit with one session); the fit moved along it, and
-    the two readings are a toe τ and a yaw −τ."""
+    """A 5 mrad wheel toe fitted beside the geometry on one session: it trades against the
+    frame yaw (which diagnose does not fit with one session) — exactly before the alignment on
+    a run's first half second, within the 1e-3 rule with it (the robot's column is taken on the
+    measured runs, whose aligned start moves with their noise; the yaw's along the prediction);
+    the fit moved along it, and the two readings are a toe τ and a yaw −τ."""
     runs = generate(
         IndependentRobot(effects={"wheel_toe": {"angle": TOE}}),
         rich_protocol(),
@@ -174,7 +180,7 @@ def test_a_wheel_toe_on_one_session_is_a_frame_yaw() -> None:
     _, _, jac, confounds = fitted(runs, (*GEOMETRY, "wheel_toe"))
     confound = only(confounds, {"wheel_toe.angle"})
     assert confound.nuisances == ("frame_yaw",)
-    assert confound.relative_singular_value < 1e-4
+    assert confound.relative_singular_value < RELATIVE_SINGULAR_VALUE
     assert confound.moved and not confound.fitted
     toe = reading(confound, "wheel_toe.angle")
     assert abs(toe - TOE) < 3.0 * confound.move_stderr * per_unit(confound, "wheel_toe.angle")
@@ -186,7 +192,8 @@ def test_a_wheel_toe_on_one_session_is_a_frame_yaw() -> None:
 
 def test_the_ground_truth_sensor_offset_is_a_tracked_point() -> None:
     """``gt_sensor_offset`` (10, −5) mm fitted beside the geometry: each of dx, dy trades
-    exactly against the tracked point's, and the readings are the same offset."""
+    against the tracked point's (within the 1e-3 rule: see the toe), and the readings are the
+    same offset."""
     runs = generate(
         IndependentRobot(effects={"gt_sensor_offset": {"dx": 0.01, "dy": -0.005}}),
         rich_protocol(),
@@ -196,7 +203,7 @@ def test_the_ground_truth_sensor_offset_is_a_tracked_point() -> None:
     for axis, truth in (("dx", 0.01), ("dy", -0.005)):
         confound = only(confounds, {f"gt_sensor_offset.{axis}"})
         assert confound.nuisances == (f"tracked_{axis}",)
-        assert confound.relative_singular_value < 1e-6
+        assert confound.relative_singular_value < RELATIVE_SINGULAR_VALUE
         assert confound.moved
         value = reading(confound, f"gt_sensor_offset.{axis}")
         assert value == pytest.approx(truth, abs=1e-3)

@@ -149,7 +149,12 @@ def test_bumps_are_named_first_and_keep_their_mean() -> None:
     """Hidden floor bumps (0.5 crossings per metre, each losing 3 mm of one wheel's travel, as
     cables of about 16 mm under this wheel): the workflow names **floor_bumps** first — not the
     distance scale their mean loss looks like, which the backward check hands to the bumps —
-    confirms them by their spread on the held-out runs, and E_s stays at its true value 1."""
+    their held-out log score beats the model without them by more than a standard error, and E_s
+    stays at its true value 1.
+
+    Not asserted: the 95 % region's coverage. On this log it holds 90 % (the bound); on the
+    generators' bump fields it holds 89–94 % — the fitted jumps come out smaller than the
+    generator's (12 against 15 mrad here), a known limit recorded in docs/diagnose.md."""
     jump = 0.003 / 0.2
     robot = IndependentRobot(effects={"floor_bumps": {"rate": 0.5, "heading_jump": jump}})
     runs = generate(robot, rich_protocol(), np.random.default_rng(5))
@@ -157,7 +162,8 @@ def test_bumps_are_named_first_and_keep_their_mean() -> None:
     assert result.named_effects[0] == "floor_bumps", result.named_effects
     assert "distance_scale" not in result.named_effects
     check = next(c for c in result.spread if c["effect"] == "floor_bumps")
-    assert check["confirmed"], check["reason"]
+    assert check["better"], check["reason"]
+    assert 0.40 <= check["coverage"]["50"] <= 0.60
     assert result.model.e_s == 1.0
     moved = result.geometry_check["E_s"]
     assert moved["moved_by"] == ["floor_bumps"] and moved["without_noise_effects"] < 1.0

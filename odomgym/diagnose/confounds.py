@@ -29,7 +29,8 @@ column is not a confound: its parameter is imprecise, which its standard error s
 a confound's robot part; against the standard error of that projection (cluster-robust, as the
 fit's own errors: Liang & Zeger 1986; session-clustered with two or more sessions but never
 below run-clustered, since with few sessions their sandwich has no spread along most
-directions) it has *moved* beyond :data:`MOVED` standard errors; never along a direction the fit
+directions) it has *moved* beyond the two-sided 95 % interval of Student's t with G − 1 degrees
+of freedom, G its clusters (:data:`MOVED`); never along a direction the fit
 is free along (robot-against-robot, or against nuisances it fits), whose values there are set
 by a signal below the rule's bound. Its two readings are then: the robot changed by
 the projection (the measurement as fitted), or the robot as given along the direction and the
@@ -54,6 +55,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from odomgym.diagnose.experiments import SEPARATING_EXPERIMENTS, synthetic_run
 from odomgym.diagnose.fit import build_within
@@ -82,8 +84,19 @@ FloatArray = NDArray[np.float64]
 RELATIVE_SINGULAR_VALUE = 1e-3
 """A direction of the unit-column joint Jacobian whose singular value is below this fraction of
 the largest is a confound (module docstring)."""
-MOVED = 2.0
-"""A fit has moved along a confound when its projection exceeds this many standard errors."""
+MOVED = 0.975
+"""A fit has moved along a confound when its projection lies beyond the two-sided 95 % interval
+of its cluster-robust standard error: beyond the 0.975 quantile of Student's t with G − 1
+degrees of freedom standard errors, G the clusters the error was taken over (Cameron & Miller
+2015, §VI: with few clusters a normal critical value, 1.96, rejects too often — on effect-free
+logs of two sessions a frame scale had "moved" by 2.0 standard errors)."""
+
+
+def _critical(clusters: int) -> float:
+    """How many standard errors a move must exceed (:data:`MOVED`)."""
+    return float(stats.t.ppf(MOVED, max(clusters - 1, 1)))
+
+
 _KEPT = 1e-3  # components of a reported direction below this (unit vector) are dropped
 _SHOWN = 0.05  # components a sentence names
 _LINEAR = 0.01  # the separations' move, in units of one parameter scale (first order)
@@ -123,7 +136,8 @@ class Confound:
         move, move_stderr: the fitted change of the robot from the model as given, projected on
             the direction's robot part, and its standard error (direction units; ∞ where the
             fit is free along the direction, NaN where it cannot give one).
-        moved: |move| > :data:`MOVED` · move_stderr (never where ``fitted``).
+        moved: |move| beyond the 95 % interval, t(G − 1) · move_stderr (:data:`MOVED`; never
+            where ``fitted``).
         fitted: whether the fit has every part of the direction free (robot parameters and
             fitted nuisances): then its values along it are set by a signal below the rule's
             bound (the gate's variance inflation refuses such a term), not moved.
@@ -306,14 +320,15 @@ def _sparse_basis(null: FloatArray, robot: int) -> list[FloatArray]:
     return out
 
 
-def _robot_covariances(fit: OpenLoopFit) -> list[FloatArray]:
+def _robot_covariances(fit: OpenLoopFit) -> list[tuple[FloatArray, int]]:
     """Cluster-robust covariances of the fit's robot parameters (fit units): run-clustered, and
     with two or more sessions session-clustered too — the sandwiches of
     :func:`odomgym.diagnose.openloop._clustered_errors` (Liang & Zeger 1986) — with the normal
     matrix inverted without the directions the 1e-3 rule calls unidentifiable (eigenvalues of
     the unit-scaled normal matrix below (1e-3)²): a confound the fit is free along (a toe
     against fitted frame yaws) must not spread its rounding noise into the others' errors.
-    Where every direction is identifiable this is the plain inverse."""
+    Where every direction is identifiable this is the plain inverse. Each comes with its
+    number of clusters."""
     problem = fit.problem
     robot, own, res = fit.blocks
     a, _ = problem.normal(robot, own, res, range(len(res)))
@@ -330,7 +345,10 @@ def _robot_covariances(fit: OpenLoopFit) -> list[FloatArray]:
     if len(set(sessions)) >= 2:
         groups.append(list(sessions))
     size = problem.size
-    return [clustered_covariance(cov, scores, labels)[:size, :size] for labels in groups]
+    return [
+        (clustered_covariance(cov, scores, labels)[:size, :size], len(set(labels)))
+        for labels in groups
+    ]
 
 
 def _separations(
@@ -429,7 +447,7 @@ def derive_confounds(
     given_values = fit.effect.read(given) if fit.effect is not None else {}
     keys = [n if n in fit.values else n.split(".", 1)[1] for n, _ in reads]
     change = np.array([fit.values[k] - given_values[k] for k in keys])
-    physical = [np.diag(scales) @ c @ np.diag(scales) for c in _robot_covariances(fit)]
+    physical = [(np.diag(scales) @ c @ np.diag(scales), g) for c, g in _robot_covariances(fit)]
     out = []
     kept: list[FloatArray] = []
     unit = np.zeros_like(jac.matrix)
@@ -520,12 +538,13 @@ def _assess(
     components: tuple[Component, ...],
     v: FloatArray,
     change: FloatArray,
-    covariances: Sequence[FloatArray],
+    covariances: Sequence[tuple[FloatArray, int]],
     sigma: float,
     sensor: SensorNoise,
 ) -> Confound:
     """The confound along unit direction ``v``: the fit's move along it (the fitted ``change``
-    of the robot in physical units, its ``covariances``), the readings and the separations."""
+    of the robot in physical units, its ``covariances`` with their cluster counts), the
+    readings and the separations."""
     robot = jac.robot
     part = v[:robot]
     weight = part / float(part @ part)
@@ -535,6 +554,7 @@ def _assess(
     nuisance_parts = [c for c in components if not c.robot]
     active = set(jac.fit.problem.active)
     fitted = all(by_name[c.name].kind in active for c in nuisance_parts)
+    critical = _critical(2)
     if fitted:  # free in the fit: its values along it are set by a signal below the bound
         stderr = math.inf
     else:
@@ -543,11 +563,17 @@ def _assess(
         # G − 1 and, with two or three, no spread along most directions (Cameron & Miller
         # 2015 on few clusters).
         spreads = [
-            float(weight @ (norms[:, None] * c * norms[None, :]) @ weight) for c in covariances
+            (float(weight @ (norms[:, None] * c * norms[None, :]) @ weight), g)
+            for c, g in covariances
         ]
-        finite = [v for v in spreads if math.isfinite(v)]
-        stderr = math.sqrt(max(max(finite), 0.0)) if finite else math.nan
-    moved = math.isfinite(stderr) and abs(move) > MOVED * stderr
+        finite = [(v, g) for v, g in spreads if math.isfinite(v)]
+        if finite:
+            largest, clusters = max(finite)
+            stderr = math.sqrt(max(largest, 0.0))
+            critical = _critical(clusters)
+        else:
+            stderr = math.nan
+    moved = math.isfinite(stderr) and abs(move) > critical * stderr
     robot_reading = tuple((c.name, move * c.per_unit) for c in components if c.robot)
     nuisance_reading = tuple((c.name, -move * c.per_unit) for c in components if not c.robot)
     robot_parts = [c for c in components if c.robot]
