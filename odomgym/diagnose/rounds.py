@@ -50,6 +50,7 @@ from odomgym.diagnose.fit import (
     run_fit_jobs,
 )
 from odomgym.diagnose.journal import FitJournal
+from odomgym.diagnose.physical import check_bumps
 from odomgym.diagnose.results import Candidate, Round
 from odomgym.diagnose.stats import (
     combine_bonferroni,
@@ -186,6 +187,7 @@ def _score_candidates(
     t, p_flip = max_t_test(improvements, ctx.rng)
     candidates = []
     for k, f in enumerate(fits):
+        signature = stage != "mean" or not EFFECTS[f.name].noise or _signature_holds(ctx, spec, f)
         lr = likelihood_ratio(float(np.sum(f.loglik - current.loglik)))
         dof = len(EFFECTS[f.name].parameters) + sum(
             len(EFFECTS[p].parameters) for p in EFFECTS[f.name].partners
@@ -205,10 +207,32 @@ def _score_candidates(
                 p_family=p_family,
                 t=float(t[k]),
                 p_sign_flip=float(p_flip[k]),
-                significant=bool(p_family < 0.5 * cfg.alpha and gain > 0.0),
+                significant=bool(p_family < 0.5 * cfg.alpha and gain > 0.0 and signature),
             )
         )
     return candidates, fits
+
+
+def _signature_holds(ctx: RoundContext, spec: RobotSpec, fit: CandidateFit) -> bool:
+    """Whether a noise effect fitted among the systematic candidates
+    (:attr:`odomgym.effects.Effect.with_systematic`) shows the signature no systematic effect
+    can make, at a size the floor can produce: for wheel jumps, :func:`odomgym.diagnose.
+    physical.check_bumps` on the current model (``spec``). Without it the effect waits for the
+    noise stage, as every noise effect does."""
+    effect = EFFECTS[fit.name]
+    cfg = ctx.config
+    if effect.wheel_jumps(fit.values, np.ones((1, 2)), float(spec.true_wheelbase)) is None:
+        return False
+    check = check_bumps(
+        ctx.data.runs,
+        spec,
+        fit.values,
+        max_obstacle=cfg.max_obstacle,
+        max_rate=cfg.max_bump_rate,
+        interval=cfg.checkpoint_interval,
+        alpha=0.5 * cfg.alpha,
+    )
+    return check.accepted
 
 
 def _refit_named(

@@ -446,7 +446,10 @@ def _rounds(
 ) -> DiagnosisState:
     """Step 4: the rounds — systematic effects first, then (once their structure is
     exhausted) discovery, then the noise model: a noise effect may stand for nothing a
-    systematic term explains. With the sessions' frames fitted, the catalogue effects they make
+    systematic term explains. A noise effect whose signature no systematic effect can make
+    (floor bumps' jumps during steady driving) competes with the systematic effects where its
+    signature is in the data: a systematic effect named before it would stand in for its
+    realised jumps. With the sessions' frames fitted, the catalogue effects they make
     unidentifiable (:data:`~odomgym.diagnose.nuisances.SESSION_EFFECTS`) are no candidates."""
     names = cfg.candidates or tuple(EFFECTS)
     if rec.frames_on:
@@ -461,7 +464,7 @@ def _rounds(
         folds=folds_for(rec.corrected, min(cfg.folds, len(rec.corrected)), rng),
         nuisance=nuisance,
         stages=[
-            ("mean", systematic, nuisance),
+            ("mean", systematic + [n for n in noise if EFFECTS[n].with_systematic], nuisance),
             ("noise", noise, nuisance),
             ("noise", [NUISANCE] if NUISANCE in names else [], None),
         ],

@@ -74,6 +74,7 @@ class FloorBumps(Effect):
 
     name = "floor_bumps"
     noise = True
+    with_systematic = True
     partners = ("distance_scale",)
     parameters = (
         Parameter("rate", "1/m", 0.0, 0.0, 10.0, 0.05, "bumps per metre of one wheel's travel"),

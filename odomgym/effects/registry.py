@@ -165,6 +165,11 @@ class Effect:
     moves the mean along the same direction (bumps shorten the travel as a distance scale
     does): the workflow refits them beside it, so each named value is right, not only their
     sum."""
+    with_systematic: ClassVar[bool] = False
+    """A noise effect whose signature no systematic effect can make (floor bumps' sudden jumps
+    during steady driving): it competes with the systematic effects from the first round of
+    ``diagnose`` where that signature is in the data, so that a systematic effect named before
+    it cannot stand in for its realised jumps (:func:`odomgym.diagnose.rounds.run_round`)."""
     confounded: ClassVar[str] = ""
     """What else, outside the catalogue, produces exactly the same logs (the report repeats it
     whenever the effect is named, so a reader does not take the name for more than the data
