@@ -76,6 +76,7 @@ __all__ = [
     "folds_for",
     "gauss_newton_step",
     "noise_curvature",
+    "noise_stderr",
     "run_fit_jobs",
     "strata",
     "systematic_vector",
@@ -503,6 +504,39 @@ def noise_curvature(
             hess[:, a, b] = value
             hess[:, b, a] = value
     return f0, grad, hess
+
+
+def noise_stderr(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effects: Sequence[Effect]
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Standard errors of the noise ``effects``' parameters at a maximum-likelihood fit
+    (``spec``, ``sensor``): model-based (the inverse observed information) and run-clustered
+    (the sandwich over runs; Liang & Zeger 1986), from :func:`noise_curvature` in the fit's
+    log-parameters, mapped back by the delta method (se(p) = p · se(log p)). Keyed
+    ``{effect: {parameter: {"stderr", "stderr_runs"}}}``; NaN where the information is
+    singular (a parameter at the floor of its range)."""
+    if not effects:
+        return {}
+    _, grad, hess = noise_curvature(data, spec, sensor, effects)
+    information = -np.sum(hess, axis=0)
+    try:
+        cov = np.linalg.inv(information)
+    except np.linalg.LinAlgError:
+        cov = np.full_like(information, math.nan)
+    runs = clustered_covariance(cov, grad, list(range(len(grad))))
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    k = 2  # after the sensor's two log-sigmas
+    for effect in effects:
+        values = effect.read(spec)
+        for p in effect.parameters:
+            model = math.sqrt(cov[k, k]) if cov[k, k] > 0 else math.nan
+            robust = math.sqrt(runs[k, k]) if runs[k, k] > 0 else math.nan
+            out.setdefault(effect.name, {})[p.name] = {
+                "stderr": values[p.name] * model,
+                "stderr_runs": values[p.name] * robust,
+            }
+            k += 1
+    return out
 
 
 def systematic_vector(

@@ -215,7 +215,7 @@ def judge_spread(
             if not ok:
                 wide = "too wide" if share > high else "too narrow"
                 reasons.append(
-                    f"its {round(100 * q)} % region holds {100 * share:.0f} % of the held-out "
+                    f"its {round(100 * q)} % region holds {100 * share:.1f} % of the held-out "
                     f"errors ({100 * low:.0f}–{100 * high:.0f} % required: {wide})"
                 )
     effect = EFFECTS[name]

@@ -98,6 +98,8 @@ class NoiseNamed:
         partners_named: the systematic effects the rounds still name beside the kept ones.
         vanished: kept by the check, then refitted to the floor of their range on the final
             systematic model (step 11): the rest of the model carries them.
+        errors: the kept effects' standard errors at that refit
+            (:func:`odomgym.diagnose.fit.noise_stderr`), ``{effect: {parameter: {...}}}``.
     """
 
     kept: list[str]
@@ -106,6 +108,7 @@ class NoiseNamed:
     values: dict[str, dict[str, float]]
     partners_named: tuple[str, ...] = ()
     vanished: list[str] = field(default_factory=list)
+    errors: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
 
     @property
     def took_over(self) -> list[str]:

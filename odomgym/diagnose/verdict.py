@@ -298,15 +298,23 @@ def real_size(
 
 
 def noise_parameters(
-    state: DiagnosisState, name: str, spec: RobotSpec
+    errors: dict[str, dict[str, float]], name: str, spec: RobotSpec
 ) -> dict[str, dict[str, float]]:
     """A kept noise effect's parameters at their final values in ``spec`` (refitted on the
-    final systematic model, step 11), with the standard errors of the rounds' fit."""
-    entries = state.parameters.get(name, {})
-    return {
-        key: {**entries.get(key, {}), "value": value}
-        for key, value in EFFECTS[name].read(spec).items()
-    }
+    final systematic model, step 11) with their standard errors there (``errors``:
+    :func:`odomgym.diagnose.fit.noise_stderr`; the quoted one is the run-clustered)."""
+    out: dict[str, dict[str, float]] = {}
+    for key, value in EFFECTS[name].read(spec).items():
+        entry = errors.get(key, {})
+        runs = float(entry.get("stderr_runs", math.nan))
+        out[key] = {
+            "value": value,
+            "stderr": runs,
+            "stderr_model": float(entry.get("stderr", math.nan)),
+            "stderr_runs": runs,
+            "stderr_sessions": math.nan,
+        }
+    return out
 
 
 def _parameters(

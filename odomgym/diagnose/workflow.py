@@ -78,6 +78,7 @@ from odomgym.diagnose.fit import (
     fit_noise,
     fit_noise_model,
     folds_for,
+    noise_stderr,
     strata,
 )
 from odomgym.diagnose.gate import (
@@ -688,8 +689,9 @@ def _noise_refit(
     """Step 11: the final model — the chosen systematic values and the kept noise effects,
     whose parameters and the sensor noise are refitted by maximum likelihood on the fit runs
     under it (the rounds fitted them beside a systematic model the gate may since have
-    changed). A noise effect the refit takes to the floor of its range (the fit's "absent":
-    a tenth of its parameters' scale) was carried by the rest of the model and leaves it."""
+    changed), with their standard errors there. A noise effect the refit takes to the floor of
+    its range (the fit's "absent": a tenth of its parameters' scale) was carried by the rest of
+    the model and leaves it."""
     spec = found.chosen.spec
     for name in noise.kept:
         spec = EFFECTS[name].write(spec, noise.values[name])
@@ -705,8 +707,9 @@ def _noise_refit(
         for name in vanished:
             spec = EFFECTS[name].write(spec, EFFECTS[name].absent_values())
             kept.remove(name)
+    errors = noise_stderr(data, refit, sensor, [EFFECTS[n] for n in kept])
     return Model(refit, sensor), dataclasses.replace(
-        noise, kept=kept, vanished=[n for n in noise.kept if n not in kept]
+        noise, kept=kept, vanished=[n for n in noise.kept if n not in kept], errors=errors
     )
 
 
@@ -871,7 +874,7 @@ def _diagnosis(
     fit_nuisances = _final_nuisances(rec, found)
     parameters = _parameters(chosen, kept)
     for name in noise.kept:
-        parameters[name] = noise_parameters(state, name, final.spec)
+        parameters[name] = noise_parameters(noise.errors.get(name, {}), name, final.spec)
     return Diagnosis(
         verdict=verdict,
         named_effects=_in_order_added(state, kept, noise.kept),
