@@ -52,6 +52,7 @@ __all__ = [
     "correct_runs",
     "offset_is_significant",
     "sessions_of",
+    "with_clock",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -196,3 +197,19 @@ def correct_runs(runs: Sequence[Run], nuisances: Mapping[str, SessionNuisance]) 
         correct_run(run, nuisances.get(session))
         for run, session in zip(runs, sessions_of(runs), strict=True)
     ]
+
+
+def with_clock(
+    nuisances: Mapping[str, SessionNuisance], clock: Mapping[str, SessionNuisance]
+) -> dict[str, SessionNuisance]:
+    """``nuisances`` (frames, fitted on runs whose clocks were already corrected) with each
+    session's time offset from ``clock`` put back."""
+    out = {}
+    for session, n in nuisances.items():
+        c = clock.get(session)
+        out[session] = (
+            dataclasses.replace(n, time_offset=c.time_offset, time_offset_se=c.time_offset_se)
+            if c is not None
+            else n
+        )
+    return out

@@ -327,6 +327,10 @@ def _decision_of(d: Diagnosis, name: str) -> str:
         return f"refused by the open-loop check ({_rule(gate[name])})"
     if name in d.final_test.get("absorbed", []):
         return "absorbed (backward check)"
+    if name in d.final_test.get("unsupported", []):
+        return "not significant added to the final model (forward check)"
+    if name in d.final_test.get("taken_over", []):
+        return "its part taken by a noise effect's mean"
     if name in d.noise_checks and not d.noise_checks[name]["accepted"]:
         return "refused (signature or size)"
     if name in d.final_test.get("noise_carried_by_the_rest", []):

@@ -22,7 +22,20 @@ from odomgym.effects import EFFECTS, Effect
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["Backward", "NoiseNamed", "Recording", "RunSplit", "SystematicModel", "TermRefusal"]
+__all__ = [
+    "Backward",
+    "NoiseNamed",
+    "Recording",
+    "RunSplit",
+    "SystematicModel",
+    "TermRefusal",
+    "run_id",
+]
+
+
+def run_id(run: Run, index: int) -> str:
+    """A run's name in the report: its ``meta["run"]``, else its place among the runs (from 1)."""
+    return str(run.meta.get("run", index + 1))
 
 
 @dataclass(frozen=True)

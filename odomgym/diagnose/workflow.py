@@ -22,13 +22,15 @@ below points. :func:`_diagnose` reads as this list, one call per step, numbered 
 5. **Backward check** (:func:`odomgym.diagnose.rounds._backward_check`): a named systematic
    effect the final model no longer needs is removed (``absorbed``) — also the partner whose
    mean a noise effect named later took over (the distance scale beside floor bumps).
-6. **Noise effects' signature and size** (:func:`odomgym.diagnose.physical.check_bumps`): floor
+6. **Noise effects' signature and size** (:func:`odomgym.diagnose.keep.noise_effects`,
+   :func:`odomgym.diagnose.physical.check_bumps`): floor
    bumps only with heavy-tailed jumps in steady driving and a size the floor can produce. A kept
    noise effect's mean part (bumps shorten the travel) belongs to it from here on: it is in the
    robot every later open-loop fit starts from.
-7. **Physical sizes** (:func:`odomgym.diagnose.physical.term_size`): a discovered term too large
+7. **Physical sizes** (:func:`odomgym.diagnose.keep.term_sizes`): a discovered term too large
    for what the robot did is a stand-in, reported and not kept.
-8. **The open-loop gate** (:func:`odomgym.diagnose.gate.open_loop_gate`): each systematic
+8. **The open-loop gate** (:func:`odomgym.diagnose.keep.systematic`, over
+   :func:`odomgym.diagnose.gate.open_loop_gate`): each systematic
    proposal is kept only if it lowers the error of predicting left-out folds (sessions, or
    blocks) open loop; effects tied in a last ``ambiguous`` round are resolved here when the
    folds need every one of them.
@@ -37,15 +39,17 @@ below points. :func:`_diagnose` reads as this list, one call per step, numbered 
 10. **A kept term is a real size** (:func:`odomgym.diagnose.verdict.real_size`): at least two
     standard errors from zero with the sign the discovery proposed, or it is refused and steps
     8–10 run again without it.
-11. **The noise model refitted** on the final systematic model (maximum likelihood).
-12. **Held out, open loop** (:mod:`odomgym.diagnose.heldout`): the held-out runs predicted by the
-    model as given, the diagnosed model and a baseline calibration, in mm and degrees — the
-    yardstick of systematic effects and terms.
-13. **Held out, spread** (:mod:`odomgym.diagnose.spread`): each kept noise effect against the
-    model without it, refitted, by the log predictive density of the held-out runs' open-loop
-    errors and the coverage of its 50 % and 95 % regions — the yardstick of noise effects.
-14. **Confounds** (:mod:`odomgym.diagnose.confounds`): the directions in which the kept robot
-    parameters and measurement nuisances make the same logs, derived from the data's joint
+11. **The noise model refitted** on the final systematic model (maximum likelihood;
+    :func:`odomgym.diagnose.keep.noise_refit`).
+12. **Held out, open loop** (:func:`odomgym.diagnose.confirm.held_out`): the held-out runs
+    predicted by the model as given, the diagnosed model and a baseline calibration, in mm and
+    degrees — the yardstick of systematic effects and terms.
+13. **Held out, spread** (:func:`odomgym.diagnose.confirm.spread`): each kept noise effect
+    against the model without it, refitted, by the log predictive density of the held-out runs'
+    open-loop errors and the coverage of its 50 % and 95 % regions — the yardstick of noise
+    effects.
+14. **Confounds** (:func:`odomgym.diagnose.confirm.confounds`): the directions in which the kept
+    robot parameters and measurement nuisances make the same logs, derived from the data's joint
     Jacobian, and whether the fitted values moved along one.
 15. **Verdict** (:func:`odomgym.diagnose.verdict.verdict_of`): which yardstick confirmed what;
     never a plain ``explained`` along a confound; the grammar's score test and a whiteness test
@@ -62,42 +66,32 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from odomgym import interrupt
+from odomgym.diagnose import confirm, keep
 from odomgym.diagnose.config import DiagnoseConfig
-from odomgym.diagnose.confounds import Confound, derive_confounds
+from odomgym.diagnose.confounds import Confound
 from odomgym.diagnose.fit import (
     Dataset,
     Model,
     candidate_effects,
-    fit_noise,
     fit_noise_model,
     folds_for,
-    noise_stderr,
     strata,
 )
 from odomgym.diagnose.gate import (
-    FilterLinearisation,
-    GateResult,
-    SystematicFit,
-    filter_estimate,
     model_effect,
-    open_loop_estimate,
-    open_loop_gate,
-    spec_with,
 )
 from odomgym.diagnose.heldout import (
     AS_GIVEN,
-    BASELINE,
     DIAGNOSED,
     Baseline,
     HeldOut,
-    compare_models,
     pictured_runs,
 )
 from odomgym.diagnose.journal import FitJournal
@@ -108,17 +102,16 @@ from odomgym.diagnose.nuisances import (
     correct_runs,
     offset_is_significant,
     sessions_of,
+    with_clock,
 )
 from odomgym.diagnose.openloop import (
     ModelErrors,
     NuisanceOptions,
     OpenLoopData,
-    OpenLoopFit,
     evaluate_open_loop,
     fit_open_loop,
-    open_loop_folds,
 )
-from odomgym.diagnose.physical import TermSize, check_bumps, term_size
+from odomgym.diagnose.physical import TermSize
 
 # Candidate, Round and GAP_METRIC are re-exported (``as``): they were importable from here
 # before the split without being in ``__all__``, and stay so.
@@ -138,30 +131,27 @@ from odomgym.diagnose.rounds import (
     run_round,
 )
 from odomgym.diagnose.screen import SkippedRun, usable_runs
-from odomgym.diagnose.spread import SpreadCheck, judge_spread, model_without
+from odomgym.diagnose.spread import SpreadCheck
 from odomgym.diagnose.steps import (
     Backward,
     NoiseNamed,
     Recording,
     RunSplit,
     SystematicModel,
-    TermRefusal,
+    run_id,
 )
 from odomgym.diagnose.verdict import (
-    _discovered_order,
     _geometry_moves,
     _kept_terms,
     _parameters,
     _shrink,
     _significant_effects,
     _terms_tried,
-    _tied_effects,
     noise_parameters,
-    real_size,
     verdict_of,
 )
 from odomgym.diagnose.where import Finding, localise, run_residuals
-from odomgym.effects import EFFECTS, Effect
+from odomgym.effects import EFFECTS
 from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
@@ -184,10 +174,6 @@ __all__ = [
 GEOMETRY = ("wheel_diameter_ratio", "wheelbase", "distance_scale")
 """The catalogue's geometric effects (E_d, E_b, E_s): fitted beside the measurement nuisances,
 the baseline's parameters."""
-
-
-def _run_id(run: Run, index: int) -> str:
-    return str(run.meta.get("run", index + 1))
 
 
 def _session_family(runs: Sequence[Run], members: Sequence[int]) -> str:
@@ -261,22 +247,6 @@ def _significant_offset(nuisance: SessionNuisance) -> SessionNuisance:
     )
 
 
-def _with_clock(
-    nuisances: Mapping[str, SessionNuisance], clock: Mapping[str, SessionNuisance]
-) -> dict[str, SessionNuisance]:
-    """``nuisances`` (frames, fitted on runs whose clocks were already corrected) with each
-    session's time offset from ``clock`` put back."""
-    out = {}
-    for session, n in nuisances.items():
-        c = clock.get(session)
-        out[session] = (
-            dataclasses.replace(n, time_offset=c.time_offset, time_offset_se=c.time_offset_se)
-            if c is not None
-            else n
-        )
-    return out
-
-
 def diagnose(
     runs: Sequence[Run],
     robot: RobotSpec,
@@ -334,13 +304,13 @@ def _diagnose(
     as_given, findings = _where(split, rec, robot, cfg, report)  # 3
     state = _rounds(rec, robot, cfg, rng, report, journal)  # 4
     backward = _backward(rec, state, cfg)  # 5
-    noise = _noise_effects(rec, state, cfg)  # 6
-    sizes = _term_sizes(rec, state)  # 7
-    found = _systematic(rec, robot, state, backward, noise, sizes, cfg, report)  # 8–10
-    final, noise = _noise_refit(found, state, noise)  # 11
-    held = _held_out(split, rec, robot, found, as_given, baseline, cfg, report)  # 12
-    spread = _spread(split, held, final, noise, found, cfg, report)  # 13
-    confounds = _confounds(rec, robot, found, noise, final, report)  # 14
+    noise = keep.noise_effects(rec, state, cfg)  # 6
+    sizes = keep.term_sizes(rec, state)  # 7
+    found = keep.systematic(rec, robot, state, backward, noise, sizes, cfg, report)  # 8–10
+    final, noise = keep.noise_refit(found, state, noise)  # 11
+    held = confirm.held_out(split, rec, robot, found, as_given, baseline, cfg, report)  # 12
+    spread = confirm.spread(split, held, final, noise, found, cfg, report)  # 13
+    confounds = confirm.confounds(rec, robot, found, noise, final, report)  # 14
     verdict, final_test = verdict_of(  # 15
         split.held, found, final, held, spread, confounds, state, cfg
     )
@@ -349,6 +319,7 @@ def _diagnose(
     final_test["absorbed"] = backward.absorbed
     final_test["unsupported"] = backward.unsupported
     final_test["noise_carried_by_the_rest"] = noise.vanished
+    final_test["taken_over"] = noise.took_over
     return _diagnosis(runs, skipped, robot, split, rec, state, findings, noise, sizes, found,
                       final, held, spread, confounds, verdict, final_test, gaps)  # fmt: skip
 
@@ -426,7 +397,7 @@ def _where(
         AS_GIVEN,
         split.held,
         robot,
-        _with_clock(rec.nominal.nuisances, rec.clock),
+        with_clock(rec.nominal.nuisances, rec.clock),
         rec.clock_options,
         rec.open_data.interval,
         rec.open_data.length,
@@ -503,340 +474,6 @@ def _backward(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> Bac
     return Backward(absorbed, _forward_check(rec.data, state.model, earlier, cfg.alpha))
 
 
-def _noise_effects(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> NoiseNamed:
-    """Step 6: the noise effects the rounds named, kept only with their signature in the data
-    and a size the floor can produce (floor bumps: :func:`odomgym.diagnose.physical.
-    check_bumps`, on the rounds' systematic model without the bumps' mean loss)."""
-    kept: list[str] = []
-    checks: dict[str, dict[str, Any]] = {}
-    for name in (n for n in state.named if EFFECTS[n].noise):
-        effect = EFFECTS[name]
-        values = effect.read(state.model.spec)
-        if effect.wheel_jumps(values, np.ones((1, 2)), rec.open_data.length) is not None:
-            check = check_bumps(
-                rec.corrected,
-                effect.write(state.model.spec, effect.absent_values()),
-                values,
-                max_obstacle=cfg.max_obstacle,
-                max_rate=cfg.max_bump_rate,
-                interval=rec.open_data.interval,
-                alpha=0.5 * cfg.alpha,
-            )
-            checks[name] = check.as_dict()
-            if not check.accepted:
-                continue
-        kept.append(name)
-    return NoiseNamed(
-        kept=kept,
-        refused=[n for n in state.named if EFFECTS[n].noise and n not in kept],
-        checks=checks,
-        values={n: EFFECTS[n].read(state.model.spec) for n in kept},
-        partners_named=tuple(n for n in state.named if not EFFECTS[n].noise),
-    )
-
-
-def _term_sizes(rec: Recording, state: DiagnosisState) -> list[TermSize]:
-    """Step 7: every discovered term of the rounds judged at the data's operating range: one
-    too large for what the robot did is a stand-in (for a clock, a frame or a mechanism the
-    grammar lacks), reported, not proposed."""
-    present = state.model.spec.effect_values(DISCOVERED) or {}
-    return [
-        term_size(rec.corrected, state.model.spec, t, present[t]) for t in _discovered_order(state)
-    ]
-
-
-MAX_SIZE_PASSES = 4
-"""Most passes of steps 8–10: each pass after the first has refused at least one term."""
-
-
-def _systematic(
-    rec: Recording,
-    robot: RobotSpec,
-    state: DiagnosisState,
-    backward: Backward,
-    noise: NoiseNamed,
-    sizes: Sequence[TermSize],
-    cfg: DiagnoseConfig,
-    report: Report,
-) -> SystematicModel:
-    """Steps 8–10: the open-loop gate, the estimator, and the real-size rule for terms —
-    again without a term the rule refused, until every kept term passes.
-
-    The gate's robot *as given* carries the kept noise effects' mean parts (floor bumps'
-    shortened travel): a noise effect's mean belongs to it, and a systematic partner (the
-    distance scale) must earn its place on top of it, not for it."""
-    base_robot = noise.with_means(robot)
-    nominal = (
-        rec.nominal
-        if base_robot is robot
-        else fit_open_loop(rec.open_data, base_robot, None, rec.options, rec.frames)
-    )
-    terms = [size.term for size in sizes if size.plausible]
-    refused: list[TermRefusal] = []
-    for _ in range(MAX_SIZE_PASSES):
-        gate, tied, resolved = _gate(
-            rec, base_robot, nominal, state, backward, noise, terms, cfg, report
-        )
-        chosen, estimators, corrected = _estimate(rec, state, gate, report)
-        failing = real_size(chosen, gate.terms, state.passes)
-        if not failing:
-            break
-        refused.extend(failing)
-        out = {t for f in failing for t in f.term.split("+")}
-        terms = [t for t in terms if t not in out]
-    return SystematicModel(
-        gate, chosen, estimators, corrected, tied, resolved, refused, rec.open_data.interval
-    )
-
-
-def _gate(
-    rec: Recording,
-    robot: RobotSpec,
-    nominal: OpenLoopFit,
-    state: DiagnosisState,
-    backward: Backward,
-    noise: NoiseNamed,
-    terms: Sequence[str],
-    cfg: DiagnoseConfig,
-    report: Report,
-) -> tuple[GateResult, list[str], bool]:
-    """Step 8: the open-loop gate on the proposals of the rounds (:func:`odomgym.diagnose.
-    verdict._significant_effects`) and the plausible ``terms``: each must lower the error of
-    predicting the held-out folds (whole sessions, or blocks of time) open loop.
-
-    Effects the likelihood could not tell apart (a last round ended ``ambiguous``) are
-    proposed too, each under the one-standard-error rule: if the open-loop prediction of
-    left-out folds needs every one of them beside the others, the tie is resolved (on June
-    OptiOdom sessions a turn skid tied with the distance scale, and the folds needed both); if
-    it keeps only some, it could not tell them apart either — the gate is run again without
-    them, and the verdict stays ambiguous with its separating experiment. Returns the gate, the
-    tied effects and whether the tie was resolved."""
-    tied = _tied_effects(state)
-    # The filter's estimates, linearised at the rounds' model without the mean part of a noise
-    # effect step 6 refused (a kept one is in ``robot``, the start of every open-loop fit).
-    base = state.model.spec
-    for name in noise.refused:
-        base = EFFECTS[name].write(base, EFFECTS[name].absent_values())
-
-    def gated(proposed_effects: list[str]) -> GateResult:
-        linearised = FilterLinearisation(
-            rec.data, Model(base, state.model.sensor), proposed_effects, terms
-        )
-        return open_loop_gate(
-            rec.open_data,
-            robot,
-            state.model.spec,
-            proposed_effects,
-            terms,
-            rec.options,
-            open_loop_folds(rec.timed),
-            start=rec.frames,
-            nominal=nominal,
-            report=report,
-            filtered=linearised,
-            corrected=OpenLoopData(rec.corrected, rec.open_data.interval, rec.open_data.length),
-            named=[n for n in state.named if not EFFECTS[n].noise],
-            order=cfg.gate_order,
-        )
-
-    out = {*noise.took_over, *backward.unsupported}
-    pool = [n for n in _significant_effects(state, tied=True) if n not in out]
-    gate = gated(pool)
-    resolved = bool(tied) and set(tied) <= set(gate.effects)
-    if tied and not resolved:
-        gate = gated([n for n in _significant_effects(state, tied=False) if n in pool])
-    return gate, tied, resolved
-
-
-def _estimate(
-    rec: Recording, state: DiagnosisState, gate: GateResult, report: Report
-) -> tuple[SystematicFit, dict[str, float], list[Run]]:
-    """Step 9: the estimator of the kept model's values: the filter's (efficient when its noise
-    model is right), unless the open-loop fit's (what the held-out comparison measures, robust
-    to a wrong noise model) predicts the left-out folds better by one standard error. Between
-    two estimators that predict equally well the efficient one wins: an open-loop estimate
-    chosen on fold noise leaves the filter a residual it can see (E_d 3e-5 off on a simulated
-    robot). Returns the chosen fit, each estimator's fold error [m²] and the fit runs with the
-    kept model's nuisances removed."""
-    chosen = open_loop_estimate(gate.fit, gate.cv_error)
-    corrected = correct_runs(rec.timed, gate.fit.nuisances)
-    estimators: dict[str, float] = {"open loop": chosen.fold_error(gate.folds)}
-    effect = model_effect(gate.effects, gate.terms)
-    if effect is not None:
-        report("estimator", 1.0)
-        kf_data = Dataset.of(corrected, rec.open_data.interval)
-        nuisance = EFFECTS.get(NUISANCE)
-        start = spec_with(gate.fit.spec, state.model.spec, gate.effects, gate.terms)
-        start_model = fit_noise_model(kf_data, Model(start, state.model.sensor), nuisance)
-        filtered = filter_estimate(
-            kf_data,
-            start_model,
-            effect,
-            nuisance,
-            OpenLoopData(corrected, rec.open_data.interval, rec.open_data.length),
-            gate.folds,
-            start,
-        )
-        estimators["filter"] = filtered.fold_error(gate.folds)
-        if not chosen.better_than(filtered, gate.folds):
-            chosen = filtered
-    return chosen, estimators, corrected
-
-
-def _noise_refit(
-    found: SystematicModel, state: DiagnosisState, noise: NoiseNamed
-) -> tuple[Model, NoiseNamed]:
-    """Step 11: the final model — the chosen systematic values and the kept noise effects,
-    whose parameters and the sensor noise are refitted by maximum likelihood on the fit runs
-    under it (the rounds fitted them beside a systematic model the gate may since have
-    changed), with their standard errors there. A noise effect the refit takes to the floor of
-    its range (the fit's "absent": a tenth of its parameters' scale) was carried by the rest of
-    the model and leaves it."""
-    spec = found.chosen.spec
-    for name in noise.kept:
-        spec = EFFECTS[name].write(spec, noise.values[name])
-    data = Dataset.of(found.corrected, found.interval)
-    kept = list(noise.kept)
-    sensor = state.model.sensor
-    while True:
-        effects = [EFFECTS[n] for n in kept]
-        refit, sensor, _ = fit_noise(data, spec, sensor, *effects, warm=bool(effects))
-        vanished = [n for n in kept if _at_floor(EFFECTS[n], EFFECTS[n].read(refit))]
-        if not vanished:
-            break
-        for name in vanished:
-            spec = EFFECTS[name].write(spec, EFFECTS[name].absent_values())
-            kept.remove(name)
-    errors = noise_stderr(data, refit, sensor, [EFFECTS[n] for n in kept])
-    return Model(refit, sensor), dataclasses.replace(
-        noise, kept=kept, vanished=[n for n in noise.kept if n not in kept], errors=errors
-    )
-
-
-def _at_floor(effect: Effect, values: Mapping[str, float]) -> bool:
-    """Whether a noise effect's fitted ``values`` make it absent once every parameter at the
-    noise fit's floor (a tenth of its scale, :func:`odomgym.diagnose.fit.fit_noise`) is read as
-    absent."""
-    floor = {p.name: (0.1 * p.scale * (1.0 + 1e-6), p.absent) for p in effect.parameters}
-    read = {k: (floor[k][1] if v <= floor[k][0] else v) for k, v in values.items()}
-    return effect.is_absent(read)
-
-
-def _final_nuisances(rec: Recording, found: SystematicModel) -> dict[str, SessionNuisance]:
-    """The fit sessions' nuisances under the diagnosed model: the gate's frames, the clock of
-    step 2."""
-    return _with_clock(found.gate.fit.nuisances, rec.clock)
-
-
-def _held_out(
-    split: RunSplit,
-    rec: Recording,
-    robot: RobotSpec,
-    found: SystematicModel,
-    as_given: ModelErrors,
-    baseline: Baseline | None,
-    cfg: DiagnoseConfig,
-    report: Report,
-) -> HeldOut:
-    """Step 12: the held-out runs predicted open loop by the model as given, the diagnosed
-    model and the baseline (:mod:`odomgym.diagnose.heldout`) — the yardstick of systematic
-    effects and terms."""
-    report("held-out test", 1.0)
-    interval, length = rec.open_data.interval, rec.open_data.length
-    models = {AS_GIVEN: as_given}
-    models[DIAGNOSED] = evaluate_open_loop(
-        DIAGNOSED,
-        split.held,
-        found.chosen.spec,
-        _final_nuisances(rec, found),
-        rec.clock_options,
-        interval,
-        length,
-        rec.pictured,
-    )
-    baseline_name, baseline_geometry = None, None
-    if baseline is not None:
-        report("baseline", 1.0)
-        base_spec = baseline(rec.corrected, robot)
-        base_fit = fit_open_loop(rec.open_data, base_spec, None, rec.options, rec.frames)
-        models[BASELINE] = evaluate_open_loop(
-            BASELINE,
-            split.held,
-            base_spec,
-            _with_clock(base_fit.nuisances, rec.clock),
-            rec.clock_options,
-            interval,
-            length,
-            rec.pictured,
-        )
-        baseline_name = baseline.name
-        baseline_geometry = {"E_d": base_spec.e_d, "E_b": base_spec.e_b, "E_s": base_spec.e_s}
-    truth = {
-        _run_id(split.held[j], j): np.column_stack(
-            [split.held[j].time - split.held[j].time[0], split.held[j].true_pose[:, :2]]
-        )
-        for j in rec.pictured
-    }
-    return compare_models(
-        split.kind,
-        models,
-        np.random.default_rng(cfg.seed + 2),
-        baseline_name,
-        baseline_geometry,
-        truth,
-    )
-
-
-def _spread(
-    split: RunSplit,
-    held: HeldOut,
-    final: Model,
-    noise: NoiseNamed,
-    found: SystematicModel,
-    cfg: DiagnoseConfig,
-    report: Report,
-) -> list[SpreadCheck]:
-    """Step 13: each kept noise effect judged by the spread it predicts on the held-out runs
-    (:func:`odomgym.diagnose.spread.judge_spread`) against the model without it, refitted on
-    the fit runs."""
-    if not noise.kept:
-        return []
-    report("held-out spread", 1.0)
-    fit_data = Dataset.of(found.corrected, found.interval)
-    runs = held.corrected(split.held)
-    return [
-        judge_spread(
-            name,
-            runs,
-            final,
-            model_without(fit_data, final, name, noise.kept),
-            cfg.checkpoint_interval,
-        )
-        for name in noise.kept
-    ]
-
-
-def _confounds(
-    rec: Recording,
-    robot: RobotSpec,
-    found: SystematicModel,
-    noise: NoiseNamed,
-    final: Model,
-    report: Report,
-) -> list[Confound]:
-    """Step 14: the directions in which the kept robot parameters and the measurement
-    nuisances (those fitted, those that are not, and errors of the ground-truth system itself)
-    make the same logs on the fit runs, derived from their joint Jacobian
-    (:func:`odomgym.diagnose.confounds.derive_confounds`), with whether the fitted values
-    moved along one beyond their errors."""
-    if not (found.gate.effects or found.gate.terms):
-        return []
-    report("confounds", 1.0)
-    return derive_confounds(
-        rec.open_data, found.gate.fit, noise.with_means(robot), sensor=final.sensor
-    )
-
-
 def _in_order_added(
     state: DiagnosisState, effects: Sequence[str], noise: Sequence[str]
 ) -> list[str]:
@@ -871,7 +508,7 @@ def _diagnosis(
     """The :class:`~odomgym.diagnose.results.Diagnosis` of the steps' results."""
     gate, chosen = found.gate, found.chosen
     kept = list(gate.effects)
-    fit_nuisances = _final_nuisances(rec, found)
+    fit_nuisances = confirm.final_nuisances(rec, found)
     parameters = _parameters(chosen, kept)
     for name in noise.kept:
         parameters[name] = noise_parameters(noise.errors.get(name, {}), name, final.spec)
@@ -914,8 +551,8 @@ def _diagnosis(
             if name in state.parameters
         },
         terms_tried=_terms_tried(state.passes),
-        fit_runs=[_run_id(runs[j], j) for j in split.fit_index],
-        holdout_runs=[_run_id(runs[j], j) for j in split.held_index],
+        fit_runs=[run_id(runs[j], j) for j in split.fit_index],
+        holdout_runs=[run_id(runs[j], j) for j in split.held_index],
         skipped_runs=[s.as_dict() for s in skipped],
         **gaps,
     )
