@@ -138,7 +138,7 @@ def test_a_frame_scaled_by_half_a_percent_reads_as_wheels_and_wheelbase_half_a_p
     Tolerance: three standard errors of the projection (about 1e-4 each), and 5e-5 between the
     two readings (first order: the columns are taken at the fitted, scaled model). The
     confound is within the 1e-3 rule, not exact: the open-loop error aligns each prediction on
-    the measured poses of a run's first half second, and a frame scaled about a point far
+    the measured poses of a run's first second, and a frame scaled about a point far
     from the run moves those poses by a little more than the scaled robot moves its
     prediction there."""
     scaled = []
@@ -169,7 +169,7 @@ def test_a_frame_scaled_by_half_a_percent_reads_as_wheels_and_wheelbase_half_a_p
 def test_a_wheel_toe_on_one_session_is_a_frame_yaw() -> None:
     """A 5 mrad wheel toe fitted beside the geometry on one session: it trades against the
     frame yaw (which diagnose does not fit with one session) — exactly before the alignment on
-    a run's first half second, within the 1e-3 rule with it (the robot's column is taken on the
+    a run's first second, within the 1e-3 rule with it (the robot's column is taken on the
     measured runs, whose aligned start moves with their noise; the yaw's along the prediction);
     the fit moved along it, and the two readings are a toe τ and a yaw −τ."""
     runs = generate(

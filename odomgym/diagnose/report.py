@@ -437,9 +437,9 @@ def _held_out_lines(d: Diagnosis) -> list[str]:
         f"Held out: {len(out['runs'])} runs — {how} "
         f"({', '.join(out['sessions']) if held.split == 'sessions' else ', '.join(out['runs'])}). "
         "Each model replays their logged wheel motions open loop, from where the measured "
-        "poses of a run's first half second put it; a held-out session's measurement "
+        "poses of a run's first second put it; a held-out session's measurement "
         "nuisances (time offset, tracked point, yaw) are fitted on its own runs with each "
-        "model fixed. RMS over every measured sample after that half second, runs weighing "
+        "model fixed. RMS over every measured sample after that second, runs weighing "
         "equally.",
         "",
         "| model | position RMS [mm] | heading RMS [°] | E_max,syst [mm] |",
