@@ -405,6 +405,22 @@ def _add_outer(mat: FloatArray, weight: float, gx: float, gy: float, gt: float) 
 
 
 @inlined_kernel
+def _small_cholesky(mat: FloatArray, dim: int, out: FloatArray) -> None:
+    """Lower Cholesky factor of the leading ``dim`` × ``dim`` block of ``mat`` into ``out``
+    (dim ≤ 3; a non-positive pivot is floored at 1e-300): the factor of :func:`_gauss_update`
+    and :func:`_mixture_level`."""
+    for a in range(dim):
+        for b in range(a + 1):
+            acc = mat[a, b]
+            for c in range(b):
+                acc -= out[a, c] * out[b, c]
+            if a == b:
+                out[a, a] = math.sqrt(max(acc, 1e-300))
+            else:
+                out[a, b] = acc / out[b, b]
+
+
+@inlined_kernel
 def _gauss_update(
     prior: FloatArray,
     mean: FloatArray,
@@ -433,16 +449,9 @@ def _gauss_update(
         for b in range(dim):
             s_mat[a, b] = hp[a, 0] * h[b, 0] + hp[a, 1] * h[b, 1] + hp[a, 2] * h[b, 2]
         s_mat[a, a] += rdiag[a]
+    _small_cholesky(s_mat, dim, chol)
     logdet = 0.0
     for a in range(dim):
-        for b in range(a + 1):
-            acc = s_mat[a, b]
-            for c in range(b):
-                acc -= chol[a, c] * chol[b, c]
-            if a == b:
-                chol[a, a] = math.sqrt(max(acc, 1e-300))
-            else:
-                chol[a, b] = acc / chol[b, b]
         logdet += 2.0 * math.log(chol[a, a])
     quad = 0.0
     for a in range(dim):  # forward substitution: L·sol = ν
@@ -650,21 +659,6 @@ def _chi2_cdf(q: float, dim: int) -> float:
     if dim == 2:
         return 1.0 - math.exp(-0.5 * q)
     return math.erf(r / _SQRT2) - _SQRT_2_OVER_PI * r * math.exp(-0.5 * q)
-
-
-@inlined_kernel
-def _small_cholesky(mat: FloatArray, dim: int, out: FloatArray) -> None:
-    """Lower Cholesky factor of the leading ``dim`` × ``dim`` block of ``mat`` into ``out``
-    (dim ≤ 3; a non-positive pivot is floored at 1e-300, as in :func:`_gauss_update`)."""
-    for a in range(dim):
-        for b in range(a + 1):
-            acc = mat[a, b]
-            for c in range(b):
-                acc -= out[a, c] * out[b, c]
-            if a == b:
-                out[a, a] = math.sqrt(max(acc, 1e-300))
-            else:
-                out[a, b] = acc / out[b, b]
 
 
 @inlined_kernel
