@@ -28,9 +28,9 @@ World's bumps the size is the heading jump of one crossing, e/b with e the over-
 
 Scored per trial (``score``):
 
-* **named first** — the first effect the report names (systematic effects kept by the open-loop
-  gate, then the noise model) is the hidden one, or the hidden one is a reading of a confound
-  the report states beside the named one;
+* **named first** — the first effect the report names (in the order the rounds added them) is
+  the hidden one, or the hidden one is named too and the report states a confound in which
+  both stand (the table counts these apart: "by a confound");
 * **its gap shrank** — by the yardstick of its kind: a systematic effect's held-out open-loop
   error below the model as given's (``held_out_open_loop.better_than_as_given``); a noise
   effect's spread check confirmed it (held-out log score better than the model without it by a
@@ -171,12 +171,15 @@ def score(truth: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
     if effect == "none":
         out.update(named_first=None, gap_shrank=None, success=not out["kept_anything"])
         return out
-    readings = {effect}
-    for confound in report.get("confounds", []):
-        members = set(confound.get("effects", []))
-        if named and named[0] in members:
-            readings |= members
-    first = bool(named) and named[0] in readings
+    first = bool(named) and named[0] == effect
+    by_confound = False
+    if not first and effect in named:
+        for confound in report.get("confounds", []):
+            members = {c["name"].split(".")[0] for c in confound["components"]}
+            if named[0] in members and effect in members:
+                by_confound = True
+    out["by_confound"] = by_confound
+    first = first or by_confound
     from odomgym.effects import EFFECTS
 
     if EFFECTS[effect].noise:
@@ -276,12 +279,14 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
     effects = [r for r in rows if r["truth"]["effect"] != "none"]
     nones = [r for r in rows if r["truth"]["effect"] == "none"]
     success = sum(bool(r["success"]) for r in effects)
+    confounded = sum(bool(r.get("by_confound")) and bool(r["success"]) for r in effects)
     alarms = sum(bool(r["kept_anything"]) for r in nones)
     elapsed = sum(float(r["elapsed_s"]) for r in rows)
     lines += [
         "",
         f"Hidden effects named first with the gap of their kind shrinking: {success} of "
-        f"{len(effects)} ({100 * success / max(len(effects), 1):.0f} %; target ≥ 95 %). False "
+        f"{len(effects)} ({100 * success / max(len(effects), 1):.0f} %; target ≥ 95 %; "
+        f"{confounded} of them named first by a confound the report states). False "
         f"alarms on robots without an effect: {alarms} of {len(nones)} "
         f"({100 * alarms / max(len(nones), 1):.0f} %; target ≤ 5 %). {elapsed:.0f} s of "
         "diagnosis.",

@@ -76,8 +76,9 @@ def _every_kept_effect_and_term_passed_the_open_loop_check(june: Diagnosis) -> N
         assert ("term", entry["term"]) in kept, entry["term"]
     assert june.terms_tried >= len(june.discovered)
     assert {s["term"] for s in june.stand_ins}.isdisjoint(e["term"] for e in june.discovered)
+    refitted_away = june.final_test.get("noise_carried_by_the_rest", [])
     for name, check in june.noise_checks.items():
-        assert (name in june.noise_model) == check["accepted"], check
+        assert (name in june.noise_model) == (check["accepted"] and name not in refitted_away)
 
 
 def _the_mean_wheel_diameter_comes_out_below_nominal(june: Diagnosis) -> None:
