@@ -10,6 +10,7 @@ the replay uses the 10 Hz log, a model difference of a few per cent of a term's 
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import gymnasium as gym
@@ -204,7 +205,7 @@ def test_structure_test_follows_the_hidden_term() -> None:
 @pytest.mark.parametrize(
     ("name", "value", "check"),
     [
-        ("out_of_round", 0.012, "refused"),
+        ("out_of_round", 0.012, "sin1"),
         ("sideslip", 0.05, "crab_lateral_signed"),
         ("speed_shrink", 0.06, "speed"),
         ("spin_scrub", 0.015, "yaw_rate"),
@@ -214,11 +215,11 @@ def test_effect_outside_the_catalogue_is_discovered(name: str, value: float, che
     """Discovery proposes the hidden mechanism's terms; the open-loop gate keeps them only
     where they lower the error of predicting left-out runs open loop by one standard error.
 
-    ``refused``: a once-per-revolution wheel term of 1.2 % averages out over every revolution,
-    so it barely moves an open-loop prediction (on this seed the pair lowers the left-out
-    folds' RMS error from 4.0 to 3.8 mm, −1.4 ± 2.2 mm² per fold: short of one standard error).
-    The likelihood must still propose it, the gate must record the refusal, the verdict must
-    not claim more than was kept, and the leftover on the held-out runs must follow it."""
+    The 1.2 % out-of-round wheel averages out over every revolution, so it barely moves an
+    open-loop prediction: while each prediction started at the first sample alone, its
+    tracker noise hid it (the pair lowered the left-out folds' RMS error from 4.0 to 3.8 mm,
+    −1.4 ± 2.2 mm² per fold, and was refused); aligned on the run's first second, the pair
+    lowers it from 2.7 to 1.8 mm and is kept."""
     effects = {name: {"value": value, "phase": 0.7}}
     runs = generate_session(effects, np.random.default_rng(31))
     result = diagnose(runs, MODEL, DiagnoseConfig(seed=31))
@@ -226,15 +227,6 @@ def test_effect_outside_the_catalogue_is_discovered(name: str, value: float, che
     expected = set(EXPECTED_TERMS[name])
     # No noise effect stands in for it.
     assert not result.noise_model, result.noise_model
-    if check == "refused":
-        proposed = {t for p in result.discovery for t in p["kept"]}
-        assert proposed & expected, result.discovery
-        refused = [g for g in result.gate if not g.kept and set(g.name.split("+")) & expected]
-        assert refused, result.gate
-        assert not terms, terms
-        assert result.verdict == "unconfirmed", result.verdict
-        assert result.final_test["residual_follows"] in expected, result.final_test
-        return
     assert set(terms) & expected, (result.verdict, list(terms), result.named_effects)
     assert result.verdict in ("explained", "partly explained"), result.verdict
     assert result.gap_after < result.gap_before
@@ -245,6 +237,11 @@ def test_effect_outside_the_catalogue_is_discovered(name: str, value: float, che
         for term in ("left_speed", "right_speed"):
             if term in terms:
                 assert -3 * value < terms[term]["coefficient"] < 0, terms[term]
+    elif check == "sin1":
+        # A sinusoid of the wheel's angle: its amplitude is the out-of-roundness.
+        pair = [terms[t]["coefficient"] for t in sorted(expected) if t in terms]
+        assert len(pair) == 2, list(terms)
+        assert abs(math.hypot(*pair) - value) < 0.25 * value, pair
     else:
         entry = terms[check]
         truth = value if check == "crab_lateral_signed" else -value

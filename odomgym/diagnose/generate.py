@@ -41,11 +41,12 @@ def _arc(
     speed: float,
     sign: float,
     rng: np.random.Generator,
-    floor: FloorSpec,
+    floor: FloorSpec | None = None,
 ) -> Run:
-    """An open-loop half circle on ``floor``: ramp up, hold (v, ω = v/R), ramp down, at 20 Hz."""
+    """An open-loop half circle on ``floor`` (default: a plain floor): ramp up, hold (v,
+    ω = v/R), ramp down, at 20 Hz."""
     dt = 0.05
-    world = World(robot, floor, dt=dt, rng=rng)
+    world = World(robot, floor if floor is not None else FloorSpec(), dt=dt, rng=rng)
     half_b = 0.5 * robot.wheelbase
     r_nom = 0.5 * robot.wheel_diameter
     omega = sign * speed / radius

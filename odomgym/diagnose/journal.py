@@ -20,11 +20,13 @@ from odomgym.io import atomic_write_bytes
 
 __all__ = ["ARITHMETIC", "FitJournal"]
 
-ARITHMETIC = 2
+ARITHMETIC = 3
 """Raised whenever a change moves the fitted numbers (not just the speed) within one odomgym
 version, so a journal written before it is not resumed into a report after it. 2: the BLAS
 libraries on one thread during a diagnosis (the last digits of every fit moved) and the open-loop
-gate's nested fits (:func:`odomgym.diagnose.gate.fit_nested`)."""
+gate's nested fits (:func:`odomgym.diagnose.gate.fit_nested`). 3: the clock fitted beside
+backlash, floor bumps among the first round's candidates and their fit from the partner as
+given (issue 42)."""
 
 
 class FitJournal:
@@ -44,6 +46,7 @@ class FitJournal:
     def __init__(self, folder: str | Path, *, resume: bool = False) -> None:
         self.folder = Path(folder)
         self.reused = 0
+        self.recorded: set[str] = set()  # fits this diagnosis wrote itself
         if not resume:
             self.clear()
 
@@ -66,10 +69,15 @@ class FitJournal:
             return None
         if not isinstance(fit, CandidateFit):
             return None
-        self.reused += 1
+        if key not in self.recorded:  # a fit this diagnosis made is found, not resumed
+            self.reused += 1
         return fit
 
     def record(self, key: str, fit: CandidateFit) -> None:
+        """Store ``fit`` under ``key`` (a stage of a later round may ask for the same fit:
+        floor bumps are scored among the first stage's candidates and again in the noise
+        stage)."""
+        self.recorded.add(key)
         atomic_write_bytes(self.folder / f"{key}.pkl", pickle.dumps(fit, protocol=5))
 
     def clear(self) -> None:
