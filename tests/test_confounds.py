@@ -184,7 +184,8 @@ def test_a_wheel_toe_on_one_session_is_a_frame_yaw() -> None:
     assert confound.moved and not confound.fitted
     toe = reading(confound, "wheel_toe.angle")
     assert abs(toe - TOE) < 3.0 * confound.move_stderr * per_unit(confound, "wheel_toe.angle")
-    assert reading(confound, "frame_yaw") == pytest.approx(-toe, rel=1e-6)
+    # τ = −δ to first order (exactly before the alignment on the first second; 3e-5 with it).
+    assert reading(confound, "frame_yaw") == pytest.approx(-toe, rel=1e-3)
     assert confound.experiment is None
     assert confound.check is not None and "markers" in confound.check
     assert_a_confound(jac, confound)

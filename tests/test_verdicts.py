@@ -79,9 +79,9 @@ def test_a_term_within_two_standard_errors_or_of_the_wrong_sign_is_refused() -> 
     refused = {r.term: r for r in real_size(fit, terms, [proposed])}  # type: ignore[list-item]
     assert set(refused) == {"crab_speed2", "left_accel", "yaw_time", "right_sin1+right_cos1"}
     crab = refused["crab_speed2"]
-    assert "within two standard errors" in crab.reason and "opposite sign" in crab.reason
+    assert "within 2 standard errors" in crab.reason and "opposite sign" in crab.reason
     assert crab.stderr == pytest.approx(0.3351)
-    assert "within two standard errors" in refused["left_accel"].reason
+    assert "within 2 standard errors" in refused["left_accel"].reason
     assert refused["yaw_time"].stderr == pytest.approx(6e-6)  # the larger, session-clustered
     pair = refused["right_sin1+right_cos1"]
     assert "opposite phase" in pair.reason and "within" not in pair.reason

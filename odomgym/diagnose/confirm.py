@@ -49,6 +49,7 @@ def held_out(
     rec: Recording,
     robot: RobotSpec,
     found: SystematicModel,
+    final: Model,
     as_given: ModelErrors,
     baseline: Baseline | None,
     cfg: DiagnoseConfig,
@@ -63,7 +64,7 @@ def held_out(
     models[DIAGNOSED] = evaluate_open_loop(
         DIAGNOSED,
         split.held,
-        found.chosen.spec,
+        final.spec,
         final_nuisances(rec, found),
         rec.clock_options,
         interval,

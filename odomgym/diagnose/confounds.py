@@ -200,7 +200,7 @@ class Confound:
             head = f"{_names(robot)} is not seen by these data {where}"
         if self.moved:
             second = (
-                f"{_nuisance_text(self.nuisance_reading)} with the robot as given"
+                f"{_nuisance_text(self.nuisance_reading)} with the rest of the fitted model"
                 if self.nuisance_reading
                 else "the robot as given"
             )

@@ -46,7 +46,7 @@ class FitJournal:
     def __init__(self, folder: str | Path, *, resume: bool = False) -> None:
         self.folder = Path(folder)
         self.reused = 0
-        self.recorded: set[str] = set()  # fits this diagnosis wrote itself
+        self.recorded: set[str] = set()  # fits this diagnosis wrote or has counted
         if not resume:
             self.clear()
 
@@ -71,6 +71,7 @@ class FitJournal:
             return None
         if key not in self.recorded:  # a fit this diagnosis made is found, not resumed
             self.reused += 1
+            self.recorded.add(key)  # counted once, however often asked for
         return fit
 
     def record(self, key: str, fit: CandidateFit) -> None:

@@ -47,7 +47,7 @@ from odomgym.effects import EFFECTS, Effect
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["MAX_SIZE_PASSES", "noise_effects", "noise_refit", "systematic", "term_sizes"]
+__all__ = ["noise_effects", "noise_refit", "systematic", "term_sizes"]
 
 Report = Callable[[str, float], None]
 
@@ -94,10 +94,6 @@ def term_sizes(rec: Recording, state: DiagnosisState) -> list[TermSize]:
     ]
 
 
-MAX_SIZE_PASSES = 4
-"""Most passes of steps 8–10: each pass after the first has refused at least one term."""
-
-
 def systematic(
     rec: Recording,
     robot: RobotSpec,
@@ -122,7 +118,7 @@ def systematic(
     )
     terms = [size.term for size in sizes if size.plausible]
     refused: list[TermRefusal] = []
-    for _ in range(MAX_SIZE_PASSES):
+    while True:  # every pass refuses a term or ends: at most one pass more than terms
         gate, tied, resolved = _gate(
             rec, base_robot, nominal, state, backward, noise, terms, cfg, report
         )
@@ -235,27 +231,31 @@ def _estimate(
 def noise_refit(
     found: SystematicModel, state: DiagnosisState, noise: NoiseNamed
 ) -> tuple[Model, NoiseNamed]:
-    """Step 11: the final model — the chosen systematic values and the kept noise effects,
-    whose parameters and the sensor noise are refitted by maximum likelihood on the fit runs
-    under it (the rounds fitted them beside a systematic model the gate may since have
-    changed), with their standard errors there. A noise effect the refit takes to the floor of
-    its range (the fit's "absent": a tenth of its parameters' scale) was carried by the rest of
-    the model and leaves it."""
+    """Step 11: the final model — the chosen systematic values and the kept noise effects. The
+    noise effects that only widen the spread (wheel noise) and the sensor noise are refitted by
+    maximum likelihood on the fit runs under it (the rounds fitted them beside a systematic
+    model the gate may since have changed), with their standard errors there. A noise effect
+    with a mean part (floor bumps) keeps the values the gate's robot carried: refitted, its
+    mean would move away from the one every open-loop fit was made with, and the held-out
+    figures would describe another model than the one saved. A pure noise effect the refit
+    takes to the floor of its range (the fit's "absent": a tenth of its parameters' scale) was
+    carried by the rest of the model and leaves it."""
     spec = found.chosen.spec
     for name in noise.kept:
         spec = EFFECTS[name].write(spec, noise.values[name])
     data = Dataset.of(found.corrected, found.interval)
-    kept = list(noise.kept)
+    widening = [n for n in noise.kept if type(EFFECTS[n]).replay is Effect.replay]
     sensor = state.model.sensor
     while True:
-        effects = [EFFECTS[n] for n in kept]
+        effects = [EFFECTS[n] for n in widening]
         refit, sensor, _ = fit_noise(data, spec, sensor, *effects, warm=bool(effects))
-        vanished = [n for n in kept if _at_floor(EFFECTS[n], EFFECTS[n].read(refit))]
+        vanished = [n for n in widening if _at_floor(EFFECTS[n], EFFECTS[n].read(refit))]
         if not vanished:
             break
         for name in vanished:
             spec = EFFECTS[name].write(spec, EFFECTS[name].absent_values())
-            kept.remove(name)
+            widening.remove(name)
+    kept = [n for n in noise.kept if n in widening or type(EFFECTS[n]).replay is not Effect.replay]
     errors = noise_stderr(data, refit, sensor, [EFFECTS[n] for n in kept])
     return Model(refit, sensor), dataclasses.replace(
         noise, kept=kept, vanished=[n for n in noise.kept if n not in kept], errors=errors

@@ -67,6 +67,8 @@ __all__ = [
     "NuisanceOptions",
     "OpenLoopData",
     "OpenLoopFit",
+    "aligned_prediction",
+    "alignment_samples",
     "cross_validate_open_loop",
     "evaluate_open_loop",
     "fit_open_loop",
@@ -208,8 +210,7 @@ def aligned_prediction(fixed: Run, replayed: Replay) -> FloatArray:
     anchor."""
     predicted = np.array(replayed.tracked, dtype=np.float64)
     measured = fixed.true_pose
-    turned = np.abs(predicted[:, 2] - predicted[0, 2]) <= ALIGN_TURN
-    inside = _in_window(fixed) & turned
+    inside = alignment_samples(fixed, predicted)
     heading = measured[inside, 2] - predicted[inside, 2]
     heading = heading[np.isfinite(heading)]
     turn = (
@@ -229,6 +230,18 @@ def aligned_prediction(fixed: Run, replayed: Replay) -> FloatArray:
     if shift.size:
         predicted[:, :2] += np.mean(shift, axis=0)
     return predicted
+
+
+def alignment_samples(fixed: Run, predicted: FloatArray) -> NDArray[np.bool_]:
+    """The samples :func:`aligned_prediction` aligns on: those within :data:`ALIGN_WINDOW` of
+    the start up to the first at which the robot has turned by more than :data:`ALIGN_TURN`
+    from its first heading — as measured, where the heading is (the set is then the data's,
+    the same for every model fitted to it, and a least-squares fit sees a smooth error), else
+    as ``predicted`` (T, 3)."""
+    heading = np.where(np.isfinite(fixed.true_pose[:, 2]), fixed.true_pose[:, 2], predicted[:, 2])
+    turn = np.abs(np.mod(heading - heading[0] + math.pi, 2.0 * math.pi) - math.pi)
+    before: NDArray[np.bool_] = np.logical_and.accumulate(turn <= ALIGN_TURN)
+    return _in_window(fixed) & before
 
 
 def _measured_minus(fixed: Run, replayed: Replay) -> FloatArray:
@@ -778,8 +791,8 @@ class ModelErrors:
         label: which model (``"as given"``, ``"diagnosed"``, ``"baseline"``).
         runs: the runs' ids; sessions: their sessions.
         position, heading: each run's RMS position [m] and heading [rad] error over its
-            measured samples after the first (NaN for a run that measured no heading after
-            its start: a position-only tracker).
+            measured samples after the alignment window (:data:`ALIGN_WINDOW`; NaN for a run
+            that measured no heading after it: a position-only tracker).
         combined: each run's mean square combined error at the fit's samples [m²].
         nuisances: the nuisances used per session (fitted with this model).
         e_max_syst: per session with squares both ways, Borenstein & Feng's E_max,syst [m]

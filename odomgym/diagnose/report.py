@@ -87,48 +87,46 @@ def format_markdown(diagnosis: Diagnosis, data: str) -> str:
 
 
 def _confirmed_words(d: Diagnosis) -> tuple[list[str], list[str]]:
-    """Each held-out confirmation in words: (confirmed, not confirmed)."""
+    """Each held-out confirmation in words, its figures left to the tables below (each figure
+    appears once): (confirmed, not confirmed — with the reason)."""
     yes: list[str] = []
     no: list[str] = []
     for c in d.final_test.get("confirmations", []):
         names = ", ".join(f"**{n}**" for n in c["names"])
         if c["yardstick"] == "open-loop error":
-            words = (
-                f"{names} by the open-loop error of the held-out runs "
-                f"({c['as_given_mm']:.1f} mm as given → {c['diagnosed_mm']:.1f} mm)"
-            )
+            words = f"{names} by the open-loop error of the held-out runs"
+            if not c["confirmed"]:
+                words += (
+                    ": the diagnosed model does not predict them better than the model as given"
+                )
         else:
-            words = f"{names} by the spread it predicts ({_spread_words(c)})"
+            words = f"{names} by the spread it predicts"
             if not c["confirmed"]:
                 words += f": {c['reason']}"
         (yes if c["confirmed"] else no).append(words)
     return yes, no
 
 
-def _spread_words(c: dict[str, Any]) -> str:
-    """A spread check in a few words: the score difference and the regions' coverage."""
-    cover = ", ".join(f"{k} % region {100 * v:.1f} %" for k, v in c["coverage"].items())
-    return (
-        f"log score {c['difference']:+.1f} ± {c['stderr']:.2g} nats per held-out "
-        f"{c['units'][:-1]}; {cover}"
-    )
-
-
 def _verdict_lines(d: Diagnosis) -> list[str]:
-    """The verdict and what it rests on, in one paragraph."""
+    """The verdict and what it rests on, in one paragraph (the figures are the tables')."""
     final = d.final_test
     left = final.get("residual_follows")
     found = _found(d)
     yes, no = _confirmed_words(d)
     confirmed = "; ".join(yes)
+    structure = (
+        f"but structure is left there: the residuals follow **{left}** most (score z = "
+        f"{final.get('residual_follows_z', math.nan):.1f}; held-out test p = "
+        f"{final.get('held_out_p', math.nan):.2g})"
+        if final.get("held_out_p", 1.0) < 0.025
+        else "but the last round left what the catalogue and the grammar could not name"
+    )
     verdicts = {
         "explained": f"the model was missing {found}. Confirmed on the held-out runs: "
         f"{confirmed}; their residuals under the updated model show no dependence on any term "
         "of the grammar and look white",
         "partly explained": f"the model was missing {found}. Confirmed on the held-out runs: "
-        f"{confirmed}; but structure is left there: the residuals follow **{left}** most "
-        f"(score z = {final.get('residual_follows_z', math.nan):.1f}; held-out test p = "
-        f"{final.get('held_out_p', math.nan):.2g})",
+        f"{confirmed}; {structure}",
         "partly confirmed": f"the fit runs pointed to {found}. Confirmed on the held-out runs: "
         f"{confirmed}. **Not** confirmed: {'; '.join(no)} — read those as proposals, not "
         "findings",
@@ -144,35 +142,35 @@ def _verdict_lines(d: Diagnosis) -> list[str]:
             f"the fit runs pointed to {found}, but the held-out runs do **not** confirm it "
             f"({'; '.join(no)}): nothing here is a finding to copy into the robot"
             if found != "nothing"
-            else f"the fit runs' likelihood proposed {_refused(d)}, but none of it lowered "
-            "the error of predicting left-out folds open loop (the open-loop check below): the "
-            "model stays as given, and nothing here is a finding to copy into the robot"
+            else f"the fit runs' likelihood proposed {_refused(d)}, but the checks after it "
+            "kept none of it (below): the model stays as given, and nothing here is a finding "
+            "to copy into the robot"
         ),
     }
     return [f"**Verdict: {d.verdict}** — {verdicts.get(d.verdict, d.verdict)}.", ""]
 
 
 def _decision_lines(d: Diagnosis) -> list[str]:
-    """What was kept and what was refused, each with the yardstick that decided and why."""
+    """What was kept and what was refused, each with the check that decided and why (the
+    open-loop figures are the check's table's)."""
     final = d.final_test
     lines = ["## What was kept, and why", ""]
-    kept = [step for step in d.gate if step.kept]
-    for step in kept:
+    confirmed = {n: c["confirmed"] for c in final.get("confirmations", []) for n in c["names"]}
+    for step in (step for step in d.gate if step.kept):
         lines.append(
-            f"- kept **{step.name}** ({step.kind}): the open-loop check of left-out folds, "
-            f"{step.before_mm:.2f} → {step.after_mm:.2f} mm (rule: {_rule(step)})"
+            f"- kept **{step.name}** ({step.kind}): it lowered the error of predicting "
+            f"left-out folds open loop (rule: {_rule(step)})"
         )
     for name in d.noise_model:
         lines.append(
             f"- kept **{name}** (noise effect): named by the rounds' held-out likelihood"
             + (", its signature and size checked" if name in d.noise_checks else "")
+            + ("" if confirmed.get(name, True) else " — **not confirmed** by its spread")
         )
-    refused = [step for step in d.gate if not step.kept]
-    for step in refused:
+    for step in (step for step in d.gate if not step.kept):
         lines.append(
-            f"- refused **{step.name}** ({step.kind}): {step.before_mm:.2f} → "
-            f"{step.after_mm:.2f} mm on left-out folds did not pass the rule "
-            f"({_rule(step)})"
+            f"- refused **{step.name}** ({step.kind}): it did not lower the error of "
+            f"predicting left-out folds open loop enough (rule: {_rule(step)})"
         )
     for entry in d.refused_terms:
         lines.append(f"- refused **{entry['term']}** (term): {entry['reason']}")
@@ -189,12 +187,17 @@ def _decision_lines(d: Diagnosis) -> list[str]:
             "- absorbed by the backward check (named on the way, not needed by the final "
             f"likelihood): {', '.join(final['absorbed'])}"
         )
+    if final.get("unsupported"):
+        lines.append(
+            "- not proposed to the open-loop check (significant in an earlier round only, not "
+            f"beside the final model): {', '.join(final['unsupported'])}"
+        )
     if len(lines) == 2:
         lines.append("- nothing was proposed")
     yes, no = _confirmed_words(d)
     lines.append("")
     if yes or no:
-        lines.append("On the held-out runs, each by the yardstick of its kind:")
+        lines.append("On the held-out runs, each by the yardstick of its kind (the tables below):")
         lines.append("")
         lines += [f"- confirmed: {w}" for w in yes]
         lines += [f"- **not confirmed**: {w}" for w in no]
@@ -209,10 +212,10 @@ def _spread_lines(d: Diagnosis) -> list[str]:
     lines = [
         "## Noise effects on held-out runs: the spread they predict",
         "",
-        "Log predictive density of each held-out run's open-loop errors (all measured samples "
-        "jointly) under the model with the effect and without it (refitted on the fit runs), "
-        "and the share of the held-out errors inside the model's 50 % and 95 % predictive "
-        "regions (40–60 % and 90–98 % required).",
+        "Log predictive density of each held-out run's open-loop errors (at its checkpoints, "
+        "jointly) under the model with the effect and without it (refitted on the fit runs, "
+        "wheel noise beside), and the share of the held-out errors inside the model's 50 % "
+        "and 95 % one-step predictive regions (40–60 % and 90–98 % required).",
         "",
         "| noise effect | score with − without [nats] | per | 50 % region | 95 % region "
         "| confirmed |",
@@ -221,9 +224,8 @@ def _spread_lines(d: Diagnosis) -> list[str]:
     for c in d.spread:
         lines.append(
             f"| {c['effect']} | {c['difference']:+.1f} ± {c['stderr']:.2g} | "
-            f"{c['units'][:-1]} ({c['unit_count']}) | {100 * c['coverage']['50']:.0f} % | "
-            f"{100 * c['coverage']['95']:.0f} % | "
-            f"{'yes' if c['confirmed'] else 'no: ' + c['reason']} |"
+            f"{c['units'][:-1]} ({c['unit_count']}) | {100 * c['coverage']['50']:.1f} % | "
+            f"{100 * c['coverage']['95']:.1f} % | {'yes' if c['confirmed'] else 'no'} |"
         )
     lines.append("")
     for key, entry in d.geometry_check.items():
@@ -262,9 +264,14 @@ def _parameter_lines(d: Diagnosis) -> list[str]:
                 edge = key in limits and limits[key].at_limit(value)
                 if edge:
                     bounded.append(f"{name}.{key}")
+                first = entry.get("stderr_model", entry.get("stderr", math.nan))
                 errors = " | ".join(
-                    _error(entry.get(k, math.nan))
-                    for k in ("stderr", "stderr_runs", "stderr_sessions")
+                    _error(v)
+                    for v in (
+                        first,
+                        entry.get("stderr_runs", math.nan),
+                        entry.get("stderr_sessions", math.nan),
+                    )
                 )
                 lines.append(
                     f"| {name} | {key} | {value:.6g}{' (bound)' if edge else ''} | {errors} |"
@@ -321,6 +328,9 @@ def _error(value: float) -> str:
 def _decision_of(d: Diagnosis, name: str) -> str:
     """What became of a proposal of the rounds, in a few words."""
     if name in d.named_effects:
+        confirmations = d.final_test.get("confirmations", [])
+        if any(name in c["names"] and not c["confirmed"] for c in confirmations):
+            return "kept, not confirmed"
         return "kept"
     gate = {step.name: step for step in d.gate}
     if name in gate:
@@ -437,10 +447,14 @@ def _held_out_lines(d: Diagnosis) -> list[str]:
         f"Held out: {len(out['runs'])} runs — {how} "
         f"({', '.join(out['sessions']) if held.split == 'sessions' else ', '.join(out['runs'])}). "
         "Each model replays their logged wheel motions open loop, from where the measured "
-        "poses of a run's first second put it; a held-out session's measurement "
-        "nuisances (time offset, tracked point, yaw) are fitted on its own runs with each "
-        "model fixed. RMS over every measured sample after that second, runs weighing "
-        "equally.",
+        "poses of a run's first second put it; "
+        + (
+            "a held-out session's measurement nuisances (time offset, tracked point, yaw) are "
+            "fitted on its own runs with each model fixed. "
+            if held.split == "sessions"
+            else "the session's measurement nuisances are those fitted on the fit runs. "
+        )
+        + "RMS over every measured sample after that second, runs weighing equally.",
         "",
         "| model | position RMS [mm] | heading RMS [°] | E_max,syst [mm] |",
         "|---|---|---|---|",
@@ -524,7 +538,10 @@ def _confound_lines(d: Diagnosis) -> list[str]:
         "rate) change the open-loop residuals by less than 10⁻³ of the largest direction.",
         "",
     ]
-    lines += [f"- **moved along it**: {c['sentence']}" for c in moved]
+    if moved and d.verdict == "confounded":
+        lines.append(f"- {len(moved)} the fit moved along: its readings are in the verdict above")
+    else:
+        lines += [f"- **moved along it**: {c['sentence']}" for c in moved]
     lines += [f"- {c['sentence']}" for c in rest]
     lines.append("")
     return lines

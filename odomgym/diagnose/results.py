@@ -127,7 +127,8 @@ class Diagnosis:
 
     @property
     def noise_model(self) -> list[str]:
-        """The named noise effects (zero-mean; named only once no systematic structure is left)."""
+        """The named noise effects (they widen the spread; floor bumps also shorten the mean
+        travel)."""
         return [n for n in self.named_effects if EFFECTS[n].noise]
 
     def as_dict(self) -> dict[str, Any]:

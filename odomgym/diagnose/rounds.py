@@ -333,7 +333,7 @@ ROUND_GOES_ON = ("explained", "discovered")
 
 
 def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
-    """One round of Which/Add (:mod:`odomgym.diagnose.workflow`, steps 4–7): score the stages'
+    """One round of Which/Add (:mod:`odomgym.diagnose.workflow`, step 4): score the stages'
     candidates against ``state.model``, decide the round's verdict, and — when an effect is named
     or a term discovered — add it to ``state.model``. The round is appended to ``state.rounds``
     and returned; another round follows if its verdict is in :data:`ROUND_GOES_ON`."""

@@ -18,10 +18,11 @@ runs' open-loop errors (Gneiting & Raftery 2007):
   wheel noise can match; and it is the density the rounds fitted the noise by, so nothing new
   has to be trusted.
 * **The comparison:** the model with the effect against the model *without* it, refitted on
-  the same fit runs — the remaining noise effects and the sensor noise by maximum likelihood,
-  and an effect's systematic partner (the distance scale beside floor bumps, whose losses
-  shorten the mean travel) by the filter's least squares. The effect is better when the mean
-  over the held-out units (sessions where there are two or more, else runs) of the paired
+  the same fit runs — the remaining noise effects, the wheel noise (as beside every candidate
+  of the rounds) and the sensor noise by maximum likelihood, and an effect's systematic
+  partner (the distance scale beside floor bumps, whose losses shorten the mean travel) by
+  the filter's least squares. The effect is better when the mean over the held-out units
+  (sessions — each its mean per run — where there are two or more, else runs) of the paired
   score difference exceeds one standard error of it.
 * **Calibration:** the model's 50 % and 95 % predictive regions must hold 40–60 % and 90–98 %
   of the held-out errors (:data:`REGIONS`). Each measured sample is judged by its one-step
@@ -48,6 +49,7 @@ from odomgym.diagnose.fit import Dataset, Joint, Model, fit_candidate, fit_noise
 from odomgym.diagnose.likelihood import measurement_mask, run_predictive
 from odomgym.diagnose.nuisances import sessions_of
 from odomgym.diagnose.replay import replay_run
+from odomgym.diagnose.rounds import NUISANCE
 from odomgym.effects import EFFECTS, Effect
 from odomgym.odometry.runs import Run
 
@@ -152,11 +154,16 @@ class SpreadCheck:
 def model_without(data: Dataset, model: Model, name: str, noise: Sequence[str]) -> Model:
     """``model`` without the noise effect ``name``, refitted on ``data``: its systematic
     partners (the mean travel floor bumps' losses shortened) by the filter's least squares with
-    the remaining noise effects, then every remaining noise effect of ``noise`` and the sensor
-    noise by maximum likelihood (module docstring)."""
+    the remaining noise effects, then every remaining noise effect of ``noise`` — and the wheel
+    noise (:data:`odomgym.diagnose.rounds.NUISANCE`) where it is not the effect judged — and
+    the sensor noise by maximum likelihood (module docstring). Wheel noise stands beside every
+    judged effect as it stood beside every candidate of the rounds: floor bumps must beat the
+    best wheel noise by their tails, not a model with no process noise at all."""
     effect = EFFECTS[name]
     spec = effect.write(model.spec, effect.absent_values())
     rest: list[Effect] = [EFFECTS[n] for n in noise if n != name]
+    if name != NUISANCE and NUISANCE not in noise and NUISANCE in EFFECTS:
+        rest.append(EFFECTS[NUISANCE])
     sensor = model.sensor
     moving = [EFFECTS[p] for p in effect.partners if type(effect).replay is not Effect.replay]
     if moving:
@@ -169,12 +176,15 @@ def model_without(data: Dataset, model: Model, name: str, noise: Sequence[str]) 
 def _paired(
     with_scores: FloatArray, without_scores: FloatArray, labels: Sequence[str]
 ) -> tuple[float, float, str, int]:
-    """Mean and standard error of the per-unit score differences: units are sessions where
-    there are two or more, else runs."""
+    """Mean and standard error of the per-unit score differences [nats per run]: units are
+    sessions (each its mean over its runs) where there are two or more, else runs."""
     sessions = list(dict.fromkeys(labels))
     diff = with_scores - without_scores
     if len(sessions) >= 2:
-        per = np.array([sum(diff[j] for j, s in enumerate(labels) if s == u) for u in sessions])
+        # A session's mean per run, so that a session of many runs does not weigh as many.
+        per = np.array(
+            [float(np.mean([diff[j] for j, s in enumerate(labels) if s == u])) for u in sessions]
+        )
         units = "sessions"
     else:
         per, units = diff, "runs"
@@ -196,8 +206,12 @@ def judge_spread(
     reference = score_runs(held, without_model, interval)
     mean, se, units, count = _paired(scored.loglik, reference.loglik, sessions_of(held))
     better = math.isfinite(se) and mean > se
-    samples = int(scored.levels.size)
-    coverage = {f"{round(100 * q)}": float(np.mean(scored.levels <= q)) for q, _, _ in REGIONS}
+    levels = scored.levels[np.isfinite(scored.levels)]
+    samples = int(levels.size)
+    coverage = {
+        f"{round(100 * q)}": float(np.mean(levels <= q)) if samples else math.nan
+        for q, _, _ in REGIONS
+    }
     enough = samples >= MIN_SAMPLES
     inside = [low <= coverage[f"{round(100 * q)}"] <= high for q, low, high in REGIONS]
     calibrated = enough and all(inside)

@@ -55,7 +55,7 @@ from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.rounds import DISCOVERED, ROUND_GOES_ON, DiagnosisState, _consistency
 from odomgym.diagnose.spread import SpreadCheck
 from odomgym.diagnose.stats import bootstrap_ci, combine_bonferroni, reducible_fraction, rms
-from odomgym.diagnose.steps import SystematicModel, TermRefusal
+from odomgym.diagnose.steps import NoiseNamed, SystematicModel, TermRefusal
 from odomgym.effects import EFFECTS, TERMS
 from odomgym.effects.discovered import operating_phrase, term_by_name
 from odomgym.odometry.runs import Run
@@ -106,7 +106,7 @@ def _gaps(
 def _final_test(
     held_data: Dataset, model: Model, found_anything: bool, last: str, alpha: float, seed: int
 ) -> tuple[str, dict[str, Any]]:
-    """The verdict on the held-out runs (step 9 of docs/diagnose.md) and the ``final_test``
+    """The verdict on the held-out runs (step 15 of docs/diagnose.md) and the ``final_test``
     record: the grammar's score test and the whiteness test under the final ``model``,
     Bonferroni-combined. ``last``: the verdict of the last round."""
     held_structure = structure_test(
@@ -134,7 +134,7 @@ def _final_test(
 def _shrink(
     held_runs: Sequence[Run], robot: RobotSpec, model: Model, cfg: DiagnoseConfig
 ) -> dict[str, Any]:
-    """The gap report (:mod:`odomgym.diagnose.workflow`, step 15) as
+    """The gap report (:mod:`odomgym.diagnose.workflow`, step 16) as
     :class:`~odomgym.diagnose.results.Diagnosis` fields: the held-out runs under the model as
     given and the final one, with bootstrap intervals over runs."""
     # The model as given keeps its own noise effects; both are filtered with the sensor noise
@@ -255,16 +255,21 @@ def _largest_stderr(entry: dict[str, float]) -> float:
     return max(finite) if finite else math.nan
 
 
+_SINUSOID_BOUND = math.sqrt(-2.0 * math.log(1.0 - math.erf(2.0 / math.sqrt(2.0))))
+"""√χ²₂ at the one-coefficient rule's level (P(|z| < 2) = 95.45 %): 2.49 standard errors."""
+
+
 def real_size(
     chosen: SystematicFit, terms: Sequence[str], passes: Sequence[Discovery]
 ) -> list[TermRefusal]:
     """Step 10: the kept ``terms`` that are not a real size. A term stays only if its final
     coefficient is at least two of its largest standard errors (:func:`_largest_stderr`:
     session-clustered where there are sessions) from zero and has the sign the discovery
-    proposed; a sinusoid (sine and cosine together) by its amplitude, its phase within 90° of
-    the proposed one. A term that fails only moved the fit within its noise — or moved it the
-    other way than the data it was discovered on said (on real logs a crab angle was kept at
-    +16.7° ± 19.2° per m²/s² after the discovery proposed −13.3°)."""
+    proposed; a sinusoid (sine and cosine together) by its amplitude, at least 2.49 of them
+    (the same level for two degrees of freedom), its phase within 90° of the proposed one. A
+    term that fails only moved the fit within its noise — or moved it the other way than the
+    data it was discovered on said (on real logs a crab angle was kept at +16.7° ± 19.2° per
+    m²/s² after the discovery proposed −13.3°)."""
     proposed: dict[str, float] = {}
     for found in passes:
         for entry in found.entries():
@@ -282,11 +287,17 @@ def real_size(
             size, given_size = float(value[0]), float(given[0])
         agrees = float(value @ given) > 0.0
         unit = term_by_name(parts[0]).unit
+        # A sinusoid's amplitude √(a² + b²) is ≥ 2σ by chance more often than one
+        # coefficient (a Rayleigh variable: e^(−2) = 13.5 % against 4.6 %): it must pass the
+        # two-degree-of-freedom χ² at the same 95.4 %, √χ²₂(0.9545) = 2.49 standard errors.
+        bound = 2.0 if len(parts) == 1 else _SINUSOID_BOUND
         reasons = []
         if not math.isfinite(se):
             reasons.append("it has no finite standard error")
-        elif not abs(size) >= 2.0 * se:
-            reasons.append(f"within two standard errors of zero ({size:+.3g} ± {se:.2g} {unit})")
+        elif not abs(size) >= bound * se:
+            reasons.append(
+                f"within {bound:.3g} standard errors of zero ({size:+.3g} ± {se:.2g} {unit})"
+            )
         if not agrees:
             reasons.append(
                 f"the opposite {'phase' if len(parts) > 1 else 'sign'} to the one the "
@@ -355,7 +366,7 @@ def _geometry_moves(
             with_noise = float(getattr(spec, label.lower()))
             without = float(check.without[key])
             se = float(entries.get(key, {}).get("stderr", math.nan))
-            out[label] = {
+            out[f"{label} ({check.effect})" if len(spread) > 1 else label] = {
                 "without_noise_effects": without,
                 "with_noise_effects": with_noise,
                 "change": with_noise - without,
@@ -396,6 +407,7 @@ def _confirmations(
 def verdict_of(
     held_runs: Sequence[Run],
     found: SystematicModel,
+    noise: NoiseNamed,
     final: Model,
     held: HeldOut,
     spread: Sequence[SpreadCheck],
@@ -406,15 +418,15 @@ def verdict_of(
     """Step 15: the verdict and the ``final_test`` record. Each finding is judged by the
     yardstick of its kind (:func:`_confirmations`); the held-out runs' score and whiteness
     tests (:func:`_final_test`) say whether structure is left. ``unconfirmed``: nothing kept
-    is confirmed, or the rounds proposed effects or terms and the gate kept none (the model
-    stays as given — never ``explained`` on a proposal the open-loop check refused); ``partly
-    confirmed``: some findings confirmed, others not (the report says which); ``confounded``:
+    is confirmed, or the rounds proposed effects, terms or noise effects and the later checks
+    kept none (the model stays as given — never ``explained`` or ``none`` on a proposal a check
+    refused); ``partly confirmed``: some findings confirmed, others not (the report says
+    which); ``confounded``:
     everything confirmed and no structure left, but the fitted values moved along a confound
     (:mod:`odomgym.diagnose.confounds`) — the logs read equally as a measurement error, and
     the report names both readings and what would separate them."""
     gate = found.gate
-    noise = [check.effect for check in spread]
-    found_anything = bool(gate.effects) or bool(gate.terms) or bool(noise)
+    found_anything = bool(gate.effects) or bool(gate.terms) or bool(spread)
     last = state.rounds[-1].verdict if state.rounds else "none"
     if found.resolved:
         last = "explained"  # the open-loop gate told the tied effects apart
@@ -426,7 +438,7 @@ def verdict_of(
         verdict = "unconfirmed"
     elif found_anything and len(confirmed) < len(confirmations):
         verdict = "partly confirmed"
-    elif not found_anything and gate.steps:
+    elif not found_anything and (gate.steps or found.refused or noise.refused or noise.vanished):
         verdict = "unconfirmed"
     if verdict == "explained" and any(c.moved for c in confounds):
         verdict = "confounded"

@@ -316,11 +316,11 @@ def _diagnose(
     sizes = keep.term_sizes(rec, state)  # 7
     found = keep.systematic(rec, robot, state, backward, noise, sizes, cfg, report)  # 8–10
     final, noise = keep.noise_refit(found, state, noise)  # 11
-    held = confirm.held_out(split, rec, robot, found, as_given, baseline, cfg, report)  # 12
+    held = confirm.held_out(split, rec, robot, found, final, as_given, baseline, cfg, report)  # 12
     spread = confirm.spread(split, held, final, noise, found, cfg, report)  # 13
     confounds = confirm.confounds(rec, robot, found, noise, final, report)  # 14
     verdict, final_test = verdict_of(  # 15
-        split.held, found, final, held, spread, confounds, state, cfg
+        split.held, found, noise, final, held, spread, confounds, state, cfg
     )
     report("shrink", 1.0)
     gaps = _shrink(held.corrected(split.held), robot, final, cfg)  # 16
