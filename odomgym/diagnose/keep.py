@@ -231,31 +231,29 @@ def _estimate(
 def noise_refit(
     found: SystematicModel, state: DiagnosisState, noise: NoiseNamed
 ) -> tuple[Model, NoiseNamed]:
-    """Step 11: the final model — the chosen systematic values and the kept noise effects. The
-    noise effects that only widen the spread (wheel noise) and the sensor noise are refitted by
-    maximum likelihood on the fit runs under it (the rounds fitted them beside a systematic
-    model the gate may since have changed), with their standard errors there. A noise effect
-    with a mean part (floor bumps) keeps the values the gate's robot carried: refitted, its
-    mean would move away from the one every open-loop fit was made with, and the held-out
-    figures would describe another model than the one saved. A pure noise effect the refit
-    takes to the floor of its range (the fit's "absent": a tenth of its parameters' scale) was
-    carried by the rest of the model and leaves it."""
+    """Step 11: the final model — the chosen systematic values and the kept noise effects,
+    whose parameters and the sensor noise are refitted by maximum likelihood on the fit runs
+    under it (the rounds fitted them beside a systematic model the gate may since have
+    changed), with their standard errors there. A noise effect the refit takes to the floor of
+    its range (the fit's "absent": a tenth of its parameters' scale) was carried by the rest of
+    the model and leaves it. The held-out figures (step 12) are this model's: a refit of floor
+    bumps moves their mean part a little from the one the gate's fits carried, and what is
+    saved is what is judged."""
     spec = found.chosen.spec
     for name in noise.kept:
         spec = EFFECTS[name].write(spec, noise.values[name])
     data = Dataset.of(found.corrected, found.interval)
-    widening = [n for n in noise.kept if type(EFFECTS[n]).replay is Effect.replay]
+    kept = list(noise.kept)
     sensor = state.model.sensor
     while True:
-        effects = [EFFECTS[n] for n in widening]
+        effects = [EFFECTS[n] for n in kept]
         refit, sensor, _ = fit_noise(data, spec, sensor, *effects, warm=bool(effects))
-        vanished = [n for n in widening if _at_floor(EFFECTS[n], EFFECTS[n].read(refit))]
+        vanished = [n for n in kept if _at_floor(EFFECTS[n], EFFECTS[n].read(refit))]
         if not vanished:
             break
         for name in vanished:
             spec = EFFECTS[name].write(spec, EFFECTS[name].absent_values())
-            widening.remove(name)
-    kept = [n for n in noise.kept if n in widening or type(EFFECTS[n]).replay is not Effect.replay]
+            kept.remove(name)
     errors = noise_stderr(data, refit, sensor, [EFFECTS[n] for n in kept])
     return Model(refit, sensor), dataclasses.replace(
         noise, kept=kept, vanished=[n for n in noise.kept if n not in kept], errors=errors
