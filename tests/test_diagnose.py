@@ -46,10 +46,13 @@ def _independent(effects: dict[str, dict[str, float]], seed: int) -> list:  # ty
 @pytest.mark.parametrize(
     ("name", "values", "verdict"),
     [
-        # A toe and an offset of the tracked point are exactly a frame yaw and a tracked point
-        # of the ground truth (which one session does not fit): the verdict names both
-        # readings ("confounded") where the fit moved along them, else "explained".
-        ("wheel_toe", {"angle": 0.005}, "explained"),
+        # A toe and an offset of the tracked point are a frame yaw and a tracked point of the
+        # ground truth (which one session does not fit): the verdict names both readings
+        # ("confounded") where the fit moved along them. For the toe the direction's relative
+        # singular value is 9.9e-4 on these logs (not exactly zero: the open-loop replay starts
+        # from the measured heading of the first second, which a frame yaw also turns), inside
+        # the 1e-3 rule, and the fit moved 18 standard errors along it.
+        ("wheel_toe", {"angle": 0.005}, "confounded"),
         # 15 mrad of wheel slack: once the clock was fitted beside the geometry alone, the
         # slack's lag at every start was taken for a clock offset, and the backlash fitted on
         # the re-timed logs predicted the held-out runs no better than the model as given
@@ -70,6 +73,8 @@ def test_independent_generator_effect_is_named_and_fitted(
         assert moved and all(
             any(part["name"].startswith(name) for part in c["components"]) for c in moved
         )
+        if name == "wheel_toe":
+            assert any(part["name"] == "frame_yaw" for c in moved for part in c["components"])
     assert result.held_out is not None
     assert result.held_out.better_than_as_given == (verdict != "unconfirmed")
     assert result.named_effects[0] == name
