@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -100,6 +101,20 @@ def _nuisances_are_reported_per_session_never_as_robot_effects(june: Diagnosis) 
     assert not math.isnan(june.gap_after)
 
 
+def _the_report_tells_one_story(june: Diagnosis) -> None:
+    """No effect is both kept and refused or absorbed in the report's decisions (issue 42: a
+    report that ticked an effect its model refused)."""
+    from odomgym.diagnose.report import format_markdown
+
+    text = format_markdown(june, "june")
+    decisions = text.split("## What was kept, and why")[1].split("## ")[0]
+    kept = set(re.findall(r"^- kept \*\*(\w+)\*\*", decisions, flags=re.M))
+    refused = set(re.findall(r"^- refused \*\*(\w+)\*\*", decisions, flags=re.M))
+    absorbed = re.findall(r"^- absorbed by the backward check [^:]*: (.*)$", decisions, flags=re.M)
+    out = {n.strip() for line in absorbed for n in line.split(",")}
+    assert kept and not kept & refused and not kept & out, (kept, refused, out)
+
+
 @pytest.mark.slow
 @pytest.mark.longest
 def test_the_june_sessions_diagnosed_together(tmp_path_factory: pytest.TempPathFactory) -> None:
@@ -110,3 +125,4 @@ def test_the_june_sessions_diagnosed_together(tmp_path_factory: pytest.TempPathF
     _every_kept_effect_and_term_passed_the_open_loop_check(june)
     _the_mean_wheel_diameter_comes_out_below_nominal(june)
     _nuisances_are_reported_per_session_never_as_robot_effects(june)
+    _the_report_tells_one_story(june)

@@ -19,7 +19,7 @@ import numpy as np
 
 from odomgym.diagnose.gate import GateStep
 from odomgym.diagnose.plots import plot_all
-from odomgym.diagnose.results import GAP_METRIC, Diagnosis
+from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
 
 __all__ = ["format_markdown", "write_outputs"]
@@ -182,10 +182,21 @@ def _decision_lines(d: Diagnosis) -> list[str]:
             f"- dropped **{name}** (noise effect): refitted on the final model it went to "
             "the floor of its range — the rest of the model carries it"
         )
-    if final.get("absorbed"):
+    absorbed = final.get("absorbed", [])
+    # The open-loop check judges every effect a round found significant, absorbed ones too: one
+    # the backward check removed may still be kept by it (and is then listed as kept above).
+    out = [n for n in absorbed if n not in d.named_effects]
+    back = [n for n in absorbed if n in d.named_effects]
+    if out:
         lines.append(
             "- absorbed by the backward check (named on the way, not needed by the final "
-            f"likelihood): {', '.join(final['absorbed'])}"
+            f"likelihood): {', '.join(out)}"
+        )
+    if back:
+        lines.append(
+            f"- {', '.join(back)}: not needed by the final likelihood (backward check), but "
+            "kept by the open-loop check above, which judges every effect a round found "
+            "significant"
         )
     if final.get("unsupported"):
         lines.append(
@@ -381,9 +392,23 @@ def _proposal_lines(d: Diagnosis) -> list[str]:
             if st
             else ""
         )
-        lines.append(f"- round {r.number}: {r.verdict} {r.winner or ''}{extra}")
+        lines.append(f"- round {r.number}: {_round_words(r)}{extra}")
     lines.append("")
     return lines
+
+
+def _round_words(r: Round) -> str:
+    """A round's outcome as a proposal, never in the words of a final verdict (a round that
+    "explained" an effect the checks later refused would contradict the report's decisions)."""
+    if r.verdict == "explained":
+        return f"proposed **{r.winner}**"
+    if r.verdict == "discovered":
+        return "proposed discovered terms (the error grammar)"
+    if r.verdict == "ambiguous":
+        return f"a tie between {', '.join(r.tied)}, not resolved by these data"
+    if r.verdict == "none":
+        return "nothing further to propose"
+    return "structure left that no candidate explains"
 
 
 def _diagnostic_lines(d: Diagnosis) -> list[str]:
