@@ -57,20 +57,12 @@ from typing import Any
 
 import numpy as np
 
+from odomgym.effects import catalogue
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-EFFECT_NAMES = (
-    "wheel_diameter_ratio",
-    "wheelbase",
-    "distance_scale",
-    "wheel_toe",
-    "turn_skid",
-    "backlash",
-    "gt_sensor_offset",
-    "floor_roughness",
-    "floor_bumps",
-)
-"""The catalogue's effects (``docs/effects.md``), in its order."""
+EFFECT_NAMES = tuple(catalogue())
+"""The whole catalogue (``docs/effects.md``), in its order: an effect it gains joins the matrix."""
 
 SIZES = {"small": (5.0, 5.0), "large": (10.0, 20.0)}
 """Each size's range of multiples of the detection limit: small at 5 ×, the bound issue 42
