@@ -209,4 +209,7 @@ def test_the_native_vector_env_batches_skid_steer_robots() -> None:
     for _ in range(10):
         _, reward, _, _, info = envs.step(np.full((3, 2), 0.5, dtype=np.float32))
     assert np.all(np.isfinite(reward))
+    # Three identical robots on identical commands: identical forward progress.
+    assert np.all(info["true_pose"][:, 0] > 0.01)
+    np.testing.assert_array_equal(info["true_pose"][0], info["true_pose"][2])
     envs.close()

@@ -64,6 +64,7 @@ from odomgym._kernels import (
     step_plain,
 )
 from odomgym.effects import EFFECTS, WorldHook
+from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.robot import RobotSpec
 from odomgym.sim.cables import CableGrid, apply_cable_deficits
@@ -708,9 +709,11 @@ class World:
         """Cables and friction patches act on a side's one ground body, at the side's mid-point;
         under a skid-steer robot's two wheels per side that would be wrong, so it is refused."""
         if any(spec.is_skid_steer for spec in self.robots) and (floor.bumps or floor.patches):
-            raise ValueError(
-                "cables and friction patches under skid-steer robots are not modelled (each "
-                "side's two wheels share one contact velocity); use a plain or rough floor"
+            raise SpecError(
+                f"floor {floor.name!r} has cables or friction patches, which are not modelled "
+                "under skid-steer robots yet (each side's two wheels share one contact "
+                "velocity); use a floor without them (smooth, slippery, rough, concrete)",
+                field="floor",
             )
 
     def lay_floor(self, floor: FloorSpec) -> None:
