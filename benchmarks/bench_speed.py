@@ -18,7 +18,11 @@ Figures (the project's targets in brackets):
    with ``World.step`` and ``env.step`` of that env (``gymnasium.make``, pre-sampled actions),
    medians of the per-step times [``env.step`` ≤ 10×, ``World.step`` ≤ 4× the limit];
 6. the same for the native vector env at 16, 256 and 1024 robots, per robot-step [≤ 1.5× the
-   limit at 256], beside its World alone.
+   limit at 256], beside its World alone;
+7. a skid-steer robot-step (the ``scout2`` preset: four friction-limited contacts) against a
+   differential-drive one of the same size and mass (``scout2`` on one axle), through
+   ``gymnasium.make`` and in the native vector env at ``--robots``, timed interleaved
+   [≤ 3×].
 
 No pymunk robot steps faster than Chipmunk's step of its space, so 5 and 6 measure what odomgym
 adds around it. Every figure of one run comes from one process on one machine; ratios are
@@ -30,6 +34,7 @@ Compilation of the numba kernels happens once, before timing; its cost is printe
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -279,6 +284,54 @@ def vector_env_limit(num_envs: int, seconds: float) -> dict[str, float]:
     }
 
 
+def skid_steer_cost(num_envs: int, seconds: float) -> dict[str, float]:
+    """Seconds per robot-step of ``UMBmarkSquare-v0`` with the ``scout2`` preset and with the
+    same robot on one axle (differential drive, casters under the rest), single env and native
+    vector env, and their ratios; blocks interleaved so both see the same load."""
+    skid = odomgym.PRESETS["scout2"]
+    diff = dataclasses.replace(skid, axle_spacing=0.0, drive_load_fraction=0.9, name="scout2-diff")
+    rng = np.random.default_rng(0)
+    blocks: dict[str, Callable[[], int]] = {}
+    closers = []
+    for label, robot in (("skid", skid), ("diff", diff)):
+        single = gym.make("UMBmarkSquare-v0", robot=robot, side=1.0)
+        single.reset(seed=0)
+        vector = gym.make_vec("UMBmarkSquare-v0", num_envs=num_envs, robot=robot, side=1.0)
+        vector.reset(seed=0)
+        one = [rng.uniform(-1, 1, size=2).astype(np.float32) for _ in range(500)]
+        many = [rng.uniform(-1, 1, size=(num_envs, 2)).astype(np.float32) for _ in range(20)]
+
+        def single_block(env: Any = single, actions: list[Any] = one) -> int:
+            for action in actions:
+                _, _, terminated, truncated, _ = env.step(action)
+                if terminated or truncated:
+                    env.reset()
+            return len(actions)
+
+        def vector_block(env: Any = vector, actions: list[Any] = many) -> int:
+            for action in actions:
+                env.step(action)
+            return len(actions) * num_envs
+
+        blocks[f"{label}_single"] = single_block
+        blocks[f"{label}_vector"] = vector_block
+        closers += [single, vector]
+    for run in blocks.values():
+        run()
+    median = _interleaved_medians(blocks, seconds)
+    for env in closers:
+        env.close()
+    return {
+        "robots": num_envs,
+        "single_skid_us": 1e6 * median["skid_single"],
+        "single_diff_us": 1e6 * median["diff_single"],
+        "single_ratio": median["skid_single"] / median["diff_single"],
+        "vector_skid_us_per_robot_step": 1e6 * median["skid_vector"],
+        "vector_diff_us_per_robot_step": 1e6 * median["diff_vector"],
+        "vector_ratio": median["skid_vector"] / median["diff_vector"],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true")
@@ -295,6 +348,7 @@ def main() -> None:
     clapper = clapper_run()
     single = single_env_limit(args.seconds)
     vector = {n: vector_env_limit(n, args.seconds) for n in args.limit_robots}
+    skid = skid_steer_cost(args.robots, args.seconds)
     result = {
         "machine": {"cpu_count": os.cpu_count(), "python": platform.python_version()},
         "umbmark_run": run,
@@ -312,6 +366,7 @@ def main() -> None:
         "clapper_straight": clapper,
         "limit_single_env": single,
         "limit_vector_env": {str(n): row for n, row in vector.items()},
+        "skid_steer_cost": skid,
     }
     rows: list[tuple[str, str, str, bool | None]] = [
         (
@@ -390,6 +445,22 @@ def main() -> None:
                 None,
             ),
         ]
+    rows += [
+        (
+            "skid-steer robot-step (scout2) vs differential, env.step",
+            f"{skid['single_skid_us']:.1f} vs {skid['single_diff_us']:.1f} us "
+            f"-> {skid['single_ratio']:.2f}x",
+            "<= 3x",
+            skid["single_ratio"] <= 3.0,
+        ),
+        (
+            f"  the same in the native vector env, {args.robots} robots",
+            f"{1e3 * skid['vector_skid_us_per_robot_step']:.0f} vs "
+            f"{1e3 * skid['vector_diff_us_per_robot_step']:.0f} ns -> {skid['vector_ratio']:.2f}x",
+            "<= 3x",
+            skid["vector_ratio"] <= 3.0,
+        ),
+    ]
     result["rows"] = [
         {"figure": figure, "measured": measured, "target": target, "met": met}
         for figure, measured, target, met in rows

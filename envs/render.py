@@ -58,6 +58,7 @@ ESTIMATE = (44, 160, 44)
 LINK = (60, 60, 60)
 LINK_AT_STOP = (214, 39, 40)
 BUMP = (90, 60, 40)
+WHEEL = (40, 40, 40)
 PATCH = (200, 225, 240)
 TEXT = (40, 40, 40)
 HEADER = (255, 255, 255)
@@ -179,6 +180,25 @@ class _Canvas:
         nose = (x + c * 0.5 * length, y + s * 0.5 * length)
         pygame.draw.line(self.surface, (0, 0, 0), to_px(x, y), to_px(*nose), 2)
 
+    def wheels(self, to_px: ToPixel, pose: Sequence[float], robot: RobotSpec) -> None:
+        """The robot's wheels at its contacts (two, or four for a skid-steer robot): filled
+        rectangles one wheel diameter long and a quarter of it wide, at ``pose``."""
+        x, y, theta = float(pose[0]), float(pose[1]), float(pose[2])
+        c, s = math.cos(theta), math.sin(theta)
+        half_l = 0.5 * float(robot.wheel_diameter)
+        half_w = 0.125 * float(robot.wheel_diameter)
+        for _, cx, cy in robot.contacts():
+            corners = [
+                to_px(x + c * (cx + ax) - s * (cy + ay), y + s * (cx + ax) + c * (cy + ay))
+                for ax, ay in (
+                    (half_l, half_w),
+                    (half_l, -half_w),
+                    (-half_l, -half_w),
+                    (-half_l, half_w),
+                )
+            ]
+            pygame.draw.polygon(self.surface, WHEEL, corners, 0)
+
     def path(self, to_px: ToPixel, xy: NDArray[np.float64], colour: Any, line: int) -> None:
         """A polyline through the points ``xy`` (K, 2) [m] (nothing for fewer than two)."""
         if len(xy) > 1:
@@ -282,6 +302,7 @@ class TopDownRenderer:
         length, width = self.robot.chassis_length, self.robot.chassis_width
         canvas.body(px, last[3:6], length, width, ODOM_PATH, 1)
         canvas.body(px, last[0:3], length, width, TRUE_PATH, 3)
+        canvas.wheels(px, last[0:3], self.robot)
         entries = [
             (TRUE_PATH, "true path (simulation)"),
             (ODOM_PATH, "odometry path"),

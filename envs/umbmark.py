@@ -102,6 +102,9 @@ class UMBmarkSquareEnv(RouteEnv):
     ## Version History
 
     * v0: initial version.
+    * v0, compatible addition (issue 43): ``robot`` may be a skid-steer robot (the presets
+      ``"scout2"``, ``"husky"``, ``"pioneer3at"`` or a spec with ``axle_spacing > 0``), on floors
+      without cables or friction patches; the rendering draws the robot's wheels (two, or four).
     """
 
     def __init__(

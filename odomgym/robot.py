@@ -65,6 +65,9 @@ ROBOT_RANGES: dict[str, tuple[float, float]] = {
     "drive_load_fraction": (1e-3, 1.0),  # [-]
     "max_wheel_speed": (1e-3, 10.0),  # [m/s]
     "max_wheel_accel": (1e-3, 100.0),  # [m/s²]
+    "axle_spacing": (0.0, 5.0),  # [m]; 0: one axle (differential drive)
+    "com_x": (-5.0, 5.0),  # [m]; the load rule below decides what a robot can carry
+    "com_y": (-5.0, 5.0),  # [m]
 }
 """Allowed range [low, high] of each robot key (docs/specs.md, "allowed")."""
 
@@ -75,7 +78,17 @@ whose odometry is off by more is not miscalibrated but misdescribed."""
 
 @dataclass(frozen=True, init=False)
 class RobotSpec:
-    """A differential-drive robot: nominal (believed) and true (hidden) parameters.
+    """A differential-drive or skid-steer robot: nominal (believed) and true (hidden) parameters.
+
+    **Which spacing is which.** ``wheelbase`` is the *side-to-side* spacing b of the left and
+    right wheels' contact points (Borenstein & Feng's b, whose error is E_b; on a car it would
+    be called the track). ``axle_spacing`` is the *front-to-back* spacing a of a skid-steer
+    robot's front and rear axles (on a car: the wheelbase). A differential-drive robot has one
+    axle: ``axle_spacing = 0``. A skid-steer robot (``axle_spacing > 0``) has two wheels per
+    side at (±a/2, ±b/2) from the centre of its four contacts, each side's two wheels driven
+    together (one rate, one encoder per side), no casters; it cannot turn without its wheels
+    sliding sideways, and its apparent track emerges from the friction of its four contacts
+    (:mod:`odomgym.sim.world`).
 
     Only ``wheel_diameter``, ``wheelbase`` and ``ticks_per_rev`` are required. The true
     parameters and the chassis are optional *arguments* (``float | None``): ``None`` means
@@ -96,7 +109,13 @@ class RobotSpec:
         chassis_width: chassis width [m] (default 1.3 b_n).
         drive_load_fraction: share of the weight carried by the two drive wheels [-]; the rest
             rests on ideal (frictionless) casters. Sets each wheel's normal force and so its
-            friction limit μ·N.
+            friction limit μ·N. Default 0.9; a skid-steer robot has no casters: 1.
+        axle_spacing: front-to-back spacing a of a skid-steer robot's axles [m] (default 0: a
+            differential-drive robot, one axle).
+        com_x, com_y: a skid-steer robot's centre of mass ahead of and to the left of the centre
+            of its four contacts [m] (default 0). It sets how the weight is shared over the four
+            contacts (:meth:`contact_loads`) and is the point whose pose the World reports for
+            a skid-steer robot (the body frame of Kozłowski & Pazderski 2004).
         max_wheel_speed: largest wheel rim speed the motor controller will command [m/s].
         max_wheel_accel: acceleration limit of each wheel's velocity controller [m/s²]. A hard
             controller (large value) asks for more force than friction gives, so wheels slip.
@@ -121,6 +140,9 @@ class RobotSpec:
     drive_load_fraction: float
     max_wheel_speed: float
     max_wheel_accel: float
+    axle_spacing: float
+    com_x: float
+    com_y: float
     name: str
     source: str
     effects: EffectTable
@@ -136,9 +158,12 @@ class RobotSpec:
         mass: float | None = None,
         chassis_length: float | None = None,
         chassis_width: float | None = None,
-        drive_load_fraction: float = 0.9,
+        drive_load_fraction: float | None = None,
         max_wheel_speed: float = 0.5,
         max_wheel_accel: float = 0.5,
+        axle_spacing: float = 0.0,
+        com_x: float = 0.0,
+        com_y: float = 0.0,
         name: str = "robot",
         source: str = "",
         effects: EffectTable | Mapping[str, Mapping[str, float]] = (),
@@ -151,6 +176,9 @@ class RobotSpec:
         low, high = ROBOT_RANGES["wheelbase"]
         sensible = isinstance(wheelbase, int | float) and low <= wheelbase <= high
         chassis = 1.3 * wheelbase if sensible else math.nan
+        skid = isinstance(axle_spacing, int | float) and axle_spacing > 0.0
+        # A skid-steer body spans its axles too (a non-number spacing is named by validate()).
+        length = max(chassis, 1.2 * axle_spacing) if skid else chassis
         values: dict[str, object] = {
             "wheel_diameter": wheel_diameter,
             "wheelbase": wheelbase,
@@ -160,11 +188,14 @@ class RobotSpec:
             "true_wheelbase": _given(true_wheelbase, wheelbase),
             # ~ 60 kg/m² of footprint: a light indoor robot when nothing better is known.
             "mass": _given(mass, 60.0 * chassis**2),
-            "chassis_length": _given(chassis_length, chassis),
+            "chassis_length": _given(chassis_length, length),
             "chassis_width": _given(chassis_width, chassis),
-            "drive_load_fraction": drive_load_fraction,
+            "drive_load_fraction": _given(drive_load_fraction, 1.0 if skid else 0.9),
             "max_wheel_speed": max_wheel_speed,
             "max_wheel_accel": max_wheel_accel,
+            "axle_spacing": axle_spacing,
+            "com_x": com_x,
+            "com_y": com_y,
             "name": name,
             "source": source,
             "effects": _normalise_effects(effects),
@@ -198,6 +229,102 @@ class RobotSpec:
                 field="chassis_width",
                 source=source,
             )
+        if self.is_skid_steer:
+            self._validate_skid(source)
+        else:
+            for key in ("com_x", "com_y"):
+                if getattr(self, key) != 0.0:
+                    raise SpecError(
+                        f"{key} applies to skid-steer robots (axle_spacing > 0); a "
+                        "differential-drive robot's centre of mass is at its axle midpoint",
+                        field=key,
+                        source=source,
+                    )
+
+    def _validate_skid(self, source: str | None) -> None:
+        """A skid-steer body holds its wheels, has no casters, and loads every wheel."""
+        if self.true_wheelbase > self.chassis_width:
+            raise SpecError(
+                f"the track (true_wheelbase {self.true_wheelbase} m) is wider than the body "
+                f"(chassis_width {self.chassis_width} m): give the body's full width, wheels "
+                "included",
+                field="wheelbase",
+                source=source,
+            )
+        if self.axle_spacing > self.chassis_length:
+            raise SpecError(
+                f"axle_spacing {self.axle_spacing} m is longer than the body (chassis_length "
+                f"{self.chassis_length} m)",
+                field="axle_spacing",
+                source=source,
+            )
+        if self.drive_load_fraction != 1.0:
+            raise SpecError(
+                "a skid-steer robot has no casters: all its weight rests on its four driven "
+                f"wheels (drive_load_fraction 1), got {self.drive_load_fraction}",
+                field="drive_load_fraction",
+                source=source,
+            )
+        x = abs(self.com_x) / self.axle_spacing
+        y = abs(self.com_y) / self.true_wheelbase
+        if x + y >= 0.5:
+            key = "com_x" if x >= y else "com_y"
+            raise SpecError(
+                f"a wheel without load: with the centre of mass at ({self.com_x}, {self.com_y}) "
+                "m the weight-sharing rule (equal springs, see contact_loads) leaves a wheel "
+                f"with none; |com_x|/a + |com_y|/b must stay below 1/2, got {x + y:.3g}",
+                field=key,
+                source=source,
+            )
+
+    # ------------------------------------------------------------------ drive geometry
+    @property
+    def is_skid_steer(self) -> bool:
+        """True for a four-wheel skid-steer robot (``axle_spacing > 0``)."""
+        return float(self.axle_spacing) > 0.0
+
+    @property
+    def drive(self) -> str:
+        """``"skid-steer"`` or ``"differential"``."""
+        return "skid-steer" if self.is_skid_steer else "differential"
+
+    def contacts(self) -> list[tuple[int, float, float]]:
+        """Each wheel contact as (side, x, y) [m] in the frame of the point whose pose the World
+        reports: side 0 left, 1 right.
+
+        Differential drive: two contacts at (0, ±b/2) from the axle midpoint. Skid-steer: four,
+        at (±a/2 − com_x, ±b/2 − com_y) from the centre of mass (front first)."""
+        half = 0.5 * float(self.true_wheelbase)
+        if not self.is_skid_steer:
+            return [(0, 0.0, half), (1, 0.0, -half)]
+        ahead = 0.5 * float(self.axle_spacing)
+        return [
+            (side, x - self.com_x, y - self.com_y)
+            for side, y in ((0, half), (1, -half))
+            for x in (ahead, -ahead)
+        ]
+
+    def contact_loads(self, gravity: float = 9.81) -> list[float]:
+        """Normal force on each contact of :meth:`contacts`, in its order [N].
+
+        Differential drive: ``drive_load_fraction`` of the weight shared equally by the two
+        drive wheels (the rest on frictionless casters). Skid-steer: four contacts under a rigid
+        body carry the weight in a statically indeterminate way; the rule here is equal,
+        linear vertical compliance at each wheel (a suspension of four equal springs, the
+        chassis rigid), under which the loads are the plane N_i = W·(1/4 + x_c·x_i/a² +
+        y_c·y_i/b²) for wheels at (x_i, y_i) = (±a/2, ±b/2) and the centre of mass at (x_c, y_c):
+        the least-energy distribution that balances the weight and its two moments. Static:
+        the load transfer of acceleration and of a turn's centripetal force is not modelled."""
+        weight = float(self.mass) * gravity
+        if not self.is_skid_steer:
+            share = 0.5 * weight * float(self.drive_load_fraction)
+            return [share, share]
+        a, b = float(self.axle_spacing), float(self.true_wheelbase)
+        return [
+            weight
+            * (0.25 + self.com_x * (x + self.com_x) / a**2 + self.com_y * (y + self.com_y) / b**2)
+            for _, x, y in self.contacts()
+        ]
 
     # ------------------------------------------------------------------ systematic errors
     @property
@@ -299,6 +426,9 @@ class RobotSpec:
         none)."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         out.pop("effects")
+        if not self.is_skid_steer:  # one axle: the skid-steer fields would only be zeros
+            for key in ("axle_spacing", "com_x", "com_y"):
+                out.pop(key)
         if self.effects:
             out["effects"] = self.effect_dict()
         return out
@@ -479,5 +609,67 @@ PRESETS: dict[str, RobotSpec] = {
         max_wheel_speed=0.4,
         max_wheel_accel=0.5,
         source="optiodom-diff README and published_results.csv (optiodom, 230620202042)",
+    ),
+    # Skid-steer robots (axle_spacing > 0): four wheels, two per side, no casters. Nominal equals
+    # true (no published calibration); what their odometry gets wrong is the apparent track,
+    # which emerges from the four contacts' friction in the World (docs/skid-steer.md).
+    "scout2": RobotSpec(
+        name="scout2",
+        # AgileX Scout 2.0. Wheel radius 0.165 m: westonrobot/scout_ros
+        # scout_base/include/scout_base/scout_params.hpp @117f8de (the URDF has 0.16459)
+        wheel_diameter=0.330,
+        # "Right and left wheels separation 583 mm", "Front and rear wheels separation 498 mm",
+        # 930 × 699 mm, 62 kg, ≤ 1.5 m/s: AgileX's specification table (distributor copy,
+        # brightenlee/roas_docs _source/scout.rst @3b96c23); track 0.58306 and wheelbase 0.498
+        # in scout_params.hpp and agilexrobotics/scout_ros scout_description/urdf/scout_v2.xacro
+        wheelbase=0.583,
+        axle_spacing=0.498,
+        ticks_per_rev=4096.0,  # assumed: the driver reports wheel speeds, not a count per rev
+        mass=62.0,
+        chassis_length=0.930,
+        chassis_width=0.699,
+        max_wheel_speed=1.5,
+        max_wheel_accel=1.0,  # assumed controller limit
+        source="AgileX Scout 2.0 specification (roas_docs scout.rst), scout_params.hpp, "
+        "scout_v2.xacro; encoder resolution and acceleration limit assumed",
+    ),
+    "husky": RobotSpec(
+        name="husky",
+        # Clearpath Husky A200. Wheel radius 0.1651 m (13-in tyres): husky/husky
+        # husky_description/urdf/husky_macro.urdf.xacro @da175a7
+        wheel_diameter=0.3302,
+        # Track 555 mm ("the effective track of the vehicle", Husky A200 User Manual 2011, p. 9;
+        # the URDF's 0.5708 would not fit the 670 mm width with 114 mm tyres), wheelbase 512 mm,
+        # 990 × 670 mm, 50 kg, 1.0 m/s: Clearpath's specification (roas_docs husky.rst @ee8192f)
+        wheelbase=0.555,
+        axle_spacing=0.512,
+        # 78 000 counts per metre (roas_docs husky.rst) × π × 0.3302 m per revolution
+        ticks_per_rev=78_000.0 * math.pi * 0.3302,
+        mass=50.0,
+        chassis_length=0.990,
+        chassis_width=0.670,
+        max_wheel_speed=1.0,
+        max_wheel_accel=1.0,  # assumed controller limit
+        source="Clearpath Husky A200 specification (roas_docs husky.rst) and User Manual "
+        "(2011) p. 9; husky_macro.urdf.xacro; acceleration limit assumed",
+    ),
+    "pioneer3at": RobotSpec(
+        name="pioneer3at",
+        # Adept MobileRobots Pioneer 3-AT. Wheel diameter 0.215 m, wheel centres at y = ±0.197
+        # and axles at x = +0.135, −0.134: MobileRobots/amr-ros-config
+        # description/urdf/pioneer3at.urdf.xacro @12dc9bc (Wang et al. 2015, Table 2: r =
+        # 0.11 m, B = 0.40 m)
+        wheel_diameter=0.215,
+        wheelbase=0.394,
+        axle_spacing=0.269,
+        ticks_per_rev=2000.0,  # assumed: a 500-line quadrature encoder behind the gearbox
+        # 12 kg, 508 × 497 mm, 0.7 m/s: cyberbotics/webots docs/guide/pioneer-3at.md @0247976
+        mass=12.0,
+        chassis_length=0.508,
+        chassis_width=0.497,
+        max_wheel_speed=0.7,
+        max_wheel_accel=1.0,  # assumed controller limit
+        source="amr-ros-config pioneer3at.urdf.xacro (geometry), Webots Pioneer 3-AT guide "
+        "(mass, size, speed), Wang et al. 2015; encoder and acceleration limit assumed",
     ),
 }

@@ -362,6 +362,8 @@ def _one_key(marker: str, key: str, type_cell: str) -> tuple[Callable[[str], Any
     if marker == "floor" and key == "roughness":
         value = "0.002"  # the rough preset (at most MAX_ROUGHNESS = 0.1)
     line = f"{key} = {value}\n"
+    if marker == "robot" and key in ("com_x", "com_y"):  # a skid-steer robot's, loading each wheel
+        line = f"axle_spacing = 0.3\n{key} = 0.05\n"
     if marker == "robot":
         return load_robot, MINIMAL_ROBOT + ("" if key in REQUIRED_ROBOT else line)
     if marker == "floor":

@@ -64,6 +64,7 @@ from odomgym._kernels import (
     step_plain,
 )
 from odomgym.effects import EFFECTS, WorldHook
+from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.robot import RobotSpec
 from odomgym.sim.cables import CableGrid, apply_cable_deficits
@@ -179,9 +180,11 @@ class World:
             np.array([s.max_wheel_accel for s in specs]) / self.nominal_radius * self.dt / substeps
         )
         self._lateral = np.stack([self.half_track, -self.half_track], axis=1)  # (N, 2) [m]
-        self.normal_force = np.array(
-            [0.5 * s.mass * GRAVITY * s.drive_load_fraction for s in specs]
-        )
+        # Each robot's wheel contacts: (side, x, y) in its body frame and the normal force on
+        # each [N] (two for differential drive, four for skid-steer; RobotSpec.contacts).
+        self._contacts = [spec.contacts() for spec in specs]
+        self._loads = [spec.contact_loads(GRAVITY) for spec in specs]
+        self._check_skid_floor(self.floor)
         self._h = self.dt / self.substeps
         self._unit_scale = np.ones(self.n)
         self.track_slip = track_slip
@@ -332,19 +335,31 @@ class World:
         self._chassis: list[pymunk.Body] = []
         self._ground: list[pymunk.Body] = []  # [2i] left, [2i+1] right
         self._joints: list[pymunk.PivotJoint] = []
-        for spec, half in zip(self.robots, self.half_track, strict=True):
+        # Joints per robot and side ([i][side] -> that side's joints, front first).
+        self._side_joints: list[list[list[pymunk.PivotJoint]]] = []
+        for spec, contacts in zip(self.robots, self._contacts, strict=True):
             chassis = pymunk.Body(spec.mass, spec.moment_of_inertia)
             space.add(chassis)
             self._chassis.append(chassis)
-            for side in (+1.0, -1.0):  # left wheel at +y (body frame), right at −y
+            sides: list[list[pymunk.PivotJoint]] = [[], []]
+            for side in (0, 1):  # the left side at +y (body frame), the right at −y
+                # One kinematic ground body per side: every wheel of a side turns at the
+                # side's rate, so each of its contacts would move at the same no-slip velocity
+                # (the rim speed along the heading). A velocity-only pivot joint ignores where
+                # its anchor sits on a kinematic body, so one ground body serves both wheels.
                 ground = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
                 space.add(ground)
-                joint = pymunk.PivotJoint(chassis, ground, (0.0, side * half), (0.0, 0.0))
-                joint.max_bias = 0.0  # velocity-level only: friction, not a spring
-                joint.collide_bodies = False
-                space.add(joint)
+                for wheel_side, x, y in contacts:
+                    if wheel_side != side:
+                        continue
+                    joint = pymunk.PivotJoint(chassis, ground, (x, y), (0.0, 0.0))
+                    joint.max_bias = 0.0  # velocity-level only: friction, not a spring
+                    joint.collide_bodies = False
+                    space.add(joint)
+                    self._joints.append(joint)
+                    sides[side].append(joint)
                 self._ground.append(ground)
-                self._joints.append(joint)
+            self._side_joints.append(sides)
         self._links: list[pymunk.SlideJoint] = []
         for i, j, lo, hi in self.links:
             link = pymunk.SlideJoint(self._chassis[i], self._chassis[j], (0, 0), (0, 0), lo, hi)
@@ -676,10 +691,30 @@ class World:
             self._noise_next = 0
 
     def _set_friction(self, mu: FloatArray) -> None:
+        """Each contact's friction limit μ·N [N] from the friction coefficient under each side
+        (N, 2): the pivot joint's largest force, isotropic (a friction circle, along and across
+        the wheel alike)."""
         changed = np.argwhere(mu != self._friction)
         for i, side in changed:
-            self._joints[2 * i + side].max_force = float(mu[i, side] * self.normal_force[i])
+            loads = [
+                n
+                for (s, _, _), n in zip(self._contacts[i], self._loads[i], strict=True)
+                if s == side
+            ]
+            for joint, load in zip(self._side_joints[i][side], loads, strict=True):
+                joint.max_force = float(mu[i, side] * load)
         self._friction = mu
+
+    def _check_skid_floor(self, floor: FloorSpec) -> None:
+        """Cables and friction patches act on a side's one ground body, at the side's mid-point;
+        under a skid-steer robot's two wheels per side that would be wrong, so it is refused."""
+        if any(spec.is_skid_steer for spec in self.robots) and (floor.bumps or floor.patches):
+            raise SpecError(
+                f"floor {floor.name!r} has cables or friction patches, which are not modelled "
+                "under skid-steer robots yet (each side's two wheels share one contact "
+                "velocity); use a floor without them (smooth, slippery, rough, concrete)",
+                field="floor",
+            )
 
     def lay_floor(self, floor: FloorSpec) -> None:
         """Change the cables, patches and friction under the robots between steps, as an
@@ -689,6 +724,7 @@ class World:
             raise ValueError(
                 f"lay_floor keeps the roughness ({self.floor.roughness}), got {floor.roughness}"
             )
+        self._check_skid_floor(floor)
         self.floor = floor
         self._has_bumps = bool(floor.bumps)
         max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
