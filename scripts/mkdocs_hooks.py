@@ -61,8 +61,8 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
     ),
     "sim": (
         "Simulation",
-        "The batched pymunk World, cables, routes, the reference driver and the Trial that "
-        "steps them with the odometry.",
+        "The batched pymunk World, cables, routes, the reference driver, the Trial that "
+        "steps them with the odometry, and steady turns (a skid-steer robot's apparent track).",
         (
             "odomgym.sim",
             "odomgym.sim.world",
@@ -73,6 +73,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.sim.trial",
             "odomgym.sim.route_runs",
             "odomgym.sim.arc_runs",
+            "odomgym.sim.turns",
         ),
     ),
     "lab": (
