@@ -131,6 +131,7 @@ from odomgym.lab.population import (
 )
 from odomgym.lab.simulated import experiment_route
 from odomgym.odometry.runs import to_frame
+from odomgym.robot import PRESETS
 from odomgym.selfcal.episodes import Episode, new_episode, step_episodes
 from odomgym.selfcal.estimators import check_observe
 from odomgym.selfcal.menu import ACTION_MENU
@@ -232,6 +233,12 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             raise SpecError(f"shaping must be finite and >= 0, got {shaping}", field="shaping")
         self.shaping = float(shaping)
         self.population = population or Population()
+        if PRESETS[self.population.base].is_skid_steer:
+            raise SpecError(
+                f"population.base {self.population.base!r} is a skid-steer robot; "
+                "SelfCalibration-v1 does not take skid-steer robots yet (docs/skid-steer.md)",
+                field="population",
+            )
         self.sensor = sensor or SensorAccuracy()
         self.action_space = gym.spaces.Discrete(len(ACTION_MENU))
         bound = OBSERVATION_BOUND

@@ -1,9 +1,10 @@
 """Skid-steer robots in the pymunk World: four friction-limited contacts, two per side.
 
-The apparent track is never written anywhere: it follows from the four contacts' Coulomb
-friction (each contact a velocity-level pivot joint capped at μ·N, isotropic), the load each
-carries and the chassis' dynamics. Checked against an analytic prediction and against how the
-papers say it moves (Mandow et al. 2007; Wang et al. 2015).
+The apparent track is never written anywhere: it follows from the four contacts' friction
+(each contact a velocity-level pivot joint capped at μ·N, isotropic), the load each carries and
+the chassis' dynamics. Checked against a closed form and against rigid Coulomb contacts solved
+directly (:func:`odomgym.sim.turns.coulomb_steady_turn`); where the World departs from them (a
+saturated joint's force is not opposite the slip) the tests say so as strict expected failures.
 
 **The analytic prediction.** In a slow spin (no centripetal force) with the load shared equally,
 every contact slides and, by symmetry, at the same slip speed |s|; Coulomb friction then gives
@@ -25,7 +26,7 @@ import pytest
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS, FloorSpec
 from odomgym.robot import PRESETS, RobotSpec, load_robot
-from odomgym.sim.turns import steady_turn
+from odomgym.sim.turns import coulomb_steady_turn, steady_turn
 from odomgym.sim.world import GRAVITY, World
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
@@ -127,21 +128,51 @@ def test_a_slow_spin_has_the_analytic_apparent_track(name: str) -> None:
     assert factor == pytest.approx(1.0 + (robot.axle_spacing / robot.true_wheelbase) ** 2, rel=2e-3)
 
 
-def test_the_apparent_track_moves_with_turn_radius_and_speed() -> None:
-    """Slow turns of every radius share the spin's factor (Coulomb friction has no speed
-    scale). Faster, a tight turn's centripetal force comes from the same friction: on a floor
-    of μ = 0.5 at 0.7 m/s, a 0.5-m turn's factor is more than 15 % (the issue's bound) below the
-    spin's and a 5-m turn's (no wheel asked beyond its top speed in any of them)."""
+def test_slow_turns_match_rigid_coulomb_contacts() -> None:
+    """At 0.2 m/s the World's steady turns of every radius have the factor of rigid Coulomb
+    contacts solved directly (``coulomb_steady_turn``: each contact's force μ·N opposite its
+    slip), the spin's: Coulomb friction has no speed scale, and a slow turn needs next to no
+    centripetal force."""
     robot = PRESETS["scout2"]
-    floor = FloorSpec(friction=0.5)
-    spin = steady_turn(robot, 0.7, 0.0, floor)
-    slow = steady_turn(robot, 0.2, 2.0)
-    wide = steady_turn(robot, 0.7, 5.0, floor)
-    tight = steady_turn(robot, 0.7, 0.4, floor)
-    assert slow.factor == pytest.approx(spin.factor, rel=2e-3)
-    assert 0.45 < tight.radius < 0.55 and wide.radius > 5.0
-    assert tight.factor < 0.85 * spin.factor and tight.factor < 0.85 * wide.factor
-    assert wide.factor <= spin.factor * (1 + 2e-3)
+    for radius in (0.5, 1.0, 2.0, 5.0):
+        world = steady_turn(robot, 0.2, radius)
+        reference = coulomb_steady_turn(robot, 0.2, radius, 0.8)
+        assert world.factor == pytest.approx(reference.factor, rel=2e-3), radius
+        assert world.radius == pytest.approx(reference.radius, rel=5e-3), radius
+        assert reference.factor == pytest.approx(
+            1.0 + (robot.axle_spacing / robot.true_wheelbase) ** 2, rel=1e-3
+        )
+
+
+def test_the_coulomb_reference_balances_forces_and_loses_track_in_fast_turns() -> None:
+    """The reference itself: the spin's closed form, and in a fast tight turn on μ = 0.5 the
+    centripetal force taken from the same friction lowers the factor — by 5 %, short of the
+    15 % the issue asks the physics to show (docs/skid-steer.md)."""
+    robot = PRESETS["scout2"]
+    spin = coulomb_steady_turn(robot, 0.7, 0.0, 0.5)
+    tight = coulomb_steady_turn(robot, 0.7, 0.4, 0.5)
+    assert spin.factor == pytest.approx(1.0 + (robot.axle_spacing / robot.true_wheelbase) ** 2)
+    assert 0.6 < tight.radius < 0.7
+    assert 0.93 * spin.factor < tight.factor < 0.97 * spin.factor
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known defect (docs/skid-steer.md): a saturated pivot joint's force points along "
+    "the chassis' effective-mass-weighted velocity error, not against the contact's slip, so "
+    "with forward speed or an off-centre load the World's contacts are not Coulomb's",
+)
+@pytest.mark.parametrize(
+    ("speed", "radius", "friction", "com_x"),
+    [(0.7, 0.4, 0.5, 0.0), (1.0, 1.0, 0.8, 0.0), (0.2, 0.0, 0.8, 0.02)],
+)
+def test_fast_turns_and_offset_loads_match_rigid_coulomb_contacts(
+    speed: float, radius: float, friction: float, com_x: float
+) -> None:
+    robot = RobotSpec(**{**PRESETS["scout2"].to_dict(), "com_x": com_x})
+    world = steady_turn(robot, speed, radius, FloorSpec(friction=friction))
+    reference = coulomb_steady_turn(robot, speed, radius, friction)
+    assert world.factor == pytest.approx(reference.factor, rel=0.01)
 
 
 def test_a_turn_beyond_the_wheels_top_speed_is_refused() -> None:
@@ -149,19 +180,33 @@ def test_a_turn_beyond_the_wheels_top_speed_is_refused() -> None:
         steady_turn(PRESETS["scout2"], 1.0, 0.5)
 
 
-def test_the_apparent_track_moves_with_friction_and_load_position() -> None:
-    """Less friction leaves less for the centripetal force of a fast turn (a smaller factor);
-    weight moved forward lets the loaded front wheels grip while the rear ones scrub, so the
-    robot turns about its front axle and the factor falls towards 1."""
-    robot = PRESETS["scout2"]
-    grip, _ = apparent_track_factor(robot, 1.0, 1.0, FloorSpec(friction=0.8))
-    slick, _ = apparent_track_factor(robot, 1.0, 1.0, FloorSpec(friction=0.5))
-    assert slick < grip
-    centred, _ = apparent_track_factor(robot, 0.2, 1.0)
-    forward, _ = apparent_track_factor(
-        RobotSpec(**{**PRESETS["scout2"].to_dict(), "com_x": 0.02}), 0.2, 1.0
-    )
-    assert 1.0 < forward < centred - 0.1
+def test_a_reset_skid_steer_robot_starts_as_in_a_fresh_world() -> None:
+    """The contacts' warm-start impulses do not survive a reset (the vector env's autoreset)."""
+    command = np.array([[-4.0, 5.0]])
+    world = World(PRESETS["scout2"])
+    for _ in range(50):
+        world.step(command)
+    world.reset(indices=np.array([0]))
+    fresh = World(PRESETS["scout2"])
+    for _ in range(50):
+        world.step(0.5 * command)
+        fresh.step(0.5 * command)
+    np.testing.assert_array_equal(world.pose, fresh.pose)
+
+
+def test_effects_slip_tracking_and_clapper_trucks_are_refused_for_skid_steer() -> None:
+    scout = PRESETS["scout2"]
+    with pytest.raises(SpecError) as caught:
+        World(scout.apply_effect("backlash", {"angle": 0.01}))
+    assert caught.value.field == "effects"
+    with pytest.raises(SpecError) as caught:
+        World(scout, track_slip=True)
+    assert caught.value.field == "track_slip"
+    from odomgym.vehicle.spec import VehicleSpec
+
+    with pytest.raises(SpecError) as caught:
+        VehicleSpec(scout, scout)
+    assert caught.value.field == "truck_a"
 
 
 def test_cables_under_a_skid_steer_robot_are_refused_in_one_line() -> None:

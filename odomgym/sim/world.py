@@ -19,7 +19,12 @@ Model, per robot (top-down, no gravity in the plane):
   wheel rolled without slipping. ``max_bias = 0`` makes the joint act on velocities only, and
   ``max_force = μ·N`` caps the force it may apply at Coulomb friction, isotropically (a friction
   circle). When a manoeuvre asks for more force than μ·N — hard acceleration, a fast turn, low
-  μ — the joint saturates and the wheel slips: slip *emerges*, nothing scripts it.
+  μ — the joint saturates and the wheel slips: slip *emerges*, nothing scripts it. A saturated
+  joint's force points along the velocity error weighted by the chassis' effective mass at the
+  contact, not exactly against the slip: Coulomb's size, the solver's direction. A skid-steer
+  robot (four contacts, :class:`~odomgym.robot.RobotSpec` ``axle_spacing > 0``, two joints on
+  each side's ground body) slides on every contact whenever it turns, which makes that
+  direction matter outside slow turns (docs/skid-steer.md, "What is not right yet").
 * **Wheel drive** — each wheel's angular rate follows its command through a velocity controller
   with an acceleration limit (a stiff motor: the rate does not depend on the ground force).
   The rim travels ``ω·r_true`` per second; the encoder counts the true wheel rotation,
@@ -90,10 +95,11 @@ class World:
             sessions ship with the package (:mod:`odomgym.data.samples`; the CLAPPER sampled at
             40 ms, Borenstein 1995, §3.1).
         substeps: physics steps per control period (each of ``dt/substeps`` seconds).
-        iterations: Chipmunk solver iterations per step. The two wheel joints of a chassis are
-            coupled; with Chipmunk's warm start (last step's impulses applied first) they
-            converge within a few iterations. Default 10: against 20, the return errors of
-            4×4 m UMBmark squares (ideal robot; LabMate on the ``bumpy`` floor; LabMate at
+        iterations: Chipmunk solver iterations per step. The wheel joints of a chassis (two, or
+            four for a skid-steer robot) are coupled; with Chipmunk's warm start (last step's
+            impulses applied first) they converge within a few iterations. Default 10: against
+            20, the return errors of 4×4 m UMBmark squares (ideal robot; LabMate on the
+            ``bumpy`` floor; LabMate at
             μ = 0.1, slipping by metres) differ by at most 0.01 mm and 0.0002°, far below one
             encoder count; 8 gives 0.05 mm, 6 gives 0.5 mm. The solver is most of a step's cost
             (256 robots: 230 µs at 20, 133 µs at 10), hence the choice.
@@ -185,6 +191,21 @@ class World:
         self._contacts = [spec.contacts() for spec in specs]
         self._loads = [spec.contact_loads(GRAVITY) for spec in specs]
         self._check_skid_floor(self.floor)
+        for spec in specs:
+            if spec.is_skid_steer and spec.effects:
+                raise SpecError(
+                    f"robot {spec.name!r} is skid-steer and carries effects "
+                    f"({', '.join(name for name, _ in spec.effects)}); the catalogue's effects "
+                    "are written for differential drive (two contacts at the axle) and are not "
+                    "applied to skid-steer robots yet",
+                    field="effects",
+                )
+        if track_slip and any(spec.is_skid_steer for spec in specs):
+            raise SpecError(
+                "track_slip measures two contacts at the axle midpoint's sides; a skid-steer "
+                "robot's four contacts are not tracked yet",
+                field="track_slip",
+            )
         self._h = self.dt / self.substeps
         self._unit_scale = np.ones(self.n)
         self.track_slip = track_slip
@@ -352,9 +373,7 @@ class World:
                 for wheel_side, x, y in contacts:
                     if wheel_side != side:
                         continue
-                    joint = pymunk.PivotJoint(chassis, ground, (x, y), (0.0, 0.0))
-                    joint.max_bias = 0.0  # velocity-level only: friction, not a spring
-                    joint.collide_bodies = False
+                    joint = _contact_joint(chassis, ground, x, y)
                     space.add(joint)
                     self._joints.append(joint)
                     sides[side].append(joint)
@@ -435,8 +454,40 @@ class World:
         self.wheel_angle[indices] = 0.0
         self.counts[indices] = 0
         self.slip[indices] = 0.0
+        if any(self.robots[i].is_skid_steer for i in indices):
+            self._fresh_contacts(indices)
         for hook in getattr(self, "_hooks", ()):
             hook.reset(indices)
+
+    def _fresh_contacts(self, indices: NDArray[np.intp]) -> None:
+        """New contact joints for the skid-steer robots among ``indices``, so that a reset robot
+        starts as in a fresh World: a joint keeps the impulse it last applied (Chipmunk's warm
+        start), and four saturated contacts carry impulses that would steer the first steps
+        after a reset (a 0.5-mm difference after 50 steps, where a differential-drive robot's
+        two joints leave 3·10⁻⁸ rad; those are left as they are, bit for bit). Every constraint
+        leaves the space and returns in build order, so the solver visits them as before."""
+        if not hasattr(self, "_side_joints"):
+            return  # during construction: the joints are new anyway
+        constraints = list(self.space.constraints)
+        for constraint in constraints:
+            self.space.remove(constraint)
+        renew = {int(i) for i in indices if self.robots[int(i)].is_skid_steer}
+        joints: list[pymunk.PivotJoint] = []
+        for i, sides in enumerate(self._side_joints):
+            for side, side_joints in enumerate(sides):
+                if i in renew:
+                    fresh = []
+                    for old in side_joints:
+                        joint = _contact_joint(
+                            self._chassis[i], self._ground[2 * i + side], *old.anchor_a
+                        )
+                        joint.max_force = old.max_force
+                        fresh.append(joint)
+                    sides[side] = fresh
+                joints += sides[side]
+        self._joints = joints
+        for constraint in (*joints, *self._links, *self._hitches):
+            self.space.add(constraint)
 
     # ------------------------------------------------------------------ stepping
     def step(self, wheel_rate_cmd: FloatArray, scale: FloatArray | None = None) -> None:
@@ -742,6 +793,17 @@ class World:
         """Force each hitch passed in the last step [N] (the towing force)."""
         h = self.dt / self.substeps
         return np.array([abs(hitch.impulse) / h for hitch in self._hitches])
+
+
+def _contact_joint(
+    chassis: pymunk.Body, ground: pymunk.Body, x: float, y: float
+) -> pymunk.PivotJoint:
+    """A wheel contact: a velocity-level pivot joint between the chassis at (x, y) [m] (body
+    frame) and the side's kinematic ground body; the World sets its largest force, μ·N."""
+    joint = pymunk.PivotJoint(chassis, ground, (x, y), (0.0, 0.0))
+    joint.max_bias = 0.0  # velocity-level only: friction, not a spring
+    joint.collide_bodies = False
+    return joint
 
 
 @kernel

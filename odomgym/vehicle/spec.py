@@ -124,6 +124,12 @@ class VehicleSpec:
                     f"{type(truck).__name__}{shown}",
                     field=key,
                 )
+            if truck.is_skid_steer:
+                raise SpecError(
+                    f"{key} is a skid-steer robot ({truck.name}); the CLAPPER's trucks are "
+                    "differential-drive (Borenstein 1995), and IPEC's model has no apparent track",
+                    field=key,
+                )
         for key in ("link_length", "link_min", "link_max", "sample_period", "linear_resolution"):
             require_positive(key, getattr(self, key))
         # Ranges a real vehicle lies in; beyond them a value is a typo (degrees for radians,
