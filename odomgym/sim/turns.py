@@ -67,11 +67,7 @@ def steady_turn(
         raise ValueError(f"radius must be >= 0 m (0: a spin), got {radius!r}")
     world = World(robot, floor if floor is not None else FLOORS["smooth"], dt=dt)
     b = float(robot.true_wheelbase)
-    if radius == 0.0:
-        left, right = -speed, speed
-    else:
-        omega = speed / radius
-        left, right = speed - 0.5 * omega * b, speed + 0.5 * omega * b
+    left, right = _rims(robot, speed, radius)
     if max(abs(left), abs(right)) > robot.max_wheel_speed:
         raise ValueError(
             f"a turn of radius {radius} m at {speed} m/s asks a wheel for "
