@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from PIL import Image
 
 import odomgym  # noqa: F401  (registers the envs)
+from odomgym.odometry.calibration import Calibration
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "assets" / "gifs"
 FRAMES = 60
@@ -60,20 +61,30 @@ def _learned(env: gym.Env[Any, Any]) -> Policy:
     return lambda obs, _info: policy(obs)
 
 
-# env id -> (make() arguments, reset options, policy, frame duration [ms])
+# recording -> (make() arguments, reset options, policy, frame duration [ms]); a recording is an
+# env id, or an env id and a label after "+" (the GIF is then ``<env id>-<label>.gif``)
 RECORDINGS: dict[str, tuple[dict[str, Any], dict[str, Any], Callable[..., Policy], int]] = {
     "UMBmarkSquare-v0": ({"floor": "bumpy"}, {"direction": "cw"}, _route_policy, 120),
     "StraightLine-v0": ({"floor": "bumpy"}, {"return_trip": True}, _route_policy, 120),
     "ClapperStraight-v0": ({}, {}, _full_speed, 120),
     "ClapperRectangle-v0": ({}, {}, _full_speed, 120),
     "SelfCalibration-v1": ({"budget": 16}, {"floor": "rough"}, _learned, 700),
+    # A skid-steer robot whose odometry takes the apparent track the trajectory calibration
+    # fits on it (`odomgym calibrate trajectory --robot scout2 --side 2`: E_b = 1.7344), so
+    # that it drives its square (docs/skid-steer.md); without it the robot turns ~52° a corner.
+    "UMBmarkSquare-v0+scout2": (
+        {"robot": "scout2", "side": 2.0, "calibration": Calibration(wheelbase_scale=1.7344)},
+        {"direction": "cw"},
+        _route_policy,
+        120,
+    ),
 }
 
 
 def _episode(env_id: str) -> tuple[list[NDArray[np.uint8]], int]:
     """Every frame of one seeded episode, and the number of steps it took."""
     kwargs, options, make_policy, _ = RECORDINGS[env_id]
-    env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+    env = gym.make(env_id.split("+")[0], render_mode="rgb_array", **kwargs)
     obs, info = env.reset(seed=SEED, options=options)
     policy = make_policy(env)
     frames: list[NDArray[np.uint8]] = []
@@ -105,7 +116,7 @@ def record(env_id: str) -> tuple[Path, int, int]:
     ]
     durations = [duration] * (len(images) - 1) + [2000]
     OUT.mkdir(parents=True, exist_ok=True)
-    path = OUT / f"{env_id}.gif"
+    path = OUT / f"{env_id.replace('+', '-')}.gif"
     images[0].save(
         path,
         save_all=True,
