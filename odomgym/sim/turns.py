@@ -68,14 +68,18 @@ def steady_turn(
     world = World(robot, floor if floor is not None else FLOORS["smooth"], dt=dt)
     b = float(robot.true_wheelbase)
     left, right = _rims(robot, speed, radius)
-    if max(abs(left), abs(right)) > robot.max_wheel_speed:
+    # Wheel rates from the *true* radii, so that the rims turn at exactly these speeds; the
+    # controller clips a rate at max_wheel_speed over the *nominal* radius.
+    command = np.array(
+        [[2.0 * left / robot.true_left_diameter, 2.0 * right / robot.true_right_diameter]]
+    )
+    top_rate = robot.max_wheel_speed / (0.5 * robot.wheel_diameter)
+    if float(np.max(np.abs(command))) > top_rate:
         raise ValueError(
             f"a turn of radius {radius} m at {speed} m/s asks a wheel for "
             f"{max(abs(left), abs(right)):.3g} m/s, more than the robot's max_wheel_speed "
             f"{robot.max_wheel_speed} m/s (the controller would clip it and drive another turn)"
         )
-    r = 0.5 * float(robot.wheel_diameter)
-    command = np.array([[left / r, right / r]])
     steps = round(seconds / dt)
     yaw, travel = [], []
     for step in range(steps):
