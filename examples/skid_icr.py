@@ -5,8 +5,7 @@
 Left: the ``scout2`` preset on the ``smooth`` floor (μ = 0.8) at four speeds, each point a
 steady turn in the World (:func:`odomgym.sim.turns.steady_turn`, dots) beside rigid Coulomb
 contacts solved directly (:func:`odomgym.sim.turns.coulomb_steady_turn`, dashed), the factor
-against the radius driven. Where they part (fast tight turns) the World is wrong: its contacts'
-force is not opposite their slip (docs/skid-steer.md, "What is not right yet").
+against the radius driven (they coincide: the World's skid-steer contacts are Coulomb's).
 Right: the ``pioneer3at``
 preset at three speeds against Wang et al. 2015's empirical function of the ICR coefficient for
 a Pioneer 3-AT, χ = 1 + 0.4728/(1 + 0.0538·√|λ|) with λ = (v_L + v_R)/(v_R − v_L), drawn

@@ -21,10 +21,12 @@ Model, per robot (top-down, no gravity in the plane):
   circle). When a manoeuvre asks for more force than μ·N — hard acceleration, a fast turn, low
   μ — the joint saturates and the wheel slips: slip *emerges*, nothing scripts it. A saturated
   joint's force points along the velocity error weighted by the chassis' effective mass at the
-  contact, not exactly against the slip: Coulomb's size, the solver's direction. A skid-steer
-  robot (four contacts, :class:`~odomgym.robot.RobotSpec` ``axle_spacing > 0``, two joints on
-  each side's ground body) slides on every contact whenever it turns, which makes that
-  direction matter outside slow turns (docs/skid-steer.md, "What is not right yet").
+  contact, not exactly against the slip: Coulomb's size, the solver's direction.
+* **Skid-steer contacts** — a skid-steer robot (:class:`~odomgym.robot.RobotSpec`
+  ``axle_spacing > 0``: two wheels per side, no casters) slides on all four contacts whenever
+  it turns, where that direction would matter: its contacts are not joints but Coulomb forces
+  opposite each contact's slip, solved implicitly after each Chipmunk step
+  (:func:`skid_contacts`), its loads by :meth:`~odomgym.robot.RobotSpec.contact_loads`.
 * **Wheel drive** — each wheel's angular rate follows its command through a velocity controller
   with an acceleration limit (a stiff motor: the rate does not depend on the ground force).
   The rim travels ``ω·r_true`` per second; the encoder counts the true wheel rotation,
@@ -190,6 +192,20 @@ class World:
         # each [N] (two for differential drive, four for skid-steer; RobotSpec.contacts).
         self._contacts = [spec.contacts() for spec in specs]
         self._loads = [spec.contact_loads(GRAVITY) for spec in specs]
+        # Skid-steer robots: their four contacts are solved here, not by Chipmunk's joints
+        # (skid_contacts): indices, (x, y) of each contact, its side and load, mass, inertia.
+        self._skid = np.array(
+            [i for i, spec in enumerate(specs) if spec.is_skid_steer], dtype=np.intp
+        )
+        self._skid_xy = np.array(
+            [[(x, y) for _, x, y in self._contacts[i]] for i in self._skid], dtype=float
+        ).reshape(len(self._skid), 4, 2)
+        self._skid_side = np.array([0, 0, 1, 1], dtype=np.intp)
+        self._skid_load = np.array([self._loads[i] for i in self._skid], dtype=float).reshape(
+            len(self._skid), 4
+        )
+        self._skid_mass = np.array([specs[i].mass for i in self._skid], dtype=float)
+        self._skid_inertia = np.array([specs[i].moment_of_inertia for i in self._skid], dtype=float)
         self._check_skid_floor(self.floor)
         for spec in specs:
             if spec.is_skid_steer and spec.effects:
@@ -249,8 +265,8 @@ class World:
         else the staged path, stage by stage from Python."""
         self._modifies_ground = self._has_bumps or self._has_patches or self._rough
         hooked = bool(self._transmission or self._shape or self._perturb)
-        self._plain = not (hooked or self._modifies_ground)
-        self._floor_only = not (self._plain or hooked or self._has_patches)
+        self._plain = not (hooked or self._modifies_ground or self._skid.size)
+        self._floor_only = not (self._plain or hooked or self._has_patches or self._skid.size)
 
     def _effect_hooks(self) -> list[WorldHook]:
         """One hook per registered effect that some robot of the batch carries."""
@@ -371,8 +387,8 @@ class World:
                 ground = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
                 space.add(ground)
                 for wheel_side, x, y in contacts:
-                    if wheel_side != side:
-                        continue
+                    if wheel_side != side or spec.is_skid_steer:
+                        continue  # a skid-steer robot's contacts are solved by skid_contacts
                     joint = _contact_joint(chassis, ground, x, y)
                     space.add(joint)
                     self._joints.append(joint)
@@ -454,40 +470,8 @@ class World:
         self.wheel_angle[indices] = 0.0
         self.counts[indices] = 0
         self.slip[indices] = 0.0
-        if any(self.robots[i].is_skid_steer for i in indices):
-            self._fresh_contacts(indices)
         for hook in getattr(self, "_hooks", ()):
             hook.reset(indices)
-
-    def _fresh_contacts(self, indices: NDArray[np.intp]) -> None:
-        """New contact joints for the skid-steer robots among ``indices``, so that a reset robot
-        starts as in a fresh World: a joint keeps the impulse it last applied (Chipmunk's warm
-        start), and four saturated contacts carry impulses that would steer the first steps
-        after a reset (a 0.5-mm difference after 50 steps, where a differential-drive robot's
-        two joints leave 3·10⁻⁸ rad; those are left as they are, bit for bit). Every constraint
-        leaves the space and returns in build order, so the solver visits them as before."""
-        if not hasattr(self, "_side_joints"):
-            return  # during construction: the joints are new anyway
-        constraints = list(self.space.constraints)
-        for constraint in constraints:
-            self.space.remove(constraint)
-        renew = {int(i) for i in indices if self.robots[int(i)].is_skid_steer}
-        joints: list[pymunk.PivotJoint] = []
-        for i, sides in enumerate(self._side_joints):
-            for side, side_joints in enumerate(sides):
-                if i in renew:
-                    fresh = []
-                    for old in side_joints:
-                        joint = _contact_joint(
-                            self._chassis[i], self._ground[2 * i + side], *old.anchor_a
-                        )
-                        joint.max_force = old.max_force
-                        fresh.append(joint)
-                    sides[side] = fresh
-                joints += sides[side]
-        self._joints = joints
-        for constraint in (*joints, *self._links, *self._hitches):
-            self.space.add(constraint)
 
     # ------------------------------------------------------------------ stepping
     def step(self, wheel_rate_cmd: FloatArray, scale: FloatArray | None = None) -> None:
@@ -573,6 +557,8 @@ class World:
                 if not self._plain:
                     self._effect_stages(h)
                 self._exchange(h)
+                if self._skid.size:
+                    self._skid_step(h)
                 if self.track_slip:
                     self._accumulate_slip(h)
         self._clock[0] += self.dt
@@ -676,6 +662,33 @@ class World:
             hook.perturb(self, h)
         midstep_translation(self._ground_v, self.pose, self._params, h)
 
+    def _skid_step(self, h: float) -> None:
+        """The skid-steer robots' contact forces for the step Chipmunk has just taken: their
+        new velocities (:func:`skid_contacts`), set on their chassis for the next position
+        integration, and their reported poses moved to match (raw pose + new v·h, the World's
+        convention, see :meth:`_exchange`)."""
+        old = self.velocity[self._skid].copy()
+        skid_contacts(
+            self._skid,
+            self._skid_xy,
+            self._skid_side,
+            self._skid_load,
+            self._skid_mass,
+            self._skid_inertia,
+            self._friction,
+            self._ground_v,
+            self.pose,
+            self.velocity,
+            self.half_track,
+            h,
+        )
+        for row, i in enumerate(self._skid):
+            v = self.velocity[i]
+            body = self._chassis[i]
+            body.velocity = (float(v[0]), float(v[1]))
+            body.angular_velocity = float(v[2])
+            self.pose[i] += (v - old[row]) * h
+
     def _accumulate_slip(self, h: float) -> None:
         """Contact point velocity v + ω × r = v − ω·l·(cos θ, sin θ) against its ground body's.
 
@@ -752,6 +765,8 @@ class World:
                 for (s, _, _), n in zip(self._contacts[i], self._loads[i], strict=True)
                 if s == side
             ]
+            if self.robots[i].is_skid_steer:
+                continue  # skid_contacts reads μ from self._friction
             for joint, load in zip(self._side_joints[i][side], loads, strict=True):
                 joint.max_force = float(mu[i, side] * load)
         self._friction = mu
@@ -793,6 +808,109 @@ class World:
         """Force each hitch passed in the last step [N] (the towing force)."""
         h = self.dt / self.substeps
         return np.array([abs(hitch.impulse) / h for hitch in self._hitches])
+
+
+SKID_CREEP = 0.005
+"""Slip speed [m/s] below which a skid-steer contact's friction grows in proportion to its slip
+(μ·N·|s|/SKID_CREEP) instead of standing at μ·N: tyre creep, and what keeps the implicit solve
+of :func:`skid_contacts` smooth where a contact barely slides."""
+
+
+@kernel
+def skid_contacts(
+    robots: NDArray[np.intp],
+    contacts: FloatArray,
+    sides: NDArray[np.intp],
+    loads: FloatArray,
+    mass: FloatArray,
+    inertia: FloatArray,
+    friction: FloatArray,
+    ground_v: FloatArray,
+    pose: FloatArray,
+    velocity: FloatArray,
+    half_track: FloatArray,
+    h: float,
+) -> None:
+    """New velocities (in place) of skid-steer robots under Coulomb contacts, implicitly.
+
+    Contact i at body-frame (x_i, y_i) from the centre of mass slides at s_i = v + ω × r_i − g_i
+    against its side's no-slip ground velocity g_i, and is pushed by f_i = −μ·N_i·s_i/max(|s_i|,
+    SKID_CREEP): Coulomb's force, opposite the slip (a pivot joint capped at μ·N would push along
+    its effective-mass-weighted velocity error instead). The coefficient μ·N_i/max(|s_i|, ·) is
+    taken at the step's start and the velocities solved implicitly, M·(q − q₀) = h·Σ A_iᵀ f_i(q)
+    with f_i linear in q — a 3×3 system per robot, stable at any step. ``robots`` (K,) indexes
+    the World's arrays; ``contacts`` (K, 4, 2), ``loads`` (K, 4), ``mass``, ``inertia`` (K,);
+    ``sides`` (4,) each contact's side; ``friction`` (N, 2) μ under each side; ``ground_v``
+    (N, 2, 2) [m/s] the sides' no-slip velocities of the step (their speeds are used);
+    ``pose`` (N, 3) as the World reports it after the step; ``velocity`` (N, 3) [m/s, m/s,
+    rad/s], read and written; ``half_track`` (N,) [m]."""
+    for k in range(robots.shape[0]):
+        i = robots[k]
+        vx, vy, w = velocity[i, 0], velocity[i, 1], velocity[i, 2]
+        # Each side's ground speed along the heading the wheels were driven at (the raw pose
+        # Chipmunk has just reached), with the mid-step turn of midstep_translation undone:
+        # that turn assumes the no-slip yaw rate, which a skid-steer robot does not have.
+        theta_d = pose[i, 2] - w * h
+        hx, hy = math.cos(theta_d), math.sin(theta_d)
+        dvx = ground_v[i, 1, 0] - ground_v[i, 0, 0]
+        dvy = ground_v[i, 1, 1] - ground_v[i, 0, 1]
+        mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])
+        my = 0.5 * (ground_v[i, 0, 1] + ground_v[i, 1, 1])
+        turn = 0.5 * h * (dvx * hx + dvy * hy) / (2.0 * half_track[i])
+        if turn != 0.0:
+            ct, st = math.cos(turn), math.sin(turn)
+            mx, my = ct * mx + st * my, -st * mx + ct * my
+        speed_l = (mx - 0.5 * dvx) * hx + (my - 0.5 * dvy) * hy
+        speed_r = (mx + 0.5 * dvx) * hx + (my + 0.5 * dvy) * hy
+        # Solved in the body frame, whose state carries over exactly from step to step: the
+        # velocity in the frame of the heading it was solved at (the previous one), turned by
+        # the rotating frame's term h·(ω·v, −ω·u) (d(u, v)/dt = f/m + (ω·v, −ω·u)), so that a
+        # steady turn is Coulomb's steady state at any step length; then back to the world at
+        # the heading the chassis has now, for the next position integration.
+        theta_p = theta_d - w * h
+        cp, sp = math.cos(theta_p), math.sin(theta_p)
+        u = cp * vx + sp * vy
+        v = -sp * vx + cp * vy
+        a00 = mass[k]
+        a11 = mass[k]
+        a22 = inertia[k]
+        a01 = a02 = a12 = 0.0
+        b0 = mass[k] * (u + h * w * v)
+        b1 = mass[k] * (v - h * w * u)
+        b2 = inertia[k] * w
+        for j in range(4):
+            rx = contacts[k, j, 0]
+            ry = contacts[k, j, 1]
+            gx = speed_l if sides[j] == 0 else speed_r
+            sx = u - w * ry - gx
+            sy = v + w * rx
+            coef = h * friction[i, sides[j]] * loads[k, j] / max(math.hypot(sx, sy), SKID_CREEP)
+            # A = [[1, 0, -ry], [0, 1, rx]]: add coef·AᵀA to the matrix, coef·Aᵀg to the right
+            # (g = (gx, 0) in the body frame).
+            a00 += coef
+            a11 += coef
+            a02 -= coef * ry
+            a12 += coef * rx
+            a22 += coef * (rx * rx + ry * ry)
+            b0 += coef * gx
+            b2 -= coef * ry * gx
+        # Solve the symmetric 3×3 system (Cramer's rule).
+        det = (
+            a00 * (a11 * a22 - a12 * a12)
+            - a01 * (a01 * a22 - a12 * a02)
+            + a02 * (a01 * a12 - a11 * a02)
+        )
+        bu = (
+            b0 * (a11 * a22 - a12 * a12) - a01 * (b1 * a22 - a12 * b2) + a02 * (b1 * a12 - a11 * b2)
+        ) / det
+        bv = (
+            a00 * (b1 * a22 - a12 * b2) - b0 * (a01 * a22 - a12 * a02) + a02 * (a01 * b2 - b1 * a02)
+        ) / det
+        velocity[i, 0] = hx * bu - hy * bv
+        velocity[i, 1] = hy * bu + hx * bv
+        velocity[i, 2] = (
+            a00 * (a11 * b2 - b1 * a12) - a01 * (a01 * b2 - b1 * a02) + b0 * (a01 * a12 - a11 * a02)
+        ) / det
 
 
 def _contact_joint(
