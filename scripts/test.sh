@@ -16,7 +16,7 @@
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
-#   pytest -n auto -m "not slow"    # about 80 s on 2 idle cores; CI runs the slow ones too
+#   pytest -n auto -m "not slow"    # 111 s on 2 idle cores (2026-11-28); CI runs the slow ones too
 #
 # torch is pinned first because this machine ships a CPU build of 2.13.0 locally; without the
 # pin pip may choose a multi-GB CUDA build to satisfy the `rl` extra's loose range.
