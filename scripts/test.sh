@@ -8,7 +8,7 @@
 # pytest runs the WHOLE suite, tests marked slow included, on parallel workers (pytest-xdist,
 # part of the test extra): -n auto starts one worker per CPU, 2 on the 2-core CI machine, and
 # --dist worksteal lets a worker that runs dry take tests queued for the other (the June
-# diagnosis, 2-3 minutes, starts first: tests/conftest.py orders the longest tests ahead). The
+# diagnosis, the longest, starts first: tests/conftest.py orders the longest tests ahead). The
 # total work bounds the suite, not the order: 9 min 15 s and 11 min 24 s on two workers from a
 # fresh clone on the 2-core machine (2026-11-27; 19-24 min of CPU), against 16 min 41 s when that order
 # was introduced. PYTEST_WORKERS overrides the count (0: serially, in this process, e.g. to read a
