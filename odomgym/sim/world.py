@@ -200,7 +200,9 @@ class World:
         self._skid_xy = np.array(
             [[(x, y) for _, x, y in self._contacts[i]] for i in self._skid], dtype=float
         ).reshape(len(self._skid), 4, 2)
-        self._skid_side = np.array([0, 0, 1, 1], dtype=np.intp)
+        self._skid_side = np.array(
+            [[side for side, _, _ in self._contacts[i]] for i in self._skid], dtype=np.intp
+        ).reshape(len(self._skid), 4)
         self._skid_load = np.array([self._loads[i] for i in self._skid], dtype=float).reshape(
             len(self._skid), 4
         )
@@ -242,8 +244,15 @@ class World:
         # The per-robot state in one array (one argument of a compiled call; pose, velocity,
         # wheel rates and angles are views of it) and the arrays of other shapes, all updated
         # in place from here on.
+        # The params' half track is what the mid-step turn divides by (midstep_translation):
+        # infinite for a skid-steer robot, which turns at no kinematic rate — skid_contacts
+        # takes its heading from the yaw rate it solves — so its contact velocities stay along
+        # the heading they were driven at.
+        turn_half_track = np.where(
+            [spec.is_skid_steer for spec in specs], math.inf, self.half_track
+        )
         self._state = new_state(
-            self.max_rate, self.max_rate_step, self.true_radius, self.ticks_per_rad, self.half_track
+            self.max_rate, self.max_rate_step, self.true_radius, self.ticks_per_rad, turn_half_track
         )
         self._bind_state()
         self.counts = np.zeros((self.n, 2), dtype=np.int64)
@@ -371,30 +380,25 @@ class World:
         self.space = space
         self._chassis: list[pymunk.Body] = []
         self._ground: list[pymunk.Body] = []  # [2i] left, [2i+1] right
-        self._joints: list[pymunk.PivotJoint] = []
-        # Joints per robot and side ([i][side] -> that side's joints, front first).
-        self._side_joints: list[list[list[pymunk.PivotJoint]]] = []
+        # One joint per wheel of a differential-drive robot ([2i] left, [2i+1] right); None for
+        # a skid-steer robot's sides, whose four contacts skid_contacts solves.
+        self._joints: list[pymunk.PivotJoint | None] = []
         for spec, contacts in zip(self.robots, self._contacts, strict=True):
             chassis = pymunk.Body(spec.mass, spec.moment_of_inertia)
             space.add(chassis)
             self._chassis.append(chassis)
-            sides: list[list[pymunk.PivotJoint]] = [[], []]
-            for side in (0, 1):  # the left side at +y (body frame), the right at −y
-                # One kinematic ground body per side: every wheel of a side turns at the
-                # side's rate, so each of its contacts would move at the same no-slip velocity
-                # (the rim speed along the heading). A velocity-only pivot joint ignores where
-                # its anchor sits on a kinematic body, so one ground body serves both wheels.
+            for side in (0, 1):  # the left wheel at +y (body frame), the right at −y
                 ground = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
                 space.add(ground)
-                for wheel_side, x, y in contacts:
-                    if wheel_side != side or spec.is_skid_steer:
-                        continue  # a skid-steer robot's contacts are solved by skid_contacts
-                    joint = _contact_joint(chassis, ground, x, y)
+                joint = None
+                if not spec.is_skid_steer:
+                    _, x, y = contacts[side]
+                    joint = pymunk.PivotJoint(chassis, ground, (x, y), (0.0, 0.0))
+                    joint.max_bias = 0.0  # velocity-level only: friction, not a spring
+                    joint.collide_bodies = False
                     space.add(joint)
-                    self._joints.append(joint)
-                    sides[side].append(joint)
                 self._ground.append(ground)
-            self._side_joints.append(sides)
+                self._joints.append(joint)
         self._links: list[pymunk.SlideJoint] = []
         for i, j, lo, hi in self.links:
             link = pymunk.SlideJoint(self._chassis[i], self._chassis[j], (0, 0), (0, 0), lo, hi)
@@ -679,7 +683,6 @@ class World:
             self._ground_v,
             self.pose,
             self.velocity,
-            self.half_track,
             h,
         )
         for row, i in enumerate(self._skid):
@@ -755,20 +758,14 @@ class World:
             self._noise_next = 0
 
     def _set_friction(self, mu: FloatArray) -> None:
-        """Each contact's friction limit μ·N [N] from the friction coefficient under each side
-        (N, 2): the pivot joint's largest force, isotropic (a friction circle, along and across
-        the wheel alike)."""
+        """Each wheel joint's friction limit μ·N [N] from the friction coefficient under each
+        side (N, 2): the pivot joint's largest force, isotropic (a friction circle). A skid-steer
+        robot has no joints: skid_contacts reads μ from ``_friction``."""
         changed = np.argwhere(mu != self._friction)
         for i, side in changed:
-            loads = [
-                n
-                for (s, _, _), n in zip(self._contacts[i], self._loads[i], strict=True)
-                if s == side
-            ]
-            if self.robots[i].is_skid_steer:
-                continue  # skid_contacts reads μ from self._friction
-            for joint, load in zip(self._side_joints[i][side], loads, strict=True):
-                joint.max_force = float(mu[i, side] * load)
+            joint = self._joints[2 * i + side]
+            if joint is not None:
+                joint.max_force = float(mu[i, side] * self._loads[i][side])
         self._friction = mu
 
     def _check_skid_floor(self, floor: FloorSpec) -> None:
@@ -828,7 +825,6 @@ def skid_contacts(
     ground_v: FloatArray,
     pose: FloatArray,
     velocity: FloatArray,
-    half_track: FloatArray,
     h: float,
 ) -> None:
     """New velocities (in place) of skid-steer robots under Coulomb contacts, implicitly.
@@ -840,28 +836,19 @@ def skid_contacts(
     taken at the step's start and the velocities solved implicitly, M·(q − q₀) = h·Σ A_iᵀ f_i(q)
     with f_i linear in q — a 3×3 system per robot, stable at any step. ``robots`` (K,) indexes
     the World's arrays; ``contacts`` (K, 4, 2), ``loads`` (K, 4), ``mass``, ``inertia`` (K,);
-    ``sides`` (4,) each contact's side; ``friction`` (N, 2) μ under each side; ``ground_v``
+    ``sides`` (K, 4) each contact's side; ``friction`` (N, 2) μ under each side; ``ground_v``
     (N, 2, 2) [m/s] the sides' no-slip velocities of the step (their speeds are used);
     ``pose`` (N, 3) as the World reports it after the step; ``velocity`` (N, 3) [m/s, m/s,
-    rad/s], read and written; ``half_track`` (N,) [m]."""
+    rad/s], read and written."""
     for k in range(robots.shape[0]):
         i = robots[k]
         vx, vy, w = velocity[i, 0], velocity[i, 1], velocity[i, 2]
         # Each side's ground speed along the heading the wheels were driven at (the raw pose
-        # Chipmunk has just reached), with the mid-step turn of midstep_translation undone:
-        # that turn assumes the no-slip yaw rate, which a skid-steer robot does not have.
+        # Chipmunk has just reached; no mid-step turn for these robots, see World.__init__).
         theta_d = pose[i, 2] - w * h
         hx, hy = math.cos(theta_d), math.sin(theta_d)
-        dvx = ground_v[i, 1, 0] - ground_v[i, 0, 0]
-        dvy = ground_v[i, 1, 1] - ground_v[i, 0, 1]
-        mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])
-        my = 0.5 * (ground_v[i, 0, 1] + ground_v[i, 1, 1])
-        turn = 0.5 * h * (dvx * hx + dvy * hy) / (2.0 * half_track[i])
-        if turn != 0.0:
-            ct, st = math.cos(turn), math.sin(turn)
-            mx, my = ct * mx + st * my, -st * mx + ct * my
-        speed_l = (mx - 0.5 * dvx) * hx + (my - 0.5 * dvy) * hy
-        speed_r = (mx + 0.5 * dvx) * hx + (my + 0.5 * dvy) * hy
+        speed_l = ground_v[i, 0, 0] * hx + ground_v[i, 0, 1] * hy
+        speed_r = ground_v[i, 1, 0] * hx + ground_v[i, 1, 1] * hy
         # Solved in the body frame, whose state carries over exactly from step to step: the
         # velocity in the frame of the heading it was solved at (the previous one), turned by
         # the rotating frame's term h·(ω·v, −ω·u) (d(u, v)/dt = f/m + (ω·v, −ω·u)), so that a
@@ -881,10 +868,10 @@ def skid_contacts(
         for j in range(4):
             rx = contacts[k, j, 0]
             ry = contacts[k, j, 1]
-            gx = speed_l if sides[j] == 0 else speed_r
+            gx = speed_l if sides[k, j] == 0 else speed_r
             sx = u - w * ry - gx
             sy = v + w * rx
-            coef = h * friction[i, sides[j]] * loads[k, j] / max(math.hypot(sx, sy), SKID_CREEP)
+            coef = h * friction[i, sides[k, j]] * loads[k, j] / max(math.hypot(sx, sy), SKID_CREEP)
             # A = [[1, 0, -ry], [0, 1, rx]]: add coef·AᵀA to the matrix, coef·Aᵀg to the right
             # (g = (gx, 0) in the body frame).
             a00 += coef
@@ -911,17 +898,6 @@ def skid_contacts(
         velocity[i, 2] = (
             a00 * (a11 * b2 - b1 * a12) - a01 * (a01 * b2 - b1 * a02) + b0 * (a01 * a12 - a11 * a02)
         ) / det
-
-
-def _contact_joint(
-    chassis: pymunk.Body, ground: pymunk.Body, x: float, y: float
-) -> pymunk.PivotJoint:
-    """A wheel contact: a velocity-level pivot joint between the chassis at (x, y) [m] (body
-    frame) and the side's kinematic ground body; the World sets its largest force, μ·N."""
-    joint = pymunk.PivotJoint(chassis, ground, (x, y), (0.0, 0.0))
-    joint.max_bias = 0.0  # velocity-level only: friction, not a spring
-    joint.collide_bodies = False
-    return joint
 
 
 @kernel
