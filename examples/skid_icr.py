@@ -4,7 +4,7 @@
 
 Left: the ``scout2`` preset on the ``smooth`` floor (μ = 0.8) at four speeds, each point a
 steady turn in the World (:func:`odomgym.sim.turns.steady_turn`, dots) beside rigid Coulomb
-contacts solved directly (:func:`odomgym.sim.turns.coulomb_steady_turn`, dashed), the factor
+contacts solved directly (:func:`odomgym.sim.turns.contact_steady_turn`, dashed), the factor
 against the radius driven (they coincide: the World's skid-steer contacts are Coulomb's).
 Right: the ``pioneer3at``
 preset at three speeds against Wang et al. 2015's empirical function of the ICR coefficient for
@@ -26,7 +26,7 @@ import numpy as np
 
 from odomgym.io import atomic_writer
 from odomgym.robot import PRESETS, RobotSpec
-from odomgym.sim.turns import coulomb_steady_turn, steady_turn
+from odomgym.sim.turns import contact_steady_turn, steady_turn
 
 RADII = (0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0)  # commanded [m]
 
@@ -42,7 +42,7 @@ def _panel(ax: object, robot: RobotSpec, speeds: tuple[float, ...]) -> None:
     colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(speeds)))
     for speed, colour in zip(speeds, colours, strict=True):
         world = [steady_turn(robot, speed, r) for r in _radii(robot, speed)]
-        coulomb = [coulomb_steady_turn(robot, speed, r, 0.8) for r in _radii(robot, speed)]
+        coulomb = [contact_steady_turn(robot, speed, r, 0.8) for r in _radii(robot, speed)]
         ax.plot([t.radius for t in world], [t.factor for t in world], "o-", color=colour,
                 label=f"{speed:.1f} m/s, World")  # type: ignore[attr-defined]  # fmt: skip
         ax.plot([t.radius for t in coulomb], [t.factor for t in coulomb], "--", color=colour,

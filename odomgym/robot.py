@@ -68,8 +68,22 @@ ROBOT_RANGES: dict[str, tuple[float, float]] = {
     "axle_spacing": (0.0, 5.0),  # [m]; 0: one axle (differential drive)
     "com_x": (-5.0, 5.0),  # [m]; the load rule below decides what a robot can carry
     "com_y": (-5.0, 5.0),  # [m]
+    "tyre_slip_stiffness": (0.0, 1000.0),  # [-] per unit slip ratio; 0: rigid contacts
+    "tyre_cornering_stiffness": (0.0, 1000.0),  # [1/rad]; 0: rigid contacts
 }
 """Allowed range [low, high] of each robot key (docs/specs.md, "allowed")."""
+
+TYRE_CORNERING_STIFFNESS = 0.12 * 180.0 / math.pi
+"""The skid-steer presets' cornering stiffness per unit load, C_α/N [1/rad]: 0.12 of the load
+per degree of slip angle, the middle of the range Gillespie (1992, pp. 347–355) gives for
+bias-ply tyres (0.08–0.18; radial 0.11–0.19). Measured on car tyres: no figure for these
+robots' tyres is published."""
+
+TYRE_SLIP_STIFFNESS = 20.0
+"""The skid-steer presets' longitudinal slip stiffness per unit load, C_κ/N [-]: **assumed**
+(a tyre reaching μ = 0.8 of its load at 4 % slip). No published figure was found for these
+robots' tyres; docs/skid-steer.md shows how the apparent track's fall with radius depends on
+the ratio C_α/C_κ, the one number that sets it."""
 
 TRUE_TO_NOMINAL: tuple[float, float] = (0.5, 2.0)
 """A true diameter or wheelbase lies within this factor of its nominal value [-]: a robot
@@ -116,6 +130,12 @@ class RobotSpec:
             of its four contacts [m] (default 0). It sets how the weight is shared over the four
             contacts (:meth:`contact_loads`) and is the point whose pose the World reports for
             a skid-steer robot (the body frame of Kozłowski & Pazderski 2004).
+        tyre_slip_stiffness, tyre_cornering_stiffness: a skid-steer robot's tyre stiffnesses
+            per unit load: the longitudinal force per unit slip ratio, C_κ/N [-], and the
+            lateral force per radian of slip angle, C_α/N [1/rad] (default 0 and 0: rigid
+            contacts, Coulomb's force from 5 mm/s of slip on). They set how far a contact
+            slips before it slides (μ/C of its rim speed) and so how the apparent track moves
+            with the turn radius (:func:`odomgym.sim.world.skid_contacts`, docs/skid-steer.md).
         max_wheel_speed: largest wheel rim speed the motor controller will command [m/s].
         max_wheel_accel: acceleration limit of each wheel's velocity controller [m/s²]. A hard
             controller (large value) asks for more force than friction gives, so wheels slip.
@@ -143,6 +163,8 @@ class RobotSpec:
     axle_spacing: float
     com_x: float
     com_y: float
+    tyre_slip_stiffness: float
+    tyre_cornering_stiffness: float
     name: str
     source: str
     effects: EffectTable
@@ -164,6 +186,8 @@ class RobotSpec:
         axle_spacing: float = 0.0,
         com_x: float = 0.0,
         com_y: float = 0.0,
+        tyre_slip_stiffness: float = 0.0,
+        tyre_cornering_stiffness: float = 0.0,
         name: str = "robot",
         source: str = "",
         effects: EffectTable | Mapping[str, Mapping[str, float]] = (),
@@ -196,6 +220,8 @@ class RobotSpec:
             "axle_spacing": axle_spacing,
             "com_x": com_x,
             "com_y": com_y,
+            "tyre_slip_stiffness": tyre_slip_stiffness,
+            "tyre_cornering_stiffness": tyre_cornering_stiffness,
             "name": name,
             "source": source,
             "effects": _normalise_effects(effects),
@@ -240,6 +266,14 @@ class RobotSpec:
                         field=key,
                         source=source,
                     )
+            for key in ("tyre_slip_stiffness", "tyre_cornering_stiffness"):
+                if getattr(self, key) != 0.0:
+                    raise SpecError(
+                        f"{key} applies to skid-steer robots (axle_spacing > 0); a "
+                        "differential-drive robot's wheels are Chipmunk's capped pivot joints",
+                        field=key,
+                        source=source,
+                    )
 
     def _validate_skid(self, source: str | None) -> None:
         """A skid-steer body holds its wheels, has no casters, and loads every wheel."""
@@ -263,6 +297,18 @@ class RobotSpec:
                 "a skid-steer robot has no casters: all its weight rests on its four driven "
                 f"wheels (drive_load_fraction 1), got {self.drive_load_fraction}",
                 field="drive_load_fraction",
+                source=source,
+            )
+        if (self.tyre_slip_stiffness > 0.0) != (self.tyre_cornering_stiffness > 0.0):
+            key = (
+                "tyre_slip_stiffness"
+                if self.tyre_slip_stiffness == 0.0
+                else ("tyre_cornering_stiffness")
+            )
+            raise SpecError(
+                f"{key} is 0 while the other tyre stiffness is not: give both (elastic tyres) "
+                "or neither (rigid contacts)",
+                field=key,
                 source=source,
             )
         x = abs(self.com_x) / self.axle_spacing
@@ -427,7 +473,13 @@ class RobotSpec:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         out.pop("effects")
         if not self.is_skid_steer:  # one axle: the skid-steer fields would only be zeros
-            for key in ("axle_spacing", "com_x", "com_y"):
+            for key in (
+                "axle_spacing",
+                "com_x",
+                "com_y",
+                "tyre_slip_stiffness",
+                "tyre_cornering_stiffness",
+            ):
                 out.pop(key)
         if self.effects:
             out["effects"] = self.effect_dict()
@@ -630,6 +682,10 @@ PRESETS: dict[str, RobotSpec] = {
         chassis_width=0.699,
         max_wheel_speed=1.5,
         max_wheel_accel=1.0,  # assumed controller limit
+        # Tyres (docs/skid-steer.md, "Tyres"): cornering 0.12 of the load per degree, Gillespie's
+        # bias-ply figure; longitudinal slip stiffness assumed (no published value).
+        tyre_slip_stiffness=TYRE_SLIP_STIFFNESS,
+        tyre_cornering_stiffness=TYRE_CORNERING_STIFFNESS,
         source="AgileX Scout 2.0 specification (roas_docs scout.rst), scout_params.hpp, "
         "scout_v2.xacro; encoder resolution and acceleration limit assumed",
     ),
@@ -650,6 +706,10 @@ PRESETS: dict[str, RobotSpec] = {
         chassis_width=0.670,
         max_wheel_speed=1.0,
         max_wheel_accel=1.0,  # assumed controller limit
+        # Tyres (docs/skid-steer.md, "Tyres"): cornering 0.12 of the load per degree, Gillespie's
+        # bias-ply figure; longitudinal slip stiffness assumed (no published value).
+        tyre_slip_stiffness=TYRE_SLIP_STIFFNESS,
+        tyre_cornering_stiffness=TYRE_CORNERING_STIFFNESS,
         source="Clearpath Husky A200 specification (roas_docs husky.rst) and User Manual "
         "(2011) p. 9; husky_macro.urdf.xacro; acceleration limit assumed",
     ),
@@ -669,6 +729,10 @@ PRESETS: dict[str, RobotSpec] = {
         chassis_width=0.497,
         max_wheel_speed=0.7,
         max_wheel_accel=1.0,  # assumed controller limit
+        # Tyres (docs/skid-steer.md, "Tyres"): cornering 0.12 of the load per degree, Gillespie's
+        # bias-ply figure; longitudinal slip stiffness assumed (no published value).
+        tyre_slip_stiffness=TYRE_SLIP_STIFFNESS,
+        tyre_cornering_stiffness=TYRE_CORNERING_STIFFNESS,
         source="amr-ros-config pioneer3at.urdf.xacro (geometry), Webots Pioneer 3-AT guide "
         "(mass, size, speed), Wang et al. 2015; encoder and acceleration limit assumed",
     ),

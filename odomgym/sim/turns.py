@@ -7,11 +7,11 @@ kinematic odometry ω = (v_R − v_L)/b_app gives the yaw rate it really turned 
 literature (Mandow et al. 2007: the ICRs of the two sides at ±χ·b/2; Wang et al. 2015: the "ICR
 coefficient"). For a differential-drive robot that does not slip it is 1.
 
-:func:`coulomb_steady_turn` is the reference the World is checked against: the same robot's
-steady circle solved directly for rigid contacts with Coulomb friction, each contact's force
-μ·N_i *opposite its slip*, the loads of :meth:`odomgym.robot.RobotSpec.contact_loads`. In a slow
-spin the World matches it (and the closed form b·(1 + (a/b)²)); in turns with forward speed it
-does not yet (docs/skid-steer.md, "What is not right yet").
+:func:`contact_steady_turn` is the reference the World is checked against: the same robot's
+steady circle solved directly from its contacts' force law (:func:`contact_forces`: Coulomb's
+μ·N_i opposite the slip for rigid contacts, the elastic-then-sliding law for tyres with
+stiffness), the loads of :meth:`odomgym.robot.RobotSpec.contact_loads`. For rigid contacts in
+a slow spin it is the closed form b·(1 + (a/b)²).
 
 Used by ``tests/test_skid.py`` and ``examples/skid_icr.py`` (docs/skid-steer.md).
 """
@@ -26,9 +26,9 @@ from scipy.optimize import least_squares
 
 from odomgym.floor import FLOORS, FloorSpec
 from odomgym.robot import RobotSpec
-from odomgym.sim.world import World
+from odomgym.sim.world import SKID_CREEP, World
 
-__all__ = ["SteadyTurn", "coulomb_steady_turn", "steady_turn"]
+__all__ = ["SteadyTurn", "contact_forces", "contact_steady_turn", "steady_turn"]
 
 
 @dataclass(frozen=True)
@@ -106,28 +106,56 @@ def _rims(robot: RobotSpec, speed: float, radius: float) -> tuple[float, float]:
     return speed - omega * half, speed + omega * half
 
 
-def coulomb_steady_turn(
+def contact_forces(
+    robot: RobotSpec,
+    slip: np.ndarray,
+    rim: np.ndarray,
+    friction: float,
+    loads: np.ndarray,
+    *,
+    floor_creep: float = SKID_CREEP,
+) -> np.ndarray:
+    """Each contact's force [N] (n, 2), body frame, for its slip ``slip`` (n, 2) [m/s] against
+    its side's rim speed ``rim`` (n,) [m/s] under loads ``loads`` (n,) [N]: the law of
+    :func:`odomgym.sim.world.skid_contacts`, written again in numpy for the reference
+    (``floor_creep``: the least creep speed; the World's ``SKID_CREEP``)."""
+    limit = friction * loads
+    speed = np.hypot(slip[:, 0], slip[:, 1])
+    if robot.tyre_slip_stiffness == 0.0:
+        return -(limit / np.maximum(speed, floor_creep))[:, None] * slip
+    ex = np.maximum(friction * np.abs(rim) / robot.tyre_slip_stiffness, floor_creep)
+    ey = np.maximum(friction * np.abs(rim) / robot.tyre_cornering_stiffness, floor_creep)
+    w = np.column_stack((slip[:, 0] / ex, slip[:, 1] / ey))
+    kappa = np.hypot(w[:, 0], w[:, 1])
+    elastic = np.where(kappa <= 1.0, 1.0, 1.0 / np.maximum(kappa, 1.0) ** 2)
+    sliding = np.where(kappa <= 1.0, 0.0, 1.0 - 1.0 / np.maximum(kappa, 1.0))
+    direction = slip / np.maximum(speed, 1e-300)[:, None]
+    return -limit[:, None] * (elastic[:, None] * w + sliding[:, None] * direction)
+
+
+def contact_steady_turn(
     robot: RobotSpec, speed: float, radius: float, friction: float, *, gravity: float = 9.81
 ) -> SteadyTurn:
-    """The steady circle of ``robot`` under rigid Coulomb contacts, solved directly.
+    """The steady circle of ``robot`` under its contacts' force law, solved directly.
 
     Unknowns: the body-frame velocity (u, v) of the centre of mass and the yaw rate ω. Contact i
     at (x_i, y_i) slides at s_i = (u − ω·y_i − g_i, v + ω·x_i), with g_i its side's rim speed,
-    and is pushed by −μ·N_i·s_i/|s_i| (regularised below 10⁻⁷ m/s). In a steady circle the
-    forces supply the centripetal acceleration, Σf = m·(−ω·v, ω·u), and the yaw moment is zero.
-    The wheel commands are those :func:`steady_turn` gives (rims at v ∓ ω·b/2)."""
+    and is pushed by :func:`contact_forces` (for rigid contacts −μ·N_i·s_i/|s_i|, regularised
+    below 10⁻⁷ m/s). In a steady circle the forces supply the centripetal acceleration, Σf =
+    m·(−ω·v, ω·u), and the yaw moment is zero. The wheel commands are those
+    :func:`steady_turn` gives (rims at v ∓ ω·b/2)."""
     left, right = _rims(robot, speed, radius)
     contacts = robot.contacts()
     loads = np.asarray(robot.contact_loads(gravity))
     mass = float(robot.mass)
     xy = np.array([(x, y) for _, x, y in contacts])
     rim = np.array([left if side == 0 else right for side, _, _ in contacts])
+    creep = 1e-7 if robot.tyre_slip_stiffness == 0.0 else SKID_CREEP
 
     def residual(q: np.ndarray) -> np.ndarray:
         u, v, omega = q
         slip = np.column_stack((u - omega * xy[:, 1] - rim, v + omega * xy[:, 0]))
-        norm = np.sqrt(np.sum(slip**2, axis=1) + 1e-14)
-        force = -(friction * loads / norm)[:, None] * slip
+        force = contact_forces(robot, slip, rim, friction, loads, floor_creep=creep)
         total = force.sum(axis=0)
         moment = float(np.sum(xy[:, 0] * force[:, 1] - xy[:, 1] * force[:, 0]))
         return np.array([total[0] + mass * omega * v, total[1] - mass * omega * u, moment])

@@ -208,6 +208,11 @@ class World:
         )
         self._skid_mass = np.array([specs[i].mass for i in self._skid], dtype=float)
         self._skid_inertia = np.array([specs[i].moment_of_inertia for i in self._skid], dtype=float)
+        # Each skid-steer robot's tyre stiffnesses per unit load (C_κ/N, C_α/N; 0, 0: rigid).
+        self._skid_tyre = np.array(
+            [(specs[i].tyre_slip_stiffness, specs[i].tyre_cornering_stiffness) for i in self._skid],
+            dtype=float,
+        ).reshape(len(self._skid), 2)
         self._check_skid_floor(self.floor)
         for spec in specs:
             if spec.is_skid_steer and spec.effects:
@@ -679,6 +684,7 @@ class World:
             self._skid_load,
             self._skid_mass,
             self._skid_inertia,
+            self._skid_tyre,
             self._friction,
             self._ground_v,
             self.pose,
@@ -809,8 +815,9 @@ class World:
 
 SKID_CREEP = 0.005
 """Slip speed [m/s] below which a skid-steer contact's friction grows in proportion to its slip
-(μ·N·|s|/SKID_CREEP) instead of standing at μ·N: tyre creep, and what keeps the implicit solve
-of :func:`skid_contacts` smooth where a contact barely slides."""
+instead of standing at μ·N: the creep of rigid contacts (tyre stiffnesses 0), the least creep
+of elastic ones, and what keeps the implicit solve of :func:`skid_contacts` smooth where a
+contact barely slides."""
 
 
 @kernel
@@ -821,25 +828,41 @@ def skid_contacts(
     loads: FloatArray,
     mass: FloatArray,
     inertia: FloatArray,
+    tyre: FloatArray,
     friction: FloatArray,
     ground_v: FloatArray,
     pose: FloatArray,
     velocity: FloatArray,
     h: float,
 ) -> None:
-    """New velocities (in place) of skid-steer robots under Coulomb contacts, implicitly.
+    """New velocities (in place) of skid-steer robots under friction-limited contacts,
+    implicitly.
 
     Contact i at body-frame (x_i, y_i) from the centre of mass slides at s_i = v + ω × r_i − g_i
-    against its side's no-slip ground velocity g_i, and is pushed by f_i = −μ·N_i·s_i/max(|s_i|,
-    SKID_CREEP): Coulomb's force, opposite the slip (a pivot joint capped at μ·N would push along
-    its effective-mass-weighted velocity error instead). The coefficient μ·N_i/max(|s_i|, ·) is
-    taken at the step's start and the velocities solved implicitly, M·(q − q₀) = h·Σ A_iᵀ f_i(q)
-    with f_i linear in q — a 3×3 system per robot, stable at any step. ``robots`` (K,) indexes
-    the World's arrays; ``contacts`` (K, 4, 2), ``loads`` (K, 4), ``mass``, ``inertia`` (K,);
-    ``sides`` (K, 4) each contact's side; ``friction`` (N, 2) μ under each side; ``ground_v``
-    (N, 2, 2) [m/s] the sides' no-slip velocities of the step (their speeds are used);
-    ``pose`` (N, 3) as the World reports it after the step; ``velocity`` (N, 3) [m/s, m/s,
-    rad/s], read and written."""
+    against its side's no-slip ground velocity g_i (the rim speed U along the heading).
+
+    * **Rigid contacts** (``tyre`` 0, 0): f_i = −μ·N_i·s_i/max(|s_i|, SKID_CREEP), Coulomb's
+      force opposite the slip (a pivot joint capped at μ·N would push along its
+      effective-mass-weighted velocity error instead).
+    * **Elastic tyres** (C_κ, C_α per unit load): each direction has a *creep speed*, the slip at
+      which its linear force reaches μ·N: ε_x = μ·U/C_κ along the wheel (a slip ratio μ/C_κ of
+      the rim speed), ε_y = μ·U/C_α across it (a slip angle of μ/C_α rad); both at least
+      SKID_CREEP. With w = (s_x/ε_x, s_y/ε_y) and κ = |w|: while κ ≤ 1 the contact is elastic,
+      f = −μ·N·w (the longitudinal and cornering stiffnesses, Pacejka 2012 §1.2); beyond it a
+      share 1 − 1/κ slides, pushed opposite the slip as Coulomb's force, and the rest stays
+      elastic: f = −μ·N·(w/κ² + (1 − 1/κ)·s/|s|) — the brush model's split of the contact
+      patch into an adhesion and a sliding region (Pacejka 2012 §3.2), in one number. |f| ≤ μN;
+      at κ → ∞ it is Coulomb's force, at κ = 1 both agree. With equal creep speeds it is the
+      rigid law exactly.
+
+    The force is linear in the slip with a diagonal coefficient taken at the step's start, and
+    the velocities are solved implicitly, M·(q − q₀) = h·Σ A_iᵀ f_i(q) — a 3×3 system per
+    robot, stable at any step. ``robots`` (K,) indexes the World's arrays; ``contacts`` (K, 4,
+    2), ``loads`` (K, 4), ``mass``, ``inertia`` (K,); ``tyre`` (K, 2) C_κ/N [-] and C_α/N
+    [1/rad]; ``sides`` (K, 4) each contact's side; ``friction`` (N, 2) μ under each side;
+    ``ground_v`` (N, 2, 2) [m/s] the sides' no-slip velocities of the step (their speeds are
+    used); ``pose`` (N, 3) as the World reports it after the step; ``velocity`` (N, 3) [m/s,
+    m/s, rad/s], read and written."""
     for k in range(robots.shape[0]):
         i = robots[k]
         vx, vy, w = velocity[i, 0], velocity[i, 1], velocity[i, 2]
@@ -852,8 +875,8 @@ def skid_contacts(
         # Solved in the body frame, whose state carries over exactly from step to step: the
         # velocity in the frame of the heading it was solved at (the previous one), turned by
         # the rotating frame's term h·(ω·v, −ω·u) (d(u, v)/dt = f/m + (ω·v, −ω·u)), so that a
-        # steady turn is Coulomb's steady state at any step length; then back to the world at
-        # the heading the chassis has now, for the next position integration.
+        # steady turn is the contacts' steady state at any step length; then back to the world
+        # at the heading the chassis has now, for the next position integration.
         theta_p = theta_d - w * h
         cp, sp = math.cos(theta_p), math.sin(theta_p)
         u = cp * vx + sp * vy
@@ -871,16 +894,30 @@ def skid_contacts(
             gx = speed_l if sides[k, j] == 0 else speed_r
             sx = u - w * ry - gx
             sy = v + w * rx
-            coef = h * friction[i, sides[k, j]] * loads[k, j] / max(math.hypot(sx, sy), SKID_CREEP)
-            # A = [[1, 0, -ry], [0, 1, rx]]: add coef·AᵀA to the matrix, coef·Aᵀg to the right
-            # (g = (gx, 0) in the body frame).
-            a00 += coef
-            a11 += coef
-            a02 -= coef * ry
-            a12 += coef * rx
-            a22 += coef * (rx * rx + ry * ry)
-            b0 += coef * gx
-            b2 -= coef * ry * gx
+            limit = h * friction[i, sides[k, j]] * loads[k, j]  # h·μ·N [N·s]
+            if tyre[k, 0] > 0.0:
+                mu = friction[i, sides[k, j]]
+                ex = max(mu * abs(gx) / tyre[k, 0], SKID_CREEP)
+                ey = max(mu * abs(gx) / tyre[k, 1], SKID_CREEP)
+                kappa = math.hypot(sx / ex, sy / ey)
+                if kappa <= 1.0:
+                    dx = limit / ex
+                    dy = limit / ey
+                else:
+                    sliding = (1.0 - 1.0 / kappa) / math.hypot(sx, sy)
+                    dx = limit * (1.0 / (ex * kappa * kappa) + sliding)
+                    dy = limit * (1.0 / (ey * kappa * kappa) + sliding)
+            else:
+                dx = dy = limit / max(math.hypot(sx, sy), SKID_CREEP)
+            # A = [[1, 0, -ry], [0, 1, rx]], D = diag(dx, dy): add AᵀDA to the matrix, AᵀD·g
+            # to the right (g = (gx, 0) in the body frame).
+            a00 += dx
+            a11 += dy
+            a02 -= dx * ry
+            a12 += dy * rx
+            a22 += dx * ry * ry + dy * rx * rx
+            b0 += dx * gx
+            b2 -= dx * ry * gx
         # Solve the symmetric 3×3 system (Cramer's rule).
         det = (
             a00 * (a11 * a22 - a12 * a12)
