@@ -122,7 +122,8 @@ def contact_forces(
     limit = friction * loads
     speed = np.hypot(slip[:, 0], slip[:, 1])
     if robot.tyre_slip_stiffness == 0.0:
-        return -(limit / np.maximum(speed, floor_creep))[:, None] * slip
+        rigid: np.ndarray = -(limit / np.maximum(speed, floor_creep))[:, None] * slip
+        return rigid
     ex = np.maximum(friction * np.abs(rim) / robot.tyre_slip_stiffness, floor_creep)
     ey = np.maximum(friction * np.abs(rim) / robot.tyre_cornering_stiffness, floor_creep)
     w = np.column_stack((slip[:, 0] / ex, slip[:, 1] / ey))
@@ -130,7 +131,8 @@ def contact_forces(
     elastic = np.where(kappa <= 1.0, 1.0, 1.0 / np.maximum(kappa, 1.0) ** 2)
     sliding = np.where(kappa <= 1.0, 0.0, 1.0 - 1.0 / np.maximum(kappa, 1.0))
     direction = slip / np.maximum(speed, 1e-300)[:, None]
-    return -limit[:, None] * (elastic[:, None] * w + sliding[:, None] * direction)
+    force: np.ndarray = -limit[:, None] * (elastic[:, None] * w + sliding[:, None] * direction)
+    return force
 
 
 def contact_steady_turn(
