@@ -12,8 +12,8 @@ apparent track of ROS's diff_drive_controller; ``icr`` Mandow et al. 2007's ICRs
 and x_ICR; ``curvature`` a factor that moves with the path parameter λ, Wang et al. 2015's form
 with a free asymptote and power) and then *validated* on fresh runs the fit never saw: circles
 of 0.75, 1.5 and 3 m each way and 20 m random free paths (legs of 1 m, curvature uniform in
-±2 /m). The table gives the median over validation runs of the end-position error per metre driven [%] and of the
-end-heading error per metre [°/m].
+±2 /m). The table gives the median over validation runs of the end-position error per metre
+driven [%] and of the end-heading error per metre [°/m].
 
 Writes ``OUT/skid_models.md`` (the table), ``OUT/skid_models.json`` and ``OUT/skid_models.png``
 (the fitted factors against the path parameter λ beside the World's steady turns, and each
