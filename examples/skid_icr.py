@@ -2,10 +2,12 @@
 
     python examples/skid_icr.py [OUT.png]     # default docs/assets/skid_icr.png; ~20 s
 
-Left: the ``scout2`` preset on the ``smooth`` floor (μ = 0.8) at four speeds, each point a
-steady turn in the World (:func:`odomgym.sim.turns.steady_turn`, dots) beside rigid Coulomb
-contacts solved directly (:func:`odomgym.sim.turns.contact_steady_turn`, dashed), the factor
-against the radius driven (they coincide: the World's skid-steer contacts are Coulomb's).
+Left: the ``scout2`` preset (elastic tyres, docs/skid-steer.md "Tyres") on the ``smooth`` floor
+(μ = 0.8) at four speeds, each point a steady turn in the World
+(:func:`odomgym.sim.turns.steady_turn`, dots) beside the same contact law solved directly
+(:func:`odomgym.sim.turns.contact_steady_turn`, dashed), the factor against the radius driven
+(they coincide), with the two analytic limits: rigid contacts' 1 + (a/b)² and the tyres' linear
+range 1 + (C_α/C_κ)·(a/b)².
 Right: the ``pioneer3at``
 preset at three speeds against Wang et al. 2015's empirical function of the ICR coefficient for
 a Pioneer 3-AT, χ = 1 + 0.4728/(1 + 0.0538·√|λ|) with λ = (v_L + v_R)/(v_R − v_L), drawn
@@ -46,9 +48,13 @@ def _panel(ax: object, robot: RobotSpec, speeds: tuple[float, ...]) -> None:
         ax.plot([t.radius for t in world], [t.factor for t in world], "o-", color=colour,
                 label=f"{speed:.1f} m/s, World")  # type: ignore[attr-defined]  # fmt: skip
         ax.plot([t.radius for t in coulomb], [t.factor for t in coulomb], "--", color=colour,
-                label=f"{speed:.1f} m/s, rigid Coulomb")  # type: ignore[attr-defined]  # fmt: skip
-    analytic = 1.0 + (robot.axle_spacing / robot.true_wheelbase) ** 2
-    ax.axhline(analytic, color="0.4", ls="--", lw=1, label=f"1 + (a/b)² = {analytic:.3f}")  # type: ignore[attr-defined]
+                label=f"{speed:.1f} m/s, contact law solved directly")  # type: ignore[attr-defined]  # fmt: skip
+    shape = (robot.axle_spacing / robot.true_wheelbase) ** 2
+    analytic = 1.0 + shape
+    ax.axhline(analytic, color="0.4", ls="--", lw=1, label=f"rigid: 1 + (a/b)² = {analytic:.3f}")  # type: ignore[attr-defined]
+    linear = 1.0 + robot.tyre_cornering_stiffness / robot.tyre_slip_stiffness * shape
+    ax.axhline(linear, color="0.4", ls=":", lw=1,
+               label=f"tyres' linear range: 1 + (C_α/C_κ)(a/b)² = {linear:.3f}")  # type: ignore[attr-defined]  # fmt: skip
     ax.set_xscale("log")  # type: ignore[attr-defined]
     ax.set_xlabel("turn radius driven [m]")  # type: ignore[attr-defined]
     ax.set_ylabel("apparent track / true track χ [-]")  # type: ignore[attr-defined]

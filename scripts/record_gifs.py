@@ -70,10 +70,10 @@ RECORDINGS: dict[str, tuple[dict[str, Any], dict[str, Any], Callable[..., Policy
     "ClapperRectangle-v0": ({}, {}, _full_speed, 120),
     "SelfCalibration-v1": ({"budget": 16}, {"floor": "rough"}, _learned, 700),
     # A skid-steer robot whose odometry takes the apparent track the trajectory calibration
-    # fits on it (`odomgym calibrate trajectory --robot scout2 --side 2`: E_b = 1.7314), so
+    # fits on it (`odomgym calibrate trajectory --robot scout2 --side 2`: E_b = 1.6723), so
     # that it drives its square (docs/skid-steer.md); without it the robot turns ~52° a corner.
     "UMBmarkSquare-v0+scout2": (
-        {"robot": "scout2", "side": 2.0, "calibration": Calibration(wheelbase_scale=1.7314)},
+        {"robot": "scout2", "side": 2.0, "calibration": Calibration(wheelbase_scale=1.6723)},
         {"direction": "cw"},
         _route_policy,
         120,

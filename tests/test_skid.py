@@ -104,6 +104,9 @@ def test_a_skid_steer_spec_round_trips_through_toml(tmp_path: Path) -> None:
         ({"com_y": -0.3}, "com_y", "a wheel without load"),
         ({"drive_load_fraction": 0.8}, "drive_load_fraction", "no casters"),
         ({"chassis_length": 0.4}, "axle_spacing", "longer than the body"),
+        ({"tyre_slip_stiffness": 20.0}, "tyre_cornering_stiffness", "give both"),
+        ({"tyre_cornering_stiffness": 7.0}, "tyre_slip_stiffness", "give both"),
+        ({"tyre_slip_stiffness": -1.0, "tyre_cornering_stiffness": 7.0}, "tyre_slip_stiffness", ""),
     ],
 )
 def test_a_bad_skid_steer_spec_names_its_field(
@@ -115,10 +118,11 @@ def test_a_bad_skid_steer_spec_names_its_field(
     assert "\n" not in str(caught.value)
 
 
-def test_a_centre_of_mass_offset_needs_a_skid_steer_robot() -> None:
+@pytest.mark.parametrize("key", ["com_x", "tyre_slip_stiffness"])
+def test_skid_steer_fields_need_a_skid_steer_robot(key: str) -> None:
     with pytest.raises(SpecError) as caught:
-        RobotSpec(wheel_diameter=0.1, wheelbase=0.3, ticks_per_rev=1000, com_x=0.01)
-    assert caught.value.field == "com_x"
+        RobotSpec(wheel_diameter=0.1, wheelbase=0.3, ticks_per_rev=1000, **{key: 0.01})  # type: ignore[arg-type]
+    assert caught.value.field == key and "skid-steer" in str(caught.value)
 
 
 # ---------------------------------------------------------------------- the physics

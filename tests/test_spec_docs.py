@@ -364,6 +364,8 @@ def _one_key(marker: str, key: str, type_cell: str) -> tuple[Callable[[str], Any
     line = f"{key} = {value}\n"
     if marker == "robot" and key in ("com_x", "com_y"):  # a skid-steer robot's, loading each wheel
         line = f"axle_spacing = 0.3\n{key} = 0.05\n"
+    if marker == "robot" and key.startswith("tyre_"):  # a skid-steer robot's, both or neither
+        line = "axle_spacing = 0.3\ntyre_slip_stiffness = 20.0\ntyre_cornering_stiffness = 7.0\n"
     if marker == "robot":
         return load_robot, MINIMAL_ROBOT + ("" if key in REQUIRED_ROBOT else line)
     if marker == "floor":
