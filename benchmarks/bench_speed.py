@@ -289,7 +289,14 @@ def skid_steer_cost(num_envs: int, seconds: float) -> dict[str, float]:
     same robot on one axle (differential drive, casters under the rest), single env and native
     vector env, and their ratios; blocks interleaved so both see the same load."""
     skid = odomgym.PRESETS["scout2"]
-    diff = dataclasses.replace(skid, axle_spacing=0.0, drive_load_fraction=0.9, name="scout2-diff")
+    diff = dataclasses.replace(
+        skid,
+        axle_spacing=0.0,
+        drive_load_fraction=0.9,
+        tyre_slip_stiffness=0.0,
+        tyre_cornering_stiffness=0.0,
+        name="scout2-diff",
+    )
     rng = np.random.default_rng(0)
     blocks: dict[str, Callable[[], int]] = {}
     closers = []

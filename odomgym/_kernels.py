@@ -76,6 +76,7 @@ __all__ = [
     "state_parts",
     "state_views",
     "step_plain",
+    "write_chassis_velocity",
     "write_ground",
 ]
 
@@ -106,6 +107,9 @@ _POSE, _VELOCITY, _RATE, _ANGLE, _RIM, _MOTOR = (
 # A Chipmunk link (odomgym.sim.chipmunk_link.SpaceExchange): its ``addresses`` hold the space, the
 # set and get pmBatchedData blocks, then the C functions of CHIPMUNK_FUNCTIONS, in this order.
 _SPACE, _SET_DATA, _GET_DATA, _SPACE_STEP, _SET_ITERATOR, _GET_ITERATOR = range(6)
+# After the functions: the pmBatchedData block that sets chassis velocities (skid-steer robots,
+# whose velocity the World solves itself: odomgym.sim.world.skid_contacts).
+_SET_CHASSIS_DATA = 6
 #: The C functions compiled code calls, in the order of a link's addresses after the data.
 CHIPMUNK_FUNCTIONS = (
     "cpSpaceStep",
@@ -428,6 +432,28 @@ def read_chassis(
     for i in range(bodies.shape[0]):
         _call_iterator(addresses[_GET_ITERATOR], bodies[i, 0], addresses[_GET_DATA])
     return bool(heads[1, 0] == BODY_STATE_WIDTH * bodies.shape[0])
+
+
+@kernel
+def write_chassis_velocity(
+    addresses: NDArray[np.uint64],
+    heads: NDArray[np.int32],
+    bodies: NDArray[np.uint64],
+    rows: NDArray[np.intp],
+    velocity: FloatArray,
+    values: FloatArray,
+) -> None:
+    """Set the velocity and angular velocity of the chassis of robots ``rows`` from
+    ``velocity`` (N, 3) [m/s, m/s, rad/s], through pymunk's set iterator and the link's third
+    block, whose numpy memory is ``values`` (≥ 3·len(rows)); the iterator reads from entry
+    ``num`` on, so it starts at 0. What ``World._skid_step`` would do through pymunk's
+    properties, without a Python call per body."""
+    for k in range(rows.shape[0]):
+        for c in range(3):
+            values[3 * k + c] = velocity[rows[k], c]
+    heads[2, 0] = 0
+    for k in range(rows.shape[0]):
+        _call_iterator(addresses[_SET_ITERATOR], bodies[rows[k], 0], addresses[_SET_CHASSIS_DATA])
 
 
 @inlined_kernel

@@ -81,3 +81,20 @@ def test_an_unpickled_world_links_to_its_own_space(monkeypatch: pytest.MonkeyPat
     for mine, theirs in zip(linked.space.bodies, fallback.space.bodies, strict=True):
         assert (mine.position, mine.velocity) == (theirs.position, theirs.velocity)
     np.testing.assert_array_equal(_drive(linked, commands[100:]), _drive(fallback, commands[100:]))
+
+
+def test_skid_steer_chassis_velocities_cross_both_ways_alike(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A skid-steer robot's velocity is solved by the World and set on its chassis each
+    substep: through the link's third block (one compiled call for the batch) or through
+    pymunk's properties, the same floats; beside a differential-drive robot in one batch."""
+    robots = [PRESETS["scout2"], PRESETS["labmate"], PRESETS["husky"]]
+    linked = World(robots, FLOORS["smooth"], substeps=2)
+    assert linked._io.compiled
+    monkeypatch.setattr(SpaceExchange, "_link", lambda self: False)
+    fallback = World(robots, FLOORS["smooth"], substeps=2)
+    assert not fallback._io.compiled
+    expected = _drive(fallback, _commands(3))
+    np.testing.assert_array_equal(_drive(linked, _commands(3)), expected)
+    assert np.all(np.hypot(expected[:, 0], expected[:, 1]) > 0.1)  # every robot moved

@@ -21,6 +21,7 @@ from odomgym._kernels import (
     CHIPMUNK_FUNCTIONS,
     SPARE_ENTRIES,
     read_chassis,
+    write_chassis_velocity,
     write_ground,
 )
 
@@ -56,10 +57,14 @@ class SpaceExchange:
         ground body;
         ``buffer``: the 4·N ground velocities going in (robot by robot, left then right, x and
         y), then the 6·N chassis states coming out (x, y, θ, ẋ, ẏ, θ̇) and two spare entries;
-        ``heads`` (2, 4) int32: the ``pmFloatArray`` headers (``num``, ``max``, data pointer) of
-        the two parts of ``buffer``, in numpy memory so a kernel can rewind ``num``;
-        ``addresses`` (6,) uint64: the space, the set and get ``pmBatchedData`` blocks and the
-        C functions of :data:`odomgym._kernels.CHIPMUNK_FUNCTIONS`.
+        ``heads`` (3, 4) int32: the ``pmFloatArray`` headers (``num``, ``max``, data pointer) of
+        the two parts of ``buffer`` and of ``chassis_in``, in numpy memory so a kernel can
+        rewind ``num``;
+        ``chassis_in`` (3·N,): chassis velocities going in (ẋ, ẏ, θ̇ per robot), for the robots
+        whose velocity the World sets itself (skid-steer robots, :meth:`set_chassis_velocity`);
+        ``addresses`` (7,) uint64: the space, the set and get ``pmBatchedData`` blocks, the
+        C functions of :data:`odomgym._kernels.CHIPMUNK_FUNCTIONS`, then the block that sets
+        chassis velocities.
     """
 
     def __init__(
@@ -70,8 +75,9 @@ class SpaceExchange:
         self._ground = ground
         n = len(chassis)
         self.buffer = np.zeros(4 * n + BODY_STATE_WIDTH * n + SPARE_ENTRIES)
-        self.heads = np.zeros((2, 4), dtype=np.int32)
-        self.addresses = np.zeros(3 + len(CHIPMUNK_FUNCTIONS), dtype=np.uint64)
+        self.chassis_in = np.zeros(3 * n)
+        self.heads = np.zeros((3, 4), dtype=np.int32)
+        self.addresses = np.zeros(4 + len(CHIPMUNK_FUNCTIONS), dtype=np.uint64)
         self.bodies = np.zeros((n, 3), dtype=np.uint64)
         self._structures: list[Any] = []  # cffi objects the addresses point into, kept alive
         self.compiled = self._link() and self._link_works()
@@ -99,6 +105,10 @@ class SpaceExchange:
                 (
                     (self.buffer[:n_in], pbatch.BodyFields.VELOCITY),
                     (self.buffer[n_in:], _STATE_FIELDS),
+                    (
+                        self.chassis_in,
+                        pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY,
+                    ),
                 )
             ):
                 array = ffi.from_buffer("pmFloatArray *", self.heads[k])
@@ -116,7 +126,12 @@ class SpaceExchange:
         def address(pointer: Any) -> int:
             return int(ffi.cast("uintptr_t", pointer))
 
-        self.addresses[:] = [address(raw_space), *map(address, blocks), *map(address, functions)]
+        self.addresses[:] = [
+            address(raw_space),
+            *map(address, blocks[:2]),
+            *map(address, functions),
+            address(blocks[2]),
+        ]
         n = len(self._chassis)
         self.bodies[:, 0] = [address(b) for b in raw_bodies[:n]]
         self.bodies[:, 1:] = np.reshape([address(b) for b in raw_bodies[n:]], (n, 2))
@@ -139,8 +154,27 @@ class SpaceExchange:
         self.buffer[:2] = (-1.0, 2.0)
         write_ground(self.addresses, self.heads, self.bodies)
         ok = ok and tuple(probe.velocity) == (-1.0, 2.0)
+        velocity = np.array([[0.75, -0.25, 1.5]])
+        write_chassis_velocity(
+            self.addresses, self.heads, self.bodies, np.zeros(1, np.intp), velocity, self.chassis_in
+        )
+        ok = ok and (*chassis.velocity, chassis.angular_velocity) == (0.75, -0.25, 1.5)
         chassis.velocity, chassis.angular_velocity, probe.velocity = original
         return ok
+
+    def set_chassis_velocity(self, rows: NDArray[np.intp], velocity: FloatArray) -> None:
+        """Set the velocity and angular velocity of the chassis of robots ``rows`` from
+        ``velocity`` (N, 3) [m/s, m/s, rad/s]: compiled through the link's third block, or
+        through pymunk's properties (the same floats either way)."""
+        if self.compiled:
+            write_chassis_velocity(
+                self.addresses, self.heads, self.bodies, rows, velocity, self.chassis_in
+            )
+            return
+        for i in rows:
+            body = self._chassis[i]
+            body.velocity = (float(velocity[i, 0]), float(velocity[i, 1]))
+            body.angular_velocity = float(velocity[i, 2])
 
     def exchange_in_python(
         self, ground_v: FloatArray, h: float, pose: FloatArray, velocity: FloatArray

@@ -691,12 +691,8 @@ class World:
             self.velocity,
             h,
         )
-        for row, i in enumerate(self._skid):
-            v = self.velocity[i]
-            body = self._chassis[i]
-            body.velocity = (float(v[0]), float(v[1]))
-            body.angular_velocity = float(v[2])
-            self.pose[i] += (v - old[row]) * h
+        self._io.set_chassis_velocity(self._skid, self.velocity)
+        self.pose[self._skid] += (self.velocity[self._skid] - old) * h
 
     def _accumulate_slip(self, h: float) -> None:
         """Contact point velocity v + ω × r = v − ω·l·(cos θ, sin θ) against its ground body's.
