@@ -24,6 +24,7 @@ from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.results import Diagnosis
 from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
 from odomgym.effects import EFFECTS
+from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.simulated import measure
@@ -180,3 +181,15 @@ def test_a_constant_x_icr_is_replayed_as_the_tracked_point_offset() -> None:
     without = np.abs(replay_run(run, robot.with_errors(e_b=chi)).tracked - poses).max(axis=0)
     assert without[:2].max() > 0.05, without
     assert "x_ICR" in EFFECTS["gt_sensor_offset"].confounded
+
+
+def test_an_apparent_track_may_pass_the_body_the_nominal_one_may_not() -> None:
+    """A diagnosis of ``scout2`` fits E_b near its spin's apparent-track factor (1.67): its true
+    track then passes the body (0.97 m against 0.699 m), which the spec accepts; a nominal
+    track wider than the body is still a one-line error naming ``wheelbase``."""
+    robot = PRESETS["scout2"]
+    wide = robot.with_errors(e_b=1.67)
+    assert wide.true_wheelbase > wide.chassis_width
+    with pytest.raises(SpecError, match="wider than the body") as caught:
+        dataclasses.replace(robot, chassis_width=0.5)
+    assert caught.value.field == "wheelbase"
