@@ -148,11 +148,17 @@ class SkidTrack(Effect):
 
     Computed as dθ₀/(1 + ε·u²/(u² + s²)) with u = (d_R − d_L)·λ½ and s = d_L + d_R, finite for
     every interval (a step that does not move keeps dθ₀ = 0).
+
+    ε ≥ 0: the scrub only ever widens the track as the turn tightens (Mandow et al. 2007; Wang
+    et al. 2015; the World's tyres, ``docs/skid-steer.md``). A negative excess — arcs
+    under-turning against spins — is what ``turn_skid`` describes on a differential-drive
+    robot, and on the OptiOdom robot's June sessions a free sign let ``skid_track`` stand in for
+    it (ε = −0.006).
     """
 
     name = "skid_track"
     parameters = (
-        Parameter("excess", "-", 0.0, -0.5, 5.0, 0.01, "extra track factor of a spin"),
+        Parameter("excess", "-", 0.0, 0.0, 5.0, 0.01, "extra track factor of a spin"),
         Parameter("lambda_half", "-", 2.0, 0.05, 100.0, 0.05, "|λ| where half the excess is left"),
     )
     summary = (
