@@ -29,7 +29,7 @@ from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.simulated import measure
 from odomgym.odometry.icr import SkidModel, skid_dead_reckon
-from odomgym.odometry.runs import Run
+from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import PRESETS, RobotSpec
 from odomgym.sim.arc_runs import circle_plan, drive_arcs
 from odomgym.sim.route_runs import simulate_runs
@@ -38,6 +38,7 @@ from odomgym.sim.routes import spin_route, square_route
 RADII = (0.5, 1.0, 2.0, 4.0)  # [m]
 SPEEDS = (0.2, 0.5)  # [m/s]
 SENSOR = SensorAccuracy(0.001, math.radians(0.1))
+DIRECTIONS: tuple[Direction, ...] = ("cw", "ccw")
 
 
 def skid_protocol(robot: RobotSpec, seed: int) -> list[Run]:
@@ -59,7 +60,7 @@ def skid_protocol(robot: RobotSpec, seed: int) -> list[Run]:
             for r, label in zip(runs, labels, strict=True)
         ]
     for degrees in (90, 180, 360):
-        for direction in ("cw", "ccw"):
+        for direction in DIRECTIONS:
             spins, _ = simulate_runs(
                 robot,
                 floor,
@@ -72,7 +73,7 @@ def skid_protocol(robot: RobotSpec, seed: int) -> list[Run]:
                 dataclasses.replace(r, meta=dict(r.meta, experiment=f"spin_{direction}_{degrees}"))
                 for r in spins
             ]
-    for direction in ("cw", "ccw"):
+    for direction in DIRECTIONS:
         squares, _ = simulate_runs(
             robot,
             floor,
@@ -167,7 +168,7 @@ def test_a_constant_x_icr_is_replayed_as_the_tracked_point_offset() -> None:
     counts = np.vstack([np.zeros(2), np.cumsum(travels / radius, axis=0)])
     run = Run(
         kind="free",
-        time=dt * np.arange(len(poses)),
+        time=dt * np.arange(len(poses), dtype=np.float64),
         counts=counts * robot.ticks_per_rev / (2.0 * math.pi),
         true_pose=poses,
         source="icr",
