@@ -1,0 +1,516 @@
+"""A fleet of robots of one model, each diagnosed on its own logs, compared across the fleet.
+
+A lab or a company runs tens of robots of one model. The questions are which effects recur,
+which robot is the odd one out, and what moved since the last period of logs. This module:
+
+* :func:`find_fleet` reads the layout ``ROBOTS/<robot>/robot.toml`` beside the robot's logs
+  (any format :func:`odomgym.data.logs.read_log` reads: native CSV files, OptiOdom session
+  folders, ROS 2 bags). Logs directly in the robot's folder belong to no period; logs in a
+  sub-folder belong to the period named by the sub-folder (``2026-10/``, ``after-repair/``).
+  Every log is one session (its file or folder name), so the diagnosis holds out whole
+  sessions when there are two or more.
+* :func:`diagnose_fleet` diagnoses each robot on all its sessions (and, with two or more
+  periods, each period on its own) with :func:`odomgym.diagnose.workflow.diagnose`; each
+  robot's report folder is that diagnosis' output, written atomically, so an interrupted
+  fleet resumes from the robots already done.
+* :func:`summarise_fleet` reads the reports back and compares the robots:
+  the effects and terms named and in how many robots; every parameter's values with their
+  standard errors; the robots more than :data:`ODD_Z` robust standard deviations from the
+  fleet (median and 1.4826 × the median absolute deviation, over the robots that name the
+  effect, when at least :data:`MIN_NAMING` do); and per robot, what moved between periods.
+* :func:`write_example_fleet` writes a fleet of simulated robots to try it on, with planted
+  odd robots (``odomgym fleet --example``).
+
+Units: the parameters' own (docs/effects.md).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from odomgym.errors import SpecError
+from odomgym.odometry.runs import Run
+from odomgym.robot import RobotSpec, load_robot
+
+__all__ = [
+    "MIN_NAMING",
+    "ODD_Z",
+    "FleetRobot",
+    "FleetSummary",
+    "diagnose_fleet",
+    "find_fleet",
+    "read_robot_runs",
+    "summarise_fleet",
+    "write_example_fleet",
+]
+
+ODD_Z = 3.0
+"""A robot is odd on a parameter when it lies more than this many robust standard deviations
+from the fleet's median [-]."""
+
+MIN_NAMING = 5
+"""Fewest robots that must name an effect before its parameters get a fleet distribution and
+odd robots: below, its recurrence count is the finding [-]."""
+
+ROBUST_SD = 1.4826
+"""Median absolute deviation → standard deviation of a normal distribution [-]."""
+
+_LOG_SUFFIXES = (".csv", ".mcap", ".db3")
+
+
+@dataclass(frozen=True)
+class FleetRobot:
+    """One robot of a fleet: its name (the folder's), model and logs.
+
+    Attributes:
+        name: the robot's folder name.
+        folder: the folder.
+        robot: the nominal model from its ``robot.toml``.
+        logs: (period, path) per log; period ``""`` for logs directly in the folder.
+    """
+
+    name: str
+    folder: Path
+    robot: RobotSpec
+    logs: tuple[tuple[str, Path], ...]
+
+    @property
+    def periods(self) -> tuple[str, ...]:
+        """The periods its logs come from, sorted (``("",)`` when none is named)."""
+        return tuple(sorted({period for period, _ in self.logs}))
+
+
+def _is_log(path: Path) -> bool:
+    """A log file, or a folder that holds a log format's own layout (OptiOdom, ROS 2 bag)."""
+    if path.name.startswith("."):
+        return False
+    if path.is_file():
+        return path.suffix.lower() in _LOG_SUFFIXES
+    return any(path.glob("*_metadata.csv")) or (path / "metadata.yaml").exists()
+
+
+def find_fleet(root: str | Path) -> list[FleetRobot]:
+    """The robots under ``root`` (one sub-folder each, sorted by name).
+
+    Raises:
+        SpecError: ``root`` is not a folder or holds no robot folder; a robot folder has no
+            ``robot.toml`` (or an invalid one: its error names field, file and line) or no
+            log.
+    """
+    where = Path(root)
+    if not where.is_dir():
+        raise SpecError("not a folder of robot folders", field="ROBOTS", source=str(where))
+    robots = []
+    for folder in sorted(p for p in where.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        toml = folder / "robot.toml"
+        if not toml.exists():
+            raise SpecError(
+                "a robot folder needs its robot.toml (the nominal model its logs are "
+                "diagnosed against)",
+                field="robot.toml",
+                source=str(folder),
+            )
+        robot = load_robot(toml)
+        logs: list[tuple[str, Path]] = []
+        for child in sorted(folder.iterdir()):
+            if _is_log(child):
+                logs.append(("", child))
+            elif child.is_dir() and not child.name.startswith("."):
+                logs += [(child.name, p) for p in sorted(child.iterdir()) if _is_log(p)]
+        if not logs:
+            raise SpecError(
+                "no log in this robot folder (native .csv files, OptiOdom session folders or "
+                "ROS 2 bags, directly or in one sub-folder per period)",
+                field="logs",
+                source=str(folder),
+            )
+        robots.append(FleetRobot(folder.name, folder, robot, tuple(logs)))
+    if not robots:
+        raise SpecError(
+            "no robot folder (each sub-folder holds one robot's robot.toml and logs)",
+            field="ROBOTS",
+            source=str(where),
+        )
+    return robots
+
+
+def read_robot_runs(robot: FleetRobot, period: str | None = None) -> list[Run]:
+    """Every run of ``robot`` (of one ``period`` if given), each marked with its session (the
+    period and the log's name) and period in ``run.meta``."""
+    from odomgym.data.logs import read_log
+
+    runs: list[Run] = []
+    for log_period, path in robot.logs:
+        if period is not None and log_period != period:
+            continue
+        log_runs, _ = read_log(path, robot=robot.robot)
+        session = f"{log_period}/{path.stem}" if log_period else path.stem
+        for run in log_runs:
+            run.meta["session"] = str(run.meta.get("session") or session)
+            run.meta["period"] = log_period
+        runs.extend(log_runs)
+    return runs
+
+
+def diagnose_fleet(
+    robots: Sequence[FleetRobot],
+    out: Path,
+    *,
+    config: Any = None,
+    baseline: bool = True,
+    resume: bool = False,
+    progress: Callable[[str], Callable[[str, float], None]] | None = None,
+    status: Callable[[str], None] | None = None,
+) -> list[Path]:
+    """Diagnose every robot into ``out/robots/<name>/`` (and ``…/periods/<period>/`` for each
+    of two or more periods); returns the report folders. With ``resume``, a robot whose
+    report is already there is not diagnosed again. ``progress(name)`` gives the callback of
+    one robot's progress bar; ``status`` receives one line per robot."""
+    from odomgym.baselines.trajectory import TrajectoryBaseline
+    from odomgym.diagnose.report import write_outputs
+    from odomgym.diagnose.workflow import diagnose
+
+    folders = []
+    for robot in robots:
+        jobs = [("", robot.name, out / "robots" / robot.name)]
+        if len(robot.periods) > 1:
+            jobs += [
+                (period, f"{robot.name} {period}", out / "robots" / robot.name / "periods" / period)
+                for period in robot.periods
+            ]
+        for period, label, folder in jobs:
+            folders.append(folder)
+            if resume and (folder / "report.json").exists():
+                if status is not None:
+                    status(f"{label}: done before, kept")
+                continue
+            runs = read_robot_runs(robot, period or None)
+            trusted = TrajectoryBaseline() if baseline else None
+            callback = progress(label) if progress is not None else None
+            kept = _periods_of(folder) if not period else None
+            diagnosis = diagnose(runs, robot.robot, config, baseline=trusted, progress=callback)
+            write_outputs(diagnosis, folder, str(robot.folder))
+            if kept is not None:
+                kept()
+            if status is not None:
+                status(f"{label}: {diagnosis.verdict}")
+    return folders
+
+
+def _periods_of(folder: Path) -> Callable[[], None] | None:
+    """Keep a robot folder's ``periods/`` across the whole-folder replace of its report."""
+    periods = folder / "periods"
+    if not periods.is_dir():
+        return None
+    keep = folder.parent / f".{folder.name}.periods"
+    if keep.exists():
+        import shutil
+
+        shutil.rmtree(keep)
+    periods.rename(keep)
+
+    def restore() -> None:
+        keep.rename(folder / "periods")
+
+    return restore
+
+
+# ---------------------------------------------------------------------------- the summary
+@dataclass
+class FleetSummary:
+    """What the fleet's reports say together (:func:`summarise_fleet`).
+
+    Attributes:
+        robots: the robots' names, in order.
+        verdicts: each robot's verdict.
+        named: effect → the robots that name it.
+        terms: discovered term → the robots that keep it.
+        values: (effect, parameter) → robot → (value, standard error) for the robots naming it.
+        fleet: (effect, parameter) → {"median", "robust_sd", "robots"} where at least
+            :data:`MIN_NAMING` robots name the effect.
+        odd: (robot, effect, parameter, value, robust z) for every robot beyond :data:`ODD_Z`.
+        moved: (robot, effect, parameter, first period, last period, change, z) between a
+            robot's first and last period where the change is beyond 3 combined standard errors.
+    """
+
+    robots: list[str]
+    verdicts: dict[str, str]
+    named: dict[str, list[str]] = field(default_factory=dict)
+    terms: dict[str, list[str]] = field(default_factory=dict)
+    values: dict[tuple[str, str], dict[str, tuple[float, float]]] = field(default_factory=dict)
+    fleet: dict[tuple[str, str], dict[str, float]] = field(default_factory=dict)
+    odd: list[tuple[str, str, str, float, float]] = field(default_factory=list)
+    moved: list[tuple[str, str, str, str, str, float, float]] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (the keys of tuples joined by ``.``)."""
+        return {
+            "robots": self.robots,
+            "verdicts": self.verdicts,
+            "named": self.named,
+            "terms": self.terms,
+            "values": {
+                f"{e}.{p}": {r: {"value": v, "stderr": s} for r, (v, s) in per.items()}
+                for (e, p), per in self.values.items()
+            },
+            "fleet": {f"{e}.{p}": stats for (e, p), stats in self.fleet.items()},
+            "odd": [
+                {"robot": r, "effect": e, "parameter": p, "value": v, "robust_z": z}
+                for r, e, p, v, z in self.odd
+            ],
+            "moved": [
+                {"robot": r, "effect": e, "parameter": p, "from": a, "to": b, "change": d, "z": z}
+                for r, e, p, a, b, d, z in self.moved
+            ],
+        }
+
+
+def _report(folder: Path) -> dict[str, Any]:
+    path = folder / "report.json"
+    try:
+        data: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SpecError("no report here: diagnose the fleet first", source=str(path)) from None
+    return data
+
+
+def _parameters(report: dict[str, Any]) -> dict[tuple[str, str], tuple[float, float]]:
+    out = {}
+    for effect, parameters in report.get("parameters", {}).items():
+        for name, entry in parameters.items():
+            out[(effect, name)] = (float(entry["value"]), float(entry.get("stderr", math.nan)))
+    return out
+
+
+def summarise_fleet(out: Path, robots: Sequence[FleetRobot]) -> FleetSummary:
+    """Read the reports :func:`diagnose_fleet` wrote under ``out`` and compare the robots."""
+    names = [robot.name for robot in robots]
+    summary = FleetSummary(robots=names, verdicts={})
+    for robot in robots:
+        report = _report(out / "robots" / robot.name)
+        summary.verdicts[robot.name] = str(report.get("verdict", ""))
+        for effect in report.get("named_effects", []):
+            summary.named.setdefault(str(effect), []).append(robot.name)
+        for term in report.get("terms_kept", []) or []:
+            summary.terms.setdefault(str(term), []).append(robot.name)
+        for key, estimate in _parameters(report).items():
+            if key[0] in report.get("named_effects", []):
+                summary.values.setdefault(key, {})[robot.name] = estimate
+        if len(robot.periods) > 1:
+            first, last = robot.periods[0], robot.periods[-1]
+            before = _parameters(_report(out / "robots" / robot.name / "periods" / first))
+            after = _parameters(_report(out / "robots" / robot.name / "periods" / last))
+            for key in sorted(set(before) & set(after)):
+                (a, sa), (b, sb) = before[key], after[key]
+                spread = math.hypot(sa, sb)
+                z = (b - a) / spread if spread > 0.0 else math.inf
+                if abs(z) > 3.0:
+                    summary.moved.append((robot.name, *key, first, last, b - a, z))
+    for key, per in sorted(summary.values.items()):
+        if len(per) < MIN_NAMING:
+            continue
+        values = np.array([v for v, _ in per.values()])
+        median = float(np.median(values))
+        robust = ROBUST_SD * float(np.median(np.abs(values - median)))
+        summary.fleet[key] = {"median": median, "robust_sd": robust, "robots": len(per)}
+        if robust <= 0.0:
+            continue
+        for name, (value, _) in per.items():
+            z = (value - median) / robust
+            if abs(z) > ODD_Z:
+                summary.odd.append((name, *key, value, z))
+    summary.named = dict(sorted(summary.named.items(), key=lambda kv: (-len(kv[1]), kv[0])))
+    summary.terms = dict(sorted(summary.terms.items(), key=lambda kv: (-len(kv[1]), kv[0])))
+    return summary
+
+
+def format_fleet(summary: FleetSummary, source: str) -> str:
+    """The fleet report as Markdown (``fleet.md``)."""
+    n = len(summary.robots)
+    lines = [f"# Fleet report: {n} robots ({source})", "", "## Effects and terms named", ""]
+    lines += ["| effect or term | robots | which |", "|---|---|---|"]
+    for what, robots in [*summary.named.items(), *summary.terms.items()]:
+        lines.append(f"| `{what}` | {len(robots)} of {n} | {', '.join(robots)} |")
+    if not summary.named and not summary.terms:
+        lines.append("| (none) | | |")
+    lines += ["", "## Parameters across the fleet", ""]
+    lines += [
+        f"Median and robust standard deviation (1.4826 × median absolute deviation) over the "
+        f"robots naming the effect, when at least {MIN_NAMING} do.",
+        "",
+        "| parameter | robots | median | robust s.d. | range |",
+        "|---|---|---|---|---|",
+    ]
+    for (effect, name), per in sorted(summary.values.items()):
+        values = [v for v, _ in per.values()]
+        stats = summary.fleet.get((effect, name))
+        median = f"{stats['median']:.6g}" if stats else "—"
+        robust = f"{stats['robust_sd']:.3g}" if stats else f"(fewer than {MIN_NAMING})"
+        lines.append(
+            f"| `{effect}.{name}` | {len(per)} | {median} | {robust} | "
+            f"{min(values):.6g} … {max(values):.6g} |"
+        )
+    lines += ["", f"## Odd robots (more than {ODD_Z:g} robust s.d. from the fleet)", ""]
+    if summary.odd:
+        lines += ["| robot | parameter | value | robust z |", "|---|---|---|---|"]
+        for robot, effect, name, value, z in sorted(summary.odd):
+            lines.append(f"| {robot} | `{effect}.{name}` | {value:.6g} | {z:+.1f} |")
+    else:
+        lines.append("None.")
+    lines += ["", "## What moved between periods", ""]
+    if summary.moved:
+        lines += ["| robot | parameter | from → to | change | z |", "|---|---|---|---|---|"]
+        for robot, effect, name, a, b, change, z in summary.moved:
+            lines.append(f"| {robot} | `{effect}.{name}` | {a} → {b} | {change:+.4g} | {z:+.1f} |")
+    else:
+        lines.append("Nothing beyond three combined standard errors (or one period per robot).")
+    lines += ["", "## Verdicts", "", "| robot | verdict |", "|---|---|"]
+    lines += [f"| {r} | {summary.verdicts[r]} |" for r in summary.robots]
+    return "\n".join(lines) + "\n"
+
+
+def plot_fleet(summary: FleetSummary, out: Path) -> list[Path]:
+    """One figure per effect named by any robot (``fleet_<effect>.png``): each parameter's
+    value per robot with its standard error, the fleet median and its ±3 robust s.d. band,
+    the odd robots in red."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from odomgym.io import atomic_writer
+
+    written = []
+    odd = {(r, e, p) for r, e, p, _, _ in summary.odd}
+    effects = sorted({e for e, _ in summary.values})
+    for effect in effects:
+        keys = sorted(k for k in summary.values if k[0] == effect)
+        fig, axes = plt.subplots(len(keys), 1, figsize=(9, 2.8 * len(keys)), squeeze=False)
+        for ax, key in zip(axes[:, 0], keys, strict=True):
+            per = summary.values[key]
+            index = [summary.robots.index(r) for r in per]
+            values = [v for v, _ in per.values()]
+            errors = [0.0 if not math.isfinite(s) else s for _, s in per.values()]
+            colours = ["tab:red" if (r, *key) in odd else "tab:blue" for r in per]
+            ax.errorbar(index, values, yerr=errors, fmt="none", ecolor="0.5", lw=1)
+            ax.scatter(index, values, c=colours, zorder=3, s=24)
+            stats = summary.fleet.get(key)
+            if stats:
+                m, s = stats["median"], stats["robust_sd"]
+                ax.axhline(m, color="0.3", lw=1, label="fleet median")
+                ax.axhspan(
+                    m - ODD_Z * s, m + ODD_Z * s, color="0.85", label=f"±{ODD_Z:g} robust s.d."
+                )
+                ax.legend(fontsize=8, loc="best")
+            ax.set_xticks(range(len(summary.robots)), summary.robots, rotation=60, fontsize=7)
+            ax.set_ylabel(f"{key[1]} [-]" if key[1].startswith("e_") else key[1])
+            ax.set_title(f"{effect}.{key[1]}: {len(per)} of {len(summary.robots)} robots name it")
+            ax.grid(True, alpha=0.3)
+        fig.tight_layout()
+        path = out / f"fleet_{effect}.png"
+        atomic_writer(path, _saver(fig))
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def _saver(fig: Any) -> Callable[[Path], None]:
+    """Save ``fig`` as PNG to the path given (for :func:`odomgym.io.atomic_writer`)."""
+
+    def save(path: Path) -> None:
+        fig.savefig(path, dpi=100, format="png")
+
+    return save
+
+
+# ---------------------------------------------------------------------------- an example
+@dataclass(frozen=True)
+class ExamplePrior:
+    """The prior the example fleet's robots are drawn from (standard deviations of normal
+    draws around 1, probabilities and ranges of the optional effects).
+
+    Attributes:
+        e_b_sd, e_s_sd: spread of E_b and E_s [-].
+        toe_p, toe_range: chance a robot's wheels are toed, and the angle's range [rad].
+        backlash_p, backlash_range: chance of gear backlash, and its range [rad].
+        odd_sd: how far the planted robots lie, in the prior's standard deviations [-].
+    """
+
+    e_b_sd: float = 0.01
+    e_s_sd: float = 0.005
+    toe_p: float = 0.3
+    toe_range: tuple[float, float] = (0.01, 0.02)
+    backlash_p: float = 0.3
+    backlash_range: tuple[float, float] = (0.01, 0.03)
+    odd_sd: float = 5.0
+
+
+def write_example_fleet(
+    out: Path,
+    robots: int,
+    *,
+    seed: int = 0,
+    model: str = "labmate",
+    sessions: int = 3,
+    floor: str = "concrete",
+    prior: ExamplePrior | None = None,
+) -> dict[str, Any]:
+    """Write ``robots`` simulated robots of preset ``model`` under ``out`` in the fleet layout
+    (``robot.toml`` = the nominal preset, one native CSV per session of the ``rich`` protocol of
+    :mod:`odomgym.diagnose.generate` on ``floor``), each carrying effects drawn from ``prior``;
+    two robots (one if fewer than ten) get a planted odd E_b or E_s. Returns the truth (also
+    written to ``out/truth.json``), which the fleet command never reads."""
+    from odomgym.data.native import write_native
+    from odomgym.diagnose.generate import simulate_protocol
+    from odomgym.floor import FLOORS
+    from odomgym.io import atomic_write_text
+    from odomgym.robot import PRESETS
+
+    if robots < 2:
+        raise SpecError(f"an example fleet needs at least 2 robots, got {robots}", field="example")
+    if model not in PRESETS:
+        raise SpecError(f"unknown robot model {model!r}", field="model")
+    if floor not in FLOORS:
+        raise SpecError(f"unknown floor {floor!r}; floors: {', '.join(FLOORS)}", field="floor")
+    p = prior if prior is not None else ExamplePrior()
+    rng = np.random.default_rng(seed)
+    base = PRESETS[model].ideal()
+    planted_count = 2 if robots >= 10 else 1
+    planted = {int(i) for i in rng.choice(robots, size=planted_count, replace=False)}
+    truth: dict[str, Any] = {"model": model, "floor": floor, "seed": seed, "robots": {}}
+    width = len(str(robots))
+    for k in range(robots):
+        name = f"robot-{k + 1:0{width}d}"
+        e_b = 1.0 + p.e_b_sd * float(rng.standard_normal())
+        e_s = 1.0 + p.e_s_sd * float(rng.standard_normal())
+        odd = None
+        if k in planted:
+            sign = 1.0 if rng.random() < 0.5 else -1.0
+            if len(planted) == 1 or k == min(planted):
+                e_b, odd = 1.0 + sign * p.odd_sd * p.e_b_sd, "wheelbase.e_b"
+            else:
+                e_s, odd = 1.0 + sign * p.odd_sd * p.e_s_sd, "distance_scale.e_s"
+        effects: dict[str, dict[str, float]] = {}
+        if rng.random() < p.toe_p:
+            effects["wheel_toe"] = {"angle": float(rng.uniform(*p.toe_range))}
+        if rng.random() < p.backlash_p:
+            effects["backlash"] = {"angle": float(rng.uniform(*p.backlash_range))}
+        true = base.with_errors(1.0, e_b, e_s)
+        for effect, values in effects.items():
+            true = true.apply_effect(effect, values)
+        folder = out / name
+        folder.mkdir(parents=True, exist_ok=True)
+        base.save(folder / "robot.toml")
+        for s in range(sessions):
+            runs = simulate_protocol(true, "rich", rng, floor=FLOORS[floor])
+            write_native(folder / f"session-{s + 1}.csv", runs)
+        truth["robots"][name] = {"e_b": e_b, "e_s": e_s, "effects": effects, "planted": odd}
+    atomic_write_text(out / "truth.json", json.dumps(truth, indent=1) + "\n")
+    return truth
