@@ -57,6 +57,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.odometry.runs",
             "odomgym.odometry.umbmark_measures",
             "odomgym.odometry.optiodom_measures",
+            "odomgym.odometry.icr",
         ),
     ),
     "sim": (
@@ -204,6 +205,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         "Where a model and a robot disagree, and what is missing (docs/diagnose.md).",
         (
             "odomgym.diagnose.workflow",
+            "odomgym.diagnose.fleet",
             "odomgym.diagnose.screen",
             "odomgym.diagnose.config",
             "odomgym.diagnose.results",
