@@ -61,6 +61,7 @@ def register(commands: Commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write the example, or diagnose the fleet and write its report."""
+    from odomgym.baselines.trajectory import TrajectoryBaseline
     from odomgym.diagnose.fleet import (
         diagnose_fleet,
         find_fleet,
@@ -107,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
             robots,
             out,
             config=config,
-            baseline=not args.no_baseline,
+            baseline=None if args.no_baseline else TrajectoryBaseline,
             resume=args.resume,
             progress=progress,
             status=report.status,

@@ -168,16 +168,18 @@ def diagnose_fleet(
     out: Path,
     *,
     config: Any = None,
-    baseline: bool = True,
+    baseline: Callable[[], Any] | None = None,
     resume: bool = False,
     progress: Callable[[str], Callable[[str, float], None]] | None = None,
     status: Callable[[str], None] | None = None,
 ) -> list[Path]:
     """Diagnose every robot into ``out/robots/<name>/`` (and ``…/periods/<period>/`` for each
     of two or more periods); returns the report folders. With ``resume``, a robot whose
-    report is already there is not diagnosed again. ``progress(name)`` gives the callback of
-    one robot's progress bar; ``status`` receives one line per robot."""
-    from odomgym.baselines.trajectory import TrajectoryBaseline
+    report is already there is not diagnosed again. ``baseline()`` makes the trusted
+    calibration each diagnosis compares with (:class:`odomgym.diagnose.heldout.Baseline`;
+    ``odomgym fleet`` passes the trajectory calibration's), none if omitted;
+    ``progress(name)`` gives the callback of one robot's progress bar; ``status`` receives one
+    line per robot."""
     from odomgym.diagnose.report import write_outputs
     from odomgym.diagnose.workflow import diagnose
 
@@ -196,7 +198,7 @@ def diagnose_fleet(
                     status(f"{label}: done before, kept")
                 continue
             runs = read_robot_runs(robot, period or None)
-            trusted = TrajectoryBaseline() if baseline else None
+            trusted = baseline() if baseline is not None else None
             callback = progress(label) if progress is not None else None
             kept = _periods_of(folder) if not period else None
             diagnosis = diagnose(runs, robot.robot, config, baseline=trusted, progress=callback)
