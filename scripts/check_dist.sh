@@ -17,6 +17,9 @@
 #
 #   bash scripts/check_dist.sh          # the CI lane (scripts/test.sh runs it)
 #   bash scripts/check_dist.sh --full   # the README's commands exactly (scripts/release.sh)
+#   bash scripts/check_dist.sh --full --tree DIR   # another checkout, e.g. an old commit's
+#                                        # (scripts/release.sh --at; without a CITATION.cff
+#                                        # there, before 0.3.0, its check is skipped)
 #
 # The CI lane runs cheaper forms of the two long commands, because issue 46 allows the whole
 # check at most 60 s on top of the test command on 2 idle cores (measured 2026-11-28, warm pip
@@ -33,19 +36,29 @@
 # build/ and odomgym.egg-info/ in the tree, removed before and after: a stale build/lib would
 # slip deleted files into the tree's wheel). Exit 1 with one line naming the failed check.
 set -euo pipefail
-cd "$(dirname "$0")/.."
-REPO="$(pwd -P)"
+SCRIPTS="$(cd "$(dirname "$0")" && pwd -P)"
+TREE="$SCRIPTS/.."
 
 FULL=0
-for arg in "$@"; do
-    case "$arg" in
+while (($#)); do
+    case "$1" in
         --full) FULL=1 ;;
-        -h|--help) sed -n '2,36p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
-        *) echo "check_dist.sh: unknown option '$arg' (expected --full or nothing)" >&2; exit 2 ;;
+        --tree)
+            [[ $# -ge 2 && -f "${2}/pyproject.toml" ]] \
+                || { echo "check_dist.sh: --tree needs a folder with a pyproject.toml" >&2; exit 2; }
+            TREE="$2"; shift ;;
+        -h|--help) sed -n '2,40p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        *) echo "check_dist.sh: unknown option '$1' (expected --full, --tree DIR)" >&2; exit 2 ;;
     esac
+    shift
 done
+if [[ -n "${PYTHON:-}" && "$PYTHON" == */* ]]; then  # a relative path is the caller's
+    PYTHON="$(cd "$(dirname "$PYTHON")" && pwd)/$(basename "$PYTHON")"
+fi
+cd "$TREE"
+REPO="$(pwd -P)"
 if [[ -z "${PYTHON:-}" ]]; then
-    if [[ -x .venv-test/bin/python ]]; then PYTHON=.venv-test/bin/python; else PYTHON=python3; fi
+    PYTHON="$SCRIPTS/../.venv-test/bin/python"; [[ -x "$PYTHON" ]] || PYTHON=python3
 fi
 PYTHON="$(command -v "$PYTHON")" || { echo "check_dist.sh: no python '$PYTHON'" >&2; exit 2; }
 # Absolute (the checks run from another folder), without resolving the venv's symbolic link.
@@ -70,7 +83,11 @@ VERSION="$("$PYTHON" -c 'import tomllib; print(tomllib.load(open("pyproject.toml
 echo "== check_dist: odomgym $VERSION ($([[ $FULL == 1 ]] && echo full || echo CI lane)), work folder $WORK"
 
 echo "-- cffconvert --validate"
-"$PYBIN/cffconvert" --validate --infile CITATION.cff || fail "CITATION.cff is not valid CFF"
+if [[ ! -f CITATION.cff && "$REPO" != "$(cd "$SCRIPTS/.." && pwd -P)" ]]; then
+    echo "   no CITATION.cff in $REPO (a tree from before 0.3.0): skipped"
+else
+    "$PYBIN/cffconvert" --validate --infile CITATION.cff || fail "CITATION.cff is not valid CFF"
+fi
 
 echo "-- python -m build (sdist, then the wheel from the sdist; and a wheel from the tree)"
 clean_tree
@@ -118,7 +135,7 @@ INSTALL_SECONDS="$(since "$INSTALL_START")"
 
 # Every file the installed odomgym opens under the source tree is refused and logged.
 SITE="$("$WORK/venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
-cp scripts/dist_guard.py "$SITE/_odomgym_dist_guard.py"
+cp "$SCRIPTS/dist_guard.py" "$SITE/_odomgym_dist_guard.py"
 echo "import _odomgym_dist_guard" > "$SITE/_odomgym_dist_guard.pth"
 export ODOMGYM_SOURCE_TREE="$REPO" ODOMGYM_GUARD_LOG="$WORK/source-reads.log"
 : > "$ODOMGYM_GUARD_LOG"
