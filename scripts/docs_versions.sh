@@ -50,8 +50,20 @@ PYBIN="$(cd "$(dirname "$PYTHON")" && pwd)"
     || { echo "docs_versions.sh: $PYBIN/python lacks mike or mkdocs: pip install '.[release,docs]'" >&2; exit 2; }
 
 WORK="$(mktemp -d "${TMPDIR:-/tmp}/odomgym-docs.XXXXXX")"
+# A bare venv that sees $PYTHON's packages through a path line (which runs none of their .pth
+# files): an editable odomgym's import hook (a developer's venv) would otherwise map
+# odomgym.envs and odomgym.baselines to the working tree instead of the tagged tree's folders.
+# mike runs `mkdocs` from PATH: both commands go through this venv's python.
+SITE="$("$PYBIN/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+"$PYBIN/python" -m venv --without-pip "$WORK/venv"
+echo "$SITE" > "$("$WORK/venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/odomgym-docs-deps.pth"
+mkdir "$WORK/bin"
+printf '#!/bin/sh\nexec "%s" -m mkdocs "$@"\n' "$WORK/venv/bin/python" > "$WORK/bin/mkdocs"
+printf '#!/bin/sh\nexec "%s" -c "import sys; from mike.driver import main; sys.exit(main())" "$@"\n' \
+    "$WORK/venv/bin/python" > "$WORK/bin/mike"
+chmod +x "$WORK/bin/mkdocs" "$WORK/bin/mike"
 cleanup() {
-    for tree in "$WORK"/v*; do [[ -d "$tree" ]] && git worktree remove --force "$tree" 2> /dev/null; done
+    for tree in "$WORK"/v[0-9]*; do [[ -d "$tree" ]] && git worktree remove --force "$tree" 2> /dev/null; done
     rm -rf "$WORK"
 }
 trap cleanup EXIT
@@ -73,11 +85,11 @@ for v in "${VERSIONS[@]}"; do
     ALIASES=()
     [[ "$v" == "$LAST" ]] && ALIASES=(latest)
     echo "== $v: mike deploy from tag v$v ($(git rev-parse --short "v$v^{commit}")) into $BRANCH"
-    (cd "$TREE" && PATH="$PYBIN:$PATH" PYTHONPATH="$TREE" NO_MKDOCS_2_WARNING=1 "$PYBIN/mike" deploy \
+    (cd "$TREE" && PATH="$WORK/bin:$PATH" PYTHONPATH="$TREE" NO_MKDOCS_2_WARNING=1 mike deploy \
         --config-file "$CONFIG" --branch "$BRANCH" --update-aliases \
         --message "docs $v from tag v$v" "$v" "${ALIASES[@]}")
 done
-"$PYBIN/mike" set-default --branch "$BRANCH" --message "docs: default latest" latest
+"$WORK/bin/mike" set-default --branch "$BRANCH" --message "docs: default latest" latest
 echo "== $BRANCH holds:"
-"$PYBIN/mike" list --branch "$BRANCH"
+"$WORK/bin/mike" list --branch "$BRANCH"
 echo "   (local only; view with: $PYBIN/mike serve --branch $BRANCH)"
