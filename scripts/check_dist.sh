@@ -22,14 +22,16 @@
 #                                        # there, before 0.3.0, its check is skipped)
 #
 # The CI lane runs cheaper forms of the two long commands, because issue 46 allows the whole
-# check at most 60 s on top of the test command on 2 idle cores (measured 2026-11-28, warm pip
-# cache, cold numba cache in the fresh venv): the main job with --robots 1 instead of 10 (one
-# robot still runs every calibrator on every floor through every output file; 10 robots took
-# 37 s, 1 robot 14 s, most of it compiling) and diagnose with --max-rounds 1 (the data read from
-# the wheel, the replay, one round, the held-out check and every figure; the full diagnosis
-# took 49 s); pip installs with --no-compile (9 s instead of 24 s: Python compiles what it
-# imports on first use). --full runs the README's commands exactly and installs as a user
-# would. The full test suite runs both commands in full from the tree (tests/test_readme.py).
+# check at most 60 s on top of the test command on 2 idle cores. Measured 2026-11-28 (warm pip
+# cache, cold numba cache in the fresh venv): the main job with 10 robots 37 s, with 1 robot
+# 14-19 s, most of it compiling (one robot still runs every calibrator on every floor through
+# every output file); the full diagnose 49 s, with --max-rounds 1 30-38 s (the data read from the
+# wheel, the replay, one round, the held-out check and every figure); pip with --no-compile
+# 6-9 s instead of 24 s (Python compiles what it imports on first use). The CI lane in all:
+# 90 s wall, 93 s CPU, alone on the 2 cores. scripts/test.sh runs it beside its gates and
+# pytest, so it adds at most half its CPU time (47 s) to the test command, less while the gates
+# leave a core idle. --full runs the README's commands exactly and installs as a user would.
+# tests/test_readme.py runs the README's commands from the tree (the main job with --robots 1).
 #
 # Needs build, twine and cffconvert (the [release] extra) in $PYTHON's environment: by default
 # the test venv's python, else python3. Writes only in a temporary folder (and setuptools'

@@ -24,9 +24,10 @@
 # installed in a fresh venv outside the tree. It starts in the background before the gates
 # (ruff, mypy and mkdocs use one core; it takes the other) and goes on beside pytest; its log is
 # printed after pytest, whose summary line is then repeated as the closing line. Issue 46
-# allows it 60 s on top of the test command: on 2 cores it ran 97 s alone (2026-11-28); waiting
-# for it before pytest cost 41 s more than the gates, beside pytest it costs about half of what
-# is left of its CPU time when the gates end.
+# allows it 60 s on top of the test command: alone on 2 cores it took 90 s (93 s of CPU; the
+# gates 54 s), so beside the gates and pytest it adds at most half its CPU time, 47 s, and less
+# while the gates leave a core idle (2026-11-28). Waiting for it before pytest instead cost
+# 41-73 s after the gates on this shared machine.
 #
 # torch is pinned first because this machine ships a CPU build of 2.13.0 locally; without the
 # pin pip may choose a multi-GB CUDA build to satisfy the `rl` extra's loose range.
