@@ -101,8 +101,8 @@ def test_odd_robots_are_those_beyond_three_robust_standard_deviations(tmp_path: 
 def test_what_moved_between_a_robots_periods(tmp_path: Path) -> None:
     folder = tmp_path / "robots" / "r0"
     _write_report(folder, {"wheelbase": {"e_b": (1.01, 1e-3)}})
-    _write_report(folder / "periods" / "2026-10", {"wheelbase": {"e_b": (1.000, 1e-3)}})
-    _write_report(folder / "periods" / "2026-11", {"wheelbase": {"e_b": (1.020, 1e-3)}})
+    _write_report(tmp_path / "periods" / "r0" / "2026-10", {"wheelbase": {"e_b": (1.000, 1e-3)}})
+    _write_report(tmp_path / "periods" / "r0" / "2026-11", {"wheelbase": {"e_b": (1.020, 1e-3)}})
     logs = (("2026-10", tmp_path / "a.csv"), ("2026-11", tmp_path / "b.csv"))
     summary = summarise_fleet(tmp_path, [FleetRobot("r0", tmp_path, PRESETS["labmate"], logs)])
     ((robot, effect, name, first, last, change, z),) = summary.moved

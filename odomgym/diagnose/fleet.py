@@ -145,20 +145,18 @@ def find_fleet(root: str | Path) -> list[FleetRobot]:
     return robots
 
 
-def read_robot_runs(robot: FleetRobot, period: str | None = None) -> list[Run]:
-    """Every run of ``robot`` (of one ``period`` if given), each marked with its session (the
-    period and the log's name) and period in ``run.meta``."""
+def read_robot_runs(robot: FleetRobot) -> list[Run]:
+    """Every run of ``robot``, each marked with its session (the period and the log's name)
+    and period in ``run.meta``."""
     from odomgym.data.logs import read_log
 
     runs: list[Run] = []
-    for log_period, path in robot.logs:
-        if period is not None and log_period != period:
-            continue
+    for period, path in robot.logs:
         log_runs, _ = read_log(path, robot=robot.robot)
-        session = f"{log_period}/{path.stem}" if log_period else path.stem
+        session = f"{period}/{path.stem}" if period else path.stem
         for run in log_runs:
             run.meta["session"] = str(run.meta.get("session") or session)
-            run.meta["period"] = log_period
+            run.meta["period"] = period
         runs.extend(log_runs)
     return runs
 
@@ -173,11 +171,11 @@ def diagnose_fleet(
     progress: Callable[[str], Callable[[str, float], None]] | None = None,
     status: Callable[[str], None] | None = None,
 ) -> list[Path]:
-    """Diagnose every robot into ``out/robots/<name>/`` (and ``…/periods/<period>/`` for each
-    of two or more periods); returns the report folders. With ``resume``, a robot whose
-    report is already there is not diagnosed again. ``baseline()`` makes the trusted
-    calibration each diagnosis compares with (:class:`odomgym.diagnose.heldout.Baseline`;
-    ``odomgym fleet`` passes the trajectory calibration's), none if omitted;
+    """Diagnose every robot into ``out/robots/<name>/`` and, for a robot of two or more
+    periods, each period into ``out/periods/<name>/<period>/``; returns the report folders.
+    With ``resume``, a report already there is not made again. ``baseline()`` makes the
+    trusted calibration each diagnosis compares with (:class:`odomgym.diagnose.heldout.
+    Baseline`; ``odomgym fleet`` passes the trajectory calibration's), none if omitted;
     ``progress(name)`` gives the callback of one robot's progress bar; ``status`` receives one
     line per robot."""
     from odomgym.diagnose.report import write_outputs
@@ -188,44 +186,26 @@ def diagnose_fleet(
         jobs = [("", robot.name, out / "robots" / robot.name)]
         if len(robot.periods) > 1:
             jobs += [
-                (period, f"{robot.name} {period}", out / "robots" / robot.name / "periods" / period)
+                (period, f"{robot.name} {period}", out / "periods" / robot.name / period)
                 for period in robot.periods
             ]
+        runs: list[Run] | None = None  # read once per robot, when a report is to be made
         for period, label, folder in jobs:
             folders.append(folder)
             if resume and (folder / "report.json").exists():
                 if status is not None:
                     status(f"{label}: done before, kept")
                 continue
-            runs = read_robot_runs(robot, period or None)
+            if runs is None:
+                runs = read_robot_runs(robot)
+            chosen = [r for r in runs if r.meta["period"] == period] if period else runs
             trusted = baseline() if baseline is not None else None
             callback = progress(label) if progress is not None else None
-            kept = _periods_of(folder) if not period else None
-            diagnosis = diagnose(runs, robot.robot, config, baseline=trusted, progress=callback)
+            diagnosis = diagnose(chosen, robot.robot, config, baseline=trusted, progress=callback)
             write_outputs(diagnosis, folder, str(robot.folder))
-            if kept is not None:
-                kept()
             if status is not None:
                 status(f"{label}: {diagnosis.verdict}")
     return folders
-
-
-def _periods_of(folder: Path) -> Callable[[], None] | None:
-    """Keep a robot folder's ``periods/`` across the whole-folder replace of its report."""
-    periods = folder / "periods"
-    if not periods.is_dir():
-        return None
-    keep = folder.parent / f".{folder.name}.periods"
-    if keep.exists():
-        import shutil
-
-        shutil.rmtree(keep)
-    periods.rename(keep)
-
-    def restore() -> None:
-        keep.rename(folder / "periods")
-
-    return restore
 
 
 # ---------------------------------------------------------------------------- the summary
@@ -311,8 +291,8 @@ def summarise_fleet(out: Path, robots: Sequence[FleetRobot]) -> FleetSummary:
                 summary.values.setdefault(key, {})[robot.name] = estimate
         if len(robot.periods) > 1:
             first, last = robot.periods[0], robot.periods[-1]
-            before = _parameters(_report(out / "robots" / robot.name / "periods" / first))
-            after = _parameters(_report(out / "robots" / robot.name / "periods" / last))
+            before = _parameters(_report(out / "periods" / robot.name / first))
+            after = _parameters(_report(out / "periods" / robot.name / last))
             for key in sorted(set(before) & set(after)):
                 (a, sa), (b, sb) = before[key], after[key]
                 spread = math.hypot(sa, sb)

@@ -208,12 +208,6 @@ class EndPoseEstimator:
         )
         return shifted
 
-    @property
-    def prior_errors(self) -> FloatArray:
-        """The prior mean's (E_d, E_b, E_s) [-]: ones for the nominal robot."""
-        cal = self._calibration_at(self._x0)
-        return np.array([cal.e_d, cal.wheelbase_scale, cal.distance_scale])
-
     def _roughness_from(self, residuals: list[FloatArray], current: float) -> float:
         """The roughness factor ρ that explains the end-pose residuals (one per run, in the
         order of the runs) beyond the sensor's accuracy: the floor-dominated components'
