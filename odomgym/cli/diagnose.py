@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 from odomgym.cli._common import (
     Progress,
     Reporter,
+    add_backend_arguments,
+    check_backend,
     check_output,
     count,
     fraction,
@@ -110,6 +112,7 @@ def register(commands: Commands) -> None:
         "runs) the held-out comparison reports beside the diagnosed model",
     )
     parser.add_argument("--jobs", type=processes, help="worker processes (default: all cores)")
+    add_backend_arguments(parser, "candidate fits")
     parser.add_argument(
         "--resume",
         action="store_true",
@@ -143,8 +146,10 @@ def run(args: argparse.Namespace) -> int:
     from odomgym.diagnose.report import format_markdown, report_json, write_outputs
     from odomgym.diagnose.screen import usable_runs
     from odomgym.diagnose.workflow import DiagnoseConfig, FitJournal, diagnose
+    from odomgym.distributed import on_ray
 
     report = Reporter.of(args)
+    check_backend(args)
     data = resolve_data(args.data, field="DATA")
     robot = load_robot(args.robot) if args.robot else None
     config = DiagnoseConfig(
@@ -192,7 +197,10 @@ def run(args: argparse.Namespace) -> int:
     # Every finished candidate fit is kept beside the output (which is replaced whole), so an
     # interrupted diagnosis resumes with --resume; it is removed once the outputs are written.
     journal = FitJournal(out.parent / f"{out.name}.journal", resume=args.resume)
-    with Progress(report, "diagnose", leave=False) as bar:
+    with (
+        on_ray(args.backend, args.ray_address, config.jobs),
+        Progress(report, "diagnose", leave=False) as bar,
+    ):
         diagnosis = diagnose(
             runs, model, config, baseline=baseline, progress=bar.stage, journal=journal
         )
