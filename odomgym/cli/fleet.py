@@ -10,7 +10,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from odomgym.cli._common import Progress, Reporter, check_output, count, processes, seed
+from odomgym.cli._common import (
+    Progress,
+    Reporter,
+    add_backend_arguments,
+    check_backend,
+    check_output,
+    count,
+    processes,
+    seed,
+)
 
 if TYPE_CHECKING:
     from odomgym.cli._common import Commands
@@ -47,6 +56,7 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "--jobs", type=processes, help="worker processes per diagnosis (default: all cores)"
     )
+    add_backend_arguments(parser, "diagnoses (one per robot and period)")
     parser.add_argument(
         "--no-baseline",
         action="store_true",
@@ -85,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
         if report.json:
             report.document(truth)
         return 0
+    check_backend(args)
     robots = find_fleet(root)
     out = Path(args.out) if args.out else Path(f"{root.name or 'fleet'}-fleet")
     check_output(out, option="--out", folder=True)
@@ -103,19 +114,29 @@ def run(args: argparse.Namespace) -> int:
 
         return stage
 
-    try:
-        diagnose_fleet(
-            robots,
-            out,
-            config=config,
-            baseline=None if args.no_baseline else TrajectoryBaseline,
-            resume=args.resume,
-            progress=progress,
-            status=report.status,
-        )
-    finally:
-        for bar in bars:
-            bar.__exit__(None, None, None)
+    common = {
+        "config": config,
+        "baseline": None if args.no_baseline else TrajectoryBaseline,
+        "resume": args.resume,
+        "status": report.status,
+    }
+    if args.backend == "ray":
+        # One Ray task per diagnosis: a bar over the fleet's diagnoses, a line as each ends.
+        with Progress(report, "fleet on Ray: diagnoses done, %") as overall:
+            diagnose_fleet(
+                robots,
+                out,
+                **common,
+                backend="ray",
+                address=args.ray_address,
+                done=overall.done_of,
+            )
+    else:
+        try:
+            diagnose_fleet(robots, out, **common, progress=progress)
+        finally:
+            for bar in bars:
+                bar.__exit__(None, None, None)
     summary = summarise_fleet(out, robots)
     text = format_fleet(summary, str(root))
     document = json.dumps(summary.to_json(), indent=1)

@@ -5,14 +5,18 @@ which robot is the odd one out, and what moved since the last period of logs. Th
 
 * :func:`find_fleet` reads the layout ``ROBOTS/<robot>/robot.toml`` beside the robot's logs
   (any format :func:`odomgym.data.logs.read_log` reads: native CSV files, OptiOdom session
-  folders, ROS 2 bags). Logs directly in the robot's folder belong to no period; logs in a
-  sub-folder belong to the period named by the sub-folder (``2026-10/``, ``after-repair/``).
+  folders, ROS 2 bags). Periods: when every log of a robot carries its date (OptiOdom
+  sessions are named by their start, :func:`odomgym.data.optiodom.session_time`), a period is
+  a calendar month (``2020-06``) and sub-folders only organise the logs (OptiOdom's
+  ``square/``, ``circular/``); otherwise logs directly in the robot's folder belong to no
+  period and logs in a sub-folder to the period named by it (``2026-10/``, ``after-repair/``).
   Every log is one session (its file or folder name), so the diagnosis holds out whole
   sessions when there are two or more.
 * :func:`diagnose_fleet` diagnoses each robot on all its sessions (and, with two or more
   periods, each period on its own) with :func:`odomgym.diagnose.workflow.diagnose`; each
   robot's report folder is that diagnosis' output, written atomically, so an interrupted
-  fleet resumes from the robots already done.
+  fleet resumes from the robots already done. With ``backend="ray"`` every diagnosis is one
+  Ray task (:mod:`odomgym.distributed`); the reports are byte-identical to the local ones.
 * :func:`summarise_fleet` reads the reports back and compares the robots:
   the effects and terms named and in how many robots; every parameter's values with their
   standard errors; the robots more than :data:`ODD_Z` robust standard deviations from the
@@ -100,6 +104,17 @@ def _is_log(path: Path) -> bool:
     return any(path.glob("*_metadata.csv")) or (path / "metadata.yaml").exists()
 
 
+def _log_month(path: Path) -> str | None:
+    """The calendar month (``YYYY-MM``) a log was recorded in, where its format says so (an
+    OptiOdom session folder named by its start), else None."""
+    from odomgym.data.optiodom import session_time
+
+    if not (path.is_dir() and (path / f"{path.name}_metadata.csv").exists()):
+        return None
+    when = session_time(path.name)
+    return f"{when:%Y-%m}" if when is not None else None
+
+
 def find_fleet(root: str | Path) -> list[FleetRobot]:
     """The robots under ``root`` (one sub-folder each, sorted by name).
 
@@ -128,6 +143,9 @@ def find_fleet(root: str | Path) -> list[FleetRobot]:
                 logs.append(("", child))
             elif child.is_dir() and not child.name.startswith("."):
                 logs += [(child.name, p) for p in sorted(child.iterdir()) if _is_log(p)]
+        months = [_log_month(path) for _, path in logs]
+        if logs and all(months):  # the logs carry their dates: periods are months
+            logs = [(str(month), path) for month, (_, path) in zip(months, logs, strict=True)]
         if not logs:
             raise SpecError(
                 "no log in this robot folder (native .csv files, OptiOdom session folders or "
@@ -161,6 +179,73 @@ def read_robot_runs(robot: FleetRobot) -> list[Run]:
     return runs
 
 
+def _units(robots: Sequence[FleetRobot], out: Path) -> list[tuple[FleetRobot, str, str, Path]]:
+    """The diagnoses a fleet needs, as (robot, period, label, report folder): each robot on all
+    its sessions, and each period of a robot with two or more on its own (period ``""``: all)."""
+    units = []
+    for robot in robots:
+        units.append((robot, "", robot.name, out / "robots" / robot.name))
+        if len(robot.periods) > 1:
+            units += [
+                (robot, period, f"{robot.name} {period}", out / "periods" / robot.name / period)
+                for period in robot.periods
+            ]
+    return units
+
+
+def _diagnose_files(
+    runs: list[Run],
+    robot: RobotSpec,
+    config: Any,
+    baseline: Callable[[], Any] | None,
+    source: str,
+) -> tuple[str, dict[str, bytes]]:
+    """One diagnosis as a Ray task: its verdict and its report folder's files (name → bytes),
+    written in a temporary folder of the worker and carried back, so the driver writes every
+    file and the cluster needs no shared file system. Candidate fits run one after the other
+    in the task (``config.jobs`` = 1: a Ray task holds one CPU); the results do not depend on
+    it (:func:`odomgym.diagnose.fit.run_fit_jobs`)."""
+    import dataclasses
+    import tempfile
+
+    from odomgym.diagnose.report import write_outputs
+    from odomgym.diagnose.workflow import diagnose
+
+    one = dataclasses.replace(config, jobs=1) if config is not None else None
+    trusted = baseline() if baseline is not None else None
+    diagnosis = diagnose(runs, robot, one, baseline=trusted)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "report"
+        written = write_outputs(diagnosis, folder, source)
+        files = {path.name: path.read_bytes() for path in written}
+    return diagnosis.verdict, files
+
+
+def _write_folder(folder: Path, files: dict[str, bytes]) -> None:
+    """Replace ``folder`` by one holding ``files`` (name → bytes), atomically: written into a
+    temporary sibling, then renamed over it."""
+    import os
+    import shutil
+    import tempfile
+
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    try:
+        for name, data in files.items():
+            (tmp / name).write_bytes(data)
+        os.chmod(tmp, 0o755)
+        if folder.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.old.", dir=folder.parent))
+            os.replace(folder, old / "x")
+            os.replace(tmp, folder)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
 def diagnose_fleet(
     robots: Sequence[FleetRobot],
     out: Path,
@@ -170,41 +255,83 @@ def diagnose_fleet(
     resume: bool = False,
     progress: Callable[[str], Callable[[str, float], None]] | None = None,
     status: Callable[[str], None] | None = None,
+    backend: str = "local",
+    address: str | None = None,
+    done: Callable[[int, int], None] | None = None,
 ) -> list[Path]:
     """Diagnose every robot into ``out/robots/<name>/`` and, for a robot of two or more
     periods, each period into ``out/periods/<name>/<period>/``; returns the report folders.
     With ``resume``, a report already there is not made again. ``baseline()`` makes the
     trusted calibration each diagnosis compares with (:class:`odomgym.diagnose.heldout.
     Baseline`; ``odomgym fleet`` passes the trajectory calibration's), none if omitted;
-    ``progress(name)`` gives the callback of one robot's progress bar; ``status`` receives one
-    line per robot."""
+    ``status`` receives one line per diagnosis as it ends, ``done(finished, total)`` the count.
+
+    ``backend``: ``local`` diagnoses one robot after the other here, each with ``config.jobs``
+    worker processes for its candidate fits, and ``progress(label)`` gives the callback of
+    each one's progress bar; ``ray`` makes every diagnosis one Ray task on the cluster at
+    ``address`` (or ``RAY_ADDRESS``; else a local Ray of ``config.jobs`` CPUs), whose report
+    files come back to be written here (:mod:`odomgym.distributed`). The reports are
+    byte-identical either way (tested)."""
+    from odomgym.distributed import Backend, ray_session, run_ray_tasks
+
+    chosen_backend = Backend(backend)
+    chosen_backend.check_available()
+    units = _units(robots, out)
+    folders = [folder for *_, folder in units]
+    todo = []
+    for unit in units:
+        if resume and (unit[3] / "report.json").exists():
+            if status is not None:
+                status(f"{unit[2]}: done before, kept")
+        else:
+            todo.append(unit)
+    finished = len(units) - len(todo)
+    if done is not None:
+        done(finished, len(units))
+    cache: dict[str, list[Run]] = {}  # a robot's logs, read once for all its diagnoses
+
+    def runs_of(robot: FleetRobot, period: str) -> list[Run]:
+        if robot.name not in cache:
+            cache.clear()  # the robots come in order: keep one robot's runs at a time
+            cache[robot.name] = read_robot_runs(robot)
+        runs = cache[robot.name]
+        return [r for r in runs if r.meta["period"] == period] if period else runs
+
+    def record(key: int, result: tuple[str, dict[str, bytes]]) -> None:
+        nonlocal finished
+        verdict, files = result
+        _write_folder(todo[key][3], files)
+        finished += 1
+        if status is not None:
+            status(f"{todo[key][2]}: {verdict}")
+        if done is not None:
+            done(finished, len(units))
+
+    if chosen_backend is Backend.RAY:
+        cpus = getattr(config, "jobs", 1) or 1
+        with ray_session(address, cpus) as started:
+            tasks = (
+                (k, (runs_of(robot, period), robot.robot, config, baseline, str(robot.folder)))
+                for k, (robot, period, _, _) in enumerate(todo)
+            )
+            run_ray_tasks(_diagnose_files, tasks, record, started=started)
+        return folders
+
     from odomgym.diagnose.report import write_outputs
     from odomgym.diagnose.workflow import diagnose
 
-    folders = []
-    for robot in robots:
-        jobs = [("", robot.name, out / "robots" / robot.name)]
-        if len(robot.periods) > 1:
-            jobs += [
-                (period, f"{robot.name} {period}", out / "periods" / robot.name / period)
-                for period in robot.periods
-            ]
-        runs: list[Run] | None = None  # read once per robot, when a report is to be made
-        for period, label, folder in jobs:
-            folders.append(folder)
-            if resume and (folder / "report.json").exists():
-                if status is not None:
-                    status(f"{label}: done before, kept")
-                continue
-            if runs is None:
-                runs = read_robot_runs(robot)
-            chosen = [r for r in runs if r.meta["period"] == period] if period else runs
-            trusted = baseline() if baseline is not None else None
-            callback = progress(label) if progress is not None else None
-            diagnosis = diagnose(chosen, robot.robot, config, baseline=trusted, progress=callback)
-            write_outputs(diagnosis, folder, str(robot.folder))
-            if status is not None:
-                status(f"{label}: {diagnosis.verdict}")
+    for robot, period, label, folder in todo:
+        trusted = baseline() if baseline is not None else None
+        callback = progress(label) if progress is not None else None
+        diagnosis = diagnose(
+            runs_of(robot, period), robot.robot, config, baseline=trusted, progress=callback
+        )
+        write_outputs(diagnosis, folder, str(robot.folder))
+        finished += 1
+        if status is not None:
+            status(f"{label}: {diagnosis.verdict}")
+        if done is not None:
+            done(finished, len(units))
     return folders
 
 
