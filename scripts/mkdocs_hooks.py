@@ -206,6 +206,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         (
             "odomgym.diagnose.workflow",
             "odomgym.diagnose.fleet",
+            "odomgym.diagnose.loso",
             "odomgym.diagnose.screen",
             "odomgym.diagnose.config",
             "odomgym.diagnose.results",
