@@ -125,10 +125,16 @@ def ray_session(address: str | None = None, cpus: int = 1) -> Iterator[bool]:
         else:
             ray.init(address=target, log_to_driver=False)
     except (ConnectionError, RuntimeError, ValueError) as exc:
-        where = target or "a local Ray"
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        hint = (
+            " (is the cluster up? A cluster with token authentication also needs "
+            "RAY_AUTH_MODE=token and its token in ~/.ray/auth_token or RAY_AUTH_TOKEN)"
+            if target
+            else ""
+        )
         raise SpecError(
-            f"cannot start or join Ray at {where}: {str(exc).splitlines()[0] if str(exc) else exc}",
-            field="ray-address",
+            f"cannot {'join Ray at ' + target if target else 'start a local Ray'}: {first}{hint}",
+            field="ray-address" if target else "backend",
         ) from None
     finally:
         if callable(previous) and signal.getsignal(signal.SIGTERM) is not previous:

@@ -35,13 +35,15 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "core": (
         "Core",
         "The package's public names and the foundation below every layer folder: robot and "
-        "floor specs, the compiled kernels, files, errors, interruption and the worker pool "
+        "floor specs, the compiled kernels, files, errors, interruption, the worker pool and "
+        "the Ray backend "
         "(docs/architecture.md shows how the layers fit).",
         (
             "odomgym",
             "odomgym.robot",
             "odomgym.floor",
             "odomgym.workers",
+            "odomgym.distributed",
             "odomgym.io",
             "odomgym.errors",
             "odomgym.interrupt",
