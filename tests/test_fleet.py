@@ -134,3 +134,35 @@ def test_the_command_diagnoses_an_example_fleet_and_resumes(
     assert main(["fleet", str(fleet), "--out", str(out), "--resume", "--no-baseline"]) == 0
     assert "robot-1: done before, kept" in capsys.readouterr().out  # status: stdout without --json
     assert (out / "fleet.md").read_text() == before
+
+
+@pytest.mark.slow
+def test_loso_gives_each_robot_its_folds_and_the_report_their_stability(tmp_path: Path) -> None:
+    """``--loso``: a robot of two sessions gets one fold file per session in ``loso/<robot>/``
+    and a row of the stability table; a second call keeps the fold files (resume). Two
+    candidate effects and no discovery keep it short."""
+    from odomgym.diagnose.config import DiagnoseConfig
+    from odomgym.diagnose.fleet import diagnose_fleet
+
+    fleet = tmp_path / "fleet"
+    assert main(["fleet", "--example", "2", str(fleet), "--sessions", "2"]) == 0
+    robots = find_fleet(fleet)
+    out = tmp_path / "out"
+    config = DiagnoseConfig(candidates=("wheelbase", "distance_scale"), discover=False, jobs=1)
+    lines: list[str] = []
+    diagnose_fleet(robots, out, config=config, loso=True, status=lines.append)
+    for robot in ("robot-1", "robot-2"):
+        assert sorted(p.name for p in (out / "loso" / robot).iterdir()) == [
+            "fold-session-1.json",
+            "fold-session-2.json",
+        ]
+    summary = summarise_fleet(out, robots)
+    assert sorted(summary.stability) == ["robot-1", "robot-2"]
+    for checks in summary.stability.values():
+        assert checks["folds"] == 2 and set(checks["intervals_overlap"]) == {"e_d", "e_b", "e_s"}
+    assert "seconds" not in json.dumps(summary.to_json())  # the same wherever the folds ran
+    text = format_fleet(summary, "fleet")
+    assert "## Stability: leave one session out" in text and "| robot-2 | 2 |" in text
+    stamps = {p: p.stat().st_mtime_ns for p in (out / "loso").rglob("fold-*.json")}
+    diagnose_fleet(robots, out, config=config, loso=True, resume=True, status=lines.append)
+    assert {p: p.stat().st_mtime_ns for p in (out / "loso").rglob("fold-*.json")} == stamps

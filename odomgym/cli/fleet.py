@@ -65,6 +65,13 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "--resume", action="store_true", help="keep the robots already diagnosed in --out"
     )
+    parser.add_argument(
+        "--loso",
+        action="store_true",
+        help="also diagnose every robot of two or more sessions once per session left out "
+        "(OUT/loso/<robot>/, kept across interruptions) and report the stability of its "
+        "effects and E_d, E_b, E_s across the folds",
+    )
     parser.add_argument("--json", action="store_true", help="print fleet.json instead of fleet.md")
     parser.set_defaults(handler=run)
 
@@ -119,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
         "baseline": None if args.no_baseline else TrajectoryBaseline,
         "resume": args.resume,
         "status": report.status,
+        "loso": args.loso,
     }
     if args.backend == "ray":
         # One Ray task per diagnosis: a bar over the fleet's diagnoses, a line as each ends.

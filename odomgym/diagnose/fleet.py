@@ -258,6 +258,7 @@ def diagnose_fleet(
     backend: str = "local",
     address: str | None = None,
     done: Callable[[int, int], None] | None = None,
+    loso: bool = False,
 ) -> list[Path]:
     """Diagnose every robot into ``out/robots/<name>/`` and, for a robot of two or more
     periods, each period into ``out/periods/<name>/<period>/``; returns the report folders.
@@ -271,11 +272,41 @@ def diagnose_fleet(
     each one's progress bar; ``ray`` makes every diagnosis one Ray task on the cluster at
     ``address`` (or ``RAY_ADDRESS``; else a local Ray of ``config.jobs`` CPUs), whose report
     files come back to be written here (:mod:`odomgym.distributed`). The reports are
-    byte-identical either way (tested)."""
-    from odomgym.distributed import Backend, ray_session, run_ray_tasks
+    byte-identical either way (tested).
+
+    ``loso``: then, for every robot of two or more sessions, its leave-one-session-out folds
+    (:func:`odomgym.diagnose.loso.run_loso`) into ``out/loso/<name>/``, one fold file per
+    session, kept across interruptions (a fold file there is not made again) and run on the
+    same backend; :func:`summarise_fleet` reports their stability."""
+    from odomgym.distributed import Backend, ray_session
 
     chosen_backend = Backend(backend)
     chosen_backend.check_available()
+    if chosen_backend is Backend.RAY:  # one Ray for the diagnoses and the folds
+        with ray_session(address, getattr(config, "jobs", 1) or 1):
+            return _diagnose_fleet(
+                robots, out, config, baseline, resume, progress, status, True, done, loso
+            )
+    return _diagnose_fleet(
+        robots, out, config, baseline, resume, progress, status, False, done, loso
+    )
+
+
+def _diagnose_fleet(
+    robots: Sequence[FleetRobot],
+    out: Path,
+    config: Any,
+    baseline: Callable[[], Any] | None,
+    resume: bool,
+    progress: Callable[[str], Callable[[str, float], None]] | None,
+    status: Callable[[str], None] | None,
+    on_ray: bool,
+    done: Callable[[int, int], None] | None,
+    loso: bool,
+) -> list[Path]:
+    """:func:`diagnose_fleet` once its backend is settled (``on_ray``: inside a Ray session)."""
+    from odomgym.distributed import ray_started, run_ray_tasks
+
     units = _units(robots, out)
     folders = [folder for *_, folder in units]
     todo = []
@@ -307,32 +338,66 @@ def diagnose_fleet(
         if done is not None:
             done(finished, len(units))
 
-    if chosen_backend is Backend.RAY:
-        cpus = getattr(config, "jobs", 1) or 1
-        with ray_session(address, cpus) as started:
-            tasks = (
-                (k, (runs_of(robot, period), robot.robot, config, baseline, str(robot.folder)))
-                for k, (robot, period, _, _) in enumerate(todo)
-            )
-            run_ray_tasks(_diagnose_files, tasks, record, started=started)
-        return folders
-
-    from odomgym.diagnose.report import write_outputs
-    from odomgym.diagnose.workflow import diagnose
-
-    for robot, period, label, folder in todo:
-        trusted = baseline() if baseline is not None else None
-        callback = progress(label) if progress is not None else None
-        diagnosis = diagnose(
-            runs_of(robot, period), robot.robot, config, baseline=trusted, progress=callback
+    if on_ray:
+        tasks = (
+            (k, (runs_of(robot, period), robot.robot, config, baseline, str(robot.folder)))
+            for k, (robot, period, _, _) in enumerate(todo)
         )
-        write_outputs(diagnosis, folder, str(robot.folder))
-        finished += 1
-        if status is not None:
-            status(f"{label}: {diagnosis.verdict}")
-        if done is not None:
-            done(finished, len(units))
+        run_ray_tasks(_diagnose_files, tasks, record, started=bool(ray_started()))
+    else:
+        from odomgym.diagnose.report import write_outputs
+        from odomgym.diagnose.workflow import diagnose
+
+        for robot, period, label, folder in todo:
+            trusted = baseline() if baseline is not None else None
+            callback = progress(label) if progress is not None else None
+            diagnosis = diagnose(
+                runs_of(robot, period), robot.robot, config, baseline=trusted, progress=callback
+            )
+            write_outputs(diagnosis, folder, str(robot.folder))
+            finished += 1
+            if status is not None:
+                status(f"{label}: {diagnosis.verdict}")
+            if done is not None:
+                done(finished, len(units))
+    if loso:
+        _fleet_loso(robots, out, config, baseline, "ray" if on_ray else "local", status, runs_of)
     return folders
+
+
+def _fleet_loso(
+    robots: Sequence[FleetRobot],
+    out: Path,
+    config: Any,
+    baseline: Callable[[], Any] | None,
+    backend: str,
+    status: Callable[[str], None] | None,
+    runs_of: Callable[[FleetRobot, str], list[Run]],
+) -> None:
+    """Every robot's leave-one-session-out folds into ``out/loso/<name>/`` (those of two or
+    more sessions; the fold files already there are kept)."""
+    from odomgym.diagnose.loso import run_loso
+    from odomgym.diagnose.nuisances import sessions_of
+
+    for robot in robots:
+        runs = runs_of(robot, "")
+        if len(set(sessions_of(runs))) < 2:
+            if status is not None:
+                status(f"{robot.name}: one session, no leave-one-session-out folds")
+            continue
+        folds, summary = run_loso(
+            runs,
+            robot.robot,
+            out / "loso" / robot.name,
+            config=config,
+            baseline=baseline,
+            backend=backend,
+        )
+        if status is not None:
+            status(
+                f"{robot.name}: {len(folds)} leave-one-session-out folds, the same systematic "
+                f"effects in {summary['folds_with_modal_set']}"
+            )
 
 
 # ---------------------------------------------------------------------------- the summary
@@ -342,6 +407,11 @@ class FleetSummary:
 
     Attributes:
         robots: the robots' names, in order.
+        stability: robot → its leave-one-session-out folds' checks (``fleet --loso``):
+            ``folds``, ``folds_with_modal_set`` ("k/n"), ``modal_effect_set``,
+            ``intervals_overlap`` (E_d, E_b, E_s: do the folds' 95 % intervals share a part)
+            and ``better_than_as_given`` ("k/n"); timing left out, so the summary is the same
+            wherever the folds ran.
         verdicts: each robot's verdict.
         named: effect → the robots that name it.
         terms: discovered term → the robots that keep it.
@@ -361,6 +431,7 @@ class FleetSummary:
     fleet: dict[tuple[str, str], dict[str, float]] = field(default_factory=dict)
     odd: list[tuple[str, str, str, float, float]] = field(default_factory=list)
     moved: list[tuple[str, str, str, str, str, float, float]] = field(default_factory=list)
+    stability: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (the keys of tuples joined by ``.``)."""
@@ -382,6 +453,7 @@ class FleetSummary:
                 {"robot": r, "effect": e, "parameter": p, "from": a, "to": b, "change": d, "z": z}
                 for r, e, p, a, b, d, z in self.moved
             ],
+            "stability": self.stability,
         }
 
 
@@ -400,6 +472,27 @@ def _parameters(report: dict[str, Any]) -> dict[tuple[str, str], tuple[float, fl
         for name, entry in parameters.items():
             out[(effect, name)] = (float(entry["value"]), float(entry.get("stderr", math.nan)))
     return out
+
+
+def _stability(out: Path, names: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """The leave-one-session-out checks of every robot with fold files under ``out/loso/``."""
+    from odomgym.diagnose.loso import summarise
+
+    stability = {}
+    for name in names:
+        files = sorted((out / "loso" / name).glob("fold-*.json"))
+        if not files:
+            continue
+        folds = [json.loads(path.read_text(encoding="utf-8")) for path in files]
+        checks = summarise(folds)
+        stability[name] = {
+            "folds": checks["folds"],
+            "folds_with_modal_set": checks["folds_with_modal_set"],
+            "modal_effect_set": checks["modal_effect_set"],
+            "intervals_overlap": {k: v["overlap"] for k, v in checks["intervals"].items()},
+            "better_than_as_given": checks["better_than_as_given"],
+        }
+    return stability
 
 
 def summarise_fleet(out: Path, robots: Sequence[FleetRobot]) -> FleetSummary:
@@ -439,6 +532,7 @@ def summarise_fleet(out: Path, robots: Sequence[FleetRobot]) -> FleetSummary:
             z = (value - median) / robust
             if abs(z) > ODD_Z:
                 summary.odd.append((name, *key, value, z))
+    summary.stability = _stability(out, names)
     summary.named = dict(sorted(summary.named.items(), key=lambda kv: (-len(kv[1]), kv[0])))
     summary.terms = dict(sorted(summary.terms.items(), key=lambda kv: (-len(kv[1]), kv[0])))
     return summary
@@ -484,6 +578,27 @@ def format_fleet(summary: FleetSummary, source: str) -> str:
             lines.append(f"| {robot} | `{effect}.{name}` | {a} → {b} | {change:+.4g} | {z:+.1f} |")
     else:
         lines.append("Nothing beyond three combined standard errors (or one period per robot).")
+    if summary.stability:
+        lines += ["", "## Stability: leave one session out (`--loso`)", ""]
+        lines += [
+            "Each robot diagnosed once per session, on its other sessions: in how many folds "
+            "the most frequent set of systematic effects was named, whether the folds' 95 % "
+            "intervals of E_d, E_b, E_s share a part, and in how many folds the left-out "
+            "session was predicted better than by the model as given.",
+            "",
+            "| robot | folds | the same effects in | that set | E_d, E_b, E_s overlap | "
+            "left-out session better |",
+            "|---|---|---|---|---|---|",
+        ]
+        for robot, st in summary.stability.items():
+            overlap = ", ".join(
+                "yes" if ok else "**no**" for ok in st["intervals_overlap"].values()
+            )
+            lines.append(
+                f"| {robot} | {st['folds']} | {st['folds_with_modal_set']} | "
+                f"{', '.join(st['modal_effect_set']) or '—'} | {overlap} | "
+                f"{st['better_than_as_given']} |"
+            )
     lines += ["", "## Verdicts", "", "| robot | verdict |", "|---|---|"]
     lines += [f"| {r} | {summary.verdicts[r]} |" for r in summary.robots]
     return "\n".join(lines) + "\n"
