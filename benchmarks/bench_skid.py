@@ -15,6 +15,12 @@ of 0.75, 1.5 and 3 m each way and 20 m random free paths (legs of 1 m, curvature
 ±2 /m). The table gives the median over validation runs of the end-position error per metre
 driven [%] and of the end-heading error per metre [°/m].
 
+Beside them, the project's six classical calibrators (:mod:`odomgym.baselines`: UMBmark, Jung &
+Chung, Lee, Ivanjko, least squares, the trajectory fit), each given its own experiments (2 m
+squares where it drives squares) in a simulated lab of the same robot and floor at the same
+speed: what a user gets who calibrates a skid-steer robot as a differential-drive one. Their
+result is a constant factor (E_b) with wheel corrections (c_L, c_R, E_s), validated alike.
+
 Writes ``OUT/skid_models.md`` (the table), ``OUT/skid_models.json`` and ``OUT/skid_models.png``
 (the fitted factors against the path parameter λ beside the World's steady turns, and each
 model's heading error per validation circle: where one constant factor fails).
@@ -34,10 +40,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from odomgym.baselines import CALIBRATORS
 from odomgym.floor import FLOORS
 from odomgym.io import atomic_writer
 from odomgym.lab.experiment import SensorAccuracy
-from odomgym.lab.simulated import measure
+from odomgym.lab.simulated import SimLab, measure
+from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.icr import SKID_MODELS, SkidModel, fit_skid_model, skid_dead_reckon
 from odomgym.odometry.runs import Run, wheel_travels
 from odomgym.robot import PRESETS, RobotSpec
@@ -49,6 +57,16 @@ from odomgym.sim.turns import steady_turn
 CAL_RADII = (0.5, 1.0, 2.0, 4.0)  # [m]
 VAL_RADII = (0.75, 1.5, 3.0)  # [m]
 SPEED = 0.3  # [m/s]
+#: The classical calibrators and their options (squares of 2 m: a skid-steer robot with its
+#: nominal track turns ~52° at a 90° corner, and 4 m squares would take it far off).
+CLASSICAL: dict[str, dict[str, float]] = {
+    "umbmark": {"side": 2.0},
+    "jung_chung": {"side": 2.0},
+    "lee": {"side": 2.0},
+    "ivanjko": {},
+    "least_squares": {"side": 2.0},
+    "trajectory": {"side": 2.0},
+}
 
 
 def _circles(robot: RobotSpec, floor: str, radii: tuple[float, ...]) -> list[Run]:
@@ -74,9 +92,13 @@ def _runs(robot: RobotSpec, floor: str, rng: np.random.Generator) -> tuple[list[
     return measure(calibration, SensorAccuracy(), rng), validation
 
 
-def _errors(model: SkidModel, run: Run, robot: RobotSpec) -> tuple[float, float, float]:
-    """End-position error per metre [%], end-heading error per metre [°/m], path length [m]."""
-    travels, _ = wheel_travels(run, robot)
+def _errors(
+    model: SkidModel, run: Run, robot: RobotSpec, calibration: Calibration | None = None
+) -> tuple[float, float, float]:
+    """End-position error per metre [%], end-heading error per metre [°/m], path length [m]
+    (``calibration``: the wheel corrections a classical calibrator found, applied to the
+    counts before ``model``)."""
+    travels, _ = wheel_travels(run, robot, calibration)
     end = skid_dead_reckon(model, travels, run.true_pose[0])[-1]
     length = float(np.sum(np.hypot(*np.diff(run.true_pose[:, :2], axis=0).T)))
     position = float(np.hypot(*(end[:2] - run.true_pose[-1, :2])))
@@ -105,11 +127,20 @@ def main() -> None:
         robot = PRESETS[name]
         for floor in args.floors:
             calibration, validation = _runs(robot, floor, rng)
-            for kind in SKID_MODELS:
-                model = fit_skid_model(kind, calibration, robot)
-                errors = np.array([_errors(model, run, robot) for run in validation])
+            fits: list[tuple[str, SkidModel, Calibration | None]] = [
+                (kind, fit_skid_model(kind, calibration, robot), None) for kind in SKID_MODELS
+            ]
+            for method, options in CLASSICAL.items():
+                lab = SimLab(robot, FLOORS[floor], rng=rng.spawn(1)[0], cruise_speed=SPEED)
+                found = CALIBRATORS[method](**options).calibrate(lab).calibration
+                constant = SkidModel("constant", robot.wheelbase, chi_inf=found.wheelbase_scale)
+                fits.append((method, constant, found))
+            for kind, model, wheels in fits:
+                errors = np.array([_errors(model, run, robot, wheels) for run in validation])
                 per_circle = {
-                    f"{run.meta['radius']}-{run.meta['direction']}": _errors(model, run, robot)[1]
+                    f"{run.meta['radius']}-{run.meta['direction']}": _errors(
+                        model, run, robot, wheels
+                    )[1]
                     for run in validation
                     if run.kind == "circular"
                 }
@@ -124,7 +155,7 @@ def main() -> None:
                         "parameters": model.to_dict(),
                     }
                 )
-                if name == args.robots[0] and floor == args.floors[0]:
+                if name == args.robots[0] and floor == args.floors[0] and kind in SKID_MODELS:
                     figure_data[kind] = (model, per_circle)
             print(f"{name} on {floor}: done ({time.perf_counter() - started:.0f} s)", flush=True)
     elapsed = time.perf_counter() - started
@@ -147,7 +178,7 @@ def _table(results: list[dict[str, object]], robots: list[str], floors: list[str
         head,
         "|---|" + "---|" * (len(robots) * len(floors)),
     ]
-    for kind in SKID_MODELS:
+    for kind in (*SKID_MODELS, *CLASSICAL):
         cells = []
         for r in robots:
             for f in floors:
@@ -155,7 +186,8 @@ def _table(results: list[dict[str, object]], robots: list[str], floors: list[str
                     x for x in results if (x["robot"], x["floor"], x["model"]) == (r, f, kind)
                 )
                 cells.append(f"{row['position_pct']:.2f} % / {row['heading_deg_per_m']:.2f}")
-        lines.append(f"| {kind} | " + " | ".join(cells) + " |")
+        label = kind if kind in SKID_MODELS else f"{kind} (classical: E_b, c_L, c_R, E_s)"
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -75,12 +75,14 @@ validation entries.
 
 ## Arguments
 
-``floors`` (benchmark floor names to draw each episode's floor from; default all
-three), ``budget`` (runs, or a list to draw from per episode; default 16), ``shaping`` (the
-coefficient c, default 0.1), ``population`` (:class:`~odomgym.lab.population.Population`, the ranges
-of the hidden errors), ``sensor`` (:class:`~odomgym.lab.experiment.SensorAccuracy` of each measured
-pose), ``observe`` (``"trajectory"`` or ``"end_pose"``: what the estimator sees; version 2 of the
-observation, :data:`~odomgym.selfcal.session.OBSERVATION_VERSION`), ``render_mode``.
+``floors`` (benchmark floor names to draw each episode's floor from; default all three,
+``concrete`` and ``rough`` for a skid-steer robot), ``budget`` (runs, or a list to draw from per
+episode; default 16), ``shaping`` (the coefficient c, default 0.1), ``population``
+(:class:`~odomgym.lab.population.Population`, the ranges of the hidden errors and the robot they
+apply to: ``Population(base="scout2")`` makes the sessions skid-steer, below), ``sensor``
+(:class:`~odomgym.lab.experiment.SensorAccuracy` of each measured pose), ``observe``
+(``"trajectory"`` or ``"end_pose"``: what the estimator sees; version 2 of the observation,
+:data:`~odomgym.selfcal.session.OBSERVATION_VERSION`), ``render_mode``.
 Reset options: ``{"floor": name, "budget": runs}``.
 
 ## Rendering
@@ -96,6 +98,18 @@ runs in order and, at the end, the validated improvement. One frame per step (on
 ``metadata["render_fps"]`` is 2. With ``render_mode=None`` (the default) no run is kept for
 drawing.
 
+## Skid-steer robots
+
+With a skid-steer ``population.base`` (``scout2``, ``husky``, ``pioneer3at``) each session
+starts from the apparent track of rigid contacts in a slow spin, E_b = 1 + (a/b)² from the
+nominal geometry (:func:`~odomgym.selfcal.episodes.skid_prior`): the estimator's prior is
+centred there and kept within its range of it, the observed E_b is relative to it, and the
+validation's "before" is the robot with it, so stopping at once still gives r_T = 0. Its runs
+are simulated on a plain floor with the bench floor's roughness (a skid-steer robot carries no
+catalogue effect and drives over no cables yet), so ``cables`` is refused. The estimator's
+model is still a constant apparent track: it cannot follow a track that moves with the turn
+radius (docs/skid-steer.md). The shipped policy was trained on LabMates.
+
 ## Version History
 
 * v0: initial version. Rendering (``render_mode``, ``"human"`` and ``"rgb_array"``) was added
@@ -103,6 +117,8 @@ drawing.
   ``render_mode`` raised :class:`~odomgym.errors.SpecError`, which stopped
   ``stable_baselines3.PPO("MlpPolicy", "SelfCalibration-v0")``): a compatible addition, so the
   version stays v0.
+* v1, compatible addition (issue 43): ``population`` may have a skid-steer base (above);
+  differential-drive sessions are unchanged (bit-identical, ``tests/test_selfcal_skid.py``).
 * v1 (odomgym 0.2.0): the estimator became the trajectory filter
   (:class:`~odomgym.selfcal.estimators.TrajectoryEstimator`, ``observe="trajectory"``,
   observation version 2). Spaces, dynamics and episode end are unchanged, but the
@@ -125,10 +141,7 @@ from numpy.typing import NDArray
 from odomgym.envs.base import DrawsLazily, describe_action
 from odomgym.errors import SpecError
 from odomgym.lab.experiment import SensorAccuracy
-from odomgym.lab.population import (
-    Population,
-    check_bench_floor,
-)
+from odomgym.lab.population import BENCH_FLOORS, Population, check_bench_floor
 from odomgym.lab.simulated import experiment_route
 from odomgym.odometry.runs import to_frame
 from odomgym.robot import PRESETS
@@ -205,7 +218,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
 
     def __init__(
         self,
-        floors: Sequence[str] = ("concrete", "rough", "cables"),
+        floors: Sequence[str] | None = None,
         budget: int | Sequence[int] = 16,
         shaping: float = 0.1,
         population: Population | None = None,
@@ -215,6 +228,10 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
     ) -> None:
         self._set_render_mode(render_mode)
         self.observe = check_observe(observe)
+        self.population = population or Population()
+        skid = PRESETS[self.population.base].is_skid_steer
+        if floors is None:  # every bench floor the robot can drive
+            floors = ("concrete", "rough") if skid else ("concrete", "rough", "cables")
         if isinstance(floors, str):
             floors = (floors,)
         if not isinstance(floors, (list, tuple)):
@@ -224,6 +241,13 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             raise SpecError("floors needs at least one floor", field="floors")
         for name in self.floors:
             check_bench_floor(name)
+            if skid and BENCH_FLOORS[name].cables:
+                raise SpecError(
+                    f"floors: {name!r} has cables, which skid-steer robots (population.base "
+                    f"{self.population.base!r}) cannot drive over yet (docs/skid-steer.md); "
+                    "choose from concrete and rough",
+                    field="floors",
+                )
         self.budgets = _budgets(budget)
         if (
             isinstance(shaping, bool)
@@ -232,13 +256,6 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         ):
             raise SpecError(f"shaping must be finite and >= 0, got {shaping}", field="shaping")
         self.shaping = float(shaping)
-        self.population = population or Population()
-        if PRESETS[self.population.base].is_skid_steer:
-            raise SpecError(
-                f"population.base {self.population.base!r} is a skid-steer robot; "
-                "SelfCalibration-v1 does not take skid-steer robots yet (docs/skid-steer.md)",
-                field="population",
-            )
         self.sensor = sensor or SensorAccuracy()
         self.action_space = gym.spaces.Discrete(len(ACTION_MENU))
         bound = OBSERVATION_BOUND

@@ -1,13 +1,14 @@
 """The apparent track of skid-steer robots against turn radius and speed (docs/skid-steer.md).
 
-    python examples/skid_icr.py [OUT.png]     # default docs/assets/skid_icr.png; ~20 s
+    python examples/skid_icr.py [OUT.png]     # default docs/assets/skid_icr.png; ~35 s
 
 Left: the ``scout2`` preset (elastic tyres, docs/skid-steer.md "Tyres") on the ``smooth`` floor
 (μ = 0.8) at four speeds, each point a steady turn in the World
 (:func:`odomgym.sim.turns.steady_turn`, dots) beside the same contact law solved directly
 (:func:`odomgym.sim.turns.contact_steady_turn`, dashed), the factor against the radius driven
 (they coincide), with the two analytic limits: rigid contacts' 1 + (a/b)² and the tyres' linear
-range 1 + (C_α/C_κ)·(a/b)².
+range 1 + (C_α/C_κ)·(a/b)². Third panel: ``scout2``'s factor against speed at a spin and four
+commanded radii.
 Right: the ``pioneer3at``
 preset at three speeds against Wang et al. 2015's empirical function of the ICR coefficient for
 a Pioneer 3-AT, χ = 1 + 0.4728/(1 + 0.0538·√|λ|) with λ = (v_L + v_R)/(v_R − v_L), drawn
@@ -61,9 +62,28 @@ def _panel(ax: object, robot: RobotSpec, speeds: tuple[float, ...]) -> None:
     ax.grid(True, which="both", alpha=0.3)  # type: ignore[attr-defined]
 
 
+def _speed_panel(ax: object, robot: RobotSpec) -> None:
+    """The factor against speed at four commanded radii (and a spin), World only."""
+    speeds = np.linspace(0.1, 1.0, 10)
+    colours = plt.get_cmap("plasma")(np.linspace(0.0, 0.8, 5))
+    for radius, colour in zip((0.0, 0.5, 1.0, 2.0, 5.0), colours, strict=True):
+        points = [
+            (v, steady_turn(robot, float(v), radius).factor)
+            for v in speeds
+            if radius == 0.0 or radius in _radii(robot, float(v))
+        ]
+        label = "spin" if radius == 0.0 else f"{radius:g} m commanded"
+        ax.plot(*zip(*points, strict=True), "o-", color=colour, label=label)  # type: ignore[attr-defined]
+    ax.set_xlabel("speed of the turn [m/s] (a spin: rim speed)")  # type: ignore[attr-defined]
+    ax.set_ylabel("apparent track / true track χ [-]")  # type: ignore[attr-defined]
+    ax.set_title(f"{robot.name}, μ = 0.8: against speed")  # type: ignore[attr-defined]
+    ax.grid(True, alpha=0.3)  # type: ignore[attr-defined]
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)  # type: ignore[attr-defined]
+
+
 def main() -> None:
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("docs/assets/skid_icr.png")
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 6.4))
+    fig, (left, right, speed) = plt.subplots(1, 3, figsize=(16.5, 6.4))
     _panel(left, PRESETS["scout2"], (0.2, 0.5, 0.8, 1.1))
     left.set_title("AgileX Scout 2.0 (scout2), μ = 0.8: steady turns")
     left.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
@@ -76,6 +96,7 @@ def main() -> None:
     right.set_xlim(left.get_xlim())
     right.set_title("Pioneer 3-AT (pioneer3at), μ = 0.8, against Wang et al. 2015")
     right.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
+    _speed_panel(speed, PRESETS["scout2"])
     fig.tight_layout()
     atomic_writer(out, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     print(f"wrote {out}")

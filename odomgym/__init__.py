@@ -20,6 +20,9 @@ The core API: :class:`~odomgym.robot.RobotSpec`, :class:`~odomgym.floor.FloorSpe
 
 from __future__ import annotations
 
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _distribution_version
+
 from odomgym._source_tree import install_source_tree_finder
 from odomgym.floor import FLOORS, CableBump, FloorSpec, FrictionPatch, load_floor
 from odomgym.odometry.calibration import Calibration, Odometry, load_calibration
@@ -30,7 +33,13 @@ from odomgym.robot import PRESETS, RobotSpec, load_robot
 # in from the top-level folders; this finder maps them the same way. A no-op when installed.
 install_source_tree_finder()
 
-__version__ = "0.1.0"
+# The version is written once, in pyproject.toml; the installed distribution's metadata carries
+# it here (an editable install's too). A source tree run without any install has no metadata:
+# "0+unknown" says so rather than a number that may be stale.
+try:
+    __version__: str = _distribution_version("odomgym")
+except PackageNotFoundError:  # pragma: no cover - only in an uninstalled checkout
+    __version__ = "0+unknown"
 
 __all__ = [
     "FLOORS",

@@ -258,22 +258,21 @@ class RobotSpec:
         if self.is_skid_steer:
             self._validate_skid(source)
         else:
-            for key in ("com_x", "com_y"):
-                if getattr(self, key) != 0.0:
-                    raise SpecError(
-                        f"{key} applies to skid-steer robots (axle_spacing > 0); a "
-                        "differential-drive robot's centre of mass is at its axle midpoint",
-                        field=key,
-                        source=source,
-                    )
-            for key in ("tyre_slip_stiffness", "tyre_cornering_stiffness"):
-                if getattr(self, key) != 0.0:
-                    raise SpecError(
-                        f"{key} applies to skid-steer robots (axle_spacing > 0); a "
-                        "differential-drive robot's wheels are Chipmunk's capped pivot joints",
-                        field=key,
-                        source=source,
-                    )
+            for keys, reason in (
+                (("com_x", "com_y"), "centre of mass is at its axle midpoint"),
+                (
+                    ("tyre_slip_stiffness", "tyre_cornering_stiffness"),
+                    "wheels are Chipmunk's capped pivot joints",
+                ),
+            ):
+                for key in keys:
+                    if getattr(self, key) != 0.0:
+                        raise SpecError(
+                            f"{key} applies to skid-steer robots (axle_spacing > 0); a "
+                            f"differential-drive robot's {reason}",
+                            field=key,
+                            source=source,
+                        )
 
     def _validate_skid(self, source: str | None) -> None:
         """A skid-steer body holds its wheels, has no casters, and loads every wheel.

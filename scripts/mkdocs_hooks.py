@@ -35,13 +35,15 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "core": (
         "Core",
         "The package's public names and the foundation below every layer folder: robot and "
-        "floor specs, the compiled kernels, files, errors, interruption and the worker pool "
+        "floor specs, the compiled kernels, files, errors, interruption, the worker pool and "
+        "the Ray backend "
         "(docs/architecture.md shows how the layers fit).",
         (
             "odomgym",
             "odomgym.robot",
             "odomgym.floor",
             "odomgym.workers",
+            "odomgym.distributed",
             "odomgym.io",
             "odomgym.errors",
             "odomgym.interrupt",
@@ -57,6 +59,7 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
             "odomgym.odometry.runs",
             "odomgym.odometry.umbmark_measures",
             "odomgym.odometry.optiodom_measures",
+            "odomgym.odometry.icr",
         ),
     ),
     "sim": (
@@ -204,6 +207,8 @@ API: dict[str, tuple[str, str, tuple[str, ...]]] = {
         "Where a model and a robot disagree, and what is missing (docs/diagnose.md).",
         (
             "odomgym.diagnose.workflow",
+            "odomgym.diagnose.fleet",
+            "odomgym.diagnose.loso",
             "odomgym.diagnose.screen",
             "odomgym.diagnose.config",
             "odomgym.diagnose.results",

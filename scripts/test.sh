@@ -16,7 +16,18 @@
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
-#   pytest -n auto -m "not slow"    # 111 s on 2 idle cores (2026-11-28); CI runs the slow ones too
+#   pytest -n auto -m "not slow"    # 120 s on 2 idle cores (2026-11-28, v0.3.0); CI runs the slow ones too
+#
+# The artefacts (issue 46): scripts/check_dist.sh builds the sdist and the wheel, checks them
+# (twine check --strict, cffconvert --validate on CITATION.cff, the wheel from the sdist against
+# the wheel from the tree) and runs the README's main job, every env and diagnose from the wheel
+# installed in a fresh venv outside the tree. It starts in the background before the gates
+# (ruff, mypy and mkdocs use one core; it takes the other) and goes on beside pytest; its log is
+# printed after pytest, whose summary line is then repeated as the closing line. Issue 46
+# allows it 60 s on top of the test command: alone on 2 cores it took 90 s (93 s of CPU; the
+# gates 54 s), so beside the gates and pytest it adds at most half its CPU time, 47 s, and less
+# while the gates leave a core idle (2026-11-28). Waiting for it before pytest instead cost
+# 41-73 s after the gates on this shared machine.
 #
 # torch is pinned first because this machine ships a CPU build of 2.13.0 locally; without the
 # pin pip may choose a multi-GB CUDA build to satisfy the `rl` extra's loose range.
@@ -34,6 +45,14 @@ rm -rf "$VENV"
 "$VENV/bin/python" -m pip install -q ".[all]"
 rm -rf build
 
+DIST_LOG="$(mktemp)"
+echo "== check_dist.sh started in the background (log: $DIST_LOG)"
+DIST_START=$SECONDS
+PYTHON="$VENV/bin/python" setsid bash scripts/check_dist.sh > "$DIST_LOG" 2>&1 &
+DIST_PID=$!
+# A failed gate ends the script: end the check's process group with it.
+trap 'kill -TERM -- -"$DIST_PID" 2>/dev/null || true' EXIT
+
 echo "== ruff check"
 "$VENV/bin/ruff" check .
 echo "== ruff format --check"
@@ -48,4 +67,18 @@ SITE="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$SITE"
 rm -rf "$SITE"
 echo "== pytest (every test, slow ones included, on ${PYTEST_WORKERS:-auto} xdist workers)"
-"$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}" --dist worksteal
+PYTEST_LOG="$(mktemp)"
+"$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}" --dist worksteal \
+    | tee "$PYTEST_LOG"
+PYTEST_DONE=$SECONDS
+DIST_STATUS=0
+wait "$DIST_PID" || DIST_STATUS=$?
+trap - EXIT
+echo "== check_dist.sh (started $((PYTEST_DONE - DIST_START)) s before pytest ended; waited" \
+    "$((SECONDS - PYTEST_DONE)) s for it after pytest):"
+grep -v '^WARNING: Location' "$DIST_LOG" || true
+rm -f "$DIST_LOG"
+[[ $DIST_STATUS == 0 ]] || { echo "== check_dist.sh failed (exit $DIST_STATUS)"; exit 1; }
+# pytest's summary again, as the closing line of the test command.
+tail -n 1 "$PYTEST_LOG"
+rm -f "$PYTEST_LOG"

@@ -33,7 +33,7 @@ PACKAGE_LAYERS: tuple[frozenset[str], ...] = tuple(
     frozenset(tier.split())
     for tier in (
         "errors io interrupt _jit _source_tree",  # no odomgym import but one another's
-        "workers effects floor _kernels",  # the worker pool, the effect catalogue, the kernels
+        "workers distributed effects floor _kernels",  # worker pool, Ray backend, effects, kernels
         "robot",  # RobotSpec: nominal vs true
         "odometry",  # dead reckoning, runs and their measures: no simulator
         "data odomgym",  # measured logs; the package's public names
@@ -57,6 +57,7 @@ TOP_LEVEL = {
     "odomgym.interrupt",
     "odomgym.io",
     "odomgym.workers",
+    "odomgym.distributed",
     "odomgym.robot",
     "odomgym.floor",
 }

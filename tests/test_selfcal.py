@@ -164,7 +164,7 @@ def test_bad_settings_and_actions_are_one_line_errors() -> None:
     for kwargs, field in (
         ({"budget": 4.0}, "budget"),
         ({"shaping": "0.1"}, "shaping"),
-        ({"floors": None}, "floors"),
+        ({"floors": 5}, "floors"),  # None is the default: every floor the robot can drive
     ):
         with pytest.raises(SpecError) as caught:
             SelfCalibrationEnv(**kwargs)  # type: ignore[arg-type]

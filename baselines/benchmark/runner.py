@@ -5,12 +5,8 @@ finished chunk journalled, the rows in one order whatever ran them.
 from __future__ import annotations
 
 import functools
-import importlib.util
 import math
-import os
-import signal
 from collections.abc import Callable
-from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +14,7 @@ from odomgym import interrupt
 from odomgym.baselines.benchmark.chunk import failed_rows, run_chunk
 from odomgym.baselines.benchmark.config import BenchConfig
 from odomgym.baselines.benchmark.journal import Journal
-from odomgym.errors import SpecError
+from odomgym.distributed import Backend, ray_session, run_ray_tasks
 from odomgym.lab.experiment import parse_choice
 from odomgym.workers import TaskFailed, WorkerDeath, run_tasks
 
@@ -27,28 +23,6 @@ __all__ = [
     "ChunkTask",
     "run_benchmark",
 ]
-
-
-class Backend(StrEnum):
-    """Where the benchmark's chunks of robots run.
-
-    * ``local`` — this machine: ``jobs`` worker processes (1: this process);
-    * ``ray`` — Ray tasks (``pip install 'odomgym[distributed]'``), on a cluster if
-      ``ray.init`` was called, else on a local Ray with ``jobs`` CPUs.
-    """
-
-    LOCAL = "local"
-    RAY = "ray"
-
-    def check_available(self) -> None:
-        """Raise :class:`SpecError` (field ``backend``) if this backend cannot run here; cheap
-        enough to call before any work."""
-        if self is Backend.RAY and importlib.util.find_spec("ray") is None:
-            raise SpecError(
-                "--backend ray needs Ray, which is not installed: "
-                "pip install 'odomgym[distributed]'",
-                field="backend",
-            )
 
 
 def _chunk_task(config: BenchConfig, part: list[int], attempt: int) -> list[dict[str, Any]]:
@@ -113,14 +87,16 @@ def run_benchmark(
     chunk: int | None = None,
     notify: Callable[[str], None] | None = None,
     task: ChunkTask = _chunk_task,
+    address: str | None = None,
 ) -> list[dict[str, Any]]:
     """Run the benchmark; rows do not depend on ``jobs``, ``backend``, ``chunk`` or on being
     interrupted and resumed.
 
     ``backend`` (a :class:`Backend` or its spelling): ``local`` uses ``jobs`` worker processes
-    (1: this process); ``ray`` submits the chunks as Ray tasks (``ray.init`` must have been
-    called, or a local Ray is started with ``jobs`` CPUs). An unknown or unavailable backend
-    raises :class:`SpecError` (field ``backend``) before any work.
+    (1: this process); ``ray`` submits the chunks as Ray tasks: on the Ray this process
+    initialised, else the cluster at ``address`` or ``RAY_ADDRESS``, else a local Ray of
+    ``jobs`` CPUs started for the run (:mod:`odomgym.distributed`). An unknown or unavailable
+    backend raises :class:`SpecError` (field ``backend``) before any work.
 
     ``journal``: record every finished chunk there (:class:`Journal`); with ``resume``, the
     robots it holds are not run again. ``chunk``: robots per unit of work (default: as many as
@@ -154,7 +130,7 @@ def run_benchmark(
     if progress is not None and count:
         progress(count, config.robots)
     if backend is Backend.RAY:
-        _run_ray(config, parts, jobs, finished)
+        _run_ray(config, parts, jobs, finished, address)
     elif jobs <= 1 or len(parts) <= 1:
         for part in parts:
             finished(part, run_chunk(config, part))
@@ -170,39 +146,15 @@ def _run_ray(
     parts: list[list[int]],
     jobs: int,
     finished: Callable[[list[int], list[dict[str, Any]]], None],
+    address: str | None,
 ) -> None:
-    import ray  # Backend.RAY.check_available() has looked for it
-
-    started = not ray.is_initialized()
-    if started:
-        # ray.init replaces the SIGTERM handler with one that calls sys.exit, and Ray's C++
-        # core installs absl's failure-signal handler, which prints a stack dump for a plain
-        # SIGTERM. Keep the caller's handler (the command line's: stop cleanly, exit 143) and
-        # no dump; Ray's own processes still end with the driver (ray.shutdown at exit).
-        previous = signal.getsignal(signal.SIGTERM)
-        os.environ.setdefault("RAY_DISABLE_FAILURE_SIGNAL_HANDLER", "1")
-        ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
-        if callable(previous) and signal.getsignal(signal.SIGTERM) is not previous:
-            signal.signal(signal.SIGTERM, previous)
-    remote = ray.remote(num_cpus=1, max_retries=1)(run_chunk)  # a dead worker: retried once
-    pending = {remote.remote(config, part): part for part in parts}
-    try:
-        while pending:
-            try:
-                ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
-            except SystemError:
-                # A stop request raised by the signal handler inside Ray's compiled wait comes
-                # back wrapped ("returned a result with an exception set"): stop as asked.
-                interrupt.check()
-                raise
-            interrupt.check()
-            for ref in ready:
-                finished(pending.pop(ref), ray.get(ref))
-    finally:
-        if pending and started:
-            # Interrupted on the local Ray this call started: shutting it down stops every
-            # worker now (force-cancelling first made Ray's task manager abort at exit).
-            ray.shutdown()
-        elif pending:  # on the caller's cluster: stop this benchmark's tasks, nothing else
-            for ref in pending:
-                ray.cancel(ref, force=True)
+    """The chunks as Ray tasks (:mod:`odomgym.distributed`: the cluster at ``address`` or
+    ``RAY_ADDRESS``, else a local Ray of ``jobs`` CPUs); a dead worker's chunk is retried once
+    by Ray."""
+    with ray_session(address, jobs) as started:
+        run_ray_tasks(
+            run_chunk,
+            ((k, (config, part)) for k, part in enumerate(parts)),
+            lambda k, rows: finished(parts[k], rows),
+            started=started,
+        )

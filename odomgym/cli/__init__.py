@@ -50,6 +50,7 @@ from odomgym.cli import (
     covariance,
     diagnose,
     fit_noise,
+    fleet,
     leaderboard,
     run,
     train,
@@ -85,6 +86,7 @@ COMMANDS: tuple[Command, ...] = (
     covariance,
     fit_noise,
     diagnose,
+    fleet,
 )
 """Every command, in the order ``odomgym --help`` lists them."""
 

@@ -145,6 +145,36 @@ def floor_help(default: str = "smooth") -> str:
     )
 
 
+def add_backend_arguments(parser: argparse.ArgumentParser, units: str) -> None:
+    """``--backend local|ray`` and ``--ray-address``: where a command's independent ``units``
+    of work run (:mod:`odomgym.distributed`), the same two options on every command that
+    spreads work (``bench``, ``diagnose``, ``fleet``)."""
+    parser.add_argument(
+        "--backend",
+        choices=["local", "ray"],
+        default="local",
+        help=f"where the {units} run: local, worker processes on this machine (default); ray, "
+        "Ray tasks on the cluster of --ray-address or RAY_ADDRESS, else on a local Ray of "
+        "--jobs CPUs (pip install 'odomgym[distributed]'); results are the same",
+    )
+    parser.add_argument(
+        "--ray-address",
+        metavar="ADDRESS",
+        help="with --backend ray: the Ray cluster to join (ray://HOST:10001, or HOST:6379 on a "
+        "node of the cluster; default: RAY_ADDRESS, else a new local Ray)",
+    )
+
+
+def check_backend(args: argparse.Namespace) -> None:
+    """Before any work: Ray is installed when asked for (one line naming the extra), and
+    ``--ray-address`` is given only with ``--backend ray``."""
+    from odomgym.distributed import Backend
+
+    if args.ray_address and args.backend != "ray":
+        raise SpecError("--ray-address needs --backend ray", field="ray-address")
+    Backend(args.backend).check_available()
+
+
 def add_robot_arguments(parser: argparse.ArgumentParser, *, calibration: bool = True) -> None:
     """The robot, its injected errors, the floor and the seed: the same options for every
     command that drives a simulated robot (``run square|straight``, ``calibrate``).

@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 from odomgym.cli._common import (
     Progress,
     Reporter,
+    add_backend_arguments,
+    check_backend,
     check_methods,
     check_output,
     count,
@@ -29,7 +31,6 @@ JOURNAL_NAME = "journal.jsonl"
 
 def register(commands: Commands) -> None:
     """Add ``bench``."""
-    from odomgym.baselines.benchmark import Backend
     from odomgym.lab.population import BENCH_FLOORS
 
     parser = commands.add_parser(
@@ -61,13 +62,7 @@ def register(commands: Commands) -> None:
         help="runs per calibration (16); several values compare budgets, e.g. --budget 16 4",
     )
     parser.add_argument("--jobs", type=processes, help="worker processes (default: all cores)")
-    parser.add_argument(
-        "--backend",
-        choices=[b.value for b in Backend],
-        default=Backend.LOCAL.value,
-        help="local: worker processes on this machine (default); ray: Ray tasks "
-        "(pip install 'odomgym[distributed]')",
-    )
+    add_backend_arguments(parser, "chunks of robots")
     parser.add_argument("--seed", type=seed, default=0, help="master random seed >= 0 (default 0)")
     parser.add_argument(
         "--out", default="bench-out", help="output folder, created if missing (default bench-out)"
@@ -105,8 +100,8 @@ def run(args: argparse.Namespace) -> int:
     from odomgym.baselines.benchmark import Backend, BenchConfig, run_benchmark, summarize
 
     report = Reporter.of(args)
+    check_backend(args)
     backend = Backend(args.backend)
-    backend.check_available()
     check_output(args.out, option="--out", folder=True)
     check_methods(args.methods)
     methods = tuple(args.methods or CALIBRATORS)
@@ -134,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
                 resume=args.resume,
                 chunk=args.chunk,
                 notify=notice,
+                address=args.ray_address,
             )
         except (KeyboardInterrupt, Interrupted) as exc:
             code = exc.code if isinstance(exc, Interrupted) else 130

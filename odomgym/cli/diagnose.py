@@ -1,5 +1,6 @@
 """``odomgym diagnose DATA --robot R``: where a robot model and measured logs disagree, which
-catalogue effect is missing, and how much of the gap it closes."""
+catalogue effect is missing, and how much of the gap it closes; with ``--loso``, whether the
+answer holds with each session left out in turn (:mod:`odomgym.diagnose.loso`)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ from typing import TYPE_CHECKING
 from odomgym.cli._common import (
     Progress,
     Reporter,
+    add_backend_arguments,
+    check_backend,
     check_output,
     count,
     fraction,
@@ -19,10 +22,12 @@ from odomgym.cli._common import (
     seed,
 )
 from odomgym.errors import SpecError
-from odomgym.robot import load_robot
+from odomgym.robot import RobotSpec, load_robot
 
 if TYPE_CHECKING:
     from odomgym.cli._common import Commands
+    from odomgym.diagnose.config import DiagnoseConfig
+    from odomgym.odometry.runs import Run
 
 
 def register(commands: Commands) -> None:
@@ -47,7 +52,9 @@ def register(commands: Commands) -> None:
         help="log format (default: detected from DATA)",
     )
     parser.add_argument(
-        "--out", help="output folder, replaced whole (default: <DATA name>-diagnose)"
+        "--out",
+        help="output folder, replaced whole (default: <DATA name>-diagnose); with --loso the "
+        "folder of fold files, kept and added to (default: <DATA name>-loso)",
     )
     parser.add_argument(
         "--holdout", type=fraction, default=0.3, help="share of runs held out (default 0.3)"
@@ -110,11 +117,13 @@ def register(commands: Commands) -> None:
         "runs) the held-out comparison reports beside the diagnosed model",
     )
     parser.add_argument("--jobs", type=processes, help="worker processes (default: all cores)")
+    add_backend_arguments(parser, "candidate fits (with --loso: the folds)")
     parser.add_argument(
         "--resume",
         action="store_true",
         help="take the candidate fits an interrupted diagnose stored in OUT.journal (the "
-        "result is the same as an uninterrupted run's); without it the journal starts afresh",
+        "result is the same as an uninterrupted run's); without it the journal starts afresh "
+        "(--loso always keeps the fold files in OUT)",
     )
     parser.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
     parser.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
@@ -129,25 +138,109 @@ def register(commands: Commands) -> None:
         default="right_wheel_joint",
         help="ROS 2 bags: the right wheel's joint name (default right_wheel_joint)",
     )
-    parser.add_argument("--json", action="store_true", help="print report.json")
+    parser.add_argument(
+        "--loso",
+        action="store_true",
+        help="leave one session out: for every session, diagnose the others and predict it "
+        "open loop (the model as given, the diagnosed model, the baseline); writes "
+        "OUT/fold-<session>.json as each fold ends, keeps the fold files already in OUT "
+        "(resume), and prints the table of the folds (docs/diagnose.md)",
+    )
+    parser.add_argument(
+        "--shard",
+        type=shard,
+        metavar="K/N",
+        help="with --loso: diagnose only folds K, K+N, ... (N processes with --jobs 1 on N "
+        "cores, or machines sharing OUT; then --table-only gathers their files)",
+    )
+    parser.add_argument(
+        "--sessions",
+        nargs="+",
+        metavar="SESSION",
+        help="with --loso: leave out only these sessions (default: every one)",
+    )
+    parser.add_argument(
+        "--table-only",
+        action="store_true",
+        help="with --loso: print the table of the folds already in OUT, diagnosing none "
+        "(the missing ones are listed)",
+    )
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print report.json (with --loso: the folds and their summary)",
+    )
     parser.set_defaults(handler=run)
+
+
+def shard(text: str) -> tuple[int, int]:
+    """An argparse type: ``K/N`` with 1 <= K <= N (:func:`odomgym.diagnose.loso.parse_shard`)."""
+    from odomgym.diagnose.loso import parse_shard
+
+    try:
+        return parse_shard(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def run(args: argparse.Namespace) -> int:
     """Read the logs, diagnose (resuming from the journal with ``--resume``), replace ``--out``
-    with the report, then print it (Markdown, or report.json) and the files written."""
+    with the report, then print it (Markdown, or report.json) and the files written; with
+    ``--loso``, the leave-one-session-out folds instead (:func:`run_loso_command`)."""
     from odomgym.baselines.trajectory import TrajectoryBaseline
-    from odomgym.data.gaps import held_poses
-    from odomgym.data.logs import read_log
     from odomgym.data.samples import resolve_data
     from odomgym.diagnose.report import format_markdown, report_json, write_outputs
-    from odomgym.diagnose.screen import usable_runs
-    from odomgym.diagnose.workflow import DiagnoseConfig, FitJournal, diagnose
+    from odomgym.diagnose.workflow import FitJournal, diagnose
+    from odomgym.distributed import on_ray
 
     report = Reporter.of(args)
+    check_backend(args)
+    if not args.loso:
+        for given, option in (
+            (args.shard is not None, "--shard"),
+            (bool(args.sessions), "--sessions"),
+            (args.table_only, "--table-only"),
+        ):
+            if given:
+                raise SpecError(f"{option} needs --loso", field=option[2:].replace("-", "_"))
     data = resolve_data(args.data, field="DATA")
     robot = load_robot(args.robot) if args.robot else None
-    config = DiagnoseConfig(
+    config = diagnose_config(args)
+    if args.loso:
+        return run_loso_command(args, report, data, robot, config)
+    out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
+    check_output(out, option="--out", folder=True, swap=True)
+    runs, model = read_runs(args, data, robot)
+    say_set_aside(runs, model, report)
+    baseline = None if args.no_baseline else TrajectoryBaseline()
+    # Every finished candidate fit is kept beside the output (which is replaced whole), so an
+    # interrupted diagnosis resumes with --resume; it is removed once the outputs are written.
+    journal = FitJournal(out.parent / f"{out.name}.journal", resume=args.resume)
+    with (
+        on_ray(args.backend, args.ray_address, config.jobs),
+        Progress(report, "diagnose", leave=False) as bar,
+    ):
+        diagnosis = diagnose(
+            runs, model, config, baseline=baseline, progress=bar.stage, journal=journal
+        )
+    if journal.reused:
+        report.status(f"resumed: {journal.reused} candidate fits taken from {journal.folder}")
+    written = write_outputs(diagnosis, out, str(data))
+    journal.clear()
+    if report.json:
+        report.text(report_json(diagnosis))  # report.json's text, already JSON
+    else:
+        report.text(format_markdown(diagnosis, str(data)))
+    report.wrote(written)
+    return 0
+
+
+def diagnose_config(args: argparse.Namespace) -> DiagnoseConfig:
+    """The diagnosis options of the command line (a ``--loso`` fold's diagnosis takes the
+    same)."""
+    from odomgym.diagnose.workflow import DiagnoseConfig
+
+    return DiagnoseConfig(
         holdout=args.holdout,
         seed=args.seed,
         max_rounds=args.max_rounds,
@@ -161,8 +254,15 @@ def run(args: argparse.Namespace) -> int:
         max_bump_rate=args.max_bump_rate,
         gate_order=args.gate_order.replace("-", " "),
     )
-    out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
-    check_output(out, option="--out", folder=True, swap=True)
+
+
+def read_runs(
+    args: argparse.Namespace, data: Path, robot: RobotSpec | None
+) -> tuple[list[Run], RobotSpec]:
+    """The runs of ``data`` and the model to test (``--robot``, else the data's own nominal
+    robot)."""
+    from odomgym.data.logs import read_log
+
     runs, nominal = read_log(
         data,
         robot=robot,
@@ -173,10 +273,17 @@ def run(args: argparse.Namespace) -> int:
         left_joint=args.left_joint,
         right_joint=args.right_joint,
     )
-    baseline = None if args.no_baseline else TrajectoryBaseline()
     model = robot if robot is not None else nominal
     if model is None:
         raise SpecError("give the robot model with --robot robot.toml", field="robot")
+    return runs, model
+
+
+def say_set_aside(runs: list[Run], model: RobotSpec, report: Reporter) -> None:
+    """Notices of the runs the diagnosis will set aside and of the held poses made gaps."""
+    from odomgym.data.gaps import held_poses
+    from odomgym.diagnose.screen import usable_runs
+
     # What the diagnosis will set aside, said before its minutes of work (it screens the runs
     # again and records the same in report.json); too few usable runs stop here in one line.
     _, skipped = usable_runs(runs, model)
@@ -189,20 +296,51 @@ def run(args: argparse.Namespace) -> int:
             f"{poses} (the tracker repeated its last pose while the wheels turned) taken as "
             f"gaps in {sum(1 for n in held if n)} of {len(runs)} runs"
         )
-    # Every finished candidate fit is kept beside the output (which is replaced whole), so an
-    # interrupted diagnosis resumes with --resume; it is removed once the outputs are written.
-    journal = FitJournal(out.parent / f"{out.name}.journal", resume=args.resume)
-    with Progress(report, "diagnose", leave=False) as bar:
-        diagnosis = diagnose(
-            runs, model, config, baseline=baseline, progress=bar.stage, journal=journal
+
+
+def run_loso_command(
+    args: argparse.Namespace,
+    report: Reporter,
+    data: Path,
+    robot: RobotSpec | None,
+    config: DiagnoseConfig,
+) -> int:
+    """``--loso``: the folds of :func:`odomgym.diagnose.loso.run_loso` in ``--out`` (fold files
+    already there are kept, not diagnosed again), a progress bar over the folds, then the
+    table (or, with ``--json``, the folds and their summary) and the fold files written.
+    With ``--backend ray`` every fold is one Ray task (not its candidate fits)."""
+    from odomgym.baselines.trajectory import TrajectoryBaseline
+    from odomgym.diagnose.loso import fold_path, fold_sessions, run_loso, table
+
+    out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-loso")
+    check_output(out, option="--out", folder=True)
+    runs, model = read_runs(args, data, robot)
+    shard_of = args.shard or (1, 1)
+    mine = fold_sessions(runs, args.sessions, shard_of)  # bad --sessions: before any work
+    say_set_aside(runs, model, report)
+    before = {s for s in mine if fold_path(out, s).is_file()}
+    with Progress(report, "leave one session out", total=len(mine), unit="fold") as bar:
+        folds, summary = run_loso(
+            runs,
+            model,
+            out,
+            config=config,
+            baseline=None if args.no_baseline else TrajectoryBaseline,
+            sessions=args.sessions,
+            shard=shard_of,
+            table_only=args.table_only,
+            backend=args.backend,
+            address=args.ray_address,
+            progress=lambda done, _: bar.at(done),
+            status=report.status,
         )
-    if journal.reused:
-        report.status(f"resumed: {journal.reused} candidate fits taken from {journal.folder}")
-    written = write_outputs(diagnosis, out, str(data))
-    journal.clear()
+    missing = summary["missing_folds"]
     if report.json:
-        report.text(report_json(diagnosis))  # report.json's text, already JSON
+        report.document({"folds": folds, "summary": summary})
     else:
-        report.text(format_markdown(diagnosis, str(data)))
-    report.wrote(written)
+        text = table(folds, summary)
+        if missing:
+            text += f"\n\nNot diagnosed yet ({len(missing)} of {len(mine)}): {', '.join(missing)}"
+        report.text(text)
+    report.wrote(fold_path(out, s) for s in mine if s not in before and fold_path(out, s).is_file())
     return 0

@@ -48,6 +48,7 @@ Conventions taken from the authors' code (``src/diff/umbmark/main.m``, ``loadDat
 from __future__ import annotations
 
 import csv
+import datetime
 import math
 import re
 from dataclasses import dataclass
@@ -69,6 +70,7 @@ __all__ = [
     "SyncWindow",
     "find_sessions",
     "read_session",
+    "session_time",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -154,6 +156,20 @@ class Session:
 def find_sessions(root: str | Path) -> list[Path]:
     """All session folders below ``root`` (folders holding one ``*_metadata.csv``), sorted."""
     return sorted({p.parent for p in Path(root).rglob("*_metadata.csv")})
+
+
+def session_time(name: str) -> datetime.datetime | None:
+    """When a session was recorded, from its name, or None if the name is not a timestamp.
+
+    The OptiOdom recordings name each session by its start as ``DDMMYYYYhhmm`` (Sousa et al.
+    2022's data set: ``230620202042`` is 23 June 2020, 20:42; the 14 June sessions run from
+    23 to 25 June 2020). ``odomgym fleet`` groups a robot's sessions into periods by it."""
+    if len(name) != 12 or not name.isdigit():
+        return None
+    try:
+        return datetime.datetime.strptime(name, "%d%m%Y%H%M")
+    except ValueError:  # 12 digits that are no date (month 13, day 32, …)
+        return None
 
 
 def read_session(

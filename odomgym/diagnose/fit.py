@@ -54,6 +54,7 @@ from odomgym.diagnose.likelihood import (
 )
 from odomgym.diagnose.replay import Replay, RunInputs, replay_run
 from odomgym.diagnose.stats import clustered_covariance
+from odomgym.distributed import ray_started, run_ray_tasks
 from odomgym.effects import EFFECTS, Effect
 from odomgym.effects.registry import Spec, SpecView
 from odomgym.errors import SpecError
@@ -973,7 +974,9 @@ def run_fit_jobs(
     """Run every job of ``jobs`` (keyed by the caller's index) and hand each fit to
     ``finished(index, fit)`` as soon as it is done, in whatever order they finish.
 
-    With ``processes`` > 1, more than one job and the ``fork`` start method: in odomgym's
+    Inside :func:`odomgym.distributed.on_ray` (``diagnose --backend ray``), more than one job:
+    as Ray tasks of one CPU each. Else, with ``processes`` > 1, more than one job and the
+    ``fork`` start method: in odomgym's
     worker pool (:func:`odomgym.workers.run_tasks`) of forked processes (they share the effect
     registry, user effects included, and the compiled kernels). Otherwise one after the other
     in this process, in the mapping's order. Results do not depend on which: each fit is a
@@ -986,7 +989,10 @@ def run_fit_jobs(
     the candidate; the fits already finished (journalled by ``finished``) stay for a resume.
     """
     todo = list(jobs)
-    if _forks(processes, len(todo)):
+    started = ray_started()
+    if started is not None and len(todo) > 1:  # inside distributed.on_ray: Ray tasks
+        run_ray_tasks(_run_job, ((k, (jobs[k], 0)) for k in todo), finished, started=started)
+    elif _forks(processes, len(todo)):
         _run_forked(
             _run_job,
             ((k, jobs[k]) for k in todo),

@@ -33,7 +33,7 @@ def plot_all(diagnosis: Diagnosis, folder: Path) -> list[str]:
 
     d = diagnosis
     written = []
-    fig = Figure(figsize=(7, 4.4))
+    fig = Figure(figsize=(8, 4.4), layout="constrained")
     ax = fig.add_subplot(1, 1, 1)
     runs = np.arange(len(d.holdout_runs))
     gaps = d.holdout_gaps
@@ -41,6 +41,7 @@ def plot_all(diagnosis: Diagnosis, folder: Path) -> list[str]:
     ax.bar(runs + 0.2, np.array(gaps["after"]), 0.4, label="updated model")
     ax.plot(runs, np.array(gaps["noise"]), "k_", markersize=14, label="noise alone")
     ax.set_xticks(runs, d.holdout_runs, rotation=60, fontsize=7)
+    ax.set_xlabel("held-out run (session-run)", fontsize=8)
     ax.set_ylabel("gap: RMS whitened innovation (1 = noise)")
     # The title names every effect added, wrapped so that no name is cut off.
     added = ", ".join(d.named_effects + [e["term"] for e in d.discovered]) or "nothing"
@@ -48,8 +49,8 @@ def plot_all(diagnosis: Diagnosis, folder: Path) -> list[str]:
         f"held-out runs, whitened gap (a diagnostic): before and after {added}", 80
     )
     ax.set_title(title, fontsize=8)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    # Beside the bars, not over them: a tall first bar ran under the legend's corner.
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.savefig(folder / "gap_before_after.png", dpi=110)
     written.append("gap_before_after.png")
     if d.held_out is not None and d.held_out.truth:
@@ -154,7 +155,9 @@ def _where_plot(findings: list[Any], folder: Path) -> str:
         factors[(title, axis)] = factor
     keys = sorted(panels)
     heights = [0.26 * len(panels[k]) + 0.9 for k in keys]
-    fig = Figure(figsize=(7.5, sum(heights) + 0.6))
+    # Constrained layout makes room for the longest group name ("manoeuvres: reversal: heading
+    # per reversal" was cut at the left edge under tight_layout with this grid).
+    fig = Figure(figsize=(7.5, sum(heights) + 0.6), layout="constrained")
     grid = fig.add_gridspec(len(keys), 1, height_ratios=heights)
     for row, key in enumerate(keys):
         ax = fig.add_subplot(grid[row, 0])
@@ -172,9 +175,12 @@ def _where_plot(findings: list[Any], folder: Path) -> str:
         ax.set_xlim(-reach, reach)
         ax.set_xlabel(f"{key[0]} [{key[1]}]", fontsize=8)
         ax.tick_params(axis="x", labelsize=7)
-    fig.suptitle("where the model as given disagrees (red: significant, Holm)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(folder / "where.png", dpi=110)
+    fig.suptitle(
+        "where the model as given disagrees with the logs: mean error per group with its 95 % "
+        "interval\n(red: significant after Holm's correction; grey: not significant)",
+        fontsize=9,
+    )
+    fig.savefig(folder / "where.png", dpi=110, bbox_inches="tight")
     return "where.png"
 
 

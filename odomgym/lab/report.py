@@ -94,7 +94,7 @@ def plot_return_errors(
 
     from odomgym.odometry.umbmark_measures import centre_of_gravity, e_max_syst
 
-    fig = Figure(figsize=(6.5, 6.0))
+    fig = Figure(figsize=(8.6, 6.0))  # 6.5 for the axes, the rest for the legend beside them
     ax = fig.subplots()
     markers = ("o", "s", "^", "D")
     for k, (label, cw, ccw) in enumerate(groups):
@@ -116,6 +116,7 @@ def plot_return_errors(
             ax.plot(cg[0], cg[1], marker="+", color=colour, markersize=16, mew=2)
         if len(cw) and len(ccw):
             ax.plot([], [], " ", label=f"{label}: E_max,syst = {1e3 * e_max_syst(cw, ccw):.1f} mm")
+    ax.plot([], [], "+", color="0.3", markersize=12, mew=2, label="centre of gravity")
     save_error_axes(fig, ax, path, title)
 
 
@@ -129,11 +130,12 @@ def save_error_axes(fig: Any, ax: Any, path: Path, title: str) -> None:
     ax.set_title(title)
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    # Beside the axes, not on them: "best" still covered points when the errors filled the plot.
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     fig.tight_layout()
 
     def write(tmp: Path) -> None:
-        fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png")
+        fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png", bbox_inches="tight")
 
     atomic_writer(path, write)
 

@@ -92,6 +92,26 @@ def _shared_floor() -> FloorSpec:
     return cable_field(rng, roughness=0.0, name="selfcal-shared")
 
 
+def _skid_floor(name: str) -> FloorSpec:
+    """The floor of a skid-steer robot's session on benchmark floor ``name`` (``""``: the
+    noiseless validation floor): the shared floor's friction and the bench floor's roughness
+    as the floor's own — a skid-steer robot carries no catalogue effect and drives no cables
+    yet (docs/skid-steer.md), so its runs are simulated on a plain floor of their own."""
+    shared = _shared_floor()
+    roughness = BENCH_FLOORS[name].roughness if name else 0.0
+    return FloorSpec(friction=shared.friction, roughness=roughness, name=f"selfcal-skid-{name}")
+
+
+def skid_prior(robot: RobotSpec) -> Calibration:
+    """The calibration a skid-steer session starts from: the apparent track of rigid contacts
+    in a slow spin, b·(1 + (a/b)²) from the nominal geometry (docs/skid-steer.md, "The
+    analytic checks") — what an engineer who knows the robot is skid-steered would put in
+    first. Differential-drive robots start uncalibrated (the identity)."""
+    if not robot.is_skid_steer:
+        return Calibration()
+    return Calibration(wheelbase_scale=1.0 + (robot.axle_spacing / robot.wheelbase) ** 2)
+
+
 @dataclass
 class Episode:
     """One session in progress on a hidden true robot (shared by the env and its batched
@@ -111,8 +131,22 @@ class Episode:
     driven: RobotSpec = field(init=False)
 
     def __post_init__(self) -> None:
+        if self.robot.is_skid_steer:  # its floor carries the roughness (_skid_floor)
+            self.driven = self.robot
+            return
         k = BENCH_FLOORS[self.floor_name].roughness
         self.driven = self.robot.apply_effect("floor_roughness", {"k_left": k, "k_right": k})
+
+    @property
+    def batch_key(self) -> str:
+        """Which physics batch of a step drives this session's runs: ``""`` the shared floor
+        (:func:`_shared_floor`), else the skid-steer floor of that name (:func:`_skid_floor`)."""
+        return self.floor_name if self.robot.is_skid_steer else ""
+
+    @property
+    def validation_key(self) -> str:
+        """Which batch drives the validation runs: the shared floor, or ``"skid-quiet"``."""
+        return "skid-quiet" if self.robot.is_skid_steer else ""
 
 
 def new_episode(
@@ -140,16 +174,34 @@ def new_episode(
     check_bench_floor(floor_name)
     budget = opts.get("budget", budgets[int(rng.integers(len(budgets)))])
     robot = population.sample(robot_rng, "selfcal-robot")
+    if robot.is_skid_steer and BENCH_FLOORS[floor_name].cables:
+        raise SpecError(
+            f"floor {floor_name!r} has cables, which skid-steer robots cannot drive over yet "
+            "(docs/skid-steer.md); choose concrete or rough",
+            field="floor",
+        )
     # The session reads only the nominal parameters.
-    session = SelfCalSession(robot, budget, sensor, observe=observe)
+    if robot.is_skid_steer:
+        session = SelfCalSession(
+            robot, budget, sensor, initial=skid_prior(robot), observe=observe, centred=True
+        )
+    else:
+        session = SelfCalSession(robot, budget, sensor, observe=observe)
     return Episode(robot, floor_name, session, run_rng, sensor)
 
 
-def _add_validation(batch: RunRequests, robot: RobotSpec, calibration: Calibration) -> list[int]:
-    """A 4 m square each way and a 4 m straight run, with ``calibration`` and without, on a
-    noiseless patch of floor (the robot without any roughness); returns their batch slots."""
+def _add_validation(
+    batch: RunRequests,
+    robot: RobotSpec,
+    calibration: Calibration,
+    reference: Calibration | None = None,
+) -> list[int]:
+    """A 4 m square each way and a 4 m straight run, with ``calibration`` and with
+    ``reference`` (default: none, the identity; a skid-steer session's: its starting
+    :func:`skid_prior`), on a noiseless patch of floor (the robot without any roughness);
+    returns their batch slots."""
     slots = []
-    for cal in (calibration, Calibration()):
+    for cal in (calibration, reference if reference is not None else Calibration()):
         for route, kind, direction in _VALIDATION_ROUTES:
             quiet = np.random.default_rng(0)  # never drawn from: k = 0 on these wheels
             slot = batch.add(
@@ -217,16 +269,25 @@ def step_episodes(
     A session whose budget is spent stops whatever the action (its observation says so: no
     runs left). Returns ``(observation, reward, terminated, info)`` per episode.
     """
-    batch = RunRequests()
-    experiment_slot: dict[int, int] = {}
-    validation_slots: dict[int, list[int]] = {}
+    # One physics batch per floor: the shared floor for differential-drive sessions (all of
+    # them, validations included), and for skid-steer sessions a plain floor per bench floor
+    # plus a noiseless one for their validations (_skid_floor).
+    batches: dict[str, RunRequests] = {}
+    experiment_slot: dict[int, tuple[str, int]] = {}
+    validation_slots: dict[int, tuple[str, list[int]]] = {}
     for i, (episode, action) in enumerate(zip(episodes, actions, strict=True)):
         if episode.done:
             raise RuntimeError("the session has ended: call reset() before step()")
         session = episode.session
         experiment = session.experiment(int(action))
         if experiment is None or session.runs_left <= 0:
-            validation_slots[i] = _add_validation(batch, episode.robot, session.calibration)
+            key = episode.validation_key
+            batch = batches.setdefault(key, RunRequests())
+            reference = skid_prior(episode.robot) if episode.robot.is_skid_steer else None
+            validation_slots[i] = (
+                key,
+                _add_validation(batch, episode.robot, session.calibration, reference),
+            )
             continue
         if BENCH_FLOORS[episode.floor_name].cables:
             poses = random_start_poses(episode.rng, 1, CABLES_START_REGION)
@@ -234,16 +295,26 @@ def step_episodes(
             start = poses[0]
         else:
             start = _PLAIN_ORIGIN
-        experiment_slot[i] = batch.add(
-            episode.driven,
-            experiment_route(experiment),
-            session.calibration,
-            stream=episode.rng.spawn(1)[0],
-            start=start,
-            kind=experiment.kind,
-            direction=experiment.direction,
+        key = episode.batch_key
+        batch = batches.setdefault(key, RunRequests())
+        experiment_slot[i] = (
+            key,
+            batch.add(
+                episode.driven,
+                experiment_route(experiment),
+                session.calibration,
+                stream=episode.rng.spawn(1)[0],
+                start=start,
+                kind=experiment.kind,
+                direction=experiment.direction,
+            ),
         )
-    runs, odom = batch.simulate(_shared_floor())
+    simulated = {
+        key: batch.simulate(
+            _shared_floor() if key == "" else _skid_floor("" if key == "skid-quiet" else key)
+        )
+        for key, batch in batches.items()
+    }
     results = []
     for i, episode in enumerate(episodes):
         session = episode.session
@@ -255,7 +326,8 @@ def step_episodes(
         reward = 0.0
         terminated = False
         if i in experiment_slot:
-            run = runs[experiment_slot[i]]
+            key, slot = experiment_slot[i]
+            run = simulated[key][0][slot]
             if episode.trace is not None:
                 episode.trace.append((int(actions[i]), run, session.calibration))
             if run.meta["finished"]:
@@ -273,7 +345,8 @@ def step_episodes(
                 )
         else:
             terminated = True
-            verdict = _verdict(runs, odom, validation_slots[i])
+            key, slots = validation_slots[i]
+            verdict = _verdict(*simulated[key], slots)
             final = -shaping * episode.potential  # Φ = 0 at the end: the shaping telescopes
             reward = verdict["reward"] + final
             if not verdict["finished"]:

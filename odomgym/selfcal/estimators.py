@@ -89,6 +89,9 @@ class EndPoseEstimator:
         self._prior_info = np.linalg.inv(prior_cov)
         self._prior_logdet = float(np.linalg.slogdet(prior_cov)[1])
         self._x0 = self._to_x(initial) if initial is not None else np.zeros(3)
+        #: Keep the estimate near the prior's mean rather than the nominal robot (set by a
+        #: session that starts a skid-steer robot from its apparent track).
+        self.centred = False
         self._limit = CLIP_PRIORS * np.array(PRIOR_STD)  # on (ln E_s, ln E_d, ln E_b)
         self.x = self._x0.copy()
         self.covariance = prior_cov
@@ -193,9 +196,17 @@ class EndPoseEstimator:
             self.roughness = self._roughness_from(residuals, self.roughness)
 
     def _clipped(self, x: FloatArray) -> FloatArray:
-        """``x`` with (ln E_s, ln E_d, ln E_b) kept within :data:`CLIP_PRIORS` half-ranges."""
-        out: FloatArray = _TO_X @ np.clip(_FROM_X @ x, -self._limit, self._limit)
-        return out
+        """``x`` with (ln E_s, ln E_d, ln E_b) kept within :data:`CLIP_PRIORS` half-ranges of
+        the nominal robot, or of the prior's mean when :attr:`centred` (a skid-steer session,
+        whose apparent track lies far from the nominal one)."""
+        if not self.centred:  # about the nominal robot
+            out: FloatArray = _TO_X @ np.clip(_FROM_X @ x, -self._limit, self._limit)
+            return out
+        centre = _FROM_X @ self._x0
+        shifted: FloatArray = _TO_X @ np.clip(
+            _FROM_X @ x, centre - self._limit, centre + self._limit
+        )
+        return shifted
 
     def _roughness_from(self, residuals: list[FloatArray], current: float) -> float:
         """The roughness factor ρ that explains the end-pose residuals (one per run, in the

@@ -80,6 +80,8 @@ class SelfCalSession:
         initial: the calibration to start from (default: uncalibrated).
         observe: ``"trajectory"`` or ``"end_pose"``
             (:data:`~odomgym.selfcal.estimators.ESTIMATORS`).
+        centred: keep the estimate within the prior's range of ``initial`` rather than of the
+            nominal robot, and observe E_b relative to it (skid-steer sessions).
     """
 
     def __init__(
@@ -89,12 +91,19 @@ class SelfCalSession:
         sensor: SensorAccuracy | None = None,
         initial: Calibration | None = None,
         observe: str = "trajectory",
+        *,
+        centred: bool = False,
     ) -> None:
         self.budget = require_count("budget", budget, 1)
         if self.budget > MAX_BUDGET:
             raise SpecError(f"budget must be <= {MAX_BUDGET} runs, got {budget}", field="budget")
         self.observe = check_observe(observe)
         self.estimator = ESTIMATORS[observe](robot, sensor or SensorAccuracy(), initial)
+        # ``centred``: the estimate stays near ``initial`` and the observed E_b is relative to
+        # it (a skid-steer session starts from its apparent track, far from 1; otherwise the
+        # observation is E_b − 1 as always).
+        self.estimator.centred = centred
+        self._e_b0 = float(initial.wheelbase_scale) if centred and initial is not None else 1.0
         self.counts = np.zeros(len(ACTION_MENU), dtype=np.int64)
         self.runs_used = 0
         self.last_item = STOP
@@ -141,7 +150,7 @@ class SelfCalSession:
             [
                 [self.runs_left / self.budget, self.budget / REFERENCE_BUDGET],
                 self.counts[1:] / self.budget,
-                [(e_d - 1.0) / 0.01, (e_b - 1.0) / 0.05, (e_s - 1.0) / 0.02],
+                [(e_d - 1.0) / 0.01, (e_b / self._e_b0 - 1.0) / 0.05, (e_s - 1.0) / 0.02],
                 np.log10(est.relative_std),
                 [math.log10(est.roughness)],
                 self.innovation,

@@ -1,0 +1,159 @@
+"""``odomgym fleet ROBOTS/``: every robot of a fleet diagnosed on its own logs, then compared
+(:mod:`odomgym.diagnose.fleet`); ``odomgym fleet --example N OUT`` writes a fleet to try it on."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from odomgym.cli._common import (
+    Progress,
+    Reporter,
+    add_backend_arguments,
+    check_backend,
+    check_output,
+    count,
+    processes,
+    seed,
+)
+
+if TYPE_CHECKING:
+    from odomgym.cli._common import Commands
+
+
+def register(commands: Commands) -> None:
+    """Add ``fleet``."""
+    parser = commands.add_parser(
+        "fleet",
+        help="diagnose every robot of a fleet and compare them (recurring effects, odd robots)",
+        description="Diagnose each robot of ROBOTS (one sub-folder per robot: its robot.toml "
+        "and its logs, optionally in one sub-folder per period) on all its sessions, then "
+        "compare the robots: which effects and terms recur in how many robots, each "
+        "parameter's values across the fleet, the robots more than 3 robust standard "
+        "deviations from it, and what moved between a robot's periods. Writes fleet.md, "
+        "fleet.json, a figure per effect and every robot's own report folder.",
+    )
+    parser.add_argument(
+        "robots",
+        metavar="ROBOTS",
+        help="the fleet's folder (with --example: the folder to write the example into)",
+    )
+    parser.add_argument("--out", help="output folder (default: <ROBOTS>-fleet)")
+    parser.add_argument(
+        "--example",
+        type=count,
+        metavar="N",
+        help="only write an example fleet of N simulated robots into ROBOTS and stop",
+    )
+    parser.add_argument(
+        "--sessions", type=count, default=3, help="sessions per example robot (default 3)"
+    )
+    parser.add_argument("--seed", type=seed, default=0, help="random seed >= 0 (default 0)")
+    parser.add_argument(
+        "--jobs", type=processes, help="worker processes per diagnosis (default: all cores)"
+    )
+    add_backend_arguments(parser, "diagnoses (one per robot and period)")
+    parser.add_argument(
+        "--no-baseline",
+        action="store_true",
+        help="do not run the baseline trajectory calibration beside each diagnosis",
+    )
+    parser.add_argument(
+        "--resume", action="store_true", help="keep the robots already diagnosed in --out"
+    )
+    parser.add_argument(
+        "--loso",
+        action="store_true",
+        help="also diagnose every robot of two or more sessions once per session left out "
+        "(OUT/loso/<robot>/, kept across interruptions) and report the stability of its "
+        "effects and E_d, E_b, E_s across the folds",
+    )
+    parser.add_argument("--json", action="store_true", help="print fleet.json instead of fleet.md")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the example, or diagnose the fleet and write its report."""
+    from odomgym.baselines.trajectory import TrajectoryBaseline
+    from odomgym.diagnose.fleet import (
+        diagnose_fleet,
+        find_fleet,
+        format_fleet,
+        plot_fleet,
+        summarise_fleet,
+        write_example_fleet,
+    )
+    from odomgym.diagnose.workflow import DiagnoseConfig
+    from odomgym.io import atomic_write_text
+
+    report = Reporter.of(args)
+    root = Path(args.robots)
+    if args.example is not None:
+        check_output(root, option="ROBOTS", folder=True)
+        truth = write_example_fleet(root, args.example, seed=args.seed, sessions=args.sessions)
+        report.status(
+            f"wrote {args.example} robots ({args.sessions} sessions each) into {root}; the "
+            f"truth, which the fleet command never reads: {root / 'truth.json'}"
+        )
+        if report.json:
+            report.document(truth)
+        return 0
+    check_backend(args)
+    robots = find_fleet(root)
+    out = Path(args.out) if args.out else Path(f"{root.name or 'fleet'}-fleet")
+    check_output(out, option="--out", folder=True)
+    config = DiagnoseConfig(seed=args.seed, jobs=args.jobs or os.cpu_count() or 1)
+    bars: list[Progress] = []
+
+    def progress(label: str) -> Callable[[str, float], None]:
+        """A bar per robot: its label, then the diagnosis' stage and fraction."""
+        if bars:
+            bars.pop().__exit__(None, None, None)
+        bar = Progress(report, label, leave=True)
+        bars.append(bar)
+
+        def stage(name: str, fraction: float) -> None:
+            bar.stage(f"{label}: {name}", fraction)
+
+        return stage
+
+    common = {
+        "config": config,
+        "baseline": None if args.no_baseline else TrajectoryBaseline,
+        "resume": args.resume,
+        "status": report.status,
+        "loso": args.loso,
+    }
+    if args.backend == "ray":
+        # One Ray task per diagnosis: a bar over the fleet's diagnoses, a line as each ends.
+        with Progress(report, "fleet on Ray: diagnoses done, %") as overall:
+            diagnose_fleet(
+                robots,
+                out,
+                **common,
+                backend="ray",
+                address=args.ray_address,
+                done=overall.done_of,
+            )
+    else:
+        try:
+            diagnose_fleet(robots, out, **common, progress=progress)
+        finally:
+            for bar in bars:
+                bar.__exit__(None, None, None)
+    summary = summarise_fleet(out, robots)
+    text = format_fleet(summary, str(root))
+    document = json.dumps(summary.to_json(), indent=1)
+    atomic_write_text(out / "fleet.md", text)
+    atomic_write_text(out / "fleet.json", document + "\n")
+    figures = plot_fleet(summary, out)
+    if report.json:
+        report.text(document)
+    else:
+        report.text(text)
+    report.wrote([out / "fleet.md", out / "fleet.json", *figures])
+    return 0

@@ -1,0 +1,198 @@
+"""Where odomgym's independent units of work run: worker processes of this machine, or Ray.
+
+Three commands spread independent work: ``bench`` (chunks of robots), ``fleet`` (one diagnosis
+per robot and period) and ``diagnose`` (its candidate fits, and with ``--loso`` its
+leave-one-session-out folds). Each unit is a deterministic function of its inputs, so where it
+runs cannot change a result: ``--backend ray`` gives byte-identical outputs to ``--backend
+local`` (tested against a real ``ray start --head`` in ``tests/test_distributed.py``).
+
+Which Ray, by Ray's own convention (``ray.init``, "address" resolution):
+
+* already initialised in this process (a script called ``ray.init`` itself): that one;
+* ``--ray-address ADDRESS`` (``ray://host:10001`` for Ray Client, or ``host:6379`` from a
+  node of the cluster), or else the ``RAY_ADDRESS`` environment variable: that cluster;
+* neither: a new local Ray with ``jobs`` CPUs (``address="local"``, so a cluster started on
+  this machine by ``ray start`` is not picked up by accident), shut down when the work ends.
+
+On a cluster, every node needs odomgym (and the same versions of numpy, scipy, pymunk) in the
+Python its Ray workers run; a unit's inputs travel with it (logs already read, configs), and
+its outputs come back to this process, which writes every file, so no shared file system is
+needed. Effects a user registered at run time exist only in this process: a Ray worker knows
+the catalogue (:mod:`odomgym.effects`) and what its own imports register.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import os
+import signal
+from collections.abc import Callable, Iterable, Iterator
+from enum import StrEnum
+from typing import Any, TypeVar
+
+from odomgym import interrupt
+from odomgym.errors import SpecError
+
+__all__ = ["RAY_MISSING", "Backend", "on_ray", "ray_session", "ray_started", "run_ray_tasks"]
+
+K = TypeVar("K")
+
+RAY_MISSING = "--backend ray needs Ray, which is not installed: pip install 'odomgym[distributed]'"
+"""The one line a command prints when Ray is asked for and absent."""
+
+
+class Backend(StrEnum):
+    """Where a command's independent units of work run.
+
+    * ``local`` — this machine: ``jobs`` worker processes (1: this process);
+    * ``ray`` — Ray tasks (``pip install 'odomgym[distributed]'``), on the cluster named by
+      ``--ray-address`` or ``RAY_ADDRESS``, else on a local Ray with ``jobs`` CPUs.
+    """
+
+    LOCAL = "local"
+    RAY = "ray"
+
+    def check_available(self) -> None:
+        """Raise :class:`SpecError` (field ``backend``) if this backend cannot run here; cheap
+        enough to call before any work."""
+        if self is Backend.RAY and importlib.util.find_spec("ray") is None:
+            raise SpecError(RAY_MISSING, field="backend")
+
+
+_RAY_STARTED: bool | None = None
+"""Inside :func:`on_ray`: whether that block started its Ray; None outside (work runs here)."""
+
+
+def ray_started() -> bool | None:
+    """None when the units of work that may go to Ray run on this machine; inside
+    :func:`on_ray`, whether its Ray was started by it (for :func:`run_ray_tasks`)."""
+    return _RAY_STARTED
+
+
+@contextlib.contextmanager
+def on_ray(backend: Backend | str, address: str | None = None, cpus: int = 1) -> Iterator[None]:
+    """With ``backend`` ``ray``, the block's units of work that can go to Ray do (a diagnosis'
+    candidate fits: :func:`odomgym.diagnose.fit.run_fit_jobs`), in a :func:`ray_session`;
+    with ``local`` nothing changes. Not reentrant across threads (one command at a time)."""
+    global _RAY_STARTED
+    if Backend(backend) is Backend.LOCAL:
+        yield
+        return
+    with ray_session(address, cpus) as started:
+        before, _RAY_STARTED = _RAY_STARTED, started
+        try:
+            yield
+        finally:
+            _RAY_STARTED = before
+
+
+def _address(address: str | None) -> str | None:
+    """The cluster to join: ``address``, else ``RAY_ADDRESS``, else None (start a local one)."""
+    chosen = address or os.environ.get("RAY_ADDRESS") or None
+    return chosen.strip() if chosen else None
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None = None, cpus: int = 1) -> Iterator[bool]:
+    """Ray, initialised for the ``with`` block (module docstring: which one); yields whether
+    this call started it (then it is shut down when the block ends, also on an error).
+
+    Raises:
+        SpecError: Ray is not installed (field ``backend``), or the cluster at the address
+            cannot be reached (field ``ray-address``, naming the address).
+    """
+    Backend.RAY.check_available()
+    import ray
+
+    if ray.is_initialized():
+        yield False
+        return
+    target = _address(address)
+    # ray.init replaces the SIGTERM handler with one that calls sys.exit, and Ray's C++ core
+    # installs absl's failure-signal handler, which prints a stack dump for a plain SIGTERM.
+    # Keep the caller's handler (the command line's: stop cleanly, exit 143) and no dump.
+    previous = signal.getsignal(signal.SIGTERM)
+    os.environ.setdefault("RAY_DISABLE_FAILURE_SIGNAL_HANDLER", "1")
+    try:
+        if target is None:
+            ray.init(
+                address="local",
+                num_cpus=max(1, cpus),
+                include_dashboard=False,
+                log_to_driver=False,
+            )
+        else:
+            ray.init(address=target, log_to_driver=False)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        hint = (
+            " (is the cluster up? A cluster with token authentication also needs "
+            "RAY_AUTH_MODE=token and its token in ~/.ray/auth_token or RAY_AUTH_TOKEN)"
+            if target
+            else ""
+        )
+        raise SpecError(
+            f"cannot {'join Ray at ' + target if target else 'start a local Ray'}: {first}{hint}",
+            field="ray-address" if target else "backend",
+        ) from None
+    finally:
+        if callable(previous) and signal.getsignal(signal.SIGTERM) is not previous:
+            signal.signal(signal.SIGTERM, previous)
+    try:
+        yield True
+    finally:
+        ray.shutdown()
+
+
+def run_ray_tasks(
+    function: Callable[..., Any],
+    tasks: Iterable[tuple[K, tuple[Any, ...]]],
+    finished: Callable[[K, Any], None],
+    *,
+    started: bool,
+    max_retries: int = 1,
+) -> None:
+    """``function(*args)`` for every ``(key, args)`` of ``tasks`` as a Ray task of one CPU,
+    each result handed to ``finished(key, result)`` in this process as it arrives (in whatever
+    order they finish). Ray must be initialised (:func:`ray_session`; ``started``: whether by
+    this command, which decides how an interruption ends the tasks).
+
+    A worker that dies is retried ``max_retries`` times by Ray itself (every attempt computes
+    the same result); an exception inside a task is raised here as a RuntimeError naming the
+    key. Ctrl-C/SIGTERM (:mod:`odomgym.interrupt`) and an exception from ``finished`` stop the
+    work: on a Ray this command started, by shutting it down; on the caller's cluster, by
+    cancelling this call's tasks only.
+    """
+    import ray
+
+    remote = ray.remote(num_cpus=1, max_retries=max_retries)(function)
+    pending: dict[Any, K] = {remote.remote(*args): key for key, args in tasks}
+    try:
+        while pending:
+            try:
+                ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            except SystemError:
+                # A stop request raised by the signal handler inside Ray's compiled wait comes
+                # back wrapped ("returned a result with an exception set"): stop as asked.
+                interrupt.check()
+                raise
+            interrupt.check()
+            for ref in ready:
+                key = pending.pop(ref)
+                try:
+                    value = ray.get(ref)
+                except ray.exceptions.RayTaskError as exc:
+                    cause = exc.cause if getattr(exc, "cause", None) is not None else exc
+                    raise RuntimeError(
+                        f"Ray task {key!r} failed: {type(cause).__name__}: {cause}"
+                    ) from None
+                finished(key, value)
+    finally:
+        if pending and started:
+            # Interrupted on the local Ray this command started: shutting it down stops every
+            # worker now (force-cancelling first made Ray's task manager abort at exit).
+            ray.shutdown()
+        elif pending:  # on the caller's cluster: stop this call's tasks, nothing else
+            for ref in pending:
+                ray.cancel(ref, force=True)

@@ -1,0 +1,168 @@
+"""``odomgym fleet``: the fleet layout, the comparison across robots, and the command.
+
+The comparison is checked on reports written here with known values (the robust statistics
+by hand); one slow test runs the whole command on a small simulated fleet and resumes it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from odomgym.cli import main
+from odomgym.diagnose.fleet import (
+    MIN_NAMING,
+    ROBUST_SD,
+    FleetRobot,
+    find_fleet,
+    format_fleet,
+    summarise_fleet,
+)
+from odomgym.errors import SpecError
+from odomgym.robot import PRESETS
+
+
+def _robot_folder(root: Path, name: str, logs: list[str]) -> Path:
+    folder = root / name
+    folder.mkdir(parents=True)
+    PRESETS["labmate"].save(folder / "robot.toml")
+    for log in logs:
+        path = folder / log
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("run,experiment,t,ticks_left,ticks_right,x,y,theta\n")
+    return folder
+
+
+def test_the_layout_gives_robots_sessions_and_periods(tmp_path: Path) -> None:
+    _robot_folder(tmp_path, "b-robot", ["s1.csv", "s2.csv"])
+    _robot_folder(tmp_path, "a-robot", ["2026-10/s1.csv", "2026-11/s1.csv", "2026-11/s2.csv"])
+    robots = find_fleet(tmp_path)
+    assert [r.name for r in robots] == ["a-robot", "b-robot"]
+    assert robots[0].periods == ("2026-10", "2026-11") and len(robots[0].logs) == 3
+    assert robots[1].periods == ("",) and len(robots[1].logs) == 2
+
+
+@pytest.mark.parametrize(
+    ("make", "field"),
+    [
+        (lambda root: None, "ROBOTS"),
+        (lambda root: (root / "r1").mkdir(), "robot.toml"),
+        (lambda root: _robot_folder(root, "r1", []), "logs"),
+    ],
+)
+def test_a_bad_fleet_folder_is_named_in_one_line(tmp_path: Path, make, field: str) -> None:  # type: ignore[no-untyped-def]
+    make(tmp_path)
+    with pytest.raises(SpecError) as caught:
+        find_fleet(tmp_path)
+    assert caught.value.field == field and "\n" not in str(caught.value)
+
+
+def _write_report(folder: Path, named: dict[str, dict[str, tuple[float, float]]]) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    report = {
+        "verdict": "explained",
+        "named_effects": list(named),
+        "terms_kept": [],
+        "parameters": {
+            effect: {p: {"value": v, "stderr": s} for p, (v, s) in values.items()}
+            for effect, values in named.items()
+        },
+    }
+    (folder / "report.json").write_text(json.dumps(report))
+
+
+def test_odd_robots_are_those_beyond_three_robust_standard_deviations(tmp_path: Path) -> None:
+    e_b = [1.000, 1.002, 0.998, 1.001, 0.999, 1.003, 0.997, 1.030]  # the last one planted
+    robots = []
+    for k, value in enumerate(e_b):
+        name = f"r{k}"
+        named = {"wheelbase": {"e_b": (value, 1e-4)}}
+        if k < MIN_NAMING - 1:  # backlash in too few robots for a distribution
+            named["backlash"] = {"angle": (0.01 * (k + 1), 1e-3)}
+        _write_report(tmp_path / "robots" / name, named)
+        robots.append(FleetRobot(name, tmp_path, PRESETS["labmate"], ((("", tmp_path / "x.csv")),)))
+    summary = summarise_fleet(tmp_path, robots)
+    median = float(np.median(e_b))
+    robust = ROBUST_SD * float(np.median(np.abs(np.array(e_b) - median)))
+    stats = summary.fleet[("wheelbase", "e_b")]
+    assert stats["median"] == pytest.approx(median) and stats["robust_sd"] == pytest.approx(robust)
+    assert [(r, e, p) for r, e, p, _, _ in summary.odd] == [("r7", "wheelbase", "e_b")]
+    assert summary.odd[0][4] == pytest.approx((1.030 - median) / robust)
+    assert ("backlash", "angle") not in summary.fleet  # named by 4 < MIN_NAMING robots
+    assert summary.named["wheelbase"] == [f"r{k}" for k in range(8)]
+    assert len(summary.named["backlash"]) == MIN_NAMING - 1
+    text = format_fleet(summary, "here")
+    assert "| r7 | `wheelbase.e_b` |" in text
+
+
+def test_what_moved_between_a_robots_periods(tmp_path: Path) -> None:
+    folder = tmp_path / "robots" / "r0"
+    _write_report(folder, {"wheelbase": {"e_b": (1.01, 1e-3)}})
+    _write_report(tmp_path / "periods" / "r0" / "2026-10", {"wheelbase": {"e_b": (1.000, 1e-3)}})
+    _write_report(tmp_path / "periods" / "r0" / "2026-11", {"wheelbase": {"e_b": (1.020, 1e-3)}})
+    logs = (("2026-10", tmp_path / "a.csv"), ("2026-11", tmp_path / "b.csv"))
+    summary = summarise_fleet(tmp_path, [FleetRobot("r0", tmp_path, PRESETS["labmate"], logs)])
+    ((robot, effect, name, first, last, change, z),) = summary.moved
+    assert (robot, effect, name, first, last) == ("r0", "wheelbase", "e_b", "2026-10", "2026-11")
+    assert change == pytest.approx(0.02) and z == pytest.approx(0.02 / np.hypot(1e-3, 1e-3))
+
+
+@pytest.mark.slow
+def test_the_command_diagnoses_an_example_fleet_and_resumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two simulated LabMates, one session each (one of them with a planted E_b 5 % off):
+    every robot gets its report folder, the fleet its report and a figure per effect named;
+    a second run with --resume keeps them."""
+    fleet = tmp_path / "fleet"
+    assert main(["fleet", "--example", "2", str(fleet), "--sessions", "1"]) == 0
+    truth = json.loads((fleet / "truth.json").read_text())
+    assert sorted(truth["robots"]) == ["robot-1", "robot-2"]
+    out = tmp_path / "out"
+    assert main(["fleet", str(fleet), "--out", str(out), "--jobs", "1", "--no-baseline"]) == 0
+    for name in ("robot-1", "robot-2"):
+        assert (out / "robots" / name / "report.json").exists()
+    data = json.loads((out / "fleet.json").read_text())
+    assert data["robots"] == ["robot-1", "robot-2"]
+    assert "wheelbase" in data["named"]  # the planted robot's E_b at least
+    assert (out / "fleet_wheelbase.png").exists()
+    before = (out / "fleet.md").read_text()
+    capsys.readouterr()
+    assert main(["fleet", str(fleet), "--out", str(out), "--resume", "--no-baseline"]) == 0
+    assert "robot-1: done before, kept" in capsys.readouterr().out  # status: stdout without --json
+    assert (out / "fleet.md").read_text() == before
+
+
+@pytest.mark.slow
+def test_loso_gives_each_robot_its_folds_and_the_report_their_stability(tmp_path: Path) -> None:
+    """``--loso``: a robot of two sessions gets one fold file per session in ``loso/<robot>/``
+    and a row of the stability table; a second call keeps the fold files (resume). Two
+    candidate effects and no discovery keep it short."""
+    from odomgym.diagnose.config import DiagnoseConfig
+    from odomgym.diagnose.fleet import diagnose_fleet
+
+    fleet = tmp_path / "fleet"
+    assert main(["fleet", "--example", "2", str(fleet), "--sessions", "2"]) == 0
+    robots = find_fleet(fleet)
+    out = tmp_path / "out"
+    config = DiagnoseConfig(candidates=("wheelbase", "distance_scale"), discover=False, jobs=1)
+    lines: list[str] = []
+    diagnose_fleet(robots, out, config=config, loso=True, status=lines.append)
+    for robot in ("robot-1", "robot-2"):
+        assert sorted(p.name for p in (out / "loso" / robot).iterdir()) == [
+            "fold-session-1.json",
+            "fold-session-2.json",
+        ]
+    summary = summarise_fleet(out, robots)
+    assert sorted(summary.stability) == ["robot-1", "robot-2"]
+    for checks in summary.stability.values():
+        assert checks["folds"] == 2 and set(checks["intervals_overlap"]) == {"e_d", "e_b", "e_s"}
+    assert "seconds" not in json.dumps(summary.to_json())  # the same wherever the folds ran
+    text = format_fleet(summary, "fleet")
+    assert "## Stability: leave one session out" in text and "| robot-2 | 2 |" in text
+    stamps = {p: p.stat().st_mtime_ns for p in (out / "loso").rglob("fold-*.json")}
+    diagnose_fleet(robots, out, config=config, loso=True, resume=True, status=lines.append)
+    assert {p: p.stat().st_mtime_ns for p in (out / "loso").rglob("fold-*.json")} == stamps
