@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import errno
 import os
+import shutil
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import NoReturn
+from typing import NoReturn, TypeVar
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_writer"]
+T = TypeVar("T")
+
+__all__ = ["atomic_folder", "atomic_write_bytes", "atomic_write_text", "atomic_writer"]
 
 
 def atomic_writer(path: Path, write: Callable[[Path], None]) -> None:
@@ -78,3 +81,34 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         tmp.write_bytes(data)
 
     atomic_writer(path, write)
+
+
+def atomic_folder(out: Path, fill: Callable[[Path], T]) -> T:
+    """Replace the folder ``out`` by one ``fill(tmp)`` writes, atomically: ``fill`` writes into a
+    new temporary sibling folder, which is renamed over ``out`` only if it succeeded (the old
+    folder, if any, moved aside first and then removed), so a reader sees the old folder or the
+    new one, never a half-written one. Returns what ``fill`` returns.
+
+    Raises:
+        OSError: ``out`` exists and is not a folder.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OSError(errno.ENOTDIR, "exists and is not a folder", str(out))
+    parent = out.resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    try:
+        result = fill(tmp)
+        os.chmod(tmp, 0o755)  # mkdtemp makes 0700; an ordinary folder's permissions
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
+            os.replace(out, old / "x")
+            os.replace(tmp, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return result

@@ -222,28 +222,15 @@ def _diagnose_files(
 
 
 def _write_folder(folder: Path, files: dict[str, bytes]) -> None:
-    """Replace ``folder`` by one holding ``files`` (name → bytes), atomically: written into a
-    temporary sibling, then renamed over it."""
-    import os
-    import shutil
-    import tempfile
+    """Replace ``folder`` by one holding ``files`` (name → bytes), atomically
+    (:func:`odomgym.io.atomic_folder`)."""
+    from odomgym.io import atomic_folder
 
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
+    def fill(tmp: Path) -> None:
         for name, data in files.items():
             (tmp / name).write_bytes(data)
-        os.chmod(tmp, 0o755)
-        if folder.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.old.", dir=folder.parent))
-            os.replace(folder, old / "x")
-            os.replace(tmp, folder)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+
+    atomic_folder(folder, fill)
 
 
 def diagnose_fleet(

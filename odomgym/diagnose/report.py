@@ -9,9 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +18,7 @@ from odomgym.diagnose.gate import GateStep
 from odomgym.diagnose.plots import plot_all
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
+from odomgym.io import atomic_folder
 
 __all__ = ["format_markdown", "write_outputs"]
 
@@ -619,27 +617,15 @@ def _check_lines(d: Diagnosis) -> list[str]:
 
 
 def write_outputs(diagnosis: Diagnosis, out: Path, data: str) -> list[Path]:
-    """Write everything into ``out`` (replacing an earlier diagnose output there) atomically."""
+    """Write everything into ``out`` (replacing an earlier diagnose output there) atomically
+    (:func:`odomgym.io.atomic_folder`)."""
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise OSError(f"{out} exists and is not a folder")
-    parent = out.resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
-    try:
+
+    def fill(tmp: Path) -> list[str]:
         (tmp / "report.json").write_text(report_json(diagnosis) + "\n", encoding="utf-8")
         (tmp / "report.md").write_text(format_markdown(diagnosis, data), encoding="utf-8")
         diagnosis.model.save(tmp / "model.toml")
-        names = ["report.json", "report.md", "model.toml", *plot_all(diagnosis, tmp)]
-        os.chmod(tmp, 0o755)
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
-            os.replace(out, old / "x")
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        return ["report.json", "report.md", "model.toml", *plot_all(diagnosis, tmp)]
+
+    names = atomic_folder(out, fill)
     return [out / n for n in names]
