@@ -128,6 +128,7 @@ def test_a_second_call_diagnoses_only_the_missing_fold_and_prints_the_same_table
     assert diagnosed == []
 
 
+@pytest.mark.slow  # it diagnoses the three folds again (12 s of CPU): CI runs it
 def test_two_shards_then_the_table_give_the_full_run(
     full: tuple[Path, str], tmp_path: Path
 ) -> None:
