@@ -121,30 +121,29 @@ def run(args: argparse.Namespace) -> int:
 
         return stage
 
-    common = {
-        "config": config,
-        "baseline": None if args.no_baseline else TrajectoryBaseline,
-        "resume": args.resume,
-        "status": report.status,
-        "loso": args.loso,
-    }
-    if args.backend == "ray":
-        # One Ray task per diagnosis: a bar over the fleet's diagnoses, a line as each ends.
-        with Progress(report, "fleet on Ray: diagnoses done, %") as overall:
-            diagnose_fleet(
-                robots,
-                out,
-                **common,
-                backend="ray",
-                address=args.ray_address,
-                done=overall.done_of,
-            )
-    else:
-        try:
-            diagnose_fleet(robots, out, **common, progress=progress)
-        finally:
-            for bar in bars:
-                bar.__exit__(None, None, None)
+    on_ray = args.backend == "ray"
+    # Locally a bar per robot (its diagnosis' stages); on Ray one bar over the fleet's
+    # diagnoses, whose stages stay in their tasks, and a line as each ends.
+    overall = Progress(report, "fleet on Ray: diagnoses done, %") if on_ray else None
+    if overall is not None:
+        bars.append(overall)
+    try:
+        diagnose_fleet(
+            robots,
+            out,
+            config=config,
+            baseline=None if args.no_baseline else TrajectoryBaseline,
+            resume=args.resume,
+            progress=None if on_ray else progress,
+            status=report.status,
+            backend=args.backend,
+            address=args.ray_address,
+            done=overall.done_of if overall is not None else None,
+            loso=args.loso,
+        )
+    finally:
+        for bar in bars:
+            bar.__exit__(None, None, None)
     summary = summarise_fleet(out, robots)
     text = format_fleet(summary, str(root))
     document = json.dumps(summary.to_json(), indent=1)

@@ -199,24 +199,21 @@ def _diagnose_files(
     config: Any,
     baseline: Callable[[], Any] | None,
     source: str,
+    progress: Callable[[str, float], None] | None = None,
 ) -> tuple[str, dict[str, bytes]]:
-    """One diagnosis as a Ray task: its verdict and its report folder's files (name → bytes),
-    written in a temporary folder of the worker and carried back, so the driver writes every
-    file and the cluster needs no shared file system. Candidate fits run one after the other
-    in the task (``config.jobs`` = 1: a Ray task holds one CPU); the results do not depend on
-    it (:func:`odomgym.diagnose.fit.run_fit_jobs`)."""
-    import dataclasses
+    """One diagnosis, here or as a Ray task: its verdict and its report folder's files (name →
+    bytes), written in a temporary folder and carried back, so the driver writes every file
+    (:func:`_write_folder`) whichever backend ran it and a cluster needs no shared file
+    system."""
     import tempfile
 
     from odomgym.diagnose.report import write_outputs
     from odomgym.diagnose.workflow import diagnose
 
-    one = dataclasses.replace(config, jobs=1) if config is not None else None
     trusted = baseline() if baseline is not None else None
-    diagnosis = diagnose(runs, robot, one, baseline=trusted)
+    diagnosis = diagnose(runs, robot, config, baseline=trusted, progress=progress)
     with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp) / "report"
-        written = write_outputs(diagnosis, folder, source)
+        written = write_outputs(diagnosis, Path(tmp) / "report", source)
         files = {path.name: path.read_bytes() for path in written}
     return diagnosis.verdict, files
 
@@ -270,12 +267,12 @@ def diagnose_fleet(
     chosen_backend = Backend(backend)
     chosen_backend.check_available()
     if chosen_backend is Backend.RAY:  # one Ray for the diagnoses and the folds
-        with ray_session(address, getattr(config, "jobs", 1) or 1):
+        with ray_session(address, getattr(config, "jobs", 1) or 1) as started:
             return _diagnose_fleet(
-                robots, out, config, baseline, resume, progress, status, True, done, loso
+                robots, out, config, baseline, resume, progress, status, started, done, loso
             )
     return _diagnose_fleet(
-        robots, out, config, baseline, resume, progress, status, False, done, loso
+        robots, out, config, baseline, resume, progress, status, None, done, loso
     )
 
 
@@ -287,12 +284,16 @@ def _diagnose_fleet(
     resume: bool,
     progress: Callable[[str], Callable[[str, float], None]] | None,
     status: Callable[[str], None] | None,
-    on_ray: bool,
+    ray_started: bool | None,
     done: Callable[[int, int], None] | None,
     loso: bool,
 ) -> list[Path]:
-    """:func:`diagnose_fleet` once its backend is settled (``on_ray``: inside a Ray session)."""
-    from odomgym.distributed import ray_started, run_ray_tasks
+    """:func:`diagnose_fleet` once its backend is settled: ``ray_started`` None runs here,
+    else inside a Ray session (True: started by this call, which an interruption shuts
+    down)."""
+    import dataclasses
+
+    from odomgym.distributed import run_ray_tasks
 
     units = _units(robots, out)
     folders = [folder for *_, folder in units]
@@ -325,30 +326,25 @@ def _diagnose_fleet(
         if done is not None:
             done(finished, len(units))
 
-    if on_ray:
+    if ray_started is not None:
+        # A Ray task holds one CPU: its candidate fits run one after the other, which changes
+        # no result (odomgym.diagnose.fit.run_fit_jobs).
+        one = dataclasses.replace(config, jobs=1) if config is not None else None
         tasks = (
-            (k, (runs_of(robot, period), robot.robot, config, baseline, str(robot.folder)))
+            (k, (runs_of(robot, period), robot.robot, one, baseline, str(robot.folder)))
             for k, (robot, period, _, _) in enumerate(todo)
         )
-        run_ray_tasks(_diagnose_files, tasks, record, started=bool(ray_started()))
+        run_ray_tasks(_diagnose_files, tasks, record, started=ray_started)
     else:
-        from odomgym.diagnose.report import write_outputs
-        from odomgym.diagnose.workflow import diagnose
-
-        for robot, period, label, folder in todo:
-            trusted = baseline() if baseline is not None else None
+        for k, (robot, period, label, _) in enumerate(todo):
             callback = progress(label) if progress is not None else None
-            diagnosis = diagnose(
-                runs_of(robot, period), robot.robot, config, baseline=trusted, progress=callback
+            runs = runs_of(robot, period)
+            record(
+                k, _diagnose_files(runs, robot.robot, config, baseline, str(robot.folder), callback)
             )
-            write_outputs(diagnosis, folder, str(robot.folder))
-            finished += 1
-            if status is not None:
-                status(f"{label}: {diagnosis.verdict}")
-            if done is not None:
-                done(finished, len(units))
     if loso:
-        _fleet_loso(robots, out, config, baseline, "ray" if on_ray else "local", status, runs_of)
+        backend = "local" if ray_started is None else "ray"
+        _fleet_loso(robots, out, config, baseline, backend, status, runs_of)
     return folders
 
 
