@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from cli_errors import one_line_error as _one_line_error
 from conftest import OPTIODOM
 
 from odomgym.cli import main
@@ -263,18 +264,6 @@ def test_every_method_on_every_shipped_session_kind(
 
 
 # ---------------------------------------------------------------------------------- outputs
-def _one_line_error(capsys: pytest.CaptureFixture[str], *needles: str) -> str:
-    """The command failed with one line naming what was wrong, printed nothing else (so no
-    work was done: every command prints its results only after the work), and no traceback."""
-    out, err = capsys.readouterr()
-    assert out == ""
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("odomgym: error: "), err
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
-    return lines[0]
-
-
 def _output_cases(tmp: Path) -> list[tuple[list[str], str, str]]:
     """(argv, option named in the error, words of the reason) for every output option."""
     existing_file = tmp / "a-file.txt"

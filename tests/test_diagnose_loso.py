@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from cli_errors import one_line_error
 
 from odomgym.cli import main
 from odomgym.diagnose import loso
@@ -149,15 +150,6 @@ def test_two_shards_then_the_table_give_the_full_run(
     assert not (tmp_path / "none").exists()  # nothing diagnosed, nothing written
 
 
-def _one_line(capsys: pytest.CaptureFixture[str], *needles: str) -> None:
-    """Failed with one line ``odomgym: error: …`` naming ``needles``, nothing on stdout."""
-    out, err = capsys.readouterr()
-    lines = err.strip().splitlines()
-    assert out == "" and len(lines) == 1 and lines[0].startswith("odomgym: error: "), err
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
-
-
 @pytest.mark.parametrize("shard", ["0/2", "3/2", "2", "a/b", "1/2/3"])
 def test_a_bad_shard_is_refused_by_the_parser(
     shard: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -189,7 +181,7 @@ def test_bad_loso_options_are_one_line(
     if "needs --loso" in needles[0]:
         argv.remove("--loso")
     assert main(argv) == 2
-    _one_line(capsys, *needles)
+    one_line_error(capsys, *needles)
     assert not (tmp_path / "out").exists()
 
 
@@ -199,7 +191,7 @@ def test_one_session_or_a_broken_fold_file_is_one_line(
     argv = _argv(tmp_path / "one")
     argv[1] = f"{DATA}/{SESSIONS[0]}"
     assert main(argv) == 2
-    _one_line(capsys, "two or more sessions")
+    one_line_error(capsys, "two or more sessions")
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / f"fold-{SESSIONS[0]}.json").write_text("{", encoding="utf-8")

@@ -21,6 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from cli_errors import one_line_error
 
 from odomgym.cli import main
 from odomgym.data import sample_session
@@ -28,14 +29,6 @@ from odomgym.data.optiodom import session_time
 from odomgym.diagnose.config import DiagnoseConfig
 from odomgym.diagnose.fleet import diagnose_fleet, find_fleet, read_robot_runs
 from odomgym.robot import PRESETS
-
-
-def _one_line_error(capsys: pytest.CaptureFixture[str], *needles: str) -> None:
-    out, err = capsys.readouterr()
-    lines = err.strip().splitlines()
-    assert out == "" and len(lines) == 1 and lines[0].startswith("odomgym: error: "), err
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
 
 
 def _files(root: Path) -> dict[str, bytes]:
@@ -205,7 +198,7 @@ def test_backend_ray_without_ray_is_one_line_naming_the_extra(
     monkeypatch.chdir(tmp_path)
     (tmp_path / "ROBOTS").mkdir()
     assert main(argv) == 2
-    _one_line_error(capsys, "--backend ray needs Ray", "odomgym[distributed]")
+    one_line_error(capsys, "--backend ray needs Ray", "odomgym[distributed]")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ROBOTS"]  # nothing written
 
 
@@ -219,7 +212,7 @@ def test_ray_address_without_backend_ray_is_one_line(
     monkeypatch.chdir(tmp_path)
     (tmp_path / "ROBOTS").mkdir()
     assert main([*command, "--ray-address", "127.0.0.1:6379"]) == 2
-    _one_line_error(capsys, "--ray-address needs --backend ray")
+    one_line_error(capsys, "--ray-address needs --backend ray")
 
 
 # --------------------------------------------------------------------- periods from dates
