@@ -275,10 +275,15 @@ class RobotSpec:
                         )
 
     def _validate_skid(self, source: str | None) -> None:
-        """A skid-steer body holds its wheels, has no casters, and loads every wheel."""
-        if self.true_wheelbase > self.chassis_width:
+        """A skid-steer body holds its wheels, has no casters, and loads every wheel.
+
+        The body must hold the *nominal* track: a skid-steer robot's E_b is the error of an
+        apparent track (its odometry's expansion factor, 1.2–1.9 on real robots;
+        docs/skid-steer.md), which a diagnosis fits and which may take the true track past the
+        body."""
+        if self.wheelbase > self.chassis_width:
             raise SpecError(
-                f"the track (true_wheelbase {self.true_wheelbase} m) is wider than the body "
+                f"the track (wheelbase {self.wheelbase} m) is wider than the body "
                 f"(chassis_width {self.chassis_width} m): give the body's full width, wheels "
                 "included",
                 field="wheelbase",

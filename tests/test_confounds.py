@@ -5,7 +5,7 @@ The expectations are analytic (``docs/diagnose.md``, "Confounds"):
 * a ground-truth frame scaled by s is exactly a robot whose wheels and wheelbase are both
   scaled by s: every displacement scales, every heading stays (E_s and E_b change together);
 * a wheel toe τ is exactly a frame yaw δ = −τ: both rotate every predicted path about its start
-  (``docs/effects.md`` step 5);
+  (``docs/effects.md`` step 6);
 * the catalogue's ``gt_sensor_offset`` (dx, dy) is exactly a tracked point (dx, dy);
 * a translation or rotation of the whole frame is invisible: every replay starts at the first
   measured pose;

@@ -76,9 +76,9 @@ def _numpy_terms(values: dict[str, float], arrays: ReplayArrays) -> tuple[np.nda
             m = wheel_modulator(term.modulator, speed, accel, arrays.angle, arrays.time)
             factor[:, col] += c * m[:, col]
         elif term.channel == "crab":
-            crab += c * body_modulator(term.modulator, v, omega, arrays.time)
+            crab += c * body_modulator(term.modulator, v, omega, arrays.time, arrays.travel)
         else:
-            yaw += c * body_modulator(term.modulator, v, omega, arrays.time)
+            yaw += c * body_modulator(term.modulator, v, omega, arrays.time, arrays.travel)
     return arrays.wheel * factor, arrays.crab + crab, arrays.dtheta * yaw
 
 
@@ -132,7 +132,9 @@ def test_compiled_grammar_replay_is_the_numpy_one_bit_for_bit(spacing: str) -> N
         ds=0.02 * rng.standard_normal(n),
         dtheta=0.05 * rng.standard_normal(n),
         crab=0.001 * rng.standard_normal(n),
+        travel=0.02 * rng.standard_normal((n, 2)),
     )
+    arrays.travel[n // 3] = 0.0  # a step that does not move: the spin modulator is 0 there
     every = {t.name: 10.0 ** rng.uniform(-3.0, 3.0) * (-1) ** k for k, t in enumerate(TERMS)}
     # Each term alone with a coefficient of ±2²⁰: c·m outweighs the 1 it is added to, and a
     # power of two scales exactly, so a modulator off in its last bit shows in the result.

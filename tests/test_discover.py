@@ -41,6 +41,7 @@ MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8)
         {"left_speed": -0.05, "right_speed": -0.05},
         {"crab_lateral_signed": 0.05},
         {"yaw_rate": -0.03},
+        {"yaw_spin": -0.03},
         {"left_time": 2e-4},
         {"right_cos2": 0.01, "crab_one": 0.01},
     ],

@@ -63,6 +63,7 @@ def _square_and_spin(spec: RobotSpec) -> list[Run]:
         ("wheel_toe", {"angle": 0.02}),
         ("backlash", {"angle": 0.05}),
         ("gt_sensor_offset", {"dx": 0.03, "dy": -0.02}),
+        ("skid_track", {"excess": 0.1, "lambda_half": 2.0}),
     ],
 )
 def test_world_matches_replay(name: str, values: dict[str, float]) -> None:
@@ -88,6 +89,60 @@ def test_turn_skid_world_matches_replay_on_arcs_and_spares_spins() -> None:
     assert abs(replay_run(run, NOMINAL).tracked[-1, 2] - run.true_pose[-1, 2]) > 0.05
     spin, _ = simulate_runs(spec, FloorSpec(), spin_route(math.pi, "cw"))
     assert abs(replay_run(spin[0], NOMINAL).tracked[-1, 2] - spin[0].true_pose[-1, 2]) < 1e-3
+
+
+@pytest.mark.parametrize(("radius", "excess"), [(0.2, 0.4), (1.0, 0.8)])
+def test_skid_track_world_matches_replay_on_arcs(radius: float, excess: float) -> None:
+    """On arcs of λ = 2R/b = 2 and 10 (b = 0.2 m) the World's skid_track hook and the replay
+    agree to 1 mm and 0.05°, and the nominal replay misses the arc's end heading by the
+    factor's share: 1 − 1/(1 + ε/(1 + (λ/λ½)²)) of the turn."""
+    values = {"excess": excess, "lambda_half": 2.0}
+    spec = NOMINAL.apply_effect("skid_track", values)
+    run = _arc(spec, radius, 0.2, 1.0, np.random.default_rng(0))
+    agree = np.abs(replay_run(run, spec).tracked - run.true_pose).max(axis=0)
+    assert agree[:2].max() < 1e-3, agree
+    assert agree[2] < math.radians(0.05), agree
+    lam = 2.0 * radius / NOMINAL.true_wheelbase
+    share = 1.0 - 1.0 / (1.0 + excess / (1.0 + (lam / 2.0) ** 2))
+    turn = replay_run(run, NOMINAL).tracked[-1, 2] - run.true_pose[0, 2]
+    missed = replay_run(run, NOMINAL).tracked[-1, 2] - run.true_pose[-1, 2]
+    assert missed / turn == pytest.approx(share, rel=0.02, abs=1e-3)
+
+
+def test_skid_track_replay_against_hand_computed_intervals() -> None:
+    """dθ = dθ₀/(1 + ε/(1 + (|λ|/λ½)²)) per interval, λ = (d_L + d_R)/(d_R − d_L), beside
+    E_b = 1.25 (dθ₀ = (d_R − d_L)/(1.25·b)). Travels [m]: a spin (λ = 0), an arc of λ = 2 =
+    λ½, an arc of λ = −6 turning right, a straight step (λ infinite) and a step that does not
+    move, with ε = 0.4, λ½ = 2, b = 0.2 m:
+
+    * spin 0.01 m each way: dθ₀ = 0.02/0.25 = 0.08 rad; factor 1/1.4 → 0.0571429 rad;
+    * (0.01, 0.03): dθ₀ = 0.08 rad; factor 1/(1 + 0.4/2) = 1/1.2 → 0.0666667 rad;
+    * (0.035, 0.025): λ = 0.06/−0.01 = −6, (6/2)² = 9; dθ₀ = −0.04 rad; factor 1/1.04 →
+      −0.0384615 rad;
+    * straight and still: 0.
+    """
+    spec = NOMINAL.with_errors(e_b=1.25).apply_effect(
+        "skid_track", {"excess": 0.4, "lambda_half": 2.0}
+    )
+    travel = np.array([[-0.01, 0.01], [0.01, 0.03], [0.035, 0.025], [0.02, 0.02], [0.0, 0.0]])
+    radius = np.array([0.5 * spec.true_left_diameter, 0.5 * spec.true_right_diameter])
+    time = np.arange(len(travel) + 1) * 0.1
+    counts = np.vstack([np.zeros(2), np.cumsum(travel / radius, axis=0)])
+    counts *= spec.ticks_per_rev / (2.0 * math.pi)
+    run = Run(
+        kind="free",
+        time=time,
+        counts=counts,
+        true_pose=np.zeros((len(time), 3)),
+        direction=None,
+        side=0.0,
+        source="hand",
+    )
+    replay = replay_run(run, spec)
+    expected = [0.08 / 1.4, 0.08 / 1.2, -0.04 / 1.04, 0.0, 0.0]
+    np.testing.assert_allclose(replay.dtheta, expected, rtol=1e-12, atol=1e-15)
+    assert EFFECTS["skid_track"].is_absent({"excess": 0.0, "lambda_half": 7.0})
+    assert NOMINAL.apply_effect("skid_track", {"excess": 0.0, "lambda_half": 7.0}) == NOMINAL
 
 
 def test_roughness_effect_spreads_headings_like_chong_kleeman() -> None:

@@ -732,12 +732,17 @@ def fit_candidate(
     nuisance: Effect | None = None,
 ) -> CandidateFit:
     """Fit ``effect`` added to (or freed in) ``spec``; the sensor noise (and, for a systematic
-    effect, the ``nuisance`` noise effect's parameters) are refitted alongside."""
+    effect, the ``nuisance`` noise effect's parameters) are refitted alongside. A systematic
+    effect's :attr:`~odomgym.effects.Effect.partners` are fitted jointly with it (``skid_track``
+    beside ``wheelbase``: the excess of a spin's track over the asymptote E_b); the fit's
+    values and standard errors are the effect's own, the partners' refit is in its spec."""
     current_spec, current_sensor = spec, sensor
     if effect.noise:
         return _fit_noise_candidate(data, spec, sensor, effect, nuisance)
+    partners = [EFFECTS[name] for name in effect.partners if not EFFECTS[name].noise]
+    fitted = Joint([effect, *partners]) if partners else effect
     for _ in range(2):
-        current_spec = _least_squares_step(data, current_spec, current_sensor, effect)
+        current_spec = _least_squares_step(data, current_spec, current_sensor, fitted)
         current_spec, current_sensor, _ = fit_noise(data, current_spec, current_sensor, nuisance)
     fit = CandidateFit(
         effect.name,

@@ -87,7 +87,7 @@ def term_modulator(run: Run, rep: Replay, spec: RobotSpec, name: str) -> FloatAr
         wheel = 0 if term.channel == "left" else 1
         column: FloatArray = wheel_modulator(term.modulator, speed, accel, angles, times)[:, wheel]
         return column
-    return body_modulator(term.modulator, rep.ds / safe, rep.dtheta / safe, times)
+    return body_modulator(term.modulator, rep.ds / safe, rep.dtheta / safe, times, rep.travel)
 
 
 @dataclass(frozen=True)

@@ -328,6 +328,24 @@ def _discovery_record(passes: Sequence[Discovery]) -> list[dict[str, Any]]:
     ]
 
 
+def _simplest(tied: list[int], fits: Sequence[CandidateFit]) -> list[int]:
+    """``tied`` (indices into ``fits``) without the systematic candidates that nest another
+    tied one: fitted with it as a partner (``skid_track`` beside ``wheelbase``, which it
+    extends by the excess of tight turns), such a candidate tied with it has not earned its
+    extra parameters, and the simpler one stands alone (a wheelbase error on spins and wide
+    arcs fits a skid track as well, with the excess spread over every turn). Where the rest
+    still tie, the round stays ``ambiguous`` and lists the nesting ones among the tied too
+    (they stay out of the open-loop gate's pool as every tied effect does)."""
+    names = {fits[k].name for k in tied}
+    nesting = [
+        k
+        for k in tied
+        if not EFFECTS[fits[k].name].noise
+        and any(p in names and p != fits[k].name for p in EFFECTS[fits[k].name].partners)
+    ]
+    return [k for k in tied if k not in nesting] if len(nesting) < len(tied) else tied
+
+
 ROUND_GOES_ON = ("explained", "discovered")
 """Round verdicts after which another round follows (something joined the model)."""
 
@@ -423,8 +441,10 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
         for k in significant
         if k != best and candidates[best].cv_gain - candidates[k].cv_gain < cfg.tie_nats
     ]
-    if len(tied) > 1:
-        runner = max((k for k in tied if k != best), key=lambda k: candidates[k].cv_gain)
+    simple = _simplest(tied, fits)
+    best = max(simple, key=lambda k: candidates[k].cv_gain)
+    if len(simple) > 1:  # the tie lists every tied candidate, nesting ones included
+        runner = max((k for k in simple if k != best), key=lambda k: candidates[k].cv_gain)
         found_experiment, _ = separating_experiment(
             fits[best].spec, fits[runner].spec, model.sensor
         )

@@ -107,7 +107,9 @@ NUISANCE_KINDS: tuple[NuisanceKind, ...] = (
         1e-4,
         "the tracked point {value:+.2f} mm ahead of the axle",
         1e3,
-        _MARKERS,
+        _MARKERS + "; on a skid-steer robot what is left of it is the sides' ICRs lying that "
+        "far behind the tracked point (Mandow et al. 2007's x_ICR = −dx), which no pose log "
+        "separates from it",
     ),
     NuisanceKind(
         "tracked_dy", "m", 1e-4, "the tracked point {value:+.2f} mm left of the axle", 1e3, _MARKERS

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from odomgym.effects.discovered import TERMS, Discovered, DiscoveredTerms, Term
 from odomgym.effects.geometry import DistanceScale, Wheelbase, WheelDiameterRatio
-from odomgym.effects.motion import TurnSkid, WheelToe
+from odomgym.effects.motion import SkidTrack, TurnSkid, WheelToe
 from odomgym.effects.noise import FloorBumps, FloorRoughness
 from odomgym.effects.registry import (
     EFFECTS,
@@ -56,6 +56,7 @@ __all__ = [
     "GroundTruthOffset",
     "Parameter",
     "ReplayArrays",
+    "SkidTrack",
     "SpecView",
     "Term",
     "TurnSkid",
@@ -77,6 +78,7 @@ for _effect in (
     DistanceScale(),
     WheelToe(),
     TurnSkid(),
+    SkidTrack(),
     Backlash(),
     FloorBumps(),
     FloorRoughness(),

@@ -21,13 +21,16 @@ Modulators of the wheel channels are each wheel's own motion: ``one`` (1), ``spe
 wheel's angle φ: once per revolution), ``sin2``/``cos2`` (of 2φ: twice per revolution), and
 ``time`` (seconds since the session started). Modulators of the body channels are the body's
 motion: ``one``, ``speed`` (|v|), ``speed2``, ``rate`` (|ω| [rad/s]), ``lateral`` (|v·ω|
-[m/s²], the lateral acceleration), ``lateral_signed`` (v·ω), ``direction`` (sign of v) and
-``time``.
+[m/s²], the lateral acceleration), ``lateral_signed`` (v·ω), ``direction`` (sign of v),
+``time`` and ``spin`` (1/(1 + λ²) [-] with the path parameter λ = (d_L + d_R)/(d_R − d_L) of the
+interval's wheel travels: 1 in a spin, ½ with the inner wheel at rest, 0 on a straight path — the
+turn-radius modulator of a skid-steer robot's scrub, Wang et al. 2015).
 
 The catalogue's systematic effects are points of this grammar (``docs/diagnose.md``): E_s is
 ``left_one`` = ``right_one`` (both wheels' travel × 1), E_d the differential travel × 1
 (``right_one`` = −``left_one``), E_b ``yaw_one`` (every turn scaled), ``turn_skid``
-``yaw_lateral`` (negative), ``wheel_toe`` ``crab_one``. Backlash (a hysteresis) and the
+``yaw_lateral`` (negative), ``wheel_toe`` ``crab_one``, ``skid_track`` near ``yaw_spin``
+(negative; exactly its shape at λ½ = 1 to first order). Backlash (a hysteresis) and the
 tracked-point offset (a measurement) are not; the noise effects are not systematic.
 
 The ``discovered`` effect carries any set of terms as parameters named ``CHANNEL_MODULATOR``
@@ -39,7 +42,8 @@ interval, with the same modulators, so an env built from a diagnosed robot behav
 Why these modulators: they are the mechanisms a roboticist checks first — tyre compression
 and centrifugal growth (speed), out-of-round wheels and bent axles (wheel angle), traction slip
 (acceleration), direction-dependent gear or tyre behaviour (direction), lateral tyre slip in
-arcs (v·ω), wear or warming during a session (time) — and each is computable from the logged
+arcs (v·ω), wear or warming during a session (time), a skid-steer robot's scrub that grows as
+the turn tightens (spin) — and each is computable from the logged
 wheel motions alone, which is what a term needs to be replayed.
 """
 
@@ -76,6 +80,7 @@ __all__ = [
     "Term",
     "describe_term",
     "operating_phrase",
+    "spin_share",
     "term_by_name",
 ]
 
@@ -103,6 +108,7 @@ BODY_MODULATORS = (
     "lateral_signed",
     "direction",
     "time",
+    "spin",
 )
 _MOD_UNIT = {
     "one": "",
@@ -118,6 +124,7 @@ _MOD_UNIT = {
     "rate": "rad/s",
     "lateral": "m/s²",
     "lateral_signed": "m/s²",
+    "spin": "",
 }
 # A typical modulator size on a small indoor robot: the fit's step and scale is 1e-3 of the
 # channel over this size (a 0.1 % travel change, 1 mrad of crab).
@@ -135,6 +142,7 @@ _MOD_SIZE = {
     "rate": 1.0,
     "lateral": 0.3,
     "lateral_signed": 0.3,
+    "spin": 1.0,
 }
 _MOD_WORDS = {
     "one": "constantly",
@@ -150,6 +158,7 @@ _MOD_WORDS = {
     "rate": "with the turn rate",
     "lateral": "with lateral acceleration |v·ω|",
     "lateral_signed": "with the signed lateral acceleration v·ω (opposite in left and right arcs)",
+    "spin": "with the tightness of the turn 1/(1 + λ²) (1 in a spin, 0 on a straight path)",
 }
 _MECHANISM = {
     ("wheel", "one"): "an effective wheel diameter off nominal",
@@ -168,6 +177,7 @@ _MECHANISM = {
     ("yaw", "one"): "an effective wheelbase off nominal",
     ("yaw", "lateral"): "yaw skid in fast arcs (under- or over-steer)",
     ("yaw", "rate"): "scrub in fast turns",
+    ("yaw", "spin"): "skid-steer scrub: an apparent track that widens as the turn tightens",
 }
 
 CATALOGUE_POINTS: dict[str, str] = {
@@ -176,6 +186,7 @@ CATALOGUE_POINTS: dict[str, str] = {
     "wheelbase": "yaw_one = 1/E_b − 1 (every turn scaled)",
     "turn_skid": "yaw_lateral = −κ (yaw × |v·ω|, the linear law)",
     "wheel_toe": "crab_one = τ (crab × 1)",
+    "skid_track": "yaw_spin = −ε at λ½ = 1 (the yaw increment × (1 − ε/(1 + λ²)), small ε)",
 }
 """The catalogue's systematic effects as points of the grammar (to first order)."""
 
@@ -308,10 +319,31 @@ def wheel_modulator(
     raise KeyError(modulator)
 
 
+def spin_share(travel: FloatArray) -> FloatArray:
+    """The ``spin`` modulator 1/(1 + λ²) per interval (n,) of wheel travels (or rim speeds)
+    ``travel`` (n, 2), λ = (d_L + d_R)/(d_R − d_L): (d_R − d_L)²/((d_R − d_L)² + (d_L + d_R)²),
+    0 where neither wheel moved."""
+    d = travel[:, 1] - travel[:, 0]
+    s = travel[:, 0] + travel[:, 1]
+    d2 = d * d
+    total = d2 + s * s
+    share: FloatArray = np.divide(d2, total, out=np.zeros_like(d2), where=total > 0.0)
+    return share
+
+
 def body_modulator(
-    modulator: str, v: FloatArray, omega: FloatArray, time: FloatArray
+    modulator: str,
+    v: FloatArray,
+    omega: FloatArray,
+    time: FloatArray,
+    travel: FloatArray | None = None,
 ) -> FloatArray:
-    """A body modulator per interval (n,); ``v`` [m/s], ``omega`` [rad/s], ``time`` [s]."""
+    """A body modulator per interval (n,); ``v`` [m/s], ``omega`` [rad/s], ``time`` [s],
+    ``travel`` (n, 2) the wheels' travel [m] (needed by ``spin`` only)."""
+    if modulator == "spin":
+        if travel is None:
+            raise ValueError("the spin modulator needs the wheels' travel")
+        return spin_share(travel)
     if modulator == "one":
         return np.ones_like(v)
     if modulator == "speed":
@@ -425,12 +457,18 @@ class DiscoveredTerms(Effect):
                 coefficients,
             )
         else:
+            spin = _NO_SPIN
+            if any(t.modulator == "spin" for t, _ in terms):
+                if arrays.travel.shape[0] != arrays.dt.shape[0]:
+                    raise ValueError("the spin modulator needs the wheels' travel per interval")
+                spin = spin_share(np.asarray(arrays.travel, dtype=np.float64))
             arrays.crab, arrays.dtheta = replay_body_terms(
                 np.asarray(arrays.ds, dtype=np.float64),
                 np.asarray(arrays.dtheta, dtype=np.float64),
                 np.asarray(arrays.crab, dtype=np.float64),
                 arrays.dt,
                 arrays.time,
+                spin,
                 np.array([t.channel == "yaw" for t, _ in terms]),
                 np.array([_BODY_CODES[t.modulator] for t, _ in terms]),
                 coefficients,
@@ -457,6 +495,7 @@ class Discovered(DiscoveredTerms):
 _WHEEL_CODES = {m: k for k, m in enumerate(WHEEL_MODULATORS)}
 _BODY_CODES = {m: k for k, m in enumerate(BODY_MODULATORS)}
 _NO_HARMONIC = np.zeros((0, 2))
+_NO_SPIN = np.zeros(0)
 
 
 def _harmonic(
@@ -564,6 +603,10 @@ def _body_terms(
         v = 0.5 * (rim[i, 0] + rim[i, 1])
         omega = (rim[i, 1] - rim[i, 0]) / (2.0 * half_track[i])
         direction = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+        d = rim[i, 1] - rim[i, 0]
+        s = rim[i, 0] + rim[i, 1]
+        total = d * d + s * s
+        spin = d * d / total if total > 0.0 else 0.0
         mods = (
             1.0,
             math.fabs(v),
@@ -573,10 +616,11 @@ def _body_terms(
             v * omega,
             direction,
             time,
+            spin,
         )
         crab = 0.0
         yaw = 1.0
-        for k in range(8):
+        for k in range(9):
             crab += coef[i, 0, k] * mods[k]
             yaw += coef[i, 1, k] * mods[k]
         mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])

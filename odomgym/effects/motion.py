@@ -1,6 +1,7 @@
-"""Contact-velocity effects: a toed-in wheel pair (crab) and yaw skid under lateral acceleration.
+"""Contact-velocity effects: a toed-in wheel pair (crab), yaw skid under lateral acceleration and a
+skid-steer robot's apparent track that moves with the turn.
 
-Both act on the no-slip velocities of the two wheel contacts (``World.ground_velocity``) before
+All three act on the no-slip velocities of the two wheel contacts (``World.ground_velocity``) before
 the floor does; the chassis follows through the friction-limited pivot joints, exactly as it
 follows the plain rolling velocities. Split each contact velocity into the common translation
 v̄ = (g_L + g_R)/2 and the differential part g_w − v̄ (the rotation about the axle midpoint):
@@ -8,9 +9,11 @@ v̄ = (g_L + g_R)/2 and the differential part g_w − v̄ (the rotation about th
 * ``wheel_toe`` rotates the translation by τ: the robot crabs at τ to its heading while
   translating; rotation in place is untouched, so the heading is unaffected;
 * ``turn_skid`` scales the differential part by max(0, 1 − κ·|v·ω₀|): yaw under-rotation that
-  grows with the lateral acceleration v·ω₀ and vanishes in in-place turns (v = 0).
+  grows with the lateral acceleration v·ω₀ and vanishes in in-place turns (v = 0);
+* ``skid_track`` scales the differential part by 1/(1 + ε/(1 + (|λ|/λ½)²)), λ = (v_L + v_R)/
+  (v_R − v_L): yaw under-rotation largest in spins (λ = 0) and gone on straight paths.
 
-The replay applies the same to one sampling interval (``docs/effects.md`` steps 4–5).
+The replay applies the same to one sampling interval (``docs/effects.md`` steps 4–6).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from numpy.typing import NDArray
 from odomgym._jit import kernel
 from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
 
-__all__ = ["TurnSkid", "WheelToe"]
+__all__ = ["SkidTrack", "TurnSkid", "WheelToe", "track_factor"]
 
 FloatArray = NDArray[np.float64]
 
@@ -117,6 +120,102 @@ def _scale_rotation(
         v = 0.5 * (rim[i, 0] + rim[i, 1])
         omega = (rim[i, 1] - rim[i, 0]) / (2.0 * half_track[i])
         factor = max(0.0, 1.0 - gain[i] * math.fabs(v * omega))
+        mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])
+        my = 0.5 * (ground_v[i, 0, 1] + ground_v[i, 1, 1])
+        for w in range(2):
+            ground_v[i, w, 0] = mx + factor * (ground_v[i, w, 0] - mx)
+            ground_v[i, w, 1] = my + factor * (ground_v[i, w, 1] - my)
+
+
+class SkidTrack(Effect):
+    """A skid-steer robot's apparent track that widens as the turn tightens.
+
+    Over one sampling interval with wheel travels d_L, d_R [m] and the path parameter
+    λ = (d_L + d_R)/(d_R − d_L) [-] (0 in a spin, infinite on a straight step, 2R/b on an arc
+    of radius R):
+
+        dθ = dθ₀ / (1 + ε/(1 + (|λ|/λ½)²)),
+
+    dθ₀ the yaw increment of the track E_b·b_n (step 3 of ``docs/effects.md``), ε ``excess``
+    [-] and λ½ ``lambda_half`` [-]. The apparent track is then χ(λ) = E_b·(1 + ε/(1 + (|λ|/λ½)²))
+    times the nominal one: E_b on straight paths and wide arcs (the asymptote), E_b·(1 + ε) in a
+    spin, half the excess left at |λ| = λ½. It is the curvature-dependent factor of
+    :mod:`odomgym.odometry.icr`, χ(λ) = χ_∞ + α/(1 + (β·|λ|)^p), at p = 2 with χ_∞ = E_b,
+    α = E_b·ε, β = 1/λ½ — the form Wang et al. (2015, Sensors 15:9681) fit to a Pioneer 3-AT's
+    ICR coefficient (there p = ½, χ_∞ = 1), whose fall with the path's straightening the ICR
+    kinematics of Mandow et al. (2007, IROS) describe. ``docs/skid-steer.md`` shows it emerge
+    from the World's tyre contacts.
+
+    Computed as dθ₀/(1 + ε·u²/(u² + s²)) with u = (d_R − d_L)·λ½ and s = d_L + d_R, finite for
+    every interval (a step that does not move keeps dθ₀ = 0).
+
+    ε ≥ 0: the scrub only ever widens the track as the turn tightens (Mandow et al. 2007; Wang
+    et al. 2015; the World's tyres, ``docs/skid-steer.md``). A negative excess — arcs
+    under-turning against spins — is what ``turn_skid`` describes on a differential-drive
+    robot, and on the OptiOdom robot's June sessions a free sign let ``skid_track`` stand in for
+    it (ε = −0.006).
+    """
+
+    name = "skid_track"
+    parameters = (
+        Parameter("excess", "-", 0.0, 0.0, 5.0, 0.01, "extra track factor of a spin"),
+        Parameter("lambda_half", "-", 2.0, 0.05, 100.0, 0.05, "|λ| where half the excess is left"),
+    )
+    summary = (
+        "skid-steer scrub: the apparent track is wider in tight turns than on wide arcs (the "
+        "robot under-turns more, the tighter it turns)"
+    )
+    reveals = "circles of several radii both ways and in-place spins (the factor moves with λ)"
+    partners = ("wheelbase",)
+
+    @classmethod
+    def is_absent(cls, values: Mapping[str, float]) -> bool:
+        """Absent when ``excess`` is 0, whatever ``lambda_half``."""
+        return float(values.get("excess", 0.0)) == 0.0
+
+    def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
+        return _TrackHook(values[:, 0].copy(), values[:, 1].copy())
+
+    def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
+        if stage == "body":
+            arrays.dtheta = arrays.dtheta * track_factor(
+                arrays.travel, values["excess"], values["lambda_half"]
+            )
+
+
+def track_factor(travel: FloatArray, excess: float, lambda_half: float) -> FloatArray:
+    """1/(1 + ε/(1 + (|λ|/λ½)²)) per interval (n,) for wheel travels ``travel`` (n, 2) [m]
+    (:class:`SkidTrack`)."""
+    u = (travel[:, 1] - travel[:, 0]) * lambda_half
+    s = travel[:, 0] + travel[:, 1]
+    u2 = u * u
+    total = u2 + s * s
+    share = np.divide(u2, total, out=np.zeros_like(u2), where=total > 0.0)
+    factor: FloatArray = 1.0 / (1.0 + excess * share)
+    return factor
+
+
+class _TrackHook(WorldHook):
+    has_shape = True
+
+    def __init__(self, excess: FloatArray, lambda_half: FloatArray) -> None:
+        self.excess = excess
+        self.lambda_half = lambda_half
+
+    def shape(self, world: WorldView, h: float) -> None:
+        _scale_track(world.ground_velocity, world.rim_speed, self.excess, self.lambda_half)
+
+
+@kernel
+def _scale_track(
+    ground_v: FloatArray, rim: FloatArray, excess: FloatArray, lambda_half: FloatArray
+) -> None:
+    for i in range(ground_v.shape[0]):
+        u = (rim[i, 1] - rim[i, 0]) * lambda_half[i]
+        s = rim[i, 0] + rim[i, 1]
+        total = u * u + s * s
+        share = u * u / total if total > 0.0 else 0.0
+        factor = 1.0 / (1.0 + excess[i] * share)
         mx = 0.5 * (ground_v[i, 0, 0] + ground_v[i, 1, 0])
         my = 0.5 * (ground_v[i, 0, 1] + ground_v[i, 1, 1])
         for w in range(2):

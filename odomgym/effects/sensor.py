@@ -4,6 +4,12 @@ A motion-capture rigid body is rarely defined exactly at the axle midpoint, the 
 describes. Tracking the point (dx, dy) of the body frame, the sensor reports
 (x, y) + R(θ)·(dx, dy): invisible on straight runs, a circle of radius √(dx² + dy²) during an
 in-place turn, and a displacement of 2·√(dx² + dy²) after a 180° spin.
+
+On a skid-steer robot a constant longitudinal offset x_ICR of the sides' instantaneous centres of
+rotation (Mandow et al. 2007) adds a sideways velocity −x_ICR·ω at the tracked point, which is
+the motion of the point dx = −x_ICR ahead of a body without it: the two make the same logs, and
+the catalogue has no separate ICR offset (the effect's ``confounded`` text says so whenever it is
+named; with per-session frames the same holds for the tracked-point nuisance).
 """
 
 from __future__ import annotations
@@ -39,6 +45,13 @@ class GroundTruthOffset(Effect):
     )
     summary = "the ground-truth system tracks a point offset from the axle midpoint"
     reveals = "in-place turns (the tracked point circles the axle; 180° spins show 2·offset)"
+    confounded = (
+        "on a skid-steer robot, instantaneous centres of rotation of both sides sitting a constant "
+        "x_ICR = −dx ahead of the tracked point (Mandow et al. 2007's x_ICR, e.g. from a centre "
+        "of mass off the middle of the wheels) move the tracked point exactly as this offset "
+        "does: pose logs cannot tell the two apart; measuring the rigid body's origin against "
+        "the middle of the wheels can, and what is left of dx is then x_ICR"
+    )
 
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _OffsetHook(values[:, 0].copy(), values[:, 1].copy())

@@ -148,14 +148,16 @@ def replay_body_terms(
     crab: FloatArray,
     dt: FloatArray,
     time: FloatArray,
+    spin: FloatArray,
     yaw: NDArray[np.bool_],
     codes: NDArray[np.int64],
     coefficients: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
     """The body terms on one run's intervals: (crab + Σ c·m [rad], dθ × (1 + Σ c·m)) over the
     crab and the ``yaw`` terms in order (modulator ``codes`` in ``BODY_MODULATORS`` order,
-    v = ``ds``/``dt`` [m/s], ω = ``dtheta``/``dt`` [rad/s]). Bit-identical to the numpy
-    expressions of ``body_modulator``: the same operations in the same order."""
+    v = ``ds``/``dt`` [m/s], ω = ``dtheta``/``dt`` [rad/s]; ``spin`` (n,) the ``spin``
+    modulator precomputed from the wheel travels, empty when no term has it). Bit-identical to
+    the numpy expressions of ``body_modulator``: the same operations in the same order."""
     n = ds.shape[0]
     v = np.empty(n)
     omega = np.empty(n)
@@ -184,8 +186,10 @@ def replay_body_terms(
                 m = v[i] * omega[i]
             elif code == 6:
                 m = _sign(v[i])
-            else:
+            elif code == 7:
                 m = time[i]
+            else:
+                m = spin[i]
             acc[i] += c * m
     out_crab = np.empty(n)
     out_dtheta = np.empty(n)
