@@ -25,11 +25,12 @@ How it differs from odomgym's simulator on purpose:
 The effects are applied to the continuous motion as ``docs/effects.md`` specifies them:
 true diameters from ``e_d``/``e_s``, wheelbase ``e_b``, backlash as a play operator between the
 motor (which the encoder counts) and the wheel, ``turn_skid`` scaling the yaw rate by
-max(0, 1 − κ|v·ω₀|), ``wheel_toe`` turning the velocity to heading + τ, ``floor_roughness`` as
-per-wheel ground-travel noise of variance k²|d| per integration step, ``floor_bumps`` as a Poisson
-process per wheel (rate per metre of the wheel's travel), each bump removing
-``heading_jump`` × true wheelbase of that wheel's ground travel spread over
-:data:`BUMP_SPREAD` of its travel, and ``gt_sensor_offset`` moving the logged point.
+max(0, 1 − κ|v·ω₀|), ``skid_track`` dividing it by 1 + ε/(1 + (λ/λ½)²) with λ the step's ratio
+of the wheels' summed to differenced ground travel, ``wheel_toe`` turning the velocity to
+heading + τ, ``floor_roughness`` as per-wheel ground-travel noise of variance k²|d| per
+integration step, ``floor_bumps`` as a Poisson process per wheel (rate per metre of the wheel's
+travel), each bump removing ``heading_jump`` × true wheelbase of that wheel's ground travel
+spread over :data:`BUMP_SPREAD` of its travel, and ``gt_sensor_offset`` moving the logged point.
 
 Everything random is drawn from the ``rng`` passed to :func:`generate`; each run draws three
 child seeds from it (motion, process noise, sensor noise), so switching an effect on or off does
@@ -72,6 +73,7 @@ EFFECT_PARAMETERS: dict[str, dict[str, float]] = {
     "wheelbase": {"e_b": 1.0},
     "backlash": {"angle": 0.0},
     "turn_skid": {"gain": 0.0},
+    "skid_track": {"excess": 0.0, "lambda_half": 2.0},
     "wheel_toe": {"angle": 0.0},
     "gt_sensor_offset": {"dx": 0.0, "dy": 0.0},
     "floor_roughness": {"k_left": 0.0, "k_right": 0.0},
@@ -79,10 +81,16 @@ EFFECT_PARAMETERS: dict[str, dict[str, float]] = {
 }
 """Every effect of ``docs/effects.md``: its parameters and their "absent" values."""
 
-_POSITIVE = {("wheel_diameter_ratio", "e_d"), ("distance_scale", "e_s"), ("wheelbase", "e_b")}
+_POSITIVE = {
+    ("wheel_diameter_ratio", "e_d"),
+    ("distance_scale", "e_s"),
+    ("wheelbase", "e_b"),
+    ("skid_track", "lambda_half"),
+}
 _NON_NEGATIVE = {
     ("backlash", "angle"),
     ("turn_skid", "gain"),
+    ("skid_track", "excess"),
     ("floor_roughness", "k_left"),
     ("floor_roughness", "k_right"),
     ("floor_bumps", "rate"),
@@ -525,6 +533,16 @@ def _simulate_run(
         dtheta = dtheta0 * np.maximum(0.0, 1.0 - gain * lateral)
     else:
         dtheta = dtheta0
+    excess = robot.param("skid_track", "excess")
+    if excess > 0.0:
+        # The apparent track E_b·(1 + ε/(1 + (λ/λ½)²)) at this step's path-curvature ratio
+        # λ = (d_L + d_R)/(d_R − d_L) of the ground travels, written as ε·Δ²λ½²/(Δ²λ½² + Σ²)
+        # so that a straight step (Δ = 0) gets no excess without dividing by zero.
+        diff2 = ((ground[:, 1] - ground[:, 0]) * robot.param("skid_track", "lambda_half")) ** 2
+        sum2 = (ground[:, 1] + ground[:, 0]) ** 2
+        denominator = diff2 + sum2
+        share = np.divide(diff2, denominator, out=np.zeros_like(diff2), where=denominator > 0.0)
+        dtheta = dtheta / (1.0 + excess * share)
     toe = robot.param("wheel_toe", "angle")
     theta = start_pose[2] + np.concatenate([[0.0], np.cumsum(dtheta)])
     chord = ds * np.sinc(dtheta / (2.0 * math.pi))  # |chord| of an arc of length ds, angle dθ

@@ -307,6 +307,29 @@ def test_turn_skid(direction: TurnDirection, speed: float) -> None:
     assert odom_rotation == pytest.approx(sign * alpha, abs=heading_bound(robot))
 
 
+@pytest.mark.parametrize("direction", ["cw", "ccw"])
+def test_skid_track(direction: TurnDirection) -> None:
+    """The apparent track b·(1 + ε/(1 + (λ/λ½)²)) with λ = (d_L + d_R)/(d_R − d_L): a spin
+    (λ = 0) turns by α/(1 + ε); an arc of radius R (λ = 2R/b at every step, the ramps
+    included) by α/(1 + ε/(1 + (2R/(b·λ½))²)); a straight path (λ infinite) keeps its heading.
+    The odometry, with the nominal track, reports the commanded α in both."""
+    excess, half = 0.6, 3.0
+    robot = quiet(effects={"skid_track": {"excess": excess, "lambda_half": half}})
+    sign = 1.0 if direction == "ccw" else -1.0
+    spin = one(robot, Manoeuvre("spin", direction, angle=math.pi, speed=0.3))
+    assert rotation(spin) == pytest.approx(sign * math.pi / (1 + excess), abs=EXACT)
+    radius, alpha = 0.5, math.pi
+    arc = one(robot, Manoeuvre("arc", direction, size=radius, angle=alpha, speed=0.3))
+    lam = 2 * radius / robot.wheelbase
+    predicted = sign * alpha / (1 + excess / (1 + (lam / half) ** 2))
+    assert rotation(arc) == pytest.approx(predicted, abs=EXACT)
+    assert abs(rotation(arc) - sign * alpha) > 0.1  # the effect is large
+    odom_rotation = odometry(arc, robot)[-1, 2] - arc.true_pose[0, 2]
+    assert odom_rotation == pytest.approx(sign * alpha, abs=heading_bound(robot))
+    straight = one(robot, Manoeuvre("straight", size=2.0))
+    assert in_start_frame(straight, straight.true_pose[-1:])[0, 2] == pytest.approx(0.0, abs=EXACT)
+
+
 def test_gt_sensor_offset() -> None:
     """A 180° in-place turn moves the tracked point by 2·|offset|; a straight does not."""
     dx, dy = 0.05, -0.03
