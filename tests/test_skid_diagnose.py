@@ -134,18 +134,40 @@ def test_scout2_names_skid_track_first_and_beats_a_constant_track() -> None:
     assert diagnosed < 0.25 * _rms(result, "as given")
 
 
-@pytest.mark.slow
-def test_differential_drive_wheelbase_error_is_not_a_skid_track() -> None:
-    """A differential-drive robot with a wheelbase 4 % wide, logged under the same protocol:
-    its apparent track is the same at every radius, so the diagnosis names ``wheelbase`` and
-    not ``skid_track`` (no filtering by the robot's class: skid_track is screened as always)."""
-    from odomgym.diagnose.generate import NOMINAL_ROBOT
+def test_skid_steer_effects_are_offered_to_skid_steer_robots_only() -> None:
+    """``skid_track`` and the grammar's ``spin`` terms are candidates on a skid-steer robot and
+    not on a differential-drive one, which turns about its axle without sliding sideways: there
+    a skid track would only stand in for a constant track factor or a yaw-rate scrub (on the
+    alien robot's spin scrub of ``tests/test_discover.py`` it did, and hid the yaw-rate term)."""
+    from odomgym.diagnose.generate import NOMINAL_ROBOT, NOMINAL_SKID_ROBOT
+    from odomgym.effects import grammar_terms
 
-    runs = skid_protocol(NOMINAL_ROBOT.with_errors(e_b=1.04), seed=1)
-    result = diagnose(runs, NOMINAL_ROBOT, DiagnoseConfig(seed=1))
+    assert EFFECTS["skid_track"].drives == ("skid-steer",)
+    assert all("differential" in e.drives for n, e in EFFECTS.items() if n != "skid_track")
+    differential, skid = grammar_terms(NOMINAL_ROBOT.drive), grammar_terms(NOMINAL_SKID_ROBOT.drive)
+    assert set(skid) - set(differential) == {"crab_spin", "yaw_spin"}
+    assert [t for t in skid if t in differential] == differential  # same order otherwise
+
+
+@pytest.mark.slow
+def test_a_constant_track_on_a_skid_steer_robot_is_not_a_skid_track() -> None:
+    """The independent generator (no code of the World or the replay) with a track 4 % wide at
+    every radius, diagnosed as a skid-steer robot: the skid track is a candidate and loses to
+    ``wheelbase``, the simpler effect its fit nests (``docs/diagnose.md``, the nesting rule)."""
+    from independent_robot import IndependentRobot, generate, rich_protocol
+
+    from odomgym.diagnose.generate import NOMINAL_SKID_ROBOT
+
+    robot = IndependentRobot(effects={"wheelbase": {"e_b": 1.04}})
+    runs = generate(robot, rich_protocol(), np.random.default_rng(3))
+    result = diagnose(runs, NOMINAL_SKID_ROBOT, DiagnoseConfig(seed=3))
     print(result.named_effects, result.verdict)
+    assert "skid_track" in {c.name for c in result.candidates}
     assert "skid_track" not in result.named_effects, result.named_effects
     assert result.named_effects[:1] == ["wheelbase"], result.named_effects
+    assert result.model.true_wheelbase == pytest.approx(
+        1.04 * NOMINAL_SKID_ROBOT.wheelbase, rel=2e-3
+    )
 
 
 def test_a_constant_x_icr_is_replayed_as_the_tracked_point_offset() -> None:

@@ -14,6 +14,7 @@ World under one of two documented protocols and returns runs as a tracking syste
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any, Literal
@@ -237,6 +238,19 @@ NOMINAL_ROBOT = RobotSpec(
     source="the OptiOdom robot's nominal parameters (optiodom-diff README), no errors",
 )
 """The robot the generator's hidden effects are added to."""
+
+NOMINAL_SKID_ROBOT = dataclasses.replace(
+    NOMINAL_ROBOT,
+    name="optiodom-ideal-skid",
+    axle_spacing=0.16,
+    drive_load_fraction=1.0,
+    source="NOMINAL_ROBOT's wheels and side-to-side track on two axles 0.16 m apart: the "
+    "skid-steer robot of the blind matrix's skid generator (its logs carry no friction, so only "
+    "the drive matters: skid-steer effects become candidates)",
+)
+"""The same wheels and track as :data:`NOMINAL_ROBOT` as a skid-steer robot, so that a log of
+the independent generator with a skid-steer effect hidden is diagnosed with the skid-steer
+catalogue (``benchmarks/bench_matrix.py --generators skid``)."""
 
 
 def _top1(name: str | None, result: Any) -> str:

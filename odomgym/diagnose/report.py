@@ -449,7 +449,8 @@ def _where_lines(d: Diagnosis) -> list[str]:
         )
     lines += ["", "Which experiments reveal which effect:", ""]
     for name, effect in EFFECTS.items():
-        lines.append(f"- `{name}`: {effect.reveals}")
+        if d.initial.drive in effect.drives:
+            lines.append(f"- `{name}`: {effect.reveals}")
     return lines
 
 

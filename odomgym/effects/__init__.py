@@ -25,7 +25,13 @@ name                      parameters             what it is
 
 from __future__ import annotations
 
-from odomgym.effects.discovered import TERMS, Discovered, DiscoveredTerms, Term
+from odomgym.effects.discovered import (
+    TERMS,
+    Discovered,
+    DiscoveredTerms,
+    Term,
+    grammar_terms,
+)
 from odomgym.effects.geometry import DistanceScale, Wheelbase, WheelDiameterRatio
 from odomgym.effects.motion import SkidTrack, TurnSkid, WheelToe
 from odomgym.effects.noise import FloorBumps, FloorRoughness
@@ -67,6 +73,7 @@ __all__ = [
     "WorldView",
     "catalogue",
     "get_effect",
+    "grammar_terms",
     "offset_point",
     "play_operator",
     "register_effect",
@@ -78,11 +85,11 @@ for _effect in (
     DistanceScale(),
     WheelToe(),
     TurnSkid(),
-    SkidTrack(),
     Backlash(),
     FloorBumps(),
     FloorRoughness(),
     GroundTruthOffset(),
+    SkidTrack(),  # last: the differential-drive catalogue keeps its order (and its matrix seeds)
     Discovered(),
 ):
     if _effect.name not in EFFECTS:

@@ -167,6 +167,7 @@ class SkidTrack(Effect):
     )
     reveals = "circles of several radii both ways and in-place spins (the factor moves with λ)"
     partners = ("wheelbase",)
+    drives = ("skid-steer",)
 
     @classmethod
     def is_absent(cls, values: Mapping[str, float]) -> bool:

@@ -170,6 +170,11 @@ class Effect:
     during steady driving): it competes with the systematic effects from the first round of
     ``diagnose`` where that signature is in the data, so that a systematic effect named before
     it cannot stand in for its realised jumps (:func:`odomgym.diagnose.rounds.run_round`)."""
+    drives: ClassVar[tuple[str, ...]] = ("differential", "skid-steer")
+    """The drives (:attr:`odomgym.robot.RobotSpec.drive`) whose robots can carry the effect:
+    ``diagnose`` offers it as a candidate only for those. A skid-steer robot's scrub
+    (``skid_track``) needs wheels that slide sideways to turn; a differential-drive robot turns
+    about its axle without it, and there the effect would only stand in for others."""
     confounded: ClassVar[str] = ""
     """What else, outside the catalogue, produces exactly the same logs (the report repeats it
     whenever the effect is named, so a reader does not take the name for more than the data
