@@ -187,12 +187,9 @@ def _significant_effects(state: DiagnosisState, *, tied: bool) -> list[str]:
     """Every systematic catalogue effect some round found significant (named, absorbed or
     beaten by another), in the order first found: the open-loop gate's pool. With ``tied``
     false, those tied in a last round that ended ``ambiguous`` (:func:`_tied_effects`) stay
-    out — unless an earlier round named them: there the tie is between their refit and the
-    newcomers, and what stays unresolved is the newcomers (a wheelbase named in round 1 and
-    tied in round 2 with a turn skid and a skid track that each add a few nats on circles)."""
+    out."""
     found = [c.name for c in state.candidates if c.significant]
-    # An ambiguous round names nothing: every named effect was named by an earlier round.
-    out = set(_tied_effects(state)) - set(state.named) if not tied else set()
+    out = set(_tied_effects(state)) if not tied else set()
     return [
         n for n in dict.fromkeys([*state.named, *found]) if not EFFECTS[n].noise and n not in out
     ]
