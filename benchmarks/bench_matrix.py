@@ -13,12 +13,6 @@ spins of 90°/180°/360° both ways at two speeds, half circles both ways at two
 * **independent** — ``tests/independent_robot.py``: no code of the World, the replay or the
   catalogue's formulas (continuous exact-arc integration, S-curve speed profiles, 10 Hz logs);
   every effect injected as ``docs/effects.md`` writes it;
-* **skid** (opt-in: ``--generators skid``) — the independent generator's logs diagnosed against
-  a skid-steer robot of the same wheels and track
-  (:data:`odomgym.diagnose.generate.NOMINAL_SKID_ROBOT`), so that the skid-steer catalogue
-  (``skid_track`` beside the rest) is in play: ``--generators skid --effects skid_track
-  wheelbase none`` measures whether the radius-dependent track is named and whether a constant
-  one or nothing is mistaken for it;
 * **world** — the project's pymunk World (:func:`odomgym.diagnose.generate.simulate_protocol`,
   20 Hz logs): systematic effects carried by the robot spec; the noise effects come from the
   **floor** — floor roughness from a rough floor (the ``rough`` preset's kind, roughness k),
@@ -63,27 +57,26 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.effects import EFFECTS, catalogue
+from odomgym.effects import catalogue
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-EFFECT_NAMES = tuple(n for n in catalogue() if "differential" in EFFECTS[n].drives)
-"""The differential-drive catalogue (``docs/effects.md``), in its order: an effect it gains joins
-the matrix."""
+EFFECT_NAMES = tuple(catalogue())
+"""The whole catalogue (``docs/effects.md``), in its order: an effect it gains joins the matrix."""
 
-SKID_EFFECT_NAMES = tuple(n for n in catalogue() if "skid-steer" in EFFECTS[n].drives)
-"""The skid-steer catalogue: the effects the ``skid`` generator may hide."""
+LATER_EFFECTS = ("skid_track",)
+"""Effects that joined the catalogue after the matrix's seeds were fixed: their seeds count
+after ``none`` (:data:`_SEED_ORDER`), so every earlier trial keeps its seed and a re-run shows
+what a change of the diagnosis did, not a new draw."""
 
-_SEED_ORDER = (*EFFECT_NAMES, "none", *(n for n in SKID_EFFECT_NAMES if n not in EFFECT_NAMES))
-"""Effects in the order their seeds count: the skid-steer-only ones after ``none``, so that the
-differential-drive trials keep the seeds they had before the skid-steer catalogue existed."""
+_SEED_ORDER = (*(n for n in EFFECT_NAMES if n not in LATER_EFFECTS), "none", *LATER_EFFECTS)
+"""Effects in the order their seeds count."""
 
 SIZES = {"small": (5.0, 5.0), "large": (10.0, 20.0)}
 """Each size's range of multiples of the detection limit: small at 5 ×, the bound issue 42
 sets for the smaller size; large drawn in 10–20 ×."""
 
-GENERATORS = ("independent", "world", "skid")
-DEFAULT_GENERATORS = ("independent", "world")
+GENERATORS = ("independent", "world")
 CABLE_DENSITY = 1.5
 """Cables per square metre of the World's bump floor (0.3 m long: 0.29 crossings per metre of a
 wheel's travel, Buffon's 2·D·L/π)."""
@@ -129,7 +122,7 @@ def simulate(generator: str, effect: str, size: str, seed: int) -> tuple[list[An
         values = hidden_effect(effect, factor, "rich", rng)
     truth["factor"] = factor
     truth["values"] = values
-    if generator in ("independent", "skid"):
+    if generator == "independent":
         from independent_robot import IndependentRobot, generate, rich_protocol
 
         robot = IndependentRobot(effects={effect: values} if values else {})
@@ -203,7 +196,7 @@ def run_trial(job: tuple[str, str, str, int]) -> dict[str, Any]:
     """One blind trial: simulate, diagnose with the default options, score."""
     import json as _json
 
-    from odomgym.diagnose.generate import NOMINAL_ROBOT, NOMINAL_SKID_ROBOT
+    from odomgym.diagnose.generate import NOMINAL_ROBOT
     from odomgym.diagnose.report import report_json
     from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
 
@@ -211,8 +204,7 @@ def run_trial(job: tuple[str, str, str, int]) -> dict[str, Any]:
     seed = _seed(generator, effect, size, trial)
     runs, truth = simulate(generator, effect, size, seed)
     start = time.perf_counter()
-    nominal = NOMINAL_SKID_ROBOT if generator == "skid" else NOMINAL_ROBOT
-    result = diagnose(runs, nominal, DiagnoseConfig(seed=seed, jobs=1))
+    result = diagnose(runs, NOMINAL_ROBOT, DiagnoseConfig(seed=seed, jobs=1))
     elapsed = time.perf_counter() - start
     report = _json.loads(report_json(result))
     return {
@@ -229,11 +221,7 @@ def jobs_for(args: argparse.Namespace) -> list[tuple[str, str, str, int]]:
     """Every trial the options ask for."""
     out: list[tuple[str, str, str, int]] = []
     for generator in args.generators:
-        catalogue_of = SKID_EFFECT_NAMES if generator == "skid" else EFFECT_NAMES
-        effects = args.effects if args.effects is not None else [*catalogue_of, "none"]
-        for effect in effects:
-            if effect != "none" and effect not in catalogue_of:
-                continue  # a skid-steer effect has no differential-drive trial
+        for effect in args.effects:
             if effect == "none":
                 out += [(generator, "none", "none", t) for t in range(args.none_trials)]
                 continue
@@ -313,16 +301,14 @@ def main() -> None:
         "--none-trials", type=int, default=20, help="robots without an effect per generator (20)"
     )
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
-    parser.add_argument(
-        "--generators", nargs="+", default=list(DEFAULT_GENERATORS), choices=GENERATORS
-    )
+    parser.add_argument("--generators", nargs="+", default=list(GENERATORS), choices=GENERATORS)
     parser.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES))
     parser.add_argument(
         "--effects",
         nargs="+",
-        default=None,
-        choices=_SEED_ORDER,
-        help="hidden effects (default: the generator's catalogue and none)",
+        default=[*EFFECT_NAMES, "none"],
+        choices=[*EFFECT_NAMES, "none"],
+        help="hidden effects (default: the catalogue and none)",
     )
     parser.add_argument("--results", type=Path, default=Path("matrix.jsonl"))
     parser.add_argument("--table", type=Path, default=None, help="write the markdown table here")

@@ -134,19 +134,28 @@ def test_scout2_names_skid_track_first_and_beats_a_constant_track() -> None:
     assert diagnosed < 0.25 * _rms(result, "as given")
 
 
-def test_skid_steer_effects_are_offered_to_skid_steer_robots_only() -> None:
-    """``skid_track`` and the grammar's ``spin`` terms are candidates on a skid-steer robot and
-    not on a differential-drive one, which turns about its axle without sliding sideways: there
-    a skid track would only stand in for a constant track factor or a yaw-rate scrub (on the
-    alien robot's spin scrub of ``tests/test_discover.py`` it did, and hid the yaw-rate term)."""
-    from odomgym.diagnose.generate import NOMINAL_ROBOT, NOMINAL_SKID_ROBOT
-    from odomgym.effects import grammar_terms
+def test_skid_track_must_fall_where_the_data_turns() -> None:
+    """The rich protocol of the independent robot (b = 0.2 m) turns in spins (λ = 0), square
+    corners and 1 m arcs (λ = 2R/b = 10): its widest turns are |λ| = 10. A skid track whose
+    share of the excess falls by a fifth or more across them (λ½ ≤ 2·10) is a shape the data
+    spans; one further out (λ½ 50, where a yaw-rate scrub drove the pair: a 4 % fall) is a
+    constant factor over every logged turn, and ``diagnose`` does not call it significant."""
+    from independent_robot import IndependentRobot, generate, rich_protocol
 
-    assert EFFECTS["skid_track"].drives == ("skid-steer",)
-    assert all("differential" in e.drives for n, e in EFFECTS.items() if n != "skid_track")
-    differential, skid = grammar_terms(NOMINAL_ROBOT.drive), grammar_terms(NOMINAL_SKID_ROBOT.drive)
-    assert set(skid) - set(differential) == {"crab_spin", "yaw_spin"}
-    assert [t for t in skid if t in differential] == differential  # same order otherwise
+    from odomgym.diagnose.generate import NOMINAL_ROBOT
+    from odomgym.effects.motion import turning_lambda
+
+    runs = generate(IndependentRobot(), rich_protocol(), np.random.default_rng(0))
+    travel = [np.diff(r.counts, axis=0) * NOMINAL_ROBOT.metres_per_tick for r in runs]
+    assert turning_lambda(travel) == pytest.approx(10.0, rel=0.02)
+    skid = EFFECTS["skid_track"]
+    assert skid.shape_identified({"excess": 0.3, "lambda_half": 4.0}, travel)
+    widest = turning_lambda(travel)
+    assert skid.shape_identified({"excess": 0.3, "lambda_half": 1.99 * widest}, travel)
+    assert not skid.shape_identified({"excess": 0.3, "lambda_half": 2.01 * widest}, travel)
+    assert not skid.shape_identified({"excess": 0.41, "lambda_half": 50.0}, travel)
+    assert all(e.shape_identified({}, travel) for n, e in EFFECTS.items() if n != "skid_track")
+    assert turning_lambda([]) == 0.0
 
 
 @pytest.mark.slow

@@ -53,9 +53,9 @@ from odomgym.diagnose.stats import sign_flip_p, wald_p
 from odomgym.effects import Effect
 from odomgym.effects.discovered import (
     CATALOGUE_POINTS,
+    TERMS,
     DiscoveredTerms,
     describe_term,
-    grammar_terms,
     term_by_name,
 )
 from odomgym.odometry.runs import Run
@@ -116,7 +116,7 @@ def library_jacobian(
     projecting on the kept columns). ``processes``: the evaluations (two per term) are shared
     among that many forked processes (:func:`~odomgym.diagnose.fit.whitened_stacks`; the same
     numbers)."""
-    names = list(terms) if terms is not None else grammar_terms(spec.drive)
+    names = list(terms) if terms is not None else [t.name for t in TERMS]
     steps: list[tuple[float, float]] = []
     specs = [spec]
     labels = ["the model itself"]

@@ -449,8 +449,7 @@ def _where_lines(d: Diagnosis) -> list[str]:
         )
     lines += ["", "Which experiments reveal which effect:", ""]
     for name, effect in EFFECTS.items():
-        if d.initial.drive in effect.drives:
-            lines.append(f"- `{name}`: {effect.reveals}")
+        lines.append(f"- `{name}`: {effect.reveals}")
     return lines
 
 

@@ -185,9 +185,12 @@ def _score_candidates(
     fits = [done[k] for k in range(len(jobs))]
     improvements = np.array([f.cv_loglik - base_cv for f in fits])
     t, p_flip = max_t_test(improvements, ctx.rng)
+    # The logs' wheel travel per interval, for the effects whose shape the data must span.
+    travel = [np.diff(run.counts, axis=0) * spec.metres_per_tick for run in data.runs]
     candidates = []
     for k, f in enumerate(fits):
         signature = stage != "mean" or not EFFECTS[f.name].noise or _signature_holds(ctx, spec, f)
+        shape = EFFECTS[f.name].shape_identified(f.values, travel)
         lr = likelihood_ratio(float(np.sum(f.loglik - current.loglik)))
         dof = len(EFFECTS[f.name].parameters) + sum(
             len(EFFECTS[p].parameters) for p in EFFECTS[f.name].partners
@@ -207,7 +210,7 @@ def _score_candidates(
                 p_family=p_family,
                 t=float(t[k]),
                 p_sign_flip=float(p_flip[k]),
-                significant=bool(p_family < 0.5 * cfg.alpha and gain > 0.0 and signature),
+                significant=bool(p_family < 0.5 * cfg.alpha and gain > 0.0 and signature and shape),
             )
         )
     return candidates, fits

@@ -56,7 +56,7 @@ from odomgym.diagnose.rounds import DISCOVERED, ROUND_GOES_ON, DiagnosisState, _
 from odomgym.diagnose.spread import SpreadCheck
 from odomgym.diagnose.stats import bootstrap_ci, combine_bonferroni, reducible_fraction, rms
 from odomgym.diagnose.steps import NoiseNamed, SystematicModel, TermRefusal
-from odomgym.effects import EFFECTS, grammar_terms
+from odomgym.effects import EFFECTS, TERMS
 from odomgym.effects.discovered import operating_phrase, term_by_name
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
@@ -195,12 +195,12 @@ def _significant_effects(state: DiagnosisState, *, tied: bool) -> list[str]:
     ]
 
 
-def _terms_tried(passes: Sequence[Discovery], drive: str) -> int:
-    """How many grammar terms the discovery tried on a robot of ``drive``: the library's
-    identifiable terms (0 when no pass ran)."""
+def _terms_tried(passes: Sequence[Discovery]) -> int:
+    """How many grammar terms the discovery tried: the library's identifiable terms (0 when no
+    pass ran)."""
     if not passes:
         return 0
-    return len(grammar_terms(drive)) - len(passes[-1].dropped)
+    return len(TERMS) - len(passes[-1].dropped)
 
 
 def _discovered_order(state: DiagnosisState) -> list[str]:

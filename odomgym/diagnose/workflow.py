@@ -435,7 +435,7 @@ def _rounds(
     signature is in the data: a systematic effect named before it would stand in for its
     realised jumps. With the sessions' frames fitted, the catalogue effects they make
     unidentifiable (:data:`~odomgym.diagnose.nuisances.SESSION_EFFECTS`) are no candidates."""
-    names = cfg.candidates or tuple(n for n in EFFECTS if robot.drive in EFFECTS[n].drives)
+    names = cfg.candidates or tuple(EFFECTS)
     if rec.frames_on:
         names = tuple(n for n in names if n not in SESSION_EFFECTS)
     model = fit_noise_model(rec.data, Model(robot, SensorNoise(*cfg.initial_sensor)))
@@ -562,7 +562,7 @@ def _diagnosis(
             for name in state.named
             if name in state.parameters
         },
-        terms_tried=_terms_tried(state.passes, final.spec.drive),
+        terms_tried=_terms_tried(state.passes),
         fit_runs=[run_id(runs[j], j) for j in split.fit_index],
         holdout_runs=[run_id(runs[j], j) for j in split.held_index],
         skipped_runs=[s.as_dict() for s in skipped],

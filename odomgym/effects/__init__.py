@@ -25,13 +25,7 @@ name                      parameters             what it is
 
 from __future__ import annotations
 
-from odomgym.effects.discovered import (
-    TERMS,
-    Discovered,
-    DiscoveredTerms,
-    Term,
-    grammar_terms,
-)
+from odomgym.effects.discovered import TERMS, Discovered, DiscoveredTerms, Term
 from odomgym.effects.geometry import DistanceScale, Wheelbase, WheelDiameterRatio
 from odomgym.effects.motion import SkidTrack, TurnSkid, WheelToe
 from odomgym.effects.noise import FloorBumps, FloorRoughness
@@ -73,7 +67,6 @@ __all__ = [
     "WorldView",
     "catalogue",
     "get_effect",
-    "grammar_terms",
     "offset_point",
     "play_operator",
     "register_effect",

@@ -24,8 +24,7 @@ motion: ``one``, ``speed`` (|v|), ``speed2``, ``rate`` (|ω| [rad/s]), ``lateral
 [m/s²], the lateral acceleration), ``lateral_signed`` (v·ω), ``direction`` (sign of v),
 ``time`` and ``spin`` (1/(1 + λ²) [-] with the path parameter λ = (d_L + d_R)/(d_R − d_L) of the
 interval's wheel travels: 1 in a spin, ½ with the inner wheel at rest, 0 on a straight path — the
-turn-radius modulator of a skid-steer robot's scrub, Wang et al. 2015; offered only to skid-steer
-robots, :func:`grammar_terms`).
+turn-radius modulator of a skid-steer robot's scrub, Wang et al. 2015).
 
 The catalogue's systematic effects are points of this grammar (``docs/diagnose.md``): E_s is
 ``left_one`` = ``right_one`` (both wheels' travel × 1), E_d the differential travel × 1
@@ -74,14 +73,12 @@ __all__ = [
     "BODY_MODULATORS",
     "CATALOGUE_POINTS",
     "CHANNELS",
-    "SKID_STEER_MODULATORS",
     "TERMS",
     "WHEEL_MODULATORS",
     "Discovered",
     "DiscoveredTerms",
     "Term",
     "describe_term",
-    "grammar_terms",
     "operating_phrase",
     "spin_share",
     "term_by_name",
@@ -231,19 +228,6 @@ TERMS: tuple[Term, ...] = tuple(
 """Every term of the grammar, in parameter order."""
 
 _BY_NAME = {t.name: t for t in TERMS}
-
-SKID_STEER_MODULATORS = ("spin",)
-"""Body modulators of a skid-steer robot's scrub only: a differential-drive robot turns about
-its axle without sliding sideways, so ``diagnose`` does not try them there (where ``yaw_spin``
-would only stand in for a constant track factor or a yaw-rate scrub)."""
-
-
-def grammar_terms(drive: str) -> list[str]:
-    """The grammar's term names ``diagnose`` tries on a robot of ``drive``
-    (:attr:`odomgym.robot.RobotSpec.drive`), in parameter order: every term of :data:`TERMS`,
-    less the skid-steer modulators' unless ``drive`` is ``"skid-steer"``."""
-    skid = drive == "skid-steer"
-    return [t.name for t in TERMS if skid or t.modulator not in SKID_STEER_MODULATORS]
 
 
 def term_by_name(name: str) -> Term:

@@ -19,7 +19,7 @@ The replay applies the same to one sampling interval (``docs/effects.md`` steps 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from odomgym._jit import kernel
 from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
 
-__all__ = ["SkidTrack", "TurnSkid", "WheelToe", "track_factor"]
+__all__ = ["SkidTrack", "TurnSkid", "WheelToe", "track_factor", "turning_lambda"]
 
 FloatArray = NDArray[np.float64]
 
@@ -167,7 +167,21 @@ class SkidTrack(Effect):
     )
     reveals = "circles of several radii both ways and in-place spins (the factor moves with λ)"
     partners = ("wheelbase",)
-    drives = ("skid-steer",)
+
+    @classmethod
+    def shape_identified(cls, values: Mapping[str, float], travel: Sequence[FloatArray]) -> bool:
+        """Whether the fitted fall of the apparent track happens where the data turns: the
+        share 1/(1 + (|λ|/λ½)²) of the excess falls by at least :data:`SHARE_FALL` between a
+        spin and the widest turns the logs hold (|λ| = :func:`turning_lambda`), i.e.
+        λ½ ≤ 2·|λ|. A half-point further out leaves the factor nearly constant over every
+        logged turn: one more constant track factor beside ``wheelbase``, with E_b and ε trading
+        against each other (on a yaw-rate scrub of a differential-drive robot the pair went to
+        E_b 0.72, ε 0.41, λ½ 50 where the widest arcs had |λ| = 10: a fall of 4 %). A half-point
+        a little beyond the data is a shape it still spans (the World's scout2 in its first
+        round: λ½ 17.5, widest turns 14.1, a fall of 39 %)."""
+        widest = turning_lambda(travel)
+        reach = widest * math.sqrt((1.0 - SHARE_FALL) / SHARE_FALL)
+        return float(values.get("lambda_half", 0.0)) <= reach
 
     @classmethod
     def is_absent(cls, values: Mapping[str, float]) -> bool:
@@ -182,6 +196,37 @@ class SkidTrack(Effect):
             arrays.dtheta = arrays.dtheta * track_factor(
                 arrays.travel, values["excess"], values["lambda_half"]
             )
+
+
+SHARE_FALL = 0.2
+"""The least fall of the skid track's share of its excess, from a spin to the widest logged
+turns, at which the data spans its shape (:meth:`SkidTrack.shape_identified`)."""
+
+TURNING_QUANTILE = 0.95
+"""The share of the logs' turning (weighted by |d_R − d_L|) whose |λ| lies at or below
+:func:`turning_lambda`: the widest turns that carry at least 5 % of it count, a few wiggles of
+a straight run (|λ| in the hundreds, tiny |d_R − d_L|) do not."""
+
+
+def turning_lambda(travel: Sequence[FloatArray]) -> float:
+    """The widest turns the logs hold, as a path parameter |λ| = |d_L + d_R|/|d_R − d_L| [-]:
+    the :data:`TURNING_QUANTILE` quantile of |λ| over every interval of ``travel`` (per run
+    (n, 2) wheel travels [m]), each weighted by its turning |d_R − d_L| (0 when nothing
+    turns)."""
+    if not travel:
+        return 0.0
+    steps = np.concatenate([np.asarray(t, dtype=np.float64).reshape(-1, 2) for t in travel])
+    steps = steps[np.all(np.isfinite(steps), axis=1)]
+    turn = np.abs(steps[:, 1] - steps[:, 0])
+    moving = turn > 0.0
+    if not np.any(moving):
+        return 0.0
+    lam = np.abs(steps[moving, 0] + steps[moving, 1]) / turn[moving]
+    weight = turn[moving]
+    order = np.argsort(lam, kind="stable")
+    cumulative = np.cumsum(weight[order])
+    k = int(np.searchsorted(cumulative, TURNING_QUANTILE * cumulative[-1]))
+    return float(lam[order][min(k, len(order) - 1)])
 
 
 def track_factor(travel: FloatArray, excess: float, lambda_half: float) -> FloatArray:

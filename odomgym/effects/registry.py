@@ -170,11 +170,6 @@ class Effect:
     during steady driving): it competes with the systematic effects from the first round of
     ``diagnose`` where that signature is in the data, so that a systematic effect named before
     it cannot stand in for its realised jumps (:func:`odomgym.diagnose.rounds.run_round`)."""
-    drives: ClassVar[tuple[str, ...]] = ("differential", "skid-steer")
-    """The drives (:attr:`odomgym.robot.RobotSpec.drive`) whose robots can carry the effect:
-    ``diagnose`` offers it as a candidate only for those. A skid-steer robot's scrub
-    (``skid_track``) needs wheels that slide sideways to turn; a differential-drive robot turns
-    about its axle without it, and there the effect would only stand in for others."""
     confounded: ClassVar[str] = ""
     """What else, outside the catalogue, produces exactly the same logs (the report repeats it
     whenever the effect is named, so a reader does not take the name for more than the data
@@ -185,6 +180,15 @@ class Effect:
     def absent_values(cls) -> dict[str, float]:
         """The values at which the effect is absent."""
         return {p.name: p.absent for p in cls.parameters}
+
+    @classmethod
+    def shape_identified(cls, values: Mapping[str, float], travel: Sequence[FloatArray]) -> bool:
+        """Whether logs whose wheel travels per interval are ``travel`` (per run (n, 2) [m]) can
+        tell this effect at the fitted ``values`` from its :attr:`partners` alone. True unless
+        an effect says otherwise: ``skid_track`` whose half-point lies beyond every turn the data
+        holds is one more constant track factor over those turns, i.e. ``wheelbase``. ``diagnose``
+        does not call such a fit significant."""
+        return True
 
     @classmethod
     def is_absent(cls, values: Mapping[str, float]) -> bool:
