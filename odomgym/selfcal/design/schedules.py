@@ -18,8 +18,10 @@ which is what makes the three searches cheap:
   fall of the posterior expected loss per metre of travel is largest, the expectation over the
   posterior predictive by Monte Carlo (:func:`greedy_session`).
 
-Both minimisations are greedy fills followed by exchanges (add, remove, or swap one run while
-the loss falls) in the manner of Fedorov's exchange algorithm (Fedorov 1972, Ch. 3): not a
+Where the budget admits at most :data:`ENUMERATE_LIMIT` schedules, both minimisations rank
+every one of them (:func:`enumerate_schedules`). Otherwise they are greedy fills followed by
+exchanges (add, remove, or swap one run while the loss falls) in the manner of Fedorov's
+exchange algorithm (Fedorov 1972, Ch. 3), restarted from every subset's own schedule: not a
 proof of optimality, but every result is a local minimum over those moves, and the oracle's
 search is started from, and never returns worse than, the fixed schedule.
 """
@@ -43,6 +45,7 @@ __all__ = [
     "best_fixed_schedule",
     "bma_risk",
     "check_budget",
+    "enumerate_schedules",
     "greedy_session",
     "oracle_loss",
     "oracle_schedules",
@@ -53,6 +56,37 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 Counts = NDArray[np.int64]
+
+ENUMERATE_LIMIT = 4000
+"""Largest number of schedules ranked exhaustively (above it: greedy fill and exchanges)."""
+
+
+def enumerate_schedules(
+    costs: FloatArray, budget_m: float, limit: int = ENUMERATE_LIMIT
+) -> NDArray[np.int64] | None:
+    """Every non-empty schedule of travel ≤ ``budget_m`` as counts (schedules, items), or
+    None if there are more than ``limit``."""
+    out: list[list[int]] = []
+    counts = [0] * len(costs)
+
+    def walk(i: int, left: float) -> bool:
+        if i == len(costs):
+            if any(counts):
+                out.append(list(counts))
+            return len(out) <= limit
+        k = 0
+        while k * costs[i] <= left + 1e-9:
+            counts[i] = k
+            if not walk(i + 1, left - k * costs[i]):
+                counts[i] = 0
+                return False
+            k += 1
+        counts[i] = 0
+        return True
+
+    if not walk(0, budget_m):
+        return None
+    return np.array(out, dtype=np.int64)
 
 
 def check_budget(budget_m: float, model: LinearModel) -> None:
@@ -194,8 +228,25 @@ def best_fixed_schedule(
         stats = subset_posteriors(prior, info, np.zeros((1, 8)))
         return float(weights @ np.einsum("jk,skj->s", model.weight, stats.cov))
 
-    start = search(bound, model.costs, budget_m)
-    return search(lambda c: bma_risk(model, prior, robots, c), model.costs, budget_m, start)
+    def risk(c: Counts) -> float:
+        return bma_risk(model, prior, robots, c)
+
+    every = enumerate_schedules(model.costs, budget_m)
+    if every is not None:
+        return min(every, key=risk)
+    # several starts against local minima: the prior-weighted bound's greedy fill, and each
+    # subset's oracle schedule (distinct ones)
+    starts = [search(bound, model.costs, budget_m)]
+    for s in range(model.prior.subsets):
+
+        def own(c: Counts, s: int = s) -> float:
+            return oracle_loss(model, prior, s, c)
+
+        candidate = search(own, model.costs, budget_m)
+        if not any(np.array_equal(candidate, c) for c in starts):
+            starts.append(candidate)
+    found = [search(risk, model.costs, budget_m, start) for start in starts]
+    return min(found, key=risk)
 
 
 def oracle_schedules(
@@ -204,6 +255,20 @@ def oracle_schedules(
     """Per subset, the schedule of travel ≤ ``budget_m`` minimising tr(W·P_S): the better of
     a search from empty and one from ``fixed`` (so never worse than ``fixed`` for S)."""
     check_budget(budget_m, model)
+    every = enumerate_schedules(model.costs, budget_m)
+    if every is not None:
+        every = np.concatenate([every, fixed[None, :]])
+        traces = np.array(
+            [
+                np.einsum(
+                    "jk,skj->s",
+                    model.weight,
+                    subset_posteriors(prior, schedule_information(model, c), np.zeros((1, 8))).cov,
+                )
+                for c in every
+            ]
+        )
+        return [every[int(np.argmin(traces[:, s]))] for s in range(model.prior.subsets)]
     out = []
     for s in range(model.prior.subsets):
 
@@ -215,6 +280,15 @@ def oracle_schedules(
             search(loss, model.costs, budget_m, fixed),
         ]
         out.append(min(candidates, key=loss))
+    # a second pass started from every subset's first-pass schedule (against local minima)
+    first = list(out)
+    for s in range(model.prior.subsets):
+
+        def again(c: Counts, s: int = s) -> float:
+            return oracle_loss(model, prior, s, c)
+
+        found = [search(again, model.costs, budget_m, start) for start in first]
+        out[s] = min([out[s], *found], key=again)
     return out
 
 
