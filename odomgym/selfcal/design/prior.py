@@ -104,7 +104,7 @@ class EffectPrior:
             )
         if not 0.0 <= self.low <= self.high or not math.isfinite(self.high):
             raise SpecError(
-                f"{where}: need 0 ≤ low ≤ high < ∞, got low={self.low}, high={self.high}",
+                f"{where}.low: need 0 ≤ low ≤ high < ∞, got low={self.low}, high={self.high}",
                 field=f"{where}.low",
             )
         for j in columns_of(self.effect):
