@@ -13,15 +13,16 @@ which is what makes the three searches cheap:
   average: its expected loss has no closed form (the model weights depend on the data), so it
   is estimated by Monte Carlo over robots drawn from the prior with common random numbers
   (:class:`DesignRobots`, :func:`bma_risk`) and minimised (:func:`best_fixed_schedule`);
-* **greedy expected information gain** (Chaloner & Verdinelli 1995, §2.1: the Bayes risk of the
-  terminal decision as the utility) picks, after every run, the affordable item whose expected
-  fall of the posterior expected loss per metre of travel is largest, the expectation over the
-  posterior predictive by Monte Carlo (:func:`greedy_session`).
+* **greedy expected information gain** (Chaloner & Verdinelli 1995: a design's expected
+  utility, here minus the Bayes risk of the terminal estimate) picks, after every run, the
+  affordable item whose expected fall of the posterior expected loss per metre of travel is
+  largest, the expectation over the posterior predictive by Monte Carlo
+  (:func:`greedy_session`).
 
 Where the budget admits at most :data:`ENUMERATE_LIMIT` schedules, both minimisations rank
 every one of them (:func:`enumerate_schedules`). Otherwise they are greedy fills followed by
 exchanges (add, remove, or swap one run while the loss falls) in the manner of Fedorov's
-exchange algorithm (Fedorov 1972, Ch. 3), restarted from every subset's own schedule: not a
+exchange algorithm (Fedorov 1972), restarted from every subset's own schedule: not a
 proof of optimality, but every result is a local minimum over those moves, and the oracle's
 search is started from, and never returns worse than, the fixed schedule.
 """
