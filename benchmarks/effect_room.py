@@ -89,6 +89,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--greedy", action="store_true", help="also the greedy EIG policy")
     parser.add_argument("--draws", type=int, default=8, help="greedy: predictive draws (8)")
     parser.add_argument(
+        "--greedy-absolute",
+        action="store_true",
+        help="greedy: the largest expected fall of the loss, not per metre of travel",
+    )
+    parser.add_argument(
         "--menu", nargs="+", default=None, help="item names (default: the whole menu)"
     )
     parser.add_argument(
@@ -146,7 +151,13 @@ def main(argv: list[str] | None = None) -> int:
             plan_rng = np.random.default_rng(np.random.SeedSequence([args.seed, 45, 4, r]))
             robot = SessionRobot(model, theta, seed)
             posts["greedy"] = greedy_session(
-                model, prior, robot, args.budget, plan_rng, draws=args.draws
+                model,
+                prior,
+                robot,
+                args.budget,
+                plan_rng,
+                draws=args.draws,
+                per_metre=not args.greedy_absolute,
             )
             estimates["greedy"] = posts["greedy"].estimate()
             for i in posts["greedy"].taken:
@@ -192,6 +203,7 @@ def main(argv: list[str] | None = None) -> int:
             for n, i in zip(names, model.items, strict=True)
         },
         "overhead_m": args.overhead,
+        "greedy_rate": "absolute" if args.greedy_absolute else "per metre",
         "fixed_schedule": describe(names, fixed),
         "oracle_schedules": {
             "+".join(model.prior.subset_names(s)) or "none": describe(names, c)

@@ -351,10 +351,12 @@ def greedy_session(
     budget_m: float,
     rng: np.random.Generator,
     draws: int = 8,
+    per_metre: bool = True,
 ) -> ModelPosterior:
     """Greedy expected information gain: after every run, the affordable item with the largest
-    expected fall of the posterior expected validation loss per metre of travel; stops when no
-    item fits the budget left or none is expected to lower the loss."""
+    expected fall of the posterior expected validation loss per metre of travel (``per_metre``;
+    else the largest fall, whatever the item costs); stops when no item fits the budget left
+    or none is expected to lower the loss."""
     check_budget(budget_m, model)
     post = ModelPosterior(model, prior)
     costs = model.costs
@@ -363,7 +365,8 @@ def greedy_session(
         now = post.expected_loss()
         best, best_rate = -1, 0.0
         for i in np.flatnonzero(costs <= left + 1e-9):
-            rate = (now - _preposterior_loss(post, int(i), draws, rng)) / costs[i]
+            fall = now - _preposterior_loss(post, int(i), draws, rng)
+            rate = fall / costs[i] if per_metre else fall
             if rate > best_rate:
                 best, best_rate = int(i), rate
         if best < 0:
