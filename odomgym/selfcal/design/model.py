@@ -48,6 +48,7 @@ __all__ = [
     "ValidationError",
     "build_model",
     "item_model",
+    "sample_rows",
     "validation_errors",
     "validation_runs",
 ]
@@ -108,7 +109,8 @@ class ItemModel:
         return out
 
 
-def _sample_rows(run: Run, every: int) -> NDArray[np.intp]:
+def sample_rows(run: Run, every: int) -> NDArray[np.intp]:
+    """The rows of ``run`` measured: every ``every``-th sample after the start, and the last."""
     rows = list(range(every, len(run.time), every))
     if rows[-1] != len(run.time) - 1:
         rows.append(len(run.time) - 1)
@@ -175,7 +177,7 @@ def item_model(
 ) -> ItemModel:
     """``item``'s :class:`ItemModel` (module docstring)."""
     run = item_run(item.experiment, robot)
-    rows = _sample_rows(run, every)
+    rows = sample_rows(run, every)
     jac = jacobian(run, rows, robot)
     cov = np.diag(np.tile([sensor[0] ** 2, sensor[0] ** 2, sensor[1] ** 2], len(rows)))
     if wheel_noise_k > 0:
@@ -204,7 +206,7 @@ def validation_jacobians(robot: RobotSpec = NOMINAL_ROBOT, every: int = EVERY) -
         rows = (
             np.array([len(run.time) - 1])
             if "square" in experiment.name
-            else _sample_rows(run, every)
+            else sample_rows(run, every)
         )
         inputs = RunInputs.of(run, robot.ticks_per_rev)
         zero = np.zeros(len(PARAMETERS))

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from odomgym.errors import SpecError
 from odomgym.selfcal.design.model import LinearModel
+from odomgym.selfcal.design.nonlinear import ReplayModel
 from odomgym.selfcal.design.posterior import ModelPosterior, SubsetPrior, subset_posteriors
 from odomgym.selfcal.design.prior import PARAMETERS
 
@@ -295,19 +296,41 @@ def oracle_schedules(
 
 class SessionRobot:
     """A robot of the evaluation: θ and one noise stream per menu item, so the k-th run of an
-    item measures the same noise whichever method drove it (paired comparisons)."""
+    item measures the same noise whichever method drove it (paired comparisons).
 
-    def __init__(self, model: LinearModel, theta: FloatArray, seed: tuple[int, ...]) -> None:
+    Args:
+        model: the linear model.
+        theta: the robot's parameters (8,).
+        seed: the entropy of its streams (one more key per item).
+        replay: if given, measure through the replay (nonlinear) instead of J·θ.
+    """
+
+    def __init__(
+        self,
+        model: LinearModel,
+        theta: FloatArray,
+        seed: tuple[int, ...],
+        replay: ReplayModel | None = None,
+    ) -> None:
         self.model = model
         self.theta = theta
+        self.replay = replay
+        self.taken: list[int] = []
+        self.measurements: list[FloatArray] = []
         self._streams = [
             np.random.default_rng(np.random.SeedSequence([*seed, i]))
             for i in range(len(model.items))
         ]
 
     def measure(self, item: int) -> FloatArray:
-        """The next run of ``item``: its measurement (m,) (:meth:`ItemModel.measure`)."""
-        return self.model.items[item].measure(self.theta, self._streams[item])
+        """The next run of ``item``: its measurement (m,), also kept in :attr:`measurements`."""
+        if self.replay is None:
+            y = self.model.items[item].measure(self.theta, self._streams[item])
+        else:
+            y = self.replay.measure(item, self.theta, self._streams[item])
+        self.taken.append(item)
+        self.measurements.append(y)
+        return y
 
 
 def run_schedule(
