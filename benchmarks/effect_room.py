@@ -57,7 +57,7 @@ from odomgym.selfcal.design import (
     validation_runs,
 )
 from odomgym.selfcal.design.menu import DesignItem
-from odomgym.selfcal.design.nonlinear import ReplayModel, relinearised_estimate
+from odomgym.selfcal.design.nonlinear import ReplayModel, laplace_estimate
 from odomgym.selfcal.design.prior import OPTIONAL_EFFECTS
 
 FloatArray = NDArray[np.float64]
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         if replay is None:
             theta = post.estimate() if subset is None else post.subset_mean(subset)
             return theta, post.effect_probability()
-        theta, prob = relinearised_estimate(
+        theta, prob = laplace_estimate(
             replay, prior, robot.taken, robot.measurements, subset=subset
         )
         return theta, prob @ bits

@@ -38,7 +38,7 @@ from odomgym.selfcal.design import (
 )
 from odomgym.selfcal.design.menu import item_run
 from odomgym.selfcal.design.model import SENSOR, WHEEL_NOISE_K, wheel_noise_covariance
-from odomgym.selfcal.design.nonlinear import ReplayModel, relinearised_estimate
+from odomgym.selfcal.design.nonlinear import ReplayModel, laplace_estimate, relinearised_estimate
 from odomgym.selfcal.design.prior import PARAMETERS
 from odomgym.selfcal.design.schedules import check_budget, enumerate_schedules
 
@@ -282,3 +282,7 @@ def test_relinearising_recovers_a_robot_the_linear_model_misses(model: LinearMod
     own = validation_errors(post.estimate(), theta, runs).combined
     assert before > 5 * own and after < 1.5 * own, (before, after, own)
     assert int(np.argmax(prob)) == 0b0110  # turn skid and backlash, nothing else
+    # each subset relinearised around its own mode, weighted by its Laplace evidence
+    laplace, prob = laplace_estimate(replay, prior, taken, ys)
+    assert validation_errors(laplace, theta, runs).combined < 1.5 * own
+    assert int(np.argmax(prob)) == 0b0110
