@@ -12,6 +12,8 @@ budget:
 * **oracle** — knows which effects the robot carries: drives the schedule best for that subset
   and fits only that subset (:func:`~odomgym.selfcal.design.schedules.oracle_schedules`);
 * **greedy EIG** (``--greedy``) — the greedy expected-information-gain policy of step 3;
+* **tree** (``--tree``) — the scripted decision tree of step 3
+  (:mod:`odomgym.selfcal.design.tree`);
 * **none** — the uncalibrated nominal robot, for scale.
 
 Each robot drives each method's runs in the linear-Gaussian model (its k-th run of an item
@@ -59,9 +61,10 @@ from odomgym.selfcal.design import (
 from odomgym.selfcal.design.menu import DesignItem
 from odomgym.selfcal.design.nonlinear import ReplayModel, laplace_estimate
 from odomgym.selfcal.design.prior import OPTIONAL_EFFECTS
+from odomgym.selfcal.design.tree import tree_session
 
 FloatArray = NDArray[np.float64]
-METHODS = ("fixed", "oracle", "greedy", "none")
+METHODS = ("fixed", "oracle", "greedy", "tree", "none")
 
 
 def with_overhead(menu: tuple[DesignItem, ...], overhead_m: float) -> tuple[DesignItem, ...]:
@@ -88,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--budget", type=float, default=10.0, help="travel budget [m] (10)")
     parser.add_argument("--seed", type=int, default=0, help="(0)")
     parser.add_argument("--greedy", action="store_true", help="also the greedy EIG policy")
+    parser.add_argument("--tree", action="store_true", help="also the scripted decision tree")
     parser.add_argument("--draws", type=int, default=8, help="greedy: predictive draws (8)")
     parser.add_argument(
         "--greedy-absolute",
@@ -148,13 +152,14 @@ def main(argv: list[str] | None = None) -> int:
         )
         return theta, prob @ bits
 
-    methods = [m for m in METHODS if m != "greedy" or args.greedy]
+    methods = [m for m in METHODS if (m != "greedy" or args.greedy) and (m != "tree" or args.tree)]
     errors: dict[str, dict[str, list[float]]] = {
         m: {"combined": [], "e_max_syst": [], "free_rms": []} for m in methods
     }
-    identified: dict[str, list[float]] = {"fixed": [], "greedy": []}
+    identified: dict[str, list[float]] = {"fixed": [], "greedy": [], "tree": []}
     travel: dict[str, list[float]] = {m: [] for m in methods}
     picks: dict[str, int] = {n: 0 for n in names}
+    tree_picks: dict[str, int] = {n: 0 for n in names}
     predicted_oracle, predicted_fixed = [], []
     subsets = []
     update_ms: list[float] = []
@@ -189,6 +194,12 @@ def main(argv: list[str] | None = None) -> int:
             estimates["greedy"], said["greedy"] = final(posts["greedy"], robot)
             for i in posts["greedy"].taken:
                 picks[names[i]] += 1
+        if args.tree:
+            robot = SessionRobot(model, theta, seed, replay)
+            posts["tree"] = tree_session(model, prior, robot, args.budget)
+            estimates["tree"], said["tree"] = final(posts["tree"], robot)
+            for i in posts["tree"].taken:
+                tree_picks[names[i]] += 1
         for m in methods:
             e = validation_errors(estimates[m], theta, runs)
             errors[m]["combined"].append(e.combined)
@@ -268,6 +279,14 @@ def main(argv: list[str] | None = None) -> int:
             errors["oracle"]["combined"], errors["greedy"]["combined"]
         )
         result["greedy_picks"] = {n: k for n, k in picks.items() if k}
+    if args.tree:
+        result["tree_vs_fixed"] = paired(errors["fixed"]["combined"], errors["tree"]["combined"])
+        result["tree_vs_oracle"] = paired(errors["oracle"]["combined"], errors["tree"]["combined"])
+        if args.greedy:
+            result["tree_vs_greedy"] = paired(
+                errors["greedy"]["combined"], errors["tree"]["combined"]
+            )
+        result["tree_picks"] = {n: k for n, k in tree_picks.items() if k}
     text = json.dumps(result, indent=1)
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:

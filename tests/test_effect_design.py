@@ -41,6 +41,7 @@ from odomgym.selfcal.design.model import SENSOR, WHEEL_NOISE_K, wheel_noise_cova
 from odomgym.selfcal.design.nonlinear import ReplayModel, laplace_estimate, relinearised_estimate
 from odomgym.selfcal.design.prior import PARAMETERS
 from odomgym.selfcal.design.schedules import check_budget, enumerate_schedules
+from odomgym.selfcal.design.tree import PROBES, SURVEY, tree_session
 
 SMALL = ("spin180", "spin180-back", "straight3", "circle0.25")
 
@@ -283,6 +284,31 @@ def test_relinearising_recovers_a_robot_the_linear_model_misses(model: LinearMod
     assert before > 5 * own and after < 1.5 * own, (before, after, own)
     assert int(np.argmax(prob)) == 0b0110  # turn skid and backlash, nothing else
     # each subset relinearised around its own mode, weighted by its Laplace evidence
-    laplace, prob = laplace_estimate(replay, prior, taken, ys)
+    laplace, prob = laplace_estimate(replay, prior, taken, ys, iterations=2)
     assert validation_errors(laplace, theta, runs).combined < 1.5 * own
     assert int(np.argmax(prob)) == 0b0110
+
+
+def test_the_scripted_tree_surveys_first_probes_the_undecided_and_keeps_the_budget(
+    model: LinearModel,
+) -> None:
+    prior = SubsetPrior.of(model)
+    theta = _theta(turn_skid__gain=0.5)
+    with pytest.raises(SpecError, match="spin360-ccw") as info:
+        tree_session(model, prior, SessionRobot(model, theta, (1,)), 10.0)
+    assert info.value.field == "menu"
+    full = build_model(select((*SURVEY, *PROBES.values())))
+    full_prior = SubsetPrior.of(full)
+
+    def session() -> tuple[list[str], np.ndarray]:
+        post = tree_session(full, full_prior, SessionRobot(full, theta, (1,)), 10.0)
+        return [full.names[i] for i in post.taken], post.estimate()
+
+    (names, a), (again, b) = session(), session()
+    assert names == again and a.tobytes() == b.tobytes()
+    assert names[:3] == list(SURVEY)
+    assert "circle0.25" in names  # the skid is undecided after the survey: probed
+    travel = sum(full.costs[full.names.index(n)] for n in names)
+    assert travel <= 10.0 + 1e-9
+    # it stops only when the next item of its cycle (straight, 180° spin, …) no longer fits
+    assert travel + full.costs[full.names.index("spin180")] > 10.0 - 1e-9

@@ -9,7 +9,10 @@ robot that may carry any of several effects.
   (Jacobian through the replay, sensor and wheel noise), computed once;
 * :mod:`~odomgym.selfcal.design.posterior` — the exact posterior over subsets and parameters;
 * :mod:`~odomgym.selfcal.design.schedules` — the best fixed schedule, the oracle's schedules and
-  the greedy expected-information-gain policy.
+  the greedy expected-information-gain policy;
+* :mod:`~odomgym.selfcal.design.tree` — the scripted decision tree;
+* :mod:`~odomgym.selfcal.design.nonlinear` — measurements through the replay and the
+  relinearised (Laplace) posterior.
 
 ``benchmarks/effect_room.py`` measures the room a policy has (docs/effect-design.md).
 """
