@@ -1,25 +1,25 @@
 """The room for a learned experiment-choosing policy over the effect catalogue (issue 45, step 2).
 
 Does the best next experiment depend on what the robot carries? Measured before any training,
-on robots drawn from the prior of :mod:`odomgym.selfcal.design.prior` (the ranges fixed before
-this was first run) with the menu of :mod:`odomgym.selfcal.design.menu`, all at one travel
+on robots drawn from the prior of :mod:`odomgym.design.prior` (the ranges fixed before
+this was first run) with the menu of :mod:`odomgym.design.menu`, all at one travel
 budget:
 
-* **best fixed schedule** — one schedule for every robot (:func:`~odomgym.selfcal.design.
+* **best fixed schedule** — one schedule for every robot (:func:`~odomgym.design.
   schedules.best_fixed_schedule`: the least Monte Carlo Bayes risk on ``--design-robots``
   robots of their own stream), estimated with the Bayes model average over effect subsets, so
   it is not handicapped by a naive estimator;
 * **oracle** — knows which effects the robot carries: drives the schedule best for that subset
-  and fits only that subset (:func:`~odomgym.selfcal.design.schedules.oracle_schedules`);
+  and fits only that subset (:func:`~odomgym.design.schedules.oracle_schedules`);
 * **greedy EIG** (``--greedy``) — the greedy expected-information-gain policy of step 3;
 * **tree** (``--tree``) — the scripted decision tree of step 3
-  (:mod:`odomgym.selfcal.design.tree`);
+  (:mod:`odomgym.design.tree`);
 * **none** — the uncalibrated nominal robot, for scale.
 
 Each robot drives each method's runs in the linear-Gaussian model (its k-th run of an item
 measures the same noise under every method: paired), and each method's final estimate is
 validated by replaying fresh runs — two 2 m squares (E_max,syst) and a free path (RMS position
-miss) — through the estimate and through the true robot (:func:`~odomgym.selfcal.design.model.
+miss) — through the estimate and through the true robot (:func:`~odomgym.design.model.
 validation_errors`). The room is 1 − mean(oracle)/mean(fixed) of the combined validation error
 (the mean of the two figures); it counts when ≥ 20 %. Paired Wilcoxon (1945) signed-rank tests
 of the per-robot log ratios.
@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import wilcoxon
 
-from odomgym.selfcal.design import (
+from odomgym.design import (
     DESIGN_MENU,
     DesignRobots,
     ModelPosterior,
@@ -58,10 +58,10 @@ from odomgym.selfcal.design import (
     validation_errors,
     validation_runs,
 )
-from odomgym.selfcal.design.menu import DesignItem
-from odomgym.selfcal.design.nonlinear import ReplayModel, laplace_estimate
-from odomgym.selfcal.design.prior import OPTIONAL_EFFECTS
-from odomgym.selfcal.design.tree import tree_session
+from odomgym.design.menu import DesignItem
+from odomgym.design.nonlinear import ReplayModel, laplace_estimate
+from odomgym.design.prior import OPTIONAL_EFFECTS
+from odomgym.design.tree import tree_session
 
 FloatArray = NDArray[np.float64]
 METHODS = ("fixed", "oracle", "greedy", "tree", "none")

@@ -41,6 +41,7 @@ PACKAGE_LAYERS: tuple[frozenset[str], ...] = tuple(
         "lab",  # experiments, simulated and recorded labs, plans, the population
         "vehicle selfcal",  # the two-truck vehicle; the self-calibration session
         "diagnose noise",  # the discrepancy workflow; the random error and its fit
+        "design",  # which experiments identify which catalogue effects (issue 45)
         "envs",
         "baselines",
         "cli",

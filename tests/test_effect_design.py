@@ -15,9 +15,7 @@ import pytest
 from scipy.linalg import block_diag
 from scipy.stats import multivariate_normal
 
-from odomgym.diagnose.replay import replay_run
-from odomgym.errors import SpecError
-from odomgym.selfcal.design import (
+from odomgym.design import (
     DEFAULT_PRIOR,
     DesignPrior,
     DesignRobots,
@@ -36,12 +34,14 @@ from odomgym.selfcal.design import (
     validation_errors,
     validation_runs,
 )
-from odomgym.selfcal.design.menu import item_run
-from odomgym.selfcal.design.model import SENSOR, WHEEL_NOISE_K, wheel_noise_covariance
-from odomgym.selfcal.design.nonlinear import ReplayModel, laplace_estimate, relinearised_estimate
-from odomgym.selfcal.design.prior import PARAMETERS
-from odomgym.selfcal.design.schedules import check_budget, enumerate_schedules
-from odomgym.selfcal.design.tree import PROBES, SURVEY, tree_session
+from odomgym.design.menu import item_run
+from odomgym.design.model import SENSOR, WHEEL_NOISE_K, wheel_noise_covariance
+from odomgym.design.nonlinear import ReplayModel, laplace_estimate, relinearised_estimate
+from odomgym.design.prior import PARAMETERS
+from odomgym.design.schedules import check_budget, enumerate_schedules
+from odomgym.design.tree import PROBES, SURVEY, tree_session
+from odomgym.diagnose.replay import replay_run
+from odomgym.errors import SpecError
 
 SMALL = ("spin180", "spin180-back", "straight3", "circle0.25")
 

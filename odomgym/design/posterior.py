@@ -2,8 +2,8 @@
 
 Each subset S of the optional effects (2⁴ = 16) is one model: θ_S (the always-present E_s,
 E_d, E_b and S's parameters) has the Gaussian prior N(μ₀, P₀) of
-:meth:`~odomgym.selfcal.design.prior.DesignPrior.gaussian`, the other entries of θ are absent
-(0), and every measured item adds y = J·θ + e, e ~ N(0, R) (:mod:`~odomgym.selfcal.design.
+:meth:`~odomgym.design.prior.DesignPrior.gaussian`, the other entries of θ are absent
+(0), and every measured item adds y = J·θ + e, e ~ N(0, R) (:mod:`~odomgym.design.
 model`). In information form (a Kalman filter of a constant state, per subset — the issue's
 "particle set over effect subsets with a Kalman update per particle", here with the 16 subsets
 enumerated rather than sampled), after the whitened measurements r = L⁻¹·y:
@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.selfcal.design.model import LinearModel
-from odomgym.selfcal.design.prior import PARAMETERS
+from odomgym.design.model import LinearModel
+from odomgym.design.prior import PARAMETERS
 
 __all__ = ["ModelPosterior", "SubsetPrior", "SubsetStats", "subset_posteriors"]
 

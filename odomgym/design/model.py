@@ -5,7 +5,7 @@ For an item, the measurement is the logged ground truth — the tracked pose (x,
 
     y = J·θ + e,   e ~ N(0, R),
 
-with J the Jacobian of those poses with respect to θ (:data:`~odomgym.selfcal.design.prior.
+with J the Jacobian of those poses with respect to θ (:data:`~odomgym.design.prior.
 PARAMETERS`) at the nominal robot, by finite differences through the replay
 (:func:`odomgym.diagnose.replay.replay_run`): central for the two-sided parameters; for the
 one-sided ones (turn-skid gain, backlash width, which the catalogue keeps ≥ 0) central about
@@ -32,12 +32,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import solve_triangular
 
+from odomgym.design.menu import DESIGN_MENU, VALIDATION, DesignItem, item_run
+from odomgym.design.prior import DEFAULT_PRIOR, PARAMETERS, DesignPrior, spec_of
 from odomgym.diagnose.generate import NOMINAL_ROBOT
 from odomgym.diagnose.replay import RunInputs, replay_run
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
-from odomgym.selfcal.design.menu import DESIGN_MENU, VALIDATION, DesignItem, item_run
-from odomgym.selfcal.design.prior import DEFAULT_PRIOR, PARAMETERS, DesignPrior, spec_of
 
 __all__ = [
     "FD_STEPS",

@@ -1,24 +1,24 @@
 """Experiment design over the effect catalogue (issue 45, steps 1–3): which runs identify a
 robot that may carry any of several effects.
 
-* :mod:`~odomgym.selfcal.design.prior` — the prior over effect subsets and sizes (fixed ranges
+* :mod:`~odomgym.design.prior` — the prior over effect subsets and sizes (fixed ranges
   with their sources) and the spec of a parameter vector;
-* :mod:`~odomgym.selfcal.design.menu` — the menu of experiments with travel and time costs, and
+* :mod:`~odomgym.design.menu` — the menu of experiments with travel and time costs, and
   the validation runs;
-* :mod:`~odomgym.selfcal.design.model` — each item's linear-Gaussian measurement model
+* :mod:`~odomgym.design.model` — each item's linear-Gaussian measurement model
   (Jacobian through the replay, sensor and wheel noise), computed once;
-* :mod:`~odomgym.selfcal.design.posterior` — the exact posterior over subsets and parameters;
-* :mod:`~odomgym.selfcal.design.schedules` — the best fixed schedule, the oracle's schedules and
+* :mod:`~odomgym.design.posterior` — the exact posterior over subsets and parameters;
+* :mod:`~odomgym.design.schedules` — the best fixed schedule, the oracle's schedules and
   the greedy expected-information-gain policy;
-* :mod:`~odomgym.selfcal.design.tree` — the scripted decision tree;
-* :mod:`~odomgym.selfcal.design.nonlinear` — measurements through the replay and the
+* :mod:`~odomgym.design.tree` — the scripted decision tree;
+* :mod:`~odomgym.design.nonlinear` — measurements through the replay and the
   relinearised (Laplace) posterior.
 
 ``benchmarks/effect_room.py`` measures the room a policy has (docs/effect-design.md).
 """
 
-from odomgym.selfcal.design.menu import DESIGN_MENU, VALIDATION, DesignItem, menu_items, select
-from odomgym.selfcal.design.model import (
+from odomgym.design.menu import DESIGN_MENU, VALIDATION, DesignItem, menu_items, select
+from odomgym.design.model import (
     ItemModel,
     LinearModel,
     ValidationError,
@@ -26,8 +26,8 @@ from odomgym.selfcal.design.model import (
     validation_errors,
     validation_runs,
 )
-from odomgym.selfcal.design.posterior import ModelPosterior, SubsetPrior, subset_posteriors
-from odomgym.selfcal.design.prior import (
+from odomgym.design.posterior import ModelPosterior, SubsetPrior, subset_posteriors
+from odomgym.design.prior import (
     DEFAULT_PRIOR,
     OPTIONAL_EFFECTS,
     PARAMETERS,
@@ -36,7 +36,7 @@ from odomgym.selfcal.design.prior import (
     GeometryPrior,
     spec_of,
 )
-from odomgym.selfcal.design.schedules import (
+from odomgym.design.schedules import (
     DesignRobots,
     SessionRobot,
     best_fixed_schedule,

@@ -1,6 +1,6 @@
 """The replay behind the linear model: nonlinear measurements and a relinearised estimate.
 
-The linear model of :mod:`~odomgym.selfcal.design.model` is exact for its own data. A robot
+The linear model of :mod:`~odomgym.design.model` is exact for its own data. A robot
 at the prior's upper sizes moves its measured poses far from J·θ (a turn skid of 0.75 s²/m
 puts a 0.5 m circle's poses 0.2 m off the linear prediction, against a 1 mm sensor), so real
 runs need the replay itself: :class:`ReplayModel` measures a robot through
@@ -15,13 +15,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.diagnose.generate import NOMINAL_ROBOT
-from odomgym.diagnose.replay import RunInputs, replay_run
-from odomgym.odometry.runs import Run
-from odomgym.selfcal.design.menu import item_run
-from odomgym.selfcal.design.model import EVERY, FD_STEPS, LinearModel, sample_rows
-from odomgym.selfcal.design.posterior import SubsetPrior, subset_posteriors
-from odomgym.selfcal.design.prior import (
+from odomgym.design.menu import item_run
+from odomgym.design.model import EVERY, FD_STEPS, LinearModel, sample_rows
+from odomgym.design.posterior import SubsetPrior, subset_posteriors
+from odomgym.design.prior import (
     ALWAYS,
     DEFAULT_PRIOR,
     PARAMETERS,
@@ -29,6 +26,9 @@ from odomgym.selfcal.design.prior import (
     columns_of,
     spec_of,
 )
+from odomgym.diagnose.generate import NOMINAL_ROBOT
+from odomgym.diagnose.replay import RunInputs, replay_run
+from odomgym.odometry.runs import Run
 from odomgym.selfcal.estimators import CLIP_PRIORS
 
 __all__ = ["ReplayModel", "laplace_estimate", "relinearised_estimate"]

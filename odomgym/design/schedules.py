@@ -35,11 +35,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.design.model import LinearModel
+from odomgym.design.nonlinear import ReplayModel
+from odomgym.design.posterior import ModelPosterior, SubsetPrior, subset_posteriors
+from odomgym.design.prior import PARAMETERS
 from odomgym.errors import SpecError
-from odomgym.selfcal.design.model import LinearModel
-from odomgym.selfcal.design.nonlinear import ReplayModel
-from odomgym.selfcal.design.posterior import ModelPosterior, SubsetPrior, subset_posteriors
-from odomgym.selfcal.design.prior import PARAMETERS
 
 __all__ = [
     "DesignRobots",

@@ -13,17 +13,17 @@ any robot, with one threshold and no tuning:
 3. **Fill**: cycle through a straight, a 180° spin and the item of every effect judged present,
    each time the next that still fits the budget, until none fits.
 
-Every decision reads the exact subset posterior (:class:`~odomgym.selfcal.design.posterior.
+Every decision reads the exact subset posterior (:class:`~odomgym.design.posterior.
 ModelPosterior`), never the robot.
 """
 
 from __future__ import annotations
 
+from odomgym.design.model import LinearModel
+from odomgym.design.posterior import ModelPosterior, SubsetPrior
+from odomgym.design.prior import OPTIONAL_EFFECTS
+from odomgym.design.schedules import SessionRobot, check_budget
 from odomgym.errors import SpecError
-from odomgym.selfcal.design.model import LinearModel
-from odomgym.selfcal.design.posterior import ModelPosterior, SubsetPrior
-from odomgym.selfcal.design.prior import OPTIONAL_EFFECTS
-from odomgym.selfcal.design.schedules import SessionRobot, check_budget
 
 __all__ = ["PROBES", "SURVEY", "tree_session"]
 

@@ -13,7 +13,7 @@ between its detection limit under the rich protocol (``docs/effects.md``, detect
 table; :func:`odomgym.diagnose.generate.detection_limit`) and the largest size a real robot was
 measured to show (each :class:`EffectPrior` names the source of its upper bound).
 
-The posterior (:mod:`odomgym.selfcal.design.posterior`) is linear-Gaussian: it replaces each
+The posterior (:mod:`odomgym.design.posterior`) is linear-Gaussian: it replaces each
 uniform by the Gaussian of the same mean and variance (:meth:`DesignPrior.gaussian`). Robots are
 drawn from the uniforms themselves (:meth:`DesignPrior.draw`).
 """
