@@ -50,7 +50,7 @@ import json
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
@@ -294,6 +294,34 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def run_pending(
+    jobs: Sequence[Any],
+    trial: Callable[[Any], dict[str, Any]],
+    results: Path,
+    workers: int,
+    done: list[dict[str, Any]],
+) -> None:
+    """Run the ``jobs`` whose key is not among ``done`` (the rows already in ``results``) on
+    ``workers`` processes; each row is appended to ``results`` and to ``done`` as it finishes,
+    so an interrupted run resumes where it stopped."""
+    finished = {tuple(r["key"]) for r in done}
+    todo = [job for job in jobs if tuple(job) not in finished]
+    print(f"{len(todo)} trials to run ({len(finished)} already in {results})", flush=True)
+    with ProcessPoolExecutor(max_workers=workers) as pool, results.open("a") as out:
+        futures = [pool.submit(trial, job) for job in todo]
+        for k, future in enumerate(as_completed(futures), 1):
+            row = future.result()
+            out.write(json.dumps(row) + "\n")
+            out.flush()
+            done.append(row)
+            mark = "ok" if row["success"] else "MISS"
+            print(
+                f"[{k}/{len(todo)}] {' '.join(map(str, row['key']))}: {mark} "
+                f"{row['verdict']} {row['named']} ({row['elapsed_s']:.0f} s)",
+                flush=True,
+            )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=5, help="trials per cell (default 5)")
@@ -316,22 +344,7 @@ def main() -> None:
     args = parser.parse_args()
     done = read_results(args.results)
     if not args.table_only:
-        finished = {tuple(r["key"]) for r in done}
-        todo = [job for job in jobs_for(args) if job not in finished]
-        print(f"{len(todo)} trials to run ({len(finished)} already in {args.results})", flush=True)
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool, args.results.open("a") as out:
-            futures = [pool.submit(run_trial, job) for job in todo]
-            for k, future in enumerate(as_completed(futures), 1):
-                row = future.result()
-                out.write(json.dumps(row) + "\n")
-                out.flush()
-                done.append(row)
-                mark = "ok" if row["success"] else "MISS"
-                print(
-                    f"[{k}/{len(todo)}] {' '.join(map(str, row['key']))}: {mark} "
-                    f"{row['verdict']} {row['named']} ({row['elapsed_s']:.0f} s)",
-                    flush=True,
-                )
+        run_pending(jobs_for(args), run_trial, args.results, args.jobs, done)
     wanted = set(jobs_for(args))
     rows = [r for r in done if tuple(r["key"]) in wanted]
     text = table(rows)

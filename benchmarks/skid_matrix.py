@@ -29,16 +29,17 @@ rerun skips the trials already there.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_matrix import read_results, run_pending
 
 CELLS = ("coulomb-geometric", "coulomb-apparent", "world-scout2")
 
@@ -150,28 +151,9 @@ def main() -> None:
     args = parser.parse_args()
     jobs = [(c, t) for c in CELLS[:2] for t in range(args.trials)]
     jobs += [(CELLS[2], t) for t in range(args.world_trials)]
-    done = (
-        [json.loads(line) for line in args.results.read_text().splitlines() if line.strip()]
-        if args.results.exists()
-        else []
-    )
+    done = read_results(args.results)
     if not args.table_only:
-        finished = {tuple(r["key"]) for r in done}
-        todo = [job for job in jobs if job not in finished]
-        print(f"{len(todo)} trials to run ({len(finished)} already in {args.results})", flush=True)
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool, args.results.open("a") as out:
-            futures = [pool.submit(run_trial, job) for job in todo]
-            for k, future in enumerate(as_completed(futures), 1):
-                row = future.result()
-                out.write(json.dumps(row) + "\n")
-                out.flush()
-                done.append(row)
-                print(
-                    f"[{k}/{len(todo)}] {row['key'][0]} {row['key'][1]}: "
-                    f"{'ok' if row['success'] else 'MISS'} {row['verdict']} {row['named']} "
-                    f"E_b {row['e_b']:.4f} ({row['elapsed_s']:.0f} s)",
-                    flush=True,
-                )
+        run_pending(jobs, run_trial, args.results, args.jobs, done)
     wanted = set(jobs)
     text = table([r for r in done if tuple(r["key"]) in wanted])
     print(text)

@@ -58,9 +58,11 @@ __all__ = [
     "SCurve",
     "TurnDirection",
     "generate",
+    "logged_run",
     "play_operator",
     "rich_protocol",
     "s_curve",
+    "time_grid",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -484,22 +486,8 @@ def _simulate_run(
     )
     encoder_phase = motion_rng.uniform(0.0, 1.0, size=2)  # fractional count at the start
     segments = _timeline(m, robot, motion_rng)
-    end = segments[-1].start + segments[-1].duration
-
-    # Log times cover the whole run (the last one is during/after the final stop).
-    n_log = math.ceil(end * log_rate_hz - 1e-9) + 1
-    log_times = np.round(np.arange(n_log) / log_rate_hz, _TIME_DECIMALS)
-    t_end = float(log_times[-1])
-    n_int = math.ceil(t_end * integration_hz - 1e-9)
-    grid = np.concatenate(
-        [
-            np.arange(n_int + 1) / integration_hz,
-            log_times,
-            [s.start for s in segments if s.start <= t_end],
-        ]
-    )
-    grid = np.unique(np.round(np.clip(grid, 0.0, t_end), _TIME_DECIMALS))
-    log_index = np.searchsorted(grid, log_times)
+    log_times, grid, log_index = time_grid(segments, log_rate_hz, integration_hz)
+    n_log = len(log_times)
 
     # Motors, transmission, wheels.
     motor = _motor_angles(segments, grid)
@@ -559,19 +547,63 @@ def _simulate_run(
     pose[:, 2] += robot.sensor_heading_std * sensor_rng.standard_normal(n_log)
     if endpoints_only and n_log > 2:
         pose[1:-1] = np.nan
+    return logged_run(
+        m,
+        index,
+        "independent",
+        log_times,
+        pose,
+        motor[log_index],
+        encoder_phase,
+        robot.ticks_per_rev,
+    )
 
-    ticks = motor[log_index] * (robot.ticks_per_rev / (2.0 * math.pi)) + encoder_phase
+
+def time_grid(
+    segments: Sequence[_Segment], log_rate_hz: float, integration_hz: float
+) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+    """The log times (cover the whole run; the last is during/after the final stop), the
+    integration grid (every 1/``integration_hz``, every log time and every move boundary) and
+    each log time's index in it."""
+    end = segments[-1].start + segments[-1].duration
+    n_log = math.ceil(end * log_rate_hz - 1e-9) + 1
+    log_times = np.round(np.arange(n_log) / log_rate_hz, _TIME_DECIMALS)
+    t_end = float(log_times[-1])
+    n_int = math.ceil(t_end * integration_hz - 1e-9)
+    grid = np.concatenate(
+        [
+            np.arange(n_int + 1) / integration_hz,
+            log_times,
+            [s.start for s in segments if s.start <= t_end],
+        ]
+    )
+    grid = np.unique(np.round(np.clip(grid, 0.0, t_end), _TIME_DECIMALS))
+    return log_times, grid, np.searchsorted(grid, log_times)
+
+
+def logged_run(
+    m: Manoeuvre,
+    index: int,
+    source: str,
+    log_times: FloatArray,
+    pose: FloatArray,
+    motor: FloatArray,
+    encoder_phase: FloatArray,
+    ticks_per_rev: float,
+) -> Run:
+    """The run a logger writes: the measured ``pose`` (n, 3) at ``log_times`` and the encoder
+    counts of the wheel-equivalent ``motor`` angles (n, 2) [rad], quantised with ``floor``
+    from the random ``encoder_phase`` (fractional counts at the start)."""
+    ticks = motor * (ticks_per_rev / (2.0 * math.pi)) + encoder_phase
     counts = (np.floor(ticks) - np.floor(encoder_phase)).astype(np.int64)
-
-    kind = "free" if m.kind == "arc" else m.kind
     return Run(
-        kind=kind,
+        kind="free" if m.kind == "arc" else m.kind,
         time=log_times.astype(float),
         counts=counts,
         true_pose=pose,
         direction=m.direction if m.kind in ("square", "spin") else None,
         side=m.size if m.kind in ("square", "straight") else 0.0,
-        source="independent",
+        source=source,
         meta={"run": f"{index:03d}", "experiment": m.experiment},
     )
 

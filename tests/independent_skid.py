@@ -48,12 +48,13 @@ from functools import cached_property
 import numpy as np
 from independent_robot import (
     _START_BOX,
-    _TIME_DECIMALS,
     IndependentRobot,
     Manoeuvre,
     TurnDirection,
     _motor_angles,
     _timeline,
+    logged_run,
+    time_grid,
 )
 from numpy.typing import NDArray
 from scipy.optimize import minimize
@@ -202,16 +203,7 @@ def _simulate_run(
     )
     phase = motion_rng.uniform(0.0, 1.0, size=2)
     segments = _timeline(m, _planner(robot), motion_rng)
-    end = segments[-1].start + segments[-1].duration
-    n_log = math.ceil(end * log_rate_hz - 1e-9) + 1
-    log_times = np.round(np.arange(n_log) / log_rate_hz, _TIME_DECIMALS)
-    t_end = float(log_times[-1])
-    n_int = math.ceil(t_end * integration_hz - 1e-9)
-    grid = np.concatenate(
-        [np.arange(n_int + 1) / integration_hz, log_times, [s.start for s in segments]]
-    )
-    grid = np.unique(np.round(np.clip(grid, 0.0, t_end), _TIME_DECIMALS))
-    log_index = np.searchsorted(grid, log_times)
+    log_times, grid, log_index = time_grid(segments, log_rate_hz, integration_hz)
     motor = _motor_angles(segments, grid)
     rims = np.diff(motor, axis=0) * (0.5 * robot.wheel_diameter)  # rim travel per step [m]
     # The step's displacement (dx, dy, dθ) in the body frame at its start: the twist per unit
@@ -229,19 +221,10 @@ def _simulate_run(
     x = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
     y = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
     pose = np.stack([x[log_index], y[log_index], theta[log_index]], axis=1)
-    pose[:, :2] += robot.sensor_position_std * sensor_rng.standard_normal((n_log, 2))
-    pose[:, 2] += robot.sensor_heading_std * sensor_rng.standard_normal(n_log)
-    ticks = motor[log_index] * (robot.ticks_per_rev / (2.0 * math.pi)) + phase
-    counts = (np.floor(ticks) - np.floor(phase)).astype(np.int64)
-    return Run(
-        kind="free" if m.kind == "arc" else m.kind,
-        time=log_times.astype(float),
-        counts=counts,
-        true_pose=pose,
-        direction=m.direction if m.kind in ("square", "spin") else None,
-        side=m.size if m.kind in ("square", "straight") else 0.0,
-        source="independent-skid",
-        meta={"run": f"{index:03d}", "experiment": m.experiment},
+    pose[:, :2] += robot.sensor_position_std * sensor_rng.standard_normal((len(log_times), 2))
+    pose[:, 2] += robot.sensor_heading_std * sensor_rng.standard_normal(len(log_times))
+    return logged_run(
+        m, index, "independent-skid", log_times, pose, motor[log_index], phase, robot.ticks_per_rev
     )
 
 

@@ -12,7 +12,6 @@ enough runs that the tolerance is ≥ 3.5 standard errors of the estimate.
 
 from __future__ import annotations
 
-import ast
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -29,6 +28,7 @@ from independent_robot import (
     rich_protocol,
     s_curve,
 )
+from module_imports import module_imports
 from numpy.typing import NDArray
 
 from odomgym.odometry.runs import Run
@@ -107,13 +107,7 @@ SQUARES = [
 
 def test_independent_of_odomgym_simulator() -> None:
     """The generator imports numpy, the standard library and odomgym.odometry.runs only."""
-    tree = ast.parse((Path(__file__).parent / "independent_robot.py").read_text())
-    modules: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            modules |= {alias.name for alias in node.names}
-        elif isinstance(node, ast.ImportFrom):
-            modules.add(node.module or "")
+    modules = module_imports(Path(__file__).parent / "independent_robot.py")
     odomgym = {m for m in modules if m.split(".")[0] == "odomgym"}
     assert odomgym == {"odomgym.odometry.runs"}
     allowed = {"numpy", "numpy.typing", "odomgym.odometry.runs"}

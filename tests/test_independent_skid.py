@@ -3,13 +3,13 @@ friction, checked against the closed forms it must meet before the diagnosis is 
 
 from __future__ import annotations
 
-import ast
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 from independent_skid import CoulombSkidRobot, generate_skid, skid_protocol
+from module_imports import module_imports
 
 
 @pytest.mark.parametrize("radius", [0.0, 0.1, 0.25, 1.0, 4.0])
@@ -59,13 +59,7 @@ def test_a_spin_turns_by_the_planned_angle_over_chi() -> None:
 def test_independent_of_odomgym_simulator() -> None:
     """The generator imports numpy, scipy's optimiser, the standard library, the independent
     robot's motion planner and odomgym.odometry.runs (the log format) only."""
-    tree = ast.parse((Path(__file__).parent / "independent_skid.py").read_text())
-    modules: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            modules |= {alias.name for alias in node.names}
-        elif isinstance(node, ast.ImportFrom):
-            modules.add(node.module or "")
+    modules = module_imports(Path(__file__).parent / "independent_skid.py")
     assert {m for m in modules if m.split(".")[0] == "odomgym"} == {"odomgym.odometry.runs"}
     assert "pymunk" not in {m.split(".")[0] for m in modules}
     assert {m for m in modules if m.split(".")[0] == "scipy"} == {"scipy.optimize"}

@@ -26,6 +26,7 @@ A = HᵀH, its information matrix.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -127,6 +128,12 @@ def jacobian(run: Run, rows: NDArray[np.intp], robot: RobotSpec = NOMINAL_ROBOT)
     """d(tracked poses at ``rows``)/dθ at θ = 0 (len(rows)·3, 8), by finite differences of
     :data:`FD_STEPS` through the replay."""
     inputs = RunInputs.of(run, robot.ticks_per_rev)
+    return _differences(lambda theta: _poses(run, theta, inputs, rows))
+
+
+def _differences(observe: Callable[[FloatArray], FloatArray]) -> FloatArray:
+    """(m, 8): the derivative of ``observe`` (θ → (m,)) at θ = 0 by the finite differences of
+    :data:`FD_STEPS`: central over ±h, or forward over 2h where a parameter is one-sided."""
     zero = np.zeros(len(PARAMETERS))
     columns = []
     for j, (h, one_sided) in enumerate(FD_STEPS):
@@ -135,8 +142,9 @@ def jacobian(run: Run, rows: NDArray[np.intp], robot: RobotSpec = NOMINAL_ROBOT)
             up[j] = 2.0 * h
         else:
             up[j], down[j] = h, -h
-        columns.append((_poses(run, up, inputs, rows) - _poses(run, down, inputs, rows)) / (2 * h))
-    return np.array(columns).T
+        columns.append((observe(up) - observe(down)) / (2 * h))
+    out: FloatArray = np.array(columns).T
+    return out
 
 
 def wheel_noise_covariance(
@@ -209,18 +217,17 @@ def validation_jacobians(robot: RobotSpec = NOMINAL_ROBOT, every: int = EVERY) -
             else sample_rows(run, every)
         )
         inputs = RunInputs.of(run, robot.ticks_per_rev)
-        zero = np.zeros(len(PARAMETERS))
-        cols = []
-        for j, (h, one_sided) in enumerate(FD_STEPS):
-            up, down = zero.copy(), zero.copy()
-            if one_sided:
-                up[j] = 2.0 * h
-            else:
-                up[j], down[j] = h, -h
-            a = _displacement(replay_run(run, spec_of(up), inputs).pose)[rows].reshape(-1)
-            z = _displacement(replay_run(run, spec_of(down), inputs).pose)[rows].reshape(-1)
-            cols.append((a - z) / (2 * h))
-        out.append(np.array(cols).T)
+
+        def observe(
+            theta: FloatArray,
+            run: Run = run,
+            inputs: RunInputs = inputs,
+            rows: NDArray[np.intp] = rows,
+        ) -> FloatArray:
+            moved: FloatArray = _displacement(replay_run(run, spec_of(theta), inputs).pose)
+            return moved[rows].reshape(-1)
+
+        out.append(_differences(observe))
     return out
 
 
