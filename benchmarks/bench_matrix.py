@@ -65,12 +65,12 @@ EFFECT_NAMES = tuple(catalogue())
 """The whole catalogue (``docs/effects.md``), in its order: an effect it gains joins the matrix."""
 
 LATER_EFFECTS = ("skid_track",)
-"""Effects that joined the catalogue after the matrix's seeds were fixed: their seeds count
-after ``none`` (:data:`_SEED_ORDER`), so every earlier trial keeps its seed and a re-run shows
-what a change of the diagnosis did, not a new draw."""
+"""Effects that joined the catalogue after the matrix's seeds were fixed: their seeds come from
+a block of their own (:func:`_seed`), so every earlier trial keeps its seed (a re-run shows what
+a change of the diagnosis did, not a new draw) and no two trials share one."""
 
 _SEED_ORDER = (*(n for n in EFFECT_NAMES if n not in LATER_EFFECTS), "none", *LATER_EFFECTS)
-"""Effects in the order their seeds count."""
+"""Effects in the order of the table (and of their seeds within each block)."""
 
 SIZES = {"small": (5.0, 5.0), "large": (10.0, 20.0)}
 """Each size's range of multiples of the detection limit: small at 5 ×, the bound issue 42
@@ -103,8 +103,10 @@ def _seed(generator: str, effect: str, size: str, trial: int) -> int:
     """A trial's seed: from its cell's place in the whole matrix, so a subset repeats exactly
     the trials of the full run."""
     g = GENERATORS.index(generator)
-    e = _SEED_ORDER.index(effect)
     s = (*SIZES, "none").index(size)
+    if effect in LATER_EFFECTS:
+        return 1_000_000 + 100_000 * g + 1000 * LATER_EFFECTS.index(effect) + 100 * s + trial
+    e = _SEED_ORDER.index(effect)  # at most 9: inside the generator's block of 10 000
     return 100_000 + 10_000 * g + 1000 * e + 100 * s + trial
 
 

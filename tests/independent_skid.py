@@ -250,7 +250,7 @@ def skid_protocol() -> list[Manoeuvre]:
     """The experiments the skid-steer papers calibrate on (Mandow et al. 2007; Wang et al.
     2015), sized for a small robot: arcs of radius 0.25, 0.5, 1 and 2 m through 180° both ways
     at 0.15 and 0.3 m/s, spins of 90°, 180° and 360° both ways at 0.1 m/s rim speed, a 2 m
-    square and a 3 m out-and-back straight each way (24 runs)."""
+    square and a 3 m out-and-back straight each way (26 runs)."""
     out: list[Manoeuvre] = []
     senses: tuple[TurnDirection, TurnDirection] = ("cw", "ccw")
     for speed in (0.15, 0.3):

@@ -245,12 +245,13 @@ NOMINAL_SKID_ROBOT = dataclasses.replace(
     axle_spacing=0.16,
     drive_load_fraction=1.0,
     source="NOMINAL_ROBOT's wheels and side-to-side track on two axles 0.16 m apart: the "
-    "skid-steer robot of the blind matrix's skid generator (its logs carry no friction, so only "
-    "the drive matters: skid-steer effects become candidates)",
+    "nominal model of the independent rigid-Coulomb skid-steer robot (tests/independent_skid.py)",
 )
-"""The same wheels and track as :data:`NOMINAL_ROBOT` as a skid-steer robot, so that a log of
-the independent generator with a skid-steer effect hidden is diagnosed with the skid-steer
-catalogue (``benchmarks/bench_matrix.py --generators skid``)."""
+"""The same wheels and track as :data:`NOMINAL_ROBOT` on two axles: the nominal model against
+which the independent skid-steer robot of ``tests/independent_skid.py`` (the same geometry on
+rigid Coulomb wheels) is diagnosed, in ``tests/test_skid_diagnose.py`` and
+``benchmarks/skid_matrix.py``. The diagnosis does not read the class from it: every robot is
+screened for every catalogue effect."""
 
 
 def _top1(name: str | None, result: Any) -> str:
