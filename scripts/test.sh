@@ -16,7 +16,7 @@
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
-#   pytest -n auto -m "not slow"    # 141 s on 2 idle cores (2026-11-28, 1 032 tests); CI runs the slow ones too
+#   pytest -n auto -m "not slow"    # 137 s on 2 idle cores (2026-11-28, 1 067 tests); CI runs the slow ones too
 #
 # The artefacts (issue 46): scripts/check_dist.sh builds the sdist and the wheel, checks them
 # (twine check --strict, cffconvert --validate on CITATION.cff, the wheel from the sdist against
