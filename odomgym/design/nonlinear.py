@@ -145,36 +145,70 @@ def _subset_map(
     best = _objective(replay, taken, measurements, theta, columns, mean, var)
     log_weight = -np.inf
     for k in range(iterations + 1):
-        info = np.zeros((len(PARAMETERS), len(PARAMETERS)))
-        data = np.zeros(len(PARAMETERS))
-        quad = 0.0
-        cache: dict[int, tuple[FloatArray, FloatArray]] = {}
-        for item, y in zip(taken, measurements, strict=True):
-            m = model.items[item]
-            if k == 0:
-                h, shifted = m.whitened, y
-            else:
-                if item not in cache:
-                    jac = replay.jacobian(item, theta)
-                    cache[item] = (m.whiten @ jac, replay.predict(item, theta) - jac @ theta)
-                h, offset = cache[item]
-                shifted = y - offset
-            r = m.whiten @ shifted
-            info += h.T @ h
-            data += h.T @ r
-            quad += float(r @ r)
+        info, data, quad = _normal_equations(replay, taken, measurements, theta, nominal=k == 0)
         stats = subset_posteriors(prior, info, data)
         target = clip_to_catalogue(stats.mean[0, subset], model.prior)
-        for _ in range(7):
-            value = _objective(replay, taken, measurements, target, columns, mean, var)
-            if value < best:
-                break
-            target = clip_to_catalogue(0.5 * (theta + target), model.prior)
-        else:
+        step = _damped_step(replay, taken, measurements, theta, target, best, (columns, mean, var))
+        if step is None:
             break
-        theta, best = target, value
+        theta, best = step
         log_weight = float(stats.log_weight[0, subset]) - 0.5 * quad
     return theta, log_weight
+
+
+def _normal_equations(
+    replay: ReplayModel,
+    taken: list[int],
+    measurements: list[FloatArray],
+    theta: FloatArray,
+    *,
+    nominal: bool,
+) -> tuple[FloatArray, FloatArray, float]:
+    """The whitened normal equations HᵀH (8, 8) and Hᵀr (8,) of the runs ``taken``, and rᵀr,
+    linearised at ``theta`` through the replay — or, when ``nominal``, the linear model's own
+    (at θ = 0). Each item is relinearised once, however often it was driven."""
+    model = replay.model
+    info = np.zeros((len(PARAMETERS), len(PARAMETERS)))
+    data = np.zeros(len(PARAMETERS))
+    quad = 0.0
+    cache: dict[int, tuple[FloatArray, FloatArray]] = {}
+    for item, y in zip(taken, measurements, strict=True):
+        m = model.items[item]
+        if nominal:
+            h, shifted = m.whitened, y
+        else:
+            if item not in cache:
+                jac = replay.jacobian(item, theta)
+                cache[item] = (m.whiten @ jac, replay.predict(item, theta) - jac @ theta)
+            h, offset = cache[item]
+            shifted = y - offset
+        r = m.whiten @ shifted
+        info += h.T @ h
+        data += h.T @ r
+        quad += float(r @ r)
+    return info, data, quad
+
+
+def _damped_step(
+    replay: ReplayModel,
+    taken: list[int],
+    measurements: list[FloatArray],
+    theta: FloatArray,
+    target: FloatArray,
+    best: float,
+    prior: tuple[NDArray[np.intp], FloatArray, FloatArray],
+) -> tuple[FloatArray, float] | None:
+    """Gauss–Newton's step from ``theta`` towards ``target`` with step halving (Nocedal & Wright
+    2006, Ch. 10): the first of ``target`` and up to six points halfway back whose negative log
+    posterior (:func:`_objective`, ``prior`` its columns, mean and variance) is below ``best``,
+    with that value; None when none is."""
+    columns, mean, var = prior
+    for _ in range(7):
+        value = _objective(replay, taken, measurements, target, columns, mean, var)
+        if value < best:
+            return target, value
+        target = clip_to_catalogue(0.5 * (theta + target), replay.model.prior)
+    return None
 
 
 def laplace_estimate(
@@ -231,32 +265,14 @@ def relinearised_estimate(
     best = _objective(replay, taken, measurements, theta, columns, mean, var)
     probability = np.zeros(model.prior.subsets)
     for k in range(iterations + 1):
-        info = np.zeros((len(PARAMETERS), len(PARAMETERS)))
-        data = np.zeros(len(PARAMETERS))
-        cache: dict[int, tuple[FloatArray, FloatArray]] = {}
-        for item, y in zip(taken, measurements, strict=True):
-            m = model.items[item]
-            if k == 0:
-                h, shifted = m.whitened, y
-            else:
-                if item not in cache:
-                    jac = replay.jacobian(item, theta)
-                    cache[item] = (m.whiten @ jac, replay.predict(item, theta) - jac @ theta)
-                h, offset = cache[item]
-                shifted = y - offset
-            info += h.T @ h
-            data += h.T @ (m.whiten @ shifted)
+        info, data, _ = _normal_equations(replay, taken, measurements, theta, nominal=k == 0)
         stats = subset_posteriors(prior, info, data)
         probability = stats.probability[0]
         target = clip_to_catalogue(
             stats.average()[0] if subset is None else stats.mean[0, subset], model.prior
         )
-        for _ in range(7):
-            value = _objective(replay, taken, measurements, target, columns, mean, var)
-            if value < best:
-                break
-            target = clip_to_catalogue(0.5 * (theta + target), model.prior)
-        else:
+        step = _damped_step(replay, taken, measurements, theta, target, best, (columns, mean, var))
+        if step is None:
             break
-        theta, best = target, value
+        theta, best = step
     return theta, probability
