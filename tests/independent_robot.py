@@ -61,6 +61,7 @@ __all__ = [
     "logged_run",
     "play_operator",
     "rich_protocol",
+    "run_streams",
     "s_curve",
     "time_grid",
 ]
@@ -474,17 +475,7 @@ def _simulate_run(
     integration_hz: float,
     endpoints_only: bool,
 ) -> Run:
-    seeds = rng.integers(0, 2**63 - 1, size=3)
-    motion_rng, process_rng, sensor_rng = (np.random.default_rng(int(s)) for s in seeds)
-
-    start_pose = np.array(
-        [
-            motion_rng.uniform(-_START_BOX, _START_BOX),
-            motion_rng.uniform(-_START_BOX, _START_BOX),
-            motion_rng.uniform(-math.pi, math.pi),
-        ]
-    )
-    encoder_phase = motion_rng.uniform(0.0, 1.0, size=2)  # fractional count at the start
+    motion_rng, process_rng, sensor_rng, start_pose, encoder_phase = run_streams(rng)
     segments = _timeline(m, robot, motion_rng)
     log_times, grid, log_index = time_grid(segments, log_rate_hz, integration_hz)
     n_log = len(log_times)
@@ -557,6 +548,26 @@ def _simulate_run(
         encoder_phase,
         robot.ticks_per_rev,
     )
+
+
+def run_streams(
+    rng: np.random.Generator,
+) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator, FloatArray, FloatArray]:
+    """A run's three child streams drawn from ``rng`` (motion, process noise, sensor noise: an
+    effect switched on or off moves none of the others), and from the motion stream the start
+    pose (x, y [m] uniform in the start box, θ [rad]) and the encoders' fractional counts at
+    the start."""
+    seeds = rng.integers(0, 2**63 - 1, size=3)
+    motion_rng, process_rng, sensor_rng = (np.random.default_rng(int(s)) for s in seeds)
+    start_pose = np.array(
+        [
+            motion_rng.uniform(-_START_BOX, _START_BOX),
+            motion_rng.uniform(-_START_BOX, _START_BOX),
+            motion_rng.uniform(-math.pi, math.pi),
+        ]
+    )
+    encoder_phase = motion_rng.uniform(0.0, 1.0, size=2)
+    return motion_rng, process_rng, sensor_rng, start_pose, encoder_phase
 
 
 def time_grid(

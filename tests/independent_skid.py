@@ -47,13 +47,13 @@ from functools import cached_property
 
 import numpy as np
 from independent_robot import (
-    _START_BOX,
     IndependentRobot,
     Manoeuvre,
     TurnDirection,
     _motor_angles,
     _timeline,
     logged_run,
+    run_streams,
     time_grid,
 )
 from numpy.typing import NDArray
@@ -192,16 +192,7 @@ def _simulate_run(
     log_rate_hz: float,
     integration_hz: float,
 ) -> Run:
-    seeds = rng.integers(0, 2**63 - 1, size=3)
-    motion_rng, _, sensor_rng = (np.random.default_rng(int(s)) for s in seeds)
-    start = np.array(
-        [
-            motion_rng.uniform(-_START_BOX, _START_BOX),
-            motion_rng.uniform(-_START_BOX, _START_BOX),
-            motion_rng.uniform(-math.pi, math.pi),
-        ]
-    )
-    phase = motion_rng.uniform(0.0, 1.0, size=2)
+    motion_rng, _, sensor_rng, start, phase = run_streams(rng)
     segments = _timeline(m, _planner(robot), motion_rng)
     log_times, grid, log_index = time_grid(segments, log_rate_hz, integration_hz)
     motor = _motor_angles(segments, grid)
