@@ -744,25 +744,24 @@ def fit_candidate(
 
     A fit that lands where the data cannot tell the effect's shape
     (:meth:`~odomgym.effects.Effect.shape_identified` false: there it is only its partners
-    again) is replaced by the best of the fits with some of its parameters held at the points
-    the effect names inside that region (:meth:`~odomgym.effects.Effect.profile_points`):
-    the candidate is the effect's best fit where it is an effect of its own. Why: the
-    least-squares steps minimise the whitened residuals at fixed noise, not the likelihood,
-    and ``skid_track`` beside ``wheelbase`` has a ridge beyond the logged turns along which
-    the two trade: on a blind matrix robot (ε 0.0023 at λ½ 2) every free start, the truth
-    included, walked up it to λ½ ≈ 80, 1.3 nats of likelihood below the truth, and the
-    candidate was refused as one more constant track factor."""
+    again) is fitted again with some of its parameters held at the points the effect names
+    inside that region (:meth:`~odomgym.effects.Effect.profile_points`), and the best
+    likelihood of all is kept. Why: the least-squares steps minimise the whitened residuals
+    at fixed noise, not the likelihood, and ``skid_track`` beside ``wheelbase`` has a ridge
+    beyond the logged turns along which the two trade: on a blind matrix robot (ε 0.0023 at
+    λ½ 2) every free start, the truth included, walked up it to λ½ ≈ 80, 1.3 nats of
+    likelihood below the truth, and the candidate was refused as one more constant track
+    factor. The held fits only ever replace a fit they beat: a fit whose free optimum lies
+    on the ridge by more keeps it (and is refused), e.g. a yaw-rate scrub that a skid track
+    at λ½ 2 mimics in all but its speed dependence (``tests/test_discover.py``)."""
     if effect.noise:
         return _fit_noise_candidate(data, spec, sensor, effect, nuisance)
     fit = _fit_systematic(data, spec, sensor, effect, nuisance)
-    inside: CandidateFit | None = None
     for held in effect.profile_points(fit.values, data.wheel_travel(spec)):
         start = effect.write(spec, {**effect.read(spec), **held})
         other = _fit_systematic(data, start, sensor, effect, nuisance, held)
-        if inside is None or float(other.loglik.sum()) > float(inside.loglik.sum()):
-            inside = other
-    if inside is not None:
-        fit = inside
+        if float(other.loglik.sum()) > float(fit.loglik.sum()):
+            fit = other
     _linearise(data, fit, effect)
     return fit
 
