@@ -156,26 +156,6 @@ def test_skid_track_must_fall_where_the_data_turns() -> None:
     assert not skid.shape_identified({"excess": 0.41, "lambda_half": 50.0}, travel)
     assert all(e.shape_identified({}, travel) for n, e in EFFECTS.items() if n != "skid_track")
     assert turning_lambda([]) == 0.0
-    # A fit beyond the turns is fitted again with λ½ held inside them, at 2 and at |λ|; a fit
-    # inside, or logs that never turn, get no second fit.
-    points = skid.profile_points({"excess": 0.17, "lambda_half": 80.0}, travel)
-    assert [p["lambda_half"] for p in points] == pytest.approx([2.0, widest])
-    assert skid.profile_points({"excess": 0.3, "lambda_half": 4.0}, travel) == ()
-    assert skid.profile_points({"excess": 0.3, "lambda_half": 80.0}, [np.ones((5, 2))]) == ()
-    assert all(e.profile_points({}, travel) == () for n, e in EFFECTS.items() if n != "skid_track")
-
-
-def test_a_held_parameter_stays_where_the_fit_put_it() -> None:
-    """``fit.Held``: the profile likelihood's point fits only the parameters not held."""
-    from odomgym.diagnose.fit import Held
-    from odomgym.diagnose.generate import NOMINAL_ROBOT
-
-    skid = EFFECTS["skid_track"]
-    held = Held(skid, {"lambda_half": 2.0})
-    assert [p.name for p in held.parameters] == ["excess"] and held.name == "skid_track"
-    spec = held.write(NOMINAL_ROBOT, {"excess": 0.02})
-    assert skid.read(spec) == {"excess": 0.02, "lambda_half": 2.0}
-    assert held.read(spec) == {"excess": 0.02}
 
 
 def test_the_skid_track_detection_limit_profiles_out_its_partner() -> None:

@@ -128,11 +128,6 @@ class Dataset:
     def of(cls, runs: Sequence[Run], min_interval: float) -> Dataset:
         return cls(list(runs), [measurement_mask(r, min_interval) for r in runs])
 
-    def wheel_travel(self, spec: RobotSpec) -> list[FloatArray]:
-        """Each run's wheel travel per interval (n, 2) [m] as ``spec``'s encoders count it: what
-        an effect's shape is judged against (:meth:`~odomgym.effects.Effect.shape_identified`)."""
-        return [np.diff(run.counts, axis=0) * spec.metres_per_tick for run in self.runs]
-
     def subset(self, index: Sequence[int]) -> Dataset:
         return Dataset(
             [self.runs[i] for i in index],
@@ -740,57 +735,24 @@ def fit_candidate(
     effect, the ``nuisance`` noise effect's parameters) are refitted alongside. A systematic
     effect's :attr:`~odomgym.effects.Effect.partners` are fitted jointly with it (``skid_track``
     beside ``wheelbase``: the excess of a spin's track over the asymptote E_b); the fit's
-    values and standard errors are the effect's own, the partners' refit is in its spec.
-
-    A fit that lands where the data cannot tell the effect's shape
-    (:meth:`~odomgym.effects.Effect.shape_identified` false: there it is only its partners
-    again) is fitted again with some of its parameters held at the points the effect names
-    inside that region (:meth:`~odomgym.effects.Effect.profile_points`), and the best
-    likelihood of all is kept. Why: the least-squares steps minimise the whitened residuals
-    at fixed noise, not the likelihood, and ``skid_track`` beside ``wheelbase`` has a ridge
-    beyond the logged turns along which the two trade: on a blind matrix robot (ε 0.0023 at
-    λ½ 2) every free start, the truth included, walked up it to λ½ ≈ 80, 1.3 nats of
-    likelihood below the truth, and the candidate was refused as one more constant track
-    factor. The held fits only ever replace a fit they beat: a fit whose free optimum lies
-    on the ridge by more keeps it (and is refused), e.g. a yaw-rate scrub that a skid track
-    at λ½ 2 mimics in all but its speed dependence (``tests/test_discover.py``)."""
+    values and standard errors are the effect's own, the partners' refit is in its spec."""
+    current_spec, current_sensor = spec, sensor
     if effect.noise:
         return _fit_noise_candidate(data, spec, sensor, effect, nuisance)
-    fit = _fit_systematic(data, spec, sensor, effect, nuisance)
-    for held in effect.profile_points(fit.values, data.wheel_travel(spec)):
-        start = effect.write(spec, {**effect.read(spec), **held})
-        other = _fit_systematic(data, start, sensor, effect, nuisance, held)
-        if float(other.loglik.sum()) > float(fit.loglik.sum()):
-            fit = other
-    _linearise(data, fit, effect)
-    return fit
-
-
-def _fit_systematic(
-    data: Dataset,
-    spec: RobotSpec,
-    sensor: SensorNoise,
-    effect: Effect,
-    nuisance: Effect | None,
-    held: Mapping[str, float] | None = None,
-) -> CandidateFit:
-    """:func:`fit_candidate` of a systematic effect from ``spec``'s values of it (the
-    parameters in ``held`` kept where ``spec`` has them), without the standard errors: least
-    squares of the effect and its partners at fixed noise, then the noise, twice."""
-    current_spec, current_sensor = spec, sensor
     partners = [EFFECTS[name] for name in effect.partners if not EFFECTS[name].noise]
-    own: Effect = Held(effect, held) if held else effect
-    fitted = Joint([own, *partners]) if partners else own
+    fitted = Joint([effect, *partners]) if partners else effect
     for _ in range(2):
         current_spec = _least_squares_step(data, current_spec, current_sensor, fitted)
         current_spec, current_sensor, _ = fit_noise(data, current_spec, current_sensor, nuisance)
-    return CandidateFit(
+    fit = CandidateFit(
         effect.name,
         current_spec,
         current_sensor,
         effect.read(current_spec),
         evaluate(data, current_spec, current_sensor, whitened=False).loglik,
     )
+    _linearise(data, fit, effect)
+    return fit
 
 
 def _fit_noise_candidate(
@@ -1086,23 +1048,3 @@ class Joint(Effect):
             effect, parameter = key.split(".", 1)
             out.setdefault(effect, {})[parameter] = value
         return out
-
-
-class Held(Effect):
-    """``effect`` with the parameters in ``held`` kept at those values, the others free: a
-    point of the profile likelihood over the held ones (:func:`fit_candidate`). Not
-    registered; only the fit uses it."""
-
-    def __init__(self, effect: Effect, held: Mapping[str, float]) -> None:
-        self.effect = effect
-        self.held = dict(held)
-        self.name = effect.name  # type: ignore[misc]
-        self.parameters = tuple(  # type: ignore[misc]
-            p for p in effect.parameters if p.name not in self.held
-        )
-
-    def read(self, spec: SpecView) -> dict[str, float]:
-        return {k: v for k, v in self.effect.read(spec).items() if k not in self.held}
-
-    def write(self, spec: Spec, values: Mapping[str, float]) -> Spec:
-        return self.effect.write(spec, {**self.effect.read(spec), **values, **self.held})

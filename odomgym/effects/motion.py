@@ -184,24 +184,6 @@ class SkidTrack(Effect):
         return float(values.get("lambda_half", 0.0)) <= reach
 
     @classmethod
-    def profile_points(
-        cls, values: Mapping[str, float], travel: Sequence[FloatArray]
-    ) -> tuple[dict[str, float], ...]:
-        """Where a fit landed beyond the logged turns (not :meth:`shape_identified`), λ½ held
-        inside them, at its default 2 and at the widest logged turns |λ|
-        (:func:`turning_lambda`), the excess and E_b fitted at each. Beyond the turns the
-        excess and E_b trade along a ridge that the least-squares steps walk up: on a blind
-        matrix robot with ε 0.0023 at λ½ 2 (spins, arcs at |λ| 10, straights) every free
-        start, the truth included, stopped near ε 0.17, λ½ 80 (refused as a constant factor,
-        and ``wheelbase`` named in its place), 1.3 nats below the truth's likelihood."""
-        widest = turning_lambda(travel)
-        if widest <= 0.0 or cls.shape_identified(values, travel):
-            return ()
-        half = cls.parameters[1]
-        points = sorted({half.absent, min(max(widest, half.low), half.high)})
-        return tuple({"lambda_half": h} for h in points)
-
-    @classmethod
     def is_absent(cls, values: Mapping[str, float]) -> bool:
         """Absent when ``excess`` is 0, whatever ``lambda_half``."""
         return float(values.get("excess", 0.0)) == 0.0

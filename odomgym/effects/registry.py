@@ -191,18 +191,6 @@ class Effect:
         return True
 
     @classmethod
-    def profile_points(
-        cls, values: Mapping[str, float], travel: Sequence[FloatArray]
-    ) -> tuple[dict[str, float], ...]:
-        """Values at which to hold some of this effect's parameters for further fits, when a
-        fit landed at ``values`` on logs with wheel travels ``travel`` (as
-        :meth:`shape_identified`); ``diagnose`` fits the rest at each and keeps the best
-        likelihood. None unless an effect says otherwise: a local fit can land on a ridge
-        where the data cannot tell the effect's shape (``skid_track``)."""
-        del values, travel
-        return ()
-
-    @classmethod
     def is_absent(cls, values: Mapping[str, float]) -> bool:
         """True if every parameter sits at its absent value."""
         return all(float(values.get(p.name, p.absent)) == p.absent for p in cls.parameters)
