@@ -16,7 +16,9 @@
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
-#   pytest -n auto -m "not slow"    # 137 s on 2 idle cores (2026-11-28, 1 067 tests); CI runs the slow ones too
+#   pytest -n auto -m "not slow"    # 70 s on 2 idle cores (2026-11-28, 1 047 tests); CI runs the slow ones too
+#
+# A test that takes 3 s or more (call or fixture set-up, `pytest --durations`) is marked slow.
 #
 # The artefacts (issue 46): scripts/check_dist.sh builds the sdist and the wheel, checks them
 # (twine check --strict, cffconvert --validate on CITATION.cff, the wheel from the sdist against

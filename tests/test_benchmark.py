@@ -98,6 +98,7 @@ def test_calibrate_in_simulation_report() -> None:
     json.dumps(summary, default=float)
 
 
+@pytest.mark.slow
 def test_benchmark_rows_do_not_depend_on_chunking(tmp_path: Path) -> None:
     config = BenchConfig(
         robots=3, floors=("concrete", "cables"), methods=("umbmark", "jung_chung"), budget=6

@@ -59,6 +59,7 @@ def test_schedules_by_name() -> None:
     ] * 2 + ["square4-cw"]
 
 
+@pytest.mark.slow
 def test_a_small_study_end_to_end(capsys: pytest.CaptureFixture[str]) -> None:
     """Four robots on ``concrete``, 3 runs, driven: a JSON record with every schedule's
     of-oracle figure (a calibration that helps: between 10 % and 500 % of the oracle), and

@@ -82,6 +82,7 @@ def full(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     return out, _run(_argv(out))
 
 
+@pytest.mark.slow
 def test_the_command_writes_a_fold_file_per_session_and_prints_the_table(
     full: tuple[Path, str],
 ) -> None:
@@ -99,6 +100,7 @@ def test_the_command_writes_a_fold_file_per_session_and_prints_the_table(
     assert "wrote: " + ", ".join(str(out / f"fold-{s}.json") for s in SESSIONS) in printed
 
 
+@pytest.mark.slow
 def test_a_second_call_diagnoses_only_the_missing_fold_and_prints_the_same_table(
     full: tuple[Path, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

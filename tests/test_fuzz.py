@@ -369,6 +369,7 @@ def _session_copy() -> Path:
     st.lists(st.tuples(st.integers(0, 6), st.integers(0, 10_000), CELLS), max_size=3),
     st.sampled_from(["utf-8", "latin-1", "utf-16"]),
 )
+@pytest.mark.slow
 def test_optiodom_sessions(
     meta_edits: list[tuple[int, int, str]], run_edits: list[tuple[int, int, str]], encoding: str
 ) -> None:
@@ -413,6 +414,7 @@ NUMBERS = st.one_of(
 
 
 @given(NUMBERS, NUMBERS, NUMBERS, NUMBERS, st.sampled_from(["1", "0", "-5", "10", "x"]))
+@pytest.mark.slow
 def test_command_line_end_to_end(
     left: str, right: str, wheelbase: str, k: str, partitions: str
 ) -> None:
@@ -729,6 +731,7 @@ def _bag_of(
     BAG_LAYOUTS,
     st.sampled_from(["mcap", "sqlite3"]),
 )
+@pytest.mark.slow
 def test_rosbag_messages(
     wheel_type: str, pose_type: str, edits: list[tuple[Any, ...]], layout: str, storage: str
 ) -> None:
@@ -869,6 +872,7 @@ YAML_VALUES = st.sampled_from(
     YAML_VALUES,
     st.booleans(),  # read the bare storage file (else the bag folder)
 )
+@pytest.mark.slow
 def test_rosbag_damaged_files(
     storage: str, data_file: bool, kind: int, where: int, junk: bytes, text: str, bare: bool
 ) -> None:
@@ -1308,6 +1312,7 @@ def _with_gaps(pose: np.ndarray, kind: str, share: float, rng: np.random.Generat
         max_size=6,
     )
 )
+@pytest.mark.slow
 def test_diagnose_takes_logs_with_gaps(gaps: list[tuple[str, float, int]]) -> None:
     """``odomgym diagnose`` (native CSV, the baseline on) on logs of three to six runs whose
     ground truth has 0–60 % gaps — random samples, long dropouts, held poses, position-only

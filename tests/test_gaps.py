@@ -251,6 +251,7 @@ def test_held_out_errors_count_each_component_where_it_was_measured() -> None:
 
 
 # ------------------------------------------------------------------------- end to end
+@pytest.mark.slow
 def test_the_issue_case_a_tracker_that_lost_the_marker_45_percent_of_the_time(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

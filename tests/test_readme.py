@@ -42,7 +42,7 @@ from odomgym.cli import main
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
 BENCH_ROBOTS = "1"
-SLOW = ("odomgym bench", "odomgym diagnose")  # tens of seconds each on 2 cores
+SLOW = ("odomgym bench", "odomgym diagnose", "odomgym run clapper-rectangle")  # ≥ 3 s each
 
 # Files a README command reads, and a snippet of the README command that writes them.
 PRODUCERS = {

@@ -41,6 +41,7 @@ def _rollout(venv, steps: int) -> list[np.ndarray]:
     return out
 
 
+@pytest.mark.slow
 def test_batched_vector_env_equals_single_envs_and_ignores_the_worker_count() -> None:
     """Sub-env i of the batched env plays exactly the episodes a DummyVecEnv of single envs
     plays (same seeds, same actions, SB3's auto-reset), whether its sessions live in one
@@ -56,6 +57,7 @@ def test_batched_vector_env_equals_single_envs_and_ignores_the_worker_count() ->
 
 
 @pytest.mark.parametrize("algo", ["ppo", "dqn"])
+@pytest.mark.slow
 def test_exported_policy_acts_as_sb3_predicts(algo: str, tmp_path) -> None:
     """The numpy policy (tanh for PPO, ReLU for DQN) picks SB3's deterministic action, also
     after a round trip through its file."""
@@ -84,6 +86,7 @@ def test_exported_policy_acts_as_sb3_predicts(algo: str, tmp_path) -> None:
     np.testing.assert_array_equal(np.argmax(loaded.logits(obs), axis=1), expected)
 
 
+@pytest.mark.slow
 def test_vector_env_attributes_and_errors_keep_the_workers_in_step() -> None:
     venv = SelfCalVecEnv(4, workers=2, env_kwargs={"budget": 2})
     try:
@@ -118,6 +121,7 @@ def test_hyperparameters_come_from_the_data_file_keyed_by_env_id(tmp_path) -> No
         load_hyperparams("ppo", tmp_path / "bad.yml")
 
 
+@pytest.mark.slow
 def test_train_command_writes_the_policy_and_its_record(tmp_path, capsys) -> None:
     out = tmp_path / "run"
     code = main(

@@ -188,6 +188,7 @@ def test_a_learned_policy_runs_only_with_what_it_was_trained_to_see() -> None:
     assert err.value.field == "observe"
 
 
+@pytest.mark.slow
 def test_run_information_adds_up_to_the_posterior_and_hardly_depends_on_the_data() -> None:
     """What an experiment design rests on (``benchmarks/design_bound.py``): the runs'
     information matrices, added to the prior's, give the filter's posterior information
