@@ -236,6 +236,40 @@ def test_a_constant_x_icr_is_replayed_as_the_tracked_point_offset() -> None:
     assert "x_ICR" in EFFECTS["gt_sensor_offset"].confounded
 
 
+def test_the_turn_skid_reads_the_yaw_before_the_skid_track_scales_it() -> None:
+    """With ``turn_skid`` and ``skid_track`` in one spec the replay's yaw per interval is
+    dθ₀·max(0, 1 − κ|v·ω₀|)/(1 + ε·share), ω₀ the no-slip yaw rate: each factor from the wheel
+    travels, as ``docs/effects.md`` writes them and the World applies them (both hooks read
+    the rim speeds). In the spec's alphabetical order the skid track came first and shrank
+    the turn skid's ω₀."""
+    from odomgym.effects.motion import track_factor
+
+    robot = PRESETS["scout2"]
+    dt = 0.05
+    legs = [(0.2, 0.6), (0.6, 0.2), (-0.4, 0.4), (0.5, 0.5)]  # rim speeds [m/s], 3 s each
+    travels = np.concatenate([np.tile(leg, (60, 1)) for leg in legs]) * dt
+    radius = 0.5 * robot.wheel_diameter
+    counts = np.vstack([np.zeros(2), np.cumsum(travels / radius, axis=0)])
+    run = Run(
+        kind="free",
+        time=dt * np.arange(len(counts), dtype=np.float64),
+        counts=counts * robot.ticks_per_rev / (2.0 * math.pi),
+        true_pose=np.zeros((len(counts), 3)),
+        source="order",
+    )
+    gain, excess, half = 0.8, 0.4, 2.0
+    both = EFFECTS["turn_skid"].write(robot, {"gain": gain})
+    both = EFFECTS["skid_track"].write(both, {"excess": excess, "lambda_half": half})
+    replay = replay_run(run, both)
+    travel = replay.travel
+    ds = 0.5 * (travel[:, 0] + travel[:, 1])
+    dtheta0 = (travel[:, 1] - travel[:, 0]) / robot.wheelbase
+    turn = np.maximum(0.0, 1.0 - gain * np.abs(ds * dtheta0) / dt**2)
+    expected = dtheta0 * turn * track_factor(travel, excess, half)
+    assert np.allclose(replay.dtheta, expected, rtol=1e-12, atol=1e-15)
+    assert EFFECTS["skid_track"].body_after == ("turn_skid",)
+
+
 def test_an_apparent_track_may_pass_the_body_the_nominal_one_may_not() -> None:
     """A diagnosis of ``scout2`` fits E_b near its spin's apparent-track factor (1.67): its true
     track then passes the body (0.97 m against 0.699 m), which the spec accepts; a nominal

@@ -86,6 +86,19 @@ def _effects_of(spec: RobotSpec) -> list[tuple[str, dict[str, float]]]:
     return [(name, values) for name, values in spec.effect_dict().items() if name in EFFECTS]
 
 
+def _body_order(
+    effects: list[tuple[str, dict[str, float]]],
+) -> list[tuple[str, dict[str, float]]]:
+    """``effects`` in the order of the ``"body"`` stage: the spec's, except that an effect
+    that must follow another one present (:attr:`~odomgym.effects.Effect.body_after`) comes
+    after the rest."""
+    names = {name for name, _ in effects}
+    late = [e for e in effects if names.intersection(EFFECTS[e[0]].body_after)]
+    if not late:
+        return effects
+    return [e for e in effects if e not in late] + late
+
+
 def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Replay:
     """Replay ``run``'s counts through ``spec`` (its true geometry and its effects).
 
@@ -116,7 +129,7 @@ def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Re
     arrays.ds = 0.5 * (travel[:, 0] + travel[:, 1])
     arrays.dtheta = (travel[:, 1] - travel[:, 0]) / wheelbase
     arrays.crab = np.zeros(len(dt))  # not zeros_like: a Python function, ~6 µs a call
-    for name, values in effects:
+    for name, values in _body_order(effects):
         EFFECTS[name].replay("body", values, arrays)
     start = _start_pose(run.true_pose[0], effects)
     ds, dtheta = arrays.ds, arrays.dtheta

@@ -167,6 +167,7 @@ class SkidTrack(Effect):
     )
     reveals = "circles of several radii both ways and in-place spins (the factor moves with λ)"
     partners = ("wheelbase",)
+    body_after = ("turn_skid",)
 
     @classmethod
     def shape_identified(cls, values: Mapping[str, float], travel: Sequence[FloatArray]) -> bool:

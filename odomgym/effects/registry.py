@@ -165,6 +165,12 @@ class Effect:
     moves the mean along the same direction (bumps shorten the travel as a distance scale
     does): the workflow refits them beside it, so each named value is right, not only their
     sum."""
+    body_after: ClassVar[tuple[str, ...]] = ()
+    """Effects whose ``"body"`` replay stage this one's must follow when both are in a spec
+    (the replay otherwise applies a stage in the spec's order, alphabetical). ``skid_track``
+    scales the yaw by a factor of the wheel travels alone, while ``turn_skid`` reads the
+    incoming yaw (ω₀ = dθ₀/Δt): applied first, the skid track would shrink the turn skid's
+    ω₀, which the World (both hooks read the rim speeds) and ``docs/effects.md`` do not."""
     with_systematic: ClassVar[bool] = False
     """A noise effect whose signature no systematic effect can make (floor bumps' sudden jumps
     during steady driving): it competes with the systematic effects from the first round of
