@@ -172,9 +172,12 @@ def detection_limit(
     ``skid_track`` with ``wheelbase``) is detectable only by what its partners cannot take up:
     their parameters are unknowns of the same fit, so the information along ``direction`` is
     the Schur complement I_uu − I_up·I_pp⁻¹·I_pu (the Cramér–Rao bound with nuisance
-    parameters, Kay 1993, Theorem 3.2: var θ̂_i ≥ [I⁻¹]_ii). For ``skid_track`` under the rich
-    protocol that is 4.5e-4 against 9.9e-5 with the track held at its nominal value (the two
-    columns correlate at 0.976: the protocol's spins and squares see mostly a constant factor).
+    parameters, Kay 1993, Theorem 3.2: var θ̂_i ≥ [I⁻¹]_ii; the effect's own other parameters
+    stay fixed, since at the absent value ``skid_track``'s λ½ has no information). Noise
+    partners are not profiled out (the fit leaves them to the noise). For ``skid_track`` under
+    the rich protocol that is 4.5e-4 against 9.9e-5 with the track held at its nominal value
+    (the two columns correlate at 0.976: the protocol's spins and squares see mostly a constant
+    factor).
     Noise effects (no Fisher information at their absent value): ``floor_roughness`` — the k
     (both wheels) whose heading spread over 6 m of travel equals the sensor's heading σ,
     σ_θ·b/√(2·6 m) (Chong & Kleeman 1997, Eq. 4 summed over both wheels); ``floor_bumps`` —
@@ -195,7 +198,7 @@ def detection_limit(
     noise = SensorNoise(*sensor)
     jacobian: list[NDArray[np.float64]] | None = None
     scales: list[float] = []
-    for member in (name, *effect.partners):
+    for member in (name, *(p for p in effect.partners if not EFFECTS[p].noise)):
         fit = CandidateFit(
             member, nominal, noise, EFFECTS[member].read(nominal), np.zeros(len(runs))
         )

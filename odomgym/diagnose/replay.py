@@ -93,10 +93,10 @@ def _body_order(
     that must follow another one present (:attr:`~odomgym.effects.Effect.body_after`) comes
     after the rest."""
     names = {name for name, _ in effects}
-    late = [e for e in effects if names.intersection(EFFECTS[e[0]].body_after)]
+    late = {name for name in names if names.intersection(EFFECTS[name].body_after)}
     if not late:
         return effects
-    return [e for e in effects if e not in late] + late
+    return [e for e in effects if e[0] not in late] + [e for e in effects if e[0] in late]
 
 
 def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Replay:
