@@ -49,7 +49,6 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 from independent_robot import (
-    _START_BOX,
     _TIME_DECIMALS,
     IndependentRobot,
     Manoeuvre,
@@ -57,6 +56,7 @@ from independent_robot import (
     _timeline,
     play_operator,
     rich_protocol,
+    run_streams,
 )
 from numpy.typing import NDArray
 
@@ -143,16 +143,7 @@ def _simulate(
     log_rate_hz: float,
     integration_hz: float,
 ) -> tuple[Run, float, FloatArray]:
-    seeds = rng.integers(0, 2**63 - 1, size=3)
-    motion_rng, process_rng, sensor_rng = (np.random.default_rng(int(s)) for s in seeds)
-    start_pose = np.array(
-        [
-            motion_rng.uniform(-_START_BOX, _START_BOX),
-            motion_rng.uniform(-_START_BOX, _START_BOX),
-            motion_rng.uniform(-math.pi, math.pi),
-        ]
-    )
-    encoder_phase = motion_rng.uniform(0.0, 1.0, size=2)
+    motion_rng, process_rng, sensor_rng, start_pose, encoder_phase = run_streams(rng)
     segments = _timeline(m, base, motion_rng)
     end = segments[-1].start + segments[-1].duration
     n_log = math.ceil(end * log_rate_hz - 1e-9) + 1

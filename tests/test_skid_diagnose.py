@@ -200,6 +200,22 @@ def test_rigid_coulomb_skid_steer_robot_is_a_wheelbase_not_a_skid_track() -> Non
     assert _rms(result, "diagnosed") < 0.01 * _rms(result, "as given")
 
 
+def _run_of_travels(
+    robot: RobotSpec, travels: np.ndarray, dt: float, poses: np.ndarray, source: str
+) -> Run:
+    """A run whose encoders counted the wheel travels ``travels`` (n, 2) [m] exactly, sampled
+    every ``dt`` [s], with ground truth ``poses`` (n + 1, 3)."""
+    radius = 0.5 * robot.wheel_diameter
+    counts = np.vstack([np.zeros(2), np.cumsum(travels / radius, axis=0)])
+    return Run(
+        kind="free",
+        time=dt * np.arange(len(poses), dtype=np.float64),
+        counts=counts * robot.ticks_per_rev / (2.0 * math.pi),
+        true_pose=poses,
+        source=source,
+    )
+
+
 def test_a_constant_x_icr_is_replayed_as_the_tracked_point_offset() -> None:
     """Logs of a skid-steer robot moving by Mandow et al. (2007)'s ICR kinematics with the
     sides' ICRs at y = ±χ·b/2 and a constant x_ICR = 0.06 m are predicted by the diagnosis's
@@ -216,15 +232,7 @@ def test_a_constant_x_icr_is_replayed_as_the_tracked_point_offset() -> None:
     speeds = np.concatenate([np.tile(leg, (60, 1)) for leg in legs])
     travels = speeds * dt
     poses = skid_dead_reckon(model, travels, np.zeros(3))
-    radius = 0.5 * robot.wheel_diameter
-    counts = np.vstack([np.zeros(2), np.cumsum(travels / radius, axis=0)])
-    run = Run(
-        kind="free",
-        time=dt * np.arange(len(poses), dtype=np.float64),
-        counts=counts * robot.ticks_per_rev / (2.0 * math.pi),
-        true_pose=poses,
-        source="icr",
-    )
+    run = _run_of_travels(robot, travels, dt, poses, "icr")
     as_offset = EFFECTS["gt_sensor_offset"].write(
         robot.with_errors(e_b=chi), {"dx": -x_icr, "dy": 0.0}
     )
@@ -248,15 +256,7 @@ def test_the_turn_skid_reads_the_yaw_before_the_skid_track_scales_it() -> None:
     dt = 0.05
     legs = [(0.2, 0.6), (0.6, 0.2), (-0.4, 0.4), (0.5, 0.5)]  # rim speeds [m/s], 3 s each
     travels = np.concatenate([np.tile(leg, (60, 1)) for leg in legs]) * dt
-    radius = 0.5 * robot.wheel_diameter
-    counts = np.vstack([np.zeros(2), np.cumsum(travels / radius, axis=0)])
-    run = Run(
-        kind="free",
-        time=dt * np.arange(len(counts), dtype=np.float64),
-        counts=counts * robot.ticks_per_rev / (2.0 * math.pi),
-        true_pose=np.zeros((len(counts), 3)),
-        source="order",
-    )
+    run = _run_of_travels(robot, travels, dt, np.zeros((len(travels) + 1, 3)), "order")
     gain, excess, half = 0.8, 0.4, 2.0
     both = EFFECTS["turn_skid"].write(robot, {"gain": gain})
     both = EFFECTS["skid_track"].write(both, {"excess": excess, "lambda_half": half})
