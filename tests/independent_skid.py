@@ -33,6 +33,37 @@ elastic contacts, ``docs/skid-steer.md``). This robot is therefore the physics-m
 the diagnosis: a skid-steer robot whose logs must be named ``wheelbase`` (E_b = χ), not
 ``skid_track``.
 
+**The elastic robot** (:class:`ElasticSkidRobot`) is the positive: the same four wheels on
+tyres that deform before they slide, under a tyre law written here and unlike the World's. Each
+contact's *practical slip* is its sliding velocity over a reference speed of the wheel,
+
+    σ_i = (u_i − c_x, −c_y) / V_i,   V_i = √((u_i² + c_x²)/2),
+
+c = (v_x − ω·y_i, v_y + ω·x_i) the contact point's velocity and u_i its side's rim speed (V_i is
+the rim speed while the wheel rolls, and stays positive for a wheel at rest that is dragged).
+The linear tyre force is N_i·l_i, l_i = (C_κ·σ_x, C_α·σ_y) (the longitudinal and cornering
+stiffnesses per unit load); its size saturates exponentially at the friction limit and its
+direction turns from the elastic one to Coulomb's, opposite the sliding, as it does:
+
+    F_i = N_i·μ·g_i·d_i,   g_i = 1 − exp(−|l_i|/μ),   d_i ∥ (1 − g_i)·l_i/|l_i| + g_i·σ_i/|σ_i|.
+
+The exponential approach to the friction circle is that of the "TMeasy" family of handling tyre
+models (Hirschberg, Rill & Weinfurter 2007); the turn of the direction is written here, so that
+a wheel sliding sideways in a spin pushes back as a Coulomb contact does, whatever its
+stiffnesses (a law that kept the elastic direction while saturated would scale all four forces of
+a symmetric spin alike, and keep χ_∞ in spins too). It is not the World's split of an elastic and
+a sliding share (``odomgym.sim.world.skid_contacts``). The slips are ratios of speeds, so the
+balance is again homogeneous of degree one in the rim speeds and solved once per ψ, here by
+Newton's root finder continued along the grid. In wide arcs every contact is in its linear range
+and the moment balance gives in closed form
+
+    χ_∞ = 1 + (C_α/C_κ)·(a/B)²
+
+(the Coulomb robot's value when C_α = C_κ), while in spins the lateral slips of ±a/(χ·B)
+saturate, and the track approaches the Coulomb value: the factor falls from spins to wide arcs,
+by an amount and at a radius that come from C_κ, C_α and μ, not from any formula of the
+catalogue (``tests/test_independent_skid.py`` checks both limits).
+
 Motion, encoders and logging are :mod:`independent_robot`'s: open-loop S-curve moves of the two
 motor angles planned with the *nominal* track, exact constant-twist steps at ``integration_hz``,
 quantised encoders with a random phase, ground truth at ``log_rate_hz`` with Gaussian noise.
@@ -40,6 +71,7 @@ quantised encoders with a random phase, ground truth at ``log_rate_hz`` with Gau
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -57,11 +89,11 @@ from independent_robot import (
     time_grid,
 )
 from numpy.typing import NDArray
-from scipy.optimize import minimize
+from scipy.optimize import minimize, root
 
 from odomgym.odometry.runs import Run
 
-__all__ = ["CoulombSkidRobot", "generate_skid", "skid_protocol"]
+__all__ = ["CoulombSkidRobot", "ElasticSkidRobot", "generate_skid", "skid_protocol"]
 
 FloatArray = NDArray[np.float64]
 
@@ -172,6 +204,128 @@ class CoulombSkidRobot:
         """χ = (u_R − u_L)/(B·ω) at rim speeds (cos ψ, sin ψ) [-]."""
         _, _, w = self.solve(psi)
         return (math.sin(psi) - math.cos(psi)) / (self.track * w)
+
+
+@dataclass(frozen=True)
+class ElasticSkidRobot(CoulombSkidRobot):
+    """A four-wheel skid-steer robot on elastic tyres with a saturating friction law (module
+    docstring): the geometry, encoders and sensor of :class:`CoulombSkidRobot`, and
+
+    Attributes:
+        slip_stiffness: C_κ, longitudinal force per unit load and unit slip ratio [-].
+        cornering_stiffness: C_α, lateral force per unit load and unit slip angle [1/rad].
+        friction: μ, the friction coefficient the force saturates at [-] (it no longer cancels).
+
+    The defaults (C_κ = 12, C_α = 6 /rad, μ = 0.8) are of the order of small pneumatic and solid
+    rubber tyres; C_α < C_κ is what lets the track fall from spins to wide arcs (χ_∞ = 1 +
+    (C_α/C_κ)·(a/B)² = 1.32 here, against 1.64 for rigid wheels).
+    """
+
+    slip_stiffness: float = 12.0
+    cornering_stiffness: float = 6.0
+    friction: float = 0.8
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("slip_stiffness", "cornering_stiffness", "friction"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be positive and finite, got {value}")
+
+    def tyre_force(self, slip: FloatArray, load: float) -> FloatArray:
+        """The floor's force on one wheel [per m·g] for its practical slip σ (2,) and load share
+        N: N·μ·g·d with g = 1 − exp(−|l|/μ), l = (C_κ·σ_x, C_α·σ_y), and the direction d the
+        unit vector of (1 − g)·l/|l| + g·σ/|σ| (module docstring); N·l itself while |l| ≪ μ,
+        Coulomb's μ·N opposite the sliding once |l| ≫ μ."""
+        lin = np.array([self.slip_stiffness * slip[0], self.cornering_stiffness * slip[1]])
+        size = math.hypot(lin[0], lin[1])
+        if size < 1e-12 * self.friction:
+            return load * lin
+        used = -math.expm1(-size / self.friction)  # g: the share of the friction limit in use
+        way = (1.0 - used) * lin / size + used * slip / math.hypot(slip[0], slip[1])
+        force: FloatArray = load * self.friction * used * way / math.hypot(way[0], way[1])
+        return force
+
+    def balance(self, twist: FloatArray, rims: tuple[float, float]) -> FloatArray:
+        """The net force (x, y) and moment of the floor on the robot [per m·g] at body
+        ``twist`` (v_x, v_y, ω) and rim speeds (u_L, u_R)."""
+        vx, vy, w = twist
+        out = np.zeros(3)
+        for x, y, side, load in self.contacts:
+            u = rims[int(side)]
+            cx = vx - w * y
+            cy = vy + w * x
+            speed = math.sqrt(0.5 * (u * u + cx * cx))
+            if speed == 0.0:
+                continue  # neither rolling nor dragged along: no slip, no force
+            fx, fy = self.tyre_force(np.array([(u - cx) / speed, -cy / speed]), load)
+            out += (fx, fy, x * fy - y * fx)
+        return out
+
+    def power(self, twist: FloatArray, rims: tuple[float, float]) -> tuple[float, FloatArray]:
+        """Not defined: the elastic forces are no gradient of a dissipated power (the slips are
+        normalised by the wheels' speeds), so the twist is a root of :meth:`balance` instead."""
+        raise TypeError("an elastic tyre's balance has no power potential; use solve()")
+
+    def solve(self, psi: float) -> FloatArray:
+        """The body twist (v_x [m/s], v_y [m/s], ω [rad/s]) at rim speeds (cos ψ, sin ψ): the
+        root of :meth:`balance`, found by MINPACK's hybrid Newton method (Powell 1970) from the
+        twist of a nearby ψ (:meth:`_continued`, which walks the grid from straight driving,
+        where the twist is exact) or from the no-slip kinematics."""
+        return self._root(psi, self._start(psi))
+
+    def _start(self, psi: float) -> FloatArray:
+        rims = (math.cos(psi), math.sin(psi))
+        return np.array([0.5 * (rims[0] + rims[1]), 0.0, (rims[1] - rims[0]) / self.track])
+
+    def _root(self, psi: float, guess: FloatArray) -> FloatArray:
+        rims = (math.cos(psi), math.sin(psi))
+        found = root(
+            self.balance, guess, args=(rims,), jac=self._jacobian, method="hybr",
+            options={"xtol": 1e-13},
+        )  # fmt: skip
+        twist: FloatArray = found.x
+        if np.max(np.abs(self.balance(twist, rims))) > 1e-9:
+            raise RuntimeError(f"no quasi-static twist at psi={psi}: {found.message}")
+        return twist
+
+    def _jacobian(self, twist: FloatArray, rims: tuple[float, float]) -> FloatArray:
+        """∂ balance/∂ twist by central differences of a fixed step (10⁻⁷ of the unit rim
+        speed): MINPACK's own step is relative to each unknown and vanishes where ω = 0."""
+        out = np.zeros((3, 3))
+        for k in range(3):
+            step = np.zeros(3)
+            step[k] = 1e-7
+            out[:, k] = (self.balance(twist + step, rims) - self.balance(twist - step, rims)) / 2e-7
+        return out
+
+    @property
+    def _table(self) -> tuple[FloatArray, FloatArray]:
+        """Four times :class:`CoulombSkidRobot`'s grid: the track moves with ψ close to straight
+        driving (λ from 20 to 2.5 within 0.4 rad of it), where the rigid robot's stays put, and
+        linear interpolation wants the finer steps for the same 10⁻⁵. Solved once per robot
+        (equal robots share it: :func:`_elastic_table`)."""
+        return _elastic_table(self)
+
+    def _continued(self, psi: FloatArray) -> FloatArray:
+        """Twists on the grid ``psi`` (ascending over [−π, π]), each solved from its
+        neighbour's, outward from straight forward driving (ψ = π/4, exact) both ways, then on
+        from the ends to reverse driving: a smooth path of roots, without a fresh start where
+        the no-slip guess is far off (spins)."""
+        out = np.zeros((len(psi), 3))
+        first = int(np.argmin(np.abs(psi - 0.25 * math.pi)))
+        out[first] = self._root(float(psi[first]), self._start(float(psi[first])))
+        for k in range(first + 1, len(psi)):
+            out[k] = self._root(float(psi[k]), out[k - 1])
+        for k in range(first - 1, -1, -1):
+            out[k] = self._root(float(psi[k]), out[k + 1])
+        return out
+
+
+@functools.lru_cache(maxsize=8)
+def _elastic_table(robot: ElasticSkidRobot) -> tuple[FloatArray, FloatArray]:
+    psi = np.linspace(-math.pi, math.pi, 4 * (_GRID - 1) + 1)
+    return psi, robot._continued(psi)
 
 
 def _planner(robot: CoulombSkidRobot) -> IndependentRobot:

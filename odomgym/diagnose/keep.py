@@ -189,7 +189,12 @@ def _gate(
     gate = gated(pool)
     resolved = bool(tied) and set(tied) <= set(gate.effects)
     if tied and not resolved:
-        gate = gated([n for n in _significant_effects(state, tied=False) if n in pool])
+        # Without the tied effects still in doubt. An effect a round had already named stays:
+        # its refit tying with a newcomer puts the newcomer in doubt, not it (the World's
+        # scout2: the skid track named in round 1, its refit tied with the turn skid in
+        # round 2, and without this rule neither reached the gate).
+        doubtful = set(tied) - set(state.named)
+        gate = gated([n for n in pool if n not in doubtful])
     return gate, tied, resolved
 
 

@@ -186,7 +186,7 @@ def _score_candidates(
     improvements = np.array([f.cv_loglik - base_cv for f in fits])
     t, p_flip = max_t_test(improvements, ctx.rng)
     # The logs' wheel travel per interval, for the effects whose shape the data must span.
-    travel = [np.diff(run.counts, axis=0) * spec.metres_per_tick for run in data.runs]
+    travel = data.wheel_travel(spec)
     candidates = []
     for k, f in enumerate(fits):
         signature = stage != "mean" or not EFFECTS[f.name].noise or _signature_holds(ctx, spec, f)
