@@ -2,7 +2,7 @@
 
 The fits are checked on runs whose ground truth *is* a model with known parameters (the wheel
 travel of a circle or a free path, the poses dead-reckoned through the model), so that the
-known answer is exact; the simulated robots' figures live in ``benchmarks/bench_skid.py``.
+known answer is exact; the simulated robots' figures live in ``odomgym bench skid``.
 """
 
 from __future__ import annotations

@@ -1,5 +1,10 @@
 """``odomgym bench calibrators``: every calibrator on the same simulated robot population and
-floors, with a journal so that an interrupted benchmark resumes where it stopped."""
+floors, with a journal so that an interrupted benchmark resumes where it stopped.
+
+``odomgym bench skid``: the skid-steer odometry models (constant factor, Mandow et al. 2007's
+ICRs, a curvature-dependent factor) fitted beside the six classical calibrators on the
+skid-steer presets, validated on circles and free paths they never saw
+(:mod:`odomgym.baselines.skid_bench`)."""
 
 from __future__ import annotations
 
@@ -20,6 +25,7 @@ from odomgym.cli._common import (
     processes,
     seed,
 )
+from odomgym.errors import SpecError
 from odomgym.interrupt import Interrupted
 
 if TYPE_CHECKING:
@@ -32,22 +38,43 @@ JOURNAL_NAME = "journal.jsonl"
 def register(commands: Commands) -> None:
     """Add ``bench``."""
     from odomgym.lab.population import BENCH_FLOORS
+    from odomgym.robot import PRESETS
 
+    # odomgym.baselines.skid_bench.SKID_PRESETS, without importing the calibrators here.
+    skid_presets = [name for name, spec in PRESETS.items() if spec.is_skid_steer]
     parser = commands.add_parser(
         "bench",
         help="benchmark calibrators on a simulated robot population",
-        description="Sample robots with hidden systematic errors, give every calibrator the same "
-        "budget on the same robots and floors, validate on fresh squares, report.",
+        description="calibrators: sample robots with hidden systematic errors, give every "
+        "calibrator the same budget on the same robots and floors, validate on fresh squares, "
+        "report. skid: fit the skid-steer odometry models and the classical calibrators on the "
+        "skid-steer presets, validate on circles and free paths they never saw, report.",
     )
-    parser.add_argument("what", choices=["calibrators"], help="what to benchmark: calibrators")
-    parser.add_argument("--robots", type=count, default=100, help="population size (default 100)")
+    parser.add_argument(
+        "what",
+        choices=["calibrators", "skid"],
+        help="what to benchmark: calibrators (a population of differential-drive robots), or "
+        "skid (skid-steer odometry models and calibrators on the skid-steer presets)",
+    )
+    parser.add_argument(
+        "--robots",
+        type=count,
+        help="calibrators: population size (default 100)",
+    )
+    parser.add_argument(
+        "--presets",
+        nargs="+",
+        metavar="PRESET",
+        choices=skid_presets,
+        help=f"skid: the skid-steer presets (default: all: {', '.join(skid_presets)})",
+    )
     parser.add_argument(
         "--floor",
         nargs="+",
         metavar="FLOOR",
-        default=list(BENCH_FLOORS),
-        help="benchmark floors (default: all): "
-        + "; ".join(f"{name}: {floor.description}" for name, floor in BENCH_FLOORS.items()),
+        help="calibrators: benchmark floors (default: all): "
+        + "; ".join(f"{name}: {floor.description}" for name, floor in BENCH_FLOORS.items())
+        + ". skid: any floor preset (default: smooth slippery)",
     )
     parser.add_argument(
         "--methods",
@@ -71,7 +98,6 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "--oracle",
         action=argparse.BooleanOptionalAction,
-        default=True,
         help="also validate each robot's true parameters as a calibration (the oracle row, the "
         "ceiling the validation noise allows) and report every method as a fraction of it "
         "(default: on)",
@@ -90,7 +116,72 @@ def register(commands: Commands) -> None:
     parser.set_defaults(handler=run)
 
 
+SKID_REFUSES = (
+    "robots", "methods", "budget", "jobs", "oracle", "resume", "chunk", "backend", "ray_address",
+)  # fmt: skip
+"""Options of ``bench calibrators`` that ``bench skid`` does not take (one line if given)."""
+
+
 def run(args: argparse.Namespace) -> int:
+    """``bench calibrators`` or ``bench skid``, by ``what``."""
+    if args.what == "skid":
+        return run_skid(args)
+    if args.presets is not None:
+        raise SpecError("--presets is an option of `odomgym bench skid`", field="--presets")
+    if args.robots is None:
+        args.robots = 100
+    if args.oracle is None:
+        args.oracle = True
+    if args.floor is None:
+        from odomgym.lab.population import BENCH_FLOORS
+
+        args.floor = list(BENCH_FLOORS)
+    return run_calibrators(args)
+
+
+def run_skid(args: argparse.Namespace) -> int:
+    """Fit and validate the skid-steer models and the classical calibrators on the presets,
+    write the table, JSON and figure into ``--out``, print the table (or ``--json``)."""
+    import time
+
+    from odomgym.baselines.skid_bench import (
+        SkidBenchConfig,
+        run_skid_bench,
+        skid_table,
+        write_skid_outputs,
+    )
+
+    parser_defaults = {"backend": "local", "budget": [16], "resume": False}
+    for name in SKID_REFUSES:
+        value = getattr(args, name, None)
+        if value is not None and value != parser_defaults.get(name):
+            option = "--" + name.replace("_", "-")
+            raise SpecError(f"{option} is an option of `odomgym bench calibrators`", field=option)
+    report = Reporter.of(args)
+    check_output(args.out, option="--out", folder=True)
+    config = SkidBenchConfig(
+        robots=tuple(args.presets) if args.presets else SkidBenchConfig.robots,
+        floors=tuple(args.floor) if args.floor else SkidBenchConfig.floors,
+        seed=args.seed,
+    )
+    cells = len(config.robots) * len(config.floors)
+    with Progress(report, "skid benchmark", total=cells, unit="robot-floor") as bar:
+        start = time.perf_counter()
+        rows = run_skid_bench(config, progress=lambda done, total: bar.at(done))
+    elapsed = time.perf_counter() - start
+    written = write_skid_outputs(config, rows, Path(args.out), elapsed)
+    if report.json:
+        report.document(
+            {"elapsed_s": elapsed, "seed": config.seed, "results": [r.as_dict() for r in rows]}
+        )
+    else:
+        report.text(skid_table(rows, config.robots, config.floors))
+        report.text(f"{len(rows)} results in {elapsed:.1f} s.")
+    report.wrote(written)
+    return 0
+
+
+def run_calibrators(args: argparse.Namespace) -> int:
     """Run the benchmark (resuming from the journal with ``--resume``), write the tables and
     plots into ``--out``, then print the summary and the files written."""
     import time
