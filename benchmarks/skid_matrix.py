@@ -61,37 +61,37 @@ def run_trial(job: tuple[str, int]) -> dict[str, Any]:
     seed = 500_000 + 1000 * CELLS.index(cell) + trial
     start = time.perf_counter()
     baseline = None
-    if cell == "elastic-geometric":
-        from independent_skid import ElasticSkidRobot, generate_skid, skid_protocol
-        from test_skid_diagnose import WheelbaseAlone
-
-        nominal = NOMINAL_SKID_ROBOT
-        elastic = ElasticSkidRobot(
-            wheel_diameter=nominal.wheel_diameter,
-            track=nominal.wheelbase,
-            axle_spacing=nominal.axle_spacing,
+    truth: dict[str, Any] = {}
+    if cell.startswith(("coulomb", "elastic")):
+        from independent_skid import (
+            CoulombSkidRobot,
+            ElasticSkidRobot,
+            generate_skid,
+            skid_protocol,
         )
-        runs = generate_skid(elastic, skid_protocol(), np.random.default_rng(seed))
-        baseline = WheelbaseAlone()
-        ratio = elastic.cornering_stiffness / elastic.slip_stiffness
-        truth = {
-            "spin_track": elastic.apparent_track(0.75 * np.pi),
-            "wide_track": 1.0 + ratio * (elastic.axle_spacing / elastic.track) ** 2,
-        }
-    elif cell.startswith("coulomb"):
-        from independent_skid import CoulombSkidRobot, generate_skid, skid_protocol
 
         nominal = NOMINAL_SKID_ROBOT
-        robot = CoulombSkidRobot(
+        kind = ElasticSkidRobot if cell.startswith("elastic") else CoulombSkidRobot
+        robot = kind(
             wheel_diameter=nominal.wheel_diameter,
             track=nominal.wheelbase,
             axle_spacing=nominal.axle_spacing,
         )
         runs = generate_skid(robot, skid_protocol(), np.random.default_rng(seed))
-        chi = 1.0 + (robot.axle_spacing / robot.track) ** 2
-        if cell == "coulomb-apparent":
-            nominal = nominal.with_errors(e_b=chi)  # the model as given holds the scrub
-        truth: dict[str, Any] = {"apparent_track": chi}
+        if isinstance(robot, ElasticSkidRobot):
+            from test_skid_diagnose import WheelbaseAlone
+
+            baseline = WheelbaseAlone()
+            ratio = robot.cornering_stiffness / robot.slip_stiffness
+            truth = {
+                "spin_track": robot.apparent_track(0.75 * np.pi),
+                "wide_track": 1.0 + ratio * (robot.axle_spacing / robot.track) ** 2,
+            }
+        else:
+            chi = 1.0 + (robot.axle_spacing / robot.track) ** 2
+            if cell == "coulomb-apparent":
+                nominal = nominal.with_errors(e_b=chi)  # the model as given holds the scrub
+            truth = {"apparent_track": chi}
     else:
         from test_skid_diagnose import WheelbaseAlone, skid_protocol
 
