@@ -34,12 +34,12 @@ import numpy as np
 from odomgym.baselines.base import CALIBRATORS
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS
-from odomgym.io import atomic_writer
+from odomgym.io import atomic_write_text, atomic_writer
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.simulated import SimLab, measure
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.icr import SKID_MODELS, SkidModel, fit_skid_model, skid_dead_reckon
-from odomgym.odometry.runs import Run, wheel_travels
+from odomgym.odometry.runs import Direction, Run, wheel_travels
 from odomgym.robot import PRESETS, RobotSpec
 
 __all__ = [
@@ -125,7 +125,8 @@ class SkidBenchRow:
 def _circles(robot: RobotSpec, floor: str, radii: tuple[float, ...]) -> list[Run]:
     from odomgym.sim.arc_runs import circle_plan, drive_arcs
 
-    senses = [(r, d) for r in radii for d in ("cw", "ccw")]
+    directions: tuple[Direction, ...] = ("cw", "ccw")
+    senses = [(r, d) for r in radii for d in directions]
     plans = [circle_plan(r, d) for r, d in senses]
     runs = drive_arcs(robot, FLOORS[floor], plans, cruise_speed=SPEED, kind="circular")
     for run, (r, d) in zip(runs, senses, strict=True):
@@ -298,7 +299,7 @@ def write_skid_outputs(
     out.mkdir(parents=True, exist_ok=True)
     table = skid_table(rows, config.robots, config.floors)
     paths = [out / "skid_models.md", out / "skid_models.json", out / "skid_models.png"]
-    atomic_writer(paths[0], lambda p: p.write_text(table + "\n"))
+    atomic_write_text(paths[0], table + "\n")
     payload = {
         "robots": list(config.robots),
         "floors": list(config.floors),
@@ -306,6 +307,6 @@ def write_skid_outputs(
         "seconds": elapsed,
         "results": [row.as_dict() for row in rows],
     }
-    atomic_writer(paths[1], lambda p: p.write_text(json.dumps(payload, indent=1) + "\n"))
+    atomic_write_text(paths[1], json.dumps(payload, indent=1) + "\n")
     _figure(config.robots[0], config.floors[0], rows, paths[2])
     return paths
