@@ -6,6 +6,7 @@ magnitude, and the open-loop gate's rules.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -366,3 +367,64 @@ def test_a_proposal_left_out_takes_the_robots_given_value(
     )
     without = [e_b for e_b, names in starts if "wheelbase.e_b" not in names]
     assert without and all(e_b == pytest.approx(1.0095, abs=1e-12) for e_b in without)
+
+
+def test_a_base_stays_while_its_extension_is_tested_and_a_wrongly_removed_effect_returns() -> None:
+    """The gate's stepwise rules on scripted fold errors (the June OptiOdom fold without
+    230620202317, in miniature): the model with a skid track (S), the wheelbase it extends (W)
+    and a diameter ratio (D) is not identifiable (105 mm), and a fit started from it goes astray
+    (W and D from there: 25 mm; from a sound start: 4.8 mm). W may not leave while S, which
+    extends it, is in the model (the principle of marginality); D, removed first for the ridge,
+    returns in the forward step (Efroymson 1960) and S stays out."""
+    ridge = EFFECTS["wheelbase"].write(ROBOT, {"e_b": 0.7})
+    table = {"": 12.0, "S": 7.0, "W": 6.0, "D": 11.0, "SW": 19.0, "SD": 30.0, "SWD": 105.0}
+    names = {"skid_track": "S", "wheelbase": "W", "wheel_diameter_ratio": "D"}
+
+    class Scripted(gate_module._Elimination):
+        def fitted(self, members: Any, begin: RobotSpec, nuisances: Any, base: Any) -> Any:
+            key = "".join(sorted((names[n] for _, n in members), key="SWD".index))
+            astray = EFFECTS["wheelbase"].read(begin)["e_b"] < 0.8
+            mm = (25.0 if astray else 4.8) if key == "WD" else table[key]
+            cv = np.full(4, (mm / 1e3) ** 2)
+            fit = SimpleNamespace(
+                spec=ridge if "S" in key else ROBOT, nuisances={}, inflation={}, cv=cv
+            )
+            return fit, cv, "open loop"
+
+        def held_out(self, fit: Any, keys: Any) -> tuple[Any, str]:
+            return fit.cv, "open loop"
+
+    gate = Scripted(
+        data=None,  # type: ignore[arg-type]
+        robot=ROBOT,
+        proposed=ROBOT,
+        options=NuisanceOptions(),
+        folds=[[0], [1], [2], [3]],
+        start=None,
+        lenient=set(names),
+        report=None,
+        filtered=None,
+        corrected=None,
+    )
+    base = gate.fitted([], ROBOT, None, None)
+    model = [("effect", "skid_track"), ("effect", "wheelbase"), ("effect", "wheel_diameter_ratio")]
+    (_, cv, _), kept, removed = gate.eliminate(model, [], base)
+    assert model == [("effect", "wheelbase"), ("effect", "wheel_diameter_ratio")]
+    assert [s.name for s in kept] == ["wheelbase", "wheel_diameter_ratio"]
+    assert all(s.kept and s.rule == "lower" for s in kept)
+    assert [s.name for s in removed] == ["skid_track"] and not removed[0].kept
+    assert 1e3 * math.sqrt(float(np.mean(cv))) == pytest.approx(4.8)
+
+
+def test_a_failing_base_beside_its_extension_is_held_and_says_so() -> None:
+    """A wheelbase that fails its rule while the skid track that extends it stays is kept,
+    and its rule says which effect held it; terms and effects nothing extends are as they
+    were."""
+    step = gate_module.GateStep("effect", "wheelbase", False, 5.0, 6.0, 11.0, 2.0, "lower")
+    members = [("effect", "skid_track"), ("effect", "wheelbase")]
+    held = gate_module._held(step, members)
+    assert held.kept and held.rule == "held by skid_track"
+    assert gate_module._held(step, [("effect", "wheelbase")]) == step
+    assert gate_module._extenders(("term", "wheelbase"), members) == []
+    assert gate_module._extenders(("effect", "skid_track"), members) == []
+    assert report_rule(held) == "held by skid_track"

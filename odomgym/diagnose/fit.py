@@ -718,15 +718,23 @@ def _least_squares_step(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
 ) -> RobotSpec:
     """``effect``'s parameters fitted by generalised least squares at fixed noise."""
+    return _least_squares(data, spec, sensor, effect)[0]
+
+
+def _least_squares(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect, max_nfev: int = 30
+) -> tuple[RobotSpec, float]:
+    """:func:`_least_squares_step` with at most ``max_nfev`` steps, and the fitted spec's
+    cost: the sum of its squared whitened innovations."""
     u0, low, high, build = systematic_vector(spec, effect)
 
     def residual(u: FloatArray) -> FloatArray:
         return whitened_stack(data, build(u), sensor)[0]
 
     result = least_squares(
-        residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=30
+        residual, u0, bounds=(low, high), diff_step=1e-2, x_scale=1.0, max_nfev=max_nfev
     )
-    return build(result.x)
+    return build(result.x), 2.0 * float(result.cost)
 
 
 def fit_candidate(
@@ -754,6 +762,7 @@ def fit_candidate(
         # it and `wheelbase` was named first (an elastic-tyred robot written apart from
         # odomgym, tests/independent_skid.py: the first round's fit at λ½ = 44.6, E_b 0.5).
         start = _least_squares_step(data, spec, sensor, _joint(partners))
+        start = _profiled_start(data, start, sensor, effect, partners)
     current_spec, current_sensor = _fit_mean(data, start, sensor, effect, partners, nuisance)
     fit = CandidateFit(
         effect.name,
@@ -764,6 +773,39 @@ def fit_candidate(
     )
     _linearise(data, fit, effect)
     return fit
+
+
+def _profiled_start(
+    data: Dataset,
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    effect: Effect,
+    partners: Sequence[Effect],
+) -> RobotSpec:
+    """Where ``effect``'s fit starts: ``spec``, or the best by generalised least squares of
+    the starts of its :meth:`~odomgym.effects.Effect.profile`, each with the profiled parameter
+    held while the effect's others and its ``partners`` are fitted. A start that does not lower
+    the cost of ``spec`` is not taken, so an effect the data do not carry starts as before."""
+    profile = effect.profile(effect.read(spec), data.wheel_travel(spec))
+    if profile is None:
+        return spec
+    held, starts = profile
+    free = _Holding([effect, *partners], f"{effect.name}.{held}")
+    whitened = whitened_stack(data, spec, sensor)[0]
+    best, best_cost = spec, float(whitened @ whitened)
+    for values in starts:
+        fitted, cost = _least_squares(
+            data, effect.write(spec, values), sensor, free, max_nfev=PROFILE_NFEV
+        )
+        if cost < best_cost:
+            best, best_cost = fitted, cost
+    return best
+
+
+PROFILE_NFEV = 10
+"""The least-squares steps of each start of a profile (:func:`_profiled_start`): with the
+profiled parameter held, the rest is nearly linear in the residuals, and a start only has to
+rank, not to finish (the fit from the best one follows)."""
 
 
 def _fit_mean(
@@ -1081,3 +1123,12 @@ class Joint(Effect):
             effect, parameter = key.split(".", 1)
             out.setdefault(effect, {})[parameter] = value
         return out
+
+
+class _Holding(Joint):
+    """Several effects fitted as one (:class:`Joint`) with one parameter held where the spec
+    has it (``EFFECT.PARAMETER``): the fits of a profile (:func:`_profiled_start`)."""
+
+    def __init__(self, effects: Sequence[Effect], held: str) -> None:
+        super().__init__(effects)
+        self.parameters = tuple(p for p in self.parameters if p.name != held)  # type: ignore[misc]

@@ -197,6 +197,17 @@ class Effect:
         return True
 
     @classmethod
+    def profile(
+        cls, values: Mapping[str, float], travel: Sequence[FloatArray]
+    ) -> tuple[str, list[dict[str, float]]] | None:
+        """Where a candidate fit of this effect may start, for data whose wheel travels per
+        interval are ``travel``: the name of a parameter held at each start while the others
+        are fitted (a profile over it), and the starts (``values`` with the held parameter,
+        and any other the start needs, changed); or None to start at ``values`` alone.
+        None unless an effect says otherwise: ``skid_track``'s fall with the turn radius."""
+        return None
+
+    @classmethod
     def is_absent(cls, values: Mapping[str, float]) -> bool:
         """True if every parameter sits at its absent value."""
         return all(float(values.get(p.name, p.absent)) == p.absent for p in cls.parameters)
