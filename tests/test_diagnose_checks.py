@@ -33,6 +33,7 @@ from odomgym.diagnose.openloop import (
 )
 from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
 from odomgym.diagnose.report import _rule as report_rule
+from odomgym.diagnose.rounds import at_nothing
 from odomgym.diagnose.workflow import split_runs
 from odomgym.effects import EFFECTS
 from odomgym.errors import SpecError
@@ -428,3 +429,16 @@ def test_a_failing_base_beside_its_extension_is_held_and_says_so() -> None:
     assert gate_module._extenders(("term", "wheelbase"), members) == []
     assert gate_module._extenders(("effect", "skid_track"), members) == []
     assert report_rule(held) == "held by skid_track"
+
+
+def test_a_candidate_fitted_back_to_nothing_beside_its_partners_is_at_nothing() -> None:
+    """A skid track whose excess came back at its bound (1.2e-12: the bounded least squares
+    starts strictly inside) is absent, whatever its half-point: the rounds then do not call it
+    significant, since its likelihood ratio is its partner's (E_b's refit; one README
+    diagnosis had ticked it)."""
+    skid = EFFECTS["skid_track"]
+    assert at_nothing(skid, {"excess": 1.242e-12, "lambda_half": 2.0})
+    assert at_nothing(skid, {"excess": 0.0, "lambda_half": 40.0})
+    assert not at_nothing(skid, {"excess": 1e-4, "lambda_half": 2.0})
+    assert not at_nothing(EFFECTS["wheelbase"], {"e_b": 1.0 + 1e-6})
+    assert at_nothing(EFFECTS["wheelbase"], {"e_b": 1.0 + 1e-12})

@@ -21,7 +21,7 @@ fit never saw, in mm and degrees; a module of their own keeps that line visible.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -68,6 +68,7 @@ __all__ = [
     "ROUND_GOES_ON",
     "DiagnosisState",
     "RoundContext",
+    "at_nothing",
     "run_round",
 ]
 
@@ -197,6 +198,10 @@ def _score_candidates(
         )
         p_family = lr_test(lr, dof, len(fits))
         gain = float(improvements[k].sum())
+        # A candidate fitted with its partners (skid_track beside wheelbase) whose own values
+        # came back absent gains only what its partners' refit gained: that is not its own
+        # (the report had ticked a skid track at ε = 0 significant, by E_b's likelihood ratio).
+        own = not (EFFECTS[f.name].partners and at_nothing(EFFECTS[f.name], f.values))
         candidates.append(
             Candidate(
                 round=number,
@@ -210,10 +215,25 @@ def _score_candidates(
                 p_family=p_family,
                 t=float(t[k]),
                 p_sign_flip=float(p_flip[k]),
-                significant=bool(p_family < 0.5 * cfg.alpha and gain > 0.0 and signature and shape),
+                significant=bool(
+                    p_family < 0.5 * cfg.alpha and gain > 0.0 and signature and shape and own
+                ),
             )
         )
     return candidates, fits
+
+
+def at_nothing(effect: Effect, values: Mapping[str, float]) -> bool:
+    """Whether fitted ``values`` leave ``effect`` absent: each within a millionth of its
+    parameter's scale of its absent value counts as there (a bounded least squares starts
+    strictly inside its bounds, so an excess fitted to its bound of 0 comes back as 1e-12)."""
+    snapped = {
+        p.name: p.absent
+        if abs(float(values.get(p.name, p.absent)) - p.absent) <= 1e-6 * p.scale
+        else float(values[p.name])
+        for p in effect.parameters
+    }
+    return effect.is_absent(snapped)
 
 
 def _signature_holds(ctx: RoundContext, spec: RobotSpec, fit: CandidateFit) -> bool:
