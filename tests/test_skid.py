@@ -26,7 +26,7 @@ import pytest
 from scipy.optimize import brentq
 
 from odomgym.errors import SpecError
-from odomgym.floor import FLOORS, FloorSpec
+from odomgym.floor import FLOORS, FloorSpec, FrictionPatch
 from odomgym.robot import PRESETS, RobotSpec, load_robot
 from odomgym.sim.turns import contact_steady_turn, steady_turn
 from odomgym.sim.world import GRAVITY, World
@@ -258,6 +258,65 @@ def test_effects_slip_tracking_and_clapper_trucks_are_refused_for_skid_steer() -
     with pytest.raises(SpecError) as caught:
         VehicleSpec(scout, scout)
     assert caught.value.field == "truck_a"
+
+
+def _driven(floor: FloorSpec, command: tuple[float, float], steps: int) -> np.ndarray:
+    world = World(PRESETS["scout2"], floor)
+    for _ in range(steps):
+        world.step(np.array([command]))
+    return world.pose[0].copy()
+
+
+def test_a_friction_patch_under_every_wheel_is_that_floor() -> None:
+    """Each skid-steer wheel reads the friction under its own contact: a patch of μ 0.3 under
+    the whole run drives the robot exactly as a floor of μ 0.3 does (the same bits)."""
+    patch = FrictionPatch(-50.0, -50.0, 50.0, 50.0, 0.3)
+    plain = _driven(FloorSpec(friction=0.3), (6.0, 6.0), 200)
+    patched = _driven(FloorSpec(friction=0.8, patches=(patch,)), (6.0, 6.0), 200)
+    np.testing.assert_array_equal(patched, plain)
+
+
+def test_ice_under_one_side_turns_a_skid_steer_robot_toward_it() -> None:
+    """Straight from rest with the left wheels on ice (μ 0.05 against 0.8): while the rims
+    accelerate (1 m/s²), the gripping right side pushes harder than the left can, and the
+    robot turns left (about 4°), then drives on along its new heading; the right side on ice is
+    the mirror image. On the same floor without ice it goes straight."""
+    ice = 0.05
+    straight = _driven(FloorSpec(friction=0.8), (6.0, 6.0), 200)
+    left = _driven(
+        FloorSpec(friction=0.8, patches=(FrictionPatch(-50.0, 0.0, 50.0, 50.0, ice),)),
+        (6.0, 6.0),
+        200,
+    )
+    right = _driven(
+        FloorSpec(friction=0.8, patches=(FrictionPatch(-50.0, -50.0, 50.0, 0.0, ice),)),
+        (6.0, 6.0),
+        200,
+    )
+    assert straight[1] == 0.0 and straight[2] == 0.0
+    assert left[2] > 0.03 and left[1] > 0.1, left
+    np.testing.assert_allclose(right, left * np.array([1.0, -1.0, -1.0]), rtol=0.0, atol=1e-12)
+
+
+def test_a_spin_over_the_edge_of_a_patch_walks_toward_the_grip() -> None:
+    """A spin in place with the front wheels on ice (a patch over x > 0, μ 0.1): one
+    wheel of a side on ice and the other not. On a uniform floor the centre of mass stays where
+    it is; here the ice scrubs less, the robot turns about a point on the gripping side, its
+    centre of mass walks away, and it turns less (less torque from the wheels that slide).
+    The patch over x < 0 gives the path mirrored through the origin."""
+    spin = (-4.0, 4.0)
+    uniform = _driven(FloorSpec(friction=0.8), spin, 300)
+    front = _driven(
+        FloorSpec(friction=0.8, patches=(FrictionPatch(0.0, -50.0, 50.0, 50.0, 0.1),)), spin, 300
+    )
+    back = _driven(
+        FloorSpec(friction=0.8, patches=(FrictionPatch(-50.0, -50.0, 0.0, 50.0, 0.1),)), spin, 300
+    )
+    assert uniform[0] == 0.0 and uniform[1] == 0.0
+    assert np.hypot(front[0], front[1]) > 0.5, front
+    assert front[2] < uniform[2] - 1.0
+    np.testing.assert_allclose(back[:2], -front[:2], rtol=0.0, atol=1e-9)
+    assert back[2] == pytest.approx(front[2], abs=1e-9)
 
 
 def test_cables_under_a_skid_steer_robot_are_refused_in_one_line() -> None:

@@ -213,6 +213,9 @@ class World:
             [(specs[i].tyre_slip_stiffness, specs[i].tyre_cornering_stiffness) for i in self._skid],
             dtype=float,
         ).reshape(len(self._skid), 2)
+        # Each skid-steer wheel's contact in the world and the friction under it (_set_friction).
+        self._skid_points = np.zeros((len(self._skid), 4, 2))
+        self._skid_friction = np.zeros((len(self._skid), 4))
         self._check_skid_floor(self.floor)
         for spec in specs:
             if spec.is_skid_steer and spec.effects:
@@ -685,7 +688,7 @@ class World:
             self._skid_mass,
             self._skid_inertia,
             self._skid_tyre,
-            self._friction,
+            self._skid_friction,
             self._ground_v,
             self.pose,
             self.velocity,
@@ -762,22 +765,33 @@ class World:
     def _set_friction(self, mu: FloatArray) -> None:
         """Each wheel joint's friction limit μ·N [N] from the friction coefficient under each
         side (N, 2): the pivot joint's largest force, isotropic (a friction circle). A skid-steer
-        robot has no joints: skid_contacts reads μ from ``_friction``."""
+        robot has no joints: skid_contacts reads μ under each of its four wheels from
+        ``_skid_friction``, the floor's at each wheel's contact where friction patches lie (a
+        patch may hold one wheel of a side), else its side's."""
         changed = np.argwhere(mu != self._friction)
         for i, side in changed:
             joint = self._joints[2 * i + side]
             if joint is not None:
                 joint.max_force = float(mu[i, side] * self._loads[i][side])
         self._friction = mu
+        if self._skid.size:
+            if self._has_patches:
+                skid_contact_points(self._skid, self._skid_xy, self.pose, self._skid_points)
+                self._skid_friction = self.floor.friction_at(
+                    self._skid_points[:, :, 0], self._skid_points[:, :, 1]
+                )
+            else:
+                self._skid_friction = mu[self._skid[:, None], self._skid_side]
 
     def _check_skid_floor(self, floor: FloorSpec) -> None:
-        """Cables and friction patches act on a side's one ground body, at the side's mid-point;
-        under a skid-steer robot's two wheels per side that would be wrong, so it is refused."""
-        if any(spec.is_skid_steer for spec in self.robots) and (floor.bumps or floor.patches):
+        """Cables act on a side's one ground body, at the side's mid-point; under a skid-steer
+        robot's two wheels per side that would be wrong, so it is refused. Friction patches
+        are read under each wheel (:meth:`_set_friction`)."""
+        if any(spec.is_skid_steer for spec in self.robots) and floor.bumps:
             raise SpecError(
-                f"floor {floor.name!r} has cables or friction patches, which are not modelled "
-                "under skid-steer robots yet (each side's two wheels share one contact "
-                "velocity); use a floor without them (smooth, slippery, rough, concrete)",
+                f"floor {floor.name!r} has cables, which are not modelled under skid-steer "
+                "robots yet (each side's two wheels share one contact velocity); use a floor "
+                "without them (smooth, slippery, rough, concrete, or one with friction patches)",
                 field="floor",
             )
 
@@ -855,7 +869,8 @@ def skid_contacts(
     the velocities are solved implicitly, M·(q − q₀) = h·Σ A_iᵀ f_i(q) — a 3×3 system per
     robot, stable at any step. ``robots`` (K,) indexes the World's arrays; ``contacts`` (K, 4,
     2), ``loads`` (K, 4), ``mass``, ``inertia`` (K,); ``tyre`` (K, 2) C_κ/N [-] and C_α/N
-    [1/rad]; ``sides`` (K, 4) each contact's side; ``friction`` (N, 2) μ under each side;
+    [1/rad]; ``sides`` (K, 4) each contact's side; ``friction`` (K, 4) μ under each contact
+    (its wheel's own point of the floor: a friction patch may lie under one wheel of a side);
     ``ground_v`` (N, 2, 2) [m/s] the sides' no-slip velocities of the step (their speeds are
     used); ``pose`` (N, 3) as the World reports it after the step; ``velocity`` (N, 3) [m/s,
     m/s, rad/s], read and written."""
@@ -890,9 +905,9 @@ def skid_contacts(
             gx = speed_l if sides[k, j] == 0 else speed_r
             sx = u - w * ry - gx
             sy = v + w * rx
-            limit = h * friction[i, sides[k, j]] * loads[k, j]  # h·μ·N [N·s]
+            limit = h * friction[k, j] * loads[k, j]  # h·μ·N [N·s]
             if tyre[k, 0] > 0.0:
-                mu = friction[i, sides[k, j]]
+                mu = friction[k, j]
                 ex = max(mu * abs(gx) / tyre[k, 0], SKID_CREEP)
                 ey = max(mu * abs(gx) / tyre[k, 1], SKID_CREEP)
                 kappa = math.hypot(sx / ex, sy / ey)
@@ -931,6 +946,25 @@ def skid_contacts(
         velocity[i, 2] = (
             a00 * (a11 * b2 - b1 * a12) - a01 * (a01 * b2 - b1 * a02) + b0 * (a01 * a12 - a11 * a02)
         ) / det
+
+
+@kernel
+def skid_contact_points(
+    robots: NDArray[np.intp], contacts: FloatArray, pose: FloatArray, out: FloatArray
+) -> None:
+    """Each skid-steer robot's four wheel contacts in the world frame (K, 4, 2) [m], into
+    ``out``: ``contacts`` (K, 4, 2) in the body frame from the point whose ``pose`` (N, 3) the
+    World reports. Scalar, like the floor's kernels: numpy's vectorised sin and cos may round
+    differently with the array's length, and a robot's contacts must not depend on its batch."""
+    for k in range(robots.shape[0]):
+        i = robots[k]
+        c = math.cos(pose[i, 2])
+        s = math.sin(pose[i, 2])
+        for j in range(4):
+            x = contacts[k, j, 0]
+            y = contacts[k, j, 1]
+            out[k, j, 0] = pose[i, 0] + c * x - s * y
+            out[k, j, 1] = pose[i, 1] + s * x + c * y
 
 
 @kernel
