@@ -245,11 +245,16 @@ def test_a_reset_skid_steer_robot_starts_as_in_a_fresh_world() -> None:
     np.testing.assert_array_equal(world.pose, fresh.pose)
 
 
-def test_effects_slip_tracking_and_clapper_trucks_are_refused_for_skid_steer() -> None:
+def test_sideways_effects_slip_tracking_and_clapper_trucks_are_refused_for_skid_steer() -> None:
+    """A skid-steer robot's contacts take their side's speed along the heading, so an effect
+    that turns the no-slip velocity sideways would be dropped: a one-line error naming it."""
     scout = PRESETS["scout2"]
     with pytest.raises(SpecError) as caught:
-        World(scout.apply_effect("backlash", {"angle": 0.01}))
-    assert caught.value.field == "effects"
+        World(scout.apply_effect("wheel_toe", {"angle": 0.01}))
+    assert caught.value.field == "effects.wheel_toe" and "\n" not in str(caught.value)
+    with pytest.raises(SpecError) as caught:
+        World(scout.apply_effect("discovered", {"crab_one": 0.01}))
+    assert caught.value.field == "effects.discovered" and "crab_one" in str(caught.value)
     with pytest.raises(SpecError) as caught:
         World(scout, track_slip=True)
     assert caught.value.field == "track_slip"
@@ -317,6 +322,57 @@ def test_a_spin_over_the_edge_of_a_patch_walks_toward_the_grip() -> None:
     assert front[2] < uniform[2] - 1.0
     np.testing.assert_allclose(back[:2], -front[:2], rtol=0.0, atol=1e-9)
     assert back[2] == pytest.approx(front[2], abs=1e-9)
+
+
+def _world_run(spec: RobotSpec, commands: list[tuple[float, float]]) -> World:
+    world = World(spec, rng=np.random.default_rng(0))
+    for command in commands:
+        world.step(np.array([command]))
+    return world
+
+
+def test_catalogue_effects_act_on_a_skid_steer_robot_on_top_of_its_physics() -> None:
+    """The World applies the catalogue's effects to skid-steer robots as to differential-drive
+    ones (each side's two wheels share a radius, a gearbox, a ground speed): a distance scale
+    of 1.02 drives a straight run 1.02 times as far; a diameter ratio E_d = D_R/D_L of 1.02
+    turns it left; backlash lets a reversed run end further forward, by about the gear's slack
+    at the rim (0.05 rad × 0.165 m = 8.3 mm); a tracked-point offset moves the reported pose
+    by the offset turned with the heading, and not the robot."""
+    scout = PRESETS["scout2"]
+    straight = [(5.0, 5.0)] * 300
+    plain = _world_run(scout, straight).pose[0]
+    scaled = _world_run(scout.apply_effect("distance_scale", {"e_s": 1.02}), straight).pose[0]
+    assert scaled[0] / plain[0] == pytest.approx(1.02, rel=1e-4)
+    ratio = _world_run(scout.apply_effect("wheel_diameter_ratio", {"e_d": 1.02}), straight)
+    assert ratio.pose[0, 2] > 0.1 and ratio.pose[0, 1] > 0.0
+    reversed_ = [(5.0, 5.0)] * 60 + [(-5.0, -5.0)] * 60
+    rigid = _world_run(scout, reversed_).pose[0]
+    slack = _world_run(scout.apply_effect("backlash", {"angle": 0.05}), reversed_).pose[0]
+    lost = slack[0] - rigid[0]
+    assert 0.5 < lost / (0.05 * 0.5 * scout.wheel_diameter) < 2.0, lost
+    turn = [(4.0, 5.0)] * 100
+    offset = _world_run(scout.apply_effect("gt_sensor_offset", {"dx": 0.05, "dy": 0.02}), turn)
+    np.testing.assert_array_equal(offset.pose, _world_run(scout, turn).pose)
+    c, s_ = np.cos(offset.pose[0, 2]), np.sin(offset.pose[0, 2])
+    moved = offset.tracked_pose()[0, :2] - offset.pose[0, :2]
+    np.testing.assert_allclose(moved, [0.05 * c - 0.02 * s_, 0.05 * s_ + 0.02 * c], atol=1e-12)
+
+
+def test_a_skid_steer_robots_noise_effects_do_not_depend_on_its_batch() -> None:
+    """Floor bumps and wheel noise on a skid-steer robot draw from its own stream: beside a
+    differential-drive robot it moves exactly as alone."""
+    noisy = PRESETS["scout2"].apply_effect("floor_bumps", {"rate": 1.0, "heading_jump": 0.04})
+    noisy = noisy.apply_effect("floor_roughness", {"k_left": 0.004, "k_right": 0.004})
+    stream = np.random.default_rng(5).spawn(2)
+    alone = World(noisy, rng=[stream[1]])
+    batch = World([PRESETS["labmate"], noisy], rng=np.random.default_rng(5).spawn(2))
+    for _ in range(120):
+        alone.step(np.array([[4.0, 5.0]]))
+        batch.step(np.array([[3.0, 3.0], [4.0, 5.0]]))
+    np.testing.assert_array_equal(batch.pose[1], alone.pose[0])
+    assert not np.array_equal(
+        alone.pose[0], _world_run(PRESETS["scout2"], [(4.0, 5.0)] * 120).pose[0]
+    )
 
 
 def test_cables_under_a_skid_steer_robot_are_refused_in_one_line() -> None:

@@ -475,6 +475,16 @@ class DiscoveredTerms(Effect):
             )
 
     # ------------------------------------------------------------------ world
+    @classmethod
+    def skid_steer_refusal(cls, values: Mapping[str, float]) -> str:
+        crab = sorted(k for k, v in values.items() if k.startswith("crab_") and float(v) != 0.0)
+        if not crab:
+            return ""
+        return (
+            f"its crab terms ({', '.join(crab)}) turn the contacts' no-slip velocity sideways, "
+            "and a skid-steer robot's contacts take only their side's speed along the heading"
+        )
+
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         coefficients = np.zeros((values.shape[0], len(TERMS)))
         index = {t.name: k for k, t in enumerate(TERMS)}

@@ -51,6 +51,15 @@ class WheelToe(Effect):
         "a check of the rigid-body alignment can"
     )
 
+    @classmethod
+    def skid_steer_refusal(cls, values: Mapping[str, float]) -> str:
+        if cls.is_absent(values):
+            return ""
+        return (
+            "a toe turns the contacts' no-slip velocity sideways, and a skid-steer robot's "
+            "contacts take only their side's speed along the heading"
+        )
+
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _ToeHook(values[:, 0].copy())
 

@@ -197,6 +197,15 @@ class Effect:
         return True
 
     @classmethod
+    def skid_steer_refusal(cls, values: Mapping[str, float]) -> str:
+        """Why the World cannot apply this effect at ``values`` to a skid-steer robot, or ""
+        when it can. A skid-steer robot's contacts take each side's no-slip speed along the
+        heading (:func:`odomgym.sim.world.skid_contacts`), so an effect that turns the contacts'
+        velocity sideways (a wheel toe, a crab term) would be dropped without a word: refused."""
+        del values
+        return ""
+
+    @classmethod
     def profile(
         cls, values: Mapping[str, float], travel: Sequence[FloatArray]
     ) -> tuple[str, list[dict[str, float]]] | None:

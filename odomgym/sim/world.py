@@ -218,14 +218,15 @@ class World:
         self._skid_friction = np.zeros((len(self._skid), 4))
         self._check_skid_floor(self.floor)
         for spec in specs:
-            if spec.is_skid_steer and spec.effects:
-                raise SpecError(
-                    f"robot {spec.name!r} is skid-steer and carries effects "
-                    f"({', '.join(name for name, _ in spec.effects)}); the catalogue's effects "
-                    "are written for differential drive (two contacts at the axle) and are not "
-                    "applied to skid-steer robots yet",
-                    field="effects",
-                )
+            for name, values in spec.effects if spec.is_skid_steer else ():
+                effect = EFFECTS.get(name)
+                reason = effect.skid_steer_refusal(dict(values)) if effect is not None else ""
+                if reason:
+                    raise SpecError(
+                        f"robot {spec.name!r} is skid-steer and carries {name}, which the World "
+                        f"does not apply to skid-steer robots: {reason}",
+                        field=f"effects.{name}",
+                    )
         if track_slip and any(spec.is_skid_steer for spec in specs):
             raise SpecError(
                 "track_slip measures two contacts at the axle midpoint's sides; a skid-steer "
