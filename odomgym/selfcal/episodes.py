@@ -95,8 +95,9 @@ def _shared_floor() -> FloorSpec:
 def _skid_floor(name: str) -> FloorSpec:
     """The floor of a skid-steer robot's session on benchmark floor ``name`` (``""``: the
     noiseless validation floor): the shared floor's friction and the bench floor's roughness
-    as the floor's own — a skid-steer robot carries no catalogue effect and drives no cables
-    yet (docs/skid-steer.md), so its runs are simulated on a plain floor of their own."""
+    as the floor's own — a skid-steer session's robot carries no catalogue effect and its
+    sessions are not run on cables yet (docs/skid-steer.md), so its runs are simulated on a
+    plain floor of their own."""
     shared = _shared_floor()
     roughness = BENCH_FLOORS[name].roughness if name else 0.0
     return FloorSpec(friction=shared.friction, roughness=roughness, name=f"selfcal-skid-{name}")
@@ -176,7 +177,7 @@ def new_episode(
     robot = population.sample(robot_rng, "selfcal-robot")
     if robot.is_skid_steer and BENCH_FLOORS[floor_name].cables:
         raise SpecError(
-            f"floor {floor_name!r} has cables, which skid-steer robots cannot drive over yet "
+            f"floor {floor_name!r} has cables, on which skid-steer sessions are not run yet "
             "(docs/skid-steer.md); choose concrete or rough",
             field="floor",
         )

@@ -17,7 +17,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odomgym._jit import kernel
+from odomgym._jit import inlined_kernel, kernel
 
 
 class HasCables(Protocol):
@@ -38,6 +38,7 @@ __all__ = [
     "cable_advance_scalar",
     "paper_bump_error",
     "rim_travel_for_advance",
+    "skid_cable_losses",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -258,6 +259,42 @@ class CableGrid(NamedTuple):
         )
 
 
+@inlined_kernel
+def _wheel_deficit(
+    wx: float,
+    wy: float,
+    hx: float,
+    hy: float,
+    rim_travel: float,
+    wheel_radius: float,
+    grid: CableGrid,
+    h: float,
+    velocity: FloatArray,
+) -> None:
+    """Remove from ``velocity`` (2,) [m/s] the horizontal travel a wheel whose contact is at
+    (``wx``, ``wy``), heading (``hx``, ``hy``), loses to the cables of its grid cell in a step of
+    ``rim_travel`` [m] over ``h`` [s] (:func:`apply_cable_deficits`)."""
+    gx = math.floor((wx - grid.origin_x) / grid.cell)
+    gy = math.floor((wy - grid.origin_y) / grid.cell)
+    if gx < 0 or gy < 0 or gx >= grid.nx or gy >= grid.ny:
+        return
+    c = gy * grid.nx + gx
+    for k in range(grid.starts[c], grid.starts[c + 1]):
+        m = grid.items[k]
+        rel_x = wx - grid.cable_x[m]
+        rel_y = wy - grid.cable_y[m]
+        axis_x = grid.axis_x[m]
+        axis_y = grid.axis_y[m]
+        if abs(rel_x * axis_x + rel_y * axis_y) > grid.half_length[m]:
+            continue
+        normal_x, normal_y = -axis_y, axis_x
+        offset = rel_x * normal_x + rel_y * normal_y
+        across = rim_travel * (hx * normal_x + hy * normal_y)
+        lost = across - cable_advance_scalar(offset, across, wheel_radius, grid.radius[m])
+        velocity[0] -= lost * normal_x / h
+        velocity[1] -= lost * normal_y / h
+
+
 @kernel
 def apply_cable_deficits(
     contact: FloatArray,
@@ -280,26 +317,56 @@ def apply_cable_deficits(
         hx = math.cos(pose[i, 2])
         hy = math.sin(pose[i, 2])
         for w in range(2):
-            wx = contact[i, w, 0]
-            wy = contact[i, w, 1]
-            gx = math.floor((wx - grid.origin_x) / grid.cell)
-            gy = math.floor((wy - grid.origin_y) / grid.cell)
-            if gx < 0 or gy < 0 or gx >= grid.nx or gy >= grid.ny:
-                continue
-            c = gy * grid.nx + gx
-            for k in range(grid.starts[c], grid.starts[c + 1]):
-                m = grid.items[k]
-                rel_x = wx - grid.cable_x[m]
-                rel_y = wy - grid.cable_y[m]
-                axis_x = grid.axis_x[m]
-                axis_y = grid.axis_y[m]
-                if abs(rel_x * axis_x + rel_y * axis_y) > grid.half_length[m]:
-                    continue
-                normal_x, normal_y = -axis_y, axis_x
-                offset = rel_x * normal_x + rel_y * normal_y
-                across = rim_speed[i, w] * h * (hx * normal_x + hy * normal_y)
-                lost = across - cable_advance_scalar(
-                    offset, across, wheel_radius[i, w], grid.radius[m]
-                )
-                ground_v[i, w, 0] -= lost * normal_x / h
-                ground_v[i, w, 1] -= lost * normal_y / h
+            _wheel_deficit(
+                contact[i, w, 0],
+                contact[i, w, 1],
+                hx,
+                hy,
+                rim_speed[i, w] * h,
+                wheel_radius[i, w],
+                grid,
+                h,
+                ground_v[i, w],
+            )
+
+
+@kernel
+def skid_cable_losses(
+    robots: NDArray[np.intp],
+    sides: NDArray[np.intp],
+    points: FloatArray,
+    pose: FloatArray,
+    rim_speed: FloatArray,
+    h: float,
+    wheel_radius: FloatArray,
+    grid: CableGrid,
+    loss: FloatArray,
+) -> None:
+    """Each skid-steer wheel's loss of no-slip speed along the heading to cables [m/s], into
+    ``loss`` (K, 4): the travel its own contact (``points`` (K, 4, 2) [m], world frame) loses
+    crossing a cable, as a differential-drive wheel's (:func:`apply_cable_deficits`), at its
+    side's rim speed. The two wheels of a side share their drive, so a wheel that climbs a
+    cable turns as fast as the other and advances less: its contact is slower than its side's
+    (:func:`odomgym.sim.world.skid_contacts` takes the difference). The loss across the heading
+    is not kept: those contacts take a speed along the heading alone."""
+    velocity = np.zeros(2)
+    for k in range(robots.shape[0]):
+        i = robots[k]
+        hx = math.cos(pose[i, 2])
+        hy = math.sin(pose[i, 2])
+        for j in range(4):
+            w = sides[k, j]
+            velocity[0] = 0.0
+            velocity[1] = 0.0
+            _wheel_deficit(
+                points[k, j, 0],
+                points[k, j, 1],
+                hx,
+                hy,
+                rim_speed[i, w] * h,
+                wheel_radius[i, w],
+                grid,
+                h,
+                velocity,
+            )
+            loss[k, j] = -(velocity[0] * hx + velocity[1] * hy)

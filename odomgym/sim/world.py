@@ -74,7 +74,7 @@ from odomgym.effects import EFFECTS, WorldHook
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.robot import RobotSpec
-from odomgym.sim.cables import CableGrid, apply_cable_deficits
+from odomgym.sim.cables import CableGrid, apply_cable_deficits, skid_cable_losses
 from odomgym.sim.chipmunk_link import SpaceExchange
 
 __all__ = ["GRAVITY", "World"]
@@ -216,7 +216,7 @@ class World:
         # Each skid-steer wheel's contact in the world and the friction under it (_set_friction).
         self._skid_points = np.zeros((len(self._skid), 4, 2))
         self._skid_friction = np.zeros((len(self._skid), 4))
-        self._check_skid_floor(self.floor)
+        self._skid_loss = np.zeros((len(self._skid), 4))  # to cables [m/s]
         for spec in specs:
             for name, values in spec.effects if spec.is_skid_steer else ():
                 effect = EFFECTS.get(name)
@@ -691,6 +691,7 @@ class World:
             self._skid_tyre,
             self._skid_friction,
             self._ground_v,
+            self._skid_loss,
             self.pose,
             self.velocity,
             h,
@@ -731,6 +732,9 @@ class World:
             self._ground_v,
         )
         if self._has_bumps:
+            # A skid-steer robot's side velocity stays its rims': its wheels meet the cables
+            # one by one (skid_cable_losses), not at the side's mid-point.
+            sides = self._ground_v[self._skid] if self._skid.size else None
             apply_cable_deficits(
                 self._contact,
                 self.pose,
@@ -740,6 +744,20 @@ class World:
                 self._bump_grid,
                 self._ground_v,
             )
+            if sides is not None:
+                self._ground_v[self._skid] = sides
+                skid_contact_points(self._skid, self._skid_xy, self.pose, self._skid_points)
+                skid_cable_losses(
+                    self._skid,
+                    self._skid_side,
+                    self._skid_points,
+                    self.pose,
+                    self._rim_speed,
+                    h,
+                    self.true_radius,
+                    self._bump_grid,
+                    self._skid_loss,
+                )
         if self._has_patches:
             self._set_friction(
                 self.floor.friction_at(self._contact[:, :, 0], self._contact[:, :, 1])
@@ -784,18 +802,6 @@ class World:
             else:
                 self._skid_friction = mu[self._skid[:, None], self._skid_side]
 
-    def _check_skid_floor(self, floor: FloorSpec) -> None:
-        """Cables act on a side's one ground body, at the side's mid-point; under a skid-steer
-        robot's two wheels per side that would be wrong, so it is refused. Friction patches
-        are read under each wheel (:meth:`_set_friction`)."""
-        if any(spec.is_skid_steer for spec in self.robots) and floor.bumps:
-            raise SpecError(
-                f"floor {floor.name!r} has cables, which are not modelled under skid-steer "
-                "robots yet (each side's two wheels share one contact velocity); use a floor "
-                "without them (smooth, slippery, rough, concrete, or one with friction patches)",
-                field="floor",
-            )
-
     def lay_floor(self, floor: FloorSpec) -> None:
         """Change the cables, patches and friction under the robots between steps, as an
         experimenter lays cables before a return leg (Borenstein 1995, §6.1). The roughness
@@ -804,9 +810,9 @@ class World:
             raise ValueError(
                 f"lay_floor keeps the roughness ({self.floor.roughness}), got {floor.roughness}"
             )
-        self._check_skid_floor(floor)
         self.floor = floor
         self._has_bumps = bool(floor.bumps)
+        self._skid_loss[:] = 0.0  # no cable under a wheel until the floor's are met
         max_step = float(np.max(self.max_rate * self.true_radius.max(axis=1))) * self._h
         self._bump_grid = CableGrid.build(floor, float(self.true_radius.max()), 1.5 * max_step)
         self._has_patches = bool(floor.patches)
@@ -842,6 +848,7 @@ def skid_contacts(
     tyre: FloatArray,
     friction: FloatArray,
     ground_v: FloatArray,
+    loss: FloatArray,
     pose: FloatArray,
     velocity: FloatArray,
     h: float,
@@ -873,8 +880,10 @@ def skid_contacts(
     [1/rad]; ``sides`` (K, 4) each contact's side; ``friction`` (K, 4) μ under each contact
     (its wheel's own point of the floor: a friction patch may lie under one wheel of a side);
     ``ground_v`` (N, 2, 2) [m/s] the sides' no-slip velocities of the step (their speeds are
-    used); ``pose`` (N, 3) as the World reports it after the step; ``velocity`` (N, 3) [m/s,
-    m/s, rad/s], read and written."""
+    used); ``loss`` (K, 4) [m/s] what each contact's no-slip speed falls short of its side's
+    (a wheel climbing a cable: :func:`odomgym.sim.cables.skid_cable_losses`; zeros
+    otherwise); ``pose`` (N, 3) as the World reports it after the step; ``velocity`` (N, 3)
+    [m/s, m/s, rad/s], read and written."""
     for k in range(robots.shape[0]):
         i = robots[k]
         vx, vy, w = velocity[i, 0], velocity[i, 1], velocity[i, 2]
@@ -903,7 +912,7 @@ def skid_contacts(
         for j in range(4):
             rx = contacts[k, j, 0]
             ry = contacts[k, j, 1]
-            gx = speed_l if sides[k, j] == 0 else speed_r
+            gx = (speed_l if sides[k, j] == 0 else speed_r) - loss[k, j]
             sx = u - w * ry - gx
             sy = v + w * rx
             limit = h * friction[k, j] * loads[k, j]  # h·μ·N [N·s]
