@@ -113,7 +113,11 @@ def register(commands: Commands) -> None:
         type=count,
         help="robots per unit of work, recorded as each finishes (default: up to 16)",
     )
-    parser.set_defaults(handler=run)
+    # What `bench skid` compares an option of `bench calibrators` against: its default as
+    # this parser has it, so the refusal cannot drift from the options.
+    parser.set_defaults(
+        handler=run, calibrator_defaults={name: parser.get_default(name) for name in SKID_REFUSES}
+    )
 
 
 SKID_REFUSES = (
@@ -151,10 +155,10 @@ def run_skid(args: argparse.Namespace) -> int:
         write_skid_outputs,
     )
 
-    parser_defaults = {"backend": "local", "budget": [16], "resume": False}
+    defaults = getattr(args, "calibrator_defaults", {})
     for name in SKID_REFUSES:
         value = getattr(args, name, None)
-        if value is not None and value != parser_defaults.get(name):
+        if value is not None and value != defaults.get(name):
             option = "--" + name.replace("_", "-")
             raise SpecError(f"{option} is an option of `odomgym bench calibrators`", field=option)
     report = Reporter.of(args)
