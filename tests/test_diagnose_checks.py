@@ -16,6 +16,7 @@ from independent_robot import IndependentRobot, generate, rich_protocol
 from odomgym.diagnose import gate as gate_module
 from odomgym.diagnose import openloop as openloop_module
 from odomgym.diagnose.config import DiagnoseConfig
+from odomgym.diagnose.fit import at_nothing
 from odomgym.diagnose.gate import (
     MAX_INFLATION,
     GateResult,
@@ -33,7 +34,6 @@ from odomgym.diagnose.openloop import (
 )
 from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
 from odomgym.diagnose.report import _rule as report_rule
-from odomgym.diagnose.rounds import at_nothing
 from odomgym.diagnose.workflow import split_runs
 from odomgym.effects import EFFECTS
 from odomgym.errors import SpecError

@@ -21,7 +21,7 @@ fit never saw, in mm and degrees; a module of their own keeps that line visible.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +42,7 @@ from odomgym.diagnose.fit import (
     FitJob,
     Joint,
     Model,
+    at_nothing,
     cross_validate,
     evaluate,
     fit_candidate,
@@ -68,7 +69,6 @@ __all__ = [
     "ROUND_GOES_ON",
     "DiagnosisState",
     "RoundContext",
-    "at_nothing",
     "run_round",
 ]
 
@@ -221,19 +221,6 @@ def _score_candidates(
             )
         )
     return candidates, fits
-
-
-def at_nothing(effect: Effect, values: Mapping[str, float]) -> bool:
-    """Whether fitted ``values`` leave ``effect`` absent: each within a millionth of its
-    parameter's scale of its absent value counts as there (a bounded least squares starts
-    strictly inside its bounds, so an excess fitted to its bound of 0 comes back as 1e-12)."""
-    snapped = {
-        p.name: p.absent
-        if abs(float(values.get(p.name, p.absent)) - p.absent) <= 1e-6 * p.scale
-        else float(values[p.name])
-        for p in effect.parameters
-    }
-    return effect.is_absent(snapped)
 
 
 def _signature_holds(ctx: RoundContext, spec: RobotSpec, fit: CandidateFit) -> bool:
