@@ -802,10 +802,11 @@ def _profiled_start(
     effect: Effect,
     partners: Sequence[Effect],
 ) -> RobotSpec:
-    """Where ``effect``'s fit starts: ``spec``, or the best by generalised least squares of
-    the starts of its :meth:`~odomgym.effects.Effect.profile`, each with the profiled parameter
-    held while the effect's others and its ``partners`` are fitted. A start that does not lower
-    the cost of ``spec`` is not taken, so an effect the data do not carry starts as before."""
+    """Where ``effect``'s second fit starts (:func:`fit_candidate`, a first fit back at
+    nothing): ``spec``, or the best by generalised least squares of the starts of its
+    :meth:`~odomgym.effects.Effect.profile`, each with the profiled parameter held while the
+    effect's others and its ``partners`` are fitted. A start that does not lower the cost of
+    ``spec`` is not taken (``spec`` itself comes back, and no second fit is made)."""
     profile = effect.profile(effect.read(spec), data.wheel_travel(spec))
     if profile is None:
         return spec

@@ -206,7 +206,10 @@ class SkidTrack(Effect):
         elastic-tyred robot of tests/independent_skid.py: ``wheelbase`` named first in 2 of 10);
         from a small excess it walks up the ridge to λ½ beyond every logged turn with E_b
         halved (ε 2.2, λ½ 36, E_b 0.5 on the same robot), where the shape rule refuses it.
-        Held fixed, λ½ leaves the excess and E_b nearly linear in the residuals."""
+        Held fixed, λ½ leaves the excess and E_b nearly linear in the residuals. ``diagnose``
+        takes it only for a fit that came back at nothing (:func:`odomgym.diagnose.fit.
+        fit_candidate`): from every fit's start it walked fits that had left the bound up the
+        same ridge (the blind matrix's ``skid_track`` cells, 13 of 20 → 1)."""
         widest = turning_lambda(travel)
         if not widest > 0.0:
             return None

@@ -213,7 +213,8 @@ class Effect:
         interval are ``travel``: the name of a parameter held at each start while the others
         are fitted (a profile over it), and the starts (``values`` with the held parameter,
         and any other the start needs, changed); or None to start at ``values`` alone.
-        None unless an effect says otherwise: ``skid_track``'s fall with the turn radius."""
+        None unless an effect says otherwise: ``skid_track``'s fall with the turn radius.
+        ``diagnose`` profiles only a fit that came back at nothing."""
         return None
 
     @classmethod
