@@ -442,3 +442,23 @@ def test_a_candidate_fitted_back_to_nothing_beside_its_partners_is_at_nothing() 
     assert not at_nothing(skid, {"excess": 1e-4, "lambda_half": 2.0})
     assert not at_nothing(EFFECTS["wheelbase"], {"e_b": 1.0 + 1e-6})
     assert at_nothing(EFFECTS["wheelbase"], {"e_b": 1.0 + 1e-12})
+
+
+def test_the_report_says_why_a_held_base_was_kept() -> None:
+    """A wheelbase kept only because the skid track extending it stayed: the report's
+    decisions say so, and do not claim it lowered the error (one story)."""
+    from odomgym.diagnose.report import _decision_lines
+
+    held = gate_module.GateStep(
+        "effect", "wheelbase", True, 5.0, 6.0, 11.0, 2.0, "held by skid_track"
+    )
+    passed = gate_module.GateStep("effect", "skid_track", True, 9.0, 5.0, -20.0, 2.0, "lower")
+    d = SimpleNamespace(
+        final_test={}, gate=[passed, held], named_effects=["skid_track"], noise_checks={},
+        noise_model=[], refused_terms=[],
+    )  # fmt: skip
+    lines = "\n".join(_decision_lines(d))  # type: ignore[arg-type]
+    wheelbase = next(line for line in lines.splitlines() if "**wheelbase**" in line)
+    assert "skid_track extends it" in wheelbase and "did not lower" in wheelbase
+    assert "it lowered the error" not in wheelbase
+    assert "**skid_track** (effect): it lowered the error" in lines

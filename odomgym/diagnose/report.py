@@ -155,6 +155,16 @@ def _decision_lines(d: Diagnosis) -> list[str]:
     lines = ["## What was kept, and why", ""]
     confirmed = {n: c["confirmed"] for c in final.get("confirmations", []) for n in c["names"]}
     for step in (step for step in d.gate if step.kept):
+        if step.rule.startswith("held by "):
+            # Kept under the principle of marginality (gate module docstring): it did not
+            # pass its own rule, and the sentence must not say it did.
+            lines.append(
+                f"- kept **{step.name}** ({step.kind}): {step.rule.removeprefix('held by ')} "
+                "extends it and stayed, so it stays too (the principle of marginality), "
+                "though alone it did not lower the error of predicting left-out folds open "
+                "loop enough"
+            )
+            continue
         lines.append(
             f"- kept **{step.name}** ({step.kind}): it lowered the error of predicting "
             f"left-out folds open loop (rule: {_rule(step)})"
