@@ -731,6 +731,10 @@ class World:
             self._contact,
             self._ground_v,
         )
+        if self._skid.size and (self._has_bumps or self._has_patches):
+            # The skid-steer wheels' contact points, once per substep for the cables and the
+            # patches both (the pose does not move in between).
+            skid_contact_points(self._skid, self._skid_xy, self.pose, self._skid_points)
         if self._has_bumps:
             # A skid-steer robot's side velocity stays its rims': its wheels meet the cables
             # one by one (skid_cable_losses), not at the side's mid-point.
@@ -746,7 +750,6 @@ class World:
             )
             if sides is not None:
                 self._ground_v[self._skid] = sides
-                skid_contact_points(self._skid, self._skid_xy, self.pose, self._skid_points)
                 skid_cable_losses(
                     self._skid,
                     self._skid_side,
@@ -760,7 +763,8 @@ class World:
                 )
         if self._has_patches:
             self._set_friction(
-                self.floor.friction_at(self._contact[:, :, 0], self._contact[:, :, 1])
+                self.floor.friction_at(self._contact[:, :, 0], self._contact[:, :, 1]),
+                points_current=True,
             )
 
     def _standard_normal(self) -> FloatArray:
@@ -781,12 +785,14 @@ class World:
                 self._noise_block[i] = stream.standard_normal((_NOISE_BLOCK, 2))
             self._noise_next = 0
 
-    def _set_friction(self, mu: FloatArray) -> None:
+    def _set_friction(self, mu: FloatArray, points_current: bool = False) -> None:
         """Each wheel joint's friction limit μ·N [N] from the friction coefficient under each
         side (N, 2): the pivot joint's largest force, isotropic (a friction circle). A skid-steer
         robot has no joints: skid_contacts reads μ under each of its four wheels from
         ``_skid_friction``, the floor's at each wheel's contact where friction patches lie (a
-        patch may hold one wheel of a side), else its side's."""
+        patch may hold one wheel of a side), else its side's. ``points_current``: the
+        skid-steer contact points were already computed at this pose (by
+        :meth:`_floor_effects`) and are not computed again."""
         changed = np.argwhere(mu != self._friction)
         for i, side in changed:
             joint = self._joints[2 * i + side]
@@ -795,7 +801,8 @@ class World:
         self._friction = mu
         if self._skid.size:
             if self._has_patches:
-                skid_contact_points(self._skid, self._skid_xy, self.pose, self._skid_points)
+                if not points_current:
+                    skid_contact_points(self._skid, self._skid_xy, self.pose, self._skid_points)
                 self._skid_friction = self.floor.friction_at(
                     self._skid_points[:, :, 0], self._skid_points[:, :, 1]
                 )
