@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from odomgym.effects.discovered import TERMS, Discovered, DiscoveredTerms, Term
 from odomgym.effects.geometry import DistanceScale, Wheelbase, WheelDiameterRatio
-from odomgym.effects.motion import SkidTrack, TurnSkid, WheelToe
+from odomgym.effects.motion import SkidSpeed, SkidTrack, TurnSkid, WheelToe
 from odomgym.effects.noise import FloorBumps, FloorRoughness
 from odomgym.effects.registry import (
     EFFECTS,
@@ -56,6 +56,7 @@ __all__ = [
     "GroundTruthOffset",
     "Parameter",
     "ReplayArrays",
+    "SkidSpeed",
     "SkidTrack",
     "SpecView",
     "Term",
@@ -83,13 +84,19 @@ for _effect in (
     FloorRoughness(),
     GroundTruthOffset(),
     SkidTrack(),  # last: the differential-drive catalogue keeps its order (and its matrix seeds)
+    SkidSpeed(),  # skid-steer robots only (Effect.skid_steer_only)
     Discovered(),
 ):
     if _effect.name not in EFFECTS:
         register_effect(_effect)
 
 
-def catalogue() -> list[str]:
+def catalogue(skid_steer: bool = False) -> list[str]:
     """The catalogue's effect names, in registry order: every registered effect except the
-    grammar's ``discovered`` (which only the discovery pass fills)."""
-    return [name for name in EFFECTS if name != "discovered"]
+    grammar's ``discovered`` (which only the discovery pass fills), and except those of
+    skid-steer robots alone (:attr:`Effect.skid_steer_only`) unless ``skid_steer``."""
+    return [
+        name
+        for name, effect in EFFECTS.items()
+        if name != "discovered" and (skid_steer or not effect.skid_steer_only)
+    ]
