@@ -336,7 +336,7 @@ class SkidSpeed(Effect):
     name = "skid_speed"
     parameters = (
         Parameter(
-            "gain", "s²/m", 0.0, 0.0, 2.0, 0.01, "apparent track narrowing per m/s² of lateral accel."
+            "gain", "s²/m", 0.0, 0.0, 2.0, 0.01, "track narrowing per m/s² of lateral accel."
         ),
     )
     summary = (
