@@ -29,6 +29,11 @@ whose scrub comes from contact physics, blind, with ``odomgym diagnose``'s defau
   ``tests/test_skid_diagnose.py``'s protocol and diagnosed against its own preset: the right
   answer is ``skid_track`` named first, and held-out runs predicted better open loop than by a
   constant apparent track (E_b alone, fitted to the same runs).
+* **world scout2, speed small/large** — the same robot carrying ``skid_speed`` (g = 0.05 and
+  0.2 s²/m: the apparent track narrowing with the lateral acceleration, on top of the tyres'):
+  the right answer is ``skid_track`` first (the tyres'), ``skid_speed`` kept, and held-out runs
+  predicted better than by a constant track. The three other World trials are its false-alarm
+  check: gain-free, ``skid_speed`` should not be kept there.
 
 Each trial has its own seed (its cell and number). Results go to ``--results`` as JSON lines; a
 rerun skips the trials already there.
@@ -49,7 +54,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_matrix import read_results, run_pending
 
-CELLS = ("coulomb-geometric", "coulomb-apparent", "world-scout2", "elastic-geometric")
+CELLS = (
+    "coulomb-geometric",
+    "coulomb-apparent",
+    "world-scout2",
+    "elastic-geometric",
+    "world-scout2-speed-small",
+    "world-scout2-speed-large",
+)
+SPEED_GAINS = {"world-scout2-speed-small": 0.05, "world-scout2-speed-large": 0.2}
+"""``skid_speed`` gains [s²/m] the World's scout2 carries on top of its tyres in the speed
+cells: at 0.5 m/s on the protocol's 0.5 m circles (v·ω = 0.5 m/s²) the robot turns 2.5 % and
+10 % more than the gain-free robot at the same rim speeds."""
 
 
 def run_trial(job: tuple[str, int]) -> dict[str, Any]:
@@ -95,12 +111,16 @@ def run_trial(job: tuple[str, int]) -> dict[str, Any]:
     else:
         from test_skid_diagnose import WheelbaseAlone, skid_protocol
 
+        from odomgym.effects import EFFECTS
         from odomgym.robot import PRESETS
 
         nominal = PRESETS["scout2"]
-        runs = skid_protocol(nominal, seed=seed)
+        carried = nominal
+        if cell in SPEED_GAINS:
+            truth = {"skid_speed_gain": SPEED_GAINS[cell]}
+            carried = EFFECTS["skid_speed"].write(nominal, {"gain": SPEED_GAINS[cell]})
+        runs = skid_protocol(carried, seed=seed)
         baseline = WheelbaseAlone()
-        truth = {}
     generated = time.perf_counter() - start
     start = time.perf_counter()
     result = diagnose(runs, nominal, DiagnoseConfig(seed=seed, jobs=1), baseline=baseline)
@@ -113,6 +133,12 @@ def run_trial(job: tuple[str, int]) -> dict[str, Any]:
         success = named[:1] == ["wheelbase"] and "skid_track" not in named
     elif cell == "coulomb-apparent":
         success = not named and not result.discovered
+    elif cell in SPEED_GAINS:
+        success = (
+            named[:1] == ["skid_track"]
+            and "skid_speed" in result.systematic_effects
+            and rms.get("diagnosed", np.inf) < rms.get("baseline", np.inf)
+        )
     else:
         success = named[:1] == ["skid_track"] and rms.get("diagnosed", np.inf) < rms.get(
             "baseline", np.inf
@@ -144,6 +170,8 @@ def table(rows: list[dict[str, Any]]) -> str:
         "coulomb-apparent": "nothing kept (false alarm otherwise)",
         "world-scout2": "`skid_track` first, beats a constant track",
         "elastic-geometric": "`skid_track` first, beats a constant track",
+        "world-scout2-speed-small": "`skid_track` first, `skid_speed` kept, beats a constant track",
+        "world-scout2-speed-large": "`skid_track` first, `skid_speed` kept, beats a constant track",
     }
     for cell in CELLS:
         group = [r for r in rows if r["key"][0] == cell]
@@ -181,6 +209,7 @@ def main() -> None:
     jobs = [(c, t) for c in CELLS[:2] for t in range(args.trials)]
     jobs += [(CELLS[2], t) for t in range(args.world_trials)]
     jobs += [(CELLS[3], t) for t in range(args.elastic_trials)]
+    jobs += [(cell, t) for cell in SPEED_GAINS for t in range(args.world_trials)]
     done = read_results(args.results)
     if not args.table_only:
         run_pending(jobs, run_trial, args.results, args.jobs, done)
