@@ -75,11 +75,11 @@ validation entries.
 
 ## Arguments
 
-``floors`` (benchmark floor names to draw each episode's floor from; default all three,
-``concrete`` and ``rough`` for a skid-steer robot), ``budget`` (runs, or a list to draw from per
-episode; default 16), ``shaping`` (the coefficient c, default 0.1), ``population``
-(:class:`~odomgym.lab.population.Population`, the ranges of the hidden errors and the robot they
-apply to: ``Population(base="scout2")`` makes the sessions skid-steer, below), ``sensor``
+``floors`` (benchmark floor names to draw each episode's floor from; default all three, ``concrete``
+and ``rough`` for a skid-steer robot, which takes ``cables`` when asked), ``budget`` (runs, or a
+list to draw from per episode; default 16), ``shaping`` (the coefficient c, default 0.1),
+``population`` (:class:`~odomgym.lab.population.Population`, the ranges of the hidden errors and the
+robot they apply to: ``Population(base="scout2")`` makes the sessions skid-steer, below), ``sensor``
 (:class:`~odomgym.lab.experiment.SensorAccuracy` of each measured pose), ``observe``
 (``"trajectory"`` or ``"end_pose"``: what the estimator sees; version 2 of the observation,
 :data:`~odomgym.selfcal.session.OBSERVATION_VERSION`), ``render_mode``.
@@ -105,8 +105,11 @@ starts from the apparent track of rigid contacts in a slow spin, E_b = 1 + (a/b)
 nominal geometry (:func:`~odomgym.selfcal.episodes.skid_prior`): the estimator's prior is
 centred there and kept within its range of it, the observed E_b is relative to it, and the
 validation's "before" is the robot with it, so stopping at once still gives r_T = 0. Its runs
-are simulated on a plain floor with the bench floor's roughness (a skid-steer robot carries no
-catalogue effect and drives over no cables yet), so ``cables`` is refused. The estimator's
+are simulated with the bench floor's roughness as the floor's own (a skid-steer robot carries
+no catalogue effect): on ``cables`` over the same cable field the differential-drive sessions
+cross, each wheel meeting the cables at its own contact, else on a plain floor. ``cables`` is
+not among a skid-steer robot's default floors (the default episodes stay as they were); name
+it in ``floors`` or in the reset options. The estimator's
 model is still a constant apparent track: it cannot follow a track that moves with the turn
 radius (docs/skid-steer.md). The shipped policy was trained on LabMates.
 
@@ -119,6 +122,8 @@ radius (docs/skid-steer.md). The shipped policy was trained on LabMates.
   version stays v0.
 * v1, compatible addition (issue 43): ``population`` may have a skid-steer base (above);
   differential-drive sessions are unchanged (bit-identical, ``tests/test_selfcal_skid.py``).
+  Later, a compatible addition: skid-steer sessions on ``cables`` (refused before), not among
+  their default floors.
 * v1 (odomgym 0.2.0): the estimator became the trajectory filter
   (:class:`~odomgym.selfcal.estimators.TrajectoryEstimator`, ``observe="trajectory"``,
   observation version 2). Spaces, dynamics and episode end are unchanged, but the
@@ -141,7 +146,7 @@ from numpy.typing import NDArray
 from odomgym.envs.base import DrawsLazily, describe_action
 from odomgym.errors import SpecError
 from odomgym.lab.experiment import SensorAccuracy
-from odomgym.lab.population import BENCH_FLOORS, Population, check_bench_floor
+from odomgym.lab.population import Population, check_bench_floor
 from odomgym.lab.simulated import experiment_route
 from odomgym.odometry.runs import to_frame
 from odomgym.robot import PRESETS
@@ -230,7 +235,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
         self.observe = check_observe(observe)
         self.population = population or Population()
         skid = PRESETS[self.population.base].is_skid_steer
-        if floors is None:  # every bench floor the robot can drive
+        if floors is None:  # the bench floors (skid-steer: cables only when asked, see below)
             floors = ("concrete", "rough") if skid else ("concrete", "rough", "cables")
         if isinstance(floors, str):
             floors = (floors,)
@@ -241,13 +246,6 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
             raise SpecError("floors needs at least one floor", field="floors")
         for name in self.floors:
             check_bench_floor(name)
-            if skid and BENCH_FLOORS[name].cables:
-                raise SpecError(
-                    f"floors: {name!r} has cables, which skid-steer robots (population.base "
-                    f"{self.population.base!r}) cannot drive over yet (docs/skid-steer.md); "
-                    "choose from concrete and rough",
-                    field="floors",
-                )
         self.budgets = _budgets(budget)
         if (
             isinstance(shaping, bool)

@@ -12,6 +12,7 @@ terms (the env's docs, "Rewards"). Units: metres, radians; rewards in nats.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Mapping, Sequence
@@ -92,14 +93,20 @@ def _shared_floor() -> FloorSpec:
     return cable_field(rng, roughness=0.0, name="selfcal-shared")
 
 
+@functools.cache
 def _skid_floor(name: str) -> FloorSpec:
     """The floor of a skid-steer robot's session on benchmark floor ``name`` (``""``: the
-    noiseless validation floor): the shared floor's friction and the bench floor's roughness
-    as the floor's own — a skid-steer session's robot carries no catalogue effect and its
-    sessions are not run on cables yet (docs/skid-steer.md), so its runs are simulated on a
-    plain floor of their own."""
+    noiseless validation floor), with the bench floor's roughness as the floor's own (a
+    skid-steer session's robot carries no catalogue effect): on a cables floor, the shared
+    floor's cable field itself (the same layout its differential-drive sessions cross; each
+    wheel meets the cables at its own contact, :func:`odomgym.sim.cables.skid_cable_losses`),
+    else a plain floor of the shared floor's friction. Skid-steer sessions on one bench floor
+    share one physics batch; they are not batched with the differential-drive sessions, whose
+    floor carries no roughness."""
     shared = _shared_floor()
     roughness = BENCH_FLOORS[name].roughness if name else 0.0
+    if name and BENCH_FLOORS[name].cables:
+        return dataclasses.replace(shared, roughness=roughness, name=f"selfcal-skid-{name}")
     return FloorSpec(friction=shared.friction, roughness=roughness, name=f"selfcal-skid-{name}")
 
 
@@ -175,12 +182,6 @@ def new_episode(
     check_bench_floor(floor_name)
     budget = opts.get("budget", budgets[int(rng.integers(len(budgets)))])
     robot = population.sample(robot_rng, "selfcal-robot")
-    if robot.is_skid_steer and BENCH_FLOORS[floor_name].cables:
-        raise SpecError(
-            f"floor {floor_name!r} has cables, on which skid-steer sessions are not run yet "
-            "(docs/skid-steer.md); choose concrete or rough",
-            field="floor",
-        )
     # The session reads only the nominal parameters.
     if robot.is_skid_steer:
         session = SelfCalSession(
@@ -271,8 +272,9 @@ def step_episodes(
     runs left). Returns ``(observation, reward, terminated, info)`` per episode.
     """
     # One physics batch per floor: the shared floor for differential-drive sessions (all of
-    # them, validations included), and for skid-steer sessions a plain floor per bench floor
-    # plus a noiseless one for their validations (_skid_floor).
+    # them, validations included), and for skid-steer sessions a floor per bench floor (the
+    # shared cable field on cables floors, else plain) plus a noiseless one for their
+    # validations (_skid_floor).
     batches: dict[str, RunRequests] = {}
     experiment_slot: dict[int, tuple[str, int]] = {}
     validation_slots: dict[int, tuple[str, list[int]]] = {}
