@@ -60,6 +60,7 @@ def test_a_skid_steer_session_calibrates_its_apparent_track() -> None:
     assert 1.55 < info["estimated_errors"][1] / true_e_b < 1.75
 
 
+@pytest.mark.slow
 def test_a_skid_steer_session_on_cables_crosses_them_and_calibrates() -> None:
     """``cables`` is a skid-steer robot's floor when asked (not among its defaults): its runs
     cross the shared cable field, each wheel at its own contact (a square from a start inside
