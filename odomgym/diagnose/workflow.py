@@ -475,8 +475,8 @@ def _class_candidates(names: tuple[str, ...], robot: RobotSpec, asked: bool) -> 
     alone = [n for n in names if EFFECTS[n].skid_steer_only]
     if alone and asked:
         raise SpecError(
-            f"{', '.join(alone)}: an effect of skid-steer robots alone, and "
-            f"{robot.name or 'the robot'} is a differential-drive robot (no axle_spacing)",
+            f"candidates: {', '.join(alone)} is an effect of skid-steer robots alone, and robot "
+            f"{robot.name!r} is differential-drive (no axle_spacing)",
             field="candidates",
         )
     return tuple(n for n in names if n not in alone)

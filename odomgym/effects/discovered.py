@@ -30,7 +30,8 @@ The catalogue's systematic effects are points of this grammar (``docs/diagnose.m
 ``left_one`` = ``right_one`` (both wheels' travel × 1), E_d the differential travel × 1
 (``right_one`` = −``left_one``), E_b ``yaw_one`` (every turn scaled), ``turn_skid``
 ``yaw_lateral`` (negative), ``wheel_toe`` ``crab_one``, ``skid_track`` near ``yaw_spin``
-(negative; exactly its shape at λ½ = 1 to first order). Backlash (a hysteresis) and the
+(negative; exactly its shape at λ½ = 1 to first order), and on skid-steer robots ``skid_speed``
+``yaw_lateral`` (positive). Backlash (a hysteresis) and the
 tracked-point offset (a measurement) are not; the noise effects are not systematic.
 
 The ``discovered`` effect carries any set of terms as parameters named ``CHANNEL_MODULATOR``
