@@ -151,17 +151,16 @@ class SkidSpeedNotNamed(AssertionError):
     "the skid track although the open-loop errors want it, and it is not named",
 )
 def test_scout2_carrying_a_speed_dependent_track_gets_skid_speed() -> None:
-    """The apparent track as a function of the turn radius *and* the speed: the World's Scout
-    2.0 carrying ``skid_speed`` g = 0.2 s²/m on top of its tyres (at 0.5 m and 0.5 m/s it
-    turns ~8 % more than at 0.2 m/s for the same rim speeds), driven through the protocol's
-    circles at two speeds, against its own preset. The data want the effect: fitted by open-
-    loop least squares beside the skid track and E_b (the replay's, Nelder–Mead), the error
-    falls from 0.0623 at g = 0 to 0.0384 at g = 0.1 (0.0473 at 0.2; the replay reads ω₀ over
-    the apparent track E_b·b and the World's hook over b, so the replay's gain is about E_b
-    times the World's, times the ~0.84 the tyres pass on). The diagnosis should keep it; on
-    this seed it names ``skid_track`` and ``wheelbase`` only (held out 70.9 mm, against 44–58 mm where
-    the effect is absent or named), and on the skid matrix's speed rows it names it in none
-    of 6 trials."""
+    """The apparent track as a function of the turn radius *and* the speed: the World's Scout 2.0
+    carrying ``skid_speed`` g = 0.2 s²/m on top of its tyres (at 0.5 m and 0.5 m/s it turns ~8 %
+    more than at 0.2 m/s for the same rim speeds), driven through the protocol's circles at two
+    speeds, against its own preset. The data want the effect: fitted by open-loop least squares
+    beside the skid track and E_b (the replay's, Nelder–Mead), the error falls from 0.0623 at g
+    = 0 to 0.0384 at g = 0.1 (0.0473 at 0.2; the replay reads ω₀ over the apparent track E_b·b
+    and the World's hook over b, so the replay's gain is about E_b times the World's, times the
+    ~0.84 the tyres pass on). The diagnosis should keep it; on this seed it names ``skid_track``
+    and ``wheelbase`` only (held out 70.9 mm, against 44–58 mm where the effect is absent or
+    named), and on the skid matrix's speed rows it names it in none of 6 trials."""
     robot = PRESETS["scout2"]
     runs = skid_protocol(EFFECTS["skid_speed"].write(robot, {"gain": 0.2}), seed=505001)
     result = diagnose(runs, robot, DiagnoseConfig(seed=505001), baseline=WheelbaseAlone())
