@@ -371,7 +371,6 @@ class Discovery:
             term = term_by_name(name)
             value = float(self.fit.values[name])
             err = float(self.fit.stderr.get(name, math.nan))
-            same = [k for k, v in CATALOGUE_POINTS.items() if v.startswith(name + " ")]
             out.append(
                 {
                     "term": name,
@@ -381,10 +380,22 @@ class Discovery:
                     "stderr": err,
                     "unit": term.unit,
                     "sentence": term_sentence(name, self.fit.values, self.fit.stderr),
-                    "catalogue_equivalent": same[0] if same else None,
+                    "catalogue_equivalent": catalogue_equivalent(name, value),
                 }
             )
         return out
+
+
+def catalogue_equivalent(term: str, value: float, skid_steer: bool = False) -> str | None:
+    """The catalogue effect grammar term ``term`` at coefficient ``value`` is a point of
+    (:data:`~odomgym.effects.discovered.CATALOGUE_POINTS`), or None. A positive
+    ``yaw_lateral`` (over-turning in fast turns) is ``skid_speed`` on a skid-steer robot
+    (``skid_steer``), the only class it is proposed for; otherwise the table's first entry
+    (``yaw_lateral``: ``turn_skid``, whatever the sign, as before ``skid_speed`` existed)."""
+    if term == "yaw_lateral" and value > 0.0 and skid_steer:
+        return "skid_speed"
+    same = [k for k, v in CATALOGUE_POINTS.items() if v.startswith(term + " ")]
+    return same[0] if same else None
 
 
 def term_sentence(name: str, values: Mapping[str, float], stderr: Mapping[str, float]) -> str:

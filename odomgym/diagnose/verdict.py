@@ -36,6 +36,7 @@ from odomgym.diagnose.config import DiagnoseConfig
 from odomgym.diagnose.confounds import Confound
 from odomgym.diagnose.discover import (
     Discovery,
+    catalogue_equivalent,
     channel_evidence,
     library_jacobian,
     structure_test,
@@ -233,6 +234,9 @@ def _kept_terms(
         entry["discovery_coefficient"] = entry["coefficient"]
         entry["coefficient"] = values[t]
         entry["stderr"] = errors[t]
+        entry["catalogue_equivalent"] = catalogue_equivalent(
+            t, values[t], chosen.spec.is_skid_steer
+        )
         entry["operating"] = size.operating
         entry["change_at_operating"] = size.change
         entry["sentence"] = (
