@@ -436,7 +436,8 @@ def _rounds(
     signature is in the data: a systematic effect named before it would stand in for its
     realised jumps. With the sessions' frames fitted, the catalogue effects they make
     unidentifiable (:data:`~odomgym.diagnose.nuisances.SESSION_EFFECTS`) are no candidates."""
-    names = _class_candidates(cfg.candidates or tuple(EFFECTS), robot, bool(cfg.candidates))
+    # diagnose() has refused a class's effect asked for by name: here only the default drops
+    names = _class_candidates(cfg.candidates or tuple(EFFECTS), robot, asked=False)
     if rec.frames_on:
         names = tuple(n for n in names if n not in SESSION_EFFECTS)
     model = fit_noise_model(rec.data, Model(robot, SensorNoise(*cfg.initial_sensor)))

@@ -27,7 +27,15 @@ from numpy.typing import NDArray
 from odomgym._jit import kernel
 from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
 
-__all__ = ["SkidSpeed", "SkidTrack", "TurnSkid", "WheelToe", "track_factor", "turning_lambda"]
+__all__ = [
+    "SkidSpeed",
+    "SkidTrack",
+    "TurnSkid",
+    "WheelToe",
+    "lateral_acceleration",
+    "track_factor",
+    "turning_lambda",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -107,8 +115,16 @@ class TurnSkid(Effect):
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "body":
             gain = values["gain"]
-            accel = np.abs(arrays.ds * arrays.dtheta) / np.square(arrays.dt)
+            accel = lateral_acceleration(arrays)
             arrays.dtheta = arrays.dtheta * np.maximum(0.0, 1.0 - gain * accel)
+
+
+def lateral_acceleration(arrays: ReplayArrays) -> FloatArray:
+    """|v·ω₀| per interval [m/s²]: the speed ds/Δt times the incoming yaw rate dθ/Δt of the
+    ``"body"`` stage, what ``turn_skid`` and ``skid_speed`` scale the yaw by (the World's hooks
+    read the same from the rim speeds)."""
+    accel: FloatArray = np.abs(arrays.ds * arrays.dtheta) / np.square(arrays.dt)
+    return accel
 
 
 class _SkidHook(WorldHook):
@@ -355,5 +371,4 @@ class SkidSpeed(Effect):
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "body":
-            accel = np.abs(arrays.ds * arrays.dtheta) / np.square(arrays.dt)
-            arrays.dtheta = arrays.dtheta * (1.0 + values["gain"] * accel)
+            arrays.dtheta = arrays.dtheta * (1.0 + values["gain"] * lateral_acceleration(arrays))
