@@ -777,13 +777,6 @@ def fit_candidate(
             again = evaluate(data, again_spec, again_sensor, whitened=False).loglik
             if float(np.sum(again)) > float(np.sum(loglik)):
                 current_spec, current_sensor, loglik = again_spec, again_sensor, again
-    if partners and not at_nothing(effect, effect.read(current_spec)):
-        travel = data.wheel_travel(spec)
-        if not effect.shape_identified(effect.read(current_spec), travel):
-            within = _fit_within_shape(data, start, sensor, effect, partners, nuisance, travel)
-            if within is not None:
-                current_spec, current_sensor = within
-                loglik = evaluate(data, current_spec, current_sensor, whitened=False).loglik
     fit = CandidateFit(effect.name, current_spec, current_sensor, effect.read(current_spec), loglik)
     _linearise(data, fit, effect)
     return fit
@@ -828,44 +821,6 @@ def _profiled_start(
         if cost < best_cost:
             best, best_cost = fitted, cost
     return best
-
-
-def _fit_within_shape(
-    data: Dataset,
-    start: RobotSpec,
-    sensor: SensorNoise,
-    effect: Effect,
-    partners: Sequence[Effect],
-    nuisance: Effect | None,
-    travel: Sequence[FloatArray],
-) -> tuple[RobotSpec, SensorNoise] | None:
-    """``effect`` fitted again where the data spans its shape, after a fit that left it
-    (:meth:`~odomgym.effects.Effect.shape_identified` false): from the best start of its
-    profile (:func:`_profiled_start`), freely if that fit stays where the data spans the shape,
-    else with the profiled parameter held at the profile's best value. None if the effect has
-    no profile or no start of it lowers the cost of ``start``.
-
-    Why: such a fit is refused by the rounds whatever its likelihood, so it cannot speak for
-    the effect; the best fit the data can identify can. A skid track whose excess and E_b
-    trade along a ridge walked to λ½ 22.7, beyond every logged turn (|λ| ≤ 6), and was refused,
-    while ``wheelbase`` alone took the spins' track and was named first, with a spurious term
-    for the arcs (the blind matrix's ``skid_track`` cells: named first in 12 of 20)."""
-    profile = effect.profile(effect.read(start), travel)
-    if profile is None:
-        return None
-    profiled = _profiled_start(data, start, sensor, effect, partners)
-    if profiled is start:
-        return None
-    free_spec, free_sensor = _fit_mean(data, profiled, sensor, effect, partners, nuisance)
-    free = effect.read(free_spec)
-    if effect.shape_identified(free, travel) and not at_nothing(effect, free):
-        return free_spec, free_sensor
-    held = _Holding([effect, *partners], f"{effect.name}.{profile[0]}")
-    spec, noise = profiled, sensor
-    for _ in range(2):
-        spec = _least_squares_step(data, spec, noise, held)
-        spec, noise, _ = fit_noise(data, spec, noise, nuisance)
-    return spec, noise
 
 
 PROFILE_NFEV = 10
