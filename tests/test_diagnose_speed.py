@@ -15,7 +15,13 @@ import pytest
 from alien_robot import generate_session
 
 from odomgym.diagnose.discover import library_jacobian
-from odomgym.diagnose.fit import Dataset, _fixed_replays, evaluate, fit_noise
+from odomgym.diagnose.fit import (
+    Dataset,
+    _fixed_replays,
+    close_thread_pool,
+    evaluate,
+    fit_noise,
+)
 from odomgym.diagnose.likelihood import (
     SensorNoise,
     _filter,
@@ -459,10 +465,14 @@ def test_compiled_residual_is_numpys_where_and_mod_bit_for_bit() -> None:
         assert run_residual(run, rep, mask).tobytes() == want.tobytes()
 
 
-def test_noise_fit_evaluations_with_stacked_process_noise_are_per_run_bit_for_bit() -> None:
+def test_noise_fit_evaluations_with_stacked_process_noise_are_per_run_bit_for_bit(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """A noise fit evaluates kept replays with the process noise of all runs computed in one
-    call on their stacked travel; each run's variance, jumps and log-likelihood are the bytes
-    of the run alone, with roughness, bumps and both (two effects adding variances)."""
+    call on their stacked travel, and the filter of a thread's share of the runs in one
+    compiled call (``likelihood.filter_runs``); each run's variance, jumps and log-likelihood
+    are the bytes of the run alone, with roughness, bumps and both (two effects adding
+    variances), on one thread, two and three (shares of one run each)."""
     runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:3]
     data = Dataset.of(runs, 0.25)
     rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
@@ -476,12 +486,16 @@ def test_noise_fit_evaluations_with_stacked_process_noise_are_per_run_bit_for_bi
             alone = _model_arrays(rep, spec, SENSOR)
             assert variance.tobytes() == alone[3].tobytes()
             assert jumps.tobytes() == alone[4].tobytes() and _bits(size) == _bits(alone[5])
-        kept = evaluate(data, spec, SENSOR, whitened=False, fixed=fixed)
         plain = [
             run_scores(run, rep, spec, SENSOR, mask, whitened=False)[0]
             for run, rep, mask in zip(data.runs, fixed.replays, data.masks, strict=True)
         ]
-        assert kept.loglik.tobytes() == np.array(plain).tobytes()
+        for threads in ("1", "2", "3"):
+            monkeypatch.setenv("ODOMGYM_THREADS", threads)
+            close_thread_pool()
+            kept = evaluate(data, spec, SENSOR, whitened=False, fixed=fixed)
+            assert kept.loglik.tobytes() == np.array(plain).tobytes(), threads
+    close_thread_pool()
 
 
 def test_filter_updates_every_measured_sample_once_whatever_the_gaps() -> None:

@@ -47,8 +47,11 @@ from scipy.optimize import least_squares, minimize
 from odomgym.diagnose.likelihood import (
     FilterInputs,
     SensorNoise,
+    StackedInputs,
     filter_inputs,
+    filter_runs,
     measurement_mask,
+    process_noise,
     run_scores,
     stacked_process_noise,
 )
@@ -181,20 +184,28 @@ class FixedReplays:
         travel: every run's wheel travel stacked (ΣN, 2) [m], for
             :func:`~odomgym.diagnose.likelihood.stacked_process_noise`.
         rows: run j's rows of ``travel``.
+        stacked: the replays, their filter inputs and the masks stacked, for
+            :func:`~odomgym.diagnose.likelihood.filter_runs`.
     """
 
     replays: list[Replay]
     inputs: list[FilterInputs]
     travel: FloatArray
     rows: list[slice]
+    stacked: StackedInputs
 
     @classmethod
-    def of(cls, replays: list[Replay], inputs: list[FilterInputs]) -> FixedReplays:
+    def of(
+        cls,
+        replays: list[Replay],
+        inputs: list[FilterInputs],
+        masks: list[NDArray[np.bool_]],
+    ) -> FixedReplays:
         ends = np.cumsum([len(r.travel) for r in replays]).tolist()
         starts = [0, *ends[:-1]]
         rows = [slice(a, b) for a, b in zip(starts, ends, strict=True)]
         travel = np.concatenate([r.travel for r in replays]) if replays else np.zeros((0, 2))
-        return cls(replays, inputs, travel, rows)
+        return cls(replays, inputs, travel, rows, StackedInputs.of(replays, inputs, masks))
 
 
 def evaluate(
@@ -211,7 +222,11 @@ def evaluate(
 
     The runs are independent, and the filter (compiled, releasing the GIL) takes most of the
     time, so they are shared among :func:`_threads` threads; each run's numbers do not depend on
-    which thread computed them, and they are gathered in run order (bit-identical results)."""
+    which thread computed them, and they are gathered in run order (bit-identical results).
+    With ``fixed`` and without ``whitened`` each thread's share of the runs is one compiled
+    call (:func:`~odomgym.diagnose.likelihood.filter_runs`, the same bytes)."""
+    if fixed is not None and not whitened:
+        return _evaluate_fixed(data, spec, sensor, fixed)
     noise = stacked_process_noise(spec, fixed.travel, fixed.rows) if fixed is not None else []
 
     def one(j: int) -> tuple[Replay, float, FloatArray | None]:
@@ -241,6 +256,24 @@ def evaluate(
     logs = np.array([r[1] for r in results], dtype=float)
     white = [r[2] for r in results if r[2] is not None]
     return Evaluation(logs, white, [r[0] for r in results])
+
+
+def _evaluate_fixed(
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, fixed: FixedReplays
+) -> Evaluation:
+    """:func:`evaluate` of kept replays without whitened innovations: the process noise of all
+    runs in one call, then one compiled filter call per thread's contiguous share."""
+    noise = process_noise(spec, fixed.travel)
+    n = len(data)
+    logs = np.empty(n)
+    pool = _pool()
+    if pool is None or n < 2:
+        filter_runs(fixed.stacked, noise, sensor, range(n), logs)
+    else:
+        count = _pool_size()
+        shares = [range(n * k // count, n * (k + 1) // count) for k in range(count)]
+        list(pool.map(lambda share: filter_runs(fixed.stacked, noise, sensor, share, logs), shares))
+    return Evaluation(logs, [], fixed.replays)
 
 
 def _threads() -> int:
@@ -393,7 +426,8 @@ def _fixed_replays(
         return None
     reps = [data.replay(j, spec) for j in range(len(data))]
     triples = zip(data.runs, reps, data.masks, strict=True)
-    return FixedReplays.of(reps, [filter_inputs(run, rep, mask) for run, rep, mask in triples])
+    inputs = [filter_inputs(run, rep, mask) for run, rep, mask in triples]
+    return FixedReplays.of(reps, inputs, data.masks)
 
 
 def _fit_noise(

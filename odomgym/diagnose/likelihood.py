@@ -41,7 +41,9 @@ __all__ = [
     "RunLikelihood",
     "RunPredictive",
     "SensorNoise",
+    "StackedInputs",
     "filter_inputs",
+    "filter_runs",
     "measurement_mask",
     "run_likelihood",
     "run_predictive",
@@ -243,6 +245,130 @@ def stacked_process_noise(
     same bytes (``tests/test_diagnose_speed.py``)."""
     variance, jumps, size = process_noise(spec, travel)
     return [(variance[r], jumps[r], size) for r in rows]
+
+
+def filter_runs(
+    stacked: StackedInputs,
+    noise: ProcessNoise,
+    sensor: SensorNoise,
+    runs: range,
+    out: FloatArray,
+) -> None:
+    """The log-likelihood of each run of ``runs`` (indices into ``stacked``) into ``out[j]``,
+    from every run's inputs stacked (:class:`StackedInputs`) and their process noise stacked
+    alike (:func:`process_noise` of the stacked travel): what :func:`run_scores` gives each
+    run without ``whitened``, the same bytes (``tests/test_diagnose_speed.py``).
+
+    Why: a noise fit evaluates the same replays hundreds of times; one compiled call for a
+    share of the runs leaves out the Python around each run's filter (~20 µs a run: the
+    arrays gathered, the call dispatched), a third of a short run's evaluation. It releases
+    the GIL, so two shares run on two threads."""
+    variance, jumps, size = noise
+    sigma = np.array([sensor.position, sensor.position, sensor.heading])
+    _filter_runs(
+        stacked.pose,
+        stacked.tracked,
+        stacked.gains,
+        variance,
+        jumps,
+        size,
+        sigma,
+        stacked.residual,
+        stacked.mask,
+        stacked.samples,
+        stacked.intervals,
+        runs.start,
+        runs.stop,
+        out,
+    )
+
+
+@kernel
+def _filter_runs(
+    pose: FloatArray,
+    tracked: FloatArray,
+    gains: FloatArray,
+    variance: FloatArray,
+    jumps: FloatArray,
+    size: float,
+    sigma: FloatArray,
+    residual: FloatArray,
+    mask: NDArray[np.bool_],
+    samples: NDArray[np.int64],
+    intervals: NDArray[np.int64],
+    first: int,
+    last: int,
+    out: FloatArray,
+) -> None:
+    """:func:`_filter` on runs ``first`` … ``last − 1`` of stacked arrays (run j's samples are
+    rows ``samples[j]:samples[j + 1]``, its intervals ``intervals[j]:intervals[j + 1]``), the
+    log-likelihood of each into ``out[j]`` (:func:`filter_runs`)."""
+    no_expected = np.zeros((0, 2))
+    for j in range(first, last):
+        a = samples[j]
+        b = samples[j + 1]
+        c = intervals[j]
+        d = intervals[j + 1]
+        loglik, _, _ = _filter(
+            pose[a:b],
+            tracked[a:b],
+            gains[c:d],
+            variance[c:d],
+            jumps[c:d],
+            size,
+            sigma,
+            residual[a:b],
+            mask[a:b],
+            False,
+            True,
+            no_expected,
+        )
+        out[j] = loglik
+
+
+@dataclass(frozen=True)
+class StackedInputs:
+    """Every run's replay and :class:`FilterInputs` stacked, for :func:`filter_runs`.
+
+    Attributes:
+        pose, tracked: the replays' axle and tracked poses (ΣT, 3).
+        gains: the wheel gains (Σn, 2, 3).
+        residual: the residuals (ΣT, 3).
+        mask: the measured components (ΣT, 3).
+        samples: run j's samples are rows ``samples[j]:samples[j + 1]`` (J + 1,).
+        intervals: run j's intervals are rows ``intervals[j]:intervals[j + 1]`` (J + 1,).
+    """
+
+    pose: FloatArray
+    tracked: FloatArray
+    gains: FloatArray
+    residual: FloatArray
+    mask: NDArray[np.bool_]
+    samples: NDArray[np.int64]
+    intervals: NDArray[np.int64]
+
+    @classmethod
+    def of(
+        cls,
+        replays: list[Replay],
+        inputs: list[FilterInputs],
+        masks: list[NDArray[np.bool_]],
+    ) -> StackedInputs:
+        def offsets(lengths: list[int]) -> NDArray[np.int64]:
+            return np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+
+        def stack(parts: list[FloatArray], shape: tuple[int, ...]) -> FloatArray:
+            return np.ascontiguousarray(np.concatenate(parts)) if parts else np.zeros(shape)
+
+        return cls(
+            stack([r.pose for r in replays], (0, 3)),
+            stack([r.tracked for r in replays], (0, 3)),
+            stack([i.gains for i in inputs], (0, 2, 3)),
+            stack([i.residual for i in inputs], (0, 3)),
+            np.ascontiguousarray(np.concatenate(masks)) if masks else np.zeros((0, 3), bool),
+            offsets([len(r.pose) for r in replays]),
+            offsets([len(i.gains) for i in inputs]),
+        )
 
 
 @dataclass(frozen=True)
