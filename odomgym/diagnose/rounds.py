@@ -153,7 +153,7 @@ def _score_candidates(
     base: Model,
     nuisance: Effect | None,
     where: tuple[int, str],
-) -> tuple[list[Candidate], list[CandidateFit]]:
+) -> tuple[list[Candidate], list[CandidateFit], dict[str, str]]:
     """Fit, cross-validate and test ``effects`` against the current model ``base`` (in round and
     stage ``where``): each candidate's likelihood-ratio test (Bonferroni over ``effects``), its
     held-out gain, and the max-T sign-flip test over runs.
