@@ -73,7 +73,6 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from odomgym import interrupt
-from odomgym._alloc import keep_freed_memory
 from odomgym.diagnose import confirm, keep
 from odomgym.diagnose.config import DiagnoseConfig
 from odomgym.diagnose.confounds import Confound
@@ -281,15 +280,9 @@ def diagnose(
     product of long vectors sums its parts in an order that depends on the thread count. The
     limit is the process's while the diagnosis runs (other threads of the caller's get it too)
     and the caller's setting is back afterwards; threadpoolctl changes it only from the thread
-    that controls OpenBLAS, so call :func:`diagnose` from the main thread for these bytes.
-
-    On glibc the process keeps the memory the diagnosis frees for reuse, rather than handing
-    it back and faulting it in again at the next likelihood evaluation
-    (:func:`odomgym._alloc.keep_freed_memory`; ``ODOMGYM_MALLOPT=0`` leaves the allocator
-    alone). That setting stays after the call; it changes no number."""
+    that controls OpenBLAS, so call :func:`diagnose` from the main thread for these bytes."""
     cfg = config if config is not None else DiagnoseConfig()
     _class_candidates(cfg.candidates or (), robot, asked=True)  # before any work
-    keep_freed_memory()
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(runs, robot, cfg, baseline, progress, journal)
 
