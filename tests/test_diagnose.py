@@ -31,6 +31,7 @@ from odomgym.cli import main
 from odomgym.data.native import write_native
 from odomgym.diagnose import workflow
 from odomgym.diagnose.generate import NOMINAL_ROBOT, hidden_effect_trial
+from odomgym.diagnose.report import report_json
 from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
 from odomgym.effects import catalogue
 from odomgym.robot import RobotSpec, load_robot
@@ -87,7 +88,6 @@ def test_independent_generator_effect_is_named_and_fitted(
 
 
 @pytest.mark.slow
-@pytest.mark.slow
 def test_bumps_refused_by_their_signature_are_not_fitted_and_nothing_else_changes(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -114,11 +114,21 @@ def test_bumps_refused_by_their_signature_are_not_fitted_and_nothing_else_change
     assert screened.verdict == fitted.verdict
     same = json.dumps(screened.parameters, sort_keys=True)  # NaN-aware: 'NaN' == 'NaN'
     assert same == json.dumps(fitted.parameters, sort_keys=True)
-    p_before = {(c.round, c.name): c.p_family for c in fitted.candidates}
+    before = {(c.round, c.name): c for c in fitted.candidates}
     for c in screened.candidates:
-        assert c.p_family == p_before[(c.round, c.name)], c
+        was = before[(c.round, c.name)]
+        assert (c.p_family, c.cv_gain, c.significant) == (
+            was.p_family,
+            was.cv_gain,
+            was.significant,
+        )
+    assert [(r.verdict, r.winner, r.tied) for r in screened.rounds] == [
+        (r.verdict, r.winner, r.tied) for r in fitted.rounds
+    ]
+    assert json.loads(report_json(screened))["rounds"][0]["screened"] == screened.rounds[0].screened
 
 
+@pytest.mark.slow
 def test_independent_generator_without_effect_is_none() -> None:
     result = diagnose(_independent({}, seed=12), MODEL, DiagnoseConfig(seed=2))
     assert result.verdict == "none"

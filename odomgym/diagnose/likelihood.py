@@ -264,6 +264,19 @@ def filter_runs(
     arrays gathered, the call dispatched), a third of a short run's evaluation. It releases
     the GIL, so two shares run on two threads."""
     variance, jumps, size = noise
+    # The kernel checks no bounds: a share outside the runs would read and write past them.
+    total = len(stacked.samples) - 1
+    if (
+        runs.step != 1
+        or not 0 <= runs.start <= runs.stop <= total
+        or len(out) != total
+        or len(variance) != len(stacked.gains)
+    ):
+        raise ValueError(
+            f"filter_runs: a contiguous share of the {total} stacked runs, one out entry a "
+            f"run and their stacked noise, got runs {runs}, {len(out)} out entries and "
+            f"{len(variance)} noise rows for {len(stacked.gains)} intervals"
+        )
     sigma = np.array([sensor.position, sensor.position, sensor.heading])
     _filter_runs(
         stacked.pose,

@@ -174,6 +174,7 @@ class Diagnosis:
                     "separating_experiment": r.separating,
                     "consistency_p": r.consistency_p,
                     "structure": r.structure,
+                    "screened": r.screened,
                 }
                 for r in self.rounds
             ],

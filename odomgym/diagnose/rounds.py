@@ -58,6 +58,7 @@ from odomgym.diagnose.stats import (
     likelihood_ratio,
     lr_test,
     max_t_test,
+    sign_matrix,
     whiteness_p,
 )
 from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
@@ -76,6 +77,11 @@ __all__ = [
 NUISANCE = "floor_roughness"
 """The noise effect fitted as a nuisance beside every systematic candidate
 (:mod:`odomgym.diagnose.workflow`, step 4)."""
+
+
+MAX_T_DRAWS = 4000
+"""Random sign patterns of a round's max-T test (:func:`odomgym.diagnose.stats.max_t_test`)
+beyond its exact enumeration."""
 
 
 DISCOVERED = "discovered"
@@ -169,6 +175,9 @@ def _score_candidates(
     screened = _screened(ctx, spec, effects, stage)
     effects = [e for e in effects if e.name not in screened]
     if not effects:
+        # The sign patterns max_t_test would have drawn (their number depends on the runs
+        # alone): the later rounds' tests get the random stream they always got.
+        sign_matrix(len(data), ctx.rng, MAX_T_DRAWS)
         return [], [], screened
     current = CandidateFit(
         "(current model)", spec, sensor, {}, evaluate(data, spec, sensor, whitened=False).loglik
@@ -195,7 +204,7 @@ def _score_candidates(
     run_fit_jobs(todo, cfg.jobs, finished)
     fits = [done[k] for k in range(len(jobs))]
     improvements = np.array([f.cv_loglik - base_cv for f in fits])
-    t, p_flip = max_t_test(improvements, ctx.rng)
+    t, p_flip = max_t_test(improvements, ctx.rng, MAX_T_DRAWS)
     # The logs' wheel travel per interval, for the effects whose shape the data must span.
     travel = data.wheel_travel(spec)
     candidates = []
