@@ -21,7 +21,7 @@ fit never saw, in mm and degrees; a module of their own keeps that line visible.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,7 +51,7 @@ from odomgym.diagnose.fit import (
     run_fit_jobs,
 )
 from odomgym.diagnose.journal import FitJournal
-from odomgym.diagnose.physical import check_bumps
+from odomgym.diagnose.physical import BumpCheck, check_bumps
 from odomgym.diagnose.results import Candidate, Round
 from odomgym.diagnose.stats import (
     combine_bonferroni,
@@ -252,22 +252,14 @@ def _screened(
     values); none otherwise.
 
     Why: a wheel-jump fit is the dearest of a round (a mixture filter over 0–3 jumps per
-    interval, six parameters by finite differences): on the 14 June OptiOdom sessions the
-    ``floor_bumps`` candidate took 98 of 236 s, fitted in every round and refused by this
-    signature in every one. The noise stage still fits it (no signature is asked there)."""
+    interval, six parameters by finite differences; on the 14 June OptiOdom sessions, whose
+    logs do show the signature, the ``floor_bumps`` candidate took 98 of 236 s). On logs
+    without it the fit was wasted. The noise stage still fits it (no signature is asked
+    there)."""
     noisy = [e for e in effects if e.noise]
     if stage != "mean" or not noisy:
         return {}
-    cfg = ctx.config
-    check = check_bumps(
-        ctx.data.runs,
-        spec,
-        {},
-        max_obstacle=cfg.max_obstacle,
-        max_rate=cfg.max_bump_rate,
-        interval=cfg.checkpoint_interval,
-        alpha=0.5 * cfg.alpha,
-    )
+    check = _bump_check(ctx, spec, {})
     if check.signature:
         return {}
     return {e.name: check.reason for e in noisy}
@@ -280,19 +272,24 @@ def _signature_holds(ctx: RoundContext, spec: RobotSpec, fit: CandidateFit) -> b
     physical.check_bumps` on the current model (``spec``). Without it the effect waits for the
     noise stage, as every noise effect does."""
     effect = EFFECTS[fit.name]
-    cfg = ctx.config
     if effect.wheel_jumps(fit.values, np.ones((1, 2)), float(spec.true_wheelbase)) is None:
         return False
-    check = check_bumps(
+    return _bump_check(ctx, spec, fit.values).accepted
+
+
+def _bump_check(ctx: RoundContext, spec: RobotSpec, values: Mapping[str, float]) -> BumpCheck:
+    """:func:`odomgym.diagnose.physical.check_bumps` of wheel-jump ``values`` on the fit runs
+    replayed through ``spec``, with the settings' bounds and half the significance level."""
+    cfg = ctx.config
+    return check_bumps(
         ctx.data.runs,
         spec,
-        fit.values,
+        values,
         max_obstacle=cfg.max_obstacle,
         max_rate=cfg.max_bump_rate,
         interval=cfg.checkpoint_interval,
         alpha=0.5 * cfg.alpha,
     )
-    return check.accepted
 
 
 def _refit_named(
