@@ -363,7 +363,7 @@ class SkidSpeed(Effect):
         "circles of one radius at two or more speeds, tight ones (the factor moves with v·ω); "
         "absent in spins and on straight paths"
     )
-    skid_steer_only = True
+    skid_steer_only = False
 
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         # _scale_rotation's factor max(0, 1 − κ·|v·ω|) at κ = −g is 1 + g·|v·ω| (never clipped)
