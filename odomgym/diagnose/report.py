@@ -464,8 +464,7 @@ def _where_lines(d: Diagnosis) -> list[str]:
         )
     lines += ["", "Which experiments reveal which effect:", ""]
     for name, effect in EFFECTS.items():
-        if d.model.is_skid_steer or not effect.skid_steer_only:
-            lines.append(f"- `{name}`: {effect.reveals}")
+        lines.append(f"- `{name}`: {effect.reveals}")
     return lines
 
 
