@@ -62,6 +62,9 @@ def _independent(effects: dict[str, dict[str, float]], seed: int) -> list:  # ty
         ("backlash", {"angle": 0.015}, "explained"),
         ("gt_sensor_offset", {"dx": 0.006, "dy": -0.004}, "confounded"),
         ("turn_skid", {"gain": 0.2}, "explained"),
+        # Its mirror image, a robot over-turning in fast turns: offered to a differential-drive
+        # robot too (issue 43: no candidate filtered by the robot's class).
+        ("skid_speed", {"gain": 0.2}, "explained"),
     ],
 )
 def test_independent_generator_effect_is_named_and_fitted(
