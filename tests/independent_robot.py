@@ -25,7 +25,8 @@ How it differs from odomgym's simulator on purpose:
 The effects are applied to the continuous motion as ``docs/effects.md`` specifies them:
 true diameters from ``e_d``/``e_s``, wheelbase ``e_b``, backlash as a play operator between the
 motor (which the encoder counts) and the wheel, ``turn_skid`` scaling the yaw rate by
-max(0, 1 − κ|v·ω₀|), ``skid_speed`` by 1 + g|v·ω₀| (ω₀ the no-slip yaw rate), ``skid_track`` dividing it by 1 + ε/(1 + (λ/λ½)²) with λ the step's ratio
+max(0, 1 − κ|v·ω₀|), ``skid_speed`` by 1 + g|v·ω₀| (ω₀ the no-slip yaw rate),
+``skid_track`` dividing it by 1 + ε/(1 + (λ/λ½)²) with λ the step's ratio
 of the wheels' summed to differenced ground travel, ``wheel_toe`` turning the velocity to
 heading + τ, ``floor_roughness`` as per-wheel ground-travel noise of variance k²|d| per
 integration step, ``floor_bumps`` as a Poisson process per wheel (rate per metre of the wheel's
