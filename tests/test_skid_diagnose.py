@@ -170,6 +170,7 @@ def test_scout2_carrying_a_speed_dependent_track_gets_skid_speed() -> None:
         raise SkidSpeedNotNamed(result.named_effects)
 
 
+@pytest.mark.slow
 def test_no_candidate_is_filtered_by_the_robot_class() -> None:
     """Issue 43: one catalogue for both classes (what the blind matrix and every diagnosis
     range over), ``skid_speed`` and ``skid_track`` in it; a differential-drive robot's rounds
