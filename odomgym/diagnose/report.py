@@ -464,7 +464,8 @@ def _where_lines(d: Diagnosis) -> list[str]:
         )
     lines += ["", "Which experiments reveal which effect:", ""]
     for name, effect in EFFECTS.items():
-        lines.append(f"- `{name}`: {effect.reveals}")
+        if d.model.is_skid_steer or not effect.skid_steer_only:
+            lines.append(f"- `{name}`: {effect.reveals}")
     return lines
 
 
