@@ -46,7 +46,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.data.gaps import measured_end
-from odomgym.diagnose.fit import build_within, gauss_newton_step, strata, systematic_vector
+from odomgym.diagnose.fit import (
+    JACOBIAN_STEP,
+    build_within,
+    gauss_newton_step,
+    strata,
+    systematic_vector,
+)
 from odomgym.diagnose.likelihood import measurement_mask
 from odomgym.diagnose.nuisances import (
     SessionNuisance,
@@ -424,7 +430,7 @@ class _Problem:
         ]
 
     def jacobian(
-        self, x: FloatArray, base: list[FloatArray], step: float = 1e-2
+        self, x: FloatArray, base: list[FloatArray], step: float = JACOBIAN_STEP
     ) -> tuple[list[FloatArray], list[FloatArray]]:
         """Forward differences: per run, d r_j / d robot (n_j, P) and d r_j / d its session's
         nuisances (n_j, k). A session's nuisances touch only its runs, so each nuisance
