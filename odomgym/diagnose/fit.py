@@ -760,15 +760,16 @@ class CandidateFit:
 
 
 def _least_squares_step(
-    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect
+    data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect, hold: bool = False
 ) -> RobotSpec:
-    """``effect``'s parameters fitted by generalised least squares at fixed noise."""
-    return _least_squares(data, spec, sensor, effect)[0]
+    """``effect``'s parameters fitted by generalised least squares at fixed noise; ``hold``:
+    with the wheel-noise gains held (:func:`_least_squares`)."""
+    return _least_squares(data, spec, sensor, effect, hold=hold)[0]
 
 
 def _held_gains(data: Dataset, spec: RobotSpec) -> list[FloatArray]:
     """Each run's wheel-noise gains under ``spec`` (:func:`~odomgym.diagnose.likelihood.
-    replay_gains`): how the wheels' noise reaches the pose, which a least-squares fit holds
+    replay_gains`): how the wheels' noise reaches the pose, which a least-squares fit may hold
     (:func:`_least_squares`)."""
     return [replay_gains(data.replay(j, spec)) for j in range(len(data))]
 
@@ -779,24 +780,20 @@ def _least_squares(
     sensor: SensorNoise,
     effect: Effect,
     max_nfev: int = 30,
-    gains: Sequence[FloatArray] | None = None,
+    hold: bool = False,
 ) -> tuple[RobotSpec, float]:
     """:func:`_least_squares_step` with at most ``max_nfev`` steps, and the fitted spec's
     cost: the sum of its squared whitened innovations. The Jacobian is
     :func:`forward_jacobian`'s, at steps of :data:`JACOBIAN_STEP` of each parameter's scale.
 
-    The noise is fixed, and so is the way it reaches the pose: the wheel-noise gains
-    (:func:`_held_gains`) are those of ``spec``, or ``gains`` if given, for every step of the
-    fit. Why: the heading gain of a wheel's noise is 1/(E_b·b), so a fit that let it move
-    with E_b could shrink its whitened innovations by widening their covariance, a cost the
-    sum of squares does not see (the likelihood's log-determinant does). Fitted beside a skid
-    track, whose excess keeps the spins' mean, E_b then went to its bound: a differential-drive
-    robot carrying a skid track of ε 0.6 %, λ½ 2 (the blind matrix's World cell at 14 ×) was
-    fitted at E_b 0.50, ε 1.01, λ½ 61, 14 % *less* whitened cost than the truth and 30 nats
-    less likelihood; refused by the shape rule, `backlash` was named first. With the gains
-    held: E_b 1.0001, ε 0.0052, λ½ 1.99."""
+    The noise parameters are fixed; how the noise reaches the pose moves with the replay (the
+    wheel-noise gains: the heading's is 1/(E_b·b), the position's turns with the replayed
+    heading), unless ``hold``, which keeps the gains of ``spec`` for every step of the fit.
+    Neither sum of squares is the likelihood, which also weighs the covariance's
+    log-determinant; :func:`fit_candidate` keeps whichever fit the likelihood prefers where
+    they part (beside a partner)."""
     u0, low, high, build = systematic_vector(spec, effect)
-    held = _held_gains(data, spec) if gains is None else gains
+    held = _held_gains(data, spec) if hold else None
     last: list[tuple[bytes, FloatArray]] = []
 
     def residual(u: FloatArray) -> FloatArray:
@@ -875,6 +872,25 @@ def fit_candidate(
         start = _least_squares_step(data, spec, sensor, _joint(partners))
     current_spec, current_sensor = _fit_mean(data, start, sensor, effect, partners, nuisance)
     loglik = evaluate(data, current_spec, current_sensor, whitened=False).loglik
+    if partners:
+        # Fitted again with the wheel-noise gains held (_least_squares), the better likelihood
+        # kept. Why: beside its partner an effect can keep the mean while the partner moves the
+        # noise. A skid track's excess keeps the spins' mean while E_b, whose 1/(E_b·b) carries
+        # the wheels' noise to the heading, widens the covariance, which the sum of squares
+        # rewards and the likelihood does not: a differential-drive robot carrying a skid track
+        # of ε 0.6 %, λ½ 2 (the blind matrix's World cell at 14 ×) was fitted at E_b 0.50,
+        # ε 1.01, λ½ 61, 14 % less sum of squares than the truth and 30 nats less likelihood,
+        # refused by the shape rule, and `backlash` was named first. With the gains held:
+        # E_b 1.0001, ε 0.0052, λ½ 1.99. Held for every effect instead, they cost likelihood
+        # elsewhere: the first round's E_d on one real OptiOdom session (230620202042) had a
+        # likelihood ratio of 54.7 fitted with moving gains and 9.3 with held ones, and the 14
+        # June sessions lost E_d (held-out heading 0.70° → 1.12°).
+        held_spec, held_sensor = _fit_mean(
+            data, start, sensor, effect, partners, nuisance, hold=True
+        )
+        held = evaluate(data, held_spec, held_sensor, whitened=False).loglik
+        if float(np.sum(held)) > float(np.sum(loglik)):
+            current_spec, current_sensor, loglik = held_spec, held_sensor, held
     if partners and at_nothing(effect, effect.read(current_spec)):
         # Back at nothing: from its bound the excess of a skid track has no gradient in its
         # half-point, and the fit may not have left it (the elastic-tyred robot: `wheelbase`
@@ -923,12 +939,11 @@ def _profiled_start(
         return spec
     held, starts = profile
     free = _Holding([effect, *partners], f"{effect.name}.{held}")
-    gains = _held_gains(data, spec)  # every start's cost against the same noise (_least_squares)
-    whitened = whitened_stack(data, spec, sensor, gains)[0]
+    whitened = whitened_stack(data, spec, sensor)[0]
     best, best_cost = spec, float(whitened @ whitened)
     for values in starts:
         fitted, cost = _least_squares(
-            data, effect.write(spec, values), sensor, free, max_nfev=PROFILE_NFEV, gains=gains
+            data, effect.write(spec, values), sensor, free, max_nfev=PROFILE_NFEV
         )
         if cost < best_cost:
             best, best_cost = fitted, cost
@@ -948,12 +963,14 @@ def _fit_mean(
     effect: Effect,
     partners: Sequence[Effect],
     nuisance: Effect | None,
+    hold: bool = False,
 ) -> tuple[RobotSpec, SensorNoise]:
     """A systematic candidate's fit (:func:`fit_candidate`): ``effect`` and its ``partners`` by
-    least squares at the noise, then the noise, twice."""
+    least squares at the noise (``hold``: with the wheel-noise gains held), then the noise,
+    twice."""
     fitted = _joint([effect, *partners])
     for _ in range(2):
-        spec = _least_squares_step(data, spec, sensor, fitted)
+        spec = _least_squares_step(data, spec, sensor, fitted, hold)
         spec, sensor, _ = fit_noise(data, spec, sensor, nuisance)
     return spec, sensor
 
