@@ -135,23 +135,8 @@ def test_independent_generator_without_effect_is_none() -> None:
     assert result.named_effects == []
 
 
-# A known defect, kept visible (strict: the day it is fixed this fails and the mark goes).
-_RIDGE = pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "known defect (docs/diagnose.md, the blind matrix): at 7.5x its detection limit with "
-        "wheelbase profiled out, skid_track's least-squares fit walks up the ridge along which "
-        "its excess and E_b trade (lambda_half beyond the logged turns), the shape rule refuses "
-        "it, and wheelbase is named first"
-    ),
-)
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "name",
-    [pytest.param(n, marks=_RIDGE) if n == "skid_track" else n for n in [*catalogue(), None]],
-)
+@pytest.mark.parametrize("name", [*catalogue(), None])
 def test_world_hidden_effect_at_three_times_the_detection_limit(name: str | None) -> None:
     """One blind trial per effect (and one without) at 3-10 x the detection limit.
 

@@ -18,9 +18,11 @@ from odomgym.diagnose.discover import library_jacobian
 from odomgym.diagnose.fit import (
     Dataset,
     _fixed_replays,
+    _held_gains,
     close_thread_pool,
     evaluate,
     fit_noise,
+    whitened_stack,
 )
 from odomgym.diagnose.likelihood import (
     SensorNoise,
@@ -110,6 +112,25 @@ def test_one_filter_pass_gives_both_scores_bit_identical() -> None:
             assert _bits(alone) == _bits(mixture.loglik)
         if spec is bumpy:  # the jumps matter here: the two filters really differ
             assert mixture.whitened.tobytes() != gaussian.whitened.tobytes()
+
+
+def test_gains_held_at_the_spec_itself_are_its_own_and_held_elsewhere_are_not() -> None:
+    """A fit with the wheel-noise gains held (``fit._least_squares(hold=True)``) starts from the
+    bytes of the plain evaluation: held at the spec being evaluated, the gains are its own. At
+    another E_b they are the start's: the heading's gain stays 1/(E_b·b) of the start while the
+    replay moves (what keeps such a fit from widening the noise by moving E_b)."""
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:3]
+    data = Dataset.of(runs, 0.25)
+    spec = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
+    held = _held_gains(data, spec)
+    plain = whitened_stack(data, spec, SENSOR)[0]
+    assert whitened_stack(data, spec, SENSOR, held)[0].tobytes() == plain.tobytes()
+    assert all(np.all(g[:, 1, 2] == 1.0 / spec.true_wheelbase) for g in held)
+    wide = EFFECTS["wheelbase"].write(spec, {"e_b": 1.05})
+    moving = whitened_stack(data, wide, SENSOR)[0]
+    kept = whitened_stack(data, wide, SENSOR, held)[0]
+    assert kept.tobytes() != moving.tobytes()  # the replay moved, the gains did not
+    assert all(np.all(g[:, 1, 2] == 1.0 / spec.true_wheelbase) for g in held)  # left as held
 
 
 @pytest.mark.parametrize("spacing", ["logged", "uniform", "stalled", "one", "two"])

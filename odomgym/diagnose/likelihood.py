@@ -45,6 +45,7 @@ __all__ = [
     "filter_inputs",
     "filter_runs",
     "measurement_mask",
+    "replay_gains",
     "run_likelihood",
     "run_predictive",
     "run_residual",
@@ -400,11 +401,13 @@ class FilterInputs:
 
 def filter_inputs(run: Run, replay: Replay, mask: NDArray[np.bool_]) -> FilterInputs:
     """:class:`FilterInputs` of ``run`` replayed as ``replay``, measured where ``mask`` holds."""
-    return FilterInputs(run_residual(run, replay, mask), _replay_gains(replay))
+    return FilterInputs(run_residual(run, replay, mask), replay_gains(replay))
 
 
-def _replay_gains(replay: Replay) -> FloatArray:
-    """:func:`_wheel_gains` of ``replay``."""
+def replay_gains(replay: Replay) -> FloatArray:
+    """How each wheel's travel noise reaches the pose at every sample of ``replay``: G (n, 2,
+    3), position [m/m] and heading [rad/m] per metre of a wheel's travel, from the replay's
+    axle poses, increments and wheelbase (the ``gains`` of :class:`FilterInputs`)."""
     return _wheel_gains(replay.pose, replay.ds, replay.dtheta, replay.wheelbase)
 
 
@@ -487,7 +490,7 @@ def _model_arrays(
     return (
         replay.pose,
         replay.tracked,
-        _replay_gains(replay) if gains is None else gains,
+        replay_gains(replay) if gains is None else gains,
         variance,
         jumps,
         size,
