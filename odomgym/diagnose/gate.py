@@ -30,7 +30,13 @@ order). The rules:
   inflation factor in the fit exceeds :data:`MAX_INFLATION` is a combination of the geometry
   and the sessions' nuisances (a constant crab angle with the sessions' frames fitted),
   whatever it does to the error: it would only make the parameters a user copies arbitrary
-  (rule ``"not identifiable"``; :func:`odomgym.diagnose.openloop.variance_inflation`).
+  (rule ``"not identifiable"``; :func:`odomgym.diagnose.openloop.variance_inflation`). An
+  effect that extends a base (``skid_track`` beside ``wheelbase``) and is as inflated is one
+  more description of what the base describes (a skid track whose half-point lies beyond the
+  logged turns is one more constant track factor): it stays if it predicts better and nothing
+  competes, but where it blocked a term the gate runs again without it, and the model that
+  predicts the folds better is kept (rule ``"not identifiable beside wheelbase"``,
+  :func:`_exchange`).
 
 Two rules make the elimination stepwise rather than one-way. A base an extension builds on
 (``wheelbase``, which a ``skid_track`` widens in tight turns: its :attr:`~odomgym.effects.Effect.
@@ -108,13 +114,14 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 DISCOVERED = "discovered"
 MAX_INFLATION = 1e6
-"""The largest variance inflation factor a discovered term may have in the open-loop fit
-(module docstring). VIF = 1 / (1 − R²) with R² of the term's column regressed on the others
-(Kutner, Nachtsheim, Neter & Li 2005, §10.5), so 10⁶ is a column within 10⁻³ (relative norm)
-of the others' span: the bound :func:`odomgym.diagnose.discover.library_jacobian` drops a
-term at. Not the textbook 10 for *harmful* collinearity: the geometry is itself that collinear
-(on the June OptiOdom sessions E_d's VIF is ≈ 700 beside a turn skid) and still well
-determined; this bound refuses only what the data cannot determine at all."""
+"""The largest variance inflation factor a discovered term (or an extension beside its base)
+may have in the open-loop fit (module docstring). VIF = 1 / (1 − R²) with R² of the term's
+column regressed on the others (Kutner, Nachtsheim, Neter & Li 2005, §10.5), so 10⁶ is a
+column within 10⁻³ (relative norm) of the others' span: the bound
+:func:`odomgym.diagnose.discover.library_jacobian` drops a term at. Not the textbook 10 for
+*harmful* collinearity: the geometry is itself that collinear (on the June OptiOdom sessions
+E_d's VIF is ≈ 700 beside a turn skid) and still well determined; this bound refuses only
+what the data cannot determine at all."""
 
 
 @dataclass(frozen=True)
@@ -132,12 +139,15 @@ class GateStep:
             its standard error [mm²].
         rule: the rule it had to pass (``"lower"`` or ``"one standard error"``), or
             ``"not identifiable"``: a term whose variance inflation exceeded
-            :data:`MAX_INFLATION`; or ``"held by EFFECT"``: a base that failed its rule while
-            an effect that extends it stayed (module docstring).
+            :data:`MAX_INFLATION`; or ``"not identifiable beside BASE"``: an extension of
+            BASE as inflated, exchanged for the terms it blocked (:func:`_exchange`); or
+            ``"held by EFFECT"``: a base that failed its rule while an effect that extends it
+            stayed (module docstring).
         estimator: whose fold refits predicted the folds better, and so were compared:
             ``"open loop"`` or ``"filter"`` (:class:`FilterLinearisation`).
         inflation: the largest variance inflation factor of its parameters in the open-loop
-            fit of the model with it (NaN for catalogue effects, which are not judged by it).
+            fit of the model with it (NaN for catalogue effects other than an extension
+            beside its base, :func:`_inflation`).
     """
 
     kind: str
@@ -445,7 +455,7 @@ class _Elimination:
         mean, spread = _fold_difference(cv, smaller_cv, self.folds)
         lenient = kind == "effect" and name in self.lenient
         inflation = _inflation(member, fit)
-        confounded = inflation > MAX_INFLATION
+        confounded = kind == "term" and inflation > MAX_INFLATION
         return GateStep(
             kind=kind,
             name=name,
@@ -669,15 +679,10 @@ def open_loop_gate(
         # The catalogue effects on their own, then the discovered terms on the model they kept
         # (those effects fixed): a term must earn its place beside the named mechanisms and
         # cannot displace one it merely resembles.
-        kept_model, kept_effects, removed_effects = gate.eliminate(effect_members, [], as_given)
-        kept_terms: list[GateStep] = []
-        removed_terms: list[GateStep] = []
-        if term_members:
-            kept_model, kept_terms, removed_terms = gate.eliminate(
-                term_members, effect_members, kept_model
-            )
-        steps = kept_effects + kept_terms + removed_effects + removed_terms
-        model = effect_members + term_members
+        kept_model, steps, model = _catalogue_first(gate, effect_members, term_members, as_given)
+        exchanged = _exchange(gate, kept_model, steps, effect_members, term_members, as_given)
+        if exchanged is not None:
+            kept_model, steps, model = exchanged
     else:
         model = effect_members + term_members
         kept_model, kept_steps, removed = gate.eliminate(model, [], as_given)
@@ -693,6 +698,77 @@ def open_loop_gate(
         nominal_cv,
         [list(f) for f in folds],
     )
+
+
+def _catalogue_first(
+    gate: _Elimination, effects: Sequence[Member], terms: Sequence[Member], as_given: Scored
+) -> tuple[Scored, list[GateStep], list[Member]]:
+    """The ``"catalogue first"`` order: ``effects`` eliminated on their own from ``as_given``,
+    then ``terms`` on the model they kept, those effects fixed; the final model's fit, every
+    step, and the members kept."""
+    effect_members, term_members = list(effects), list(terms)
+    kept_model, kept_effects, removed_effects = gate.eliminate(effect_members, [], as_given)
+    kept_terms: list[GateStep] = []
+    removed_terms: list[GateStep] = []
+    if term_members:
+        kept_model, kept_terms, removed_terms = gate.eliminate(
+            term_members, effect_members, kept_model
+        )
+    steps = kept_effects + kept_terms + removed_effects + removed_terms
+    return kept_model, steps, effect_members + term_members
+
+
+def _exchange(
+    gate: _Elimination,
+    kept_model: Scored,
+    steps: Sequence[GateStep],
+    effects: Sequence[Member],
+    terms: Sequence[Member],
+    as_given: Scored,
+) -> tuple[Scored, list[GateStep], list[Member]] | None:
+    """The gate run again on the proposed ``effects`` and ``terms`` without a kept extension
+    the open-loop fit cannot identify beside its base, where a discovered term was refused as
+    not identifiable beside it; that model, its steps and its members if it predicts the
+    folds better than ``kept_model``, else None.
+
+    Why: a skid track whose half-point lies beyond the logged turns is one more constant track
+    factor beside E_b (variance inflation above :data:`MAX_INFLATION`), and once it is in the
+    model a discovered term that describes the same yaw can no longer be identified. On a
+    differential-drive robot carrying a yaw-rate scrub (outside the catalogue,
+    ``tests/alien_robot.py``) the first round named the skid track (ε 0.04, λ½ 15), the gate
+    kept it beside the wheelbase at ε 0.05 ± 0.28, λ½ 18 ± 63, and refused the yaw-rate term
+    (VIF ∞): held-out heading error 4.17°, against 0.13° for the wheelbase with that term.
+    Where no term competes, an unidentified extension that predicts better stays, and the
+    report's confounds say that its values are not determined (a skid track at 5 × its
+    detection limit, whose shape the rich protocol does not resolve). The exchange of one
+    member for another is the replacement step of stepwise selection (Miller 2002, *Subset
+    Selection in Regression*, 2nd ed., §3.5)."""
+    blocked = any(s.kind == "term" and not s.kept and s.rule == "not identifiable" for s in steps)
+    weak = [
+        s
+        for s in steps
+        if s.kind == "effect" and s.kept and not s.rule.startswith("held by")
+        and s.inflation > MAX_INFLATION
+    ]  # fmt: skip
+    if not blocked or not weak:
+        return None
+    extension = max(weak, key=lambda s: s.inflation)
+    member: Member = ("effect", extension.name)
+    others = [m for m in effects if m != member]
+    alternative, alt_steps, alt_model = _catalogue_first(gate, others, terms, as_given)
+    mean, spread = _fold_difference(kept_model[1], alternative[1], gate.folds)
+    if not mean > 0.0:
+        return None
+    refused = replace(
+        extension,
+        kept=False,
+        before_mm=1e3 * math.sqrt(float(np.mean(alternative[1]))),
+        after_mm=1e3 * math.sqrt(float(np.mean(kept_model[1]))),
+        difference=1e6 * mean,
+        stderr=1e6 * spread,
+        rule=f"not identifiable beside {', '.join(EFFECTS[extension.name].partners)}",
+    )
+    return alternative, [*alt_steps, refused], alt_model
 
 
 @dataclass

@@ -464,7 +464,7 @@ def _where_lines(d: Diagnosis) -> list[str]:
         )
     lines += ["", "Which experiments reveal which effect:", ""]
     for name, effect in EFFECTS.items():
-        if d.model.is_skid_steer or not effect.skid_steer_only:
+        if effect.applies_to(d.model.is_skid_steer):
             lines.append(f"- `{name}`: {effect.reveals}")
     return lines
 
@@ -587,10 +587,10 @@ def _confound_lines(d: Diagnosis) -> list[str]:
 
 
 def _rule(step: GateStep) -> str:
-    """A gate step's rule, with the variance inflation that made a term unidentifiable."""
-    if step.rule == "not identifiable":
+    """A gate step's rule, with the variance inflation that made a proposal unidentifiable."""
+    if step.rule.startswith("not identifiable"):
         inflation = "∞" if math.isinf(step.inflation) else f"{step.inflation:.2g}"
-        return f"not identifiable (VIF {inflation})"
+        return f"{step.rule} (VIF {inflation})"
     return step.rule
 
 
@@ -603,7 +603,10 @@ def _check_lines(d: Diagnosis) -> list[str]:
             "",
             "Each systematic proposal of the rounds had to lower the error of predicting the "
             "left-out folds open loop (a discovered term by more than one standard error, and "
-            "only if the open-loop fit can identify it: variance inflation ≤ 10⁶).",
+            "only if the open-loop fit can identify it: variance inflation ≤ 10⁶). An effect "
+            "that fit cannot identify beside the one it extends (a skid track beside the "
+            "wheelbase) leaves where the model without it, and with a term it blocked, "
+            "predicts better.",
             "",
             "| kind | name | before [mm] | with it [mm] | change ± s.e. [mm²] | rule | kept |",
             "|---|---|---|---|---|---|---|",

@@ -471,9 +471,7 @@ def _class_candidates(names: tuple[str, ...], robot: RobotSpec, asked: bool) -> 
     (:attr:`~odomgym.effects.Effect.skid_steer_only`) when ``robot`` is a differential-drive
     one: its diagnosis is the one it had before they existed. Asked for by name (``asked``:
     ``DiagnoseConfig.candidates``) on such a robot, one is a one-line error."""
-    if robot.is_skid_steer:
-        return names
-    alone = [n for n in names if EFFECTS[n].skid_steer_only]
+    alone = [n for n in names if not EFFECTS[n].applies_to(robot.is_skid_steer)]
     if alone and asked:
         raise SpecError(
             f"candidates: {', '.join(alone)} is an effect of skid-steer robots alone, and robot "

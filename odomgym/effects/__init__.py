@@ -98,5 +98,5 @@ def catalogue(skid_steer: bool = False) -> list[str]:
     return [
         name
         for name, effect in EFFECTS.items()
-        if name != "discovered" and (skid_steer or not effect.skid_steer_only)
+        if name != "discovered" and effect.applies_to(skid_steer)
     ]

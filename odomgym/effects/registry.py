@@ -186,6 +186,14 @@ class Effect:
     whenever the effect is named, so a reader does not take the name for more than the data
     can say)."""
 
+    @classmethod
+    def applies_to(cls, skid_steer: bool) -> bool:
+        """Whether a robot of that class (``skid_steer``: two axles) can carry the effect:
+        every effect but those of skid-steer robots alone (:attr:`skid_steer_only`) on a
+        differential-drive robot. The one test the catalogue, the diagnosis's candidates and
+        the report's list of revealing experiments share."""
+        return skid_steer or not cls.skid_steer_only
+
     # ------------------------------------------------------------------ values
     @classmethod
     def absent_values(cls) -> dict[str, float]:
