@@ -462,3 +462,57 @@ def test_the_report_says_why_a_held_base_was_kept() -> None:
     assert "skid_track extends it" in wheelbase and "did not lower" in wheelbase
     assert "it lowered the error" not in wheelbase
     assert "**skid_track** (effect): it lowered the error" in lines
+
+
+def test_an_extension_is_judged_for_identification_only_beside_its_base() -> None:
+    """The identification rule reads a skid track's variance inflation only where the fit
+    also carries the wheelbase it extends; a plain catalogue effect is never judged by it (a
+    tracked-point offset is exactly a measurement nuisance the fit carries), and a term is
+    judged by its own columns."""
+    fit: Any = SimpleNamespace(
+        inflation={
+            "skid_track.excess": 4e7,
+            "skid_track.lambda_half": 2e5,
+            "wheelbase.e_b": 4.2e7,
+            "discovered.yaw_rate": 12.0,
+        },
+    )
+    assert gate_module._inflation(("effect", "skid_track"), fit) == 4e7
+    assert math.isnan(gate_module._inflation(("effect", "wheelbase"), fit))
+    assert gate_module._inflation(("term", "yaw_rate"), fit) == 12.0
+    alone: Any = SimpleNamespace(
+        inflation={"skid_track.excess": 30.0, "skid_track.lambda_half": 30.0},
+    )
+    assert math.isnan(gate_module._inflation(("effect", "skid_track"), alone))
+
+
+def test_an_unidentified_extension_is_exchanged_only_for_a_term_it_blocked() -> None:
+    """Without a term refused as not identifiable, a kept skid track stays whatever its
+    inflation (it predicts better and nothing competes; the report's confounds say its values
+    are not determined): the gate is not run again. The exchange itself is tested end to end
+    on the alien yaw-rate scrub (tests/test_discover.py)."""
+
+    def step(kind: str, name: str, kept: bool, rule: str, inflation: float) -> Any:
+        return gate_module.GateStep(
+            kind, name, kept, 3.0, 2.0, -5.0, 1.0, rule, "open loop", inflation
+        )
+
+    class NoGate:
+        folds = ((0,),)
+
+        def eliminate(self, *args: object) -> None:
+            raise AssertionError("the gate must not run again")
+
+    kept = (None, np.zeros(3), "open loop")
+    steps = [
+        step("effect", "skid_track", True, "lower", 4e7),
+        step("effect", "wheelbase", True, "held by skid_track", math.nan),
+        step("term", "yaw_rate", False, "one standard error", 3.0),
+    ]
+    effects = [("effect", "skid_track"), ("effect", "wheelbase")]
+    terms = [("term", "yaw_rate")]
+    args: Any = (NoGate(), kept, steps, effects, terms, kept)
+    assert gate_module._exchange(*args) is None
+    steps[0] = step("effect", "skid_track", True, "lower", 50.0)
+    steps[2] = step("term", "yaw_rate", False, "not identifiable", math.inf)
+    assert gate_module._exchange(*args) is None  # identified: nothing to exchange

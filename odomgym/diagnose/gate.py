@@ -569,13 +569,13 @@ def _inflation(member: Member, fit: OpenLoopFit) -> float:
         _, term_names = _parts([member])
         return max(fit.inflation.get(f"{DISCOVERED}.{t}", math.inf) for t in term_names)
     effect = EFFECTS[name]
-    if not effect.partners or not any(p in fit.values for p in _partner_keys(effect)):
+    if not effect.partners or not any(k in fit.inflation for k in _partner_keys(effect)):
         return math.nan
     return max(fit.inflation.get(f"{name}.{p.name}", math.inf) for p in effect.parameters)
 
 
 def _partner_keys(effect: Effect) -> list[str]:
-    """The open-loop fit's value keys of ``effect``'s partners' parameters."""
+    """The open-loop fit's keys of ``effect``'s partners' parameters (``wheelbase.e_b``)."""
     return [f"{p}.{q.name}" for p in effect.partners for q in EFFECTS[p].parameters]
 
 
