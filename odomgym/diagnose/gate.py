@@ -742,7 +742,7 @@ def _exchange(
     report's confounds say that its values are not determined (a skid track at 5 × its
     detection limit, whose shape the rich protocol does not resolve). The exchange of one
     member for another is the replacement step of stepwise selection (Miller 2002, *Subset
-    Selection in Regression*, 2nd ed., §3.5)."""
+    Selection in Regression*, 2nd ed., chapter 3: sequential replacement)."""
     blocked = any(s.kind == "term" and not s.kept and s.rule == "not identifiable" for s in steps)
     weak = [
         s
