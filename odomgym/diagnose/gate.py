@@ -114,11 +114,12 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 DISCOVERED = "discovered"
 MAX_INFLATION = 1e6
-"""The largest variance inflation factor a discovered term (or an extension beside its base)
-may have in the open-loop fit (module docstring). VIF = 1 / (1 − R²) with R² of the term's
-column regressed on the others (Kutner, Nachtsheim, Neter & Li 2005, §10.5), so 10⁶ is a
-column within 10⁻³ (relative norm) of the others' span: the bound
-:func:`odomgym.diagnose.discover.library_jacobian` drops a term at. Not the textbook 10 for
+"""The largest variance inflation factor a discovered term may have in the open-loop fit, and
+the one above which an extension beside its base is exchanged for a term it blocked (module
+docstring). VIF = 1 / (1 − R²) with R² of the term's column regressed on the others
+(Kutner, Nachtsheim, Neter & Li 2005, §10.5), so 10⁶ is a column within 10⁻³ (relative norm)
+of the others' span: the bound :func:`odomgym.diagnose.discover.library_jacobian` drops a
+term at. Not the textbook 10 for
 *harmful* collinearity: the geometry is itself that collinear (on the June OptiOdom sessions
 E_d's VIF is ≈ 700 beside a turn skid) and still well determined; this bound refuses only
 what the data cannot determine at all."""
