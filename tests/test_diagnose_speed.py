@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from alien_robot import generate_session
 
+from odomgym.diagnose import fit as fit_module
 from odomgym.diagnose.discover import library_jacobian
 from odomgym.diagnose.fit import (
     Dataset,
@@ -131,6 +132,31 @@ def test_gains_held_at_the_spec_itself_are_its_own_and_held_elsewhere_are_not() 
     kept = whitened_stack(data, wide, SENSOR, held)[0]
     assert kept.tobytes() != moving.tobytes()  # the replay moved, the gains did not
     assert all(np.all(g[:, 1, 2] == 1.0 / spec.true_wheelbase) for g in held)  # left as held
+
+
+def test_a_fit_scipy_cannot_start_keeps_its_start_and_other_errors_pass(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """scipy's trust-region reflective step that cannot be taken from a start (a one-sided
+    parameter at its bound beside one without gradient: seen in the blind matrix) leaves the
+    fit at its start, with the start's sum of squares; any other error of scipy is not
+    swallowed."""
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:3]
+    data = Dataset.of(runs, 0.25)
+
+    def failing(message: str) -> object:
+        def least_squares(*args: object, **kwargs: object) -> None:
+            raise ValueError(message)
+
+        return least_squares
+
+    monkeypatch.setattr(fit_module, "least_squares", failing(fit_module._TRUST_REGION_FAILURE))
+    spec, cost = fit_module._least_squares(data, MODEL, SENSOR, EFFECTS["wheelbase"])
+    start = whitened_stack(data, MODEL, SENSOR)[0]
+    assert spec is MODEL and cost == float(start @ start)
+    monkeypatch.setattr(fit_module, "least_squares", failing("Residuals are not finite"))
+    with pytest.raises(ValueError, match="not finite"):
+        fit_module._least_squares(data, MODEL, SENSOR, EFFECTS["wheelbase"])
 
 
 @pytest.mark.parametrize("spacing", ["logged", "uniform", "stalled", "one", "two"])
