@@ -370,6 +370,23 @@ def test_a_proposal_left_out_takes_the_robots_given_value(
     assert without and all(e_b == pytest.approx(1.0095, abs=1e-12) for e_b in without)
 
 
+def _four_fold_gate(cls: Any, lenient: set[str]) -> Any:
+    """A gate of class ``cls`` (the elimination, or a scripted subclass) over four one-run
+    folds of no data, on the nominal robot, with the effects ``lenient`` named by the rounds."""
+    return cls(
+        data=None,
+        robot=ROBOT,
+        proposed=ROBOT,
+        options=NuisanceOptions(),
+        folds=[[0], [1], [2], [3]],
+        start=None,
+        lenient=lenient,
+        report=None,
+        filtered=None,
+        corrected=None,
+    )
+
+
 def test_a_base_stays_while_its_extension_is_tested_and_a_wrongly_removed_effect_returns() -> None:
     """The gate's stepwise rules on scripted fold errors (the June OptiOdom fold without
     230620202317, in miniature): the model with a skid track (S), the wheelbase it extends (W)
@@ -399,18 +416,7 @@ def test_a_base_stays_while_its_extension_is_tested_and_a_wrongly_removed_effect
         def held_out(self, fit: Any, keys: Any) -> tuple[Any, str]:
             return fit.cv, "open loop"
 
-    gate = Scripted(
-        data=None,  # type: ignore[arg-type]
-        robot=ROBOT,
-        proposed=ROBOT,
-        options=NuisanceOptions(),
-        folds=[[0], [1], [2], [3]],
-        start=None,
-        lenient=set(names),
-        report=None,
-        filtered=None,
-        corrected=None,
-    )
+    gate = _four_fold_gate(Scripted, set(names))
     base = gate.fitted([], ROBOT, None, None)
     model = [("effect", "skid_track"), ("effect", "wheelbase"), ("effect", "wheel_diameter_ratio")]
     (_, cv, _), kept, removed = gate.eliminate(model, [], base)
@@ -497,21 +503,7 @@ def test_an_unidentified_effect_must_beat_one_standard_error() -> None:
     the report says why (a turn skid and a speed-dependent track, one law of |v·ω| split in
     two, had both been kept on a June OptiOdom fold)."""
 
-    class Scripted(gate_module._Elimination):
-        pass
-
-    gate = Scripted(
-        data=None,  # type: ignore[arg-type]
-        robot=ROBOT,
-        proposed=ROBOT,
-        options=NuisanceOptions(),
-        folds=[[0], [1], [2], [3]],
-        start=None,
-        lenient={"skid_speed", "turn_skid"},
-        report=None,
-        filtered=None,
-        corrected=None,
-    )
+    gate = _four_fold_gate(gate_module._Elimination, {"skid_speed", "turn_skid"})
     cv = np.array([1.00, 1.02, 0.97, 1.01]) * 1e-6
     smaller = np.array([1.01, 1.01, 0.99, 1.00]) * 1e-6  # with it: 0.5 % lower, within noise
     identified: Any = SimpleNamespace(inflation={}, robot_inflation={"skid_speed.gain": 40.0})
