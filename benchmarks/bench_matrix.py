@@ -64,7 +64,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 EFFECT_NAMES = tuple(catalogue())
 """The whole catalogue (``docs/effects.md``), in its order: an effect it gains joins the matrix."""
 
-LATER_EFFECTS = ("skid_track",)
+LATER_EFFECTS = ("skid_track", "skid_speed")
 """Effects that joined the catalogue after the matrix's seeds were fixed: their seeds come from
 a block of their own (:func:`_seed`), so every earlier trial keeps its seed (a re-run shows what
 a change of the diagnosis did, not a new draw) and no two trials share one."""

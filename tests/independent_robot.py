@@ -25,7 +25,8 @@ How it differs from odomgym's simulator on purpose:
 The effects are applied to the continuous motion as ``docs/effects.md`` specifies them:
 true diameters from ``e_d``/``e_s``, wheelbase ``e_b``, backlash as a play operator between the
 motor (which the encoder counts) and the wheel, ``turn_skid`` scaling the yaw rate by
-max(0, 1 − κ|v·ω₀|), ``skid_track`` dividing it by 1 + ε/(1 + (λ/λ½)²) with λ the step's ratio
+max(0, 1 − κ|v·ω₀|), ``skid_speed`` by 1 + g|v·ω₀| (ω₀ the no-slip yaw rate),
+``skid_track`` dividing it by 1 + ε/(1 + (λ/λ½)²) with λ the step's ratio
 of the wheels' summed to differenced ground travel, ``wheel_toe`` turning the velocity to
 heading + τ, ``floor_roughness`` as per-wheel ground-travel noise of variance k²|d| per
 integration step, ``floor_bumps`` as a Poisson process per wheel (rate per metre of the wheel's
@@ -76,6 +77,7 @@ EFFECT_PARAMETERS: dict[str, dict[str, float]] = {
     "wheelbase": {"e_b": 1.0},
     "backlash": {"angle": 0.0},
     "turn_skid": {"gain": 0.0},
+    "skid_speed": {"gain": 0.0},
     "skid_track": {"excess": 0.0, "lambda_half": 2.0},
     "wheel_toe": {"angle": 0.0},
     "gt_sensor_offset": {"dx": 0.0, "dy": 0.0},
@@ -93,6 +95,7 @@ _POSITIVE = {
 _NON_NEGATIVE = {
     ("backlash", "angle"),
     ("turn_skid", "gain"),
+    ("skid_speed", "gain"),
     ("skid_track", "excess"),
     ("floor_roughness", "k_left"),
     ("floor_roughness", "k_right"),
@@ -507,11 +510,13 @@ def _simulate_run(
     ds = 0.5 * (ground[:, 0] + ground[:, 1])
     dtheta0 = (ground[:, 1] - ground[:, 0]) / robot.true_wheelbase
     gain = robot.param("turn_skid", "gain")
+    relief = robot.param("skid_speed", "gain")
+    lateral = np.abs((ds / dt) * (dtheta0 / dt))  # |v·ω₀| [m/s²] of each step
+    dtheta = dtheta0
     if gain > 0.0:
-        lateral = np.abs((ds / dt) * (dtheta0 / dt))
-        dtheta = dtheta0 * np.maximum(0.0, 1.0 - gain * lateral)
-    else:
-        dtheta = dtheta0
+        dtheta = dtheta * np.maximum(0.0, 1.0 - gain * lateral)
+    if relief > 0.0:
+        dtheta = dtheta * (1.0 + relief * lateral)
     excess = robot.param("skid_track", "excess")
     if excess > 0.0:
         # The apparent track E_b·(1 + ε/(1 + (λ/λ½)²)) at this step's path-curvature ratio

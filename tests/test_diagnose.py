@@ -62,6 +62,9 @@ def _independent(effects: dict[str, dict[str, float]], seed: int) -> list:  # ty
         ("backlash", {"angle": 0.015}, "explained"),
         ("gt_sensor_offset", {"dx": 0.006, "dy": -0.004}, "confounded"),
         ("turn_skid", {"gain": 0.2}, "explained"),
+        # Its mirror image, a robot over-turning in fast turns: offered to a differential-drive
+        # robot too (issue 43: no candidate filtered by the robot's class).
+        ("skid_speed", {"gain": 0.2}, "explained"),
     ],
 )
 def test_independent_generator_effect_is_named_and_fitted(
@@ -135,6 +138,11 @@ def test_independent_generator_without_effect_is_none() -> None:
     assert result.named_effects == []
 
 
+# Each case's seed: its place in the catalogue as it stood when the test was written (sorted),
+# an effect that joined later after them, so that the earlier cases keep their seeds.
+_SEED_ORDER = (*sorted(n for n in catalogue() if n != "skid_speed"), "skid_speed")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [*catalogue(), None])
 def test_world_hidden_effect_at_three_times_the_detection_limit(name: str | None) -> None:
@@ -145,9 +153,7 @@ def test_world_hidden_effect_at_three_times_the_detection_limit(name: str | None
     has less power for the smallest effects (E_s = 1.0005, 9.6x the filter's limit, moves a
     2-m run by 1 mm). So the effect must be either named, or proposed first by the likelihood
     and reported ``unconfirmed`` — never another name."""
-    trial = hidden_effect_trial(
-        name, "rich", seed=100 + (sorted(catalogue()).index(name) if name else 99)
-    )
+    trial = hidden_effect_trial(name, "rich", seed=100 + (_SEED_ORDER.index(name) if name else 99))
     if name is None:
         assert trial["verdict"] == "none", trial
     elif trial["top1"] == "unconfirmed":

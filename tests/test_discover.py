@@ -113,16 +113,15 @@ def test_env_loads_a_robot_with_discovered_terms(tmp_path: Path) -> None:
 
 def test_a_term_names_the_catalogue_effect_it_is_a_point_of() -> None:
     """``report.json``'s ``catalogue_equivalent``: the grammar's point of each systematic
-    effect; a positive ``yaw_lateral`` is ``skid_speed`` on a skid-steer robot (the robot
-    over-turns in fast turns) and ``turn_skid`` otherwise, as before ``skid_speed`` existed."""
+    effect; ``yaw_lateral`` is the point of two one-sided effects, told apart by its sign
+    (positive: the robot over-turns in fast turns, ``skid_speed``; negative: ``turn_skid``),
+    whatever the robot's class."""
     from odomgym.diagnose.discover import catalogue_equivalent
 
     assert catalogue_equivalent("yaw_one", 0.01) == "wheelbase"
-    assert catalogue_equivalent("yaw_spin", -0.1, skid_steer=True) == "skid_track"
+    assert catalogue_equivalent("yaw_spin", -0.1) == "skid_track"
     assert catalogue_equivalent("yaw_lateral", -0.02) == "turn_skid"
-    assert catalogue_equivalent("yaw_lateral", 0.02) == "turn_skid"
-    assert catalogue_equivalent("yaw_lateral", 0.02, skid_steer=True) == "skid_speed"
-    assert catalogue_equivalent("yaw_lateral", -0.02, skid_steer=True) == "turn_skid"
+    assert catalogue_equivalent("yaw_lateral", 0.02) == "skid_speed"
     assert catalogue_equivalent("left_sin1", 0.01) is None
 
 

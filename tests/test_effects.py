@@ -97,7 +97,7 @@ def test_skid_speed_world_matches_replay_on_arcs_and_spares_spins() -> None:
     arc of 1 m at 0.35 m/s to 1 mm and 0.05°; the nominal replay under-turns by the factor's
     share of the turn, (f − 1)/f with f = 1 + g·v²/R = 1.061: 5.8 % (measured 5.5 %, the
     arc's ramps are slower; 4 % to 8 % allowed), and a spin (v = 0) is spared. The World
-    applies it to any robot; ``diagnose`` proposes it for skid-steer robots alone
+    applies it to any robot, and ``diagnose`` proposes it to any robot
     (``tests/test_skid_diagnose.py``)."""
     spec = NOMINAL.apply_effect("skid_speed", {"gain": 0.5})
     run = _arc(spec, 1.0, 0.35, 1.0, np.random.default_rng(0))

@@ -161,26 +161,22 @@ def test_scout2_carrying_a_speed_dependent_track_gets_skid_speed() -> None:
     assert _rms(result, "diagnosed") < 0.25 * _rms(result, "baseline")
 
 
-def test_skid_speed_is_a_candidate_of_skid_steer_robots_alone() -> None:
-    """``skid_speed`` is proposed for robots with two axles only: the differential-drive
-    catalogue (``catalogue()``, what the blind matrix and a differential-drive diagnosis
-    range over) is the one it was, and asking for it by name on such a robot is a one-line
-    error naming the field."""
-    from odomgym.diagnose.generate import NOMINAL_ROBOT
-    from odomgym.diagnose.workflow import _class_candidates
+@pytest.mark.slow
+def test_no_candidate_is_filtered_by_the_robot_class() -> None:
+    """Issue 43: one catalogue for both classes (what the blind matrix and every diagnosis
+    range over), ``skid_speed`` and ``skid_track`` in it; a differential-drive robot's rounds
+    fit ``skid_speed`` like any other candidate (asked for by name, no error) and, where its
+    logs carry no such effect, do not name it."""
+    from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
     from odomgym.effects import catalogue
 
-    every = tuple(EFFECTS)
-    assert "skid_speed" in every
-    assert _class_candidates(every, NOMINAL_ROBOT, asked=False) == tuple(
-        n for n in every if n != "skid_speed"
-    )
-    assert _class_candidates(every, PRESETS["scout2"], asked=False) == every
-    assert "skid_speed" not in catalogue()
-    assert catalogue(skid_steer=True) == [*catalogue(), "skid_speed"]
-    with pytest.raises(SpecError, match="skid-steer robots alone") as info:  # before any work
-        diagnose([], NOMINAL_ROBOT, DiagnoseConfig(candidates=("wheelbase", "skid_speed")))
-    assert info.value.field == "candidates"
+    assert catalogue() == [n for n in EFFECTS if n != "discovered"]
+    assert {"skid_track", "skid_speed"} <= set(catalogue())
+    runs = simulate_protocol(NOMINAL_ROBOT, "rich", np.random.default_rng(43))
+    result = diagnose(runs, NOMINAL_ROBOT, DiagnoseConfig(candidates=("skid_speed",), seed=43))
+    fitted = [c for c in result.candidates if c.name == "skid_speed"]
+    assert fitted and all(c.round >= 1 for c in fitted)
+    assert "skid_speed" not in result.named_effects
 
 
 def test_skid_track_must_fall_where_the_data_turns() -> None:

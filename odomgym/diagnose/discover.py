@@ -386,14 +386,13 @@ class Discovery:
         return out
 
 
-def catalogue_equivalent(term: str, value: float, skid_steer: bool = False) -> str | None:
+def catalogue_equivalent(term: str, value: float) -> str | None:
     """The catalogue effect grammar term ``term`` at coefficient ``value`` is a point of
-    (:data:`~odomgym.effects.discovered.CATALOGUE_POINTS`), or None. A positive
-    ``yaw_lateral`` (over-turning in fast turns) is ``skid_speed`` on a skid-steer robot
-    (``skid_steer``), the only class it is proposed for; otherwise the table's first entry
-    (``yaw_lateral``: ``turn_skid``, whatever the sign, as before ``skid_speed`` existed)."""
-    if term == "yaw_lateral" and value > 0.0 and skid_steer:
-        return "skid_speed"
+    (:data:`~odomgym.effects.discovered.CATALOGUE_POINTS`), or None. ``yaw_lateral`` is a point
+    of two one-sided effects, told apart by its sign: negative (under-turning in fast turns) is
+    ``turn_skid``, positive (over-turning) ``skid_speed``, on a robot of either class."""
+    if term == "yaw_lateral":
+        return "skid_speed" if value > 0.0 else "turn_skid"
     same = [k for k, v in CATALOGUE_POINTS.items() if v.startswith(term + " ")]
     return same[0] if same else None
 

@@ -247,7 +247,7 @@ def hidden_effect(
         return {"dx": m * u[0], "dy": m * u[1]}
     p = effect.parameters[0]
     m = factor * detection_limit(name, protocol)
-    if name in ("turn_skid", "backlash", "skid_track"):
+    if name in ("turn_skid", "backlash", "skid_track", "skid_speed"):
         sign = 1.0  # one-sided parameters
     return {p.name: p.absent + sign * m}
 

@@ -567,6 +567,11 @@ class OpenLoopFit:
         run_error: each run's mean square combined error at the fit [m²].
         inflation: every parameter's variance inflation factor (:func:`variance_inflation`),
             by the other parameters and the sessions' nuisances together.
+        robot_inflation: every robot parameter's variance inflation factor by the other robot
+            parameters alone, the nuisances held known: whether the data can tell the robot's
+            effects apart (an effect that is exactly a measurement nuisance is a confound the
+            report states, :mod:`odomgym.diagnose.confounds`, not a robot effect the fit cannot
+            identify).
     """
 
     spec: RobotSpec
@@ -581,6 +586,7 @@ class OpenLoopFit:
     x: FloatArray = field(repr=False)
     blocks: tuple[list[FloatArray], list[FloatArray], list[FloatArray]] = field(repr=False)
     inflation: dict[str, float] = field(default_factory=dict)
+    robot_inflation: dict[str, float] = field(default_factory=dict)
 
     @property
     def error(self) -> float:
@@ -639,16 +645,18 @@ def fit_open_loop(
     )
     x, res, robot, own = _levenberg_marquardt(problem, np.concatenate(x0))
     fitted = build(x[: problem.size])
-    se_runs, se_sessions, vif = _clustered_errors(problem, robot, own, res)
+    se_runs, se_sessions, vif, robot_vif = _clustered_errors(problem, robot, own, res)
     values = effect.read(fitted) if effect is not None else {}
     stderr_runs: dict[str, float] = {}
     stderr_sessions: dict[str, float] = {}
     inflation: dict[str, float] = {}
+    robot_inflation: dict[str, float] = {}
     if effect is not None:
         for k, p in enumerate(effect.parameters):
             stderr_runs[p.name] = float(se_runs[k] * p.scale)
             stderr_sessions[p.name] = float(se_sessions[k] * p.scale)
             inflation[p.name] = float(vif[k])
+            robot_inflation[p.name] = float(robot_vif[k])
     nuisances = {}
     for s in order:
         se = np.full(4, math.nan)
@@ -669,22 +677,30 @@ def fit_open_loop(
         x=x,
         blocks=(robot, own, res),
         inflation=inflation,
+        robot_inflation=robot_inflation,
     )
 
 
 def _clustered_errors(
     problem: _Problem, robot: list[FloatArray], own: list[FloatArray], res: list[FloatArray]
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Run- and session-clustered standard errors of every fitted parameter (fit units), and
-    every parameter's variance inflation factor (:func:`variance_inflation`)."""
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Run- and session-clustered standard errors of every fitted parameter (fit units), every
+    parameter's variance inflation factor (:func:`variance_inflation`), and the robot
+    parameters' by each other alone (the leading block of the normal matrix)."""
     a, _ = problem.normal(robot, own, res, range(len(res)))
     if len(a) == 0:
-        return np.zeros(0), np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)
+    size = problem.size
+    block = a[:size, :size]
+    try:
+        robot_vif = variance_inflation(block, np.asarray(np.linalg.inv(block), dtype=np.float64))
+    except np.linalg.LinAlgError:
+        robot_vif = np.full(size, math.inf)
     try:
         cov: FloatArray = np.asarray(np.linalg.inv(a), dtype=np.float64)
     except np.linalg.LinAlgError:
         nan = np.full(len(a), math.nan)
-        return nan, nan, np.full(len(a), math.inf)
+        return nan, nan, np.full(len(a), math.inf), robot_vif
     scores = np.array([problem.score(robot, own, res, j) for j in range(len(res))])
     by_run = clustered_covariance(cov, scores, list(range(len(res))))
     by_session = clustered_covariance(cov, scores, list(problem.data.sessions))
@@ -692,6 +708,7 @@ def _clustered_errors(
         np.sqrt(np.maximum(np.diag(by_run), 0.0)),
         np.sqrt(np.maximum(np.diag(by_session), 0.0)),
         variance_inflation(a, cov),
+        robot_vif,
     )
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.diagnose.gate import GateStep
+from odomgym.diagnose.gate import UNIDENTIFIED, GateStep
 from odomgym.diagnose.plots import plot_all
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
@@ -464,8 +464,7 @@ def _where_lines(d: Diagnosis) -> list[str]:
         )
     lines += ["", "Which experiments reveal which effect:", ""]
     for name, effect in EFFECTS.items():
-        if effect.applies_to(d.model.is_skid_steer):
-            lines.append(f"- `{name}`: {effect.reveals}")
+        lines.append(f"- `{name}`: {effect.reveals}")
     return lines
 
 
@@ -588,7 +587,7 @@ def _confound_lines(d: Diagnosis) -> list[str]:
 
 def _rule(step: GateStep) -> str:
     """A gate step's rule, with the variance inflation that made a proposal unidentifiable."""
-    if step.rule.startswith("not identifiable"):
+    if step.rule.startswith("not identifiable") or step.rule == UNIDENTIFIED:
         inflation = "∞" if math.isinf(step.inflation) else f"{step.inflation:.2g}"
         return f"{step.rule} (VIF {inflation})"
     return step.rule
@@ -604,9 +603,9 @@ def _check_lines(d: Diagnosis) -> list[str]:
             "Each systematic proposal of the rounds had to lower the error of predicting the "
             "left-out folds open loop (a discovered term by more than one standard error, and "
             "only if the open-loop fit can identify it: variance inflation ≤ 10⁶). An effect "
-            "that fit cannot identify beside the one it extends (a skid track beside the "
-            "wheelbase) leaves where the model without it, and with a term it blocked, "
-            "predicts better.",
+            "that fit cannot tell from the other robot effects (the same bound) must lower it "
+            "by more than two standard errors, and leaves where the model without it, and "
+            "with a term it blocked, predicts better.",
             "",
             "| kind | name | before [mm] | with it [mm] | change ± s.e. [mm²] | rule | kept |",
             "|---|---|---|---|---|---|---|",

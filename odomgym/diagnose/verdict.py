@@ -234,9 +234,7 @@ def _kept_terms(
         entry["discovery_coefficient"] = entry["coefficient"]
         entry["coefficient"] = values[t]
         entry["stderr"] = errors[t]
-        entry["catalogue_equivalent"] = catalogue_equivalent(
-            t, values[t], chosen.spec.is_skid_steer
-        )
+        entry["catalogue_equivalent"] = catalogue_equivalent(t, values[t])
         entry["operating"] = size.operating
         entry["change_at_operating"] = size.change
         entry["sentence"] = (

@@ -282,7 +282,6 @@ def diagnose(
     and the caller's setting is back afterwards; threadpoolctl changes it only from the thread
     that controls OpenBLAS, so call :func:`diagnose` from the main thread for these bytes."""
     cfg = config if config is not None else DiagnoseConfig()
-    _class_candidates(cfg.candidates or (), robot, asked=True)  # before any work
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(runs, robot, cfg, baseline, progress, journal)
 
@@ -436,8 +435,7 @@ def _rounds(
     signature is in the data: a systematic effect named before it would stand in for its
     realised jumps. With the sessions' frames fitted, the catalogue effects they make
     unidentifiable (:data:`~odomgym.diagnose.nuisances.SESSION_EFFECTS`) are no candidates."""
-    # diagnose() has refused a class's effect asked for by name: here only the default drops
-    names = _class_candidates(cfg.candidates or tuple(EFFECTS), robot, asked=False)
+    names = cfg.candidates or tuple(EFFECTS)
     if rec.frames_on:
         names = tuple(n for n in names if n not in SESSION_EFFECTS)
     model = fit_noise_model(rec.data, Model(robot, SensorNoise(*cfg.initial_sensor)))
@@ -464,21 +462,6 @@ def _rounds(
         if run_round(number, ctx, state).verdict not in ROUND_GOES_ON:
             break
     return state
-
-
-def _class_candidates(names: tuple[str, ...], robot: RobotSpec, asked: bool) -> tuple[str, ...]:
-    """``names`` less the effects of skid-steer robots alone
-    (:attr:`~odomgym.effects.Effect.skid_steer_only`) when ``robot`` is a differential-drive
-    one: its diagnosis is the one it had before they existed. Asked for by name (``asked``:
-    ``DiagnoseConfig.candidates``) on such a robot, one is a one-line error."""
-    alone = [n for n in names if not EFFECTS[n].applies_to(robot.is_skid_steer)]
-    if alone and asked:
-        raise SpecError(
-            f"candidates: {', '.join(alone)} is an effect of skid-steer robots alone, and robot "
-            f"{robot.name!r} is differential-drive (no axle_spacing)",
-            field="candidates",
-        )
-    return tuple(n for n in names if n not in alone)
 
 
 def _backward(rec: Recording, state: DiagnosisState, cfg: DiagnoseConfig) -> Backward:

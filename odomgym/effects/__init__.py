@@ -84,19 +84,15 @@ for _effect in (
     FloorRoughness(),
     GroundTruthOffset(),
     SkidTrack(),  # last: the differential-drive catalogue keeps its order (and its matrix seeds)
-    SkidSpeed(),  # skid-steer robots only (Effect.skid_steer_only)
+    SkidSpeed(),
     Discovered(),
 ):
     if _effect.name not in EFFECTS:
         register_effect(_effect)
 
 
-def catalogue(skid_steer: bool = False) -> list[str]:
+def catalogue() -> list[str]:
     """The catalogue's effect names, in registry order: every registered effect except the
-    grammar's ``discovered`` (which only the discovery pass fills), and except those of
-    skid-steer robots alone (:attr:`Effect.skid_steer_only`) unless ``skid_steer``."""
-    return [
-        name
-        for name, effect in EFFECTS.items()
-        if name != "discovered" and effect.applies_to(skid_steer)
-    ]
+    grammar's ``discovered`` (which only the discovery pass fills). One catalogue for every
+    robot class: ``diagnose`` proposes each effect to every robot, and the data decide."""
+    return [name for name in EFFECTS if name != "discovered"]

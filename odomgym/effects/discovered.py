@@ -188,7 +188,7 @@ CATALOGUE_POINTS: dict[str, str] = {
     "turn_skid": "yaw_lateral = −κ (yaw × |v·ω|, the linear law)",
     "wheel_toe": "crab_one = τ (crab × 1)",
     "skid_track": "yaw_spin = −ε at λ½ = 1 (the yaw increment × (1 − ε/(1 + λ²)), small ε)",
-    "skid_speed": "yaw_lateral = +g (yaw × |v·ω|, the linear law; skid-steer robots)",
+    "skid_speed": "yaw_lateral = +g (yaw × |v·ω|, the linear law)",
 }
 """The catalogue's systematic effects as points of the grammar (to first order)."""
 

@@ -345,9 +345,10 @@ class SkidSpeed(Effect):
     with speed is ``turn_skid`` (dθ₀·max(0, 1 − κ·|v·ω₀|)), so this one's sign is fixed: the
     two are not one effect named twice.
 
-    Only a skid-steer robot's diagnosis proposes it (:attr:`skid_steer_only`): on a
-    differential-drive robot the same over-turning in fast arcs is no scrub, and the
-    catalogue of those robots stays as it was (``catalogue()``)."""
+    ``diagnose`` proposes it to every robot, of either class (issue 43: no candidate filtered
+    by the robot's class). A differential-drive robot has no scrub to relieve, and on its logs
+    the fit leaves the gain at 0 unless the data want it (``docs/skid-steer.md``: the June
+    sessions and the blind matrix, re-run with it offered)."""
 
     name = "skid_speed"
     parameters = (
@@ -363,7 +364,6 @@ class SkidSpeed(Effect):
         "circles of one radius at two or more speeds, tight ones (the factor moves with v·ω); "
         "absent in spins and on straight paths"
     )
-    skid_steer_only = True
 
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         # _scale_rotation's factor max(0, 1 − κ·|v·ω|) at κ = −g is 1 + g·|v·ω| (never clipped)

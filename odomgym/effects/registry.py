@@ -176,23 +176,10 @@ class Effect:
     during steady driving): it competes with the systematic effects from the first round of
     ``diagnose`` where that signature is in the data, so that a systematic effect named before
     it cannot stand in for its realised jumps (:func:`odomgym.diagnose.rounds.run_round`)."""
-    skid_steer_only: ClassVar[bool] = False
-    """An effect of skid-steer robots alone (``skid_speed``): ``diagnose`` proposes it only for
-    a robot with two axles (:attr:`odomgym.robot.RobotSpec.is_skid_steer`), and
-    :func:`odomgym.effects.catalogue` lists it only when asked for the skid-steer catalogue, so
-    a differential-drive robot's diagnosis is what it was before the effect existed."""
     confounded: ClassVar[str] = ""
     """What else, outside the catalogue, produces exactly the same logs (the report repeats it
     whenever the effect is named, so a reader does not take the name for more than the data
     can say)."""
-
-    @classmethod
-    def applies_to(cls, skid_steer: bool) -> bool:
-        """Whether a robot of that class (``skid_steer``: two axles) can carry the effect:
-        every effect but those of skid-steer robots alone (:attr:`skid_steer_only`) on a
-        differential-drive robot. The one test the catalogue, the diagnosis's candidates and
-        the report's list of revealing experiments share."""
-        return skid_steer or not cls.skid_steer_only
 
     # ------------------------------------------------------------------ values
     @classmethod
