@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.diagnose.gate import UNIDENTIFIED, GateStep
+from odomgym.diagnose.gate import REAL_SIZE, UNIDENTIFIED, GateStep
 from odomgym.diagnose.plots import plot_all
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
@@ -604,9 +604,8 @@ def _check_lines(d: Diagnosis) -> list[str]:
             "left-out folds open loop (a discovered term by more than one standard error, and "
             "only if the open-loop fit can identify it: variance inflation ≤ 10⁶). An effect "
             "that fit cannot tell from the other robot effects (the same bound) must lower it "
-            "by more than one standard error and by at least 1 % of it, and leaves where the "
-            "model without it, and "
-            "with a term it blocked, predicts better.",
+            f"by more than one standard error and by at least {100 * REAL_SIZE:g} % of it, and "
+            "leaves where the model without it, and with a term it blocked, predicts better.",
             "",
             "| kind | name | before [mm] | with it [mm] | change ± s.e. [mm²] | rule | kept |",
             "|---|---|---|---|---|---|---|",
