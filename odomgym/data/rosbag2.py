@@ -112,7 +112,7 @@ def read_rosbag(
         )
     if joint_topic is not None and left == right:
         raise SpecError(f"left and right name the same joint {left!r}", field="right")
-    api = _Rosbags.load()
+    api = _Rosbags.load(Path(path))
     runs: list[Run] = []
     for bag in _find_bags(Path(path)):
         label = experiment if experiment is not None else _bag_name(bag)
@@ -131,12 +131,14 @@ class _Rosbags:
         self.typestore = typestore
 
     @classmethod
-    def load(cls) -> _Rosbags:
+    def load(cls, path: Path) -> _Rosbags:
+        """The ``rosbags`` API, or a one-line :class:`SpecError` naming the bag ``path`` it
+        was needed for (the extra that installs it)."""
         try:
             from rosbags.rosbag2 import Reader, ReaderError
             from rosbags.typesys import Stores, get_typestore
         except ImportError:
-            raise SpecError(_INSTALL, field="rosbags") from None
+            raise SpecError(_INSTALL, field="rosbags", source=str(path)) from None
         return cls(Reader, ReaderError, get_typestore(Stores.ROS2_HUMBLE))
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.diagnose.gate import REAL_SIZE, UNIDENTIFIED, GateStep
+from odomgym.diagnose.gate import MAX_INFLATION, REAL_SIZE, UNIDENTIFIED, GateStep
 from odomgym.diagnose.plots import plot_all
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
@@ -593,6 +593,17 @@ def _rule(step: GateStep) -> str:
     return step.rule
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _power_of_ten(value: float) -> str:
+    """``value`` as 10 with a superscript exponent (10⁶) when it is a power of ten, else in
+    ``g`` format: the report's bounds read from the constants that set them."""
+    if value > 0 and 10.0 ** round(math.log10(value)) == value:
+        return "10" + str(round(math.log10(value))).translate(_SUPERSCRIPT)
+    return f"{value:g}"
+
+
 def _check_lines(d: Diagnosis) -> list[str]:
     """The open-loop check of every systematic proposal and the stand-ins."""
     lines: list[str] = []
@@ -602,7 +613,8 @@ def _check_lines(d: Diagnosis) -> list[str]:
             "",
             "Each systematic proposal of the rounds had to lower the error of predicting the "
             "left-out folds open loop (a discovered term by more than one standard error, and "
-            "only if the open-loop fit can identify it: variance inflation ≤ 10⁶). An effect "
+            "only if the open-loop fit can identify it: variance inflation ≤ "
+            f"{_power_of_ten(MAX_INFLATION)}). An effect "
             "that fit cannot tell from the other robot effects (the same bound) must lower it "
             f"by more than one standard error and by at least {100 * REAL_SIZE:g} % of it, and "
             "leaves where the model without it, and with a term it blocked, predicts better.",
