@@ -32,7 +32,12 @@ from odomgym.diagnose.openloop import (
     open_loop_folds,
     variance_inflation,
 )
-from odomgym.diagnose.physical import PLAUSIBLE_CHANGE, check_bumps, term_size
+from odomgym.diagnose.physical import (
+    PLAUSIBLE_CHANGE,
+    bump_size_reasons,
+    check_bumps,
+    term_size,
+)
 from odomgym.diagnose.report import _rule as report_rule
 from odomgym.diagnose.workflow import split_runs
 from odomgym.effects import EFFECTS
@@ -561,3 +566,19 @@ def test_an_unidentified_extension_is_exchanged_only_for_a_term_it_blocked() -> 
     steps[0] = step("effect", "skid_track", True, "lower", 50.0)
     steps[2] = step("term", "yaw_rate", False, "not identifiable", math.inf)
     assert gate_module._exchange(*args) is None  # identified: nothing to exchange
+
+
+def test_the_size_half_of_the_bump_check_needs_no_replay() -> None:
+    """``bump_size_reasons`` is the magnitude half of ``check_bumps``, on values alone (the
+    rounds use it to stop refitting a bump field a floor cannot make): at the bounds nothing is
+    said; a jump losing more than a 20 mm obstacle's extra rotation (rigid wheel over a
+    cylinder) and a rate above one per metre are each named, with ``check_bumps``' words."""
+    radius = 0.5 * NOMINAL_ROBOT.wheel_diameter
+    largest = bump_extra_rotation(radius, 0.02)
+    at_bound = {"rate": 1.0, "heading_jump": largest / NOMINAL_ROBOT.true_wheelbase}
+    assert bump_size_reasons(NOMINAL_ROBOT, at_bound, max_obstacle=0.02, max_rate=1.0) == []
+    beyond = {"rate": 3.5, "heading_jump": 1.01 * largest / NOMINAL_ROBOT.true_wheelbase}
+    reasons = bump_size_reasons(NOMINAL_ROBOT, beyond, max_obstacle=0.02, max_rate=1.0)
+    assert len(reasons) == 2
+    assert "obstacle" in reasons[0] and "3.5 bumps per metre" in reasons[1]
+    assert bump_size_reasons(NOMINAL_ROBOT, {}, max_obstacle=0.02, max_rate=1.0) == []

@@ -115,6 +115,23 @@ def _the_report_tells_one_story(june: Diagnosis) -> None:
     assert kept and not kept & refused and not kept & out, (kept, refused, out)
 
 
+def _a_bump_field_no_floor_can_make_is_fitted_once(june: Diagnosis) -> None:
+    """The June logs' heavy-tailed heading increments fit a bump field of more jumps per metre
+    than a floor holds (3.2 in the first round); the mean stage then stops fitting it, and
+    says why, in every later round that has a mean stage (``rounds._refused_for_size``)."""
+    first = next(c for c in june.candidates if c.name == "floor_bumps" and c.stage == "mean")
+    assert first.values["rate"] > 1.0, first.values
+    later = [
+        r
+        for r in june.rounds
+        if r.number > first.round and any(c.stage == "mean" for c in r.candidates)
+    ]
+    assert later
+    for r in later:
+        assert "beyond what a floor can make" in r.screened.get("floor_bumps", ""), r.screened
+        assert "floor_bumps" not in {c.name for c in r.candidates if c.stage == "mean"}
+
+
 @pytest.mark.slow
 @pytest.mark.longest
 def test_the_june_sessions_diagnosed_together(tmp_path_factory: pytest.TempPathFactory) -> None:
@@ -126,3 +143,4 @@ def test_the_june_sessions_diagnosed_together(tmp_path_factory: pytest.TempPathF
     _the_mean_wheel_diameter_comes_out_below_nominal(june)
     _nuisances_are_reported_per_session_never_as_robot_effects(june)
     _the_report_tells_one_story(june)
+    _a_bump_field_no_floor_can_make_is_fitted_once(june)

@@ -227,6 +227,32 @@ def _steady_increments(runs: Sequence[Run], spec: RobotSpec, interval: float) ->
     return np.concatenate(out) if out else np.zeros(0)
 
 
+def bump_size_reasons(
+    spec: RobotSpec, values: Mapping[str, float], *, max_obstacle: float, max_rate: float
+) -> list[str]:
+    """Why fitted ``floor_bumps`` ``values`` are beyond what a floor can make under ``spec``
+    (empty if they are not): each bump losing more travel than crossing a ``max_obstacle`` [m]
+    obstacle can (:func:`odomgym.sim.cables.bump_extra_rotation`), or more than ``max_rate``
+    bumps per metre — the magnitude half of :func:`check_bumps`, which needs no replay."""
+    rate, jump = float(values.get("rate", 0.0)), float(values.get("heading_jump", 0.0))
+    loss = jump * float(spec.true_wheelbase)
+    largest = bump_extra_rotation(0.5 * float(spec.wheel_diameter), max_obstacle)
+    reasons = []
+    if loss > largest:
+        reasons.append(
+            f"each bump would lose {1e3 * loss:.3g} mm of travel ({math.degrees(jump):.3g}° of "
+            f"heading), more than crossing a {1e3 * max_obstacle:.3g} mm obstacle can "
+            f"({1e3 * largest:.3g} mm)"
+        )
+    if rate > max_rate:
+        reasons.append(
+            f"{rate:.3g} bumps per metre is more than the {max_rate:.3g} a floor is assumed to "
+            f"hold: heavier-tailed wheel noise, not obstacles (as bumps they would shorten the "
+            f"mean travel by {100 * rate * loss:.2g} % and move E_s)"
+        )
+    return reasons
+
+
 def check_bumps(
     runs: Sequence[Run],
     spec: RobotSpec,
@@ -251,25 +277,15 @@ def check_bumps(
     else:
         excess, p = math.nan, 1.0
     signature = p < alpha
-    plausible = loss <= largest and rate <= max_rate
+    size = bump_size_reasons(spec, values, max_obstacle=max_obstacle, max_rate=max_rate)
+    plausible = not size
     reasons = []
     if not signature:
         reasons.append(
             "no heavy-tailed heading jumps during steady driving "
             f"(excess kurtosis {excess:.3g} over {n} steady intervals, p = {p:.3g})"
         )
-    if loss > largest:
-        reasons.append(
-            f"each bump would lose {1e3 * loss:.3g} mm of travel ({math.degrees(jump):.3g}° of "
-            f"heading), more than crossing a {1e3 * max_obstacle:.3g} mm obstacle can "
-            f"({1e3 * largest:.3g} mm)"
-        )
-    if rate > max_rate:
-        reasons.append(
-            f"{rate:.3g} bumps per metre is more than the {max_rate:.3g} a floor is assumed to "
-            f"hold: heavier-tailed wheel noise, not obstacles (as bumps they would shorten the "
-            f"mean travel by {100 * rate * loss:.2g} % and move E_s)"
-        )
+    reasons += size
     return BumpCheck(
         rate=rate,
         heading_jump=jump,
