@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares, minimize
+from scipy.optimize import least_squares, lsq_linear, minimize
 
 from odomgym.diagnose.likelihood import (
     FilterInputs,
@@ -73,6 +73,7 @@ __all__ = [
     "FitJob",
     "Joint",
     "Model",
+    "bounded_gauss_newton_step",
     "build_within",
     "close_thread_pool",
     "evaluate",
@@ -617,6 +618,40 @@ def gauss_newton_step(a: FloatArray, b: FloatArray, rcond: float = 1e-9) -> Floa
     return step
 
 
+def bounded_gauss_newton_step(
+    a: FloatArray, b: FloatArray, low: FloatArray, high: FloatArray, rcond: float = 1e-9
+) -> FloatArray:
+    """The minimiser of the Gauss–Newton model ½·δᵀAδ + bᵀδ inside the box low ≤ δ ≤ high:
+    the step of a *bounded* refit, where :func:`gauss_newton_step` is the unbounded one.
+
+    Why not the unbounded step clipped to the box: where two parameters are correlated,
+    clipping one leaves the other where it only belonged beside the first's unclipped value,
+    and the clipped point can be worse than no step at all. The box problem is solved exactly
+    as a bounded linear least-squares problem (Stark & Parker 1995, BVLS) on A's square root;
+    directions A does not determine (eigenvalue below ``rcond`` × the largest) are held at 0
+    by a ridge of that size, as :func:`gauss_newton_step` drops them."""
+    values, vectors = np.linalg.eigh(0.5 * (a + a.T))
+    top = float(np.max(values)) if len(values) else 0.0
+    if top <= 0.0:
+        return np.zeros(len(b))
+    keep = values > rcond * top
+    root = np.sqrt(values[keep])[:, None] * vectors[:, keep].T  # rootᵀroot = A on its range
+    target = -(vectors[:, keep].T @ b) / np.sqrt(values[keep])
+    ridge = math.sqrt(rcond * top) * np.eye(len(b))
+    lo = np.minimum(low, 0.0)
+    hi = np.maximum(high, 0.0)
+    if np.all(lo == hi):
+        return np.zeros(len(b))
+    solved = lsq_linear(
+        np.vstack([root, ridge]),
+        np.concatenate([target, np.zeros(len(b))]),
+        bounds=(np.where(lo == hi, lo - 1e-12, lo), np.where(lo == hi, hi + 1e-12, hi)),
+        method="bvls",
+    )
+    step: FloatArray = np.clip(np.asarray(solved.x, dtype=float), lo, hi)
+    return step
+
+
 def build_within(
     build: Callable[[FloatArray], RobotSpec], start: FloatArray, step: FloatArray
 ) -> RobotSpec:
@@ -1145,15 +1180,19 @@ def cross_validate(
             held_data = data.subset(list(fold))
             out[list(fold)] = evaluate(held_data, spec, sensor, whitened=False).loglik
         return out
+    # One Gauss–Newton step from the full fit per fold, inside the parameters' bounds: the
+    # fold's refit is a bounded fit like the full one. Unbounded, a fold that leaves out the runs
+    # carrying a parameter's information has almost no curvature in it and the step ran far
+    # past its bound (the World's Scout 2.0 carrying `skid_speed`, seed 505001, first round: a
+    # one-sided gain at its lower bound 0 sent to −4.9 s²/m, the held-out fold then scored
+    # −3 460 nats; bounded, it stays at 0 and the fold scores about what the full fit does).
+    _, low, high, _ = systematic_vector(fit.spec, effect)
     for fold in folds:
         held = set(fold)
         train = [j for j in range(len(data)) if j not in held]
         a: FloatArray = np.sum([fit.jacobian[j].T @ fit.jacobian[j] for j in train], axis=0)
         b: FloatArray = np.sum([fit.jacobian[j].T @ fit.whitened[j] for j in train], axis=0)
-        try:
-            delta = -np.linalg.solve(a, b)
-        except np.linalg.LinAlgError:
-            delta = np.zeros(len(b))
+        delta = bounded_gauss_newton_step(a, b, low, high)
         for j in fold:
             moved = fit.whitened[j] + fit.jacobian[j] @ delta
             out[j] = fit.loglik[j] - 0.5 * (moved @ moved - fit.whitened[j] @ fit.whitened[j])

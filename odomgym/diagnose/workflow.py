@@ -21,7 +21,8 @@ below points. :func:`_diagnose` reads as this list, one call per step, numbered 
    the discovery's sparse regression (:mod:`odomgym.diagnose.discover`); the noise model last.
 5. **Backward check** (:func:`odomgym.diagnose.rounds._backward_check`): a named systematic
    effect the final model no longer needs is removed (``absorbed``) — also the partner whose
-   mean a noise effect named later took over (the distance scale beside floor bumps).
+   mean a noise effect named later took over (the distance scale beside floor bumps) — and a
+   noise effect named beside an absorbed one must pass its test again without it.
 6. **Noise effects' signature and size** (:func:`odomgym.diagnose.keep.noise_effects`,
    :func:`odomgym.diagnose.physical.check_bumps`): floor
    bumps only with heavy-tailed jumps in steady driving and a size the floor can produce. A kept
