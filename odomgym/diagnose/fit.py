@@ -629,7 +629,12 @@ def bounded_gauss_newton_step(
     and the clipped point can be worse than no step at all. The box problem is solved exactly
     as a bounded linear least-squares problem (Stark & Parker 1995, BVLS) on A's square root;
     directions A does not determine (eigenvalue below ``rcond`` × the largest) are held at 0
-    by a ridge of that size, as :func:`gauss_newton_step` drops them."""
+    by a ridge of that size, as :func:`gauss_newton_step` drops them. Where the unbounded step
+    (:func:`gauss_newton_step`) stays inside the box it is the minimum, and it is returned as
+    it is, without the ridge's rounding."""
+    free = gauss_newton_step(a, b, rcond)
+    if np.all(free >= low) and np.all(free <= high):
+        return free
     values, vectors = np.linalg.eigh(0.5 * (a + a.T))
     top = float(np.max(values)) if len(values) else 0.0
     if top <= 0.0:
