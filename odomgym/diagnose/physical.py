@@ -227,6 +227,14 @@ def _steady_increments(runs: Sequence[Run], spec: RobotSpec, interval: float) ->
     return np.concatenate(out) if out else np.zeros(0)
 
 
+def _bump_losses(spec: RobotSpec, jump: float, max_obstacle: float) -> tuple[float, float]:
+    """The travel [m] one bump of heading jump ``jump`` [rad] loses under ``spec``, and the
+    most that crossing a ``max_obstacle`` [m] obstacle can lose
+    (:func:`odomgym.sim.cables.bump_extra_rotation`)."""
+    loss = jump * float(spec.true_wheelbase)
+    return loss, bump_extra_rotation(0.5 * float(spec.wheel_diameter), max_obstacle)
+
+
 def bump_size_reasons(
     spec: RobotSpec, values: Mapping[str, float], *, max_obstacle: float, max_rate: float
 ) -> list[str]:
@@ -235,8 +243,7 @@ def bump_size_reasons(
     obstacle can (:func:`odomgym.sim.cables.bump_extra_rotation`), or more than ``max_rate``
     bumps per metre — the magnitude half of :func:`check_bumps`, which needs no replay."""
     rate, jump = float(values.get("rate", 0.0)), float(values.get("heading_jump", 0.0))
-    loss = jump * float(spec.true_wheelbase)
-    largest = bump_extra_rotation(0.5 * float(spec.wheel_diameter), max_obstacle)
+    loss, largest = _bump_losses(spec, jump, max_obstacle)
     reasons = []
     if loss > largest:
         reasons.append(
@@ -266,9 +273,7 @@ def check_bumps(
     """Check fitted ``floor_bumps`` ``values`` on ``runs`` replayed through ``spec`` (the
     systematic model, without the bumps' mean loss) — module docstring."""
     rate, jump = float(values.get("rate", 0.0)), float(values.get("heading_jump", 0.0))
-    loss = jump * float(spec.true_wheelbase)
-    radius = 0.5 * float(spec.wheel_diameter)
-    largest = bump_extra_rotation(radius, max_obstacle)
+    loss, largest = _bump_losses(spec, jump, max_obstacle)
     increments = _steady_increments(runs, spec, interval)
     n = len(increments)
     if n >= 20:

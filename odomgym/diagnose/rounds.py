@@ -493,6 +493,7 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
     base = model
     structure: StructureTest | None = None
     stopped: str | None = None
+    refused = _refused_for_size(ctx, state)  # earlier rounds' fits: one answer for every stage
     for stage, stage_names, helper in ctx.stages:
         if stage == "noise" and structure is None:
             # Is the systematic structure exhausted? Score test of the whole grammar on the
@@ -528,7 +529,7 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
             continue
         base = fit_noise_model(data, model, helper)
         candidates, fits, screened = _score_candidates(
-            ctx, effects, base, helper, (number, stage), _refused_for_size(ctx, state)
+            ctx, effects, base, helper, (number, stage), refused
         )
         round_candidates.extend(candidates)
         round_screened.update(screened)
