@@ -625,3 +625,32 @@ def test_a_forked_worker_that_dies_stops_the_diagnosis_naming_its_task(
         fit_module.whitened_stacks(
             Dataset.of(runs, 0.25), [MODEL, MODEL], SENSOR, lambda k, s: None, processes=2
         )
+
+
+def test_fit_jobs_are_handed_out_dearest_first_and_the_serial_path_keeps_its_order(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The worker pool takes jobs first come, first served, so ``run_fit_jobs`` hands out
+    the candidates fitted beside partners (``skid_track`` beside ``wheelbase``,
+    ``floor_bumps`` beside the distance scale: two or three fits each) before the others, in
+    registry order otherwise; one process runs them in the caller's order."""
+    from types import SimpleNamespace
+
+    from odomgym.diagnose import fit as fit_module
+
+    names = ["wheelbase", "skid_track", "turn_skid", "floor_bumps", "backlash"]
+    jobs = {k: SimpleNamespace(effect=name) for k, name in enumerate(names)}
+    handed: list[int] = []
+    monkeypatch.setattr(
+        fit_module,
+        "run_forked",
+        lambda task, items, processes, finished, doing: handed.extend(k for k, _ in items),
+    )
+    fit_module.run_fit_jobs(jobs, 2, lambda k, fit: None)  # type: ignore[arg-type]
+    assert [names[k] for k in handed] == [
+        "skid_track", "floor_bumps", "wheelbase", "turn_skid", "backlash"
+    ]  # fmt: skip
+    ran: list[int] = []
+    monkeypatch.setattr(fit_module, "_run_job", lambda job, attempt: job)
+    fit_module.run_fit_jobs(jobs, 1, lambda k, fit: ran.append(k))  # type: ignore[arg-type]
+    assert ran == list(range(len(names)))

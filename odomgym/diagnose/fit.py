@@ -81,10 +81,12 @@ __all__ = [
     "fit_noise",
     "fit_noise_model",
     "folds_for",
+    "forks",
     "gauss_newton_step",
     "noise_curvature",
     "noise_stderr",
     "run_fit_jobs",
+    "run_forked",
     "strata",
     "systematic_vector",
     "whitened_stack",
@@ -591,18 +593,50 @@ def systematic_vector(
     spec: RobotSpec, effect: Effect
 ) -> tuple[FloatArray, FloatArray, FloatArray, Callable[[FloatArray], RobotSpec]]:
     """Parameters in units of their scale, relative to the current values, with bounds."""
-    current = effect.read(spec)
-    params = effect.parameters
-    origin = np.array([current[p.name] for p in params])
-    scale = np.array([p.scale for p in params])
-    low = np.array([p.low for p in params])
-    high = np.array([p.high for p in params])
+    build = SpecBuilder.of(spec, effect)
+    return (
+        np.zeros(len(build.origin)),
+        (build.low - build.origin) / build.scale,
+        (build.high - build.origin) / build.scale,
+        build,
+    )
 
-    def build(u: FloatArray) -> RobotSpec:
-        values = np.clip(origin + u * scale, low, high)
-        return effect.write(spec, {p.name: float(v) for p, v in zip(params, values, strict=True)})
 
-    return np.zeros(len(params)), (low - origin) / scale, (high - origin) / scale, build
+@dataclass(frozen=True)
+class SpecBuilder:
+    """The spec at fit units u of :func:`systematic_vector`: ``effect`` written into ``spec``
+    at origin + u·scale, clipped to [low, high].
+
+    A class, not a closure, so that a fit holding it (an
+    :class:`~odomgym.diagnose.openloop.OpenLoopFit`) can come back from a worker process
+    (:meth:`odomgym.diagnose.gate._Elimination.each`)."""
+
+    spec: RobotSpec
+    effect: Effect
+    origin: FloatArray
+    scale: FloatArray
+    low: FloatArray
+    high: FloatArray
+
+    @classmethod
+    def of(cls, spec: RobotSpec, effect: Effect) -> SpecBuilder:
+        current = effect.read(spec)
+        params = effect.parameters
+        return cls(
+            spec,
+            effect,
+            np.array([current[p.name] for p in params]),
+            np.array([p.scale for p in params]),
+            np.array([p.low for p in params]),
+            np.array([p.high for p in params]),
+        )
+
+    def __call__(self, u: FloatArray) -> RobotSpec:
+        values = np.clip(self.origin + u * self.scale, self.low, self.high)
+        params = self.effect.parameters
+        return self.effect.write(
+            self.spec, {p.name: float(v) for p, v in zip(params, values, strict=True)}
+        )
 
 
 def gauss_newton_step(a: FloatArray, b: FloatArray, rcond: float = 1e-9) -> FloatArray:
@@ -720,14 +754,14 @@ def whitened_stacks(
     A spec whose evaluation raises in a worker surfaces as :class:`odomgym.workers.TaskFailed`
     (as a candidate fit's does in :func:`run_fit_jobs`)."""
     global _SHARED_STACKS
-    if not _forks(processes, len(specs)):
+    if not forks(processes, len(specs)):
         for k, spec in enumerate(specs):
             use(k, whitened_stack(data, spec, sensor)[1])
         return
     names = list(labels) if labels is not None else [f"model {k + 1}" for k in range(len(specs))]
     _SHARED_STACKS = (data, sensor)
     try:
-        _run_forked(
+        run_forked(
             _stack_task,
             enumerate(specs),
             processes,
@@ -738,7 +772,7 @@ def whitened_stacks(
         _SHARED_STACKS = None
 
 
-def _forks(processes: int, tasks: int) -> bool:
+def forks(processes: int, tasks: int) -> bool:
     """Whether :func:`whitened_stacks` and :func:`run_fit_jobs` share ``tasks`` among
     ``processes`` forked workers: more than one of each, the ``fork`` start method available,
     and not inside a worker process already (a daemon process may not start its own)."""
@@ -750,7 +784,7 @@ def _forks(processes: int, tasks: int) -> bool:
     )
 
 
-def _run_forked(
+def run_forked(
     task: Handler,
     items: Iterable[tuple[int, object]],
     processes: int,
@@ -1279,10 +1313,12 @@ def run_fit_jobs(
     """
     todo = list(jobs)
     started = ray_started()
+    if started is not None or forks(processes, len(todo)):
+        todo = sorted(todo, key=lambda k: -_expected_cost(jobs[k].effect))
     if started is not None and len(todo) > 1:  # inside distributed.on_ray: Ray tasks
         run_ray_tasks(_run_job, ((k, (jobs[k], 0)) for k in todo), finished, started=started)
-    elif _forks(processes, len(todo)):
-        _run_forked(
+    elif forks(processes, len(todo)):
+        run_forked(
             _run_job,
             ((k, jobs[k]) for k in todo),
             processes,
@@ -1292,6 +1328,22 @@ def run_fit_jobs(
     else:
         for k in todo:
             finished(k, _run_job(jobs[k], 0))
+
+
+def _expected_cost(name: str) -> int:
+    """How many fits a candidate's job makes, roughly (the order :func:`run_fit_jobs` hands
+    jobs out in, the dearest first): an effect fitted beside partners makes two or three
+    (:func:`fit_candidate`: the partners alone, then jointly, then with the gains held or from
+    a profile), every other one.
+
+    Why: the workers take jobs first come, first served, and the round waits for its last
+    fit. In registry order the dearest came late (on the 14 June OptiOdom sessions
+    ``floor_bumps`` and ``skid_track``, 8 and 4 s against 0.5 s for the others), so one
+    worker ran it alone while the other had finished; handed out first, it runs beside the
+    rest (Graham 1969, longest processing time first). Each fit is a function of its job
+    alone, so the order changes no result."""
+    effect = EFFECTS.get(name)
+    return 1 + len(effect.partners) if effect is not None else 1
 
 
 def candidate_effects(exclude: Sequence[str] = ()) -> list[Effect]:

@@ -70,6 +70,7 @@ them).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -85,7 +86,9 @@ from odomgym.diagnose.fit import (
     Model,
     build_within,
     fit_candidate,
+    forks,
     gauss_newton_step,
+    run_forked,
     systematic_vector,
     whitened_stack,
 )
@@ -413,6 +416,45 @@ class _Elimination:
     report: Callable[[str, float], None] | None
     filtered: FilterLinearisation | None
     corrected: OpenLoopData | None
+    jobs: int = 1
+
+    def each(
+        self, members: Sequence[Member], call: Callable[[Member], Any], stage: str
+    ) -> list[Any]:
+        """``call(member)`` for every one of ``members``, in order: side by side in
+        ``jobs`` forked worker processes (:func:`odomgym.diagnose.fit.run_forked`) when there
+        are several of each, else one after the other; ``stage`` names them in the progress.
+
+        Why: a backward elimination's trials of one pass are independent open-loop fits (on
+        the 14 June OptiOdom sessions 12 of them, 27 s on one core), and the gate ran them on
+        one core while the rounds used both. Each trial is a deterministic function of the
+        members, the model and the data, so where it ran changes no result."""
+        count = len(members)
+
+        def say(k: int) -> None:
+            if self.report is not None:
+                self.report(f"{stage}: {members[k][1]}", k / count)
+
+        if not forks(self.jobs, count):
+            out = []
+            for k, member in enumerate(members):
+                say(k)
+                out.append(call(member))
+            return out
+        done: dict[int, Any] = {}
+
+        def finished(k: int, value: Any) -> None:
+            done[k] = value
+            say(k)
+
+        run_forked(
+            lambda k, attempt: call(members[k]),
+            ((k, k) for k in range(count)),
+            self.jobs,
+            finished,
+            lambda k: f"checking {members[k][1]} open loop",
+        )
+        return [done[k] for k in range(count)]
 
     def held_out(self, fit: OpenLoopFit, keys: Sequence[str]) -> tuple[FloatArray, str]:
         """The fold errors of a model by the better of the two estimators: the open-loop fit
@@ -526,11 +568,15 @@ class _Elimination:
         while the five-effect model of every other fold gives 6 mm)."""
         best: tuple[Member, GateStep, Scored] | None = None
         fit, cv, _ = current
-        for member in candidates:
-            if member[0] != "effect":
-                continue
+        effects = [m for m in candidates if m[0] == "effect"]
+
+        def refitted(member: Member) -> Scored:
             begin = spec_with(fit.spec, self.proposed, *_parts([member]))
-            larger = self.fitted([*model, member], begin, fit.nuisances, fit)
+            return self.fitted([*model, member], begin, fit.nuisances, fit)
+
+        for member, larger in zip(
+            effects, self.each(effects, refitted, "open-loop check, readmitting"), strict=True
+        ):
             step = self.judge(member, larger, cv)
             if step.kept and (best is None or step.difference < best[1].difference):
                 best = (member, step, larger)
@@ -557,11 +603,25 @@ class _Elimination:
         while True:
             while model:
                 round_number += 1
-                trials: dict[Member, tuple[GateStep, OpenLoopFit, FloatArray]] = {}
-                for k, member in enumerate(model):
-                    if self.report is not None:
-                        self.report(f"open-loop check {round_number}: {member[1]}", k / len(model))
-                    trials[member] = self.trial(member, model, fixed, current, base)
+                model_now, current_now = list(model), current
+                trials: dict[Member, tuple[GateStep, OpenLoopFit, FloatArray]] = dict(
+                    zip(
+                        model_now,
+                        self.each(
+                            model_now,
+                            functools.partial(
+                                self.trial,
+                                model=model_now,
+                                fixed=fixed,
+                                current=current_now,
+                                base=base,
+                            ),
+                            f"open-loop check {round_number}",
+                        ),
+                        strict=True,
+                    )
+                )
+                for member in model_now:
                     tested[member] = trials[member][0]
                 failing = [
                     m for m in model if not trials[m][0].kept and not _extended(m, fixed + model)
@@ -675,6 +735,7 @@ def open_loop_gate(
     corrected: OpenLoopData | None = None,
     named: Sequence[str] | None = None,
     order: str = "joint",
+    jobs: int = 1,
 ) -> GateResult:
     """Keep those of ``effects`` and ``terms`` (their values in ``proposed``, the rounds'
     model) that the held-out folds confirm, by backward elimination from all of them on
@@ -685,7 +746,8 @@ def open_loop_gate(
     runs it was made on, nuisances removed (without them, the open-loop fit alone). ``order``:
     ``"joint"`` eliminates effects and terms together; ``"catalogue first"`` the catalogue
     effects alone, then the terms with the kept effects fixed (:class:`odomgym.diagnose.config.
-    DiagnoseConfig`'s ``gate_order``)."""
+    DiagnoseConfig`'s ``gate_order``). ``jobs``: worker processes for each pass's trials
+    (:meth:`_Elimination.each`; the same result with any number)."""
     if order not in GATE_ORDERS:
         raise ValueError(f"order must be one of {GATE_ORDERS}, got {order!r}")
     gate = _Elimination(
@@ -699,6 +761,7 @@ def open_loop_gate(
         report,
         filtered,
         corrected,
+        jobs,
     )
     effect_members: list[Member] = [("effect", n) for n in effects]
     term_members: list[Member] = [("term", n) for n in term_proposals(terms)]

@@ -182,6 +182,7 @@ def _gate(
             corrected=OpenLoopData(rec.corrected, rec.open_data.interval, rec.open_data.length),
             named=[n for n in state.named if not EFFECTS[n].noise],
             order=cfg.gate_order,
+            jobs=cfg.jobs,
         )
 
     out = {*noise.took_over, *backward.unsupported}

@@ -392,6 +392,18 @@ def _start_nuisances(
     return out
 
 
+class _Fixed:
+    """The builder of a fit without robot parameters: ``spec`` whatever u (a class, not a
+    closure, so that the fit pickles; :class:`~odomgym.diagnose.fit.SpecBuilder`)."""
+
+    def __init__(self, spec: RobotSpec) -> None:
+        self.spec = spec
+
+    def __call__(self, u: FloatArray) -> RobotSpec:
+        del u
+        return self.spec
+
+
 @dataclass
 class _Problem:
     """The least-squares problem of :func:`fit_open_loop` in fit units: x = (the robot's
@@ -610,14 +622,12 @@ def fit_open_loop(
     active = list(opts.active)
     order = list(dict.fromkeys(data.sessions))
     members = {s: [j for j, lab in enumerate(data.sessions) if lab == s] for s in order}
+    build: Callable[[FloatArray], RobotSpec]
     if effect is not None:
         u0, low_u, high_u, build = systematic_vector(spec, effect)
     else:
         u0, low_u, high_u = np.zeros(0), np.zeros(0), np.zeros(0)
-
-        def build(u: FloatArray) -> RobotSpec:
-            del u
-            return spec
+        build = _Fixed(spec)
 
     scale = _NUISANCE_SCALE[active]
     bound = _NUISANCE_BOUND[active].copy()
