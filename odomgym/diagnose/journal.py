@@ -20,13 +20,13 @@ from odomgym.io import atomic_write_bytes
 
 __all__ = ["ARITHMETIC", "FitJournal"]
 
-ARITHMETIC = 3
+ARITHMETIC = 4
 """Raised whenever a change moves the fitted numbers (not just the speed) within one odomgym
 version, so a journal written before it is not resumed into a report after it. 2: the BLAS
 libraries on one thread during a diagnosis (the last digits of every fit moved) and the open-loop
 gate's nested fits (:func:`odomgym.diagnose.gate.fit_nested`). 3: the clock fitted beside
 backlash, floor bumps among the first round's candidates and their fit from the partner as
-given (issue 42)."""
+given (issue 42). 4: the systematic fits' tolerance (``fit.LEAST_SQUARES_FTOL``, issue 44)."""
 
 
 class FitJournal:
