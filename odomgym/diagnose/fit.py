@@ -921,9 +921,9 @@ values) and less on smaller logs: below the 0.1 to which the reports give a like
 
 Why not the default: the last iterations it asked for moved the likelihood by thousandths of
 a nat and cost a Jacobian each (one replay and filter of every run per parameter); with 1e-7
-the June sessions' diagnosis took 81 s instead of 94 s, its effects, verdict and held-out
-table the same, fitted values equal to 5 significant digits (``docs/diagnose.md``, "Landed
-on stop 63")."""
+the June sessions' diagnosis took 79–83 s instead of 94 s, its effects, verdict and held-out
+table the same, the kept values equal to four significant digits or more (``docs/diagnose.md``,
+"Landed on stop 63")."""
 
 
 JACOBIAN_STEP = 1e-2
@@ -1353,7 +1353,7 @@ def _expected_cost(name: str) -> int:
     """How many fits a candidate's job makes, roughly (the order :func:`run_fit_jobs` hands
     jobs out in, the dearest first): an effect fitted beside partners makes two or three
     (:func:`fit_candidate`: the partners alone, then jointly, then with the gains held or from
-    a profile), every other one.
+    a profile), every other effect one.
 
     Why: the workers take jobs first come, first served, and the round waits for its last
     fit. In registry order the dearest came late (on the 14 June OptiOdom sessions
