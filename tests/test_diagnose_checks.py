@@ -52,6 +52,7 @@ from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 from odomgym.sim.cables import bump_extra_rotation
+from odomgym.workers import TaskFailed
 
 ROBOT = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8, max_wheel_speed=0.6)
 
@@ -223,23 +224,35 @@ def test_the_gate_keeps_a_real_effect_and_drops_a_made_up_term(
 
 def test_the_gate_in_worker_processes_is_the_serial_gate_bit_for_bit(
     wheelbase_case: tuple[list[Run], RobotSpec],
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """``jobs=2``: each pass's trials (and the readmission's refits) run in forked worker
+    """``jobs=2``: each pass's trials, and the readmission's refits, run in forked worker
     processes, and the result is the serial gate's to the last bit — the same steps, the same
-    fitted values and held-out errors — with a proposal removed and one tried back in (a 1 %
-    wheelbase error, a distance scale and a term it does not have)."""
+    fitted values and held-out errors — with two proposals removed and both tried back in (a
+    1 % wheelbase error, a distance scale and a diameter ratio it does not have, a made-up
+    term). A pass whose worker fails runs again in the caller: the same result."""
     runs, proposed = wheelbase_case
     proposed = EFFECTS["distance_scale"].write(proposed, {"e_s": 1.004})
+    proposed = EFFECTS["wheel_diameter_ratio"].write(proposed, {"e_d": 1.003})
     data = OpenLoopData(runs, 0.25, ROBOT.wheelbase)
     folds = open_loop_folds(runs)
     said: list[str] = []
+    forked: list[int] = []
+    real_run_forked = gate_module.run_forked
+
+    def spy(task: Any, items: Any, processes: int, finished: Any, doing: Any) -> None:
+        listed = list(items)
+        forked.append(len(listed))
+        real_run_forked(task, listed, processes, finished, doing)
+
+    monkeypatch.setattr(gate_module, "run_forked", spy)
 
     def gate(jobs: int) -> GateResult:
         return open_loop_gate(
             data,
             ROBOT,
             proposed,
-            ["wheelbase", "distance_scale"],
+            ["wheelbase", "distance_scale", "wheel_diameter_ratio"],
             ["right_sin1"],
             NuisanceOptions(),
             folds,
@@ -249,15 +262,27 @@ def test_the_gate_in_worker_processes_is_the_serial_gate_bit_for_bit(
 
     serial = gate(1)
     stages = list(said)
+    assert not forked
+    assert any("readmitting" in stage for stage in stages)
     said.clear()
-    forked = gate(2)
-    assert len(serial.steps) >= 3 and any(not s.kept for s in serial.steps)
-    assert forked.steps == serial.steps
-    assert forked.effects == serial.effects and forked.terms == serial.terms
-    assert pickle.dumps(forked.fit.values) == pickle.dumps(serial.fit.values)
-    assert forked.fit.spec == serial.fit.spec
-    assert forked.cv_error.tobytes() == serial.cv_error.tobytes()
+    parallel = gate(2)
+    assert len(forked) >= 2 and all(count >= 2 for count in forked)
+    assert sum("readmitting" in stage for stage in said) >= 2  # both refits, forked
+    assert len([s for s in serial.steps if not s.kept]) >= 2
+    assert parallel.steps == serial.steps
+    assert parallel.effects == serial.effects and parallel.terms == serial.terms
+    assert pickle.dumps(parallel.fit.values) == pickle.dumps(serial.fit.values)
+    assert parallel.fit.spec == serial.fit.spec
+    assert parallel.cv_error.tobytes() == serial.cv_error.tobytes()
     assert sorted(said) == sorted(stages)  # every trial's progress, in whatever order
+
+    def fails(task: Any, items: Any, processes: int, finished: Any, doing: Any) -> None:
+        raise TaskFailed(0, "PicklingError: a user effect defined inside a function")
+
+    monkeypatch.setattr(gate_module, "run_forked", fails)
+    again = gate(2)
+    assert again.steps == serial.steps
+    assert again.cv_error.tobytes() == serial.cv_error.tobytes()
 
 
 def test_catalogue_first_decides_the_effects_without_the_terms(

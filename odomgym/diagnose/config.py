@@ -41,8 +41,9 @@ class DiagnoseConfig:
         tie_nats: candidates whose held-out log-likelihood gains differ by less than this
             [nats] are tied (2·3 = 6 on the deviance scale: below "strong" evidence in Kass &
             Raftery 1995, §3.2).
-        jobs: worker processes fitting candidates side by side, and evaluating the grammar
-            library's finite differences (results do not depend on it).
+        jobs: worker processes fitting candidates side by side, evaluating the grammar
+            library's finite differences, and fitting the open-loop gate's trials of a pass
+            (results do not depend on it).
         session_frames: fit a tracked-point offset and a yaw misalignment per session
             (:mod:`odomgym.diagnose.nuisances`); None: when the runs come from two or more
             sessions (``Run.meta["session"]``).

@@ -602,7 +602,7 @@ def systematic_vector(
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SpecBuilder:
     """The spec at fit units u of :func:`systematic_vector`: ``effect`` written into ``spec``
     at origin + u·scale, clipped to [low, high].
@@ -773,8 +773,9 @@ def whitened_stacks(
 
 
 def forks(processes: int, tasks: int) -> bool:
-    """Whether :func:`whitened_stacks` and :func:`run_fit_jobs` share ``tasks`` among
-    ``processes`` forked workers: more than one of each, the ``fork`` start method available,
+    """Whether :func:`whitened_stacks`, :func:`run_fit_jobs` and the open-loop gate's trials
+    (:meth:`odomgym.diagnose.gate._Elimination.each`) share ``tasks`` among ``processes``
+    forked workers: more than one of each, the ``fork`` start method available,
     and not inside a worker process already (a daemon process may not start its own)."""
     return (
         processes > 1

@@ -103,6 +103,7 @@ from odomgym.diagnose.openloop import (
 )
 from odomgym.effects import EFFECTS, DiscoveredTerms, Effect
 from odomgym.robot import RobotSpec
+from odomgym.workers import TaskFailed
 
 __all__ = [
     "FilterLinearisation",
@@ -428,32 +429,41 @@ class _Elimination:
         Why: a backward elimination's trials of one pass are independent open-loop fits (on
         the 14 June OptiOdom sessions 12 of them, 27 s on one core), and the gate ran them on
         one core while the rounds used both. Each trial is a deterministic function of the
-        members, the model and the data, so where it ran changes no result."""
+        members, the model and the data, so where it ran changes no result.
+
+        A trial's fit comes back pickled, effects included. Where a worker's trial fails — an
+        error in the fit, or a user-registered effect that cannot be pickled (a class defined
+        inside a function) — the pass runs again here, one trial after the other: the same
+        results, and a real error raised with its own traceback."""
         count = len(members)
 
-        def say(k: int) -> None:
-            if self.report is not None:
-                self.report(f"{stage}: {members[k][1]}", k / count)
-
-        if not forks(self.jobs, count):
+        def serial() -> list[Any]:
             out = []
             for k, member in enumerate(members):
-                say(k)
+                if self.report is not None:
+                    self.report(f"{stage}: {member[1]}", k / count)
                 out.append(call(member))
             return out
+
+        if not forks(self.jobs, count):
+            return serial()
         done: dict[int, Any] = {}
 
         def finished(k: int, value: Any) -> None:
             done[k] = value
-            say(k)
+            if self.report is not None:
+                self.report(f"{stage}: {members[k][1]}", len(done) / count)
 
-        run_forked(
-            lambda k, attempt: call(members[k]),
-            ((k, k) for k in range(count)),
-            self.jobs,
-            finished,
-            lambda k: f"checking {members[k][1]} open loop",
-        )
+        try:
+            run_forked(
+                lambda k, attempt: call(members[k]),
+                ((k, k) for k in range(count)),
+                self.jobs,
+                finished,
+                lambda k: f"checking {members[k][1]} open loop",
+            )
+        except TaskFailed:
+            return serial()
         return [done[k] for k in range(count)]
 
     def held_out(self, fit: OpenLoopFit, keys: Sequence[str]) -> tuple[FloatArray, str]:
