@@ -274,6 +274,7 @@ def test_the_gate_in_worker_processes_is_the_serial_gate_bit_for_bit(
     assert pickle.dumps(parallel.fit.values) == pickle.dumps(serial.fit.values)
     assert parallel.fit.spec == serial.fit.spec
     assert parallel.cv_error.tobytes() == serial.cv_error.tobytes()
+    assert parallel.fit.problem.data is data  # the caller's runs, not a copy of them
     assert sorted(said) == sorted(stages)  # every trial's progress, in whatever order
 
     def fails(task: Any, items: Any, processes: int, finished: Any, doing: Any) -> None:

@@ -71,7 +71,9 @@ them).
 from __future__ import annotations
 
 import functools
+import io
 import math
+import pickle
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -431,11 +433,15 @@ class _Elimination:
         one core while the rounds used both. Each trial is a deterministic function of the
         members, the model and the data, so where it ran changes no result.
 
-        A trial's fit comes back pickled, effects included. Where a worker's trial fails — an
-        error in the fit, or a user-registered effect that cannot be pickled (a class defined
-        inside a function) — the pass runs again here, one trial after the other: the same
-        results, and a real error raised with its own traceback."""
+        A trial's fit comes back pickled, effects included, but not the data it was fitted
+        on: the gate's own data (:attr:`data`, :attr:`corrected`) travel by reference
+        (:func:`_by_reference`), so the fits refer to the very objects a serial pass's would,
+        and twelve trials do not bring back twelve copies of every run. Where a worker's trial
+        fails — an error in the fit, or a user-registered effect that cannot be pickled (a
+        class defined inside a function) — the pass runs again here, one trial after the
+        other: the same results, and a real error raised with its own traceback."""
         count = len(members)
+        shared = [self.data, self.corrected]
 
         def serial() -> list[Any]:
             out = []
@@ -449,14 +455,14 @@ class _Elimination:
             return serial()
         done: dict[int, Any] = {}
 
-        def finished(k: int, value: Any) -> None:
-            done[k] = value
+        def finished(k: int, blob: bytes) -> None:
+            done[k] = _from_reference(blob, shared)
             if self.report is not None:
                 self.report(f"{stage}: {members[k][1]}", len(done) / count)
 
         try:
             run_forked(
-                lambda k, attempt: call(members[k]),
+                lambda k, attempt: _by_reference(call(members[k]), shared),
                 ((k, k) for k in range(count)),
                 self.jobs,
                 finished,
@@ -654,6 +660,25 @@ class _Elimination:
             model.append(member)
         kept = [_held(tested[m], fixed + model) for m in model]
         return current, kept, list(removed.values())
+
+
+def _by_reference(value: object, shared: Sequence[object]) -> bytes:
+    """``value`` pickled with each of ``shared`` (objects the receiving process holds too: a
+    forked worker's parent) written as its index instead of its contents
+    (:func:`_from_reference` puts the receiver's own object back)."""
+    buffer = io.BytesIO()
+    pickler = pickle.Pickler(buffer, protocol=pickle.HIGHEST_PROTOCOL)
+    ids = {id(obj): k for k, obj in enumerate(shared) if obj is not None}
+    pickler.persistent_id = lambda obj: ids.get(id(obj))  # type: ignore[method-assign]
+    pickler.dump(value)
+    return buffer.getvalue()
+
+
+def _from_reference(blob: bytes, shared: Sequence[object]) -> Any:
+    """The value :func:`_by_reference` pickled, with ``shared``'s objects put back in place."""
+    unpickler = pickle.Unpickler(io.BytesIO(blob))
+    unpickler.persistent_load = lambda k: shared[k]  # type: ignore[method-assign]
+    return unpickler.load()
 
 
 def _inflation(member: Member, fit: OpenLoopFit) -> float:
