@@ -1333,11 +1333,12 @@ def run_fit_jobs(
     """
     todo = list(jobs)
     started = ray_started()
-    if started is not None or forks(processes, len(todo)):
+    forked = forks(processes, len(todo))
+    if started is not None or forked:
         todo = sorted(todo, key=lambda k: -_expected_cost(jobs[k].effect))
     if started is not None and len(todo) > 1:  # inside distributed.on_ray: Ray tasks
         run_ray_tasks(_run_job, ((k, (jobs[k], 0)) for k in todo), finished, started=started)
-    elif forks(processes, len(todo)):
+    elif forked:
         run_forked(
             _run_job,
             ((k, jobs[k]) for k in todo),

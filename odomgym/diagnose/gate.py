@@ -619,25 +619,14 @@ class _Elimination:
         while True:
             while model:
                 round_number += 1
-                model_now, current_now = list(model), current
-                trials: dict[Member, tuple[GateStep, OpenLoopFit, FloatArray]] = dict(
-                    zip(
-                        model_now,
-                        self.each(
-                            model_now,
-                            functools.partial(
-                                self.trial,
-                                model=model_now,
-                                fixed=fixed,
-                                current=current_now,
-                                base=base,
-                            ),
-                            f"open-loop check {round_number}",
-                        ),
-                        strict=True,
-                    )
+                trial = functools.partial(
+                    self.trial, model=model, fixed=fixed, current=current, base=base
                 )
-                for member in model_now:
+                results = self.each(model, trial, f"open-loop check {round_number}")
+                trials: dict[Member, tuple[GateStep, OpenLoopFit, FloatArray]] = dict(
+                    zip(model, results, strict=True)
+                )
+                for member in model:
                     tested[member] = trials[member][0]
                 failing = [
                     m for m in model if not trials[m][0].kept and not _extended(m, fixed + model)
