@@ -55,9 +55,18 @@ from odomgym.diagnose.likelihood import (
     replay_gains,
     run_residual,
     run_scores,
+    score_stacked,
     stacked_process_noise,
 )
-from odomgym.diagnose.replay import Replay, RunInputs, replay_run
+from odomgym.diagnose.replay import (
+    Replay,
+    RunInputs,
+    RunStack,
+    StackedReplay,
+    replay_run,
+    replay_stacked,
+    stackable,
+)
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.distributed import ray_started, run_ray_tasks
 from odomgym.effects import EFFECTS, Effect
@@ -127,6 +136,8 @@ class Dataset:
     masks: list[NDArray[np.bool_]]
     inputs: list[dict[float, RunInputs]] = field(default_factory=list)
     noise_fits: dict[object, tuple[RobotSpec, SensorNoise, float]] = field(default_factory=dict)
+    stacks: dict[tuple[float, int, int], RunStack] = field(default_factory=dict)
+    mask_stacks: dict[tuple[int, int], NDArray[np.bool_]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.inputs:
@@ -151,11 +162,53 @@ class Dataset:
     def replay(self, j: int, spec: RobotSpec) -> Replay:
         """Run ``j`` replayed through ``spec`` (:func:`~odomgym.diagnose.replay.replay_run`)
         with its kept inputs."""
+        return replay_run(self.runs[j], spec, self._inputs(j, spec.ticks_per_rev))
+
+    def replays(self, spec: RobotSpec, index: range | None = None) -> list[Replay]:
+        """The runs of ``index`` (default: all) replayed through ``spec``: in one pass over
+        them stacked (:func:`~odomgym.diagnose.replay.replay_stack`; the stack kept per
+        encoder resolution and range) where every effect of ``spec`` replays stacked, else run
+        by run (:meth:`replay`); the same numbers either way."""
+        if index is None:
+            index = range(len(self.runs))
+        stacked = self.stacked_replay(spec, index)
+        if stacked is None:
+            return [self.replay(j, spec) for j in index]
+        return stacked.split()
+
+    def stacked_replay(self, spec: RobotSpec, index: range) -> StackedReplay | None:
+        """The runs of ``index`` replayed through ``spec`` in one pass
+        (:func:`~odomgym.diagnose.replay.replay_stacked`), or None where that does not apply
+        (fewer than two runs, or an effect of ``spec`` that replays one run at a time)."""
+        if len(index) < 2 or index.step != 1 or not stackable(spec):
+            return None
+        return replay_stacked(self.stack(spec.ticks_per_rev, index), spec)
+
+    def stack(self, ticks: float, index: range) -> RunStack:
+        """The :class:`~odomgym.diagnose.replay.RunStack` of the runs of ``index`` (a
+        contiguous range) at ``ticks`` counts/rev, kept."""
+        key = (ticks, index.start, index.stop)
+        stack = self.stacks.get(key)
+        if stack is None:
+            inputs = [self._inputs(j, ticks) for j in index]
+            stack = self.stacks[key] = RunStack.of([self.runs[j] for j in index], inputs)
+        return stack
+
+    def stacked_mask(self, index: range) -> NDArray[np.bool_]:
+        """The masks of the runs of ``index`` stacked (ΣT, 3), kept."""
+        key = (index.start, index.stop)
+        held = self.mask_stacks.get(key)
+        if held is None:
+            held = np.ascontiguousarray(np.concatenate([self.masks[j] for j in index]))
+            held.flags.writeable = False
+            self.mask_stacks[key] = held
+        return held
+
+    def _inputs(self, j: int, ticks: float) -> RunInputs:
         held = self.inputs[j]
-        ticks = spec.ticks_per_rev
         if ticks not in held:
             held[ticks] = RunInputs.of(self.runs[j], ticks)
-        return replay_run(self.runs[j], spec, held[ticks])
+        return held[ticks]
 
     def __len__(self) -> int:
         return len(self.runs)
@@ -167,6 +220,8 @@ class Dataset:
         self.__dict__.update(state)
         self.inputs = [{} for _ in self.runs]
         self.noise_fits = {}
+        self.stacks = {}
+        self.mask_stacks = {}
 
 
 @dataclass
@@ -238,14 +293,12 @@ def evaluate(
         return _evaluate_fixed(data, spec, sensor, fixed)
     noise = stacked_process_noise(spec, fixed.travel, fixed.rows) if fixed is not None else []
 
-    def one(j: int) -> tuple[Replay, float, FloatArray | None]:
+    def one(j: int, rep: Replay) -> tuple[Replay, float, FloatArray | None]:
         run, mask = data.runs[j], data.masks[j]
         if fixed is None:
-            rep = data.replay(j, spec)
             held = None if gains is None else FilterInputs(run_residual(run, rep, mask), gains[j])
             loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened, kept=held)
         else:
-            rep = fixed.replays[j]
             kept, own = fixed.inputs[j], noise[j]
             loglik, white = run_scores(
                 run, rep, spec, sensor, mask, whitened=whitened, kept=kept, noise=own
@@ -253,7 +306,31 @@ def evaluate(
         return rep, loglik, white
 
     def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
-        return [one(j) for j in index]
+        # A thread replays its share of the runs stacked and scores them in one compiled call
+        # (score_stacked): numpy's calls on the stacked arrays and the compiled functions
+        # release the GIL, so the threads' shares overlap.
+        if fixed is not None:
+            reps = fixed.replays[index.start : index.stop]
+            return [one(j, rep) for j, rep in zip(index, reps, strict=True)]
+        stacked = data.stacked_replay(spec, index)
+        if stacked is None:
+            return [one(j, data.replay(j, spec)) for j in index]
+        reps = stacked.split()
+        stack = data.stack(spec.ticks_per_rev, index)
+        logs, white = score_stacked(
+            stacked,
+            stack.measured,
+            data.stacked_mask(index),
+            spec,
+            sensor,
+            whitened=whitened,
+            gains=None if gains is None else _stacked_gains(gains, index),
+        )
+        rows = (3 * stacked.samples()).tolist()
+        return [
+            (rep, float(logs[r]), white[rows[r] : rows[r + 1]] if whitened else None)
+            for r, rep in enumerate(reps)
+        ]
 
     pool = _pool()
     n = len(data)
@@ -434,7 +511,7 @@ def _fixed_replays(
     functions on the same inputs: the same bytes)."""
     if _moves_mean(effects):
         return None
-    reps = [data.replay(j, spec) for j in range(len(data))]
+    reps = data.replays(spec)
     triples = zip(data.runs, reps, data.masks, strict=True)
     inputs = [filter_inputs(run, rep, mask) for run, rep, mask in triples]
     return FixedReplays.of(reps, inputs, data.masks)
@@ -842,11 +919,32 @@ def _least_squares_step(
     return _least_squares(data, spec, sensor, effect, hold=hold)[0]
 
 
-def _held_gains(data: Dataset, spec: RobotSpec) -> list[FloatArray]:
+class HeldGains(list[FloatArray]):
+    """Each run's wheel-noise gains (:func:`_held_gains`), with their stacks per contiguous
+    range of runs kept (:func:`_stacked_gains`): a fit that holds them evaluates hundreds of
+    times."""
+
+    def __init__(self, gains: Sequence[FloatArray]) -> None:
+        super().__init__(gains)
+        self.stacks: dict[tuple[int, int], FloatArray] = {}
+
+
+def _stacked_gains(gains: Sequence[FloatArray], index: range) -> FloatArray:
+    """The gains of the runs of ``index`` stacked (N, 2, 3); kept if ``gains`` is a
+    :class:`HeldGains`."""
+    key = (index.start, index.stop)
+    kept = gains.stacks if isinstance(gains, HeldGains) else {}
+    held = kept.get(key)
+    if held is None:
+        held = kept[key] = np.ascontiguousarray(np.concatenate([gains[j] for j in index]))
+    return held
+
+
+def _held_gains(data: Dataset, spec: RobotSpec) -> HeldGains:
     """Each run's wheel-noise gains under ``spec`` (:func:`~odomgym.diagnose.likelihood.
     replay_gains`): how the wheels' noise reaches the pose, which a least-squares fit may hold
     (:func:`_least_squares`)."""
-    return [replay_gains(data.replay(j, spec)) for j in range(len(data))]
+    return HeldGains([replay_gains(rep) for rep in data.replays(spec)])
 
 
 def _least_squares(

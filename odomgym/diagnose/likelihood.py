@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import inlined_kernel, kernel
-from odomgym.diagnose.replay import Replay
+from odomgym.diagnose.replay import Replay, StackedReplay
 from odomgym.effects import EFFECTS
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
@@ -50,6 +50,7 @@ __all__ = [
     "run_predictive",
     "run_residual",
     "run_scores",
+    "score_stacked",
     "stacked_process_noise",
 ]
 
@@ -231,6 +232,138 @@ def run_scores(
     if np.any(jumps > 0.0):
         _, white, _ = _filter(*arrays, residual, mask, True, True, no_expected)
     return float(loglik), white
+
+
+def score_stacked(
+    replay: StackedReplay,
+    measured: FloatArray,
+    mask: NDArray[np.bool_],
+    spec: RobotSpec,
+    sensor: SensorNoise,
+    *,
+    whitened: bool,
+    gains: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`run_scores` of every run of a stacked replay, in one compiled call: each run's
+    log-likelihood (R,) and, if ``whitened``, the runs' whitened innovations stacked (3·(N + R),;
+    run r's are entries ``3·samples[r]:3·samples[r + 1]``, :meth:`StackedReplay.samples`),
+    else an empty array. ``measured`` and ``mask`` are the runs' measured poses and masks
+    stacked as the replay's poses (N + R, 3); ``gains``: the wheel gains held (N, 2, 3), as
+    ``kept`` holds them in :func:`run_scores` (default: the replay's own).
+
+    The same bytes as :func:`run_scores` on each run: the residual, the wheel gains and the
+    filter are the same compiled functions on each run's rows, and the process noise of the
+    stacked travel is, row by row, each run's (:func:`process_noise`). Why: the Python around
+    each run's filter (its inputs gathered, the process noise looked up, the call dispatched)
+    held the GIL for a third of a systematic evaluation, so the evaluation threads queued for
+    it; one call per thread's share releases it for the whole share."""
+    samples = replay.samples()
+    if not (measured.shape == mask.shape == replay.pose.shape):
+        raise ValueError(
+            f"score_stacked: measured {measured.shape}, mask {mask.shape} and replayed poses "
+            f"{replay.pose.shape} must have the same shape"
+        )
+    if gains is not None and gains.shape != (len(replay.ds), 2, 3):
+        raise ValueError(f"score_stacked: held gains {gains.shape} for {len(replay.ds)} intervals")
+    variance, jumps, size = process_noise(spec, replay.travel)
+    runs = len(samples) - 1
+    logs = np.empty(runs)
+    white = np.empty(3 * len(replay.pose) if whitened else 0)
+    _score_runs(
+        np.ascontiguousarray(measured, dtype=np.float64),
+        replay.pose,
+        replay.tracked,
+        replay.ds,
+        replay.dtheta,
+        float(replay.wheelbase),
+        variance,
+        jumps,
+        size,
+        np.array([sensor.position, sensor.position, sensor.heading]),
+        np.ascontiguousarray(mask, dtype=np.bool_),
+        samples,
+        np.asarray(replay.bounds, dtype=np.int64),
+        np.zeros((0, 2, 3)) if gains is None else np.ascontiguousarray(gains, dtype=np.float64),
+        gains is not None,
+        whitened,
+        logs,
+        white,
+    )
+    return logs, white
+
+
+@kernel
+def _score_runs(
+    measured: FloatArray,
+    pose: FloatArray,
+    tracked: FloatArray,
+    ds: FloatArray,
+    dtheta: FloatArray,
+    wheelbase: float,
+    variance: FloatArray,
+    jumps: FloatArray,
+    size: float,
+    sigma: FloatArray,
+    mask: NDArray[np.bool_],
+    samples: NDArray[np.int64],
+    intervals: NDArray[np.int64],
+    held: FloatArray,
+    use_held: bool,
+    whitened: bool,
+    logs: FloatArray,
+    white: FloatArray,
+) -> None:
+    """:func:`run_scores` of every run of stacked arrays (:func:`score_stacked`)."""
+    no_expected = np.zeros((0, 2))
+    for j in range(samples.shape[0] - 1):
+        a = samples[j]
+        b = samples[j + 1]
+        c = intervals[j]
+        d = intervals[j + 1]
+        residual = _pose_residual(measured[a:b], tracked[a:b], mask[a:b])
+        if use_held:
+            gains = held[c:d].copy()
+        else:
+            gains = _wheel_gains(pose[a:b], ds[c:d], dtheta[c:d], wheelbase)
+        loglik, own, _ = _filter(
+            pose[a:b],
+            tracked[a:b],
+            gains,
+            variance[c:d],
+            jumps[c:d],
+            size,
+            sigma,
+            residual,
+            mask[a:b],
+            False,
+            True,
+            no_expected,
+        )
+        logs[j] = loglik
+        if not whitened:
+            continue
+        jumping = False
+        for k in range(c, d):
+            for w in range(2):
+                if jumps[k, w] > 0.0:
+                    jumping = True
+        if jumping:
+            _, own, _ = _filter(
+                pose[a:b],
+                tracked[a:b],
+                gains,
+                variance[c:d],
+                jumps[c:d],
+                size,
+                sigma,
+                residual,
+                mask[a:b],
+                True,
+                True,
+                no_expected,
+            )
+        for k in range(3 * (b - a)):
+            white[3 * a + k] = own[k]
 
 
 def stacked_process_noise(

@@ -24,7 +24,18 @@ from odomgym.effects.registry import scale_columns
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["Replay", "RunInputs", "replay_run", "session_time", "wheel_angles"]
+__all__ = [
+    "Replay",
+    "RunInputs",
+    "RunStack",
+    "StackedReplay",
+    "replay_run",
+    "replay_stack",
+    "replay_stacked",
+    "session_time",
+    "stackable",
+    "wheel_angles",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -80,6 +91,173 @@ class RunInputs:
         for array in (inputs.dt, inputs.motor, inputs.angle, inputs.time):
             array.flags.writeable = False
         return inputs
+
+
+@dataclass(frozen=True)
+class RunStack:
+    """Several runs' :class:`RunInputs` stacked end to end, for :func:`replay_stack`: computed
+    once per fit's runs and encoder resolution, shared read-only by its replays.
+
+    Attributes:
+        ticks_per_rev: the encoder resolution of every run's inputs [counts/rev].
+        dt, motor, angle, time: the runs' :class:`RunInputs` arrays stacked (N,), (N, 2).
+        bounds: where each run's intervals start, and where the last ends (R + 1,).
+        first: each run's first measured pose (R, 3) [m, m, rad].
+        measured: the runs' measured poses stacked (N + R, 3) (NaN where not measured).
+        memo: as :attr:`RunInputs.memo`, for the stacked arrays.
+    """
+
+    ticks_per_rev: float
+    dt: FloatArray
+    motor: FloatArray
+    angle: FloatArray
+    time: FloatArray
+    bounds: NDArray[np.int64]
+    first: FloatArray
+    measured: FloatArray
+    memo: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, runs: list[Run], inputs: list[RunInputs]) -> RunStack:
+        """The stack of ``runs`` with their ``inputs`` (one encoder resolution)."""
+        ticks = {i.ticks_per_rev for i in inputs}
+        if len(ticks) > 1:
+            raise ValueError(f"runs stacked at several encoder resolutions: {sorted(ticks)}")
+        lengths = [len(i.dt) for i in inputs]
+        bounds = np.zeros(len(inputs) + 1, dtype=np.int64)
+        np.cumsum(lengths, out=bounds[1:])
+        stack = cls(
+            ticks.pop() if ticks else 0.0,
+            np.concatenate([i.dt for i in inputs]) if inputs else np.zeros(0),
+            np.concatenate([i.motor for i in inputs]) if inputs else np.zeros((0, 2)),
+            np.concatenate([i.angle for i in inputs]) if inputs else np.zeros((0, 2)),
+            np.concatenate([i.time for i in inputs]) if inputs else np.zeros(0),
+            bounds,
+            np.array([np.asarray(r.true_pose[0], dtype=float) for r in runs]).reshape(-1, 3),
+            np.ascontiguousarray(
+                np.concatenate([np.asarray(r.true_pose, dtype=np.float64) for r in runs])
+                if runs
+                else np.zeros((0, 3))
+            ),
+        )
+        for array in (
+            stack.dt,
+            stack.motor,
+            stack.angle,
+            stack.time,
+            stack.bounds,
+            stack.first,
+            stack.measured,
+        ):
+            array.flags.writeable = False
+        return stack
+
+
+@dataclass(frozen=True)
+class StackedReplay:
+    """The runs of a :class:`RunStack` replayed (:func:`replay_stacked`): the arrays of
+    :class:`Replay` for every run, stacked end to end.
+
+    Attributes:
+        pose, tracked: axle and tracked poses (N + R, 3) [m, m, rad].
+        travel: wheel travel per interval (N, 2) [m].
+        ds, dtheta: body increments per interval (N,) [m], [rad].
+        wheelbase: the model's true wheelbase [m].
+        bounds: run r's intervals are rows ``bounds[r]:bounds[r + 1]``, its poses rows
+            ``bounds[r] + r:bounds[r + 1] + r + 1`` (R + 1,).
+    """
+
+    pose: FloatArray
+    tracked: FloatArray
+    travel: FloatArray
+    ds: FloatArray
+    dtheta: FloatArray
+    wheelbase: float
+    bounds: NDArray[np.int64]
+
+    def samples(self) -> NDArray[np.int64]:
+        """Where each run's poses start, and where the last ends (R + 1,)."""
+        out: NDArray[np.int64] = self.bounds + np.arange(len(self.bounds), dtype=np.int64)
+        return out
+
+    def split(self) -> list[Replay]:
+        """Each run's :class:`Replay`, its arrays views of the stacked ones."""
+        out = []
+        for r in range(len(self.bounds) - 1):
+            a, b = int(self.bounds[r]), int(self.bounds[r + 1])
+            rows = slice(a + r, b + r + 1)
+            out.append(
+                Replay(
+                    self.pose[rows],
+                    self.tracked[rows],
+                    self.travel[a:b],
+                    self.ds[a:b],
+                    self.dtheta[a:b],
+                    self.wheelbase,
+                )
+            )
+        return out
+
+
+def stackable(spec: RobotSpec) -> bool:
+    """Whether every effect of ``spec`` replays runs stacked
+    (:meth:`~odomgym.effects.Effect.replays_stacked`)."""
+    return all(EFFECTS[name].replays_stacked() for name, _ in _effects_of(spec))
+
+
+def replay_stack(stack: RunStack, spec: RobotSpec) -> list[Replay]:
+    """Every run of ``stack`` replayed through ``spec`` (:func:`replay_stacked`), run by
+    run."""
+    return replay_stacked(stack, spec).split()
+
+
+def replay_stacked(stack: RunStack, spec: RobotSpec) -> StackedReplay:
+    """Every run of ``stack`` replayed through ``spec``, in one pass over the stacked arrays:
+    the same numbers as :func:`replay_run` on each run (the stages act sample by sample, or
+    run by run through :attr:`~odomgym.effects.ReplayArrays.bounds`; the integration restarts
+    at each run's first measured pose), each run's arrays views of the stacked results.
+
+    Why: a fit replays all its runs at every evaluation, and a run's replay was mostly the
+    stages' numpy calls and the Python between them (~58 µs a run of ~1 300 samples on the
+    June OptiOdom sessions); stacked, each call is paid once for all runs. Only for a spec
+    whose effects all replay stacked (:func:`stackable`): the caller replays the others run
+    by run."""
+    effects = _effects_of(spec)
+    if stack.ticks_per_rev != spec.ticks_per_rev:
+        raise ValueError(
+            f"a stack of inputs at {stack.ticks_per_rev} counts/rev replayed through a spec "
+            f"of {spec.ticks_per_rev}"
+        )
+    radius = 0.5 * np.array([spec.true_left_diameter, spec.true_right_diameter], dtype=float)
+    wheelbase = float(spec.true_wheelbase)
+    arrays = ReplayArrays(
+        dt=stack.dt,
+        wheel=stack.motor,
+        wheelbase=wheelbase,
+        radius=radius,
+        angle=stack.angle,
+        time=stack.time,
+        memo=stack.memo,
+        bounds=stack.bounds,
+    )
+    for name, values in effects:
+        EFFECTS[name].replay("transmission", values, arrays)
+    travel = scale_columns(arrays.wheel, radius)
+    arrays.travel = travel
+    arrays.ds = 0.5 * (travel[:, 0] + travel[:, 1])
+    arrays.dtheta = (travel[:, 1] - travel[:, 0]) / wheelbase
+    arrays.crab = np.zeros(len(stack.dt))
+    for name, values in _body_order(effects):
+        EFFECTS[name].replay("body", values, arrays)
+    starts = _start_pose(stack.first, effects)
+    ds, dtheta = _floats(arrays.ds), _floats(arrays.dtheta)
+    bounds = stack.bounds
+    theta, direction = _stacked_headings(
+        np.ascontiguousarray(starts[:, 2]), dtheta, _floats(arrays.crab), bounds
+    )
+    pose = _stacked_positions(starts, theta, ds, np.cos(direction), np.sin(direction), bounds)
+    tracked = _measure(pose, effects, arrays)
+    return StackedReplay(pose, tracked, travel, ds, dtheta, wheelbase, bounds)
 
 
 def _effects_of(spec: RobotSpec) -> list[tuple[str, dict[str, float]]]:
@@ -190,6 +368,61 @@ def _positions(
     return pose
 
 
+@kernel
+def _stacked_headings(
+    theta0: FloatArray, dtheta: FloatArray, crab: FloatArray, bounds: NDArray[np.int64]
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`_headings` of every run of a stack (run r from ``theta0[r]``, its intervals rows
+    ``bounds[r]:bounds[r + 1]``): the headings (N + R,) and directions (N,), each run's the
+    same operations in the same order."""
+    runs = bounds.shape[0] - 1
+    theta = np.empty(dtheta.shape[0] + runs)
+    direction = np.empty(dtheta.shape[0])
+    for r in range(runs):
+        a = bounds[r]
+        b = bounds[r + 1]
+        p = a + r
+        theta[p] = theta0[r] + 0.0
+        total = 0.0
+        for i in range(a, b):
+            total = dtheta[i] if i == a else total + dtheta[i]
+            theta[p + 1 + i - a] = theta0[r] + total
+        for i in range(a, b):
+            direction[i] = theta[p + i - a] + 0.5 * dtheta[i] + crab[i]
+    return theta, direction
+
+
+@kernel
+def _stacked_positions(
+    start: FloatArray,
+    theta: FloatArray,
+    ds: FloatArray,
+    cos_d: FloatArray,
+    sin_d: FloatArray,
+    bounds: NDArray[np.int64],
+) -> FloatArray:
+    """:func:`_positions` of every run of a stack (run r from ``start[r]``), the poses
+    (N + R, 3), each run's the same operations in the same order."""
+    runs = bounds.shape[0] - 1
+    pose = np.empty((ds.shape[0] + runs, 3))
+    for r in range(runs):
+        a = bounds[r]
+        b = bounds[r + 1]
+        p = a + r
+        pose[p, 0] = start[r, 0] + 0.0
+        pose[p, 1] = start[r, 1] + 0.0
+        x = 0.0
+        y = 0.0
+        for i in range(a, b):
+            x = ds[i] * cos_d[i] if i == a else x + ds[i] * cos_d[i]
+            y = ds[i] * sin_d[i] if i == a else y + ds[i] * sin_d[i]
+            pose[p + 1 + i - a, 0] = start[r, 0] + x
+            pose[p + 1 + i - a, 1] = start[r, 1] + y
+        for i in range(p, b + r + 1):
+            pose[i, 2] = theta[i]
+    return pose
+
+
 def wheel_angles(run: Run, motor: FloatArray) -> FloatArray:
     """Each wheel's angle at the middle of every interval [rad], from the session's start when
     the run records where its wheels began (``meta["wheel_angle0"]``), else from the run's."""
@@ -220,13 +453,16 @@ def _measure(
 
 
 def _start_pose(measured: FloatArray, effects: list[tuple[str, dict[str, float]]]) -> FloatArray:
-    """The axle pose whose tracked point is the measured first pose (fixed-point iteration:
-    exact in two steps for rigid offsets, which do not change the heading).
+    """The axle pose whose tracked point is the measured first pose (3,), or the axle poses of
+    measured first poses (R, 3) (fixed-point iteration: exact in two steps for rigid offsets,
+    which do not change the heading).
 
-    The iteration stops early once a step leaves the pose's bytes as they were: ``_measure``
-    is a function of the pose alone, so every further step would give those bytes again (the
-    common case, a model without a measurement stage, takes one step instead of three)."""
-    target = np.asarray(measured, dtype=float)[None, :]
+    The iteration stops early once a step leaves the poses' bytes as they were: ``_measure``
+    is a function of each pose alone, so every further step would give those bytes again (the
+    common case, a model without a measurement stage, takes one step instead of three). So a
+    pose that settles before the others stays as it settled, and each of R poses is the one
+    its own iteration gives."""
+    target = np.asarray(measured, dtype=float).reshape(-1, 3)
     pose = target.copy()
     arrays = ReplayArrays(dt=np.zeros(0), wheel=np.zeros((0, 2)))
     for _ in range(3):
@@ -236,5 +472,5 @@ def _start_pose(measured: FloatArray, effects: list[tuple[str, dict[str, float]]
         pose = moved
         if settled:
             break
-    start: FloatArray = pose[0]
+    start: FloatArray = pose[0] if np.ndim(measured) == 1 else pose
     return start

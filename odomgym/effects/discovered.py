@@ -67,6 +67,7 @@ from odomgym.effects.registry import (
     SpecView,
     WorldHook,
     WorldView,
+    run_bounds,
 )
 from odomgym.effects.term_replay import replay_body_terms, replay_wheel_terms
 
@@ -428,6 +429,8 @@ class DiscoveredTerms(Effect):
         return all(float(v) == 0.0 for v in values.values())
 
     # ------------------------------------------------------------------ replay
+    stacked_replay = True  # sample by sample; the acceleration modulator run by run
+
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         # Compiled, bit-identical to the modulators' numpy expressions (term_replay.py).
         if stage not in ("transmission", "body"):
@@ -457,6 +460,7 @@ class DiscoveredTerms(Effect):
                 np.array([0 if t.channel == "left" else 1 for t, _ in terms]),
                 np.array([_WHEEL_CODES[t.modulator] for t, _ in terms]),
                 coefficients,
+                run_bounds(arrays),
             )
         else:
             spin = _NO_SPIN

@@ -71,6 +71,8 @@ class WheelToe(Effect):
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _ToeHook(values[:, 0].copy())
 
+    stacked_replay = True  # sample by sample
+
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "body":
             arrays.crab = arrays.crab + values["angle"]
@@ -111,6 +113,8 @@ class TurnSkid(Effect):
 
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _SkidHook(values[:, 0].copy())
+
+    stacked_replay = True  # sample by sample
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "body":
@@ -246,6 +250,8 @@ class SkidTrack(Effect):
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _TrackHook(values[:, 0].copy(), values[:, 1].copy())
 
+    stacked_replay = True  # sample by sample
+
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "body":
             arrays.dtheta = arrays.dtheta * track_factor(
@@ -368,6 +374,8 @@ class SkidSpeed(Effect):
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         # _scale_rotation's factor max(0, 1 − κ·|v·ω|) at κ = −g is 1 + g·|v·ω| (never clipped)
         return _SkidHook(-values[:, 0])
+
+    stacked_replay = True  # sample by sample
 
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "body":

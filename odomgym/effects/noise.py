@@ -90,6 +90,8 @@ class FloorBumps(Effect):
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _BumpHook(values[:, 0].copy(), values[:, 1] * 2.0 * world.half_track)
 
+    stacked_replay = True  # sample by sample
+
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         # The losses always shorten a wheel's travel: on average by rate·e per metre, which is a
         # systematic shortening of the distance; the jumps scatter around it (noise face).

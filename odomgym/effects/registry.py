@@ -45,6 +45,7 @@ __all__ = [
     "WorldView",
     "get_effect",
     "register_effect",
+    "run_bounds",
     "scale_columns",
 ]
 
@@ -180,6 +181,16 @@ class Effect:
     """What else, outside the catalogue, produces exactly the same logs (the report repeats it
     whenever the effect is named, so a reader does not take the name for more than the data
     can say)."""
+    stacked_replay: ClassVar[bool] = False
+    """Whether :meth:`replay` may be handed several runs' arrays stacked end to end
+    (:attr:`ReplayArrays.bounds` says where each run starts): true of a replay that acts
+    sample by sample, or run by run through ``bounds`` (backlash's play restarts at every
+    run). ``diagnose`` then replays all of a fit's runs in one pass
+    (:func:`odomgym.diagnose.replay.replay_stack`), where a run at a time pays the stages'
+    numpy calls once per run; a spec carrying an effect without it is replayed run by run.
+    An effect that does not override :meth:`replay` has nothing to stack and counts as true.
+    False by default, so a user's effect that reads a whole run (a cumulative sum, a
+    gradient) keeps its own run."""
 
     # ------------------------------------------------------------------ values
     @classmethod
@@ -272,9 +283,15 @@ class Effect:
 
     # ------------------------------------------------------------------ replay face
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
-        """Apply the effect to one run's arrays at ``stage`` (in place); see
-        :class:`ReplayArrays` for the stages."""
+        """Apply the effect to one run's arrays at ``stage`` (in place), or to several runs'
+        stacked if :attr:`stacked_replay`; see :class:`ReplayArrays` for the stages."""
         del stage, values, arrays
+
+    @classmethod
+    def replays_stacked(cls) -> bool:
+        """Whether this effect's replay takes several runs stacked (:attr:`stacked_replay`, or
+        no replay of its own)."""
+        return cls.stacked_replay or cls.replay is Effect.replay
 
     # ------------------------------------------------------------------ noise face
     def wheel_variance(self, values: Mapping[str, float], travel: FloatArray) -> FloatArray | None:
@@ -331,6 +348,12 @@ class ReplayArrays:
     the interval's middle since the session started [s] (``Run.meta["session_time"]`` at the
     run's first sample, else 0).
 
+    ``bounds`` (R + 1,), when not None, says that the arrays hold R runs stacked end to end:
+    run r's intervals are rows ``bounds[r]:bounds[r + 1]`` of the (n,) and (n, 2) arrays and its
+    poses rows ``bounds[r] + r:bounds[r + 1] + r + 1`` of the (T, 3) ones (only effects with
+    :attr:`Effect.stacked_replay` see such arrays; :func:`run_bounds` gives the bounds of
+    either kind).
+
     ``memo`` holds what an effect derives from a run's inputs alone (``angle``, ``time``,
     ``dt``), kept between replays of the same run (the diagnose fits replay every run hundreds
     of times with different parameters): each entry is ``(input, derived)``, reused only while
@@ -351,6 +374,15 @@ class ReplayArrays:
     pose: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     tracked: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     memo: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    bounds: NDArray[np.int64] | None = None
+
+
+def run_bounds(arrays: ReplayArrays) -> NDArray[np.int64]:
+    """Where each run's intervals start in ``arrays`` and where the last ends (R + 1,):
+    :attr:`ReplayArrays.bounds`, or ``[0, n]`` for one run's arrays."""
+    if arrays.bounds is not None:
+        return arrays.bounds
+    return np.array([0, len(arrays.dt)], dtype=np.int64)
 
 
 class WorldHook:

@@ -56,6 +56,8 @@ class GroundTruthOffset(Effect):
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _OffsetHook(values[:, 0].copy(), values[:, 1].copy())
 
+    stacked_replay = True  # pose by pose
+
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "measurement":
             arrays.tracked = offset_point(arrays.tracked, values["dx"], values["dy"])

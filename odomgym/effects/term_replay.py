@@ -93,19 +93,26 @@ def replay_wheel_terms(
     columns: NDArray[np.int64],
     codes: NDArray[np.int64],
     coefficients: FloatArray,
+    bounds: NDArray[np.int64],
 ) -> FloatArray:
-    """The wheel terms on one run's wheel rotations (n, 2) [rad]: each wheel's rotation
-    × (1 + Σ c·m) over the terms in order (wheel ``columns``, modulator ``codes`` in
-    ``WHEEL_MODULATORS`` order), the speed [m/s] the travel through ``radius`` [m] over
-    ``dt`` [s], the angle modulators precomputed. Bit-identical to the numpy expressions of
-    ``wheel_modulator``: the same operations in the same order."""
+    """The wheel terms on the wheel rotations (n, 2) [rad] of the runs whose rows start at
+    ``bounds`` (R + 1,; ``[0, n]`` for one run): each wheel's rotation × (1 + Σ c·m) over the
+    terms in order (wheel ``columns``, modulator ``codes`` in ``WHEEL_MODULATORS`` order), the
+    speed [m/s] the travel through ``radius`` [m] over ``dt`` [s], the angle modulators
+    precomputed; the acceleration is each run's own gradient. Bit-identical to the numpy
+    expressions of ``wheel_modulator`` on each run: the same operations in the same order."""
     n = wheel.shape[0]
     speed = np.empty((n, 2))
     for i in range(n):
         safe = dt[i] if dt[i] > 0.0 else np.inf
         for w in range(2):
             speed[i, w] = wheel[i, w] * radius[w] / safe
-    accel = _abs_speed_rate(speed, dt) if np.any(codes == 4) else speed
+    accel = speed
+    if np.any(codes == 4):
+        accel = np.empty((n, 2))
+        for r in range(bounds.shape[0] - 1):
+            a, b = bounds[r], bounds[r + 1]
+            accel[a:b] = _abs_speed_rate(speed[a:b], dt[a:b])
     factor = np.ones((n, 2))
     for t in range(codes.size):
         w = columns[t]

@@ -18,7 +18,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
-from odomgym.effects.registry import Effect, Parameter, ReplayArrays, WorldHook, WorldView
+from odomgym.effects.registry import (
+    Effect,
+    Parameter,
+    ReplayArrays,
+    WorldHook,
+    WorldView,
+    run_bounds,
+)
 
 __all__ = ["Backlash", "play_operator"]
 
@@ -39,10 +46,14 @@ class Backlash(Effect):
     def world_hook(self, world: WorldView, values: FloatArray) -> WorldHook | None:
         return _BacklashHook(values[:, 0].copy())
 
+    stacked_replay = True  # the play restarts engaged forward at every run's first interval
+
     def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
         if stage == "transmission":
             gap = np.full(2, 0.5 * values["angle"])
-            arrays.wheel = play_operator(arrays.wheel, np.full(2, values["angle"]), gap)
+            arrays.wheel = play_operator(
+                arrays.wheel, np.full(2, values["angle"]), gap, run_bounds(arrays)
+            )
 
 
 class _BacklashHook(WorldHook):
@@ -78,31 +89,43 @@ def _play_step(step: FloatArray, width: FloatArray, gap: FloatArray) -> None:
 
 
 @kernel
-def _play_run(motor: FloatArray, width: FloatArray, gap0: FloatArray) -> FloatArray:
+def _play_runs(
+    motor: FloatArray, width: FloatArray, gap0: FloatArray, bounds: NDArray[np.int64]
+) -> FloatArray:
     out = np.empty_like(motor)
-    for w in range(2):
-        half = 0.5 * width[w]
-        g = gap0[w]
-        for k in range(motor.shape[0]):
-            g += motor[k, w]
-            if g > half:
-                out[k, w] = g - half
-                g = half
-            elif g < -half:
-                out[k, w] = g + half
-                g = -half
-            else:
-                out[k, w] = 0.0
+    for r in range(bounds.shape[0] - 1):
+        for w in range(2):
+            half = 0.5 * width[w]
+            g = gap0[w]
+            for k in range(bounds[r], bounds[r + 1]):
+                g += motor[k, w]
+                if g > half:
+                    out[k, w] = g - half
+                    g = half
+                elif g < -half:
+                    out[k, w] = g + half
+                    g = -half
+                else:
+                    out[k, w] = 0.0
     return out
 
 
-def play_operator(motor: FloatArray, width: FloatArray, gap: FloatArray) -> FloatArray:
+def play_operator(
+    motor: FloatArray,
+    width: FloatArray,
+    gap: FloatArray,
+    bounds: NDArray[np.int64] | None = None,
+) -> FloatArray:
     """Wheel rotation increments (n, 2) [rad] from motor increments (n, 2) through gear play of
-    ``width`` (2,) [rad], starting with φ_m − φ_w = ``gap`` (2,)."""
+    ``width`` (2,) [rad], starting with φ_m − φ_w = ``gap`` (2,); ``bounds`` (R + 1,): rows of
+    R runs stacked, each starting at ``gap`` again (default: one run)."""
+    if bounds is None:
+        bounds = np.array([0, len(motor)], dtype=np.int64)
     return np.asarray(
-        _play_run(
+        _play_runs(
             np.ascontiguousarray(motor, dtype=np.float64),
             np.asarray(width, dtype=np.float64),
             np.asarray(gap, dtype=np.float64),
+            np.asarray(bounds, dtype=np.int64),
         )
     )
