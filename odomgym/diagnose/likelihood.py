@@ -285,6 +285,8 @@ def score_stacked(
         np.asarray(replay.bounds, dtype=np.int64),
         np.zeros((0, 2, 3)) if gains is None else np.ascontiguousarray(gains, dtype=np.float64),
         gains is not None,
+        replay.cos_mid,
+        replay.sin_mid,
         whitened,
         logs,
         white,
@@ -309,11 +311,15 @@ def _score_runs(
     intervals: NDArray[np.int64],
     held: FloatArray,
     use_held: bool,
+    cos_mid: FloatArray,
+    sin_mid: FloatArray,
     whitened: bool,
     logs: FloatArray,
     white: FloatArray,
 ) -> None:
-    """:func:`run_scores` of every run of stacked arrays (:func:`score_stacked`)."""
+    """:func:`run_scores` of every run of stacked arrays (:func:`score_stacked`); the wheel
+    gains from the replay's cosines and sines of the middle headings where it kept them."""
+    shared = cos_mid.shape[0] == ds.shape[0]
     no_expected = np.zeros((0, 2))
     for j in range(samples.shape[0] - 1):
         a = samples[j]
@@ -323,6 +329,10 @@ def _score_runs(
         residual = _pose_residual(measured[a:b], tracked[a:b], mask[a:b])
         if use_held:
             gains = held[c:d].copy()
+        elif shared:
+            gains = _wheel_gains_of(
+                pose[a:b], ds[c:d], dtheta[c:d], wheelbase, cos_mid[c:d], sin_mid[c:d]
+            )
         else:
             gains = _wheel_gains(pose[a:b], ds[c:d], dtheta[c:d], wheelbase)
         loglik, own, _ = _filter(
@@ -557,6 +567,38 @@ def _wheel_gains(
         mid = pose[m, 2] + 0.5 * dtheta[m]
         c = math.cos(mid)
         s = math.sin(mid)
+        half = ds[m] / (2.0 * wheelbase)
+        for w in range(2):
+            sign = 1.0 if w == 0 else -1.0
+            gains[m, w, 0] = 0.5 * c + sign * half * s
+            gains[m, w, 1] = 0.5 * s - sign * half * c
+            gains[m, w, 2] = -sign / wheelbase
+    return gains
+
+
+@kernel
+def _wheel_gains_of(
+    pose: FloatArray,
+    ds: FloatArray,
+    dtheta: FloatArray,
+    wheelbase: float,
+    cos_mid: FloatArray,
+    sin_mid: FloatArray,
+) -> FloatArray:
+    """:func:`_wheel_gains` with the cosine and sine of each middle heading given (the
+    replay's, :class:`~odomgym.diagnose.replay.StackedReplay`): the same bytes, the cosine
+    and sine computed once instead of twice per interval. At a middle heading of zero the
+    replay's direction θ + dθ/2 + 0.0 is +0.0 where θ + dθ/2 may be −0.0, whose sine keeps the
+    sign: recomputed there."""
+    n = ds.shape[0]
+    gains = np.empty((n, 2, 3))
+    for m in range(n):
+        mid = pose[m, 2] + 0.5 * dtheta[m]
+        c = cos_mid[m]
+        s = sin_mid[m]
+        if mid == 0.0:
+            c = math.cos(mid)
+            s = math.sin(mid)
         half = ds[m] / (2.0 * wheelbase)
         for w in range(2):
             sign = 1.0 if w == 0 else -1.0

@@ -13,6 +13,7 @@ computed once per run by a fit, which replays every run hundreds of times.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -165,6 +166,9 @@ class StackedReplay:
         wheelbase: the model's true wheelbase [m].
         bounds: run r's intervals are rows ``bounds[r]:bounds[r + 1]``, its poses rows
             ``bounds[r] + r:bounds[r + 1] + r + 1`` (R + 1,).
+        cos_mid, sin_mid: cosine and sine of every interval's middle heading θ + dθ/2 (N,),
+            or empty where the replay did not compute them (a crab angle made its directions
+            differ from the middle headings).
     """
 
     pose: FloatArray
@@ -174,6 +178,8 @@ class StackedReplay:
     dtheta: FloatArray
     wheelbase: float
     bounds: NDArray[np.int64]
+    cos_mid: FloatArray = field(default_factory=lambda: np.zeros(0))
+    sin_mid: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def samples(self) -> NDArray[np.int64]:
         """Where each run's poses start, and where the last ends (R + 1,)."""
@@ -250,14 +256,28 @@ def replay_stacked(stack: RunStack, spec: RobotSpec) -> StackedReplay:
     for name, values in _body_order(effects):
         EFFECTS[name].replay("body", values, arrays)
     starts = _start_pose(stack.first, effects)
-    ds, dtheta = _floats(arrays.ds), _floats(arrays.dtheta)
+    ds, dtheta, crab = _floats(arrays.ds), _floats(arrays.dtheta), _floats(arrays.crab)
     bounds = stack.bounds
-    theta, direction = _stacked_headings(
-        np.ascontiguousarray(starts[:, 2]), dtheta, _floats(arrays.crab), bounds
-    )
-    pose = _stacked_positions(starts, theta, ds, np.cos(direction), np.sin(direction), bounds)
+    theta, direction = _stacked_headings(np.ascontiguousarray(starts[:, 2]), dtheta, crab, bounds)
+    cos_d, sin_d = _cos_sin(direction)
+    pose = _stacked_positions(starts, theta, ds, cos_d, sin_d, bounds)
     tracked = _measure(pose, effects, arrays)
-    return StackedReplay(pose, tracked, travel, ds, dtheta, wheelbase, bounds)
+    if np.any(crab != 0.0):  # the directions are not the middle headings
+        cos_d = sin_d = np.zeros(0)
+    return StackedReplay(pose, tracked, travel, ds, dtheta, wheelbase, bounds, cos_d, sin_d)
+
+
+@kernel
+def _cos_sin(angle: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Cosine and sine of every element of ``angle``, compiled (libm's, as numpy's on the
+    machines measured: the same bytes; 2.0 ms instead of numpy's 2.8 ms for 133 000 angles,
+    2026-11-30)."""
+    c = np.empty(angle.shape[0])
+    s = np.empty(angle.shape[0])
+    for i in range(angle.shape[0]):
+        c[i] = math.cos(angle[i])
+        s[i] = math.sin(angle[i])
+    return c, s
 
 
 def _effects_of(spec: RobotSpec) -> list[tuple[str, dict[str, float]]]:
