@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym._jit import kernel
 from odomgym.data.gaps import measured_end
 from odomgym.diagnose.fit import (
     JACOBIAN_STEP,
@@ -60,7 +61,14 @@ from odomgym.diagnose.nuisances import (
     offset_is_significant,
     sessions_of,
 )
-from odomgym.diagnose.replay import Replay, RunInputs, replay_run
+from odomgym.diagnose.replay import (
+    Replay,
+    RunInputs,
+    RunStack,
+    replay_run,
+    replay_stacked,
+    stackable,
+)
 from odomgym.diagnose.stats import clustered_covariance
 from odomgym.effects import Effect
 from odomgym.errors import SpecError
@@ -129,6 +137,9 @@ class OpenLoopData:
         # Runs weigh equally: each run's residuals are divided by √(its measured samples).
         self.weights = [1.0 / math.sqrt(max(int(m.any(axis=1).sum()), 1)) for m in self.masks]
         self.inputs: list[dict[tuple[float, float], RunInputs]] = [{} for _ in self.runs]
+        self.corrected: list[dict[tuple[float, ...] | None, Run]] = [{} for _ in self.runs]
+        self.stacks: dict[tuple[object, ...], RunStack] = {}
+        self.fixed_arrays: _StackedRuns | None = None
 
     def replay(
         self, j: int, spec: RobotSpec, nuisance: SessionNuisance | None
@@ -141,6 +152,11 @@ class OpenLoopData:
         and building them took a third of each replay. A few are kept per run (the offset moves
         while it is fitted); the replay is the one :func:`replay_run` makes without them."""
         fixed = correct_run(self.runs[j], nuisance)
+        return fixed, replay_run(fixed, spec, self._inputs(j, fixed, nuisance, spec))
+
+    def _inputs(
+        self, j: int, fixed: Run, nuisance: SessionNuisance | None, spec: RobotSpec
+    ) -> RunInputs:
         offset = nuisance.time_offset if nuisance is not None else 0.0
         key = (offset, float(spec.ticks_per_rev))
         held = self.inputs[j]
@@ -149,7 +165,65 @@ class OpenLoopData:
             if len(held) >= _KEPT_INPUTS:
                 held.clear()
             inputs = held[key] = RunInputs.of(fixed, spec.ticks_per_rev)
-        return fixed, replay_run(fixed, spec, inputs)
+        return inputs
+
+    def _corrected(self, j: int, nuisance: SessionNuisance | None) -> Run:
+        """Run ``j`` with ``nuisance`` removed (:func:`correct_run`), a few kept per run (a
+        fit's Jacobian moves the robot's parameters with the nuisances where they were)."""
+        key = None if nuisance is None else tuple(float(v) for v in nuisance.values)
+        held = self.corrected[j]
+        fixed = held.get(key)
+        if fixed is None:
+            if len(held) >= _KEPT_INPUTS:
+                held.clear()
+            fixed = held[key] = correct_run(self.runs[j], nuisance)
+        return fixed
+
+    def stacked_residuals(
+        self, spec: RobotSpec, nuisances: Sequence[SessionNuisance | None]
+    ) -> list[FloatArray] | None:
+        """Every run's :func:`_residual` (run j with ``nuisances[j]`` removed), from one
+        stacked replay (:func:`~odomgym.diagnose.replay.replay_stacked`) and one compiled
+        pass for the alignment and the weighting (:func:`_stacked_open_loop`): the same bytes
+        as run by run. None where a replay of ``spec`` does not stack (fewer than two runs,
+        or an effect that replays one run at a time).
+
+        Why: an open-loop fit evaluates every run at every step and Jacobian column, and the
+        Python around each run's replay, alignment and residual (~100 µs) was most of it."""
+        if len(self.runs) < 2 or not stackable(spec):
+            return None
+        ticks = float(spec.ticks_per_rev)
+        keys = tuple(None if n is None else tuple(float(v) for v in n.values) for n in nuisances)
+        stack = self.stacks.get((ticks, keys))
+        if stack is None:
+            fixed = [self._corrected(j, n) for j, n in enumerate(nuisances)]
+            inputs = [
+                self._inputs(j, f, n, spec)
+                for j, (f, n) in enumerate(zip(fixed, nuisances, strict=True))
+            ]
+            if len(self.stacks) >= _KEPT_INPUTS:
+                self.stacks.clear()
+            stack = self.stacks[(ticks, keys)] = RunStack.of(fixed, inputs)
+        if self.fixed_arrays is None:
+            self.fixed_arrays = _StackedRuns.of(self)
+        arrays = self.fixed_arrays
+        replay = replay_stacked(stack, spec)
+        out = np.empty(arrays.rows[-1])
+        _stacked_open_loop(
+            stack.measured,
+            replay.tracked,
+            arrays.time,
+            arrays.mask,
+            replay.samples(),
+            arrays.weights,
+            float(self.length),
+            ALIGN_WINDOW + 1e-9,
+            ALIGN_TURN,
+            arrays.rows,
+            out,
+        )
+        rows = arrays.rows.tolist()
+        return [out[rows[j] : rows[j + 1]] for j in range(len(self.runs))]
 
     def subset(self, index: Sequence[int]) -> OpenLoopData:
         out = OpenLoopData.__new__(OpenLoopData)
@@ -159,10 +233,36 @@ class OpenLoopData:
         out.sessions = [self.sessions[j] for j in index]
         out.weights = [self.weights[j] for j in index]
         out.inputs = [self.inputs[j] for j in index]
+        out.corrected = [self.corrected[j] for j in index]
+        out.stacks = {}
+        out.fixed_arrays = None
         return out
 
     def __len__(self) -> int:
         return len(self.runs)
+
+
+@dataclass(frozen=True)
+class _StackedRuns:
+    """What :meth:`OpenLoopData.stacked_residuals` takes from the runs alone, stacked: the
+    sample times (ΣT,) [s], the masks (ΣT, 3), each run's weight (R,) and where each run's
+    residuals start in the stacked residual vector (R + 1,)."""
+
+    time: FloatArray
+    mask: NDArray[np.bool_]
+    weights: FloatArray
+    rows: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, data: OpenLoopData) -> _StackedRuns:
+        rows = np.zeros(len(data.runs) + 1, dtype=np.int64)
+        np.cumsum([int(m.sum()) for m in data.masks], out=rows[1:])
+        return cls(
+            np.ascontiguousarray(np.concatenate([r.time for r in data.runs]), dtype=np.float64),
+            np.ascontiguousarray(np.concatenate(data.masks), dtype=np.bool_),
+            np.array(data.weights, dtype=np.float64),
+            rows,
+        )
 
 
 def _wrap(angle: FloatArray) -> FloatArray:
@@ -257,6 +357,199 @@ def _measured_minus(fixed: Run, replayed: Replay) -> FloatArray:
     error[:, 2] = _wrap(error[:, 2])
     error[_in_window(fixed)] = np.nan
     return error
+
+
+@kernel
+def _block_sum(values: FloatArray, start: int, n: int) -> float:
+    """numpy's pairwise sum of a block of at most 128 values (:func:`_pairwise_sum`)."""
+    if n < 8:
+        total: float = -0.0
+        for i in range(n):
+            total += values[start + i]
+        return total
+    r0 = values[start]
+    r1 = values[start + 1]
+    r2 = values[start + 2]
+    r3 = values[start + 3]
+    r4 = values[start + 4]
+    r5 = values[start + 5]
+    r6 = values[start + 6]
+    r7 = values[start + 7]
+    i = 8
+    end = n - n % 8
+    while i < end:
+        r0 += values[start + i]
+        r1 += values[start + i + 1]
+        r2 += values[start + i + 2]
+        r3 += values[start + i + 3]
+        r4 += values[start + i + 4]
+        r5 += values[start + i + 5]
+        r6 += values[start + i + 6]
+        r7 += values[start + i + 7]
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        total += values[start + i]
+        i += 1
+    return total
+
+
+@kernel
+def _pairwise_sum(values: FloatArray, start: int, n: int) -> float:
+    """numpy's sum of ``values[start:start + n]`` (a contiguous float64 vector): its pairwise
+    summation (eight partial sums in blocks of up to 128; above, the two halves summed apart,
+    the first a multiple of 8 long, then added), the same operations in the same order, so the
+    same bytes (``tests/test_diagnose_speed.py`` holds it to ``numpy.sum``). numpy recurses;
+    this walks the same tree with a stack of its own, as numba's on-disk cache cannot reload a
+    recursive kernel (it crashed the process that loaded it, numba 0.68)."""
+    if n <= 128:
+        return _block_sum(values, start, n)
+    starts = np.empty(256, dtype=np.int64)
+    sizes = np.empty(256, dtype=np.int64)
+    joins = np.zeros(256, dtype=np.bool_)
+    partial = np.empty(256)
+    top = 0
+    done = 0
+    starts[0] = start
+    sizes[0] = n
+    top = 1
+    while top > 0:
+        top -= 1
+        s = starts[top]
+        m = sizes[top]
+        if joins[top]:  # both halves summed: first + second
+            joins[top] = False
+            second = partial[done - 1]
+            first = partial[done - 2]
+            done -= 2
+            partial[done] = first + second
+            done += 1
+        elif m <= 128:
+            partial[done] = _block_sum(values, s, m)
+            done += 1
+        else:
+            half = m // 2
+            half -= half % 8
+            joins[top] = True  # this entry again, after both halves
+            top += 1
+            starts[top] = s + half
+            sizes[top] = m - half
+            joins[top] = False
+            top += 1
+            starts[top] = s
+            sizes[top] = half
+            joins[top] = False
+            top += 1
+    return float(partial[0])
+
+
+@kernel
+def _numpy_mod(x: float, period: float) -> float:
+    """``numpy.mod(x, period)`` for a positive ``period``: fmod, plus the period where that is
+    non-zero and negative, +0.0 where it is zero (numpy's float remainder)."""
+    mod = float(np.fmod(x, period))
+    if mod != 0.0:  # NaN included, as numpy's ``if (mod)``
+        if mod < 0.0:
+            mod += period
+    else:
+        mod = 0.0
+    return mod
+
+
+@kernel
+def _stacked_open_loop(
+    measured: FloatArray,
+    tracked: FloatArray,
+    time: FloatArray,
+    mask: NDArray[np.bool_],
+    samples: NDArray[np.int64],
+    weights: FloatArray,
+    length: float,
+    window: float,
+    align_turn: float,
+    rows: NDArray[np.int64],
+    out: FloatArray,
+) -> None:
+    """:func:`_residual` of every run of stacked arrays (run r's samples rows
+    ``samples[r]:samples[r + 1]``, its residuals ``out[rows[r]:rows[r + 1]]``):
+    :func:`aligned_prediction` (with :func:`alignment_samples`), :func:`_measured_minus` and
+    the weighting, numpy's operations written out in numpy's order (its pairwise sums, the
+    axis-0 means of the shift row by row, its float remainder), so the same bytes."""
+    two_pi = 2.0 * math.pi
+    for r in range(samples.shape[0] - 1):
+        a = samples[r]
+        b = samples[r + 1]
+        n = b - a
+        predicted = tracked[a:b].copy()
+        # alignment_samples: the window before the robot has turned, by the measured heading
+        # where there is one, else the predicted.
+        inside = np.zeros(n, dtype=np.bool_)
+        h0 = measured[a, 2] if np.isfinite(measured[a, 2]) else predicted[0, 2]
+        before = True
+        for k in range(n):
+            hk = measured[a + k, 2] if np.isfinite(measured[a + k, 2]) else predicted[k, 2]
+            turn = abs(_numpy_mod(hk - h0 + math.pi, two_pi) - math.pi)
+            before = before and turn <= align_turn
+            inside[k] = (time[a + k] - time[a] <= window) and before
+        # the mean heading difference over the window, by its sines and cosines
+        sines = np.empty(n)
+        cosines = np.empty(n)
+        m = 0
+        for k in range(n):
+            if inside[k]:
+                d = measured[a + k, 2] - predicted[k, 2]
+                if np.isfinite(d):
+                    sines[m] = math.sin(d)
+                    cosines[m] = math.cos(d)
+                    m += 1
+        turn = 0.0
+        if m > 0:
+            turn = math.atan2(_pairwise_sum(sines, 0, m) / m, _pairwise_sum(cosines, 0, m) / m)
+        if turn != 0.0:
+            c = math.cos(turn)
+            s = math.sin(turn)
+            x0 = predicted[0, 0]
+            y0 = predicted[0, 1]
+            for k in range(n):
+                rx = predicted[k, 0] - x0
+                ry = predicted[k, 1] - y0
+                predicted[k, 0] = x0 + c * rx - s * ry
+                predicted[k, 1] = y0 + s * rx + c * ry
+                predicted[k, 2] += turn
+        # the mean position difference over the window (numpy's axis-0 mean: row by row)
+        sx = 0.0
+        sy = 0.0
+        count = 0
+        for k in range(n):
+            if inside[k]:
+                ex = measured[a + k, 0] - predicted[k, 0]
+                ey = measured[a + k, 1] - predicted[k, 1]
+                if np.isfinite(ex) and np.isfinite(ey):
+                    if count == 0:
+                        sx = ex
+                        sy = ey
+                    else:
+                        sx += ex
+                        sy += ey
+                    count += 1
+        if count > 0:
+            mx = sx / count
+            my = sy / count
+            for k in range(n):
+                predicted[k, 0] += mx
+                predicted[k, 1] += my
+        # _measured_minus and _residual: the masked errors, the heading × length, weighted
+        # (the alignment window's rows are never in the mask)
+        j = rows[r]
+        w = weights[r]
+        for k in range(n):
+            for axis in range(3):
+                if mask[a + k, axis]:
+                    error = measured[a + k, axis] - predicted[k, axis]
+                    if axis == 2:
+                        error = (_numpy_mod(error + math.pi, two_pi) - math.pi) * length
+                    out[j] = error * w
+                    j += 1
 
 
 def open_loop_mask(run: Run, interval: float) -> NDArray[np.bool_]:
@@ -436,6 +729,11 @@ class _Problem:
     def residuals(self, x: FloatArray) -> list[FloatArray]:
         model = self.build(x[: self.size])
         cache = {s: self.nuisance(x, s) for s in self.sessions}
+        stacked = self.data.stacked_residuals(
+            model, [cache[self.data.sessions[j]] for j in range(len(self.data))]
+        )
+        if stacked is not None:
+            return stacked
         return [
             _residual(self.data, j, model, cache[self.data.sessions[j]])
             for j in range(len(self.data))
