@@ -11,6 +11,7 @@ acceleration modulator's gradient), crab angles, wheel jumps, held gains and eve
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Mapping
 
 import numpy as np
@@ -20,11 +21,19 @@ from alien_robot import generate_session
 from odomgym.diagnose.fit import Dataset, _held_gains, close_thread_pool, evaluate
 from odomgym.diagnose.likelihood import FilterInputs, SensorNoise, run_residual, run_scores
 from odomgym.diagnose.nuisances import SessionNuisance
-from odomgym.diagnose.openloop import OpenLoopData, _pairwise_sum, _residual
-from odomgym.diagnose.replay import replay_run, stackable
+from odomgym.diagnose.openloop import (
+    OpenLoopData,
+    _measured_minus,
+    _pairwise_sum,
+    _residual,
+    _stacked_open_loop_residuals,
+    _StackedRuns,
+)
+from odomgym.diagnose.replay import Replay, replay_run, stackable
 from odomgym.effects import EFFECTS, Effect, Parameter, ReplayArrays, register_effect
 from odomgym.effects.discovered import DiscoveredTerms
 from odomgym.effects.transmission import play_operator
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
 MODEL = RobotSpec(wheel_diameter=0.084, wheelbase=0.2, ticks_per_rev=2796.8)
@@ -221,3 +230,46 @@ def test_stacked_open_loop_residuals_are_per_run_bit_for_bit(rate: float) -> Non
             inside = part.stacked_residuals(spec, [per_run[1], per_run[3]])
             assert inside is not None
             assert _same(inside[1], _residual(data, 3, spec, per_run[3]))
+
+
+def test_the_stacked_alignment_turns_by_numpys_arctan2() -> None:
+    """The alignment's turn is numpy's ``arctan2`` of the mean sine and cosine, as
+    :func:`~odomgym.diagnose.openloop.aligned_prediction` computes it, not libm's ``atan2``
+    (they differ in the last bit for about one pair in 20 000): runs whose window holds a
+    single measured heading, off the prediction by an angle where the two differ, get each
+    run's residuals to the last bit."""
+    rng = np.random.default_rng(1)
+    angles = rng.uniform(-0.01, 0.01, 100_000)
+    differ = [
+        d
+        for d in angles[:20_000]
+        if np.arctan2(math.sin(d), math.cos(d)) != math.atan2(math.sin(d), math.cos(d))
+    ]
+    if not differ:
+        pytest.skip("numpy's arctan2 is libm's atan2 on this machine")
+    t = np.arange(60) * 0.05
+    built, replays = [], []
+    for d in differ[:2]:
+        tracked = np.stack([0.1 * t, 0.02 * t, np.zeros_like(t)], axis=1)
+        measured = tracked + np.array([0.001, -0.002, 0.0])
+        measured[:, 2] = np.nan
+        measured[0, 2] = d  # the window's one heading
+        measured[30:, 2] = d + 0.001
+        counts = np.zeros((len(t), 2), dtype=np.int64)
+        built.append(Run("straight", t, counts, measured, meta={"session": "s"}))
+        zeros = np.zeros(len(t) - 1)
+        replays.append(Replay(tracked, tracked, np.zeros((len(t) - 1, 2)), zeros, zeros, 0.2))
+    data = OpenLoopData(built, 0.25, MODEL.wheelbase)
+    samples = np.array([0, len(t), 2 * len(t)], dtype=np.int64)
+    out = _stacked_open_loop_residuals(
+        np.concatenate([r.true_pose for r in built]),
+        np.concatenate([r.tracked for r in replays]),
+        _StackedRuns.of(data),
+        samples,
+        float(data.length),
+    )
+    rows = _StackedRuns.of(data).rows
+    for j, (run, rep) in enumerate(zip(built, replays, strict=True)):
+        reference = _residual(data, j, MODEL, None, _measured_minus(run, rep))
+        assert len(reference) > 0
+        assert _same(out[rows[j] : rows[j + 1]], reference)
