@@ -246,15 +246,7 @@ def replay_stacked(stack: RunStack, spec: RobotSpec) -> StackedReplay:
         memo=stack.memo,
         bounds=stack.bounds,
     )
-    for name, values in effects:
-        EFFECTS[name].replay("transmission", values, arrays)
-    travel = scale_columns(arrays.wheel, radius)
-    arrays.travel = travel
-    arrays.ds = 0.5 * (travel[:, 0] + travel[:, 1])
-    arrays.dtheta = (travel[:, 1] - travel[:, 0]) / wheelbase
-    arrays.crab = np.zeros(len(stack.dt))
-    for name, values in _body_order(effects):
-        EFFECTS[name].replay("body", values, arrays)
+    travel = _motion_stages(arrays, effects)
     starts = _start_pose(stack.first, effects)
     ds, dtheta, crab = _floats(arrays.ds), _floats(arrays.dtheta), _floats(arrays.crab)
     bounds = stack.bounds
@@ -278,6 +270,22 @@ def _cos_sin(angle: FloatArray) -> tuple[FloatArray, FloatArray]:
         c[i] = math.cos(angle[i])
         s[i] = math.sin(angle[i])
     return c, s
+
+
+def _motion_stages(arrays: ReplayArrays, effects: list[tuple[str, dict[str, float]]]) -> FloatArray:
+    """The ``"transmission"`` and ``"body"`` stages on ``arrays`` (one run's or several
+    stacked), with the true geometry between them: the wheels' travel (n, 2) [m], and
+    ``arrays.ds``, ``dtheta`` and ``crab`` set."""
+    for name, values in effects:
+        EFFECTS[name].replay("transmission", values, arrays)
+    travel = scale_columns(arrays.wheel, arrays.radius)
+    arrays.travel = travel
+    arrays.ds = 0.5 * (travel[:, 0] + travel[:, 1])
+    arrays.dtheta = (travel[:, 1] - travel[:, 0]) / arrays.wheelbase
+    arrays.crab = np.zeros(len(arrays.dt))  # not zeros_like: a Python function, ~6 µs a call
+    for name, values in _body_order(effects):
+        EFFECTS[name].replay("body", values, arrays)
+    return travel
 
 
 def _effects_of(spec: RobotSpec) -> list[tuple[str, dict[str, float]]]:
@@ -319,16 +327,8 @@ def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Re
         time=inputs.time,
         memo=inputs.memo,
     )
-    for name, values in effects:
-        EFFECTS[name].replay("transmission", values, arrays)
-    travel = scale_columns(arrays.wheel, radius)
-    wheelbase = float(spec.true_wheelbase)
-    arrays.travel = travel
-    arrays.ds = 0.5 * (travel[:, 0] + travel[:, 1])
-    arrays.dtheta = (travel[:, 1] - travel[:, 0]) / wheelbase
-    arrays.crab = np.zeros(len(dt))  # not zeros_like: a Python function, ~6 µs a call
-    for name, values in _body_order(effects):
-        EFFECTS[name].replay("body", values, arrays)
+    travel = _motion_stages(arrays, effects)
+    wheelbase = arrays.wheelbase
     start = _start_pose(run.true_pose[0], effects)
     ds, dtheta = arrays.ds, arrays.dtheta
     # Midpoint integration: θ the running sum of dθ, each interval translated along its middle
