@@ -273,3 +273,27 @@ def test_the_stacked_alignment_turns_by_numpys_arctan2() -> None:
         reference = _residual(data, j, MODEL, None, _measured_minus(run, rep))
         assert len(reference) > 0
         assert _same(out[rows[j] : rows[j + 1]], reference)
+
+
+def test_the_flag_counts_only_in_the_class_that_defines_the_replay() -> None:
+    """A subclass that overrides a stacking effect's replay without saying so again is not
+    stacked; one that keeps the replay it inherits, or says so, is; an effect without a replay
+    of its own has nothing to stack."""
+    from odomgym.effects import Backlash
+
+    class Reread(Backlash):
+        def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
+            super().replay(stage, values, arrays)
+
+    class Said(Reread):
+        stacked_replay = True
+
+        def replay(self, stage: str, values: Mapping[str, float], arrays: ReplayArrays) -> None:
+            super().replay(stage, values, arrays)
+
+    class Kept(Backlash):
+        pass
+
+    assert not Reread.replays_stacked()
+    assert Said.replays_stacked() and Kept.replays_stacked() and Backlash.replays_stacked()
+    assert EFFECTS["wheelbase"].replays_stacked()  # geometry: no replay of its own

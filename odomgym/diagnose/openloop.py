@@ -65,6 +65,7 @@ from odomgym.diagnose.replay import (
     Replay,
     RunInputs,
     RunStack,
+    _cos_sin,
     replay_run,
     replay_stacked,
     stackable,
@@ -308,11 +309,8 @@ def aligned_prediction(fixed: Run, replayed: Replay) -> FloatArray:
     inside = alignment_samples(fixed, predicted)
     heading = measured[inside, 2] - predicted[inside, 2]
     heading = heading[np.isfinite(heading)]
-    turn = (
-        float(np.arctan2(np.mean(np.sin(heading)), np.mean(np.cos(heading))))
-        if heading.size
-        else 0.0
-    )
+    cosines, sines = _cos_sin(np.ascontiguousarray(heading, dtype=np.float64))
+    turn = float(np.arctan2(np.mean(sines), np.mean(cosines))) if heading.size else 0.0
     if turn != 0.0:
         c, s = math.cos(turn), math.sin(turn)
         start = predicted[0, :2].copy()

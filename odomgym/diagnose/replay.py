@@ -261,9 +261,12 @@ def replay_stacked(stack: RunStack, spec: RobotSpec) -> StackedReplay:
 
 @kernel
 def _cos_sin(angle: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Cosine and sine of every element of ``angle``, compiled (libm's, as numpy's on the
-    machines measured: the same bytes; 2.0 ms instead of numpy's 2.8 ms for 133 000 angles,
-    2026-11-30)."""
+    """Cosine and sine of every element of ``angle`` (a contiguous vector), compiled: libm's
+    (2.0 ms instead of numpy's 2.8 ms for 133 000 angles, 2026-11-30). The run-by-run replay,
+    the stacked one and the open-loop alignment all take theirs from here or from libm in a
+    kernel, so the paths agree on every machine, not only where numpy's sine and cosine are
+    libm's (they are on this project's machine: the results are the bytes numpy's gave; a numpy
+    with SIMD sine and cosine, 1.24 on AVX-512, would have moved them in their last bits)."""
     c = np.empty(angle.shape[0])
     s = np.empty(angle.shape[0])
     for i in range(angle.shape[0]):
@@ -334,7 +337,8 @@ def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Re
     # Midpoint integration: θ the running sum of dθ, each interval translated along its middle
     # heading plus the crab angle.
     theta, direction = _headings(float(start[2]), _floats(dtheta), _floats(arrays.crab))
-    pose = _positions(start, theta, _floats(ds), np.cos(direction), np.sin(direction))
+    cos_d, sin_d = _cos_sin(direction)
+    pose = _positions(start, theta, _floats(ds), cos_d, sin_d)
     tracked = _measure(pose, effects, arrays)
     return Replay(pose, tracked, travel, ds, dtheta, wheelbase)
 
@@ -346,7 +350,8 @@ def _floats(values: FloatArray) -> FloatArray:
 
 # The two kernels below are numpy's cumulative sums and sums written out (``np.cumsum`` adds
 # in order, its first element the first input itself), so a replay's bits do not depend on
-# which computed it; the cosines and sines between them stay numpy's. Compiled because a fit
+# which computed it; the cosines and sines between them are :func:`_cos_sin`'s, as in the
+# stacked replay. Compiled because a fit
 # replays every run hundreds of times and a dozen small numpy calls per replay added up.
 @kernel
 def _headings(theta0: float, dtheta: FloatArray, crab: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -337,6 +337,9 @@ def _stacked(
     computes them) with its session's nuisances ``values`` removed from ``runs``, stacked."""
     view = copy.copy(data)
     view.inputs = [{} for _ in runs]  # the replay inputs depend on the runs' counts
+    view.corrected = [{} for _ in runs]  # so do the corrected runs and the stacks
+    view.stacks = {}
+    view.fixed_arrays = None
     view.runs = [
         GroundTruthError(*values[s][_SESSION_KINDS:]).remove(r)
         for r, s in zip(runs, data.sessions, strict=True)

@@ -289,9 +289,14 @@ class Effect:
 
     @classmethod
     def replays_stacked(cls) -> bool:
-        """Whether this effect's replay takes several runs stacked (:attr:`stacked_replay`, or
-        no replay of its own)."""
-        return cls.stacked_replay or cls.replay is Effect.replay
+        """Whether this effect's replay takes several runs stacked: the class that defines its
+        :meth:`replay` says so itself (:attr:`stacked_replay` in its own body), or there is no
+        replay but :class:`Effect`'s. A subclass that overrides a stacking effect's replay
+        without saying so again is replayed run by run."""
+        for klass in cls.__mro__:
+            if "replay" in vars(klass):
+                return klass is Effect or bool(vars(klass).get("stacked_replay", False))
+        return True
 
     # ------------------------------------------------------------------ noise face
     def wheel_variance(self, values: Mapping[str, float], travel: FloatArray) -> FloatArray | None:
