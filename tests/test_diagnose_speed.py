@@ -437,7 +437,8 @@ def test_column_scaling_is_numpys_broadcast_bit_for_bit() -> None:
 
 def test_compiled_integration_is_numpy_cumsum_bit_for_bit() -> None:
     """The replay's midpoint integration (two kernels around numpy's cos and sin) gives the
-    bytes of the numpy expressions it replaced, signed zeros at the start included."""
+    bytes of the numpy expressions it replaced, signed zeros at the start included, for one
+    run and for the same run stacked behind another."""
     rng = np.random.default_rng(11)
     for first in (0.0, -0.0, 0.3):
         dtheta = 0.05 * rng.standard_normal(50)
@@ -451,10 +452,32 @@ def test_compiled_integration_is_numpy_cumsum_bit_for_bit() -> None:
             pose[:, 0] = start[0] + np.concatenate([[0.0], np.cumsum(ds * np.cos(direction))])
             pose[:, 1] = start[1] + np.concatenate([[0.0], np.cumsum(ds * np.sin(direction))])
             pose[:, 2] = theta
-            got_theta, got_direction = _headings(float(start[2]), dtheta, crab)
-            got = _positions(start, got_theta, ds, np.cos(got_direction), np.sin(got_direction))
+            one = np.array([0, 50], dtype=np.int64)
+            got_theta, got_direction = _headings(start[2:3], dtheta, crab, one)
+            got = _positions(
+                start[None, :], got_theta, ds, np.cos(got_direction), np.sin(got_direction), one
+            )
             assert got_direction.tobytes() == direction.tobytes()
             assert got.tobytes() == pose.tobytes()
+            # behind a run of 7 intervals from another start: the second run's rows the same
+            two = np.array([0, 7, 57], dtype=np.int64)
+            lead = 0.02 * rng.standard_normal(7)
+            theta2, direction2 = _headings(
+                np.array([0.7, start[2]]),
+                np.concatenate([lead, dtheta]),
+                np.concatenate([lead, crab]),
+                two,
+            )
+            both = _positions(
+                np.array([[3.0, 4.0, 0.7], start]),
+                theta2,
+                np.concatenate([lead, ds]),
+                np.cos(direction2),
+                np.sin(direction2),
+                two,
+            )
+            assert direction2[7:].tobytes() == direction.tobytes()
+            assert both[8:].tobytes() == pose.tobytes()
 
 
 def test_a_repeated_noise_fit_is_the_first_one() -> None:

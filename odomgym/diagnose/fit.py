@@ -166,7 +166,7 @@ class Dataset:
 
     def replays(self, spec: RobotSpec, index: range | None = None) -> list[Replay]:
         """The runs of ``index`` (default: all) replayed through ``spec``: in one pass over
-        them stacked (:func:`~odomgym.diagnose.replay.replay_stack`; the stack kept per
+        them stacked (:func:`~odomgym.diagnose.replay.replay_stacked`; the stack kept per
         encoder resolution and range) where every effect of ``spec`` replays stacked, else run
         by run (:meth:`replay`); the same numbers either way."""
         if index is None:

@@ -151,8 +151,10 @@ class OpenLoopData:
         is kept per time offset and encoder resolution (the only parts of a nuisance and a model
         it depends on): a fit replays every run hundreds of times, mostly at one time offset,
         and building them took a third of each replay. A few are kept per run (the offset moves
-        while it is fitted); the replay is the one :func:`replay_run` makes without them."""
-        fixed = correct_run(self.runs[j], nuisance)
+        while it is fitted), and so are the corrected runs (:meth:`_corrected`, shared with
+        :meth:`stacked_residuals`); the replay is the one :func:`replay_run` makes without
+        them."""
+        fixed = self._corrected(j, nuisance)
         return fixed, replay_run(fixed, spec, self._inputs(j, fixed, nuisance, spec))
 
     def _inputs(

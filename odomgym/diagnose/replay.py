@@ -31,7 +31,6 @@ __all__ = [
     "RunStack",
     "StackedReplay",
     "replay_run",
-    "replay_stack",
     "replay_stacked",
     "session_time",
     "stackable",
@@ -96,7 +95,7 @@ class RunInputs:
 
 @dataclass(frozen=True)
 class RunStack:
-    """Several runs' :class:`RunInputs` stacked end to end, for :func:`replay_stack`: computed
+    """Several runs' :class:`RunInputs` stacked end to end, for :func:`replay_stacked`: computed
     once per fit's runs and encoder resolution, shared read-only by its replays.
 
     Attributes:
@@ -211,12 +210,6 @@ def stackable(spec: RobotSpec) -> bool:
     return all(EFFECTS[name].replays_stacked() for name, _ in _effects_of(spec))
 
 
-def replay_stack(stack: RunStack, spec: RobotSpec) -> list[Replay]:
-    """Every run of ``stack`` replayed through ``spec`` (:func:`replay_stacked`), run by
-    run."""
-    return replay_stacked(stack, spec).split()
-
-
 def replay_stacked(stack: RunStack, spec: RobotSpec) -> StackedReplay:
     """Every run of ``stack`` replayed through ``spec``, in one pass over the stacked arrays:
     the same numbers as :func:`replay_run` on each run (the stages act sample by sample, or
@@ -250,9 +243,9 @@ def replay_stacked(stack: RunStack, spec: RobotSpec) -> StackedReplay:
     starts = _start_pose(stack.first, effects)
     ds, dtheta, crab = _floats(arrays.ds), _floats(arrays.dtheta), _floats(arrays.crab)
     bounds = stack.bounds
-    theta, direction = _stacked_headings(np.ascontiguousarray(starts[:, 2]), dtheta, crab, bounds)
+    theta, direction = _headings(np.ascontiguousarray(starts[:, 2]), dtheta, crab, bounds)
     cos_d, sin_d = _cos_sin(direction)
-    pose = _stacked_positions(starts, theta, ds, cos_d, sin_d, bounds)
+    pose = _positions(starts, theta, ds, cos_d, sin_d, bounds)
     tracked = _measure(pose, effects, arrays)
     if np.any(crab != 0.0):  # the directions are not the middle headings
         cos_d = sin_d = np.zeros(0)
@@ -336,9 +329,10 @@ def replay_run(run: Run, spec: RobotSpec, inputs: RunInputs | None = None) -> Re
     ds, dtheta = arrays.ds, arrays.dtheta
     # Midpoint integration: θ the running sum of dθ, each interval translated along its middle
     # heading plus the crab angle.
-    theta, direction = _headings(float(start[2]), _floats(dtheta), _floats(arrays.crab))
+    one = np.array([0, len(dt)], dtype=np.int64)
+    theta, direction = _headings(start[2:3], _floats(dtheta), _floats(arrays.crab), one)
     cos_d, sin_d = _cos_sin(direction)
-    pose = _positions(start, theta, _floats(ds), cos_d, sin_d)
+    pose = _positions(start[None, :], theta, _floats(ds), cos_d, sin_d, one)
     tracked = _measure(pose, effects, arrays)
     return Replay(pose, tracked, travel, ds, dtheta, wheelbase)
 
@@ -348,58 +342,20 @@ def _floats(values: FloatArray) -> FloatArray:
     return np.asarray(values, dtype=np.float64)
 
 
-# The two kernels below are numpy's cumulative sums and sums written out (``np.cumsum`` adds
-# in order, its first element the first input itself), so a replay's bits do not depend on
-# which computed it; the cosines and sines between them are :func:`_cos_sin`'s, as in the
-# stacked replay. Compiled because a fit
-# replays every run hundreds of times and a dozen small numpy calls per replay added up.
+# The two kernels below are numpy's cumulative sums and sums written out, run by run
+# (``np.cumsum`` adds in order, its first element the first input itself), so a replay's bits
+# do not depend on which computed it, nor on how many runs were stacked; the cosines and sines
+# between them are :func:`_cos_sin`'s. Compiled because a fit replays every run hundreds of
+# times and a dozen small numpy calls per replay added up. One run is a stack of one
+# (``bounds`` = [0, n]).
 @kernel
-def _headings(theta0: float, dtheta: FloatArray, crab: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Heading at every sample (T,) from ``theta0`` [rad] and the increments ``dtheta`` (n,),
-    and the direction of translation over every interval (n,): its middle heading plus
-    ``crab`` [rad]."""
-    n = dtheta.shape[0]
-    theta = np.empty(n + 1)
-    direction = np.empty(n)
-    theta[0] = theta0 + 0.0
-    total = 0.0
-    for i in range(n):
-        total = dtheta[i] if i == 0 else total + dtheta[i]
-        theta[i + 1] = theta0 + total
-    for i in range(n):
-        direction[i] = theta[i] + 0.5 * dtheta[i] + crab[i]
-    return theta, direction
-
-
-@kernel
-def _positions(
-    start: FloatArray, theta: FloatArray, ds: FloatArray, cos_d: FloatArray, sin_d: FloatArray
-) -> FloatArray:
-    """Axle poses (T, 3) [m, m, rad] from the start pose, the headings ``theta`` (T,) and each
-    interval's translation ``ds`` [m] along the direction whose cosine and sine are given."""
-    n = ds.shape[0]
-    pose = np.empty((n + 1, 3))
-    pose[0, 0] = start[0] + 0.0
-    pose[0, 1] = start[1] + 0.0
-    x = 0.0
-    y = 0.0
-    for i in range(n):
-        x = ds[i] * cos_d[i] if i == 0 else x + ds[i] * cos_d[i]
-        y = ds[i] * sin_d[i] if i == 0 else y + ds[i] * sin_d[i]
-        pose[i + 1, 0] = start[0] + x
-        pose[i + 1, 1] = start[1] + y
-    for i in range(n + 1):
-        pose[i, 2] = theta[i]
-    return pose
-
-
-@kernel
-def _stacked_headings(
+def _headings(
     theta0: FloatArray, dtheta: FloatArray, crab: FloatArray, bounds: NDArray[np.int64]
 ) -> tuple[FloatArray, FloatArray]:
-    """:func:`_headings` of every run of a stack (run r from ``theta0[r]``, its intervals rows
-    ``bounds[r]:bounds[r + 1]``): the headings (N + R,) and directions (N,), each run's the
-    same operations in the same order."""
+    """Heading at every sample of every run of a stack (N + R,), run r from ``theta0[r]``
+    [rad] with the increments ``dtheta`` of its intervals, rows ``bounds[r]:bounds[r + 1]``,
+    and the direction of translation over every interval (N,): its middle heading plus
+    ``crab`` [rad]."""
     runs = bounds.shape[0] - 1
     theta = np.empty(dtheta.shape[0] + runs)
     direction = np.empty(dtheta.shape[0])
@@ -418,7 +374,7 @@ def _stacked_headings(
 
 
 @kernel
-def _stacked_positions(
+def _positions(
     start: FloatArray,
     theta: FloatArray,
     ds: FloatArray,
@@ -426,8 +382,9 @@ def _stacked_positions(
     sin_d: FloatArray,
     bounds: NDArray[np.int64],
 ) -> FloatArray:
-    """:func:`_positions` of every run of a stack (run r from ``start[r]``), the poses
-    (N + R, 3), each run's the same operations in the same order."""
+    """Axle poses (N + R, 3) [m, m, rad] of every run of a stack, run r from ``start[r]``,
+    from the headings ``theta`` (N + R,) and each interval's translation ``ds`` [m] along the
+    direction whose cosine and sine are given."""
     runs = bounds.shape[0] - 1
     pose = np.empty((ds.shape[0] + runs, 3))
     for r in range(runs):

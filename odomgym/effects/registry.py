@@ -186,7 +186,7 @@ class Effect:
     (:attr:`ReplayArrays.bounds` says where each run starts): true of a replay that acts
     sample by sample, or run by run through ``bounds`` (backlash's play restarts at every
     run). ``diagnose`` then replays all of a fit's runs in one pass
-    (:func:`odomgym.diagnose.replay.replay_stack`), where a run at a time pays the stages'
+    (:func:`odomgym.diagnose.replay.replay_stacked`), where a run at a time pays the stages'
     numpy calls once per run; a spec carrying an effect without it is replayed run by run.
     An effect that does not override :meth:`replay` has nothing to stack and counts as true.
     False by default, so a user's effect that reads a whole run (a cumulative sum, a
