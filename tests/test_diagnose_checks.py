@@ -656,6 +656,38 @@ def test_the_size_half_of_the_bump_check_needs_no_replay() -> None:
     assert bump_size_reasons(NOMINAL_ROBOT, {}, max_obstacle=0.02, max_rate=1.0) == []
 
 
+def test_a_round_asks_for_the_bump_signature_only_of_effects_not_refused_for_size(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A round does not fit a noise effect refused for its size in an earlier round (its
+    reason stays that one) nor one whose signature the logs lack; the signature, a replay of
+    every fit run, is computed only when some noise effect is left to ask about. The reasons
+    come in the candidates' order, and outside the mean stage nothing is refused."""
+    from odomgym.diagnose import rounds
+
+    asked: list[list[str]] = []
+
+    def check(ctx: object, spec: RobotSpec, values: object) -> SimpleNamespace:
+        asked.append([])
+        return SimpleNamespace(signature=False, reason="no heavy-tailed heading jumps")
+
+    monkeypatch.setattr(rounds, "_bump_check", check)
+    ctx: Any = SimpleNamespace()
+    refused = {"floor_bumps": "3.5 bumps per metre"}
+    wheelbase, bumps, rough = (EFFECTS[n] for n in ("wheelbase", "floor_bumps", "floor_roughness"))
+    out = rounds._not_fitted(ctx, NOMINAL_ROBOT, [wheelbase, bumps, rough], "mean", refused)
+    assert list(out.items()) == [
+        ("floor_bumps", "3.5 bumps per metre"),
+        ("floor_roughness", "no heavy-tailed heading jumps"),
+    ]
+    assert len(asked) == 1
+    out = rounds._not_fitted(ctx, NOMINAL_ROBOT, [wheelbase, bumps], "mean", refused)
+    assert out == {"floor_bumps": "3.5 bumps per metre"}
+    assert len(asked) == 1  # every noise effect refused for its size: no replay
+    assert rounds._not_fitted(ctx, NOMINAL_ROBOT, [wheelbase, bumps, rough], "noise", refused) == {}
+    assert len(asked) == 1
+
+
 # ------------------------------------------------------------------ bounded fold steps
 def _box_minimum(a: np.ndarray, b: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """½·δᵀAδ + bᵀδ minimised over the box by brute force: every coordinate free, at its low

@@ -196,6 +196,29 @@ def test_sign_flip_p_counts_patterns_reaching_the_observed_norm() -> None:
     assert dstats.sign_flip_p(parts, basis, 0.0, np.random.default_rng(0), 100) == 1.0
 
 
+def test_sign_flip_p_draws_its_patterns_in_blocks_of_rows_as_one_draw(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Beyond ``_SIGN_CHUNK`` pattern entries the patterns are drawn a block of rows at a time
+    (the block sign-flip test's matrix is 4 000 × ~4 400 on real logs): one draw of the whole
+    matrix consumes the stream row after row, so the blocks hold its rows. The same p-values as
+    one draw, and the generator left where one draw leaves it, with the last block shorter."""
+    gen = np.random.default_rng(3)
+    parts = gen.normal(size=(50, 4))
+    basis = np.linalg.qr(gen.normal(size=(4, 4)))[0]
+    whole = np.random.default_rng(9)
+    null = np.sum(((dstats.sign_matrix(50, whole, 997) @ parts) @ basis) ** 2, axis=1)
+    ranked = np.sort(null)
+    monkeypatch.setattr(dstats, "_SIGN_CHUNK", 50 * 64 + 7)  # blocks of 64 rows, 37 last
+    for k in (10, 498, 900):
+        observed = 0.5 * (ranked[k] + ranked[k + 1])  # between two patterns: no tie
+        blocks = np.random.default_rng(9)
+        assert dstats.sign_flip_p(parts, basis, observed, blocks, 997) == pytest.approx(
+            (997 - k - 1) / 997, abs=1e-15
+        )
+        assert blocks.bit_generator.state == whole.bit_generator.state
+
+
 # ------------------------------------------------------------------ standard errors
 def test_clustered_covariance_by_hand() -> None:
     """Model covariance 2·I (2×2), three runs in two clusters: s_a = (1, 0) + (0, 1),

@@ -174,9 +174,7 @@ def _score_candidates(
     data, cfg, journal = ctx.data, ctx.config, ctx.journal
     spec, sensor = base.spec, base.sensor
     family = len(effects)
-    screened = _screened(ctx, spec, effects, stage)
-    if stage == "mean" and refused:  # fitted beyond a floor's bounds before (_refused_for_size)
-        screened.update({e.name: refused[e.name] for e in effects if e.name in refused})
+    screened = _not_fitted(ctx, spec, effects, stage, refused or {})
     effects = [e for e in effects if e.name not in screened]
     if not effects:
         # The sign patterns max_t_test would have drawn (their number depends on the runs
@@ -246,6 +244,24 @@ def _score_candidates(
     return candidates, fits, screened
 
 
+def _not_fitted(
+    ctx: RoundContext,
+    spec: RobotSpec,
+    effects: Sequence[Effect],
+    stage: str,
+    refused: Mapping[str, str],
+) -> dict[str, str]:
+    """The candidates among ``effects`` a round does not fit, each with its reason, in the
+    order of ``effects``: in a mean stage, those ``refused`` for their size in an earlier round
+    (:func:`_refused_for_size`), then the noise effects :func:`_screened` refuses. Why in that
+    order: a refused effect's reason is its size whatever the signature says, so the signature
+    (a replay of every fit run) is asked only about the others."""
+    size = {e.name: refused[e.name] for e in effects if stage == "mean" and e.name in refused}
+    signature = _screened(ctx, spec, [e for e in effects if e.name not in size], stage)
+    reasons = size | signature
+    return {e.name: reasons[e.name] for e in effects if e.name in reasons}
+
+
 def _screened(
     ctx: RoundContext, spec: RobotSpec, effects: Sequence[Effect], stage: str
 ) -> dict[str, str]:
@@ -259,7 +275,12 @@ def _screened(
     interval, six parameters by finite differences; on the 14 June OptiOdom sessions, whose
     logs do show the signature, the ``floor_bumps`` candidate took 98 of 236 s). On logs
     without it the fit was wasted. The noise stage still fits it (no signature is asked
-    there)."""
+    there).
+
+    :func:`_not_fitted` leaves out the effects refused for their size already: when no noise
+    effect is left, the signature is not computed (a replay of every fit run and a kurtosis,
+    0.23 s a round on the 14 June sessions, whose every round after the first refused the bumps
+    for their size)."""
     noisy = [e for e in effects if e.noise]
     if stage != "mean" or not noisy:
         return {}
