@@ -15,6 +15,7 @@ import pytest
 from alien_robot import generate_session
 
 from odomgym.diagnose import fit as fit_module
+from odomgym.diagnose import where as where_module
 from odomgym.diagnose.discover import library_jacobian
 from odomgym.diagnose.fit import (
     Dataset,
@@ -48,6 +49,7 @@ from odomgym.diagnose.openloop import (
 )
 from odomgym.diagnose.replay import _headings, _measure, _positions, _start_pose, replay_run
 from odomgym.diagnose.stats import _null_max, sign_matrix, studentised
+from odomgym.diagnose.where import RunResidual
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
 from odomgym.effects.registry import scale_columns
@@ -677,3 +679,89 @@ def test_fit_jobs_are_handed_out_dearest_first_and_the_serial_path_keeps_its_ord
     monkeypatch.setattr(fit_module, "_run_job", lambda job, attempt: job)
     fit_module.run_fit_jobs(jobs, 1, lambda k, fit: ran.append(k))  # type: ignore[arg-type]
     assert ran == list(range(len(names)))
+
+
+def _numpy_interval_rates(r: RunResidual) -> dict[str, list[float]]:
+    """The manoeuvre view of ``where.localise`` as it was written before it was compiled: a
+    loop of numpy calls per interval between measured samples (the reference)."""
+    rates: dict[str, list[float]] = {k: [] for k in ("straight", "cross", "turn", "arc", "rev")}
+    gained = np.zeros(len(r.ds) + 1)
+    gained[r.index] = r.residual[:, 2]
+    cross = np.zeros(len(r.ds) + 1)
+    cross[r.index] = r.residual[:, 1]
+    for a, b in zip(r.index[:-1], r.index[1:], strict=True):
+        span = slice(a, b)
+        moving = r.classes[span][r.classes[span] != 0]
+        if np.any(moving != moving[:1]):
+            continue
+        cls = np.bincount(r.classes[span], minlength=4).argmax()
+        dh, dc = gained[b] - gained[a], cross[b] - cross[a]
+        if cls == 1:
+            dist = float(np.abs(r.ds[span]).sum())
+            if dist > 0.02:
+                rates["straight"].append(dh / dist)
+                rates["cross"].append(dc / dist)
+        elif cls in (2, 3):
+            ang = float(np.abs(r.dtheta[span]).sum())
+            if ang > 0.05:
+                rates["turn" if cls == 2 else "arc"].append(dh / ang)
+        if r.reversal[span].any():
+            rates["rev"].append(dh / float(r.reversal[span].sum()))
+    return rates
+
+
+def test_the_compiled_manoeuvre_view_gives_numpys_numbers() -> None:
+    """``where._interval_rates`` against the numpy loop it replaced, on random runs with every
+    case: intervals of one manoeuvre, of stops, of two manoeuvres (left out), ties of stops and
+    motion (``argmax`` takes the first), spans from 1 to 300 samples (numpy's pairwise sum
+    splits above 128), a NaN heading, reversals. The same values, bit for bit, in the same
+    order."""
+    rng = np.random.default_rng(11)
+    seen = dict.fromkeys(("straight", "cross", "turn", "arc", "rev"), 0)
+    for trial in range(40):
+        n = int(rng.integers(50, 2000))
+        runs = rng.integers(1, 40, size=n // 5)  # runs of one class, to make whole intervals
+        classes = np.repeat(rng.integers(0, 4, size=len(runs)), runs)[:n]
+        classes = np.concatenate([classes, np.zeros(n - len(classes), dtype=np.int64)])
+        gaps = rng.choice([1, 2, 5, 17, 64, 130, 300], size=n)
+        index = np.unique(np.concatenate([[0], np.cumsum(gaps)]))
+        index = index[index <= n]
+        residual = rng.normal(scale=0.01, size=(len(index), 3))
+        if trial % 3 == 0:
+            residual[rng.integers(len(index)), 2] = np.nan
+        r = RunResidual(
+            label="x",
+            turn="none",
+            index=index.astype(np.intp),
+            residual=residual,
+            final=residual[-1],
+            classes=classes.astype(np.int64),
+            speed=np.zeros(n),
+            omega=np.zeros(n),
+            reversal=rng.random(n) < 0.02,
+            ds=rng.normal(scale=0.01, size=n),
+            dtheta=rng.normal(scale=0.02, size=n),
+        )
+        expected = _numpy_interval_rates(r)
+        kind = np.empty(len(index) - 1, dtype=np.int64)
+        heading, off_track, per_reversal = (np.empty(len(kind)) for _ in range(3))
+        reversed_ = np.empty(len(kind), dtype=np.bool_)
+        gained = np.zeros(n + 1)
+        gained[index] = residual[:, 2]
+        cross = np.zeros(n + 1)
+        cross[index] = residual[:, 1]
+        where_module._interval_rates(
+            index.astype(np.int64), gained, cross, r.classes, r.ds, r.dtheta, r.reversal,
+            kind, heading, off_track, per_reversal, reversed_,
+        )  # fmt: skip
+        got = {
+            "straight": heading[kind == 1],
+            "cross": off_track[kind == 1],
+            "turn": heading[kind == 2],
+            "arc": heading[kind == 3],
+            "rev": per_reversal[reversed_],
+        }
+        for key, values in expected.items():
+            assert np.asarray(values).tobytes() == got[key].tobytes(), (trial, key)
+            seen[key] += len(values)
+    assert min(seen.values()) > 20, seen  # every kind of interval was compared
