@@ -165,9 +165,13 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
             gained[r.index] = r.residual[:, 2]
             cross = np.zeros(len(r.ds) + 1)
             cross[r.index] = r.residual[:, 1]
+            # Heading disagreement gained between consecutive measured samples, attributed to
+            # the manoeuvre that dominated in between — only where one manoeuvre (or stops)
+            # filled the interval: across a gap in the ground truth the robot may have driven
+            # straight and turned, and what each added cannot be told apart.
             classes = np.ascontiguousarray(r.classes, dtype=np.int64)
-            if len(classes) and (classes.min() < 0 or classes.max() > 3):
-                raise ValueError(f"manoeuvre classes must be 0-3, got {sorted(set(classes))}")
+            if len(classes) and (classes.min() < 0 or classes.max() > 3):  # the kernel's counts
+                raise RuntimeError(f"manoeuvre classes outside 0-3: {sorted(set(classes))}")
             kind = np.empty(max(len(r.index) - 1, 0), dtype=np.int64)
             heading, off_track, per_reversal = (np.empty(len(kind)) for _ in range(3))
             reversed_ = np.empty(len(kind), dtype=np.bool_)
