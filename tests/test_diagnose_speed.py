@@ -15,7 +15,7 @@ import pytest
 from alien_robot import generate_session
 
 from odomgym.diagnose import fit as fit_module
-from odomgym.diagnose import where as where_module
+from odomgym.diagnose import openloop as openloop_module
 from odomgym.diagnose.discover import library_jacobian
 from odomgym.diagnose.fit import (
     Dataset,
@@ -711,11 +711,11 @@ def _numpy_interval_rates(r: RunResidual) -> dict[str, list[float]]:
 
 
 def test_the_compiled_manoeuvre_view_gives_numpys_numbers() -> None:
-    """``where._interval_rates`` against the numpy loop it replaced, on random runs with every
-    case: intervals of one manoeuvre, of stops, of two manoeuvres (left out), ties of stops and
-    motion (``argmax`` takes the first), spans from 1 to 300 samples (numpy's pairwise sum
-    splits above 128), a NaN heading, reversals. The same values, bit for bit, in the same
-    order."""
+    """``openloop._interval_rates`` (the kernel of ``where.localise``) against the numpy loop
+    it replaced, on random runs with every case: intervals of one manoeuvre, of stops, of two
+    manoeuvres (left out), ties of stops and motion (``argmax`` takes the first), spans from 1
+    to 300 samples (numpy's pairwise sum splits above 128), a NaN heading, reversals. The same
+    values, bit for bit, in the same order."""
     rng = np.random.default_rng(11)
     seen = dict.fromkeys(("straight", "cross", "turn", "arc", "rev"), 0)
     for trial in range(40):
@@ -750,7 +750,7 @@ def test_the_compiled_manoeuvre_view_gives_numpys_numbers() -> None:
         gained[index] = residual[:, 2]
         cross = np.zeros(n + 1)
         cross[index] = residual[:, 1]
-        where_module._interval_rates(
+        openloop_module._interval_rates(
             index.astype(np.int64), gained, cross, r.classes, r.ds, r.dtheta, r.reversal,
             kind, heading, off_track, per_reversal, reversed_,
         )  # fmt: skip

@@ -234,9 +234,10 @@ def sign_flip_p(
         # scores computed at once: the pattern matrix of the block sign-flip test is 4 000 ×
         # ~4 400 on the 14 June OptiOdom sessions, 140 MB, and writing it fresh cost 0.25–0.7 s
         # a test in the diagnosing process (page faults), 0.14 s in blocks. BLAS may sum a
-        # block's products in another order than the whole matrix's (last bits of the null
-        # statistics); the comparison's tolerance of 1e-12 covers that, so the p-value is the
-        # same unless a pattern's statistic ties the observed one to 12 digits.
+        # block's products in another order than the whole matrix's (as it may for another
+        # thread count): the null statistics can differ in their last bits, and a p-value
+        # moves only if a pattern's statistic lies within rounding of the cut-off
+        # observed·(1 − 1e-12), whose tolerance keeps the identity pattern counted.
         score = np.empty((draws, parts.shape[1]))
         rows = max(1, _SIGN_CHUNK // units)
         for k in range(0, draws, rows):

@@ -25,9 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym._jit import kernel
 from odomgym.data.gaps import measured_end
-from odomgym.diagnose.openloop import _pairwise_sum
+from odomgym.diagnose.openloop import _interval_rates
 from odomgym.diagnose.replay import replay_run
 from odomgym.diagnose.stats import holm, mean_t_test
 from odomgym.odometry.runs import Run, rotate_into
@@ -226,83 +225,3 @@ def localise(residuals: Sequence[RunResidual], alpha: float = 0.05) -> list[Find
             )
         )
     return findings
-
-
-@kernel
-def _interval_rates(
-    index: NDArray[np.int64],
-    gained: FloatArray,
-    cross: FloatArray,
-    classes: NDArray[np.int64],
-    ds: FloatArray,
-    dtheta: FloatArray,
-    reversal: NDArray[np.bool_],
-    kind: NDArray[np.int64],
-    heading: FloatArray,
-    off_track: FloatArray,
-    per_reversal: FloatArray,
-    reversed_: NDArray[np.bool_],
-) -> None:
-    """The manoeuvre view of :func:`localise` for one run, interval by interval between
-    consecutive measured samples ``index[p]``, ``index[p + 1]``: ``kind[p]`` the manoeuvre the
-    interval is counted for (1 straight, 2 in-place turn, 3 arc; 0 none: stops, too short, or
-    more than one manoeuvre), ``heading[p]`` the heading disagreement gained per metre (1) or
-    per radian (2, 3), ``off_track[p]`` the cross-track one per metre (1), ``per_reversal[p]``
-    the heading gained per wheel reversal where ``reversed_[p]`` (a wheel reversed in it).
-
-    Why compiled: a loop of small numpy calls per interval took 0.8 s of the 14 June OptiOdom
-    sessions (102 runs). The same numbers: the class is the most frequent one (the first of
-    equals, as ``bincount().argmax()``), and the distances and angles are numpy's pairwise sums
-    of the absolute values (:func:`~odomgym.diagnose.openloop._pairwise_sum`)."""
-    longest = 0
-    for p in range(index.shape[0] - 1):
-        longest = max(longest, index[p + 1] - index[p])
-    absolute = np.empty(longest)
-    for p in range(index.shape[0] - 1):
-        a = index[p]
-        b = index[p + 1]
-        kind[p] = 0
-        heading[p] = np.nan
-        off_track[p] = np.nan
-        per_reversal[p] = np.nan
-        reversed_[p] = False
-        first = 0
-        mixed = False
-        counts = np.zeros(4, dtype=np.int64)
-        flips = 0
-        for i in range(a, b):
-            c = classes[i]
-            counts[c] += 1
-            if c != 0:
-                if first == 0:
-                    first = c
-                elif c != first:
-                    mixed = True
-            if reversal[i]:
-                flips += 1
-        if mixed:
-            continue
-        cls = 0
-        for c in range(1, 4):
-            if counts[c] > counts[cls]:
-                cls = c
-        dh = gained[b] - gained[a]
-        dc = cross[b] - cross[a]
-        if cls == 1:
-            for i in range(a, b):
-                absolute[i - a] = abs(ds[i])
-            dist = _pairwise_sum(absolute, 0, b - a)
-            if dist > 0.02:
-                kind[p] = 1
-                heading[p] = dh / dist
-                off_track[p] = dc / dist
-        elif cls == 2 or cls == 3:
-            for i in range(a, b):
-                absolute[i - a] = abs(dtheta[i])
-            ang = _pairwise_sum(absolute, 0, b - a)
-            if ang > 0.05:
-                kind[p] = cls
-                heading[p] = dh / ang
-        if flips > 0:
-            reversed_[p] = True
-            per_reversal[p] = dh / float(flips)
