@@ -554,6 +554,19 @@ def replay_gains(replay: Replay) -> FloatArray:
     return _wheel_gains(replay.pose, replay.ds, replay.dtheta, replay.wheelbase)
 
 
+@inlined_kernel
+def _put_gains(gains: FloatArray, m: int, c: float, s: float, ds: float, wheelbase: float) -> None:
+    """Interval ``m``'s rows of the wheel gains G (:func:`_wheel_gains`): the midpoint odometry
+    equations' derivatives in each wheel's travel, given the cosine ``c`` and sine ``s`` of the
+    middle heading, the interval's travel ``ds`` [m] and the wheelbase [m]."""
+    half = ds / (2.0 * wheelbase)
+    for w in range(2):
+        sign = 1.0 if w == 0 else -1.0
+        gains[m, w, 0] = 0.5 * c + sign * half * s
+        gains[m, w, 1] = 0.5 * s - sign * half * c
+        gains[m, w, 2] = -sign / wheelbase
+
+
 @kernel
 def _wheel_gains(
     pose: FloatArray, ds: FloatArray, dtheta: FloatArray, wheelbase: float
@@ -567,12 +580,7 @@ def _wheel_gains(
         mid = pose[m, 2] + 0.5 * dtheta[m]
         c = math.cos(mid)
         s = math.sin(mid)
-        half = ds[m] / (2.0 * wheelbase)
-        for w in range(2):
-            sign = 1.0 if w == 0 else -1.0
-            gains[m, w, 0] = 0.5 * c + sign * half * s
-            gains[m, w, 1] = 0.5 * s - sign * half * c
-            gains[m, w, 2] = -sign / wheelbase
+        _put_gains(gains, m, c, s, ds[m], wheelbase)
     return gains
 
 
@@ -599,12 +607,7 @@ def _wheel_gains_of(
         if mid == 0.0:
             c = math.cos(mid)
             s = math.sin(mid)
-        half = ds[m] / (2.0 * wheelbase)
-        for w in range(2):
-            sign = 1.0 if w == 0 else -1.0
-            gains[m, w, 0] = 0.5 * c + sign * half * s
-            gains[m, w, 1] = 0.5 * s - sign * half * c
-            gains[m, w, 2] = -sign / wheelbase
+        _put_gains(gains, m, c, s, ds[m], wheelbase)
     return gains
 
 
