@@ -10,6 +10,10 @@ World under one of two documented protocols and returns runs as a tracking syste
   half circles of 1 m radius both ways at 0.15 and 0.35 m/s (4, open-loop wheel commands);
   ground truth at every 50 ms sample;
 * ``"umbmark"`` — 5 cw + 5 ccw 1.5 m squares, ground truth at the first and last rows only.
+
+:func:`simulate_field_log` drives a robot (of either class) through one session as a user's
+logs hold it, not as a protocol asks: squares, circles, spins and free paths, a marker off the
+axle, and a tracker that lost the marker for a share of the samples.
 """
 
 from __future__ import annotations
@@ -22,14 +26,18 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from odomgym.effects.sensor import offset_point
 from odomgym.floor import FloorSpec
+from odomgym.lab.experiment import SensorAccuracy
+from odomgym.lab.simulated import measure
 from odomgym.odometry.runs import Direction, Run
 from odomgym.robot import RobotSpec
+from odomgym.sim.arc_runs import circle_plan, drive_arcs, free_plan
 from odomgym.sim.route_runs import simulate_runs
 from odomgym.sim.routes import Route, spin_route, square_route, straight_route
 from odomgym.sim.world import World
 
-__all__ = ["Protocol", "simulate_protocol"]
+__all__ = ["Protocol", "simulate_field_log", "simulate_protocol"]
 
 FloatArray = NDArray[np.float64]
 Protocol = Literal["rich", "umbmark"]
@@ -151,6 +159,77 @@ def simulate_protocol(
 #: rate and a varying jump.
 BUMP_RATE = 0.5
 """Bumps per metre of one wheel's travel in hidden ``floor_bumps`` effects [1/m]."""
+
+
+def simulate_field_log(
+    robot: RobotSpec,
+    rng: np.random.Generator,
+    *,
+    lost: float = 0.0,
+    marker: tuple[float, float] = (0.29, 0.0),
+    sensor: tuple[float, float] = (0.001, math.radians(0.2)),
+    floor: FloorSpec | None = None,
+) -> list[Run]:
+    """One session of ``robot``'s logs as a user brings them: 3 m squares both ways and
+    circles of 1 and 2.5 m radius both ways at 0.5 m/s, a full spin each way at 0.4 m/s, and
+    six 25 m free paths (legs of 1 m, turning up to 2 /m,
+    :func:`~odomgym.sim.arc_runs.free_plan`) at 0.6 m/s, on ``floor`` (default: a plain floor).
+    The tracked point sits at ``marker`` = (dx, dy) [m] in the body frame (a motion-capture
+    rigid body is rarely on the axle), measured with ``sensor`` = (position σ [m], heading σ
+    [rad]); the tracker lost the marker for a share ``lost`` (0–0.9) of each run's samples, in
+    bursts of 3–62 samples, written as gaps (NaN: what a held pose becomes, or an empty cell).
+    Runs are named ``r00``, ``r01``, … and labelled with their experiment.
+
+    Why: the protocols above are what a calibration asks for; a diagnosis also meets logs
+    that were not recorded for it, and a real skid-steer robot's logs had 45 % of their
+    tracker samples held (issue 42). ``tests/test_skid_diagnose.py`` and
+    ``benchmarks/skid_field.py`` diagnose such logs.
+
+    Raises:
+        ValueError: ``lost`` outside [0, 0.9].
+    """
+    if not 0.0 <= lost <= 0.9:
+        raise ValueError(f"lost must lie in [0, 0.9], got {lost}")
+    ground = floor if floor is not None else FloorSpec()
+
+    def tagged(runs: list[Run], label: str) -> list[Run]:
+        return [dataclasses.replace(r, meta=dict(r.meta, experiment=label)) for r in runs]
+
+    runs: list[Run] = []
+    for direction in _DIRECTIONS:
+        route = square_route(3.0, direction)
+        squares, _ = simulate_runs(
+            robot, ground, route, cruise_speed=0.5, kind="square", direction=direction
+        )
+        runs += tagged(squares, f"square_{direction}")
+    for radius in (1.0, 2.5):
+        for direction in _DIRECTIONS:
+            plan = [circle_plan(radius, direction, laps=1.0)]
+            circles = drive_arcs(robot, ground, plan, cruise_speed=0.5, kind="circular")
+            runs += tagged(circles, f"circle_{direction}_{radius:g}")
+    for direction in _DIRECTIONS:
+        route = spin_route(2.0 * math.pi, direction)
+        spins, _ = simulate_runs(
+            robot, ground, route, cruise_speed=0.4, kind="spin", direction=direction
+        )
+        runs += tagged(spins, f"spin_{direction}")
+    for i in range(6):
+        plan = [free_plan(rng, 25.0)]
+        runs += tagged(drive_arcs(robot, ground, plan, cruise_speed=0.6, kind="free"), f"free_{i}")
+    dx, dy = marker
+    runs = [dataclasses.replace(r, true_pose=offset_point(r.true_pose, dx, dy)) for r in runs]
+    runs = measure(runs, SensorAccuracy(sensor[0], sensor[1]), rng)
+    out = []
+    for i, run in enumerate(runs):
+        pose = run.true_pose.copy()
+        held = np.zeros(len(pose), dtype=bool)
+        while held.mean() < lost:
+            start = int(rng.integers(1, len(pose) - 1))
+            held[start : start + int(rng.integers(3, 60))] = True
+        held[0] = held[-1] = False
+        pose[held] = np.nan
+        out.append(dataclasses.replace(run, true_pose=pose, meta=dict(run.meta, run=f"r{i:02d}")))
+    return out
 
 
 def detection_limit(
