@@ -1,17 +1,14 @@
-"""The rounds of ``diagnose`` (:mod:`odomgym.diagnose.rounds`): what joins the model when an
-effect is named, and in which order the named effects are reported."""
+"""The order in which ``diagnose`` reports the effects its rounds named
+(:func:`odomgym.diagnose.workflow._in_order_added`). How a round's winner joins the model with
+its partners is tested end to end in ``tests/test_skid_diagnose.py`` (the Husky in the field)."""
 
 from __future__ import annotations
 
-import pytest
-
-from odomgym.diagnose.fit import Dataset, Model
+from odomgym.diagnose.fit import Model
 from odomgym.diagnose.generate import NOMINAL_ROBOT
 from odomgym.diagnose.likelihood import SensorNoise
-from odomgym.diagnose.rounds import DiagnosisState, _refit_named
+from odomgym.diagnose.rounds import DiagnosisState
 from odomgym.diagnose.workflow import _in_order_added
-from odomgym.effects import EFFECTS
-from odomgym.robot import PRESETS
 
 
 def _state(*named: str) -> DiagnosisState:
@@ -39,26 +36,3 @@ def test_an_effect_kept_beside_the_partner_it_extends_is_reported_in_its_place()
     # A partner the gate kept without the rounds naming it comes after its effect anyway.
     state = _state("skid_track")
     assert _in_order_added(state, ["skid_track", "wheelbase"], []) == ["skid_track", "wheelbase"]
-
-
-@pytest.mark.slow
-def test_the_joint_refit_frees_a_named_effects_partner() -> None:
-    """A skid track named alone is refitted with E_b free beside it (its partner), not with E_b
-    held where another fit left it: the World's Scout 2.0 (apparent track 1.67 in a spin, 1.25
-    on wide arcs) written with a skid track but E_b at the nominal 1, the refit moves E_b to
-    the arcs' track. Until stop 66 a lone named effect was not refitted at all, and a partner's
-    value came from the candidate's fit after the joint refit (see
-    ``tests/test_skid_diagnose.py``, the Husky whose tracker lost 45 % of its samples)."""
-    from test_skid_diagnose import skid_protocol
-
-    robot = PRESETS["scout2"]
-    runs = skid_protocol(robot, seed=0)
-    data = Dataset.of(runs, 0.25)
-    spec = EFFECTS["skid_track"].write(robot, {"excess": 0.4, "lambda_half": 4.0})
-    parameters: dict[str, dict[str, dict[str, float]]] = {}
-    model = Model(spec, SensorNoise(1e-3, 1.7e-3))
-    refit = _refit_named(data, model, ["skid_track"], parameters, None)
-    e_b = EFFECTS["wheelbase"].read(refit)["e_b"]
-    assert 1.1 < e_b < 1.4, e_b
-    assert set(parameters) == {"skid_track"}  # the partner is not named by its refit
-    assert parameters["skid_track"]["excess"]["value"] > 0.2
