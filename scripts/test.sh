@@ -16,7 +16,7 @@
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
-#   pytest -n auto -m "not slow"    # 48 s on 2 idle cores (2026-11-30, 1 070 tests); CI runs the slow ones too
+#   pytest -n auto -m "not slow"    # 48 s on 2 idle cores (2026-12-01, 1 075 tests); CI runs the slow ones too
 #
 # A test that takes 3 s or more (call or fixture set-up, `pytest --durations`) is marked slow.
 #

@@ -396,3 +396,25 @@ def test_an_apparent_track_may_pass_the_body_the_nominal_one_may_not() -> None:
     with pytest.raises(SpecError, match="wider than the body") as caught:
         dataclasses.replace(robot, chassis_width=0.5)
     assert caught.value.field == "wheelbase"
+
+
+def test_a_field_log_loses_the_share_it_is_asked_to() -> None:
+    """:func:`odomgym.diagnose.generate.simulate_field_log`: 14 runs (squares, circles, spins,
+    free paths), each with at least the asked share of its tracker samples lost as gaps but
+    its first and last kept, the tracked point 0.29 m ahead of the axle; a share outside
+    [0, 0.9] is refused naming the field."""
+    from odomgym.diagnose.generate import simulate_field_log
+
+    robot = PRESETS["husky"]
+    runs = simulate_field_log(robot, np.random.default_rng(3), lost=0.45)
+    assert [r.meta["run"] for r in runs] == [f"r{i:02d}" for i in range(14)]
+    families = {r.meta["experiment"].split("_")[0] for r in runs}
+    assert families == {"square", "circle", "spin", "free"}
+    for run in runs:
+        lost = np.isnan(run.true_pose[:, 0])
+        assert 0.45 <= lost.mean() < 0.6 and not lost[0] and not lost[-1]
+    # The first pose is the start's, at rest: the marker 0.29 m ahead along the heading.
+    spin = next(r for r in runs if r.meta["experiment"] == "spin_cw")
+    assert spin.true_pose[0, 0] == pytest.approx(0.29, abs=1e-9)
+    with pytest.raises(SpecError, match="lost"):
+        simulate_field_log(robot, np.random.default_rng(3), lost=0.95)

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.effects.sensor import offset_point
+from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.simulated import measure
@@ -186,10 +187,10 @@ def simulate_field_log(
     ``benchmarks/skid_field.py`` diagnose such logs.
 
     Raises:
-        ValueError: ``lost`` outside [0, 0.9].
+        SpecError: ``lost`` outside [0, 0.9] (``field`` = ``lost``).
     """
     if not 0.0 <= lost <= 0.9:
-        raise ValueError(f"lost must lie in [0, 0.9], got {lost}")
+        raise SpecError(f"lost must lie in [0, 0.9], got {lost}", field="lost")
     ground = floor if floor is not None else FloorSpec()
 
     def tagged(runs: list[Run], label: str) -> list[Run]:
