@@ -178,7 +178,7 @@ def simulate_field_log(
     The tracked point sits at ``marker`` = (dx, dy) [m] in the body frame (a motion-capture
     rigid body is rarely on the axle), measured with ``sensor`` = (position σ [m], heading σ
     [rad]); the tracker lost the marker for a share ``lost`` (0–0.9) of each run's samples, in
-    bursts of 3–62 samples, written as gaps (NaN: what a held pose becomes, or an empty cell).
+    bursts of 3–59 samples, written as gaps (NaN: what a held pose becomes, or an empty cell).
     Runs are named ``r00``, ``r01``, … and labelled with their experiment.
 
     Why: the protocols above are what a calibration asks for; a diagnosis also meets logs
@@ -226,8 +226,8 @@ def simulate_field_log(
         held = np.zeros(len(pose), dtype=bool)
         while held.mean() < lost:
             start = int(rng.integers(1, len(pose) - 1))
-            held[start : start + int(rng.integers(3, 60))] = True
-        held[0] = held[-1] = False
+            # a burst stops before the last sample, which is kept
+            held[start : min(start + int(rng.integers(3, 60)), len(pose) - 1)] = True
         pose[held] = np.nan
         out.append(dataclasses.replace(run, true_pose=pose, meta=dict(run.meta, run=f"r{i:02d}")))
     return out

@@ -493,12 +493,14 @@ def _in_order_added(
     """The kept catalogue effects — systematic ``effects`` and ``noise`` effects — in the order
     the rounds named them (an effect named again after others joined keeps its first place),
     then those the gate kept that the rounds found significant without naming them: the order
-    in which the diagnosis added them to the model.
+    in which the diagnosis added them to the model, with one exception.
 
-    An effect kept beside a partner it extends (:attr:`~odomgym.effects.Effect.partners`: the
-    skid track over ``wheelbase``, its asymptote; floor bumps over the distance scale, their
-    mean loss) takes the place of the partner if the rounds named the partner first, the
-    partner right after it: the pair is one law, and the effect names it. A first round, far
+    The exception: an effect kept beside a partner it extends
+    (:attr:`~odomgym.effects.Effect.partners`: the skid track over ``wheelbase``, its
+    asymptote; floor bumps over the distance scale, their mean loss) takes the place of the
+    partner if the partner comes first by the rule above (named earlier, or named where the
+    effect was only kept by the gate), the partner right after it: the pair is one law, and
+    the effect names it. The report's table says so in its header. A first round, far
     from the robot, may name the constant part alone (a World Scout 2.0 of the blind matrix:
     ``wheelbase`` in round 1, where the skid track's fit lay beyond the logged turns, then the
     skid track in round 2, both kept)."""
