@@ -910,6 +910,10 @@ class CandidateFit:
             "stderr_sessions": self.stderr_sessions.get(name, math.nan),
         }
 
+    def entries(self) -> dict[str, dict[str, float]]:
+        """The report's entry (:meth:`entry`) of each of the fit's own parameters at its value."""
+        return {key: self.entry(key, value) for key, value in self.values.items()}
+
 
 def _least_squares_step(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, effect: Effect, hold: bool = False

@@ -617,9 +617,7 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
     # parameters are updated, it is listed once, where it was first added.
     if winner.name not in state.named:
         state.named.append(winner.name)
-    state.parameters[winner.name] = {
-        key: winner.entry(key, value) for key, value in winner.values.items()
-    }
+    state.parameters[winner.name] = winner.entries()
     done = finish("explained", winner.name)
     # Only the named effect joins the model (not the nuisance wheel noise fitted beside a
     # systematic effect); the sensor noise is refitted for it. A noise effect fitted jointly
@@ -668,8 +666,6 @@ def _with_its_pair(
         return Model(mixed[0], mixed[1])
     paired = fit_noise(data, effect.write(model.spec, winner.values), model.sensor)
     if paired[2] > mixed[2]:
-        parameters[winner.name] = {
-            key: winner.entry(key, value) for key, value in winner.values.items()
-        }
+        parameters[winner.name] = winner.entries()
         return Model(paired[0], paired[1])
     return Model(mixed[0], mixed[1])

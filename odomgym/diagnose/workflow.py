@@ -501,9 +501,9 @@ def _in_order_added(
     partner if the partner comes first by the rule above (named earlier, or named where the
     effect was only kept by the gate), the partner right after it: the pair is one law, and
     the effect names it. The report's table says so in its header. A first round, far
-    from the robot, may name the constant part alone (a World Scout 2.0 of the blind matrix:
-    ``wheelbase`` in round 1, where the skid track's fit lay beyond the logged turns, then the
-    skid track in round 2, both kept)."""
+    from the robot, may name the constant part alone (the World's Husky against its preset,
+    ``benchmarks/skid_field.py`` without lost samples: ``wheelbase`` in round 1, the marker's
+    offset in round 2, the skid track in round 3, all kept)."""
     kept = {*effects, *noise}
     first = [n for n in state.named if n in kept]
     order = first + [n for n in effects if n not in first]
