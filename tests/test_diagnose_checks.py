@@ -662,7 +662,9 @@ def test_a_round_asks_for_the_bump_signature_only_of_effects_not_refused_for_siz
     """A round does not fit a noise effect refused for its size in an earlier round (its
     reason stays that one) nor one whose signature the logs lack; the signature, a replay of
     every fit run, is computed only when some noise effect is left to ask about. The reasons
-    come in the candidates' order, and outside the mean stage nothing is refused."""
+    come in the candidates' order. A noise stage leaves out what it is told was refused for
+    its size (:func:`test_a_noise_stage_refits_no_bump_field_the_model_carries_beyond_a_floors_size`
+    says what), and asks for no signature."""
     from odomgym.diagnose import rounds
 
     asked: list[list[str]] = []
@@ -684,8 +686,50 @@ def test_a_round_asks_for_the_bump_signature_only_of_effects_not_refused_for_siz
     out = rounds._not_fitted(ctx, NOMINAL_ROBOT, [wheelbase, bumps], "mean", refused)
     assert out == {"floor_bumps": "3.5 bumps per metre"}
     assert len(asked) == 1  # every noise effect refused for its size: no replay
-    assert rounds._not_fitted(ctx, NOMINAL_ROBOT, [wheelbase, bumps, rough], "noise", refused) == {}
+    out = rounds._not_fitted(ctx, NOMINAL_ROBOT, [wheelbase, bumps, rough], "noise", refused)
+    assert out == {"floor_bumps": "3.5 bumps per metre"}
+    assert rounds._not_fitted(ctx, NOMINAL_ROBOT, [bumps, rough], "noise", {}) == {}
     assert len(asked) == 1
+
+
+def test_a_noise_stage_refits_no_bump_field_the_model_carries_beyond_a_floors_size() -> None:
+    """What each stage of the next round leaves out for its size: a mean stage, a bump field
+    whose latest fit among the systematic candidates was beyond a floor's bounds (whatever the
+    noise stage fitted since); a noise stage, one the model already carries whose latest fit
+    in either stage was beyond. A noise stage still fits one the model does not carry, so that
+    it may be named as the rounds' heavy-tailed noise model."""
+    from odomgym.diagnose import rounds
+    from odomgym.diagnose.results import Candidate, Round
+
+    largest = bump_extra_rotation(0.5 * float(NOMINAL_ROBOT.wheel_diameter), 0.02)
+    jump = 0.5 * largest / NOMINAL_ROBOT.true_wheelbase
+
+    def bumps(number: int, stage: str, rate: float) -> Round:
+        values = {"rate": rate, "heading_jump": jump}
+        c = Candidate(number, stage, "floor_bumps", values, {}, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, False)
+        return Round(number, "none", None, [], None, [c], 1.0)
+
+    cfg = SimpleNamespace(max_obstacle=0.02, max_bump_rate=1.0)
+    ctx: Any = SimpleNamespace(config=cfg)
+    state: Any = SimpleNamespace(model=SimpleNamespace(spec=NOMINAL_ROBOT), named=[], rounds=[])
+
+    def refused(stage: str) -> dict[str, str]:
+        state.candidates = [c for r in state.rounds for c in r.candidates]
+        return rounds._refused_for_size(ctx, state, stage)
+
+    state.rounds = [bumps(1, "mean", 3.5)]
+    assert "3.5 bumps per metre" in refused("mean")["floor_bumps"]
+    assert refused("noise") == {}  # the model does not carry them: the noise stage fits them
+    state.named = ["floor_bumps"]  # a noise stage named them
+    assert "3.5 bumps per metre" in refused("noise")["floor_bumps"]
+    state.rounds.append(bumps(6, "noise", 0.4))  # refitted in a noise stage at a floor's size
+    assert refused("noise") == {}
+    assert "3.5 bumps per metre" in refused("mean")["floor_bumps"]
+    state.rounds.append(bumps(7, "noise", 3.9))
+    assert "3.9 bumps per metre" in refused("noise")["floor_bumps"]
+    assert "3.5 bumps per metre" in refused("mean")["floor_bumps"]
+    state.rounds = [bumps(1, "mean", 0.4), bumps(6, "noise", 3.9)]
+    assert refused("mean") == {}
 
 
 # ------------------------------------------------------------------ bounded fold steps

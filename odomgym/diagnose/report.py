@@ -403,10 +403,7 @@ def _proposal_lines(d: Diagnosis) -> list[str]:
         )
         lines.append(f"- round {r.number}: {_round_words(r)}{extra}")
         for name, reason in r.screened.items():
-            lines.append(
-                f"  - {name} not fitted among the systematic candidates (refused whatever its "
-                f"fit): {reason}"
-            )
+            lines.append(f"  - {name} not fitted this round (refused whatever its fit): {reason}")
     lines.append("")
     return lines
 

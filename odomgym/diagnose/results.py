@@ -70,7 +70,7 @@ class Round:
     candidates: list[Candidate]
     consistency_p: float
     structure: dict[str, Any] | None = None
-    # Noise effects the mean stage did not fit (refused whatever their fit), with the reason.
+    # Noise effects a stage of the round did not fit (refused whatever their fit), with the reason.
     screened: dict[str, str] = field(default_factory=dict)
 
 

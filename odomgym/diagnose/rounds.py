@@ -252,11 +252,12 @@ def _not_fitted(
     refused: Mapping[str, str],
 ) -> dict[str, str]:
     """The candidates among ``effects`` a round does not fit, each with its reason, in the
-    order of ``effects``: in a mean stage, those ``refused`` for their size in an earlier round
-    (:func:`_refused_for_size`), then the noise effects :func:`_screened` refuses. Why in that
+    order of ``effects``: those ``refused`` for their size in an earlier round (the stage's own
+    answer of :func:`_refused_for_size`), then, in a mean stage, the noise effects
+    :func:`_screened` refuses. Why in that
     order: a refused effect's reason is its size whatever the signature says, so the signature
     (a replay of every fit run) is asked only about the others."""
-    size = {e.name: refused[e.name] for e in effects if stage == "mean" and e.name in refused}
+    size = {e.name: refused[e.name] for e in effects if e.name in refused}
     signature = _screened(ctx, spec, [e for e in effects if e.name not in size], stage)
     reasons = size | signature
     return {e.name: reasons[e.name] for e in effects if e.name in reasons}
@@ -275,7 +276,7 @@ def _screened(
     interval, six parameters by finite differences; on the 14 June OptiOdom sessions, whose
     logs do show the signature, the ``floor_bumps`` candidate took 98 of 236 s). On logs
     without it the fit was wasted. The noise stage still fits it (no signature is asked
-    there).
+    there) unless :func:`_refused_for_size` says otherwise.
 
     :func:`_not_fitted` leaves out the effects refused for their size already: when no noise
     effect is left, the signature is not computed (a replay of every fit run and a kurtosis,
@@ -290,11 +291,21 @@ def _screened(
     return {e.name: check.reason for e in noisy}
 
 
-def _refused_for_size(ctx: RoundContext, state: DiagnosisState) -> dict[str, str]:
-    """The wheel-jump effects whose latest fit among the systematic candidates was beyond what
-    a floor can make (:func:`odomgym.diagnose.physical.bump_size_reasons`: more bumps per metre
-    than ``max_bump_rate``, or each losing more travel than ``max_obstacle`` can), each with
-    the reason: the mean stage does not fit them again. The noise stage still does.
+def _refused_for_size(
+    ctx: RoundContext, state: DiagnosisState, stage: str = "mean"
+) -> dict[str, str]:
+    """The wheel-jump effects a ``stage`` of the next round does not fit again, each with the
+    reason, because a fit was beyond what a floor can make
+    (:func:`odomgym.diagnose.physical.bump_size_reasons`: more bumps per metre than
+    ``max_bump_rate``, or each losing more travel than ``max_obstacle`` can).
+
+    - A mean stage: those whose latest fit among the systematic candidates was beyond.
+    - A noise stage: those the model already carries (a noise stage named them) whose latest
+      fit in either stage was beyond. Such a fit can only update the values of an effect the
+      final model refuses for its size whatever they are
+      (:func:`odomgym.diagnose.keep.noise_effects`); a noise stage still fits, and may name,
+      one the model does not carry, as the heavy-tailed noise model the rounds' likelihood
+      wants.
 
     Why: such a fit is refused whatever it gains (:func:`_signature_holds`), and the dearest of
     a round. What it fits is the logs' heavy-tailed heading increments, which the systematic
@@ -302,13 +313,22 @@ def _refused_for_size(ctx: RoundContext, state: DiagnosisState) -> dict[str, str
     out at 3.2–3.9 jumps per metre in every one of the eight rounds (one per metre allowed),
     61 of the diagnosis's 185 s (`--jobs 1`); not refitted, 150 s → 118 s (`--jobs 2`) with the
     same decisions, and the blind matrix's bump trials the same to the last bit (bump fields
-    of 0.3–0.5 per metre fit inside the bounds and are refitted every round)."""
+    of 0.3–0.5 per metre fit inside the bounds and are refitted every round).
+
+    The noise stage's rule (stop 67): on the June sessions the noise stage of round 6 names
+    the bumps (3.9 per metre); round 8's noise stage refitted them (5 s of a 58 s diagnosis)
+    and they did not win. Not refitted, the same report. Not named at all in round 6 (tried on
+    stop 67, not landed), the rounds lose the heavy-tailed noise model their later systematic
+    fits lean on: five of the 14 leave-one-session-out folds then drop `wheelbase` and move
+    E_s from 0.9965 to 0.9943–0.9947 (intervals no longer overlapping)."""
     cfg = ctx.config
     spec = state.model.spec
     latest: dict[str, Candidate] = {}
     for c in state.candidates:
-        if c.stage == "mean" and EFFECTS[c.name].noise:
+        if EFFECTS[c.name].noise and (c.stage == "mean" or stage != "mean"):
             latest[c.name] = c
+    if stage != "mean":
+        latest = {name: c for name, c in latest.items() if name in state.named}
     out = {}
     for name, c in latest.items():
         reasons = bump_size_reasons(
@@ -514,7 +534,8 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
     base = model
     structure: StructureTest | None = None
     stopped: str | None = None
-    refused = _refused_for_size(ctx, state)  # earlier rounds' fits: one answer for every stage
+    # Earlier rounds' fits: one answer for every mean stage, one for every noise stage.
+    refused = {stage: _refused_for_size(ctx, state, stage) for stage in ("mean", "noise")}
     for stage, stage_names, helper in ctx.stages:
         if stage == "noise" and structure is None:
             # Is the systematic structure exhausted? Score test of the whole grammar on the
@@ -550,7 +571,7 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
             continue
         base = fit_noise_model(data, model, helper)
         candidates, fits, screened = _score_candidates(
-            ctx, effects, base, helper, (number, stage), refused
+            ctx, effects, base, helper, (number, stage), refused[stage]
         )
         round_candidates.extend(candidates)
         round_screened.update(screened)
