@@ -132,11 +132,11 @@ def _a_bump_field_no_floor_can_make_is_fitted_once(june: Diagnosis) -> None:
         assert "beyond what a floor can make" in r.screened.get("floor_bumps", ""), r.screened
         assert "floor_bumps" not in {c.name for c in r.candidates if c.stage == "mean"}
     # Named by a noise stage as the rounds' heavy-tailed noise model (round 6 on stop 67's
-    # code), the field is not refitted by any later stage: the final model refuses it for its
-    # size whatever its values.
+    # code) at a size no floor makes, the field is not refitted by any later stage.
     named = [r.number for r in june.rounds if r.winner == "floor_bumps"]
+    assert named, [r.winner for r in june.rounds]
     for r in june.rounds:
-        if named and r.number > named[0]:
+        if r.number > named[0]:
             assert "floor_bumps" not in {c.name for c in r.candidates}, r.number
 
 

@@ -295,17 +295,15 @@ def _refused_for_size(
     ctx: RoundContext, state: DiagnosisState, stage: str = "mean"
 ) -> dict[str, str]:
     """The wheel-jump effects a ``stage`` of the next round does not fit again, each with the
-    reason, because a fit was beyond what a floor can make
+    reason, because they were beyond what a floor can make
     (:func:`odomgym.diagnose.physical.bump_size_reasons`: more bumps per metre than
     ``max_bump_rate``, or each losing more travel than ``max_obstacle`` can).
 
     - A mean stage: those whose latest fit among the systematic candidates was beyond.
-    - A noise stage: those the model already carries (a noise stage named them) whose latest
-      fit in either stage was beyond. Such a fit can only update the values of an effect the
-      final model refuses for its size whatever they are
-      (:func:`odomgym.diagnose.keep.noise_effects`); a noise stage still fits, and may name,
-      one the model does not carry, as the heavy-tailed noise model the rounds' likelihood
-      wants.
+    - A noise stage: those the model carries (a noise stage named them) at values beyond — the
+      values the final model judges them by (:func:`odomgym.diagnose.keep.noise_effects`).
+      A noise stage still fits, and may name, one the model does not carry, as the
+      heavy-tailed noise model the rounds' likelihood wants.
 
     Why: such a fit is refused whatever it gains (:func:`_signature_holds`), and the dearest of
     a round. What it fits is the logs' heavy-tailed heading increments, which the systematic
@@ -315,29 +313,32 @@ def _refused_for_size(
     same decisions, and the blind matrix's bump trials the same to the last bit (bump fields
     of 0.3–0.5 per metre fit inside the bounds and are refitted every round).
 
-    The noise stage's rule (stop 67): on the June sessions the noise stage of round 6 names
-    the bumps (3.9 per metre); round 8's noise stage refitted them (5 s of a 58 s diagnosis)
-    and they did not win. Not refitted, the same report. Not named at all in round 6 (tried on
-    stop 67, not landed), the rounds lose the heavy-tailed noise model their later systematic
-    fits lean on: five of the 14 leave-one-session-out folds then drop `wheelbase` and move
-    E_s from 0.9965 to 0.9943–0.9947 (intervals no longer overlapping)."""
+    The noise stage's rule (stop 67) gives up something: a refit that won at a size a floor
+    can make would have replaced the carried values, and the final model would then have kept
+    the bumps. It did not happen on any re-validation set: on the June sessions the noise stage
+    of round 6 names the bumps (3.9 per metre), and round 8's refit (5 s of a 58 s diagnosis)
+    came out at 3.9 again and lost; not refitted, the same report. Not named at all in round 6
+    (tried on stop 67, not landed), the rounds lose the heavy-tailed noise model their later
+    systematic fits lean on: five of the 14 leave-one-session-out folds then drop `wheelbase`
+    and move E_s from 0.9965 to 0.9943–0.9947 (intervals no longer overlapping)."""
     cfg = ctx.config
     spec = state.model.spec
-    latest: dict[str, Candidate] = {}
-    for c in state.candidates:
-        if EFFECTS[c.name].noise and (c.stage == "mean" or stage != "mean"):
-            latest[c.name] = c
-    if stage != "mean":
-        latest = {name: c for name, c in latest.items() if name in state.named}
+    judged: dict[str, tuple[str, Mapping[str, float]]] = {}
+    if stage == "mean":
+        for c in state.candidates:
+            if c.stage == "mean" and EFFECTS[c.name].noise:
+                judged[c.name] = (f"fitted in round {c.round}", c.values)
+    else:
+        for name in state.named:
+            if EFFECTS[name].noise:
+                judged[name] = ("carried by the model", EFFECTS[name].read(spec))
     out = {}
-    for name, c in latest.items():
+    for name, (where, values) in judged.items():
         reasons = bump_size_reasons(
-            spec, c.values, max_obstacle=cfg.max_obstacle, max_rate=cfg.max_bump_rate
+            spec, values, max_obstacle=cfg.max_obstacle, max_rate=cfg.max_bump_rate
         )
         if reasons:
-            out[name] = f"fitted in round {c.round} beyond what a floor can make: " + "; ".join(
-                reasons
-            )
+            out[name] = f"{where} beyond what a floor can make: " + "; ".join(reasons)
     return out
 
 
