@@ -55,6 +55,13 @@ DIST_PID=$!
 # A failed gate ends the script: end the check's process group with it.
 trap 'kill -TERM -- -"$DIST_PID" 2>/dev/null || true' EXIT
 
+# The numba kernels compiled once, into the new venv's cache, beside the gates: otherwise both
+# xdist workers compile the same kernels at the same time when pytest starts
+# (scripts/warm_kernels.py says why; ~50 s of CPU once instead of ~80 s twice).
+WARM_LOG="$(mktemp)"
+"$VENV/bin/python" scripts/warm_kernels.py > "$WARM_LOG" 2>&1 &
+WARM_PID=$!
+
 echo "== ruff check"
 "$VENV/bin/ruff" check .
 echo "== ruff format --check"
@@ -68,6 +75,11 @@ echo "== mkdocs build --strict (the documentation site; a broken link or undocum
 SITE="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$SITE"
 rm -rf "$SITE"
+WARM_START=$SECONDS
+wait "$WARM_PID" || { cat "$WARM_LOG"; echo "== scripts/warm_kernels.py failed"; exit 1; }
+echo "== numba kernels compiled (waited $((SECONDS - WARM_START)) s for it after the gates):"
+grep '^warm_kernels:' "$WARM_LOG" || true
+rm -f "$WARM_LOG"
 echo "== pytest (every test, slow ones included, on ${PYTEST_WORKERS:-auto} xdist workers)"
 PYTEST_LOG="$(mktemp)"
 "$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}" --dist worksteal \
