@@ -16,9 +16,13 @@
 #
 # Everyday loop, from the dev venv (editable install), without the slow end-to-end tests:
 #
-#   pytest -n auto -m "not slow"    # 48 s on 2 idle cores (2026-12-01, 1 075 tests); CI runs the slow ones too
+#   pytest -n auto -m "not slow"    # 54 s on 2 idle cores (2026-12-01, 1 077 tests); CI runs the slow ones too
 #
 # A test that takes 3 s or more (call or fixture set-up, `pytest --durations`) is marked slow.
+#
+# numba's kernels are compiled once, by scripts/warm_kernels.py beside the gates, before pytest
+# starts: in a fresh venv both workers would otherwise compile the same kernels at the same time
+# (the fast lane: 100 s from an empty cache, 64 s after the warm-up, 54 s warm; docs/testing.md).
 #
 # The artefacts (issue 46): scripts/check_dist.sh builds the sdist and the wheel, checks them
 # (twine check --strict, cffconvert --validate on CITATION.cff, the wheel from the sdist against
