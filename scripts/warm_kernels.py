@@ -20,6 +20,9 @@ from __future__ import annotations
 
 import time
 import warnings
+from typing import Any
+
+import gymnasium
 
 
 def _envs() -> None:
@@ -30,27 +33,32 @@ def _envs() -> None:
 
     ids = sorted(i for i, s in gym.registry.items() if str(s.entry_point).startswith("odomgym."))
     for env_id in ids:
-        env = gym.make(env_id)
-        env.reset(seed=0)
-        for _ in range(3):
-            env.step(env.action_space.sample())
-        env.close()
+        _steps(gym.make(env_id))
         if gym.registry[env_id].vector_entry_point:
             vec = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point")
+            vec.action_space.seed(0)
             vec.reset(seed=0)
             vec.step(vec.action_space.sample())
             vec.close()
+
+
+def _steps(env: gymnasium.Env[Any, Any], count: int = 3) -> None:
+    """``count`` seeded random steps of ``env`` (reset again where an episode ends: a
+    self-calibration session may end on its first action), then close it."""
+    env.action_space.seed(0)
+    env.reset(seed=0)
+    for _ in range(count):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+    env.close()
 
 
 def _skid_steer() -> None:
     """A skid-steer preset driven in the square env (its four contacts' kernels)."""
     import gymnasium as gym
 
-    env = gym.make("UMBmarkSquare-v0", robot="scout2")
-    env.reset(seed=0)
-    for _ in range(3):
-        env.step(env.action_space.sample())
-    env.close()
+    _steps(gym.make("UMBmarkSquare-v0", robot="scout2"))
 
 
 def _effects() -> None:
