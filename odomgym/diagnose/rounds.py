@@ -291,9 +291,7 @@ def _screened(
     return {e.name: check.reason for e in noisy}
 
 
-def _refused_for_size(
-    ctx: RoundContext, state: DiagnosisState, stage: str = "mean"
-) -> dict[str, str]:
+def _refused_for_size(ctx: RoundContext, state: DiagnosisState, stage: str) -> dict[str, str]:
     """The wheel-jump effects a ``stage`` of the next round does not fit again, each with the
     reason, because they were beyond what a floor can make
     (:func:`odomgym.diagnose.physical.bump_size_reasons`: more bumps per metre than
