@@ -86,8 +86,10 @@ grep '^warm_kernels:' "$WARM_LOG" || true
 rm -f "$WARM_LOG"
 echo "== pytest (every test, slow ones included, on ${PYTEST_WORKERS:-auto} xdist workers)"
 PYTEST_LOG="$(mktemp)"
+# --durations: the 15 slowest calls and set-ups under CI's own conditions (a fresh venv, the
+# artefact check beside), where the suite's time goes (docs/testing.md).
 "$VENV/bin/pytest" -p no:cacheprovider -n "${PYTEST_WORKERS:-auto}" --dist worksteal \
-    | tee "$PYTEST_LOG"
+    --durations=15 | tee "$PYTEST_LOG"
 PYTEST_DONE=$SECONDS
 DIST_STATUS=0
 wait "$DIST_PID" || DIST_STATUS=$?
