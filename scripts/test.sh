@@ -21,19 +21,20 @@
 # A test that takes 3 s or more (call or fixture set-up, `pytest --durations`) is marked slow.
 #
 # numba's kernels are compiled once, by scripts/warm_kernels.py beside the gates, before pytest
-# starts: in a fresh venv both workers would otherwise compile the same kernels at the same time
-# (the fast lane: 100 s from an empty cache, 64 s after the warm-up, 54 s warm; docs/testing.md).
+# starts: in a fresh venv both workers would otherwise compile the same kernels at the same time,
+# ~40 s of CPU each (the fast lane: 100 s from an empty cache, 64 s after the warm-up, 54 s
+# warm; docs/testing.md).
 #
 # The artefacts (issue 46): scripts/check_dist.sh builds the sdist and the wheel, checks them
 # (twine check --strict, cffconvert --validate on CITATION.cff, the wheel from the sdist against
 # the wheel from the tree) and runs the README's main job, every env and diagnose from the wheel
 # installed in a fresh venv outside the tree. It starts in the background before the gates
-# (ruff, mypy and mkdocs use one core; it takes the other) and goes on beside pytest; its log is
-# printed after pytest, whose summary line is then repeated as the closing line. Issue 46
-# allows it 60 s on top of the test command: alone on 2 cores it took 90 s (93 s of CPU; the
-# gates 54 s), so beside the gates and pytest it adds at most half its CPU time, 47 s, and less
-# while the gates leave a core idle (2026-11-28). Waiting for it before pytest instead cost
-# 41-73 s after the gates on this shared machine.
+# (ruff, mypy and mkdocs use one core; it and the kernels' warm-up share the other) and goes on
+# beside pytest; its log is printed after pytest, whose summary line is then repeated as the
+# closing line. Issue 46 allows it 60 s on top of the test command: alone on 2 cores it took
+# 90 s (93 s of CPU; the gates 54 s), so beside the gates and pytest it adds at most half its
+# CPU time, 47 s (2026-11-28). Waiting for it before pytest instead cost 41-73 s after the
+# gates on this shared machine.
 #
 # torch is pinned first because this machine ships a CPU build of 2.13.0 locally; without the
 # pin pip may choose a multi-GB CUDA build to satisfy the `rl` extra's loose range.
@@ -56,14 +57,16 @@ echo "== check_dist.sh started in the background (log: $DIST_LOG)"
 DIST_START=$SECONDS
 PYTHON="$VENV/bin/python" setsid bash scripts/check_dist.sh > "$DIST_LOG" 2>&1 &
 DIST_PID=$!
-# A failed gate ends the script: end the check's process group with it.
-trap 'kill -TERM -- -"$DIST_PID" 2>/dev/null || true' EXIT
-
-# The numba kernels compiled once, into the new venv's cache, beside the gates: otherwise both
-# xdist workers compile the same kernels at the same time when pytest starts
-# (scripts/warm_kernels.py says why; ~50 s of CPU once instead of ~80 s twice).
 WARM_LOG="$(mktemp)"
-"$VENV/bin/python" scripts/warm_kernels.py > "$WARM_LOG" 2>&1 &
+WARM_PID=""
+# A failed gate ends the script: end the background process groups (the check, the warm-up)
+# with it.
+trap 'kill -TERM -- -"$DIST_PID" 2>/dev/null || true
+      [[ -z "$WARM_PID" ]] || kill -TERM -- -"$WARM_PID" 2>/dev/null || true
+      rm -f "$WARM_LOG"' EXIT
+
+# numba's kernels compiled once, beside the gates (docs/testing.md).
+setsid "$VENV/bin/python" scripts/warm_kernels.py > "$WARM_LOG" 2>&1 &
 WARM_PID=$!
 
 echo "== ruff check"
@@ -80,9 +83,15 @@ SITE="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$SITE"
 rm -rf "$SITE"
 WARM_START=$SECONDS
-wait "$WARM_PID" || { cat "$WARM_LOG"; echo "== scripts/warm_kernels.py failed"; exit 1; }
-echo "== numba kernels compiled (waited $((SECONDS - WARM_START)) s for it after the gates):"
-grep '^warm_kernels:' "$WARM_LOG" || true
+if wait "$WARM_PID"; then
+    echo "== numba kernels compiled (waited $((SECONDS - WARM_START)) s for it after the gates):"
+    grep '^warm_kernels:' "$WARM_LOG" || true
+else
+    # Only time is at stake: the tests go on, and their workers compile what they need.
+    cat "$WARM_LOG"
+    echo "== scripts/warm_kernels.py FAILED (above); pytest goes on without the warm-up"
+fi
+WARM_PID=""
 rm -f "$WARM_LOG"
 echo "== pytest (every test, slow ones included, on ${PYTEST_WORKERS:-auto} xdist workers)"
 PYTEST_LOG="$(mktemp)"

@@ -6,12 +6,12 @@ Why: every kernel (:mod:`odomgym._jit`) is compiled on its first call with given
 types and cached on disk next to its module, so a fresh install pays the compilation once —
 but two processes that start at the same time (pytest's xdist workers, a fleet's worker
 processes) each compile the same kernels before either has written them to the cache. In the
-test command that is about 80 s of CPU in the fast lane alone, paid twice. This script makes
-the calls that compile the common kernels, in one process: every registered env reset and
-stepped (its vector env too), the skid-steer presets in the square env, the CLAPPER, and one
-blind diagnosis of simulated logs (the filter, the replays, the open-loop fits and the
-discovery's term replays). Kernels it misses are compiled where they are first called, as
-before; nothing it computes is kept.
+test command's fast lane that was about 40 s of CPU in each of the two workers. This script
+makes the calls that compile the common kernels, in one process: every registered env reset
+and stepped (its vector env too; the CLAPPER's among them), a skid-steer preset in the square
+env, every catalogue effect the World injects, and one blind diagnosis of simulated logs (the
+filter, the replays, the open-loop fits and the discovery's term replays). Kernels it misses
+are compiled where they are first called, as before; nothing it computes is kept.
 
 Its output: one line per part with its time [s], then the total.
 """
@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import gymnasium
+if TYPE_CHECKING:
+    import gymnasium
 
 
 def _envs() -> None:
@@ -67,18 +68,15 @@ def _effects() -> None:
     import numpy as np
 
     from odomgym.diagnose.generate import NOMINAL_ROBOT, hidden_effect
-    from odomgym.effects import EFFECTS
+    from odomgym.effects import EFFECTS, catalogue
     from odomgym.floor import load_floor
     from odomgym.sim.route_runs import simulate_runs
     from odomgym.sim.routes import straight_route
 
     rng = np.random.default_rng(0)
     robot = NOMINAL_ROBOT
-    for name, effect in EFFECTS.items():
-        try:
-            robot = effect.write(robot, hidden_effect(name, 3.0, "rich", rng))
-        except (KeyError, ValueError):  # an effect without a detection limit of its own
-            continue
+    for name in catalogue():
+        robot = EFFECTS[name].write(robot, hidden_effect(name, 3.0, "rich", rng))
     simulate_runs(robot, load_floor("bumpy"), straight_route(1.0), rng=rng, kind="straight")
 
 
@@ -90,7 +88,12 @@ def _diagnosis() -> None:
 
 
 def main() -> None:
-    warnings.simplefilter("ignore")
+    """Run the parts in order, each timed. Gymnasium's deprecation notices (``SelfCalibration-
+    v0``) are silenced; numba's warnings are not (one that it cannot cache a kernel would make
+    this script useless)."""
+    import gymnasium  # noqa: F401  (its logger sets a DeprecationWarning filter on import)
+
+    warnings.simplefilter("ignore", DeprecationWarning)
     start = time.perf_counter()
     for name, part in (
         ("envs", _envs),
