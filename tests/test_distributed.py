@@ -247,3 +247,34 @@ def test_a_robots_dated_sessions_give_its_periods_by_month(tmp_path: Path) -> No
     runs = read_robot_runs(found)
     assert {r.meta["period"] for r in runs} == {"2020-06", "2020-07"}
     assert {r.meta["session"] for r in runs} == {"230620202042", "150720200930"}
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("no_ray_address")
+def test_ray_workers_import_the_odomgym_this_process_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ray puts the driver's working folder first on its workers' sys.path. Run from a folder
+    holding another ``odomgym/`` (a source checkout beside an installed odomgym; here a decoy
+    that cannot be imported), the workers must still import this process's odomgym: Ray is
+    started from the folder that holds it (``odomgym.distributed.ray_session``)."""
+    pytest.importorskip("ray")
+    import ray
+
+    import odomgym
+    from odomgym.distributed import ray_session
+
+    decoy = tmp_path / "odomgym"
+    decoy.mkdir()
+    (decoy / "__init__.py").write_text('raise ImportError("the decoy odomgym")\n')
+    monkeypatch.chdir(tmp_path)
+
+    def where() -> str:
+        import odomgym as imported
+
+        return str(Path(imported.__file__).resolve())
+
+    with ray_session(None, 1):
+        found = ray.get(ray.remote(where).remote())
+    assert found == str(Path(odomgym.__file__).resolve())
+    assert Path.cwd() == tmp_path  # the working folder is given back
