@@ -97,11 +97,9 @@ def _address(address: str | None) -> str | None:
 
 
 def _package_root() -> str:
-    """The folder holding the imported ``odomgym`` package (site-packages for an install, the
-    checkout for an editable one): where :func:`ray_session` starts Ray from."""
-    import odomgym
-
-    return str(Path(odomgym.__file__).resolve().parents[1])
+    """The folder holding the imported ``odomgym`` package, this module's (site-packages for
+    an install, the checkout for an editable one): where :func:`ray_session` starts Ray from."""
+    return str(Path(__file__).resolve().parents[1])
 
 
 def _init(ray: Any, target: str | None, cpus: int) -> None:
