@@ -18,9 +18,11 @@ On a cluster, every node needs odomgym (and the same versions of numpy, scipy, p
 Python its Ray workers run; a unit's inputs travel with it (logs already read, configs), and
 its outputs come back to this process, which writes every file, so no shared file system is
 needed. Effects a user registered at run time exist only in this process: a Ray worker knows
-the catalogue (:mod:`odomgym.effects`) and what its own imports register. Ray is started from
-the folder that holds this process's odomgym (:func:`ray_session`), since Ray puts the
-driver's working folder first on its workers' ``sys.path``.
+the catalogue (:mod:`odomgym.effects`) and what its own imports register. Ray puts the working
+folder of the process that calls ``ray.init`` first on its workers' ``sys.path``, so
+:func:`ray_session` calls it from the folder that holds this process's odomgym, and gives the
+workers the user's folders behind it (a ``PYTHONPATH``); a Ray the caller initialised is used as
+it is.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import contextlib
 import importlib.util
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterable, Iterator
 from enum import StrEnum
 from pathlib import Path
@@ -97,20 +100,42 @@ def _address(address: str | None) -> str | None:
 
 
 def _package_root() -> str:
-    """The folder holding the imported ``odomgym`` package, this module's (site-packages for
-    an install, the checkout for an editable one): where :func:`ray_session` starts Ray from."""
-    return str(Path(__file__).resolve().parents[1])
+    """The folder holding the imported ``odomgym`` package, this module's, as it stands on
+    ``sys.path`` (site-packages for an install, the checkout for an editable one; not resolved
+    through symbolic links): where :func:`ray_session` starts Ray from."""
+    return str(Path(__file__).absolute().parents[1])
+
+
+def _user_paths() -> str:
+    """The folders Ray would have put first on its workers' ``sys.path`` (the script's folder
+    where it is on this process's path, and the working folder), then this process's
+    ``PYTHONPATH``, all absolute: a ``PYTHONPATH`` for the workers, so that the user's own
+    modules (an effect registered in a module beside the script) still import there, behind
+    the odomgym this process runs."""
+    found: list[str] = []
+    script = os.path.dirname(os.path.realpath(sys.argv[0])) if sys.argv and sys.argv[0] else ""
+    if script and script in sys.path:
+        found.append(script)
+    found.append(os.path.abspath(os.curdir))
+    found += [os.path.abspath(p) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+    return os.pathsep.join(dict.fromkeys(found))
 
 
 def _init(ray: Any, target: str | None, cpus: int) -> None:
     """``ray.init``: a new local Ray with ``cpus`` CPUs (``target`` None), else the cluster at
-    ``target``."""
-    if target is None:
-        ray.init(
-            address="local", num_cpus=max(1, cpus), include_dashboard=False, log_to_driver=False
-        )
-    else:
-        ray.init(address=target, log_to_driver=False)
+    ``target``; the workers' ``PYTHONPATH`` is :func:`_user_paths`'s."""
+    runtime_env = {"env_vars": {"PYTHONPATH": _user_paths()}}
+    with contextlib.chdir(_package_root()):
+        if target is None:
+            ray.init(
+                address="local",
+                num_cpus=max(1, cpus),
+                include_dashboard=False,
+                log_to_driver=False,
+                runtime_env=runtime_env,
+            )
+        else:
+            ray.init(address=target, log_to_driver=False, runtime_env=runtime_env)
 
 
 @contextlib.contextmanager
@@ -135,16 +160,17 @@ def ray_session(address: str | None = None, cpus: int = 1) -> Iterator[bool]:
     previous = signal.getsignal(signal.SIGTERM)
     os.environ.setdefault("RAY_DISABLE_FAILURE_SIGNAL_HANDLER", "1")
     try:
-        # Ray puts the driver's working folder first on its workers' sys.path (and starts a
-        # local cluster's workers there). From a source checkout with odomgym installed (not
-        # editable), the workers then imported the checkout's odomgym/ while this process ran
-        # the installed one: other code, without the envs/ and baselines/ that package-dir
-        # maps in, and numba's cache of neither (measured in CI: a leave-one-session-out
-        # test on Ray 97 s instead of 13 s, each worker compiling every kernel again). Ray is
-        # started from the folder that holds this process's odomgym, so the workers import
-        # the same one; the working folder is restored at once.
-        with contextlib.chdir(_package_root()):
-            _init(ray, target, cpus)
+        # Ray puts the working folder of the process that calls ray.init first on its
+        # workers' sys.path. From a source checkout with odomgym installed (not editable),
+        # the workers then imported the checkout's odomgym/ while this process ran the
+        # installed one: other code, without the envs/ and baselines/ that package-dir maps
+        # in, and numba's cache of neither (in CI a leave-one-session-out test on Ray took
+        # 96.8 s, 14.6 s with this; each worker had compiled every kernel again). So ray.init
+        # is called from the folder that holds this process's odomgym (the working folder is
+        # given back when it returns: this process's other threads see the change meanwhile,
+        # and a local Ray's processes keep that folder as theirs), and the folders Ray would
+        # have put first follow it on the workers' path (_user_paths).
+        _init(ray, target, cpus)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         hint = (

@@ -256,25 +256,32 @@ def test_ray_workers_import_the_odomgym_this_process_runs(
 ) -> None:
     """Ray puts the driver's working folder first on its workers' sys.path. Run from a folder
     holding another ``odomgym/`` (a source checkout beside an installed odomgym; here a decoy
-    that cannot be imported), the workers must still import this process's odomgym: Ray is
-    started from the folder that holds it (``odomgym.distributed.ray_session``)."""
+    that cannot be imported), the workers must still import this process's odomgym, its
+    subpackages included, and a module of the user's in that folder must still import there
+    (``odomgym.distributed.ray_session``)."""
     pytest.importorskip("ray")
     import ray
 
     import odomgym
+    import odomgym.baselines
     from odomgym.distributed import ray_session
 
     decoy = tmp_path / "odomgym"
     decoy.mkdir()
     (decoy / "__init__.py").write_text('raise ImportError("the decoy odomgym")\n')
+    (tmp_path / "users_own_effects_7f3.py").write_text("ANSWER = 42\n")
     monkeypatch.chdir(tmp_path)
 
-    def where() -> str:
+    def where() -> tuple[str, str, int]:
+        import users_own_effects_7f3  # type: ignore[import-not-found]
+
         import odomgym as imported
+        import odomgym.baselines as baselines
 
-        return str(Path(imported.__file__).resolve())
+        return imported.__file__ or "", baselines.__file__ or "", users_own_effects_7f3.ANSWER
 
-    with ray_session(None, 1):
+    with ray_session(None, 1) as started:
+        assert started  # this call started Ray (else it would not have chosen the folder)
         found = ray.get(ray.remote(where).remote())
-    assert found == str(Path(odomgym.__file__).resolve())
+    assert found == (odomgym.__file__, odomgym.baselines.__file__, 42)
     assert Path.cwd() == tmp_path  # the working folder is given back
