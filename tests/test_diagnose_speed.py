@@ -117,6 +117,47 @@ def test_one_filter_pass_gives_both_scores_bit_identical() -> None:
             assert mixture.whitened.tobytes() != gaussian.whitened.tobytes()
 
 
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_whitened_innovations_alone_are_the_same_bytes_without_the_jump_mixture(
+    threads: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A least-squares residual reads the whitened innovations only (``whitened_stack``, and
+    ``evaluate(..., loglik=False)``): they are the bytes of the evaluation that also scores the
+    runs, stacked and run by run, with and without expected wheel jumps; only runs with jumps
+    expected leave their log-likelihood out (NaN), and without jumps it is still computed
+    (the one filter pass gives it anyway)."""
+    monkeypatch.setenv("ODOMGYM_THREADS", threads)
+    close_thread_pool()
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:4]
+    data = Dataset.of(runs, 0.25)
+    rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
+    bumpy = EFFECTS["floor_bumps"].write(rough, {"rate": 0.3, "heading_jump": 0.004})
+    try:
+        for spec in (rough, bumpy):
+            full = evaluate(data, spec, SENSOR)
+            alone = evaluate(data, spec, SENSOR, loglik=False)
+            assert len(alone.whitened) == len(full.whitened) == len(runs)
+            for a, b in zip(alone.whitened, full.whitened, strict=True):
+                assert a.tobytes() == b.tobytes()
+            assert whitened_stack(data, spec, SENSOR)[0].tobytes() == (
+                np.concatenate(full.whitened).tobytes()
+            )
+            if spec is bumpy:
+                assert np.all(np.isnan(alone.loglik)) and np.all(np.isfinite(full.loglik))
+            else:
+                assert alone.loglik.tobytes() == full.loglik.tobytes()
+            # Run by run (the path of a spec that does not replay stacked) the same.
+            for run, mask in zip(data.runs, data.masks, strict=True):
+                rep = replay_run(run, spec)
+                value, white = run_scores(run, rep, spec, SENSOR, mask, whitened=True)
+                only, same = run_scores(run, rep, spec, SENSOR, mask, whitened=True, loglik=False)
+                assert white is not None and same is not None
+                assert same.tobytes() == white.tobytes()
+                assert np.isnan(only) if spec is bumpy else _bits(only) == _bits(value)
+    finally:
+        close_thread_pool()
+
+
 def test_gains_held_at_the_spec_itself_are_its_own_and_held_elsewhere_are_not() -> None:
     """A fit with the wheel-noise gains held (``fit._least_squares(hold=True)``) starts from the
     bytes of the plain evaluation: held at the spec being evaluated, the gains are its own. At

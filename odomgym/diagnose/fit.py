@@ -276,13 +276,18 @@ def evaluate(
     whitened: bool = True,
     fixed: FixedReplays | None = None,
     gains: Sequence[FloatArray] | None = None,
+    loglik: bool = True,
 ) -> Evaluation:
     """Replay every run through ``spec`` and filter it; ``fixed``: each run's replay through
     ``spec`` and its filter inputs, if the caller keeps them (a noise fit, see
     :func:`_fixed_replays`: then the process noise of all runs is computed in one call).
     ``gains``: each run's wheel-noise gains (:func:`~odomgym.diagnose.likelihood.replay_gains`)
     held at a replay of another spec instead of this one's (:func:`_least_squares`; not with
-    ``fixed``, which keeps its own).
+    ``fixed``, which keeps its own). ``loglik`` False (with ``whitened``): the whitened
+    innovations are all the caller reads (a least-squares residual), and a run where a wheel
+    jump is expected gets NaN for its log-likelihood instead of a filter of its jump mixture
+    (:func:`~odomgym.diagnose.likelihood.run_scores`); the whitened innovations are the same
+    bytes either way.
 
     The runs are independent, and the filter (compiled, releasing the GIL) takes most of the
     time, so they are shared among :func:`_threads` threads; each run's numbers do not depend on
@@ -297,13 +302,15 @@ def evaluate(
         run, mask = data.runs[j], data.masks[j]
         if fixed is None:
             held = None if gains is None else FilterInputs(run_residual(run, rep, mask), gains[j])
-            loglik, white = run_scores(run, rep, spec, sensor, mask, whitened=whitened, kept=held)
+            value, white = run_scores(
+                run, rep, spec, sensor, mask, whitened=whitened, kept=held, loglik=loglik
+            )
         else:
             kept, own = fixed.inputs[j], noise[j]
-            loglik, white = run_scores(
-                run, rep, spec, sensor, mask, whitened=whitened, kept=kept, noise=own
+            value, white = run_scores(
+                run, rep, spec, sensor, mask, whitened=whitened, kept=kept, noise=own, loglik=loglik
             )
-        return rep, loglik, white
+        return rep, value, white
 
     def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
         # A thread replays its share of the runs stacked and scores them in one compiled call
@@ -325,6 +332,7 @@ def evaluate(
             sensor,
             whitened=whitened,
             gains=None if gains is None else _stacked_gains(gains, index),
+            loglik=loglik,
         )
         rows = (3 * stacked.samples()).tolist()
         return [
@@ -789,8 +797,9 @@ def whitened_stack(
     gains: Sequence[FloatArray] | None = None,
 ) -> tuple[FloatArray, list[FloatArray]]:
     """The whitened innovations of every run under ``spec``, concatenated and per run;
-    ``gains``: the wheel-noise gains held (:func:`evaluate`)."""
-    ev = evaluate(data, spec, sensor, gains=gains)
+    ``gains``: the wheel-noise gains held (:func:`evaluate`). No log-likelihood: with a wheel
+    jump expected, the jump mixture's filter is left out (``evaluate``'s ``loglik``)."""
+    ev = evaluate(data, spec, sensor, gains=gains, loglik=False)
     return np.concatenate(ev.whitened), ev.whitened
 
 

@@ -207,10 +207,13 @@ def run_scores(
     whitened: bool,
     kept: FilterInputs | None = None,
     noise: ProcessNoise | None = None,
+    loglik: bool = True,
 ) -> tuple[float, FloatArray | None]:
     """``run``'s log-likelihood with the jump mixture and, if ``whitened``, its whitened
     innovations with the jumps as their variance: :func:`run_likelihood`'s ``loglik`` without
     and ``whitened`` with ``gaussian_jumps``, which is what a fit needs of every run.
+    ``loglik`` False (with ``whitened``): the caller needs the whitened innovations only, and
+    the log-likelihood of a run where a wheel jump is expected is not computed (NaN).
 
     Why one function: the two filters differ only at samples where a wheel jump is expected
     (``gaussian_jumps`` is read nowhere else), so without any — every model but one carrying
@@ -225,13 +228,16 @@ def run_scores(
     arrays = _model_arrays(replay, spec, sensor, kept.gains, noise)
     residual = kept.residual
     no_expected = np.zeros((0, 2))
-    loglik, white, _ = _filter(*arrays, residual, mask, False, True, no_expected)
-    if not whitened:
-        return float(loglik), None
-    jumps = arrays[4]
-    if np.any(jumps > 0.0):
+    jumping = whitened and bool(np.any(arrays[4] > 0.0))
+    if jumping and not loglik:
         _, white, _ = _filter(*arrays, residual, mask, True, True, no_expected)
-    return float(loglik), white
+        return math.nan, white
+    value, white, _ = _filter(*arrays, residual, mask, False, True, no_expected)
+    if not whitened:
+        return float(value), None
+    if jumping:
+        _, white, _ = _filter(*arrays, residual, mask, True, True, no_expected)
+    return float(value), white
 
 
 def score_stacked(
@@ -243,13 +249,15 @@ def score_stacked(
     *,
     whitened: bool,
     gains: FloatArray | None = None,
+    loglik: bool = True,
 ) -> tuple[FloatArray, FloatArray]:
     """:func:`run_scores` of every run of a stacked replay, in one compiled call: each run's
     log-likelihood (R,) and, if ``whitened``, the runs' whitened innovations stacked (3·(N + R),;
     run r's are entries ``3·samples[r]:3·samples[r + 1]``, :meth:`StackedReplay.samples`),
     else an empty array. ``measured`` and ``mask`` are the runs' measured poses and masks
     stacked as the replay's poses (N + R, 3); ``gains``: the wheel gains held (N, 2, 3), as
-    ``kept`` holds them in :func:`run_scores` (default: the replay's own).
+    ``kept`` holds them in :func:`run_scores` (default: the replay's own); ``loglik``: as in
+    :func:`run_scores` (False: NaN for a run where a wheel jump is expected).
 
     The same bytes as :func:`run_scores` on each run: the residual, the wheel gains and the
     filter are the same compiled functions on each run's rows, and the process noise of the
@@ -288,6 +296,7 @@ def score_stacked(
         replay.cos_mid,
         replay.sin_mid,
         whitened,
+        whitened and not loglik,
         logs,
         white,
     )
@@ -314,11 +323,15 @@ def _score_runs(
     cos_mid: FloatArray,
     sin_mid: FloatArray,
     whitened: bool,
+    white_only: bool,
     logs: FloatArray,
     white: FloatArray,
 ) -> None:
     """:func:`run_scores` of every run of stacked arrays (:func:`score_stacked`); the wheel
-    gains from the replay's cosines and sines of the middle headings where it kept them."""
+    gains from the replay's cosines and sines of the middle headings where it kept them.
+    ``white_only``: the whitened innovations only — a run where a wheel jump is expected gets
+    NaN for its log-likelihood and skips the jump mixture's filter (which a least-squares
+    residual never reads: four Kalman updates a sample, about 3/4 of such a run's time)."""
     shared = cos_mid.shape[0] == ds.shape[0]
     no_expected = np.zeros((0, 2))
     for j in range(samples.shape[0] - 1):
@@ -335,6 +348,31 @@ def _score_runs(
             )
         else:
             gains = _wheel_gains(pose[a:b], ds[c:d], dtheta[c:d], wheelbase)
+        jumping = False
+        if whitened:
+            for k in range(c, d):
+                for w in range(2):
+                    if jumps[k, w] > 0.0:
+                        jumping = True
+        if jumping and white_only:
+            logs[j] = math.nan
+            _, own, _ = _filter(
+                pose[a:b],
+                tracked[a:b],
+                gains,
+                variance[c:d],
+                jumps[c:d],
+                size,
+                sigma,
+                residual,
+                mask[a:b],
+                True,
+                True,
+                no_expected,
+            )
+            for k in range(3 * (b - a)):
+                white[3 * a + k] = own[k]
+            continue
         loglik, own, _ = _filter(
             pose[a:b],
             tracked[a:b],
@@ -352,11 +390,6 @@ def _score_runs(
         logs[j] = loglik
         if not whitened:
             continue
-        jumping = False
-        for k in range(c, d):
-            for w in range(2):
-                if jumps[k, w] > 0.0:
-                    jumping = True
         if jumping:
             _, own, _ = _filter(
                 pose[a:b],

@@ -92,7 +92,7 @@ def _consistency(data: Dataset, model: Model) -> float:
     """p-value that ``model``'s whitened innovations on ``data`` are white noise
     (:func:`odomgym.diagnose.stats.whiteness_p`: per-run means and pooled lag-1 correlation,
     Bonferroni-combined)."""
-    ev = evaluate(data, model.spec, model.sensor)
+    ev = evaluate(data, model.spec, model.sensor, loglik=False)
     return whiteness_p(ev.whitened, data.masks)
 
 
