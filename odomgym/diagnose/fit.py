@@ -226,11 +226,24 @@ class Dataset:
 
 @dataclass
 class Evaluation:
-    """Per-run log-likelihoods (mixture) and whitened innovations (Gaussian jumps)."""
+    """Per-run log-likelihoods (mixture) and whitened innovations (Gaussian jumps), and the
+    replays they came from: ``sources`` holds each run's :class:`Replay`, or the
+    :class:`StackedReplay` of a share of consecutive runs replayed together."""
 
     loglik: FloatArray
     whitened: list[FloatArray]
-    replays: list[Replay]
+    sources: Sequence[Replay | StackedReplay]
+
+    @property
+    def replays(self) -> list[Replay]:
+        """Each run's replay, in run order; a stacked share's are views of its arrays, made
+        here. Why not made by :func:`evaluate`: no fit reads them, and splitting every stacked
+        evaluation into a hundred views cost about 1 % of a diagnosis (the 14 June OptiOdom
+        sessions)."""
+        out: list[Replay] = []
+        for source in self.sources:
+            out.extend(source.split() if isinstance(source, StackedReplay) else [source])
+        return out
 
 
 @dataclass(frozen=True)
@@ -312,17 +325,22 @@ def evaluate(
             )
         return rep, value, white
 
-    def chunk(index: range) -> list[tuple[Replay, float, FloatArray | None]]:
+    Share = tuple[list[Replay | StackedReplay], list[tuple[float, FloatArray | None]]]
+
+    def listed(scored: list[tuple[Replay, float, FloatArray | None]]) -> Share:
+        return [r[0] for r in scored], [(r[1], r[2]) for r in scored]
+
+    def chunk(index: range) -> Share:
         # A thread replays its share of the runs stacked and scores them in one compiled call
         # (score_stacked): numpy's calls on the stacked arrays and the compiled functions
-        # release the GIL, so the threads' shares overlap.
+        # release the GIL, so the threads' shares overlap. A stacked replay stays whole: its
+        # runs' views are made only if a caller asks for them (Evaluation.replays).
         if fixed is not None:
             reps = fixed.replays[index.start : index.stop]
-            return [one(j, rep) for j, rep in zip(index, reps, strict=True)]
+            return listed([one(j, rep) for j, rep in zip(index, reps, strict=True)])
         stacked = data.stacked_replay(spec, index)
         if stacked is None:
-            return [one(j, data.replay(j, spec)) for j in index]
-        reps = stacked.split()
+            return listed([one(j, data.replay(j, spec)) for j in index])
         stack = data.stack(spec.ticks_per_rev, index)
         logs, white = score_stacked(
             stacked,
@@ -335,22 +353,24 @@ def evaluate(
             loglik=loglik,
         )
         rows = (3 * stacked.samples()).tolist()
-        return [
-            (rep, float(logs[r]), white[rows[r] : rows[r + 1]] if whitened else None)
-            for r, rep in enumerate(reps)
+        return [stacked], [
+            (float(logs[r]), white[rows[r] : rows[r + 1]] if whitened else None)
+            for r in range(len(index))
         ]
 
     pool = _pool()
     n = len(data)
     if pool is None or n < 2:
-        results = chunk(range(n))
+        parts = [chunk(range(n))]
     else:  # one contiguous share per thread: few hand-overs of the GIL
         count = _pool_size()
-        shares = [range(n * k // count, n * (k + 1) // count) for k in range(count)]
-        results = [r for part in pool.map(chunk, shares) for r in part]
-    logs = np.array([r[1] for r in results], dtype=float)
-    white = [r[2] for r in results if r[2] is not None]
-    return Evaluation(logs, white, [r[0] for r in results])
+        parts = list(
+            pool.map(chunk, [range(n * k // count, n * (k + 1) // count) for k in range(count)])
+        )
+    results = [r for part in parts for r in part[1]]
+    logs = np.array([r[0] for r in results], dtype=float)
+    white = [r[1] for r in results if r[1] is not None]
+    return Evaluation(logs, white, [source for part in parts for source in part[0]])
 
 
 def _evaluate_fixed(
