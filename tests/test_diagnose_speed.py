@@ -540,6 +540,52 @@ def test_a_repeated_noise_fit_is_the_first_one() -> None:
     assert len(data.noise_fits) == 3
 
 
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_a_bump_fit_keeping_its_replays_is_the_fit_replaying_every_time(
+    threads: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A noise fit of floor bumps (whose mean loss moves the replay) beside wheel noise
+    replays the runs again only when the bumps' rate or jump moved (``KeptReplays``): the
+    fitted spec, sensor noise and log-likelihood are the bytes of the fit that replays at
+    every evaluation, and it replays exactly where the bumps' values changed since a share's
+    last evaluation (on these runs 123 replays instead of 219 on one thread)."""
+    monkeypatch.setenv("ODOMGYM_THREADS", threads)
+    close_thread_pool()
+    runs = generate_session({"floor_bumps": {"value": 0.02}}, np.random.default_rng(14))[:4]
+    bumps, rough = EFFECTS["floor_bumps"], EFFECTS["floor_roughness"]
+    calls = {"replays": 0}
+    seen: list[tuple[tuple[int, int], object]] = []
+    replay = Dataset.stacked_replay
+
+    def counted(self: Dataset, spec: RobotSpec, index: range) -> object:
+        calls["replays"] += 1
+        seen.append(((index.start, index.stop), bumps.read(spec)))
+        return replay(self, spec, index)
+
+    monkeypatch.setattr(Dataset, "stacked_replay", counted)
+    try:
+        kept = fit_module._fit_noise(Dataset.of(runs, 0.25), MODEL, SENSOR, [bumps, rough], False)
+        with_kept = calls["replays"]
+        calls["replays"] = 0
+        seen.clear()
+        monkeypatch.setattr(
+            fit_module.KeptReplays,
+            "stacked",
+            lambda self, data, spec, index: data.stacked_replay(spec, index),
+        )
+        every = fit_module._fit_noise(Dataset.of(runs, 0.25), MODEL, SENSOR, [bumps, rough], False)
+    finally:
+        close_thread_pool()
+    assert not bumps.is_absent(bumps.read(kept[0]))  # the bumps were fitted, not dropped
+    assert kept[0] == every[0] and kept[1] == every[1] and _bits(kept[2]) == _bits(every[2])
+    last: dict[tuple[int, int], object] = {}
+    moved = 0
+    for share, values in seen:  # the fit that replays every time: where did the bumps move?
+        moved += last.get(share) != values
+        last[share] = values
+    assert with_kept == moved < calls["replays"]
+
+
 def _numpy_residual(measured: np.ndarray, predicted: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The residual as numpy expressions (the path :func:`_pose_residual` replaced)."""
     residual = np.where(mask, measured - predicted, 0.0)

@@ -290,6 +290,7 @@ def evaluate(
     fixed: FixedReplays | None = None,
     gains: Sequence[FloatArray] | None = None,
     loglik: bool = True,
+    kept: KeptReplays | None = None,
 ) -> Evaluation:
     """Replay every run through ``spec`` and filter it; ``fixed``: each run's replay through
     ``spec`` and its filter inputs, if the caller keeps them (a noise fit, see
@@ -300,7 +301,8 @@ def evaluate(
     innovations are all the caller reads (a least-squares residual), and a run where a wheel
     jump is expected gets NaN for its log-likelihood instead of a filter of its jump mixture
     (:func:`~odomgym.diagnose.likelihood.run_scores`); the whitened innovations are the same
-    bytes either way.
+    bytes either way. ``kept``: a noise fit's :class:`KeptReplays`, which replays a share of
+    the runs again only when a parameter that moves the replay has moved.
 
     The runs are independent, and the filter (compiled, releasing the GIL) takes most of the
     time, so they are shared among :func:`_threads` threads; each run's numbers do not depend on
@@ -338,7 +340,9 @@ def evaluate(
         if fixed is not None:
             reps = fixed.replays[index.start : index.stop]
             return listed([one(j, rep) for j, rep in zip(index, reps, strict=True)])
-        stacked = data.stacked_replay(spec, index)
+        stacked = (
+            data.stacked_replay(spec, index) if kept is None else kept.stacked(data, spec, index)
+        )
         if stacked is None:
             return listed([one(j, data.replay(j, spec)) for j in index])
         stack = data.stack(spec.ticks_per_rev, index)
@@ -545,16 +549,46 @@ def _fixed_replays(
     return FixedReplays.of(reps, inputs, data.masks)
 
 
+class KeptReplays:
+    """The latest stacked replay of each share of the runs in a noise fit whose effects move
+    the replay (floor bumps: their mean loss of travel), kept while the parameters that move
+    it stay put — those of the ``moving`` effects; the sensor σ and a noise effect without a
+    replay of its own (wheel noise) never enter it.
+
+    Why: such a fit cannot keep one replay for all its evaluations (:func:`_fixed_replays`),
+    but four of the seven evaluations of each finite-difference gradient of a bump field's
+    fit (σ_xy, σ_θ, k_L, k_R beside its rate and jump) replay the very spec of the one
+    before; kept, they only filter again. A replay is a deterministic function of the spec,
+    so the same bytes."""
+
+    def __init__(self, moving: Sequence[Effect]) -> None:
+        self.moving = list(moving)
+        self.held: dict[tuple[int, int], tuple[object, StackedReplay | None]] = {}
+
+    def stacked(self, data: Dataset, spec: RobotSpec, index: range) -> StackedReplay | None:
+        """``data.stacked_replay(spec, index)``, or the kept one if the moving effects'
+        values are those it was replayed with."""
+        key = tuple(tuple(e.read(spec).items()) for e in self.moving)
+        share = (index.start, index.stop)
+        held = self.held.get(share)
+        if held is not None and held[0] == key:
+            return held[1]
+        stacked = data.stacked_replay(spec, index)
+        self.held[share] = (key, stacked)  # one share per thread: no two threads write one
+        return stacked
+
+
 def _fit_noise(
     data: Dataset, spec: RobotSpec, sensor: SensorNoise, chosen: list[Effect], warm: bool
 ) -> tuple[RobotSpec, SensorNoise, float]:
     """:func:`fit_noise` itself (without its memo)."""
     fixed = _fixed_replays(data, spec, chosen)
     x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
+    kept = None if fixed is not None else KeptReplays([e for e in chosen if _moves_mean([e])])
 
     def objective(x: FloatArray) -> float:
         s, n = build(x)
-        ev = evaluate(data, s, n, whitened=False, fixed=fixed)
+        ev = evaluate(data, s, n, whitened=False, fixed=fixed, kept=kept)
         return -float(ev.loglik.sum())
 
     start = np.clip(x0, low, high)
