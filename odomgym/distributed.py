@@ -124,18 +124,16 @@ def _user_paths() -> str:
 def _init(ray: Any, target: str | None, cpus: int) -> None:
     """``ray.init``: a new local Ray with ``cpus`` CPUs (``target`` None), else the cluster at
     ``target``; the workers' ``PYTHONPATH`` is :func:`_user_paths`'s."""
-    runtime_env = {"env_vars": {"PYTHONPATH": _user_paths()}}
+    options: dict[str, Any] = {
+        "log_to_driver": False,
+        "runtime_env": {"env_vars": {"PYTHONPATH": _user_paths()}},
+    }
+    if target is None:
+        options.update(address="local", num_cpus=max(1, cpus), include_dashboard=False)
+    else:
+        options.update(address=target)
     with contextlib.chdir(_package_root()):
-        if target is None:
-            ray.init(
-                address="local",
-                num_cpus=max(1, cpus),
-                include_dashboard=False,
-                log_to_driver=False,
-                runtime_env=runtime_env,
-            )
-        else:
-            ray.init(address=target, log_to_driver=False, runtime_env=runtime_env)
+        ray.init(**options)
 
 
 @contextlib.contextmanager
