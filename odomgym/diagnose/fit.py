@@ -29,6 +29,7 @@ after the other.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
 import multiprocessing as mp
@@ -224,6 +225,11 @@ class Dataset:
         self.mask_stacks = {}
 
 
+_Share = tuple[list[Replay | StackedReplay], list[tuple[float, FloatArray | None]]]
+"""What :func:`evaluate` makes of a thread's share of the runs: its replays (one stacked
+replay, or each run's) and each run's log-likelihood and whitened innovations."""
+
+
 @dataclass
 class Evaluation:
     """Per-run log-likelihoods (mixture) and whitened innovations (Gaussian jumps), and the
@@ -234,12 +240,12 @@ class Evaluation:
     whitened: list[FloatArray]
     sources: Sequence[Replay | StackedReplay]
 
-    @property
+    @functools.cached_property
     def replays(self) -> list[Replay]:
         """Each run's replay, in run order; a stacked share's are views of its arrays, made
         here. Why not made by :func:`evaluate`: no fit reads them, and splitting every stacked
         evaluation into a hundred views cost about 1 % of a diagnosis (the 14 June OptiOdom
-        sessions)."""
+        sessions). Made once; the views share the stacked replay's memory."""
         out: list[Replay] = []
         for source in self.sources:
             out.extend(source.split() if isinstance(source, StackedReplay) else [source])
@@ -309,6 +315,8 @@ def evaluate(
     which thread computed them, and they are gathered in run order (bit-identical results).
     With ``fixed`` and without ``whitened`` each thread's share of the runs is one compiled
     call (:func:`~odomgym.diagnose.likelihood.filter_runs`, the same bytes)."""
+    if not whitened and not loglik:
+        raise ValueError("evaluate: loglik=False needs whitened=True (nothing else to compute)")
     if fixed is not None and not whitened:
         return _evaluate_fixed(data, spec, sensor, fixed)
     noise = stacked_process_noise(spec, fixed.travel, fixed.rows) if fixed is not None else []
@@ -321,18 +329,24 @@ def evaluate(
                 run, rep, spec, sensor, mask, whitened=whitened, kept=held, loglik=loglik
             )
         else:
-            kept, own = fixed.inputs[j], noise[j]
+            inputs, own = fixed.inputs[j], noise[j]
             value, white = run_scores(
-                run, rep, spec, sensor, mask, whitened=whitened, kept=kept, noise=own, loglik=loglik
+                run,
+                rep,
+                spec,
+                sensor,
+                mask,
+                whitened=whitened,
+                kept=inputs,
+                noise=own,
+                loglik=loglik,
             )
         return rep, value, white
 
-    Share = tuple[list[Replay | StackedReplay], list[tuple[float, FloatArray | None]]]
-
-    def listed(scored: list[tuple[Replay, float, FloatArray | None]]) -> Share:
+    def listed(scored: list[tuple[Replay, float, FloatArray | None]]) -> _Share:
         return [r[0] for r in scored], [(r[1], r[2]) for r in scored]
 
-    def chunk(index: range) -> Share:
+    def chunk(index: range) -> _Share:
         # A thread replays its share of the runs stacked and scores them in one compiled call
         # (score_stacked): numpy's calls on the stacked arrays and the compiled functions
         # release the GIL, so the threads' shares overlap. A stacked replay stays whole: its
@@ -557,24 +571,31 @@ class KeptReplays:
 
     Why: such a fit cannot keep one replay for all its evaluations (:func:`_fixed_replays`),
     but four of the seven evaluations of each finite-difference gradient of a bump field's
-    fit (σ_xy, σ_θ, k_L, k_R beside its rate and jump) replay the very spec of the one
-    before; kept, they only filter again. A replay is a deterministic function of the spec,
-    so the same bytes."""
+    fit (σ_xy, σ_θ, k_L, k_R beside its rate and jump) replay the spec of its base point;
+    kept, they only filter again. A replay is a deterministic function of the spec, so the
+    same bytes. Only for noise effects (:func:`_fit_noise`): their ``build`` changes nothing
+    else of the spec."""
+
+    KEPT = 3
+    """Replays kept per share: the gradient's base point and its two steps that move the
+    replay (the bumps' rate and jump, which come before k_L and k_R in the noise vector)."""
 
     def __init__(self, moving: Sequence[Effect]) -> None:
         self.moving = list(moving)
-        self.held: dict[tuple[int, int], tuple[object, StackedReplay | None]] = {}
+        self.held: dict[tuple[int, int], dict[object, StackedReplay | None]] = {}
 
     def stacked(self, data: Dataset, spec: RobotSpec, index: range) -> StackedReplay | None:
-        """``data.stacked_replay(spec, index)``, or the kept one if the moving effects'
-        values are those it was replayed with."""
+        """``data.stacked_replay(spec, index)``, or a kept one if the moving effects'
+        values are those it was replayed with (the latest :attr:`KEPT` per share)."""
         key = tuple(tuple(e.read(spec).items()) for e in self.moving)
-        share = (index.start, index.stop)
-        held = self.held.get(share)
-        if held is not None and held[0] == key:
-            return held[1]
-        stacked = data.stacked_replay(spec, index)
-        self.held[share] = (key, stacked)  # one share per thread: no two threads write one
+        # One share per thread: no two threads write the same share's entry.
+        held = self.held.setdefault((index.start, index.stop), {})
+        if key in held:
+            held[key] = held.pop(key)  # the most recent last
+            return held[key]
+        stacked = held[key] = data.stacked_replay(spec, index)
+        if len(held) > self.KEPT:
+            del held[next(iter(held))]  # the least recently used
         return stacked
 
 
@@ -584,7 +605,9 @@ def _fit_noise(
     """:func:`fit_noise` itself (without its memo)."""
     fixed = _fixed_replays(data, spec, chosen)
     x0, low, high, build = _noise_vector(spec, sensor, chosen, at_current=warm)
-    kept = None if fixed is not None else KeptReplays([e for e in chosen if _moves_mean([e])])
+    kept = None
+    if fixed is None and all(e.noise for e in chosen):
+        kept = KeptReplays([e for e in chosen if _moves_mean([e])])
 
     def objective(x: FloatArray) -> float:
         s, n = build(x)
