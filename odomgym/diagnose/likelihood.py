@@ -356,7 +356,8 @@ def _score_runs(
                         jumping = True
         if jumping and white_only:
             logs[j] = math.nan
-            _, own, _ = _filter(
+        else:
+            loglik, own, _ = _filter(
                 pose[a:b],
                 tracked[a:b],
                 gains,
@@ -366,30 +367,13 @@ def _score_runs(
                 sigma,
                 residual,
                 mask[a:b],
-                True,
+                False,
                 True,
                 no_expected,
             )
-            for k in range(3 * (b - a)):
-                white[3 * a + k] = own[k]
-            continue
-        loglik, own, _ = _filter(
-            pose[a:b],
-            tracked[a:b],
-            gains,
-            variance[c:d],
-            jumps[c:d],
-            size,
-            sigma,
-            residual,
-            mask[a:b],
-            False,
-            True,
-            no_expected,
-        )
-        logs[j] = loglik
-        if not whitened:
-            continue
+            logs[j] = loglik
+            if not whitened:
+                continue
         if jumping:
             _, own, _ = _filter(
                 pose[a:b],
