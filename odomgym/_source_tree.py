@@ -7,6 +7,12 @@ not, so Python started in the repository root (where ``odomgym/`` shadows the in
 would fail with ``No module named 'odomgym.envs'``. The finder below maps the two names to the
 top-level folders exactly as ``package-dir`` does, and only when the folders are not already
 inside the package.
+
+It goes first on ``sys.meta_path``: a checkout put on ``PYTHONPATH`` beside an editable install
+of *another* checkout (two revisions timed side by side, ``benchmarks/june_speed.py``) found
+its ``odomgym`` first, but the editable install's finder, earlier on the path, answered for
+``odomgym.envs`` and ``odomgym.baselines`` with the other checkout's folders: one process ran
+two revisions' code.
 """
 
 from __future__ import annotations
@@ -56,4 +62,4 @@ def install_source_tree_finder() -> None:
         return
     if any(isinstance(f, _SourceTreeFinder) for f in sys.meta_path):
         return
-    sys.meta_path.append(_SourceTreeFinder(root))
+    sys.meta_path.insert(0, _SourceTreeFinder(root))
