@@ -15,18 +15,19 @@ ratio measured in one sitting compares two versions. Each tree first runs once u
 numba compiles its kernels into that tree's own cache before the clock starts.
 
 Each run is a fresh process (Python's start-up, reading the logs, the diagnosis, the report and
-its figures: what a user waits for). It starts in its tree's folder with ``PYTHONPATH`` set to
-it: Python puts the working folder first on its path, so a process started elsewhere would
-import whatever ``odomgym/`` sits there. The header prints the files each tree imported
-``odomgym`` and ``odomgym.baselines`` from (``odomgym._source_tree``). A revision older than
-stop 70 takes ``odomgym.envs`` and ``odomgym.baselines`` from an editable install when there is
-one (its finder went last on ``sys.meta_path``), and the header then names that install's
-``baselines``.
+its figures: what a user waits for), started in its tree's folder with ``PYTHONPATH`` set to
+it (Python puts the working folder first on its path). Its ``odomgym.envs`` and
+``odomgym.baselines`` are its tree's too: before the command runs, a bootstrap puts this
+checkout's ``odomgym._source_tree`` finder for that tree first on ``sys.meta_path``, because a
+revision older than stop 70 added its own finder last, behind an editable install's, and would
+have run the installed checkout's baselines. The header prints each tree's commit and the files
+its process imported; a tree whose files are not its own stops the benchmark. Both trees read
+this checkout's ``examples/optiodom_nominal.toml`` (the same input).
 
 Prints every run's wall time [s], the medians, their ratio (this / REV) and whether the two
 trees' ``report.json`` are byte for byte the same; ``--json`` prints the same as one JSON
-object. A benchmark, not a test: it exits 0 whatever the times, and 2 with one line when the
-data, the revision or a run fails.
+object. A benchmark, not a test: it exits 0 whatever the times, 2 with one line when the data,
+the revision or a run fails, and 130 on Ctrl-C or SIGTERM (the worktree removed either way).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ import signal
 import statistics
 import subprocess
 import sys
+import tarfile
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -50,9 +52,25 @@ TARGET_S = 60.0
 """Issue 44: the 14 June sessions diagnosed together in at most a minute on 2 idle cores."""
 
 
+_BOOTSTRAP = """
+import importlib.util, runpy, sys
+from pathlib import Path
+spec = importlib.util.spec_from_file_location("_june_source_tree", {finder!r})
+module = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(module)
+sys.meta_path.insert(0, module._SourceTreeFinder(Path({root!r})))
+sys.argv[0] = "odomgym"
+{body}
+"""
+"""Run in each tree's process before anything imports odomgym: this checkout's source-tree
+finder (``odomgym/_source_tree.py`` imports nothing of odomgym) mapping ``odomgym.envs`` and
+``odomgym.baselines`` to the tree's folders, first on ``sys.meta_path``."""
+
+
 @dataclass
 class Tree:
-    """One checkout under test: its label, its root folder and its runs' wall times [s]."""
+    """One checkout under test: its label, its root folder, its timed runs' wall times [s] and
+    the bytes of its last ``report.json``."""
 
     label: str
     root: Path
@@ -60,30 +78,47 @@ class Tree:
     report: bytes = b""
 
     def env(self) -> dict[str, str]:
+        """The environment of this tree's processes: ``PYTHONPATH`` is its root."""
         return {**os.environ, "PYTHONPATH": str(self.root)}
 
+    def python(self, body: str) -> list[str]:
+        """The command that runs ``body`` after the bootstrap (:data:`_BOOTSTRAP`)."""
+        finder = str(ROOT / "odomgym" / "_source_tree.py")
+        code = _BOOTSTRAP.format(finder=finder, root=str(self.root), body=body)
+        return [sys.executable, "-c", code]
+
+    def commit(self) -> str:
+        """The tree's commit, with ``+changes`` when its files differ from it."""
+        git = ["git", "-C", str(self.root)]
+        head = subprocess.run(
+            [*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        )
+        dirty = subprocess.run([*git, "status", "--porcelain"], capture_output=True, text=True)
+        return head.stdout.strip() + (" +changes" if dirty.stdout.strip() else "")
+
     def imported(self) -> str:
-        """The files this tree's process imports ``odomgym`` and the baselines from."""
+        """The files this tree's process imports ``odomgym`` and the baselines from; raises if
+        they are not the tree's own."""
         probe = (
-            "import odomgym, odomgym.baselines; print(odomgym.__file__, odomgym.baselines.__file__)"
+            "import odomgym, odomgym.baselines; "
+            "print(odomgym.__file__); print(odomgym.baselines.__file__)"
         )
         done = subprocess.run(
-            [sys.executable, "-c", probe],
-            cwd=self.root,
-            env=self.env(),
-            capture_output=True,
-            text=True,
+            self.python(probe), cwd=self.root, env=self.env(), capture_output=True, text=True
         )
         if done.returncode != 0:
             raise RuntimeError(f"{self.label}: cannot import odomgym: {done.stderr.strip()}")
-        return done.stdout.strip()
+        files = done.stdout.splitlines()
+        root = self.root.resolve()
+        if not all(Path(f).resolve().is_relative_to(root) for f in files):
+            raise RuntimeError(f"{self.label}: imported code outside its tree: {files}")
+        return " ".join(files)
 
     def run(self, data: Path, out: Path, jobs: int) -> float:
-        """One diagnosis of ``data`` into ``out``; its wall time [s]."""
-        command = [
-            sys.executable,
-            "-m",
-            "odomgym",
+        """One diagnosis of ``data`` into ``out``; its wall time [s]. Interrupted, the
+        diagnosis is asked to stop (SIGTERM, which odomgym turns into a clean stop) before it
+        is killed."""
+        argv = [
             "diagnose",
             str(data),
             "--format",
@@ -95,13 +130,28 @@ class Tree:
             "--out",
             str(out),
         ]
+        body = f"sys.argv[1:] = {argv!r}\nrunpy.run_module('odomgym', run_name='__main__')"
         start = time.perf_counter()
-        done = subprocess.run(
-            command, cwd=self.root, env=self.env(), capture_output=True, text=True
+        process = subprocess.Popen(
+            self.python(body),
+            cwd=self.root,
+            env=self.env(),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
         )
+        try:
+            _, stderr = process.communicate()
+        except BaseException:
+            process.terminate()
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+            raise
         elapsed = time.perf_counter() - start
-        if done.returncode != 0:
-            tail = (done.stderr.strip().splitlines() or ["(no message)"])[-1]
+        if process.returncode != 0:
+            tail = (stderr.strip().splitlines() or ["(no message)"])[-1]
             raise RuntimeError(f"{self.label}: the diagnosis failed: {tail}")
         self.report = (out / "report.json").read_bytes()
         return elapsed
@@ -115,6 +165,9 @@ def _gather_june(folder: Path) -> Path:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     gathered: Path = module.gather_june(folder)
+    sessions = [p for p in gathered.glob("*/*") if p.is_dir()]
+    if len(sessions) != 14:
+        raise RuntimeError(f"gathered {len(sessions)} June sessions in {gathered}, not 14")
     return gathered
 
 
@@ -167,44 +220,66 @@ def table(trees: list[Tree], result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _remove(worktree: Path) -> None:
+    """Remove the temporary worktree (twice forced: also one that ``git worktree add`` left
+    locked when it was interrupted) and prune git's record of it; warn if that fails."""
+    git = ["git", "-C", str(ROOT), "worktree"]
+    gone = subprocess.run([*git, "remove", "-f", "-f", str(worktree)], capture_output=True)
+    subprocess.run([*git, "prune"], capture_output=True)
+    if gone.returncode != 0 and worktree.exists():
+        print(f"june_speed: warning: could not remove the worktree {worktree}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--against", metavar="REV", help="a git revision to time beside this tree")
     parser.add_argument("--runs", type=int, default=3, help="timed runs per tree (default 3)")
     parser.add_argument("--jobs", type=int, default=2, help="diagnose --jobs (default 2)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
-    parser.add_argument("--keep", type=Path, help="keep the last reports in this folder")
+    parser.add_argument(
+        "--keep",
+        type=lambda text: Path(text).resolve(),
+        help="keep each tree's last report in DIR/report-this-tree and DIR/report-against",
+    )
     args = parser.parse_args(argv)
     if args.runs < 1:
         parser.error("--runs must be at least 1")
     # A SIGTERM unwinds like Ctrl-C, so the temporary worktree is removed (``finally`` below).
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGINT))
     with tempfile.TemporaryDirectory(prefix="june-speed-") as tmp:
         work = Path(tmp)
         trees = [Tree("this tree", ROOT)]
+        folders = {"this tree": "report-this-tree"}
         try:
             data = _gather_june(work / "june")
             if args.against:
                 trees.append(Tree(args.against, _worktree(args.against, work / "against")))
+                folders[args.against] = "report-against"
             for tree in trees:
-                print(f"{tree.label}: {tree.imported()}", file=sys.stderr)
+                print(f"{tree.label} ({tree.commit()}): {tree.imported()}", file=sys.stderr)
                 print(f"{tree.label}: compiling (untimed run)…", file=sys.stderr)
                 tree.run(data, work / "warm", args.jobs)
             for k in range(args.runs):
-                for tree in trees:
-                    out = (args.keep or work) / f"{'ab'[trees.index(tree)]}-report"
+                # Each round in the other order, so neither tree always runs after the other.
+                for tree in trees if k % 2 == 0 else trees[::-1]:
+                    out = (args.keep or work) / folders[tree.label]
                     tree.times.append(tree.run(data, out, args.jobs))
                     print(
                         f"run {k + 1}/{args.runs} {tree.label}: {tree.times[-1]:.1f} s",
                         file=sys.stderr,
                     )
-        except RuntimeError as exc:
+        except (RuntimeError, OSError, tarfile.TarError, ImportError) as exc:
             print(f"june_speed: error: {exc}", file=sys.stderr)
             return 2
+        except (KeyboardInterrupt, SystemExit):
+            print("june_speed: interrupted", file=sys.stderr)
+            return 130
         finally:
-            if args.against and (work / "against").exists():
-                remove = ["worktree", "remove", "--force", str(work / "against")]
-                subprocess.run(["git", "-C", str(ROOT), *remove], capture_output=True)
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            if args.against:
+                _remove(work / "against")
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     result = summary(trees)
     print(json.dumps(result, indent=2) if args.json else table(trees, result))
     return 0

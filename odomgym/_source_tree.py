@@ -10,9 +10,10 @@ inside the package.
 
 It goes first on ``sys.meta_path``: a checkout put on ``PYTHONPATH`` beside an editable install
 of *another* checkout (two revisions timed side by side, ``benchmarks/june_speed.py``) found
-its ``odomgym`` first, but the editable install's finder, earlier on the path, answered for
-``odomgym.envs`` and ``odomgym.baselines`` with the other checkout's folders: one process ran
-two revisions' code.
+its ``odomgym`` first, but the editable install's finder, earlier on ``sys.meta_path`` (added
+there by its ``.pth`` file at start-up), answered for ``odomgym.envs`` and
+``odomgym.baselines`` with the other checkout's folders: one process ran two revisions' code
+(``tests/test_source_tree.py``).
 """
 
 from __future__ import annotations

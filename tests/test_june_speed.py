@@ -1,0 +1,48 @@
+"""``benchmarks/june_speed.py``: its summary and table of two trees' timed runs (the timing
+itself is the benchmark's, never a test's)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _june_speed(monkeypatch: pytest.MonkeyPatch) -> ModuleType:
+    spec = importlib.util.spec_from_file_location(
+        "june_speed", ROOT / "benchmarks" / "june_speed.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "june_speed", module)  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_side_by_side_benchmark_reports_medians_ratio_and_the_target(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``benchmarks/june_speed.py``'s summary of two trees' runs: each median, the ratio of the
+    first tree's to the second's, whether every run of a tree met the 60 s target, and whether
+    the two reports were the same bytes."""
+    bench = _june_speed(monkeypatch)
+    this = bench.Tree("this tree", ROOT, [58.0, 61.0, 55.0], b"{}")
+    other = bench.Tree("v0.3.0", ROOT, [60.0, 64.0, 62.0], b"{}")
+    result = bench.summary([this, other])
+    assert result["trees"]["this tree"]["median_s"] == 58.0
+    assert result["trees"]["v0.3.0"]["median_s"] == 62.0
+    assert result["ratio"] == 58.0 / 62.0
+    assert result["trees"]["this tree"]["every_run_within_target"] is False
+    assert result["same_report"] is True
+    text = bench.table([this, other], result)
+    assert "| median | **58.0** | **62.0** |" in text
+    assert "ratio this tree / v0.3.0: 0.935" in text
+    other.report = b"[]"
+    assert bench.summary([this, other])["same_report"] is False
+    alone = bench.summary([bench.Tree("this tree", ROOT, [50.0], b"")])
+    assert "ratio" not in alone and alone["trees"]["this tree"]["every_run_within_target"]
