@@ -33,7 +33,6 @@ the revision or a run fails, and 130 on Ctrl-C or SIGTERM (the worktree removed 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import os
 import signal
@@ -158,13 +157,11 @@ class Tree:
 
 
 def _gather_june(folder: Path) -> Path:
-    spec = importlib.util.spec_from_file_location(
-        "diagnose_loso", ROOT / "benchmarks" / "diagnose_loso.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    gathered: Path = module.gather_june(folder)
+    """The 14 June sessions in ``folder`` (``diagnose_loso.gather_june``, beside this script:
+    run as a script, its folder is first on ``sys.path``)."""
+    from diagnose_loso import gather_june
+
+    gathered: Path = gather_june(folder)
     sessions = [p for p in gathered.glob("*/*") if p.is_dir()]
     if len(sessions) != 14:
         raise RuntimeError(f"gathered {len(sessions)} June sessions in {gathered}, not 14")
