@@ -3,26 +3,14 @@ arithmetic, and a small end-to-end run (the measured study is in docs/selfcal.md
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
-from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
+from benchmark_module import load_benchmark
 
-
-def _load() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "design_bound.py"
-    spec = importlib.util.spec_from_file_location("design_bound", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-design = _load()
+design = load_benchmark("design_bound")
 
 
 def test_every_multiset_of_menu_items_once() -> None:

@@ -19,12 +19,12 @@ benchmark.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import re
 from pathlib import Path
 
 import pytest
+from benchmark_module import load_benchmark
 
 from odomgym.baselines.trajectory import TrajectoryBaseline
 from odomgym.data.logs import read_log
@@ -36,12 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _gather(folder: Path) -> Path:
-    spec = importlib.util.spec_from_file_location(
-        "diagnose_loso", ROOT / "benchmarks" / "diagnose_loso.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_benchmark("diagnose_loso")
     folder.mkdir(parents=True, exist_ok=True)
     gathered: Path = module.gather_june(folder)
     return gathered

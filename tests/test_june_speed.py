@@ -3,34 +3,18 @@ itself is the benchmark's, never a test's)."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
-import pytest
+from benchmark_module import load_benchmark
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _june_speed(monkeypatch: pytest.MonkeyPatch) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "june_speed", ROOT / "benchmarks" / "june_speed.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "june_speed", module)  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_the_side_by_side_benchmark_reports_medians_ratio_and_the_target(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
+def test_the_side_by_side_benchmark_reports_medians_ratio_and_the_target() -> None:
     """``benchmarks/june_speed.py``'s summary of two trees' runs: each median, the ratio of the
     first tree's to the second's, whether every run of a tree met the 60 s target, and whether
     the two reports were the same bytes."""
-    bench = _june_speed(monkeypatch)
+    bench = load_benchmark("june_speed")
     this = bench.Tree("this tree", ROOT, [58.0, 61.0, 55.0], b"{}")
     other = bench.Tree("v0.3.0", ROOT, [60.0, 64.0, 62.0], b"{}")
     result = bench.summary([this, other])

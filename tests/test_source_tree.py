@@ -21,17 +21,13 @@ ROOT = Path(__file__).resolve().parent.parent
 
 _DECOY = """
 import importlib.util, sys
-from importlib.abc import MetaPathFinder
-class Decoy(MetaPathFinder):  # an editable install's finder for another checkout
-    def find_spec(self, name, path, target=None):
-        head, _, tail = name.partition(".")
-        if head == "odomgym" and tail in ("envs", "baselines"):
-            folder = {decoy!r} + "/" + tail
-            return importlib.util.spec_from_file_location(
-                name, folder + "/__init__.py", submodule_search_locations=[folder]
-            )
-        return None
-sys.meta_path.append(Decoy())
+from pathlib import Path
+# An editable install's finder for another checkout: the project's own finder class, loaded
+# apart from the package (so the package does not take it for its own), for the decoy folder.
+spec = importlib.util.spec_from_file_location("decoy_source_tree", {finder!r})
+decoy = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(decoy)
+sys.meta_path.append(decoy._SourceTreeFinder(Path({decoy_root!r})))
 import odomgym, odomgym.envs, odomgym.baselines, odomgym.baselines.trajectory as t
 for module in (odomgym, odomgym.envs, odomgym.baselines, t):
     print(module.__file__)
@@ -49,7 +45,11 @@ def test_a_checkout_on_the_path_imports_its_own_envs_and_baselines(tmp_path: Pat
         (decoy / name / "__init__.py").write_text("")
     env = {**os.environ, "PYTHONPATH": str(tree)}
     done = subprocess.run(
-        [sys.executable, "-c", _DECOY.format(decoy=str(decoy))],
+        [
+            sys.executable,
+            "-c",
+            _DECOY.format(finder=str(ROOT / "odomgym" / "_source_tree.py"), decoy_root=str(decoy)),
+        ],
         cwd=tmp_path,
         env=env,
         capture_output=True,
