@@ -8,6 +8,7 @@ equality of the bytes, not a tolerance. The threaded evaluation's identity is te
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 import numpy as np
@@ -21,6 +22,7 @@ from odomgym.diagnose.fit import (
     Dataset,
     _fixed_replays,
     _held_gains,
+    balanced_shares,
     close_thread_pool,
     evaluate,
     fit_noise,
@@ -53,6 +55,7 @@ from odomgym.diagnose.where import RunResidual
 from odomgym.effects import EFFECTS, ReplayArrays
 from odomgym.effects.discovered import TERMS, DiscoveredTerms, body_modulator, wheel_modulator
 from odomgym.effects.registry import scale_columns
+from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 from odomgym.workers import run_tasks
 
@@ -865,3 +868,61 @@ def test_the_compiled_manoeuvre_view_gives_numpys_numbers() -> None:
             assert np.asarray(values).tobytes() == got[key].tobytes(), (trial, key)
             seen[key] += len(values)
     assert min(seen.values()) > 20, seen  # every kind of interval was compared
+
+
+def test_thread_shares_balance_samples_and_leave_the_bytes_alone(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The threads of ``evaluate`` take contiguous shares of nearly equal samples
+    (``fit.balanced_shares``), not of equal run counts: on run lengths like the June OptiOdom
+    sessions' (squares of ~2 000 samples, then spins of ~230, then circles of ~1 800) the
+    larger of two shares holds at most one run's samples more than half. Which cut is taken
+    changes no number: runs of very unequal lengths give the same bytes on one thread and on
+    two (whose cut falls elsewhere than the middle run)."""
+    june_like = [np.zeros(n) for n in [2012] * 30 + [666, 230, 225] * 15 + [1814] * 27]
+    total = sum(len(r) for r in june_like)
+    for count in (1, 2, 3, 5):
+        shares = balanced_shares(june_like, count)
+        assert [j for share in shares for j in share] == list(range(len(june_like)))
+        assert len(shares) == count and all(len(share) >= 1 for share in shares)
+        largest = max(sum(len(june_like[j]) for j in share) for share in shares)
+        assert largest <= total / count + max(len(r) for r in june_like)
+    # Equal run counts would give 30 squares and 21 spins against 24 spins and 27 circles.
+    halves = balanced_shares(june_like, 2)
+    sizes = [sum(len(june_like[j]) for j in share) for share in halves]
+    assert abs(sizes[0] - sizes[1]) <= 2012
+    by_count = [sum(len(r) for r in june_like[:51]), sum(len(r) for r in june_like[51:])]
+    assert abs(by_count[0] - by_count[1]) > 4 * abs(sizes[0] - sizes[1])
+    assert balanced_shares([np.zeros(4)] * 3, 8) == [range(0, 1), range(1, 2), range(2, 3)]
+
+    runs = generate_session({"sideslip": {"value": 0.03}}, np.random.default_rng(5))[:5]
+    runs = [_head(runs[0], 40), *runs[1:4], _head(runs[4], 60)]
+    data = Dataset.of(runs, 0.25)
+    assert balanced_shares(data.masks, 2) != [range(0, 2), range(2, 5)]
+    rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
+    fixed = _fixed_replays(data, rough, [EFFECTS["floor_roughness"]])
+    got = {}
+    try:
+        for threads in ("1", "2"):
+            monkeypatch.setenv("ODOMGYM_THREADS", threads)
+            close_thread_pool()
+            full = evaluate(data, rough, SENSOR)
+            kept = evaluate(data, rough, SENSOR, whitened=False, fixed=fixed)
+            got[threads] = (
+                full.loglik.tobytes(),
+                np.concatenate(full.whitened).tobytes(),
+                kept.loglik.tobytes(),
+            )
+    finally:
+        close_thread_pool()
+    assert got["1"] == got["2"]
+
+
+def _head(run: Run, samples: int) -> Run:
+    """``run``'s first ``samples`` samples: a short run beside long ones."""
+    return dataclasses.replace(
+        run,
+        time=run.time[:samples],
+        counts=run.counts[:samples],
+        true_pose=run.true_pose[:samples],
+    )
