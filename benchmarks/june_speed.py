@@ -24,8 +24,12 @@ have run the installed checkout's baselines. The header prints each tree's commi
 its process imported; a tree whose files are not its own stops the benchmark. Both trees read
 this checkout's ``examples/optiodom_nominal.toml`` (the same input).
 
-Prints every run's wall time [s], the medians, their ratio (this / REV) and whether the two
-trees' ``report.json`` are byte for byte the same; ``--json`` prints the same as one JSON
+Before the timed runs, a machine probe in this tree (:data:`_PROBE`, one thread): the compiled
+filter of every June run, against its 2.50 ms on the machine of stop 69, where this command took
+52–56 s. It says how far this machine is from the one the 60 s target was measured on.
+
+Prints every run's wall time [s], the medians, their ratio (this / REV), the probe and whether
+the two trees' ``report.json`` are byte for byte the same; ``--json`` prints the same as one JSON
 object. A benchmark, not a test: it exits 0 whatever the times, 2 with one line when the data,
 the revision or a run fails, and 130 on Ctrl-C or SIGTERM (the worktree removed either way).
 """
@@ -49,6 +53,41 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_S = 60.0
 """Issue 44: the 14 June sessions diagnosed together in at most a minute on 2 idle cores."""
+REFERENCE_FILTER_MS = 2.50
+"""The machine probe's figure (:data:`_PROBE`) on the machine of stop 69 (2026-11-30), where
+this command took 52–56 s: the plain filter of every June run on one thread (docs/diagnose.md,
+"Measured on stop 69": 2.49–2.50 ms)."""
+
+_PROBE = """
+import time
+from pathlib import Path
+import numpy as np
+from odomgym.data.logs import read_log
+from odomgym.diagnose import fit
+from odomgym.diagnose.likelihood import SensorNoise, filter_runs, process_noise
+from odomgym.robot import load_robot
+robot = load_robot({robot!r})
+runs, _ = read_log(Path({data!r}), robot=robot, format="optiodom")
+data = fit.Dataset.of(runs, 0.25)
+kept = fit._fixed_replays(data, robot, [])
+noise = process_noise(robot, kept.travel)
+logs = np.empty(len(data))
+sensor = SensorNoise(0.002, 0.01)
+every = range(len(data))
+filter_runs(kept.stacked, noise, sensor, every, logs)
+best = []
+for _ in range(5):
+    start = time.perf_counter()
+    for _ in range(50):
+        filter_runs(kept.stacked, noise, sensor, every, logs)
+    best.append((time.perf_counter() - start) / 50)
+print(1e3 * min(best))
+"""
+"""The machine probe: the compiled filter of every June run (102 runs, 133 391 samples) on the
+robot as given, one thread, the best of five means of 50 calls [ms]. Why: the machine's speed
+moves between sessions (±10 % within an hour, and 1.6× between the machines of stops 69 and
+71), and a 60 s target holds only on the machine it was set on; the probe beside the runs says
+how far this machine is from it."""
 
 
 _BOOTSTRAP = """
@@ -85,6 +124,22 @@ class Tree:
         finder = str(ROOT / "odomgym" / "_source_tree.py")
         code = _BOOTSTRAP.format(finder=finder, root=str(self.root), body=body)
         return [sys.executable, "-c", code]
+
+    def probe(self, data: Path) -> float:
+        """The machine probe (:data:`_PROBE`) on ``data``, in this tree's process [ms]."""
+        robot = str(ROOT / "examples" / "optiodom_nominal.toml")
+        body = _PROBE.format(robot=robot, data=str(data))
+        done = subprocess.run(
+            self.python(body),
+            cwd=self.root,
+            env={**self.env(), "ODOMGYM_THREADS": "1"},
+            capture_output=True,
+            text=True,
+        )
+        if done.returncode != 0:
+            tail = (done.stderr.strip().splitlines() or ["(no message)"])[-1]
+            raise RuntimeError(f"{self.label}: the machine probe failed: {tail}")
+        return float(done.stdout.split()[-1])
 
     def commit(self) -> str:
         """The tree's commit, with ``+changes`` when its files differ from it."""
@@ -180,10 +235,17 @@ def _worktree(rev: str, folder: Path) -> Path:
     return folder
 
 
-def summary(trees: list[Tree]) -> dict[str, Any]:
+def summary(trees: list[Tree], probe_ms: float | None = None) -> dict[str, Any]:
     """Medians, the ratio of the first tree's median to the second's, and the target's verdict
-    per tree (every timed run ≤ :data:`TARGET_S`)."""
+    per tree (every timed run ≤ :data:`TARGET_S`); with ``probe_ms`` (the machine probe), that
+    figure and its ratio to :data:`REFERENCE_FILTER_MS`."""
     out: dict[str, Any] = {"target_s": TARGET_S, "trees": {}}
+    if probe_ms is not None:
+        out["machine"] = {
+            "filter_ms": probe_ms,
+            "reference_ms": REFERENCE_FILTER_MS,
+            "factor": probe_ms / REFERENCE_FILTER_MS,
+        }
     for tree in trees:
         out["trees"][tree.label] = {
             "root": str(tree.root),
@@ -210,6 +272,13 @@ def table(trees: list[Tree], result: dict[str, Any]) -> str:
     for t in trees:
         ok = result["trees"][t.label]["every_run_within_target"]
         lines.append(f"- {t.label}: every run ≤ {TARGET_S:g} s: {'yes' if ok else 'no'}")
+    if "machine" in result:
+        machine = result["machine"]
+        lines.append(
+            f"- machine probe: the filter of every June run on one thread "
+            f"{machine['filter_ms']:.2f} ms against {machine['reference_ms']:.2f} ms on the "
+            f"machine of stop 69 (52–56 s there): {machine['factor']:.2f}× as slow"
+        )
     if "ratio" in result:
         lines.append(f"- ratio {trees[0].label} / {trees[1].label}: {result['ratio']:.3f}")
         same = "the same bytes" if result["same_report"] else "different"
@@ -256,6 +325,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{tree.label} ({tree.commit()}): {tree.imported()}", file=sys.stderr)
                 print(f"{tree.label}: compiling (untimed run)…", file=sys.stderr)
                 tree.run(data, work / "warm", args.jobs)
+            probe_ms = trees[0].probe(data)
+            print(f"machine probe: {probe_ms:.2f} ms", file=sys.stderr)
             for k in range(args.runs):
                 # Each round in the other order, so neither tree always runs after the other.
                 for tree in trees if k % 2 == 0 else trees[::-1]:
@@ -277,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.against:
                 _remove(work / "against")
             signal.signal(signal.SIGINT, signal.default_int_handler)
-    result = summary(trees)
+    result = summary(trees, probe_ms)
     print(json.dumps(result, indent=2) if args.json else table(trees, result))
     return 0
 

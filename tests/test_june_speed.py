@@ -30,3 +30,15 @@ def test_the_side_by_side_benchmark_reports_medians_ratio_and_the_target() -> No
     assert bench.summary([this, other])["same_report"] is False
     alone = bench.summary([bench.Tree("this tree", ROOT, [50.0], b"")])
     assert "ratio" not in alone and alone["trees"]["this tree"]["every_run_within_target"]
+    assert "machine" not in alone
+
+
+def test_the_machine_probe_is_set_beside_the_reference_machine() -> None:
+    """With the machine probe's figure, the summary gives it, the reference machine's and their
+    ratio, and the table says how much slower this machine is."""
+    bench = load_benchmark("june_speed")
+    tree = bench.Tree("this tree", ROOT, [120.0], b"{}")
+    result = bench.summary([tree], probe_ms=4.0)
+    assert result["machine"] == {"filter_ms": 4.0, "reference_ms": 2.5, "factor": 1.6}
+    assert "4.00 ms against 2.50 ms" in bench.table([tree], result)
+    assert "1.60× as slow" in bench.table([tree], result)
