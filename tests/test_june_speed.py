@@ -42,3 +42,5 @@ def test_the_machine_probe_is_set_beside_the_reference_machine() -> None:
     assert result["machine"] == {"filter_ms": 4.0, "reference_ms": 2.5, "factor": 1.6}
     assert "4.00 ms against 2.50 ms" in bench.table([tree], result)
     assert "1.60× as slow" in bench.table([tree], result)
+    # The probe's script is valid Python once its paths are filled in.
+    compile(bench._PROBE.format(robot="robot.toml", data="june"), "probe", "exec")
