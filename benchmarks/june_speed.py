@@ -27,7 +27,7 @@ this checkout's ``examples/optiodom_nominal.toml`` (the same input).
 Before the timed runs, a machine probe in this tree (:data:`_PROBE`, one thread): the compiled
 filter of every June run, against its 2.50 ms on the machine of stop 69, where this command took
 52–66 s that day. It says how far this machine is from the one the 60 s target was measured on
-(a floor on the slowdown: on stop 71 the probe read 1.6–1.8× and the command took about 2×).
+(a rough guide: on stop 71 the probe read 1.6–2.1× and the command took about 2×).
 
 Prints every run's wall time [s], the medians, their ratio (this / REV), the probe and whether
 the two trees' ``report.json`` are byte for byte the same; ``--json`` prints the same as one JSON
@@ -86,11 +86,12 @@ print(1e3 * min(best))
 """
 """The machine probe: the compiled filter of every June run (102 runs, 133 391 samples) on the
 robot as given, one thread, the best of five means of 50 calls [ms]. Why: the machine's speed
-moves between sessions (±10 % within an hour; on stop 71 a machine whose probe read 1.6–1.8×
+moves between sessions (±10 % within an hour; on stop 71 a machine whose probe read 1.6–2.1×
 stop 69's), and a 60 s target holds only on the machine it was set on; the probe beside the
-runs says how far this machine is from it. A floor on the slowdown, not a forecast: on stop
-71 the whole command ran about 2× slower. It times this tree's compiled filter, so it is
-comparable with the reference only while that filter is stop 69's (it is, on stop 71)."""
+runs says how far this machine is from it. A rough guide, not a forecast: the probe itself
+moved by a quarter within an hour on stop 71, and the whole command ran about 2× slower. It
+times this tree's compiled filter, so it is comparable with the reference only while that
+filter is stop 69's (it is, on stop 71)."""
 
 
 _BOOTSTRAP = """
