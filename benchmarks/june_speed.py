@@ -54,6 +54,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_S = 60.0
 """Issue 44: the 14 June sessions diagnosed together in at most a minute on 2 idle cores."""
+NOMINAL = ROOT / "examples" / "optiodom_nominal.toml"
+"""The robot both trees diagnose the June sessions against (and the probe filters them with)."""
 REFERENCE_FILTER_MS = 2.50
 """The machine probe's figure (:data:`_PROBE`) on the machine of stop 69 (2026-12-01), where
 this command took 52–66 s that day: the plain filter of every June run on one thread
@@ -129,20 +131,22 @@ class Tree:
         code = _BOOTSTRAP.format(finder=finder, root=str(self.root), body=body)
         return [sys.executable, "-c", code]
 
-    def probe(self, data: Path) -> float:
-        """The machine probe (:data:`_PROBE`) on ``data``, in this tree's process [ms]."""
-        robot = str(ROOT / "examples" / "optiodom_nominal.toml")
-        body = _PROBE.format(robot=robot, data=str(data))
-        done = subprocess.run(
+    def call(self, body: str, **env: str) -> subprocess.CompletedProcess[str]:
+        """``body`` run to its end in this tree's process (its output captured), with ``env``
+        added to the tree's environment."""
+        return subprocess.run(
             self.python(body),
             cwd=self.root,
-            env={**self.env(), "ODOMGYM_THREADS": "1"},
+            env={**self.env(), **env},
             capture_output=True,
             text=True,
         )
+
+    def probe(self, data: Path) -> float:
+        """The machine probe (:data:`_PROBE`) on ``data``, in this tree's process [ms]."""
+        done = self.call(_PROBE.format(robot=str(NOMINAL), data=str(data)), ODOMGYM_THREADS="1")
         if done.returncode != 0:
-            tail = (done.stderr.strip().splitlines() or ["(no message)"])[-1]
-            raise RuntimeError(f"{self.label}: the machine probe failed: {tail}")
+            raise RuntimeError(f"{self.label}: the machine probe failed: {_last(done.stderr)}")
         try:
             return float(done.stdout.split()[-1])
         except (IndexError, ValueError):
@@ -166,9 +170,7 @@ class Tree:
             "import odomgym, odomgym.baselines; "
             "print(odomgym.__file__); print(odomgym.baselines.__file__)"
         )
-        done = subprocess.run(
-            self.python(probe), cwd=self.root, env=self.env(), capture_output=True, text=True
-        )
+        done = self.call(probe)
         if done.returncode != 0:
             raise RuntimeError(f"{self.label}: cannot import odomgym: {done.stderr.strip()}")
         files = done.stdout.splitlines()
@@ -187,7 +189,7 @@ class Tree:
             "--format",
             "optiodom",
             "--robot",
-            str(ROOT / "examples" / "optiodom_nominal.toml"),
+            str(NOMINAL),
             "--jobs",
             str(jobs),
             "--out",
@@ -214,10 +216,14 @@ class Tree:
             raise
         elapsed = time.perf_counter() - start
         if process.returncode != 0:
-            tail = (stderr.strip().splitlines() or ["(no message)"])[-1]
-            raise RuntimeError(f"{self.label}: the diagnosis failed: {tail}")
+            raise RuntimeError(f"{self.label}: the diagnosis failed: {_last(stderr)}")
         self.report = (out / "report.json").read_bytes()
         return elapsed
+
+
+def _last(stderr: str) -> str:
+    """The last line a failed process wrote (its error), for a one-line message."""
+    return (stderr.strip().splitlines() or ["(no message)"])[-1]
 
 
 def _gather_june(folder: Path) -> Path:

@@ -901,6 +901,7 @@ def test_thread_shares_balance_samples_and_leave_the_bytes_alone(
     runs = [_head(runs[0], 40), *runs[1:4], _head(runs[4], 60)]
     data = Dataset.of(runs, 0.25)
     assert balanced_shares(data.masks, 2) == [range(0, 3), range(3, 5)]
+    assert data.shares(2) == balanced_shares(data.masks, 2) and data.shares(2) is data.shares(2)
     assert [len(share) for share in balanced_shares(data.masks, 3)].count(1) >= 1
     rough = EFFECTS["floor_roughness"].write(MODEL, {"k_left": 3e-4, "k_right": 2e-4})
     fixed = _fixed_replays(data, rough, [EFFECTS["floor_roughness"]])

@@ -139,6 +139,7 @@ class Dataset:
     noise_fits: dict[object, tuple[RobotSpec, SensorNoise, float]] = field(default_factory=dict)
     stacks: dict[tuple[float, int, int], RunStack] = field(default_factory=dict)
     mask_stacks: dict[tuple[int, int], NDArray[np.bool_]] = field(default_factory=dict)
+    share_cuts: dict[int, list[range]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.inputs:
@@ -195,6 +196,14 @@ class Dataset:
             stack = self.stacks[key] = RunStack.of([self.runs[j] for j in index], inputs)
         return stack
 
+    def shares(self, count: int) -> list[range]:
+        """The runs cut into ``count`` threads' shares of nearly equal samples
+        (:func:`balanced_shares` of the masks), kept: every evaluation asks again."""
+        held = self.share_cuts.get(count)
+        if held is None:
+            held = self.share_cuts[count] = balanced_shares(self.masks, count)
+        return held
+
     def stacked_mask(self, index: range) -> NDArray[np.bool_]:
         """The masks of the runs of ``index`` stacked (ΣT, 3), kept."""
         key = (index.start, index.stop)
@@ -223,6 +232,7 @@ class Dataset:
         self.noise_fits = {}
         self.stacks = {}
         self.mask_stacks = {}
+        self.share_cuts = {}
 
 
 _Share = tuple[list[Replay | StackedReplay], list[tuple[float, FloatArray | None]]]
@@ -381,7 +391,7 @@ def evaluate(
     if pool is None or n < 2:
         parts = [chunk(range(n))]
     else:  # one contiguous share per thread: few hand-overs of the GIL
-        parts = list(pool.map(chunk, balanced_shares(data.masks, _pool_size())))
+        parts = list(pool.map(chunk, data.shares(_pool_size())))
     results = [r for part in parts for r in part[1]]
     logs = np.array([r[0] for r in results], dtype=float)
     white = [r[1] for r in results if r[1] is not None]
@@ -400,7 +410,7 @@ def _evaluate_fixed(
     if pool is None or n < 2:
         filter_runs(fixed.stacked, noise, sensor, range(n), logs)
     else:
-        shares = balanced_shares(data.masks, _pool_size())
+        shares = data.shares(_pool_size())
         list(pool.map(lambda share: filter_runs(fixed.stacked, noise, sensor, share, logs), shares))
     return Evaluation(logs, [], fixed.replays)
 
