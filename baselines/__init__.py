@@ -11,6 +11,8 @@ own, which the command line, the benchmark and the leaderboard then offer (worke
 * ``ivanjko`` — Ivanjko et al., straight runs and in-place spins, nonlinear least squares;
 * ``least_squares`` — Antonelli et al. style linear least squares over whole runs;
 * ``trajectory`` — OptiOdom-style optimisation over whole trajectories;
+* ``skid_icr`` — Mandow et al.'s ICR model of a skid-steer robot (the sides' ICRs and the
+  apparent track) with the wheels' factors, from squares and circles of several radii;
 * ``selfcal`` — a learned policy that chooses the experiments, with a Kalman filter along the
   measured runs (``SelfCalibration-v1``; the shipped policy runs in numpy, no torch needed);
 * ``selfcal_scripted`` — the same estimator with a fixed schedule (the policy's ablation);
@@ -25,6 +27,7 @@ from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.least_squares import LeastSquares
 from odomgym.baselines.lee import Lee
 from odomgym.baselines.selfcal import SelfCal, SelfCalEndPose, SelfCalScripted
+from odomgym.baselines.skid_icr import SkidIcr
 from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.umbmark import UMBmark
 
@@ -36,6 +39,7 @@ for _cls in (
     Ivanjko,
     LeastSquares,
     Trajectory,
+    SkidIcr,
     SelfCal,
     SelfCalScripted,
     SelfCalEndPose,
@@ -53,6 +57,7 @@ __all__ = [
     "SelfCal",
     "SelfCalEndPose",
     "SelfCalScripted",
+    "SkidIcr",
     "Trajectory",
     "UMBmark",
     "register_calibrator",

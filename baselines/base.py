@@ -38,6 +38,7 @@ __all__ = [
     "SquareOptions",
     "SquaresSizing",
     "check_square_settings",
+    "default_methods",
     "option_names",
     "perform",
     "register_calibrator",
@@ -146,6 +147,11 @@ class Calibrator(ABC):
     min_budget: ClassVar[int] = 2
     """Fewest runs the method can calibrate with (default: one square each way); the benchmark
     refuses smaller budgets."""
+    skid_steer: ClassVar[bool] = False
+    """Whether the method is made for skid-steer robots (its calibration moves the ICRs):
+    such a method runs on any robot, but the commands that compare every method on
+    differential-drive robots (``odomgym bench calibrators``, ``odomgym leaderboard``) leave it
+    out unless it is named (:func:`default_methods`)."""
 
     # ------------------------------------------------------------------ sizing: the method's own
     # rules for the callers that configure every method alike. Each returns constructor options
@@ -222,6 +228,13 @@ class Holdings:
 CALIBRATORS: dict[str, type[Calibrator]] = {}
 """The registry: command-line name → calibrator class. The benchmark, the leaderboard and the
 command line offer every method in it; add one with :func:`register_calibrator`."""
+
+
+def default_methods(*, skid_steer: bool = False) -> list[str]:
+    """The registered methods a comparison runs when none are named: every method made for
+    differential-drive robots, and with ``skid_steer`` those made for skid-steer robots too
+    (:attr:`Calibrator.skid_steer`), in registration order."""
+    return [name for name, cls in CALIBRATORS.items() if skid_steer or not cls.skid_steer]
 
 
 def register_calibrator(cls: C, *, replace: bool = False) -> C:

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.baselines.base import CALIBRATORS, Calibrator, option_names
+from odomgym.baselines.base import CALIBRATORS, Calibrator, default_methods, option_names
 from odomgym.baselines.validation import calibrator_for_session, method_options
 from odomgym.data import find_sessions, read_session
 from odomgym.errors import SpecError
@@ -145,7 +145,7 @@ def run_leaderboard(
     ``conventions`` (e.g. ``"optiodom"``) applies to the methods that take a ``conventions``
     option (:func:`takes_conventions`); the others run with their own.
     """
-    names = list(methods or CALIBRATORS)
+    names = list(methods or default_methods())
     every = [read_session(p) for p in find_sessions(root)]
     sessions = [s for s in every if s.path_type in path_types]
     if not sessions:

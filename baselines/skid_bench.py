@@ -14,7 +14,9 @@ curvature uniform in ±2 /m). Beside them, the six classical calibrators of
 :mod:`odomgym.baselines` (UMBmark, Jung & Chung, Lee, Ivanjko, least squares, the trajectory
 fit), each given its own experiments (2 m squares where it drives squares) in a simulated lab of
 the same robot, floor and speed — what a user gets who calibrates a skid-steer robot as a
-differential-drive one: a constant factor (E_b) with wheel corrections, validated alike.
+differential-drive one: a constant factor (E_b) with wheel corrections, validated alike — and
+the registered skid-steer calibrator ``skid_icr`` (:mod:`odomgym.baselines.skid_icr`), the ICR
+model with the wheels' factors from its own squares and circles.
 
 Each row is the median over the validation runs of the end-position error per metre driven
 [%] and of the end-heading error per metre [°/m]. All randomness flows from one seed
@@ -45,10 +47,12 @@ from odomgym.robot import PRESETS, RobotSpec
 __all__ = [
     "CAL_RADII",
     "CLASSICAL",
+    "SKID_CALIBRATORS",
     "SKID_PRESETS",
     "SPEED",
     "VAL_RADII",
     "SkidBenchConfig",
+    "calibration_model",
     "run_skid_bench",
     "skid_table",
     "write_skid_outputs",
@@ -70,6 +74,11 @@ CLASSICAL: dict[str, dict[str, float]] = {
 }
 """The classical calibrators and their options: squares of 2 m (a skid-steer robot with its
 nominal track turns ~52° at a 90° corner, and 4 m squares would take it far off)."""
+SKID_CALIBRATORS: dict[str, dict[str, float]] = {"skid_icr": {}}
+"""The registered skid-steer calibrators and their options: ``skid_icr``
+(:mod:`odomgym.baselines.skid_icr`, Mandow et al. 2007's ICRs with the wheels' factors, from
+its own 2 m squares and circles of 0.5–4 m). Each draws from a stream of its own,
+``default_rng([seed, cell, 1])``, so that adding one leaves every other row as it was."""
 SKID_PRESETS = tuple(name for name, spec in PRESETS.items() if spec.is_skid_steer)
 """The skid-steer presets (:data:`odomgym.robot.PRESETS` with ``axle_spacing > 0``)."""
 
@@ -153,6 +162,23 @@ def _runs(robot: RobotSpec, floor: str, rng: np.random.Generator) -> tuple[list[
     return measure(calibration, SensorAccuracy(), rng), validation
 
 
+def calibration_model(calibration: Calibration, robot: RobotSpec) -> SkidModel:
+    """The skid-steer model a calibrator's ``calibration`` stands for (its wheels' factors
+    applied to the counts before it): Mandow et al. 2007's ICRs when it moves them
+    (``y_L, y_R = y_ICR ± E_b·b/2``, x_ICR), else one constant factor, E_b."""
+    b = float(robot.wheelbase)
+    if calibration.has_icr:
+        half = 0.5 * calibration.wheelbase_scale * b
+        return SkidModel(
+            "icr",
+            b,
+            y_left=calibration.icr_y + half,
+            y_right=calibration.icr_y - half,
+            x_icr=calibration.icr_x,
+        )
+    return SkidModel("constant", b, chi_inf=calibration.wheelbase_scale)
+
+
 def _errors(
     model: SkidModel, run: Run, robot: RobotSpec, calibration: Calibration | None = None
 ) -> tuple[float, float, float]:
@@ -184,8 +210,12 @@ def run_skid_bench(
         for method, options in CLASSICAL.items():
             lab = SimLab(robot, FLOORS[floor], rng=rng.spawn(1)[0], cruise_speed=SPEED)
             found = CALIBRATORS[method](**options).calibrate(lab).calibration
-            constant = SkidModel("constant", robot.wheelbase, chi_inf=found.wheelbase_scale)
-            fits.append((method, constant, found))
+            fits.append((method, calibration_model(found, robot), found))
+        for method, options in SKID_CALIBRATORS.items():
+            stream = np.random.default_rng([config.seed, done, 1])
+            lab = SimLab(robot, FLOORS[floor], rng=stream, cruise_speed=SPEED)
+            found = CALIBRATORS[method](**options).calibrate(lab).calibration
+            fits.append((method, calibration_model(found, robot), found))
         for kind, model, wheels in fits:
             errors = np.array([_errors(model, run, robot, wheels) for run in validation])
             per_circle = {
@@ -220,13 +250,19 @@ def skid_table(rows: Sequence[SkidBenchRow], robots: Sequence[str], floors: Sequ
         head,
         "|---|" + "---|" * (len(robots) * len(floors)),
     ]
-    for kind in (*SKID_MODELS, *CLASSICAL):
+    for kind in (*SKID_MODELS, *CLASSICAL, *SKID_CALIBRATORS):
         cells = []
         for r in robots:
             for f in floors:
                 row = next(x for x in rows if (x.robot, x.floor, x.model) == (r, f, kind))
                 cells.append(f"{row.position_pct:.2f} % / {row.heading_deg_per_m:.2f}")
-        label = kind if kind in SKID_MODELS else f"{kind} (classical: E_b, c_L, c_R, E_s)"
+        label = (
+            kind
+            if kind in SKID_MODELS
+            else f"{kind} (registered: ICRs, c_L, c_R, E_s)"
+            if kind in SKID_CALIBRATORS
+            else f"{kind} (classical: E_b, c_L, c_R, E_s)"
+        )
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

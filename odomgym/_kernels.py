@@ -541,13 +541,16 @@ def integrate_odometry(
     last_counts: NDArray[np.int64],
     travel_per_tick: FloatArray,
     wheelbase: FloatArray,
+    icr: FloatArray,
     inv_dt: float,
     pose: FloatArray,
     wheel_speed: FloatArray,
 ) -> None:
     """Midpoint dead reckoning of one sampling period, in place
     (:mod:`odomgym.odometry.calibration`'s equations): ``pose`` (N, 3) and ``wheel_speed``
-    (N, 2) [m/s] from cumulative ``counts``."""
+    (N, 2) [m/s] from cumulative ``counts``; ``icr`` (N, 2) the calibrations' x_ICR, y_ICR [m].
+    A robot whose ICR offsets are both 0 takes the differential-drive equations alone, so its
+    results do not depend on the skid-steer terms' rounding."""
     for i in range(counts.shape[0]):
         left = (counts[i, 0] - last_counts[i, 0]) * travel_per_tick[i, 0]
         right = (counts[i, 1] - last_counts[i, 1]) * travel_per_tick[i, 1]
@@ -558,8 +561,16 @@ def integrate_odometry(
         ds = 0.5 * (left + right)
         dtheta = (right - left) / wheelbase[i]
         mid = pose[i, 2] + 0.5 * dtheta
-        pose[i, 0] += ds * math.cos(mid)
-        pose[i, 1] += ds * math.sin(mid)
+        if icr[i, 0] == 0.0 and icr[i, 1] == 0.0:
+            pose[i, 0] += ds * math.cos(mid)
+            pose[i, 1] += ds * math.sin(mid)
+        else:
+            forward = ds + icr[i, 1] * dtheta
+            leftward = -icr[i, 0] * dtheta
+            c = math.cos(mid)
+            s = math.sin(mid)
+            pose[i, 0] += forward * c - leftward * s
+            pose[i, 1] += forward * s + leftward * c
         pose[i, 2] += dtheta
 
 
@@ -671,6 +682,7 @@ def after_step(
     last_counts: NDArray[np.int64],
     travel_per_tick: FloatArray,
     wheelbase: FloatArray,
+    icr: FloatArray,
     inv_dt: float,
     pose: FloatArray,
     wheel_speed: FloatArray,
@@ -686,7 +698,9 @@ def after_step(
     advanced: NDArray[np.bool_],
 ) -> None:
     """:func:`integrate_odometry` then :func:`route_update` (moving on to the next segment)."""
-    integrate_odometry(counts, last_counts, travel_per_tick, wheelbase, inv_dt, pose, wheel_speed)
+    integrate_odometry(
+        counts, last_counts, travel_per_tick, wheelbase, icr, inv_dt, pose, wheel_speed
+    )
     route_update(
         pose,
         wheel_speed,
@@ -757,7 +771,8 @@ def episode_report(
 #: wheel rate per unit action [rad/s], then what :meth:`odomgym.sim.world.World.step_arrays`
 #: returns: packed state, encoder counts, contact velocities, the Chipmunk link's addresses,
 #: headers, buffer and bodies, the clock [s]), the odometry's (last counts, travel per tick [m],
-#: wheelbase [m], pose, wheel speeds [m/s]), the trial's top wheel speeds [m/s], the route's
+#: wheelbase [m], ICR offsets [m], pose, wheel speeds [m/s]), the trial's top wheel speeds
+#: [m/s], the route's
 #: (:meth:`odomgym.sim.routes.RouteProgress.step_arrays`), the trial's start poses, and the
 #: substep [s], substeps per step and control period [s].
 STEP_FIELDS = (
@@ -773,6 +788,7 @@ STEP_FIELDS = (
     "last_counts",
     "travel_per_tick",
     "wheelbase",
+    "icr",
     "odom_pose",
     "wheel_speed",
     "max_speed",
@@ -857,6 +873,7 @@ def control_step(
         a.last_counts,
         a.travel_per_tick,
         a.wheelbase,
+        a.icr,
         1.0 / a.dt,
         a.odom_pose,
         a.wheel_speed,

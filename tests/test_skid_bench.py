@@ -23,7 +23,8 @@ def test_the_curvature_model_beats_one_constant_factor_on_a_tyred_robot(
     one, and the curvature-dependent factor (Wang et al. 2015's form) predicts the validation
     circles and free paths it never saw with less than half its heading error. The classical
     calibrators fit the squares' spins and are worse than the constant factor fitted on the
-    circles. The table, its JSON and the figure are written; the same seed gives the same rows."""
+    circles; the registered ICR calibrator (``skid_icr``), which drives circles of its own, is
+    not. The table, its JSON and the figure are written; the same seed gives the same rows."""
     out = tmp_path / "skid"
     argv = ["bench", "skid", "--presets", "scout2", "--floor", "smooth", "--out", str(out)]
     assert main([*argv, "--json"]) == 0
@@ -32,6 +33,9 @@ def test_the_curvature_model_beats_one_constant_factor_on_a_tyred_robot(
     heading = {model: row["heading_deg_per_m"] for model, row in rows.items()}
     assert heading["curvature"] < 0.5 * heading["constant"], heading
     assert heading["constant"] < heading["trajectory"] < heading["nominal"], heading
+    # The registered ICR calibrator drives its own circles and beats the classical ones.
+    assert heading["skid_icr"] < 0.5 * heading["trajectory"], heading
+    assert rows["skid_icr"]["parameters"]["kind"] == "icr"
     assert rows["constant"]["parameters"]["chi_inf"] > 1.3  # the track an odometry needs
     for name in ("skid_models.md", "skid_models.json", "skid_models.png"):
         assert (out / name).stat().st_size > 100, name

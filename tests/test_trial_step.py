@@ -75,8 +75,8 @@ def test_a_trial_step_is_its_parts_steps(floor: str) -> None:
 
 def test_the_compiled_step_follows_resets_routes_and_calibrations() -> None:
     """A reset onto a longer route reallocates the route arrays, a new calibration changes
-    the odometry's constants, a partial reset moves some robots back: the fused step sees
-    each as the World's own step does."""
+    the odometry's constants (an ICR offset among them), a partial reset moves some robots
+    back: the fused step sees each as the World's own step does."""
 
     def story(trial: Trial, by_parts: bool) -> np.ndarray:
         rows = [_run(trial, 60, 2, by_parts=by_parts)]
@@ -84,6 +84,10 @@ def test_the_compiled_step_follows_resets_routes_and_calibrations() -> None:
         rows.append(_run(trial, 60, 3, by_parts=by_parts))
         trial.odometry.set_calibration(Calibration(c_left=1.01, c_right=0.99), index=1)
         rows.append(_run(trial, 60, 4, by_parts=by_parts))
+        # A skid-steer calibration: the ICR offsets reach the compiled step too.
+        skid = Calibration(wheelbase_scale=1.6, icr_x=0.03, icr_y=-0.01)
+        trial.odometry.set_calibration(skid, index=2)
+        rows.append(_run(trial, 60, 8, by_parts=by_parts))
         trial.odometry.reset()
         trial.reset(indices=np.array([0, 2]))
         rows.append(_run(trial, 60, 5, by_parts=by_parts))

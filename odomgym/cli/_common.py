@@ -210,10 +210,13 @@ def robot_from(args: argparse.Namespace) -> RobotSpec:
 
 def describe_calibration(calibration: Calibration) -> str:
     """A calibration in one line, as the status lines of ``run`` and ``calibrate`` show it."""
-    return (
+    line = (
         f"c_L = {calibration.c_left:.6f}, c_R = {calibration.c_right:.6f}, "
         f"E_b = {calibration.wheelbase_scale:.6f}, E_s = {calibration.distance_scale:.6f}"
     )
+    if calibration.has_icr:
+        line += f", x_ICR = {calibration.icr_x:.6f} m, y_ICR = {calibration.icr_y:.6f} m"
+    return line
 
 
 def check_methods(methods: Sequence[str] | None) -> None:

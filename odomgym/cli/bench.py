@@ -79,7 +79,8 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "--methods",
         nargs="+",
-        help="calibrators (default: all, selfcal included: its shipped policy runs in numpy)",
+        help="calibrators (default: every method made for differential-drive robots, selfcal "
+        "included: its shipped policy runs in numpy; skid_icr only when named)",
     )
     parser.add_argument(
         "--budget",
@@ -190,7 +191,7 @@ def run_calibrators(args: argparse.Namespace) -> int:
     plots into ``--out``, then print the summary and the files written."""
     import time
 
-    from odomgym.baselines import CALIBRATORS
+    from odomgym.baselines.base import default_methods
     from odomgym.baselines.bench_report import markdown_summary, write_outputs
     from odomgym.baselines.benchmark import Backend, BenchConfig, run_benchmark, summarize
 
@@ -199,7 +200,7 @@ def run_calibrators(args: argparse.Namespace) -> int:
     backend = Backend(args.backend)
     check_output(args.out, option="--out", folder=True)
     check_methods(args.methods)
-    methods = tuple(args.methods or CALIBRATORS)
+    methods = tuple(args.methods or default_methods())
     # BenchConfig names the offending field itself (SpecError).
     config = BenchConfig(
         robots=args.robots,

@@ -28,7 +28,11 @@ def register(commands: Commands) -> None:
         required=True,
         help="folder of OptiOdom sessions, or optiodom: for the shipped ones",
     )
-    parser.add_argument("--methods", nargs="+", help="calibrators (default: all)")
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        help="calibrators (default: every method made for differential-drive robots)",
+    )
     parser.add_argument(
         "--conventions",
         choices=["optiodom"],

@@ -179,6 +179,15 @@ def format_simulation_report(report: Any, floor_name: str) -> str:
         ("E_s", cal.distance_scale, robot.e_s),
     ):
         lines.append(f"{label:<16}{1.0:>12.5f}{est:>12.5f}{tru:>12.5f}")
+    if cal.has_icr:
+        # A skid-steer calibration's ICRs (Mandow et al. 2007); a robot's own geometry has none
+        # to compare with (its apparent track emerges from the contacts' friction).
+        for key, label in (
+            ("icr_y_left", "y_L [mm]"),
+            ("icr_y_right", "y_R [mm]"),
+            ("icr_x", "x_ICR [mm]"),
+        ):
+            lines.append(f"{label:<16}{'':>12}{1e3 * estimated[key]:>12.3f}{'':>12}")
     lines += [
         "",
         f"validation on fresh squares ({len(report.errors_before['cw'])} cw + "

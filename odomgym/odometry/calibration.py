@@ -9,6 +9,20 @@ revolution C_e) and a :class:`Calibration`. Per sampling period, with encoder in
     x += Δs·cos(θ + Δθ/2),  y += Δs·sin(θ + Δθ/2),  θ += Δθ
 
 (midpoint integration, as in the OptiOdom authors' model). Everything is batched over N robots.
+
+**Skid-steer robots: the ICR offsets.** A skid-steer robot's sides do not turn about the wheels'
+contacts but about instantaneous centres of rotation (ICRs) of their own (Mandow et al. 2007,
+Eqs. 4–6): the left side's at (x_ICR, y_L), the right side's at (x_ICR, y_R) in the body frame.
+With y_L − y_R = b_eff (the apparent track, E_b's expansion factor) and the two ICRs' midpoint
+y_ICR = (y_L + y_R)/2, Mandow's equations are the equations above with two more terms per
+period,
+
+    Δs_fwd = Δs + y_ICR·Δθ,   Δs_left = −x_ICR·Δθ,
+    x += Δs_fwd·cos(θ + Δθ/2) − Δs_left·sin(θ + Δθ/2),
+    y += Δs_fwd·sin(θ + Δθ/2) + Δs_left·cos(θ + Δθ/2),
+
+so :class:`Calibration` carries them as ``icr_x`` and ``icr_y`` [m], 0 for a differential-drive
+robot (whose odometry is then exactly the equations above, bit for bit).
 """
 
 from __future__ import annotations
@@ -24,7 +38,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._kernels import integrate_odometry
-from odomgym.errors import SpecError, locate_key, read_spec_toml, require_positive
+from odomgym.errors import (
+    SpecError,
+    locate_key,
+    read_spec_toml,
+    require_finite,
+    require_positive,
+)
 from odomgym.io import atomic_write_text
 from odomgym.robot import RobotSpec
 
@@ -42,18 +62,34 @@ class Calibration:
         wheelbase_scale: E_b as estimated; the odometry uses b_eff = wheelbase_scale · b_n
             (Borenstein & Feng 1994, Eq. 6.28).
         distance_scale: E_s as estimated; multiplies both wheels' travel (solderspot 2014).
+        icr_x: x_ICR, the sides' instantaneous centres of rotation ahead of the tracked point
+            [m] (Mandow et al. 2007, Eq. 6): the body slides sideways by −x_ICR per radian
+            turned. 0 for a differential-drive robot.
+        icr_y: y_ICR, the midpoint of the two sides' ICRs to the left of the tracked point
+            [m] ((y_L + y_R)/2 in Mandow et al. 2007's Eqs. 4–5; their spread y_L − y_R is the
+            apparent track ``wheelbase_scale`` · b_n): the body moves forward by y_ICR per
+            radian turned. 0 for a differential-drive robot.
 
-    The identity calibration (all ones) is the uncalibrated robot.
+    The identity calibration (all ones, ICR offsets 0) is the uncalibrated robot. The four
+    factors must be positive; the ICR offsets finite, of either sign.
     """
 
     c_left: float = 1.0
     c_right: float = 1.0
     wheelbase_scale: float = 1.0
     distance_scale: float = 1.0
+    icr_x: float = 0.0
+    icr_y: float = 0.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            require_positive(f.name, getattr(self, f.name))
+            _check_field(f.name, getattr(self, f.name))
+
+    @property
+    def has_icr(self) -> bool:
+        """Whether the calibration moves the sides' ICRs (a skid-steer calibration): the
+        odometry then adds the ICR terms of the module docstring."""
+        return self.icr_x != 0.0 or self.icr_y != 0.0
 
     # ------------------------------------------------------------------ conversions
     @classmethod
@@ -91,12 +127,18 @@ class Calibration:
         )
 
     def parameters(self, robot: RobotSpec) -> dict[str, float]:
-        """The effective parameters the calibrated odometry uses: b, D_R, D_L [m]."""
-        return {
+        """The effective parameters the calibrated odometry uses: b, D_R, D_L [m], and for a
+        skid-steer calibration (:attr:`has_icr`) Mandow et al. 2007's y_L, y_R and x_ICR [m]."""
+        out = {
             "wheelbase": self.wheelbase_scale * robot.wheelbase,
             "right_diameter": self.c_right * self.distance_scale * robot.wheel_diameter,
             "left_diameter": self.c_left * self.distance_scale * robot.wheel_diameter,
         }
+        if self.has_icr:
+            out["icr_y_left"] = self.icr_y + 0.5 * out["wheelbase"]
+            out["icr_y_right"] = self.icr_y - 0.5 * out["wheelbase"]
+            out["icr_x"] = self.icr_x
+        return out
 
     @property
     def e_d(self) -> float:
@@ -107,13 +149,17 @@ class Calibration:
         """Compose: ``other`` was estimated on a robot already corrected by ``self``.
 
         Used by iterated calibration (Borenstein & Feng 1994, §6.3 "second compensation";
-        solderspot 2014): every factor multiplies.
+        solderspot 2014): every factor multiplies. The ICR offsets [m] add: ``other``'s are
+        what the robot still showed beyond ``self``'s (exact when ``other``'s factors are 1,
+        to first order in them otherwise).
         """
         return Calibration(
             c_left=self.c_left * other.c_left,
             c_right=self.c_right * other.c_right,
             wheelbase_scale=self.wheelbase_scale * other.wheelbase_scale,
             distance_scale=self.distance_scale * other.distance_scale,
+            icr_x=self.icr_x + other.icr_x,
+            icr_y=self.icr_y + other.icr_y,
         )
 
     def ros2_parameters(self) -> dict[str, float]:
@@ -145,12 +191,22 @@ class Calibration:
         ]
         for key, value in self.ros2_parameters().items():
             lines.append(f"    {key}: {value:.9f}")
+        if self.has_icr:
+            lines.append(
+                "# Not expressible in diff_drive_controller, which turns about the wheels' "
+                f"midpoint: the ICR offsets icr_x = {self.icr_x:.6f} m, icr_y = {self.icr_y:.6f} m"
+                " (Mandow et al. 2007)."
+            )
         return "\n".join(lines) + "\n"
 
     # ------------------------------------------------------------------ TOML
     def to_dict(self) -> dict[str, float]:
-        """A TOML-ready dict."""
-        return dataclasses.asdict(self)
+        """A TOML-ready dict; the ICR offsets only when they are not 0, so that a
+        differential-drive calibration is written as it always was."""
+        out = dataclasses.asdict(self)
+        if not self.has_icr:
+            del out["icr_x"], out["icr_y"]
+        return out
 
     def save(self, path: str | Path) -> None:
         """Write ``[calibration]`` TOML atomically."""
@@ -171,8 +227,21 @@ class Calibration:
                     field=key,
                     source=where,
                 )
-            require_positive(key, value, source=where)
+            _check_field(key, value, source=where)
         return cls(**table)
+
+
+_OFFSETS = ("icr_x", "icr_y")
+"""The fields of a :class:`Calibration` that are lengths of either sign, not factors."""
+
+
+def _check_field(name: str, value: object, *, source: str | None = None) -> None:
+    """A factor must be a positive number, an ICR offset a finite one (:class:`SpecError`
+    naming the field, and the file and line when ``source`` says them)."""
+    if name in _OFFSETS:
+        require_finite(name, value, source=source)
+    else:
+        require_positive(name, value, source=source)
 
 
 def load_calibration(path: str | Path) -> Calibration:
@@ -202,6 +271,7 @@ class Odometry:
         # (odomgym._kernels.StepArrays).
         self._travel_per_tick = np.zeros((self.n, 2))
         self._wheelbase = np.zeros(self.n)
+        self._icr = np.zeros((self.n, 2))
         self.pose = np.zeros((self.n, 3))
         self.last_counts = np.zeros((self.n, 2), dtype=np.int64)
         self.wheel_speed = np.zeros((self.n, 2))
@@ -233,6 +303,7 @@ class Odometry:
             axis=1,
         )
         self._wheelbase[:] = np.array([c.wheelbase_scale for c in cal]) * self._nominal_wheelbase
+        self._icr[:] = np.array([(c.icr_x, c.icr_y) for c in cal])
 
     @property
     def travel_per_tick(self) -> FloatArray:
@@ -243,6 +314,12 @@ class Odometry:
     def effective_wheelbase(self) -> FloatArray:
         """b_eff = E_b,est · b_n of each robot (N,) [m]."""
         return np.asarray(self._wheelbase)
+
+    @property
+    def icr_offsets(self) -> FloatArray:
+        """x_ICR, y_ICR of each robot (N, 2) [m] (module docstring; zeros for a
+        differential-drive calibration)."""
+        return self._icr
 
     def reset(
         self, poses: FloatArray | None = None, indices: NDArray[np.intp] | None = None
@@ -265,6 +342,7 @@ class Odometry:
             self.last_counts,
             self._travel_per_tick,
             self._wheelbase,
+            self._icr,
             1.0 / dt,
             self.pose,
             self.wheel_speed,

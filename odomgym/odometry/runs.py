@@ -119,24 +119,43 @@ def wheel_travels(
 
 
 def wheel_steps(run: Run, robot: RobotSpec, calibration: Calibration | None = None) -> WheelSteps:
-    """``run``'s encoder counts as wheel travel and motion per step (:func:`wheel_travels`)."""
+    """``run``'s encoder counts as wheel travel and motion per step (:func:`wheel_travels`).
+
+    Raises:
+        ValueError: ``calibration`` moves the ICRs (a skid-steer calibration): its steps also
+            move sideways, which these differential-drive steps (and the Jacobians built on
+            them) do not hold; :func:`replay_odometry` replays such a calibration.
+    """
+    if calibration is not None and calibration.has_icr:
+        raise ValueError(
+            "this replay models a differential-drive odometry; the calibration's ICR offsets "
+            f"(icr_x = {calibration.icr_x:g} m, icr_y = {calibration.icr_y:g} m) need "
+            "odomgym.odometry.runs.replay_odometry"
+        )
     travels, wheelbase = wheel_travels(run, robot, calibration)
     left, right = travels[:, 0], travels[:, 1]
     return WheelSteps(left, right, wheelbase, 0.5 * (left + right), (right - left) / wheelbase)
 
 
 def integrate_steps(
-    start: FloatArray, ds: FloatArray, dtheta: FloatArray
+    start: FloatArray, ds: FloatArray, dtheta: FloatArray, lateral: FloatArray | None = None
 ) -> tuple[FloatArray, FloatArray]:
     """Midpoint dead reckoning of per-step travel ``ds`` [m] and turn ``dtheta`` [rad] from
     ``start`` (x, y [m], θ [rad]), as :class:`odomgym.odometry.calibration.Odometry` does:
-    poses (T, 3) and each step's midpoint heading μ_j = θ_j + Δθ_j/2 (T − 1,) [rad]."""
+    poses (T, 3) and each step's midpoint heading μ_j = θ_j + Δθ_j/2 (T − 1,) [rad].
+    ``lateral`` [m], each step's motion to the left of the heading (a skid-steer calibration's
+    −x_ICR·Δθ), is 0 when not given."""
     x0, y0, th0 = start
     theta = th0 + np.concatenate([[0.0], np.cumsum(dtheta)])
     mid = theta[:-1] + 0.5 * dtheta
     poses = np.empty((len(theta), 3))
-    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(ds * np.cos(mid))])
-    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(ds * np.sin(mid))])
+    c, s = np.cos(mid), np.sin(mid)
+    if lateral is None:
+        dx, dy = ds * c, ds * s
+    else:
+        dx, dy = ds * c - lateral * s, ds * s + lateral * c
+    poses[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(dx)])
+    poses[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(dy)])
     poses[:, 2] = theta
     return poses, mid
 
@@ -171,8 +190,18 @@ def replay_odometry(
 
     The odometry starts at the first ground-truth pose (the OptiOdom convention), so the
     result is directly comparable with ``run.true_pose``. Same equations as
-    :class:`odomgym.odometry.calibration.Odometry`, vectorised over the samples.
+    :class:`odomgym.odometry.calibration.Odometry`, vectorised over the samples, the ICR terms of
+    a skid-steer calibration included.
     """
+    if calibration is not None and calibration.has_icr:
+        travels, wheelbase = wheel_travels(run, robot, calibration)
+        ds = 0.5 * (travels[:, 0] + travels[:, 1])
+        dtheta = (travels[:, 1] - travels[:, 0]) / wheelbase
+        forward = ds + calibration.icr_y * dtheta
+        poses, _ = integrate_steps(
+            run.true_pose[0], forward, dtheta, lateral=-calibration.icr_x * dtheta
+        )
+        return poses
     _, _, _, ds, dtheta = wheel_steps(run, robot, calibration)
     poses, _ = integrate_steps(run.true_pose[0], ds, dtheta)
     return poses

@@ -1,0 +1,180 @@
+"""The skid-steer ICR calibration as a registered calibrator (``skid_icr``,
+:mod:`odomgym.baselines.skid_icr`) and the ICR offsets a :class:`Calibration` carries.
+
+The odometry's ICR terms are checked against Mandow et al. 2007's model as
+:mod:`odomgym.odometry.icr` writes it (an independent vectorised form), and the fit on runs
+whose ground truth *is* an ICR robot with known parameters, so that the answer is exact; the
+simulated robots' figures live in ``odomgym bench skid`` (tests/test_skid_bench.py).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from odomgym.baselines import CALIBRATORS
+from odomgym.baselines.base import default_methods
+from odomgym.baselines.skid_bench import calibration_model
+from odomgym.baselines.skid_icr import DEFAULT_RADII, SkidIcr, SkidIcrOptions, fit_icr
+from odomgym.errors import SpecError
+from odomgym.lab.experiment import ExperimentKind
+from odomgym.odometry.calibration import Calibration, Odometry, load_calibration
+from odomgym.odometry.icr import SkidModel, skid_dead_reckon
+from odomgym.odometry.runs import Run, replay_odometry, wheel_steps
+from odomgym.robot import PRESETS
+
+ROBOT = PRESETS["scout2"]
+B = ROBOT.wheelbase
+TICK = ROBOT.metres_per_tick
+
+
+def _counts(curvatures: list[float], seconds: float = 6.0) -> np.ndarray:
+    """Cumulative whole encoder counts (T, 2) of 0.05 s samples driving legs of the given
+    curvatures [1/m] at 0.3 m/s with the nominal track, each ``seconds`` long."""
+    rows = []
+    for kappa in curvatures:
+        step = 0.3 * 0.05
+        half = 0.5 * B * kappa * step
+        rows += [(step - half, step + half)] * round(seconds / 0.05)
+    travel = np.vstack(([0.0, 0.0], np.cumsum(rows, axis=0)))
+    return np.round(travel / TICK).astype(np.int64)
+
+
+def _truth(model: SkidModel, counts: np.ndarray, k: tuple[float, float]) -> Run:
+    """A run whose ground truth is ``model`` driven by wheels travelling ``k`` times their
+    nominal distance per count."""
+    travels = np.diff(counts, axis=0) * TICK * np.array(k)
+    pose = skid_dead_reckon(model, travels, np.array([0.3, -0.2, 0.4]))
+    return Run(kind="free", time=0.05 * np.arange(len(pose)), counts=counts, true_pose=pose)
+
+
+def test_the_odometry_applies_the_icr_offsets_as_mandows_model() -> None:
+    """Odometry (the compiled kernel every driver uses) and replay_odometry both dead-reckon
+    an ICR calibration exactly as Mandow et al. 2007's model with y_L, y_R = y_ICR ± E_b·b/2."""
+    counts = _counts([0.0, 1.5, -0.7, 3.0, 0.2])
+    cal = Calibration(c_left=1.01, c_right=0.99, wheelbase_scale=1.6, icr_x=0.04, icr_y=-0.02)
+    run = _truth(SkidModel("constant", B, chi_inf=1.0), counts, (1.0, 1.0))
+    odometry = Odometry(ROBOT, cal)
+    odometry.reset(run.true_pose[:1])
+    poses = []
+    for row in counts:
+        poses.append(odometry.update(row[None, :], 0.05)[0].copy())
+    model = calibration_model(cal, ROBOT)
+    assert model.kind == "icr"
+    travels = np.diff(counts, axis=0) * TICK * np.array([1.01, 0.99])
+    expected = skid_dead_reckon(model, travels, run.true_pose[0])
+    np.testing.assert_allclose(np.array(poses), expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(replay_odometry(run, ROBOT, cal), expected, rtol=0, atol=1e-12)
+    # The ICR terms matter at this size: 4 cm of x_ICR moves the end pose by centimetres.
+    plain = replay_odometry(run, ROBOT, Calibration(1.01, 0.99, 1.6))
+    assert np.hypot(*(plain[-1, :2] - expected[-1, :2])) > 0.02
+
+
+def test_zero_offsets_are_the_differential_drive_odometry_bit_for_bit() -> None:
+    counts = _counts([0.0, 2.0, -1.0])
+    run = _truth(SkidModel("constant", B, chi_inf=1.0), counts, (1.0, 1.0))
+    cal = Calibration(1.01, 0.99, 1.2, 1.02)
+    assert not cal.has_icr
+    odometry = Odometry(ROBOT, cal)
+    odometry.reset(run.true_pose[:1])
+    poses = np.array([odometry.update(row[None, :], 0.05)[0].copy() for row in counts])
+    # The differential-drive equations written out (odomgym.odometry.calibration's docstring),
+    # in the kernel's order of operations.
+    per_tick, wheelbase = odometry.travel_per_tick[0], odometry.effective_wheelbase[0]
+    pose = run.true_pose[0].copy()
+    for increment, got in zip(np.diff(counts, axis=0), poses[1:], strict=True):
+        left, right = increment[0] * per_tick[0], increment[1] * per_tick[1]
+        ds, dtheta = 0.5 * (left + right), (right - left) / wheelbase
+        mid = pose[2] + 0.5 * dtheta
+        pose += (ds * math.cos(mid), ds * math.sin(mid), dtheta)
+        np.testing.assert_array_equal(got, pose)
+
+
+def test_fit_icr_recovers_a_known_icr_robot() -> None:
+    """Ground truth from an ICR robot (y_L = 0.47, y_R = −0.43, x_ICR = 0.05 m) whose wheels
+    travel 1.01 and 0.99 times their nominal distance: the fit finds every parameter."""
+    counts = [_counts(legs) for legs in ([0.0, 2.0, -2.0], [0.5, -1.0, 0.25, 4.0], [-0.3, 1.0])]
+    truth = SkidModel("icr", B, y_left=0.47, y_right=-0.43, x_icr=0.05)
+    runs = [_truth(truth, c, (1.01, 0.99)) for c in counts]
+    fit = fit_icr(runs, ROBOT)
+    cal = fit.calibration
+    assert cal.c_left * cal.distance_scale == pytest.approx(1.01, abs=1e-7)
+    assert cal.c_right * cal.distance_scale == pytest.approx(0.99, abs=1e-7)
+    assert cal.wheelbase_scale * B == pytest.approx(0.90, abs=1e-6)
+    assert cal.icr_y == pytest.approx(0.02, abs=1e-6)
+    assert cal.icr_x == pytest.approx(0.05, abs=1e-6)
+    assert fit.rms_after < 1e-7 < fit.rms_before
+    # Gaps in the ground truth leave windows out, not NaN in the fit.
+    gappy = [_truth(truth, c, (1.01, 0.99)) for c in counts]
+    for run in gappy:
+        run.true_pose[5:60] = np.nan
+    again = fit_icr(gappy, ROBOT).calibration
+    assert again.icr_x == pytest.approx(0.05, abs=1e-6)
+    assert fit_icr(gappy, ROBOT).windows < fit.windows
+
+
+def test_a_calibration_keeps_its_icr_offsets_in_files_and_says_what_ros_cannot(
+    tmp_path: Path,
+) -> None:
+    plain = Calibration(1.01, 0.99, 1.2, 1.02)
+    assert set(plain.to_dict()) == {"c_left", "c_right", "wheelbase_scale", "distance_scale"}
+    skid = Calibration(1.0, 1.0, 1.6, 1.0, icr_x=-0.03, icr_y=0.01)
+    path = tmp_path / "cal.toml"
+    skid.save(path)
+    assert load_calibration(path) == skid
+    assert "icr_x = -0.030000 m" in skid.ros2_yaml()
+    assert "icr_x" not in plain.ros2_yaml()
+    assert plain.then(skid) == Calibration(1.01, 0.99, 1.92, 1.02, icr_x=-0.03, icr_y=0.01)
+    assert skid.parameters(ROBOT)["icr_y_left"] == pytest.approx(0.01 + 0.8 * B)
+    path.write_text("[calibration]\nc_left = 1.0\nicr_x = nan\n")
+    with pytest.raises(SpecError, match="icr_x must be finite") as info:
+        load_calibration(path)
+    assert info.value.field == "icr_x"
+    assert "cal.toml:3:" in str(info.value)
+    with pytest.raises(SpecError, match="c_left must be > 0"):
+        Calibration(c_left=-1.0, icr_x=0.1)
+
+
+def test_differential_drive_replays_refuse_an_icr_calibration() -> None:
+    run = _truth(SkidModel("constant", B, chi_inf=1.0), _counts([1.0]), (1.0, 1.0))
+    with pytest.raises(ValueError, match="ICR offsets"):
+        wheel_steps(run, ROBOT, Calibration(icr_x=0.01))
+
+
+def test_skid_icr_is_registered_with_its_experiments_and_sizing() -> None:
+    assert CALIBRATORS["skid_icr"] is SkidIcr
+    # Made for skid-steer robots: the comparisons on differential-drive robots run it only
+    # when it is named; every other method stays in them.
+    assert default_methods() == [m for m in CALIBRATORS if m != "skid_icr"]
+    assert default_methods(skid_steer=True) == list(CALIBRATORS)
+    method = SkidIcr()
+    kinds = [(e.kind, e.direction, e.size) for e in method.experiments()]
+    assert kinds[:2] == [(ExperimentKind.SQUARE, "cw", 2.0), (ExperimentKind.SQUARE, "ccw", 2.0)]
+    assert [size for kind, _, size in kinds if kind is ExperimentKind.CIRCULAR] == [
+        r for r in DEFAULT_RADII for _ in ("cw", "ccw")
+    ]
+    assert SkidIcr.budget_options(4) == {"radii": (0.5,), "runs_per_direction": 1}
+    assert SkidIcr.budget_options(16) == {"radii": DEFAULT_RADII, "runs_per_direction": 4}
+    with pytest.raises(LookupError, match="radii"):
+        SkidIcr.session_options(None)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("options", "field"),
+    [
+        ({"radii": ()}, "radii"),
+        ({"radii": (1.0, -2.0)}, "radii"),
+        ({"radii": (1.0, 1.0)}, "radii"),
+        ({"side": 0.0}, "side"),
+        ({"runs_per_direction": 0}, "runs_per_direction"),
+        ({"window": -1.0}, "window"),
+        ({"heading_weight": -0.1}, "heading_weight"),
+    ],
+)
+def test_bad_options_name_the_field(options: dict[str, object], field: str) -> None:
+    with pytest.raises(SpecError) as info:
+        SkidIcrOptions(**options)  # type: ignore[arg-type]
+    assert info.value.field == field
