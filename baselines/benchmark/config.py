@@ -20,7 +20,7 @@ from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.lab.population import BENCH_FLOORS, Population, check_bench_floor
 from odomgym.odometry.calibration import Calibration
-from odomgym.robot import RobotSpec
+from odomgym.robot import PRESETS, RobotSpec
 
 __all__ = [
     "ORACLE",
@@ -73,6 +73,20 @@ class BenchConfig:
     def __post_init__(self) -> None:
         for floor in self.floors:
             check_bench_floor(floor)
+        if self.population.base not in PRESETS:
+            raise SpecError(
+                f"unknown population base {self.population.base!r}; presets: {', '.join(PRESETS)}",
+                field="base",
+            )
+        if self.oracle and PRESETS[self.population.base].is_skid_steer:
+            # The oracle validates the robot's true geometry as its calibration; a skid-steer
+            # robot's odometry needs an apparent track that emerges from its contacts instead.
+            raise SpecError(
+                f"the oracle row needs a robot whose true geometry is its odometry's; "
+                f"{self.population.base} is skid-steer, whose apparent track emerges from its "
+                "contacts (leave the oracle out: --no-oracle, oracle=False)",
+                field="oracle",
+            )
         if self.robots < 1:
             raise SpecError(f"robots must be >= 1, got {self.robots}", field="robots")
         if self.validation_runs < 1:

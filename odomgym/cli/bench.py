@@ -62,6 +62,15 @@ def register(commands: Commands) -> None:
         help="calibrators: population size (default 100)",
     )
     parser.add_argument(
+        "--base",
+        metavar="PRESET",
+        choices=list(PRESETS),
+        help="calibrators: the preset the population's robots are drawn around (default "
+        f"labmate; one of {', '.join(PRESETS)}). A skid-steer preset adds the methods made for "
+        "skid-steer robots (skid_icr) to the default methods and leaves the oracle row out: "
+        "its apparent track emerges from the contacts, so no true geometry is its odometry's",
+    )
+    parser.add_argument(
         "--presets",
         nargs="+",
         metavar="PRESET",
@@ -101,7 +110,7 @@ def register(commands: Commands) -> None:
         action=argparse.BooleanOptionalAction,
         help="also validate each robot's true parameters as a calibration (the oracle row, the "
         "ceiling the validation noise allows) and report every method as a fraction of it "
-        "(default: on)",
+        "(default: on; off for a skid-steer --base, and refused there)",
     )
     parser.add_argument(
         "--resume",
@@ -122,7 +131,8 @@ def register(commands: Commands) -> None:
 
 
 SKID_REFUSES = (
-    "robots", "methods", "budget", "jobs", "oracle", "resume", "chunk", "backend", "ray_address",
+    "robots", "base", "methods", "budget", "jobs", "oracle", "resume", "chunk", "backend",
+    "ray_address",
 )  # fmt: skip
 """Options of ``bench calibrators`` that ``bench skid`` does not take (one line if given)."""
 
@@ -135,8 +145,6 @@ def run(args: argparse.Namespace) -> int:
         raise SpecError("--presets is an option of `odomgym bench skid`", field="--presets")
     if args.robots is None:
         args.robots = 100
-    if args.oracle is None:
-        args.oracle = True
     if args.floor is None:
         from odomgym.lab.population import BENCH_FLOORS
 
@@ -194,13 +202,17 @@ def run_calibrators(args: argparse.Namespace) -> int:
     from odomgym.baselines.base import default_methods
     from odomgym.baselines.bench_report import markdown_summary, write_outputs
     from odomgym.baselines.benchmark import Backend, BenchConfig, run_benchmark, summarize
+    from odomgym.lab.population import Population
+    from odomgym.robot import PRESETS
 
     report = Reporter.of(args)
     check_backend(args)
     backend = Backend(args.backend)
     check_output(args.out, option="--out", folder=True)
     check_methods(args.methods)
-    methods = tuple(args.methods or default_methods())
+    population = Population(base=args.base or "labmate")
+    skid = PRESETS[population.base].is_skid_steer
+    methods = tuple(args.methods or default_methods(skid_steer=skid))
     # BenchConfig names the offending field itself (SpecError).
     config = BenchConfig(
         robots=args.robots,
@@ -209,7 +221,8 @@ def run_calibrators(args: argparse.Namespace) -> int:
         budget=args.budget[0],
         extra_budgets=tuple(args.budget[1:]),
         seed=args.seed,
-        oracle=args.oracle,
+        population=population,
+        oracle=(not skid) if args.oracle is None else args.oracle,
     )
     jobs = args.jobs or os.cpu_count() or 1
     journal = Path(args.out) / JOURNAL_NAME
