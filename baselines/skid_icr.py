@@ -14,7 +14,9 @@ y_ICR = (y_L + y_R)/2 and a sideways motion of −x_ICR per radian turned
 **Experiments.** The skid-steer papers' (Mandow et al. 2007, §IV; Wang et al. 2015, §4): the
 bi-directional square (its corners are in-place spins, where the factor is largest) and one lap
 of circles of several radii each way (default 0.5, 1, 2, 4 m), measured by the lab's
-ground-truth sensor.
+ground-truth sensor; free paths on request. On a recorded session it takes every square and
+circle the session holds both ways and every free path (:meth:`SkidIcr.session_options`); runs
+of one curvature alone leave the ICR offsets loose, and the result's notes say so.
 
 **Fit.** Least squares on the motion over short windows (:func:`fit_icr`): each window of
 ``window`` seconds is dead-reckoned from its measured start pose and compared with its measured
@@ -54,13 +56,31 @@ from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Run, wheel_travels
 from odomgym.robot import RobotSpec
 
-__all__ = ["DEFAULT_RADII", "IcrFit", "SkidIcr", "SkidIcrOptions", "fit_icr"]
+__all__ = [
+    "DEFAULT_RADII",
+    "POOR_OFFSET",
+    "RECORDED_RADIUS",
+    "IcrFit",
+    "SkidIcr",
+    "SkidIcrOptions",
+    "fit_icr",
+]
 
 FloatArray = NDArray[np.float64]
+
+POOR_OFFSET = 0.05
+"""A fitted ICR offset whose standard error exceeds this fraction of the nominal track is
+reported as poorly determined [-] (5 %: 29 mm on the Scout 2.0)."""
 
 DEFAULT_RADII: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)
 """The calibration circles' radii [m], the range over which Mandow et al. (2007) and Wang et al.
 (2015) measured the ICRs move (``odomgym bench skid`` calibrates on the same)."""
+
+
+RECORDED_RADIUS = 1.0
+"""The radius [m] the circles of a recorded session are asked for: a recorded lab serves its
+circles whatever their radius (:class:`odomgym.lab.recorded.RecordedLab`), so the value only
+names one circle per run and direction; the fit never reads it."""
 
 
 @dataclass(frozen=True)
@@ -70,8 +90,11 @@ class SkidIcrOptions:
     Attributes:
         side: square side L [m] (2 m: a skid-steer robot with its nominal track turns only
             about 52° at a 90° corner, and wider squares take it far off).
-        runs_per_direction: squares per direction.
-        radii: circle radii [m], one lap of each both ways, tightest first.
+        runs_per_direction: squares per direction (0: none).
+        radii: circle radii [m], tightest first (empty: no circles).
+        circle_runs: circles of each radius per direction, one lap each.
+        free_runs: free paths (a recorded session's, or the simulator's random arcs).
+        free_length: length of a simulated free path [m].
         window: length of the fit's windows [s].
         heading_weight: weight of a window's heading error [m/rad] (0.3: 1° counts as 5 mm).
     """
@@ -79,20 +102,30 @@ class SkidIcrOptions:
     side: float = 2.0
     runs_per_direction: int = 1
     radii: tuple[float, ...] = DEFAULT_RADII
+    circle_runs: int = 1
+    free_runs: int = 0
+    free_length: float = 20.0
     window: float = 2.0
     heading_weight: float = 0.3
 
     def __post_init__(self) -> None:
         require_positive("side", self.side)
-        require_count("runs_per_direction", self.runs_per_direction, 1)
+        require_count("runs_per_direction", self.runs_per_direction, 0)
         radii = tuple(self.radii)
-        if not radii:
-            raise SpecError("radii needs at least one circle radius [m]", field="radii")
         for radius in radii:
             require_positive("radii", radius)
         if len(set(radii)) != len(radii):
             raise SpecError(f"radii must differ, got {radii}", field="radii")
         object.__setattr__(self, "radii", radii)
+        require_count("circle_runs", self.circle_runs, 1)
+        require_count("free_runs", self.free_runs, 0)
+        require_positive("free_length", self.free_length)
+        if not (self.runs_per_direction or radii or self.free_runs):
+            raise SpecError(
+                "skid_icr needs runs to fit: squares (runs_per_direction), circles (radii) or "
+                "free paths (free_runs); all are 0",
+                field="runs_per_direction",
+            )
         require_positive("window", self.window)
         if not (isinstance(self.heading_weight, int | float) and self.heading_weight >= 0.0):
             raise SpecError(
@@ -284,11 +317,21 @@ class SkidIcr(Calibrator):
         side: float = 2.0,
         runs_per_direction: int = 1,
         radii: Sequence[float] = DEFAULT_RADII,
+        circle_runs: int = 1,
+        free_runs: int = 0,
+        free_length: float = 20.0,
         window: float = 2.0,
         heading_weight: float = 0.3,
     ) -> None:
         self.options = SkidIcrOptions(
-            side, runs_per_direction, tuple(radii), window, heading_weight
+            side=side,
+            runs_per_direction=runs_per_direction,
+            radii=tuple(radii),
+            circle_runs=circle_runs,
+            free_runs=free_runs,
+            free_length=free_length,
+            window=window,
+            heading_weight=heading_weight,
         )
 
     @classmethod
@@ -307,23 +350,50 @@ class SkidIcr(Calibrator):
 
     @classmethod
     def session_options(cls, held: Holdings) -> dict[str, Any]:
-        del held
-        raise LookupError(
-            "skid_icr drives circles of radii it chooses, and a recorded session does not say "
-            "its circles' radii; diagnose a recorded skid-steer robot with `odomgym diagnose` "
-            "(its skid_track effect)"
+        """Every square, circle and free path a recorded session holds (squares and circles
+        as many as it holds both ways). Its circles are asked for at :data:`RECORDED_RADIUS`:
+        a recorded lab serves them whatever their radius, and the fit takes any shape.
+
+        Raises:
+            LookupError: the session holds none of them (straight runs and spins alone do not
+                show the ICRs: a spin does not move the tracked point far, a straight run
+                does not turn).
+        """
+        squares = min(
+            held.runs(ExperimentKind.SQUARE, "cw"), held.runs(ExperimentKind.SQUARE, "ccw")
         )
+        circles = min(
+            held.runs(ExperimentKind.CIRCULAR, "cw"), held.runs(ExperimentKind.CIRCULAR, "ccw")
+        )
+        free = held.runs(ExperimentKind.FREE)
+        if not (squares or circles or free):
+            raise LookupError(
+                "skid_icr fits squares or circles driven both ways, or free paths, and the "
+                "session holds none"
+            )
+        out: dict[str, Any] = {
+            "runs_per_direction": squares,
+            "radii": (RECORDED_RADIUS,) if circles else (),
+            "circle_runs": max(circles, 1),
+            "free_runs": free,
+        }
+        if held.side > 0.0:
+            out["side"] = held.side
+        return out
 
     def experiments(self) -> list[Experiment]:
-        """The cw and ccw squares, then one lap of each circle cw and ccw."""
+        """The cw and ccw squares, then the circles cw and ccw radius by radius, then the free
+        paths (each part left out when its count is 0)."""
         o = self.options
-        out = [
-            Experiment(ExperimentKind.SQUARE, "cw", o.runs_per_direction, o.side),
-            Experiment(ExperimentKind.SQUARE, "ccw", o.runs_per_direction, o.side),
-        ]
+        out = []
+        if o.runs_per_direction:
+            out.append(Experiment(ExperimentKind.SQUARE, "cw", o.runs_per_direction, o.side))
+            out.append(Experiment(ExperimentKind.SQUARE, "ccw", o.runs_per_direction, o.side))
         for radius in o.radii:
-            out.append(Experiment(ExperimentKind.CIRCULAR, "cw", 1, radius))
-            out.append(Experiment(ExperimentKind.CIRCULAR, "ccw", 1, radius))
+            out.append(Experiment(ExperimentKind.CIRCULAR, "cw", o.circle_runs, radius))
+            out.append(Experiment(ExperimentKind.CIRCULAR, "ccw", o.circle_runs, radius))
+        if o.free_runs:
+            out.append(Experiment(ExperimentKind.FREE, None, o.free_runs, o.free_length))
         return out
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
@@ -357,6 +427,18 @@ class SkidIcr(Calibrator):
             "x_ICR also holds any offset of the tracked point along the body: from logs the "
             "two are one (Mandow et al. 2007's ICR model; docs/skid-steer.md)"
         ]
+        # Runs of one curvature cannot separate y_ICR from the distance scale, nor x_ICR from
+        # a heading offset: say so when the fit's own errors show it.
+        loose = [
+            f"{name} ± {1e3 * std:.1f} mm"
+            for name, std in (("x_ICR", fit.std[3]), ("y_ICR", fit.std[4]))
+            if std > POOR_OFFSET * lab.robot.wheelbase
+        ]
+        if loose:
+            notes.append(
+                f"poorly determined by these runs ({', '.join(loose)}): turns of several radii "
+                "(circles of several radii, free paths) tell the ICR offsets apart"
+            )
         return CalibrationResult(
             calibration=cal,
             estimates=estimates,

@@ -18,12 +18,17 @@ import pytest
 from cli_errors import one_line_error
 
 from odomgym.baselines import CALIBRATORS
-from odomgym.baselines.base import default_methods
+from odomgym.baselines.base import Holdings, default_methods
 from odomgym.baselines.skid_bench import calibration_model
 from odomgym.baselines.skid_icr import DEFAULT_RADII, SkidIcr, SkidIcrOptions, fit_icr
+from odomgym.baselines.validation import calibrator_for_session
 from odomgym.cli import main
+from odomgym.data.optiodom import Session
 from odomgym.errors import SpecError
-from odomgym.lab.experiment import ExperimentKind
+from odomgym.floor import FLOORS
+from odomgym.lab.experiment import Experiment, ExperimentKind
+from odomgym.lab.recorded import RecordedLab
+from odomgym.lab.simulated import SimLab
 from odomgym.odometry.calibration import Calibration, Odometry, load_calibration
 from odomgym.odometry.icr import SkidModel, skid_dead_reckon
 from odomgym.odometry.runs import Run, replay_odometry, wheel_steps
@@ -161,18 +166,49 @@ def test_skid_icr_is_registered_with_its_experiments_and_sizing() -> None:
     ]
     assert SkidIcr.budget_options(4) == {"radii": (0.5,), "runs_per_direction": 1}
     assert SkidIcr.budget_options(16) == {"radii": DEFAULT_RADII, "runs_per_direction": 4}
-    with pytest.raises(LookupError, match="radii"):
-        SkidIcr.session_options(None)  # type: ignore[arg-type]
+    spins_only = Holdings(0.0, {(ExperimentKind.SPIN, "cw"): 4, (ExperimentKind.SPIN, "ccw"): 4})
+    with pytest.raises(LookupError, match="holds none"):
+        SkidIcr.session_options(spins_only)
+
+
+def test_skid_icr_calibrates_a_recorded_session_of_a_skid_steer_robot() -> None:
+    """A session (squares, circles of one radius both ways, free paths) of the World's Scout on
+    the slippery floor, served by a RecordedLab as a user's logs would be: the method takes
+    every run it can use and finds the apparent track the same lab's own calibration finds."""
+    robot = PRESETS["scout2"]
+    lab = SimLab(robot, FLOORS["slippery"], rng=np.random.default_rng(3), cruise_speed=0.3)
+    runs = []
+    for experiment in (
+        Experiment("square", "cw", 1, 2.0),
+        Experiment("square", "ccw", 1, 2.0),
+        Experiment("circular", "cw", 1, 1.0),
+        Experiment("circular", "ccw", 1, 1.0),
+        Experiment("free", None, 2, 20.0),
+    ):
+        runs += lab.perform(experiment, Calibration())
+    for k, run in enumerate(runs):
+        run.source = f"sim-{k}"
+    session = Session("sim", Path("."), "free", robot, Calibration(), 2.0, tuple(runs))
+    method = calibrator_for_session(SkidIcr, session)
+    assert method.options.runs_per_direction == 1 and method.options.free_runs == 2
+    result = method.calibrate(RecordedLab(session))
+    assert result.runs_used == len(runs)
+    assert result.calibration.has_icr
+    # The World's Scout needs about 1.7 on this floor (docs/skid-steer.md).
+    assert 1.6 < result.calibration.wheelbase_scale < 1.85
+    assert abs(result.calibration.e_d - 1.0) < 0.01
 
 
 @pytest.mark.parametrize(
     ("options", "field"),
     [
-        ({"radii": ()}, "radii"),
+        ({"radii": (), "runs_per_direction": 0}, "runs_per_direction"),
+        ({"circle_runs": 0}, "circle_runs"),
+        ({"free_runs": -1}, "free_runs"),
         ({"radii": (1.0, -2.0)}, "radii"),
         ({"radii": (1.0, 1.0)}, "radii"),
         ({"side": 0.0}, "side"),
-        ({"runs_per_direction": 0}, "runs_per_direction"),
+        ({"runs_per_direction": -1}, "runs_per_direction"),
         ({"window": -1.0}, "window"),
         ({"heading_weight": -0.1}, "heading_weight"),
     ],
