@@ -40,6 +40,7 @@ from odomgym.envs.info import LazyInfo
 from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.odometry.calibration import Calibration, load_calibration
+from odomgym.odometry.runs import require_differential
 from odomgym.robot import RobotSpec, load_robot
 from odomgym.sim.routes import Route
 from odomgym.sim.trial import OBSERVATION_NAMES, Trial
@@ -344,6 +345,7 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
                     f"covariance_k must be two finite k >= 0 [m^0.5], got {covariance_k!r}"
                 )
             covariance_k = (kl, kr)
+            require_differential(self.calibration, "covariance_k (Chong & Kleeman's covariance)")
         self.covariance_k = covariance_k
         self._set_render_mode(render_mode)
         if not (np.isfinite(dt) and dt > 0):

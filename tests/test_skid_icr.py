@@ -24,11 +24,13 @@ from odomgym.baselines.skid_icr import DEFAULT_RADII, SkidIcr, SkidIcrOptions, f
 from odomgym.baselines.validation import calibrator_for_session
 from odomgym.cli import main
 from odomgym.data.optiodom import Session
+from odomgym.envs.umbmark import UMBmarkSquareEnv
 from odomgym.errors import SpecError
 from odomgym.floor import FLOORS
 from odomgym.lab.experiment import Experiment, ExperimentKind
 from odomgym.lab.recorded import RecordedLab
 from odomgym.lab.simulated import SimLab
+from odomgym.noise.fit import run_noise_basis
 from odomgym.odometry.calibration import Calibration, Odometry, load_calibration
 from odomgym.odometry.icr import SkidModel, skid_dead_reckon
 from odomgym.odometry.runs import Run, replay_odometry, wheel_steps
@@ -146,10 +148,17 @@ def test_a_calibration_keeps_its_icr_offsets_in_files_and_says_what_ros_cannot(
         Calibration(c_left=-1.0, icr_x=0.1)
 
 
-def test_differential_drive_replays_refuse_an_icr_calibration() -> None:
+def test_differential_drive_models_refuse_an_icr_calibration() -> None:
+    """The differential-drive replays with Jacobians, Chong & Kleeman's covariance (noise fit,
+    env option) would drop a calibration's ICR steps: each says so instead."""
     run = _truth(SkidModel("constant", B, chi_inf=1.0), _counts([1.0]), (1.0, 1.0))
+    skid = Calibration(icr_x=0.01)
     with pytest.raises(ValueError, match="ICR offsets"):
-        wheel_steps(run, ROBOT, Calibration(icr_x=0.01))
+        wheel_steps(run, ROBOT, skid)
+    with pytest.raises(ValueError, match="Chong & Kleeman"):
+        run_noise_basis(run, ROBOT, skid)
+    with pytest.raises(ValueError, match="covariance_k"):
+        UMBmarkSquareEnv(robot="scout2", calibration=skid, covariance_k=(0.001, 0.001))
 
 
 def test_skid_icr_is_registered_with_its_experiments_and_sizing() -> None:

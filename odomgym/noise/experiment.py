@@ -32,7 +32,7 @@ from odomgym.noise.fit import (
     noise_samples,
 )
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run, wheel_travels
+from odomgym.odometry.runs import Run, require_differential, wheel_travels
 from odomgym.robot import PRESETS, RobotSpec
 
 __all__ = [
@@ -108,6 +108,7 @@ def with_wheel_noise(
     for name, value in (("k_left", k_left), ("k_right", k_right)):
         if not (math.isfinite(value) and value >= 0.0):
             raise ValueError(f"{name} must be a finite number >= 0 [m^1/2], got {value!r}")
+    require_differential(calibration, "the wheel-noise replay")
     cal = calibration if calibration is not None else Calibration()
     noisy = []
     for run in runs:

@@ -53,7 +53,7 @@ from scipy import optimize, stats
 
 from odomgym.noise.covariance import propagate_path
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run, return_error, wheel_travels
+from odomgym.odometry.runs import Run, require_differential, return_error, wheel_travels
 from odomgym.robot import RobotSpec
 
 __all__ = [
@@ -147,6 +147,7 @@ def run_noise_basis(
     :func:`_path_basis`), ~50× faster, and falls back to the reference for samples that turn
     more than 1 rad.
     """
+    require_differential(calibration, "Chong & Kleeman's covariance")
     cal = calibration if calibration is not None else Calibration()
     travels, wheelbase = wheel_travels(run, robot, cal)
     check_noise_run(run, travels)

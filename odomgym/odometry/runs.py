@@ -33,6 +33,7 @@ __all__ = [
     "integrate_steps",
     "replay_odometry",
     "replay_with_jacobian",
+    "require_differential",
     "return_error",
     "rotate_into",
     "step_jacobians",
@@ -118,6 +119,18 @@ def wheel_travels(
     return travels, cal.wheelbase_scale * robot.wheelbase
 
 
+def require_differential(calibration: Calibration | None, what: str) -> None:
+    """Raise ValueError unless ``calibration`` is a differential-drive one (no ICR offsets):
+    ``what`` (a model of the differential-drive odometry, e.g. Chong & Kleeman's covariance)
+    would otherwise drop the offsets' sideways and forward steps silently."""
+    if calibration is not None and calibration.has_icr:
+        raise ValueError(
+            f"{what} models a differential-drive odometry; the calibration's ICR offsets "
+            f"(icr_x = {calibration.icr_x:g} m, icr_y = {calibration.icr_y:g} m) are a "
+            "skid-steer robot's"
+        )
+
+
 def wheel_steps(run: Run, robot: RobotSpec, calibration: Calibration | None = None) -> WheelSteps:
     """``run``'s encoder counts as wheel travel and motion per step (:func:`wheel_travels`).
 
@@ -126,12 +139,7 @@ def wheel_steps(run: Run, robot: RobotSpec, calibration: Calibration | None = No
             move sideways, which these differential-drive steps (and the Jacobians built on
             them) do not hold; :func:`replay_odometry` replays such a calibration.
     """
-    if calibration is not None and calibration.has_icr:
-        raise ValueError(
-            "this replay models a differential-drive odometry; the calibration's ICR offsets "
-            f"(icr_x = {calibration.icr_x:g} m, icr_y = {calibration.icr_y:g} m) need "
-            "odomgym.odometry.runs.replay_odometry"
-        )
+    require_differential(calibration, "this replay (replay_odometry takes ICR offsets)")
     travels, wheelbase = wheel_travels(run, robot, calibration)
     left, right = travels[:, 0], travels[:, 1]
     return WheelSteps(left, right, wheelbase, 0.5 * (left + right), (right - left) / wheelbase)
