@@ -40,6 +40,7 @@ from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, perf
 from odomgym.errors import SpecError, require_count
 from odomgym.lab.experiment import Experiment, Lab
 from odomgym.odometry.calibration import Calibration
+from odomgym.selfcal.episodes import skid_prior
 from odomgym.selfcal.estimators import check_observe
 from odomgym.selfcal.menu import ACTION_MENU, STOP
 from odomgym.selfcal.session import (
@@ -288,10 +289,22 @@ class SelfCal(Calibrator):
         return self._policy(session.observation())
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
-        """Run a session in ``lab``: choose, drive with the current estimate, measure, refit."""
+        """Run a session in ``lab``: choose, drive with the current estimate, measure, refit.
+
+        A skid-steer robot without an ``initial`` calibration starts as ``SelfCalibration-v1``
+        starts it: from the apparent track of rigid contacts in a slow spin
+        (:func:`odomgym.selfcal.episodes.skid_prior`), the estimate centred there; from the
+        identity its estimator's prior range would hold E_b far below the track it needs.
+        """
         sensor = getattr(lab, "sensor", None)  # a SimLab's; else the default sonar calibrator
+        centred = initial is None and lab.robot.is_skid_steer
         session = SelfCalSession(
-            lab.robot, self.options.budget, sensor, initial, observe=self.options.observe
+            lab.robot,
+            self.options.budget,
+            sensor,
+            skid_prior(lab.robot) if centred else initial,
+            observe=self.options.observe,
+            centred=centred,
         )
         while (action := self._choose(session)) != STOP:
             experiment = session.experiment(action)
