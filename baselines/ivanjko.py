@@ -62,7 +62,7 @@ from odomgym.baselines.trajectory import sample_indices
 from odomgym.errors import require_count, require_positive
 from odomgym.lab.experiment import Experiment, ExperimentKind, Lab
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run, replay_with_jacobian
+from odomgym.odometry.runs import Run, replay_with_jacobian, require_differential
 from odomgym.robot import RobotSpec
 
 __all__ = [
@@ -278,6 +278,7 @@ class Ivanjko(Calibrator):
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the experiments with ``initial`` active, then fit and iterate."""
+        require_differential(initial, self.name)
         robot = lab.robot
         runs0, dist0 = lab.runs_used, lab.distance_used
         start = initial if initial is not None else Calibration()

@@ -53,7 +53,7 @@ from odomgym.baselines.umbmark import (
 )
 from odomgym.lab.experiment import Lab, parse_choice
 from odomgym.odometry.calibration import Calibration, wrap_angle
-from odomgym.odometry.runs import return_error
+from odomgym.odometry.runs import require_differential, return_error
 
 __all__ = [
     "HeadingMean",
@@ -220,6 +220,7 @@ class JungChung(SquareCalibrator):
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares in ``lab`` with ``initial`` and correct E_b and E_d."""
+        require_differential(initial, self.name)
         robot = lab.robot
         runs0, dist0 = lab.runs_used, lab.distance_used
         calibration = initial if initial is not None else Calibration()

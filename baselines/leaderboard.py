@@ -22,6 +22,7 @@ should compare.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -175,7 +176,11 @@ def run_leaderboard(
             for target in every:
                 if target.name == source.name:
                     continue
-                transferred = Calibration.from_parameters(target.robot, *absolute)
+                transferred = dataclasses.replace(
+                    Calibration.from_parameters(target.robot, *absolute),
+                    icr_x=result.calibration.icr_x,
+                    icr_y=result.calibration.icr_y,
+                )
                 board.cross[(method, source.name, target.name)] = evaluate(
                     target.runs, target.robot, transferred
                 )

@@ -78,7 +78,7 @@ from odomgym.baselines.base import (
 from odomgym.errors import SpecError, require_count, require_positive
 from odomgym.lab.experiment import Experiment, ExperimentKind, Lab
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run
+from odomgym.odometry.runs import Run, require_differential
 from odomgym.robot import RobotSpec
 
 __all__ = [
@@ -399,6 +399,7 @@ class LeastSquares(Calibrator):
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Perform the experiments with ``initial`` active; estimate (b, D_R, D_L)."""
+        require_differential(initial, self.name)
         runs0, dist0 = lab.runs_used, lab.distance_used
         calibration = initial if initial is not None else Calibration()
         runs: list[Run] = []

@@ -68,7 +68,7 @@ from odomgym.baselines.base import (
 from odomgym.baselines.umbmark import e_b_from_alpha, perform_squares
 from odomgym.lab.experiment import Lab
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import return_error
+from odomgym.odometry.runs import require_differential, return_error
 from odomgym.odometry.umbmark_measures import centre_of_gravity, summarize_umbmark
 
 __all__ = [
@@ -263,6 +263,7 @@ class Lee(SquareCalibrator):
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Drive the squares with ``initial`` active and correct E_d and E_b."""
+        require_differential(initial, self.name)
         robot = lab.robot
         runs0, dist0 = lab.runs_used, lab.distance_used
         calibration = initial if initial is not None else Calibration()

@@ -77,8 +77,10 @@ nominal track turns ~52° at a 90° corner, and 4 m squares would take it far of
 SKID_CALIBRATORS: dict[str, dict[str, float]] = {"skid_icr": {}}
 """The registered skid-steer calibrators and their options: ``skid_icr``
 (:mod:`odomgym.baselines.skid_icr`, Mandow et al. 2007's ICRs with the wheels' factors, from
-its own 2 m squares and circles of 0.5–4 m). Each draws from a stream of its own,
-``default_rng([seed, cell, 1])``, so that adding one leaves every other row as it was."""
+its own 2 m squares and circles of 0.5–4 m). They draw from a stream apart from the classical
+rows', ``default_rng([seed, cell, 1])`` (``cell`` the robot and floor's place in the run, as
+the classical calibrators' streams depend on it too), so that adding them left every other
+row as it was."""
 SKID_PRESETS = tuple(name for name, spec in PRESETS.items() if spec.is_skid_steer)
 """The skid-steer presets (:data:`odomgym.robot.PRESETS` with ``axle_spacing > 0``)."""
 

@@ -24,16 +24,20 @@ end pose (position [m], and heading [rad] times ``heading_weight`` [m/rad]). Win
 early error from weighting everything after it, as in :func:`odomgym.odometry.icr.fit_skid_model`,
 which fits the same model without the wheels' factors.
 
-**What it cannot tell apart.** A constant x_ICR moves the tracked point exactly as a tracking
-marker placed ahead of the body's centre would: a calibration's x_ICR is the sum of both. On a
+**What it cannot tell apart.** A constant x_ICR moves the tracked point exactly as tracking a
+point −x_ICR ahead of it would (``tests/test_icr.py``): a marker d ahead of the body's centre
+reads as x_ICR − d, its own x_ICR and the marker's offset in one number. On a
 differential-drive robot the ICRs lie on the axle, and the fit returns offsets near 0 and E_b
 near the robot's own.
 
 **Where it sits.** In :data:`odomgym.baselines.base.CALIBRATORS`, so ``odomgym calibrate
-skid_icr``, ``odomgym bench calibrators --methods skid_icr`` (a population built on a
-skid-steer preset through the API: ``Population(base="scout2")``) and ``odomgym bench skid``
-offer it; its :class:`~odomgym.odometry.calibration.Calibration` carries the ICR offsets, which
-every odometry of the project applies (the closed-loop drivers, the replays). It is made for
+skid_icr``, ``odomgym bench calibrators --base scout2`` (a population drawn around a skid-steer
+preset; through the API ``BenchConfig(population=Population(base="scout2"), oracle=False)``)
+and ``odomgym bench skid`` offer it; its :class:`~odomgym.odometry.calibration.Calibration`
+carries the ICR offsets, which every odometry of the project applies (the closed-loop drivers,
+the arc driver, the replays); the models of a differential-drive odometry (the classical
+calibrators, Chong & Kleeman's covariance, CLAPPER's estimators) refuse them in one line
+(:func:`odomgym.odometry.runs.require_differential`). It is made for
 skid-steer robots (:attr:`~odomgym.baselines.base.Calibrator.skid_steer`), so the comparisons
 of every method on differential-drive robots leave it out unless it is named.
 """
@@ -50,7 +54,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, perform
-from odomgym.errors import SpecError, require_count, require_positive
+from odomgym.errors import SpecError, require_count, require_finite, require_positive
 from odomgym.lab.experiment import Experiment, ExperimentKind, Lab
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Run, wheel_travels
@@ -111,7 +115,12 @@ class SkidIcrOptions:
     def __post_init__(self) -> None:
         require_positive("side", self.side)
         require_count("runs_per_direction", self.runs_per_direction, 0)
-        radii = tuple(self.radii)
+        try:
+            radii = tuple(self.radii)
+        except TypeError:
+            raise SpecError(
+                f"radii must be a list of circle radii [m], got {self.radii!r}", field="radii"
+            ) from None
         for radius in radii:
             require_positive("radii", radius)
         if len(set(radii)) != len(radii):
@@ -127,7 +136,7 @@ class SkidIcrOptions:
                 field="runs_per_direction",
             )
         require_positive("window", self.window)
-        if not (isinstance(self.heading_weight, int | float) and self.heading_weight >= 0.0):
+        if require_finite("heading_weight", self.heading_weight) < 0.0:
             raise SpecError(
                 f"heading_weight must be >= 0 [m/rad], got {self.heading_weight!r}",
                 field="heading_weight",

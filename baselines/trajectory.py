@@ -58,7 +58,7 @@ from odomgym.baselines.base import (
 from odomgym.errors import SpecError, require_count, require_finite, require_positive
 from odomgym.lab.experiment import Experiment, ExperimentKind, Lab, parse_choice
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run, replay_with_jacobian
+from odomgym.odometry.runs import Run, replay_with_jacobian, require_differential
 from odomgym.robot import RobotSpec
 
 __all__ = [
@@ -497,6 +497,7 @@ class Trajectory(SquaresSizing):
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Perform the experiments with ``initial`` active and fit (b, D_R, D_L) to them."""
+        require_differential(initial, self.name)
         runs0, dist0 = lab.runs_used, lab.distance_used
         calibration = initial if initial is not None else Calibration()
         runs: list[Run] = []

@@ -54,7 +54,7 @@ from odomgym.baselines.base import (
 from odomgym.errors import SpecError, require_count, require_positive
 from odomgym.lab.experiment import Experiment, ExperimentKind, Lab, parse_choice
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Run, replay_odometry, return_error
+from odomgym.odometry.runs import Run, replay_odometry, require_differential, return_error
 from odomgym.odometry.umbmark_measures import centre_of_gravity, summarize_umbmark
 from odomgym.robot import RobotSpec
 
@@ -415,6 +415,7 @@ class UMBmark(SquaresSizing):
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Run the procedure in ``lab`` from ``initial`` (default: uncalibrated)."""
+        require_differential(initial, self.name)
         robot = lab.robot
         runs0, dist0 = lab.runs_used, lab.distance_used
         calibration = initial if initial is not None else Calibration()

@@ -33,8 +33,9 @@ from odomgym.lab.simulated import SimLab
 from odomgym.noise.fit import run_noise_basis
 from odomgym.odometry.calibration import Calibration, Odometry, load_calibration
 from odomgym.odometry.icr import SkidModel, skid_dead_reckon
-from odomgym.odometry.runs import Run, replay_odometry, wheel_steps
+from odomgym.odometry.runs import Run, replay_odometry, wheel_steps, wheel_travels
 from odomgym.robot import PRESETS
+from odomgym.sim.arc_runs import circle_plan, drive_arcs
 
 ROBOT = PRESETS["scout2"]
 B = ROBOT.wheelbase
@@ -266,3 +267,34 @@ def test_bench_options_for_skid_steer_populations_fail_in_one_line(
     assert main([*argv, "--out", str(tmp_path / "out")]) == 2
     one_line_error(capsys, needle)
     assert not (tmp_path / "out").exists()
+
+
+def test_the_arc_driver_counts_the_icr_step_in_its_path_length() -> None:
+    """A circle driven by a calibration with y_ICR = 0.1 m: the body moves y_ICR·Δθ forward
+    beyond the rims' mean travel, so the driver stops when the mean travel plus that step is
+    the plan's length (2π m), not when the mean travel alone is."""
+    cal = Calibration(wheelbase_scale=1.7, icr_y=0.1)
+    (run,) = drive_arcs(
+        ROBOT, FLOORS["smooth"], [circle_plan(1.0, "ccw")], calibration=cal, cruise_speed=0.3
+    )
+    travels, wheelbase = wheel_travels(run, ROBOT, cal)
+    mean = float(travels.mean(axis=1).sum())
+    turn = float((travels[:, 1] - travels[:, 0]).sum() / wheelbase)
+    assert turn == pytest.approx(2.0 * math.pi, rel=0.02)
+    assert mean + cal.icr_y * turn == pytest.approx(2.0 * math.pi, abs=0.02)
+    assert mean < 2.0 * math.pi - 0.5  # the ICR step is 0.63 m of it
+
+
+def test_classical_calibrators_and_clapper_refuse_an_icr_calibration() -> None:
+    skid = Calibration(wheelbase_scale=1.7, icr_x=0.02)
+    lab = SimLab(ROBOT, FLOORS["smooth"], rng=np.random.default_rng(0))
+    for name in ("umbmark", "jung_chung", "lee", "ivanjko", "least_squares", "trajectory"):
+        with pytest.raises(ValueError, match=f"^{name} models a differential-drive"):
+            CALIBRATORS[name]().calibrate(lab, skid)
+    assert lab.runs_used == 0  # refused before driving
+    from odomgym.vehicle.paths import straight_path
+    from odomgym.vehicle.spec import VEHICLES
+    from odomgym.vehicle.trial import VehicleTrial
+
+    with pytest.raises(ValueError, match="CLAPPER"):
+        VehicleTrial(VEHICLES["clapper"], FLOORS["smooth"], straight_path(2.0), calibration=skid)

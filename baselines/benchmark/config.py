@@ -76,7 +76,7 @@ class BenchConfig:
         if self.population.base not in PRESETS:
             raise SpecError(
                 f"unknown population base {self.population.base!r}; presets: {', '.join(PRESETS)}",
-                field="base",
+                field="population.base",
             )
         if self.oracle and PRESETS[self.population.base].is_skid_steer:
             # The oracle validates the robot's true geometry as its calibration; a skid-steer

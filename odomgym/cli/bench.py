@@ -53,7 +53,7 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "what",
         choices=["calibrators", "skid"],
-        help="what to benchmark: calibrators (a population of differential-drive robots), or "
+        help="what to benchmark: calibrators (a population of robots drawn around --base), or "
         "skid (skid-steer odometry models and calibrators on the skid-steer presets)",
     )
     parser.add_argument(
@@ -89,7 +89,7 @@ def register(commands: Commands) -> None:
         "--methods",
         nargs="+",
         help="calibrators (default: every method made for differential-drive robots, selfcal "
-        "included: its shipped policy runs in numpy; skid_icr only when named)",
+        "included: its shipped policy runs in numpy; skid_icr too with a skid-steer --base)",
     )
     parser.add_argument(
         "--budget",

@@ -100,7 +100,9 @@ def drive_arcs(
     for a leg of curvature κ it asks for the body speed v = ``cruise_speed`` [m/s] and the yaw
     rate ω = κ·v, i.e. rim speeds v ∓ ω·b/2, and turns them into wheel rates with the
     wheelbase b and wheel diameters it *believes* (the nominal ones corrected by
-    ``calibration``) — so a calibration changes the path driven, as on a real robot. Rim
+    ``calibration``) — so a calibration changes the path driven, as on a real robot. A
+    skid-steer calibration's y_ICR moves the body y_ICR·ω forward beyond the rims' mean: the
+    rims then run at v − y_ICR·ω ∓ ω·b/2, and the odometric path length counts its y_ICR·Δθ. Rim
     speeds beyond ``max_wheel_speed`` are scaled down together (the curvature is kept). A leg
     ends when the odometry has measured its length; the next starts without stopping (the
     wheel controllers' acceleration limit smooths the change). The robot brakes when the
@@ -147,6 +149,10 @@ def drive_arcs(
     odometry = Odometry(specs, cals)
     believed = [c.parameters(s) for c, s in zip(cals, specs, strict=True)]
     half_base = np.array([0.5 * b["wheelbase"] for b in believed])
+    # A skid-steer calibration's ICRs (Mandow et al. 2007): the body moves y_ICR forward per
+    # radian turned, so the rims' mean speed is what is left of the cruise speed.
+    icr_y = np.array([c.icr_y for c in cals])
+    skid_terms = bool(np.any(icr_y != 0.0))
     radius = np.array([[0.5 * b["left_diameter"], 0.5 * b["right_diameter"]] for b in believed])
     max_speed = np.array([s.max_wheel_speed for s in specs])
     max_accel = np.array([s.max_wheel_accel for s in specs])
@@ -183,12 +189,16 @@ def drive_arcs(
         for r in np.flatnonzero(~braking).tolist():
             leg = min(int(np.searchsorted(ends[r], travelled[r], side="right")), len(ends[r]) - 1)
             omega = curvature[r][leg] * cruise_speed
-            rims = cruise_speed + np.array([-omega, omega]) * half_base[r]
+            mean = cruise_speed - icr_y[r] * omega if skid_terms else cruise_speed
+            rims = mean + np.array([-omega, omega]) * half_base[r]
             rims *= min(1.0, max_speed[r] / float(np.abs(rims).max()))
             command[r] = rims / radius[r]
         world.step(command)
+        heading = odometry.pose[:, 2].copy() if skid_terms else None
         odometry.update(world.counts, dt)
         travelled += 0.5 * odometry.wheel_speed.sum(axis=1) * dt
+        if heading is not None:
+            travelled += icr_y * (odometry.pose[:, 2] - heading)
         step += 1
         recording.store(step, record(), world.counts)
         at_rest = braking & (np.abs(odometry.wheel_speed).max(axis=1) < stop_speed)

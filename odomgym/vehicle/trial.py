@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration, Odometry, wrap_angle
+from odomgym.odometry.runs import require_differential
 from odomgym.sim.world import World
 from odomgym.vehicle.cable_layout import (
     CableLayer,
@@ -122,6 +123,10 @@ class VehicleTrial:
     ) -> None:
         if cables is not None and n != 1:
             raise ValueError("cables are laid under one vehicle: use n=1")
+        # The estimators (dead reckoning, IPEC) take the trucks' wheelbases and wheel travel
+        # only: a skid-steer calibration's ICR steps would reach the reported odometry but not
+        # the poses the vehicle is steered by.
+        require_differential(calibration, "CLAPPER's estimators (dead reckoning, IPEC)")
         self.spec, self.floor, self.path, self.n, self.cables = spec, floor, path, n, cables
         trucks = [spec.truck_a, spec.truck_b] * n
         links = [(2 * k, 2 * k + 1, spec.link_min, spec.link_max) for k in range(n)]
