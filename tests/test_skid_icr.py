@@ -252,6 +252,9 @@ def test_bench_calibrators_on_a_skid_steer_population(
     rows = results["rows"] if isinstance(results, dict) else results
     icr = next(r for r in rows if r["method"] == "skid_icr")
     assert icr["est_E_b"] > 1.3  # the apparent track, not the wheels' spacing
+    # A skid-steer population's rows carry the ICR offsets (0 for a classical method).
+    assert icr["est_icr_x"] != 0.0
+    assert next(r for r in rows if r["method"] == "umbmark")["est_icr_x"] == 0.0
 
 
 @pytest.mark.parametrize(

@@ -127,6 +127,16 @@ def _row(
         estimate = (math.nan, math.nan, math.nan)
     else:
         estimate = (calibration.e_d, calibration.wheelbase_scale, calibration.distance_scale)
+    # A skid-steer population's rows also hold the ICR offsets [m] a calibration carries
+    # (0 for the differential-drive methods); a differential-drive one's rows are as before.
+    icr = (
+        {
+            "est_icr_x": math.nan if calibration is None else calibration.icr_x,
+            "est_icr_y": math.nan if calibration is None else calibration.icr_y,
+        }
+        if robot.is_skid_steer
+        else {}
+    )
     return {
         "method": label,
         "budget": budget,
@@ -138,6 +148,7 @@ def _row(
         "est_E_d": estimate[0],
         "est_E_b": estimate[1],
         "est_E_s": estimate[2],
+        **icr,
         "runs_used": result.runs_used if result is not None else 0,
         "distance_m": result.distance_used if result is not None else 0.0,
         "wall_time_s": wall,
