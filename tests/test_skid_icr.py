@@ -301,3 +301,39 @@ def test_classical_calibrators_and_clapper_refuse_an_icr_calibration() -> None:
 
     with pytest.raises(ValueError, match="CLAPPER"):
         VehicleTrial(VEHICLES["clapper"], FLOORS["smooth"], straight_path(2.0), calibration=skid)
+
+
+def test_the_leaderboard_carries_a_calibrations_icr_offsets_to_the_other_sessions() -> None:
+    """``leaderboard --methods skid_icr`` on the shipped (differential-drive) square sessions:
+    each calibration is judged on the other sessions with its ICR offsets, not only with the
+    b, D_R, D_L the board tabulates."""
+    from odomgym.baselines.leaderboard import evaluate, run_leaderboard
+    from odomgym.data import sample_data
+    from odomgym.data.optiodom import find_sessions, read_session
+
+    root = sample_data()
+    board = run_leaderboard(root, methods=["skid_icr"], path_types=("square",))
+    sessions = {s.name: s for s in (read_session(p) for p in find_sessions(root))}
+    (source, target), *_ = [(s, t) for (_, s, t) in board.cross]
+    own = (
+        SkidIcr(
+            **SkidIcr.session_options(
+                Holdings(sessions[source].side, RecordedLab(sessions[source]).holdings())
+            )
+        )
+        .calibrate(RecordedLab(sessions[source]), sessions[source].initial)
+        .calibration
+    )
+    assert own.has_icr
+    params = own.parameters(sessions[source].robot)
+    moved = Calibration.from_parameters(
+        sessions[target].robot, params["wheelbase"], params["right_diameter"],
+        params["left_diameter"],
+    )  # fmt: skip
+    with_icr = Calibration(
+        moved.c_left, moved.c_right, moved.wheelbase_scale, moved.distance_scale,
+        icr_x=own.icr_x, icr_y=own.icr_y,
+    )  # fmt: skip
+    got = board.cross[("skid_icr", source, target)]
+    assert got == evaluate(sessions[target].runs, sessions[target].robot, with_icr)
+    assert got != evaluate(sessions[target].runs, sessions[target].robot, moved)
