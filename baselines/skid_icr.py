@@ -187,7 +187,7 @@ def _windows(runs: Sequence[Run], robot: RobotSpec, window: float) -> _Windows:
         travel, _ = wheel_travels(run, robot)
         period = float(np.median(np.diff(run.time)))
         n = max(1, round(window / period)) if period > 0 else 1
-        known = np.isfinite(run.true_pose).all(axis=1)
+        known: NDArray[np.bool_] = np.asarray(np.isfinite(run.true_pose).all(axis=1))
         for a in range(0, run.time.shape[0] - 1, n):
             b = min(a + n, run.time.shape[0] - 1)
             if not (known[a] and known[b]):
