@@ -13,6 +13,8 @@ own, which the command line, the benchmark and the leaderboard then offer (worke
 * ``trajectory`` — OptiOdom-style optimisation over whole trajectories;
 * ``skid_icr`` — Mandow et al.'s ICR model of a skid-steer robot (the sides' ICRs and the
   apparent track) with the wheels' factors, from squares and circles of several radii;
+* ``skid_curvature`` — a skid-steer robot's apparent track that moves with the turn (Wang et
+  al.'s form), with the wheels' factors, from the same runs;
 * ``selfcal`` — a learned policy that chooses the experiments, with a Kalman filter along the
   measured runs (``SelfCalibration-v1``; the shipped policy runs in numpy, no torch needed);
 * ``selfcal_scripted`` — the same estimator with a fixed schedule (the policy's ablation);
@@ -27,7 +29,7 @@ from odomgym.baselines.jung_chung import JungChung
 from odomgym.baselines.least_squares import LeastSquares
 from odomgym.baselines.lee import Lee
 from odomgym.baselines.selfcal import SelfCal, SelfCalEndPose, SelfCalScripted
-from odomgym.baselines.skid_icr import SkidIcr
+from odomgym.baselines.skid_icr import SkidCurvature, SkidIcr
 from odomgym.baselines.trajectory import Trajectory
 from odomgym.baselines.umbmark import UMBmark
 
@@ -40,6 +42,7 @@ for _cls in (
     LeastSquares,
     Trajectory,
     SkidIcr,
+    SkidCurvature,
     SelfCal,
     SelfCalScripted,
     SelfCalEndPose,
@@ -57,6 +60,7 @@ __all__ = [
     "SelfCal",
     "SelfCalEndPose",
     "SelfCalScripted",
+    "SkidCurvature",
     "SkidIcr",
     "Trajectory",
     "UMBmark",

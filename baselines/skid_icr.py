@@ -1,4 +1,5 @@
-"""The skid-steer ICR calibration (Mandow et al. 2007) as a registered calibrator, ``skid_icr``.
+"""The skid-steer models as registered calibrators: ``skid_icr`` (Mandow et al. 2007's ICRs)
+and ``skid_curvature`` (a track that moves with the turn, Wang et al. 2015's form).
 
 A skid-steer robot turns about instantaneous centres of rotation (ICRs) of its sides that lie
 outside its wheels (Mandow et al. 2007, Eqs. 4–6): the left side's at (x_ICR, y_L), the right
@@ -11,6 +12,13 @@ y_ICR = (y_L + y_R)/2 and a sideways motion of −x_ICR per radian turned
     E_b        the apparent track over the nominal b_n (the expansion factor χ) [-]
     x_ICR, y_ICR   the ICRs' offsets [m]
 
+``skid_curvature`` (:class:`SkidCurvature`) fits, from the same runs and in the same windows,
+the wheels' factors and an apparent track that widens as the turn tightens instead of the ICRs:
+b_eff(λ) = b_n·(E_b + α/(1 + (β·|λ|)^p)) with λ = (Δs_L + Δs_R)/(Δs_R − Δs_L) per period
+(:mod:`odomgym.odometry.calibration`), the curvature model of :mod:`odomgym.odometry.icr`.
+Constant ICRs cannot be right both in a spin and on a wide arc of a symmetric robot; the curve
+can (docs/skid-steer.md).
+
 **Experiments.** The skid-steer papers' (Mandow et al. 2007, §IV; Wang et al. 2015, §4): the
 bi-directional square (its corners are in-place spins, where the factor is largest) and one lap
 of circles of several radii each way (default 0.5, 1, 2, 4 m), measured by the lab's
@@ -18,7 +26,7 @@ ground-truth sensor; free paths on request. On a recorded session it takes every
 circle the session holds both ways and every free path (:meth:`SkidIcr.session_options`); runs
 of one curvature alone leave the ICR offsets loose, and the result's notes say so.
 
-**Fit.** Least squares on the motion over short windows (:func:`fit_icr`): each window of
+**Fit.** Least squares on the motion over short windows (:func:`fit_skid`): each window of
 ``window`` seconds is dead-reckoned from its measured start pose and compared with its measured
 end pose (position [m], and heading [rad] times ``heading_weight`` [m/rad]). Windows keep one
 early error from weighting everything after it, as in :func:`odomgym.odometry.icr.fit_skid_model`,
@@ -47,7 +55,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,12 +73,16 @@ __all__ = [
     "POOR_OFFSET",
     "RECORDED_RADIUS",
     "IcrFit",
+    "SkidCurvature",
+    "SkidFitModel",
     "SkidIcr",
     "SkidIcrOptions",
     "fit_icr",
+    "fit_skid",
 ]
 
 FloatArray = NDArray[np.float64]
+SkidFitModel = Literal["icr", "curvature"]
 
 POOR_OFFSET = 0.05
 """A fitted ICR offset whose standard error exceeds this fraction of the nominal track is
@@ -152,8 +164,9 @@ class IcrFit:
         windows: how many windows entered the fit.
         rms_before, rms_after: RMS window end-position error [m] with the starting and the
             fitted calibration.
-        std: standard errors of (ln k_L, ln k_R, ln E_b, x_ICR [m], y_ICR [m]) from the
-            Gauss–Newton covariance (windows treated as independent, so optimistic).
+        std: standard errors of the fit's parameters (:func:`_calibration`'s order: for the
+            ICR model ln k_L, ln k_R, ln E_b, x_ICR [m], y_ICR [m]) from the Gauss–Newton
+            covariance (windows treated as independent, so optimistic).
         evaluations: residual evaluations.
     """
 
@@ -161,7 +174,7 @@ class IcrFit:
     windows: int
     rms_before: float
     rms_after: float
-    std: tuple[float, float, float, float, float]
+    std: tuple[float, ...]
     evaluations: int
 
 
@@ -210,28 +223,40 @@ def _windows(runs: Sequence[Run], robot: RobotSpec, window: float) -> _Windows:
     )
 
 
-def _calibration(p: FloatArray) -> Calibration:
-    """The calibration of the fit's parameters p = (ln k_L, ln k_R, ln E_b, x_ICR, y_ICR)."""
+def _calibration(p: FloatArray, model: SkidFitModel) -> Calibration:
+    """The calibration of the fit's parameters: p = (ln k_L, ln k_R, ln E_b, x_ICR, y_ICR) for
+    ``icr``; (ln k_L, ln k_R, ln χ_∞, α, ln β, ln p) for ``curvature``, χ_∞ its E_b."""
     k_left, k_right = math.exp(p[0]), math.exp(p[1])
     mean = 0.5 * (k_left + k_right)
+    wheels = {
+        "c_left": k_left / mean,
+        "c_right": k_right / mean,
+        "wheelbase_scale": math.exp(p[2]),
+        "distance_scale": mean,
+    }
+    if model == "icr":
+        return Calibration(**wheels, icr_x=float(p[3]), icr_y=float(p[4]))
     return Calibration(
-        c_left=k_left / mean,
-        c_right=k_right / mean,
-        wheelbase_scale=math.exp(p[2]),
-        distance_scale=mean,
-        icr_x=float(p[3]),
-        icr_y=float(p[4]),
+        **wheels,
+        track_alpha=float(p[3]),
+        track_beta=math.exp(p[4]),
+        track_power=math.exp(p[5]),
     )
 
 
-def _window_ends(p: FloatArray, w: _Windows, track: float) -> FloatArray:
-    """Each window's end pose (windows, 3), dead-reckoned from its measured start with the
-    calibration of ``p`` (the equations of :class:`odomgym.odometry.calibration.Odometry`)."""
-    left = w.travels[:, 0] * math.exp(p[0])
-    right = w.travels[:, 1] * math.exp(p[1])
-    dtheta = (right - left) / (math.exp(p[2]) * track)
-    forward = 0.5 * (left + right) + p[4] * dtheta
-    leftward = -p[3] * dtheta
+def _window_ends(cal: Calibration, w: _Windows, track: float) -> FloatArray:
+    """Each window's end pose (windows, 3), dead-reckoned from its measured start with ``cal``
+    (the equations of :class:`odomgym.odometry.calibration.Odometry`, every skid-steer term)."""
+    left = w.travels[:, 0] * (cal.c_left * cal.distance_scale)
+    right = w.travels[:, 1] * (cal.c_right * cal.distance_scale)
+    difference = right - left
+    if cal.has_track_curve:
+        lam = (right + left) / np.where(np.abs(difference) > 1e-12, difference, 1e-12)
+        dtheta = difference / (cal.track_factor(lam) * track)
+    else:
+        dtheta = difference / (cal.wheelbase_scale * track)
+    forward = 0.5 * (left + right) + cal.icr_y * dtheta
+    leftward = -cal.icr_x * dtheta
     # Each step's heading before it, within its window: a running sum restarted per window.
     total = np.concatenate(([0.0], np.cumsum(dtheta)))
     owner = np.repeat(np.arange(len(w.first)), np.diff(np.append(w.first, len(dtheta))))
@@ -244,41 +269,62 @@ def _window_ends(p: FloatArray, w: _Windows, track: float) -> FloatArray:
     return np.column_stack((w.start[:, 0] + dx, w.start[:, 1] + dy, w.start[:, 2] + turn))
 
 
-def fit_icr(
+def _start_and_bounds(
+    start: Calibration, model: SkidFitModel, track: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The fit's first point and bounds. The bounds keep the model a robot: wheels within a
+    factor 1.65 of their nominal travel, a track between a fifth and ten times the nominal,
+    ICRs within ten tracks; a curve that widens the track as the turn tightens (α ≥ 0) with β
+    in 10⁻³…10³ and a power in ¼…4 (as :func:`odomgym.odometry.icr.fit_skid_model`)."""
+    wheels = [
+        math.log(start.c_left * start.distance_scale),
+        math.log(start.c_right * start.distance_scale),
+        math.log(start.wheelbase_scale),
+    ]
+    if model == "icr":
+        reach = 10.0 * track
+        p0 = np.array([*wheels, start.icr_x, start.icr_y])
+        low = np.array([-0.5, -0.5, math.log(0.2), -reach, -reach])
+        high = np.array([0.5, 0.5, math.log(10.0), reach, reach])
+    else:
+        # From a constant track the curve starts at α = 0.5, β = 0.3, p = 1 (a spin's track
+        # half a nominal wider than a straight path's), where its gradient is not zero.
+        curve = (
+            [start.track_alpha, math.log(start.track_beta), math.log(start.track_power)]
+            if start.has_track_curve
+            else [0.5, math.log(0.3), 0.0]
+        )
+        p0 = np.array([*wheels, *curve])
+        low = np.array([-0.5, -0.5, math.log(0.2), 0.0, math.log(1e-3), math.log(0.25)])
+        high = np.array([0.5, 0.5, math.log(10.0), 10.0, math.log(1e3), math.log(4.0)])
+    return np.clip(p0, low + 1e-9, high - 1e-9), low, high
+
+
+def fit_skid(
     runs: Sequence[Run],
     robot: RobotSpec,
+    model: SkidFitModel = "icr",
     initial: Calibration | None = None,
     *,
     window: float = 2.0,
     heading_weight: float = 0.3,
 ) -> IcrFit:
-    """Fit the wheels' factors, the apparent track and the ICR offsets to ``runs`` (module
-    docstring), starting from ``initial`` (default: uncalibrated).
+    """Fit the wheels' factors and ``model``'s skid-steer terms to ``runs`` (module docstring),
+    starting from ``initial`` (default: uncalibrated): ``icr`` the apparent track and the ICR
+    offsets (Mandow et al. 2007), ``curvature`` a track that moves with the turn (Wang et al.
+    2015's form, with a free asymptote and power).
 
     Raises:
         SpecError: no window with measured poses at both ends (``field`` = ``runs``).
     """
     w = _windows(runs, robot, window)
     track = float(robot.wheelbase)
-    start = initial if initial is not None else Calibration()
-    p0 = np.array(
-        [
-            math.log(start.c_left * start.distance_scale),
-            math.log(start.c_right * start.distance_scale),
-            math.log(start.wheelbase_scale),
-            start.icr_x,
-            start.icr_y,
-        ]
+    p0, low, high = _start_and_bounds(
+        initial if initial is not None else Calibration(), model, track
     )
-    # Bounds keep the model a robot: wheels within a factor 1.65 of their nominal travel, an
-    # apparent track between a fifth and ten times the nominal, ICRs within ten tracks.
-    reach = 10.0 * track
-    low = np.array([-0.5, -0.5, math.log(0.2), -reach, -reach])
-    high = np.array([0.5, 0.5, math.log(10.0), reach, reach])
-    p0 = np.clip(p0, low + 1e-9, high - 1e-9)
 
     def residual(p: FloatArray) -> FloatArray:
-        ends = _window_ends(p, w, track)
+        ends = _window_ends(_calibration(p, model), w, track)
         out = np.empty((len(w.first), 3))
         out[:, :2] = ends[:, :2] - w.end[:, :2]
         out[:, 2] = heading_weight * np.remainder(ends[:, 2] - w.end[:, 2] + math.pi, math.tau)
@@ -293,16 +339,29 @@ def fit_icr(
     p = np.asarray(fit.x, dtype=float)
     final = np.asarray(fit.fun, dtype=float)
     jac = np.asarray(fit.jac, dtype=float)
-    variance = float(final @ final) / max(final.size - 5, 1)
+    variance = float(final @ final) / max(final.size - p.size, 1)
     std = np.sqrt(np.clip(np.diag(variance * np.linalg.pinv(jac.T @ jac)), 0.0, None))
     return IcrFit(
-        calibration=_calibration(p),
+        calibration=_calibration(p, model),
         windows=len(w.first),
         rms_before=rms(p0),
         rms_after=rms(p),
-        std=(float(std[0]), float(std[1]), float(std[2]), float(std[3]), float(std[4])),
+        std=tuple(float(x) for x in std),
         evaluations=int(fit.nfev),
     )
+
+
+def fit_icr(
+    runs: Sequence[Run],
+    robot: RobotSpec,
+    initial: Calibration | None = None,
+    *,
+    window: float = 2.0,
+    heading_weight: float = 0.3,
+) -> IcrFit:
+    """:func:`fit_skid` of Mandow et al. 2007's ICR model: the wheels' factors, the apparent
+    track and the ICR offsets."""
+    return fit_skid(runs, robot, "icr", initial, window=window, heading_weight=heading_weight)
 
 
 class SkidIcr(Calibrator):
@@ -320,6 +379,8 @@ class SkidIcr(Calibrator):
     min_budget: ClassVar[int] = 4
     """One square and one circle each way."""
     skid_steer: ClassVar[bool] = True
+    model: ClassVar[SkidFitModel] = "icr"
+    """Which skid-steer terms the fit frees beside the wheels' factors (:func:`fit_skid`)."""
 
     def __init__(
         self,
@@ -406,48 +467,30 @@ class SkidIcr(Calibrator):
         return out
 
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
-        """Drive the experiments with ``initial`` in the odometry and fit (:func:`fit_icr`)."""
+        """Drive the experiments with ``initial`` in the odometry and fit (:func:`fit_skid`)."""
         driving = initial if initial is not None else Calibration()
         runs0, dist0 = lab.runs_used, lab.distance_used
         runs: list[Run] = []
         for experiment in self.experiments():
             runs += perform(lab, experiment, driving, method=self.name)
-        fit = fit_icr(
+        fit = fit_skid(
             runs,
             lab.robot,
+            self.model,
             driving,
             window=self.options.window,
             heading_weight=self.options.heading_weight,
         )
         cal = fit.calibration
-        b = cal.wheelbase_scale * lab.robot.wheelbase
         estimates = {
             "E_d": cal.e_d,
             "E_b": cal.wheelbase_scale,
             "E_s": cal.distance_scale,
-            "x_icr": cal.icr_x,
-            "y_icr": cal.icr_y,
-            "y_left": cal.icr_y + 0.5 * b,
-            "y_right": cal.icr_y - 0.5 * b,
+            **self._estimates(cal, lab.robot),
             "rms_before_m": fit.rms_before,
             "rms_after_m": fit.rms_after,
         }
-        notes = [
-            "x_ICR also holds any offset of the tracked point along the body: from logs the "
-            "two are one (Mandow et al. 2007's ICR model; docs/skid-steer.md)"
-        ]
-        # Runs of one curvature cannot separate y_ICR from the distance scale, nor x_ICR from
-        # a heading offset: say so when the fit's own errors show it.
-        loose = [
-            f"{name} ± {1e3 * std:.1f} mm"
-            for name, std in (("x_ICR", fit.std[3]), ("y_ICR", fit.std[4]))
-            if std > POOR_OFFSET * lab.robot.wheelbase
-        ]
-        if loose:
-            notes.append(
-                f"poorly determined by these runs ({', '.join(loose)}): turns of several radii "
-                "(circles of several radii, free paths) tell the ICR offsets apart"
-            )
+        notes = self._notes(fit, lab.robot)
         return CalibrationResult(
             calibration=cal,
             estimates=estimates,
@@ -455,3 +498,76 @@ class SkidIcr(Calibrator):
             distance_used=lab.distance_used - dist0,
             notes=notes,
         )
+
+    def _estimates(self, cal: Calibration, robot: RobotSpec) -> dict[str, float]:
+        """The model's own quantities for the report: the ICRs [m]."""
+        b = cal.wheelbase_scale * robot.wheelbase
+        return {
+            "x_icr": cal.icr_x,
+            "y_icr": cal.icr_y,
+            "y_left": cal.icr_y + 0.5 * b,
+            "y_right": cal.icr_y - 0.5 * b,
+        }
+
+    def _notes(self, fit: IcrFit, robot: RobotSpec) -> list[str]:
+        """What a user should know: x_ICR's confound with the tracked point, and offsets the
+        runs left loose (runs of one curvature cannot separate y_ICR from the distance scale,
+        nor x_ICR from a heading offset)."""
+        notes = [
+            "x_ICR also holds any offset of the tracked point along the body: from logs the "
+            "two are one (Mandow et al. 2007's ICR model; docs/skid-steer.md)"
+        ]
+        loose = [
+            f"{name} ± {1e3 * std:.1f} mm"
+            for name, std in (("x_ICR", fit.std[3]), ("y_ICR", fit.std[4]))
+            if std > POOR_OFFSET * robot.wheelbase
+        ]
+        if loose:
+            notes.append(
+                f"poorly determined by these runs ({', '.join(loose)}): turns of several radii "
+                "(circles of several radii, free paths) tell the ICR offsets apart"
+            )
+        return notes
+
+
+class SkidCurvature(SkidIcr):
+    """An apparent track that moves with the turn, fitted with the wheels' factors: b_eff(λ)
+    = b_n·(E_b + α/(1 + (β·|λ|)^p)), Wang et al. 2015's form with a free asymptote E_b and
+    power p (:mod:`odomgym.odometry.calibration`), from the same experiments as
+    :class:`SkidIcr`. Its :class:`~odomgym.odometry.calibration.Calibration` carries α, β, p
+    as ``track_alpha``, ``track_beta``, ``track_power``.
+
+    Args: the fields of :class:`SkidIcrOptions`.
+    """
+
+    name: ClassVar[str] = "skid_curvature"
+    reference: ClassVar[str] = (
+        "T. Wang, Y. Wu, J. Liang, C. Han, J. Chen, Q. Zhao, Analysis and experimental "
+        "kinematics of a skid-steering wheeled robot based on a laser scanner sensor, "
+        "Sensors 15(5):9681-9702, 2015"
+    )
+    model: ClassVar[SkidFitModel] = "curvature"
+
+    def _estimates(self, cal: Calibration, robot: RobotSpec) -> dict[str, float]:
+        """The curve's parameters and the track it gives in a spin and on a 1 m and 5 m arc
+        of the nominal track (λ = R/(b_n/2)) [-]."""
+        half = 0.5 * robot.wheelbase
+        return {
+            "alpha": cal.track_alpha,
+            "beta": cal.track_beta,
+            "power": cal.track_power,
+            "factor_spin": float(cal.track_factor(0.0)),
+            "factor_1m": float(cal.track_factor(1.0 / half)),
+            "factor_5m": float(cal.track_factor(5.0 / half)),
+        }
+
+    def _notes(self, fit: IcrFit, robot: RobotSpec) -> list[str]:
+        """Whether the track moves with the turn beyond the fit's own error."""
+        del robot
+        alpha, std = fit.calibration.track_alpha, fit.std[3]
+        if alpha <= 2.0 * std:
+            return [
+                f"the track's curve is within its error (alpha {alpha:.4f} ± {std:.4f}): a "
+                "constant track (skid_icr or a classical calibrator) describes these runs"
+            ]
+        return []

@@ -541,16 +541,17 @@ def integrate_odometry(
     last_counts: NDArray[np.int64],
     travel_per_tick: FloatArray,
     wheelbase: FloatArray,
-    icr: FloatArray,
+    skid: FloatArray,
     inv_dt: float,
     pose: FloatArray,
     wheel_speed: FloatArray,
 ) -> None:
     """Midpoint dead reckoning of one sampling period, in place
     (:mod:`odomgym.odometry.calibration`'s equations): ``pose`` (N, 3) and ``wheel_speed``
-    (N, 2) [m/s] from cumulative ``counts``; ``icr`` (N, 2) the calibrations' x_ICR, y_ICR [m].
-    A robot whose ICR offsets are both 0 takes the differential-drive equations alone, so its
-    results do not depend on the skid-steer terms' rounding."""
+    (N, 2) [m/s] from cumulative ``counts``; ``skid`` (N, 5) the calibrations' skid-steer terms
+    (:func:`odomgym.odometry.calibration.skid_terms`: x_ICR, y_ICR [m], α/E_b, β, p). A robot
+    whose x_ICR, y_ICR and α are 0 takes the differential-drive equations alone, so its results
+    do not depend on the skid-steer terms' rounding."""
     for i in range(counts.shape[0]):
         left = (counts[i, 0] - last_counts[i, 0]) * travel_per_tick[i, 0]
         right = (counts[i, 1] - last_counts[i, 1]) * travel_per_tick[i, 1]
@@ -559,14 +560,22 @@ def integrate_odometry(
         wheel_speed[i, 0] = left * inv_dt
         wheel_speed[i, 1] = right * inv_dt
         ds = 0.5 * (left + right)
-        dtheta = (right - left) / wheelbase[i]
+        if skid[i, 2] == 0.0:
+            dtheta = (right - left) / wheelbase[i]
+        else:
+            # The track at this period's λ = (L + R)/(R − L); the 1e-12 m floor keeps a step
+            # that does not turn at the straight-path track (as odomgym.odometry.icr does).
+            difference = right - left
+            lam = (right + left) / (difference if abs(difference) > 1e-12 else 1e-12)
+            curve = skid[i, 2] / (1.0 + (skid[i, 3] * abs(lam)) ** skid[i, 4])
+            dtheta = difference / (wheelbase[i] * (1.0 + curve))
         mid = pose[i, 2] + 0.5 * dtheta
-        if icr[i, 0] == 0.0 and icr[i, 1] == 0.0:
+        if skid[i, 0] == 0.0 and skid[i, 1] == 0.0:
             pose[i, 0] += ds * math.cos(mid)
             pose[i, 1] += ds * math.sin(mid)
         else:
-            forward = ds + icr[i, 1] * dtheta
-            leftward = -icr[i, 0] * dtheta
+            forward = ds + skid[i, 1] * dtheta
+            leftward = -skid[i, 0] * dtheta
             c = math.cos(mid)
             s = math.sin(mid)
             pose[i, 0] += forward * c - leftward * s
@@ -682,7 +691,7 @@ def after_step(
     last_counts: NDArray[np.int64],
     travel_per_tick: FloatArray,
     wheelbase: FloatArray,
-    icr: FloatArray,
+    skid: FloatArray,
     inv_dt: float,
     pose: FloatArray,
     wheel_speed: FloatArray,
@@ -699,7 +708,7 @@ def after_step(
 ) -> None:
     """:func:`integrate_odometry` then :func:`route_update` (moving on to the next segment)."""
     integrate_odometry(
-        counts, last_counts, travel_per_tick, wheelbase, icr, inv_dt, pose, wheel_speed
+        counts, last_counts, travel_per_tick, wheelbase, skid, inv_dt, pose, wheel_speed
     )
     route_update(
         pose,
@@ -771,7 +780,7 @@ def episode_report(
 #: wheel rate per unit action [rad/s], then what :meth:`odomgym.sim.world.World.step_arrays`
 #: returns: packed state, encoder counts, contact velocities, the Chipmunk link's addresses,
 #: headers, buffer and bodies, the clock [s]), the odometry's (last counts, travel per tick [m],
-#: wheelbase [m], ICR offsets [m], pose, wheel speeds [m/s]), the trial's top wheel speeds
+#: wheelbase [m], skid-steer terms, pose, wheel speeds [m/s]), the trial's top wheel speeds
 #: [m/s], the route's
 #: (:meth:`odomgym.sim.routes.RouteProgress.step_arrays`), the trial's start poses, and the
 #: substep [s], substeps per step and control period [s].
@@ -788,7 +797,7 @@ STEP_FIELDS = (
     "last_counts",
     "travel_per_tick",
     "wheelbase",
-    "icr",
+    "skid",
     "odom_pose",
     "wheel_speed",
     "max_speed",
@@ -873,7 +882,7 @@ def control_step(
         a.last_counts,
         a.travel_per_tick,
         a.wheelbase,
-        a.icr,
+        a.skid,
         1.0 / a.dt,
         a.odom_pose,
         a.wheel_speed,

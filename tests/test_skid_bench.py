@@ -35,6 +35,8 @@ def test_the_curvature_model_beats_one_constant_factor_on_a_tyred_robot(
     assert heading["constant"] < heading["trajectory"] < heading["nominal"], heading
     # The registered ICR calibrator drives its own circles and beats the classical ones.
     assert heading["skid_icr"] < 0.5 * heading["trajectory"], heading
+    # ... and the registered curve calibrator is as good as the curvature model fitted alone.
+    assert heading["skid_curvature"] < 0.5 * heading["constant"], heading
     assert rows["skid_icr"]["parameters"]["kind"] == "icr"
     assert rows["constant"]["parameters"]["chi_inf"] > 1.3  # the track an odometry needs
     for name in ("skid_models.md", "skid_models.json", "skid_models.png"):

@@ -20,7 +20,14 @@ from cli_errors import one_line_error
 from odomgym.baselines import CALIBRATORS
 from odomgym.baselines.base import Holdings, default_methods
 from odomgym.baselines.skid_bench import calibration_model
-from odomgym.baselines.skid_icr import DEFAULT_RADII, SkidIcr, SkidIcrOptions, fit_icr
+from odomgym.baselines.skid_icr import (
+    DEFAULT_RADII,
+    SkidCurvature,
+    SkidIcr,
+    SkidIcrOptions,
+    fit_icr,
+    fit_skid,
+)
 from odomgym.baselines.validation import calibrator_for_session
 from odomgym.cli import main
 from odomgym.data.optiodom import Session
@@ -166,7 +173,8 @@ def test_skid_icr_is_registered_with_its_experiments_and_sizing() -> None:
     assert CALIBRATORS["skid_icr"] is SkidIcr
     # Made for skid-steer robots: the comparisons on differential-drive robots run it only
     # when it is named; every other method stays in them.
-    assert default_methods() == [m for m in CALIBRATORS if m != "skid_icr"]
+    skid = {"skid_icr", "skid_curvature"}
+    assert default_methods() == [m for m in CALIBRATORS if m not in skid]
     assert default_methods(skid_steer=True) == list(CALIBRATORS)
     method = SkidIcr()
     kinds = [(e.kind, e.direction, e.size) for e in method.experiments()]
@@ -337,3 +345,85 @@ def test_the_leaderboard_carries_a_calibrations_icr_offsets_to_the_other_session
     got = board.cross[("skid_icr", source, target)]
     assert got == evaluate(sessions[target].runs, sessions[target].robot, with_icr)
     assert got != evaluate(sessions[target].runs, sessions[target].robot, moved)
+
+
+CURVE = Calibration(
+    c_left=1.004, c_right=0.996, wheelbase_scale=1.25, distance_scale=1.01,
+    track_alpha=0.42, track_beta=0.3, track_power=1.6,
+)  # fmt: skip
+"""A track that moves with the turn: 1.67 × nominal in a spin, 1.25 on a straight path."""
+
+
+def test_the_odometry_applies_a_track_curve_as_the_curvature_model() -> None:
+    """The compiled kernel and replay_odometry dead-reckon a calibration whose track moves
+    with the turn as odomgym.odometry.icr's curvature model (χ_∞ = E_b) does, λ per period."""
+    counts = _counts([0.0, 1.5, -0.7, 3.0, 0.2, 8.0])
+    run = _truth(SkidModel("constant", B, chi_inf=1.0), counts, (1.0, 1.0))
+    odometry = Odometry(ROBOT, CURVE)
+    odometry.reset(run.true_pose[:1])
+    poses = np.array([odometry.update(row[None, :], 0.05)[0].copy() for row in counts])
+    model = calibration_model(CURVE, ROBOT)
+    assert model.kind == "curvature"
+    scale = CURVE.distance_scale * np.array([CURVE.c_left, CURVE.c_right])
+    expected = skid_dead_reckon(model, np.diff(counts, axis=0) * TICK * scale, run.true_pose[0])
+    np.testing.assert_allclose(poses, expected, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(replay_odometry(run, ROBOT, CURVE), expected, rtol=0, atol=1e-11)
+    assert float(CURVE.track_factor(0.0)) == pytest.approx(1.67)
+    assert CURVE.parameters(ROBOT)["spin_wheelbase"] == pytest.approx(1.67 * B)
+
+
+def test_fit_skid_recovers_a_known_track_curve() -> None:
+    """Ground truth from the curvature model (χ_∞ 1.3, α 0.4, β 0.35, p 1.5) driven by wheels
+    travelling 1.01 and 0.99 times their nominal distance: the fit finds every parameter."""
+    truth = SkidModel("curvature", B, chi_inf=1.3, alpha=0.4, beta=0.35, power=1.5)
+    legs = ([0.0, 2.0, -2.0, 6.0], [0.5, -1.0, 0.25, 4.0, 12.0], [-0.3, 1.0, -8.0])
+    runs = [_truth(truth, _counts(list(c)), (1.01, 0.99)) for c in legs]
+    cal = fit_skid(runs, ROBOT, "curvature").calibration
+    assert cal.c_left * cal.distance_scale == pytest.approx(1.01, abs=1e-6)
+    assert cal.c_right * cal.distance_scale == pytest.approx(0.99, abs=1e-6)
+    assert cal.wheelbase_scale == pytest.approx(1.3, abs=1e-5)
+    assert cal.track_alpha == pytest.approx(0.4, abs=1e-5)
+    assert cal.track_beta == pytest.approx(0.35, abs=1e-4)
+    assert cal.track_power == pytest.approx(1.5, abs=1e-4)
+
+
+def test_a_track_curve_in_files_composition_and_refusals(tmp_path: Path) -> None:
+    path = tmp_path / "curve.toml"
+    CURVE.save(path)
+    assert load_calibration(path) == CURVE
+    assert "icr_x" not in path.read_text() and "track_alpha" in path.read_text()
+    assert "alpha = 0.420000" in CURVE.ros2_yaml()
+    assert Calibration(wheelbase_scale=1.1).then(CURVE).track_alpha == pytest.approx(0.42 * 1.1)
+    with pytest.raises(ValueError, match="do not compose"):
+        CURVE.then(CURVE)
+    path.write_text("[calibration]\ntrack_alpha = -0.1\n")
+    with pytest.raises(SpecError, match="track_alpha must be >= 0") as info:
+        load_calibration(path)
+    assert info.value.field == "track_alpha"
+    run = _truth(SkidModel("constant", B, chi_inf=1.0), _counts([1.0]), (1.0, 1.0))
+    with pytest.raises(ValueError, match="track curve"):
+        wheel_steps(run, ROBOT, CURVE)
+
+
+def test_the_arc_driver_turns_by_the_track_its_curve_gives() -> None:
+    """A 1 m circle driven by a calibration whose track moves with the turn: the driver asks
+    the rims for the track at the λ it makes (about 1.52 × nominal at λ ≈ 2.3), so the odometry
+    turns once round in the circle's length; rims sized by the straight-path track (1.25) would
+    turn it only about 0.8 times round."""
+    (run,) = drive_arcs(
+        ROBOT, FLOORS["smooth"], [circle_plan(1.0, "ccw")], calibration=CURVE, cruise_speed=0.3
+    )
+    odometry = replay_odometry(run, ROBOT, CURVE)
+    assert odometry[-1, 2] - odometry[0, 2] == pytest.approx(2.0 * math.pi, rel=0.02)
+
+
+def test_skid_curvature_is_registered_and_calibrates_the_worlds_scout() -> None:
+    """On the World's Scout (`smooth`, seed 1) the curve's track is about 1.67 × nominal in a
+    spin and falls toward wide arcs, as the World's steady turns do (docs/skid-steer.md)."""
+    assert CALIBRATORS["skid_curvature"] is SkidCurvature
+    assert SkidCurvature.skid_steer and SkidCurvature().experiments() == SkidIcr().experiments()
+    lab = SimLab(PRESETS["scout2"], FLOORS["smooth"], rng=np.random.default_rng(1))
+    result = SkidCurvature().calibrate(lab)
+    assert 1.6 < result.estimates["factor_spin"] < 1.75
+    assert result.estimates["factor_5m"] < result.estimates["factor_1m"] - 0.1
+    assert not result.calibration.has_icr and result.calibration.has_track_curve

@@ -216,6 +216,11 @@ def describe_calibration(calibration: Calibration) -> str:
     )
     if calibration.has_icr:
         line += f", x_ICR = {calibration.icr_x:.6f} m, y_ICR = {calibration.icr_y:.6f} m"
+    if calibration.has_track_curve:
+        line += (
+            f", track curve alpha = {calibration.track_alpha:.6f}, "
+            f"beta = {calibration.track_beta:.6f}, p = {calibration.track_power:.6f}"
+        )
     return line
 
 

@@ -188,6 +188,16 @@ def format_simulation_report(report: Any, floor_name: str) -> str:
             ("icr_x", "x_ICR [mm]"),
         ):
             lines.append(f"{label:<16}{'':>12}{1e3 * estimated[key]:>12.3f}{'':>12}")
+    if cal.has_track_curve:
+        # A track that moves with the turn (Wang et al. 2015's form): its spin value.
+        spin = 1e3 * estimated["spin_wheelbase"]
+        lines.append(f"{'b in a spin [mm]':<16}{'':>12}{spin:>12.3f}{'':>12}")
+        for label, value in (
+            ("alpha", cal.track_alpha),
+            ("beta", cal.track_beta),
+            ("p", cal.track_power),
+        ):
+            lines.append(f"{label:<16}{'':>12}{value:>12.5f}{'':>12}")
     lines += [
         "",
         f"validation on fresh squares ({len(report.errors_before['cw'])} cw + "

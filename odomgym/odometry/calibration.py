@@ -23,6 +23,17 @@ period,
 
 so :class:`Calibration` carries them as ``icr_x`` and ``icr_y`` [m], 0 for a differential-drive
 robot (whose odometry is then exactly the equations above, bit for bit).
+
+**Skid-steer robots: an apparent track that moves with the turn.** Wang et al. (2015) measured
+the ICR coefficient of a skid-steer robot fall as its path straightens; with the path parameter
+λ = (Δs_L + Δs_R)/(Δs_R − Δs_L) of each period (λ = 0 in a spin, |λ| → ∞ on a straight), the
+odometry may take
+
+    b_eff(λ) = b_n · (E_b + α / (1 + (β·|λ|)^p))
+
+(their form with a free asymptote E_b and power p, as :mod:`odomgym.odometry.icr`'s curvature
+model), so :class:`Calibration` carries α, β, p as ``track_alpha``, ``track_beta`` and
+``track_power``; α = 0 (the default) is the constant b_eff = E_b·b_n above.
 """
 
 from __future__ import annotations
@@ -48,7 +59,7 @@ from odomgym.errors import (
 from odomgym.io import atomic_write_text
 from odomgym.robot import RobotSpec
 
-__all__ = ["Calibration", "Odometry", "load_calibration"]
+__all__ = ["SKID_TERMS", "Calibration", "Odometry", "load_calibration", "skid_terms"]
 
 FloatArray = NDArray[np.float64]
 
@@ -69,9 +80,12 @@ class Calibration:
             [m] ((y_L + y_R)/2 in Mandow et al. 2007's Eqs. 4–5; their spread y_L − y_R is the
             apparent track ``wheelbase_scale`` · b_n): the body moves forward by y_ICR per
             radian turned. 0 for a differential-drive robot.
+        track_alpha, track_beta, track_power: α [-] ≥ 0, β [-] > 0 and p [-] > 0 of an
+            apparent track that widens as the turn tightens, b_eff(λ) = b_n·(E_b + α/(1 +
+            (β·|λ|)^p)) (module docstring; Wang et al. 2015's form). α = 0: a constant track.
 
-    The identity calibration (all ones, ICR offsets 0) is the uncalibrated robot. The four
-    factors must be positive; the ICR offsets finite, of either sign.
+    The identity calibration (all ones, ICR offsets and α 0) is the uncalibrated robot. The
+    four factors, β and p must be positive; the ICR offsets finite, of either sign; α ≥ 0.
     """
 
     c_left: float = 1.0
@@ -80,6 +94,9 @@ class Calibration:
     distance_scale: float = 1.0
     icr_x: float = 0.0
     icr_y: float = 0.0
+    track_alpha: float = 0.0
+    track_beta: float = 1.0
+    track_power: float = 1.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -87,9 +104,29 @@ class Calibration:
 
     @property
     def has_icr(self) -> bool:
-        """Whether the calibration moves the sides' ICRs (a skid-steer calibration): the
-        odometry then adds the ICR terms of the module docstring."""
+        """Whether the calibration moves the sides' ICRs: the odometry then adds the ICR
+        terms of the module docstring."""
         return self.icr_x != 0.0 or self.icr_y != 0.0
+
+    @property
+    def has_track_curve(self) -> bool:
+        """Whether the apparent track moves with the turn (α ≠ 0, module docstring)."""
+        return self.track_alpha != 0.0
+
+    @property
+    def is_skid_steer(self) -> bool:
+        """Whether the calibration holds a skid-steer term (ICR offsets or a track that moves
+        with the turn), which the models of a differential-drive odometry cannot apply."""
+        return self.has_icr or self.has_track_curve
+
+    def track_factor(self, lam: Any) -> FloatArray:
+        """b_eff(λ)/b_n at path parameters ``lam`` [-] (a float or an array): E_b, plus the
+        curve's α/(1 + (β·|λ|)^p) when :attr:`has_track_curve` (module docstring)."""
+        lam = np.asarray(lam, dtype=float)
+        if not self.has_track_curve:
+            return np.full_like(lam, self.wheelbase_scale)
+        shape = (self.track_beta * np.abs(lam)) ** self.track_power
+        return np.asarray(self.wheelbase_scale + self.track_alpha / (1.0 + shape))
 
     # ------------------------------------------------------------------ conversions
     @classmethod
@@ -138,6 +175,8 @@ class Calibration:
             out["icr_y_left"] = self.icr_y + 0.5 * out["wheelbase"]
             out["icr_y_right"] = self.icr_y - 0.5 * out["wheelbase"]
             out["icr_x"] = self.icr_x
+        if self.has_track_curve:
+            out["spin_wheelbase"] = float(self.track_factor(0.0)) * robot.wheelbase
         return out
 
     @property
@@ -151,8 +190,12 @@ class Calibration:
         Used by iterated calibration (Borenstein & Feng 1994, §6.3 "second compensation";
         solderspot 2014): every factor multiplies. The ICR offsets [m] add: ``other``'s are
         what the robot still showed beyond ``self``'s (exact when ``other``'s factors are 1,
-        to first order in them otherwise).
+        to first order in them otherwise). A track curve's α scales with the other's E_b; two
+        curves do not compose (ValueError).
         """
+        if self.has_track_curve and other.has_track_curve:
+            raise ValueError("two calibrations whose tracks both move with the turn do not compose")
+        curve = self if self.has_track_curve else other
         return Calibration(
             c_left=self.c_left * other.c_left,
             c_right=self.c_right * other.c_right,
@@ -160,6 +203,10 @@ class Calibration:
             distance_scale=self.distance_scale * other.distance_scale,
             icr_x=self.icr_x + other.icr_x,
             icr_y=self.icr_y + other.icr_y,
+            track_alpha=curve.track_alpha
+            * (other.wheelbase_scale if curve is self else self.wheelbase_scale),
+            track_beta=curve.track_beta,
+            track_power=curve.track_power,
         )
 
     def ros2_parameters(self) -> dict[str, float]:
@@ -197,15 +244,25 @@ class Calibration:
                 f"midpoint: the ICR offsets icr_x = {self.icr_x:.6f} m, icr_y = {self.icr_y:.6f} m"
                 " (Mandow et al. 2007)."
             )
+        if self.has_track_curve:
+            lines.append(
+                "# Not expressible in diff_drive_controller, whose wheel separation is constant: "
+                f"the track's curve alpha = {self.track_alpha:.6f}, beta = {self.track_beta:.6f}, "
+                f"p = {self.track_power:.6f} (Wang et al. 2015); the multiplier above is its "
+                "straight-path value."
+            )
         return "\n".join(lines) + "\n"
 
     # ------------------------------------------------------------------ TOML
     def to_dict(self) -> dict[str, float]:
-        """A TOML-ready dict; the ICR offsets only when they are not 0, so that a
-        differential-drive calibration is written as it always was."""
+        """A TOML-ready dict; the skid-steer terms only when they act (ICR offsets not 0, a
+        track curve's α not 0), so that a differential-drive calibration is written as it
+        always was."""
         out = dataclasses.asdict(self)
         if not self.has_icr:
             del out["icr_x"], out["icr_y"]
+        if not self.has_track_curve:
+            del out["track_alpha"], out["track_beta"], out["track_power"]
         return out
 
     def save(self, path: str | Path) -> None:
@@ -236,10 +293,13 @@ _OFFSETS = ("icr_x", "icr_y")
 
 
 def _check_field(name: str, value: object, *, source: str | None = None) -> None:
-    """A factor must be a positive number, an ICR offset a finite one (:class:`SpecError`
-    naming the field, and the file and line when ``source`` says them)."""
+    """A factor must be a positive number, an ICR offset a finite one, α a finite one ≥ 0
+    (:class:`SpecError` naming the field, and the file and line when ``source`` says them)."""
     if name in _OFFSETS:
         require_finite(name, value, source=source)
+    elif name == "track_alpha":
+        if require_finite(name, value, source=source) < 0.0:
+            raise SpecError(f"{name} must be >= 0, got {value!r}", field=name, source=source)
     else:
         require_positive(name, value, source=source)
 
@@ -248,6 +308,26 @@ def load_calibration(path: str | Path) -> Calibration:
     """Load a calibration TOML written by ``odomgym calibrate --save`` (or by hand)."""
     file = Path(path)
     return Calibration.from_dict(read_spec_toml(file, "calibration"), path=file)
+
+
+SKID_TERMS = 5
+"""Columns of :func:`skid_terms`."""
+
+
+def skid_terms(calibration: Calibration) -> tuple[float, float, float, float, float]:
+    """A calibration's skid-steer terms as :func:`odomgym._kernels.integrate_odometry` reads
+    them: x_ICR, y_ICR [m], α/E_b (the track curve relative to the straight-path track), β, p
+    [-]. All zeros for a differential-drive calibration, which the kernel tells by its first
+    three."""
+    if not calibration.is_skid_steer:
+        return (0.0, 0.0, 0.0, 0.0, 0.0)
+    return (
+        calibration.icr_x,
+        calibration.icr_y,
+        calibration.track_alpha / calibration.wheelbase_scale,
+        calibration.track_beta,
+        calibration.track_power,
+    )
 
 
 class Odometry:
@@ -271,7 +351,7 @@ class Odometry:
         # (odomgym._kernels.StepArrays).
         self._travel_per_tick = np.zeros((self.n, 2))
         self._wheelbase = np.zeros(self.n)
-        self._icr = np.zeros((self.n, 2))
+        self._skid = np.zeros((self.n, SKID_TERMS))
         self.pose = np.zeros((self.n, 3))
         self.last_counts = np.zeros((self.n, 2), dtype=np.int64)
         self.wheel_speed = np.zeros((self.n, 2))
@@ -303,7 +383,7 @@ class Odometry:
             axis=1,
         )
         self._wheelbase[:] = np.array([c.wheelbase_scale for c in cal]) * self._nominal_wheelbase
-        self._icr[:] = np.array([(c.icr_x, c.icr_y) for c in cal])
+        self._skid[:] = np.array([skid_terms(c) for c in cal])
 
     @property
     def travel_per_tick(self) -> FloatArray:
@@ -316,10 +396,10 @@ class Odometry:
         return np.asarray(self._wheelbase)
 
     @property
-    def icr_offsets(self) -> FloatArray:
-        """x_ICR, y_ICR of each robot (N, 2) [m] (module docstring; zeros for a
-        differential-drive calibration)."""
-        return self._icr
+    def skid_terms(self) -> FloatArray:
+        """Each robot's skid-steer terms (N, :data:`SKID_TERMS`) as the compiled odometry reads
+        them (:func:`skid_terms`; zeros for a differential-drive calibration)."""
+        return self._skid
 
     def reset(
         self, poses: FloatArray | None = None, indices: NDArray[np.intp] | None = None
@@ -342,7 +422,7 @@ class Odometry:
             self.last_counts,
             self._travel_per_tick,
             self._wheelbase,
-            self._icr,
+            self._skid,
             1.0 / dt,
             self.pose,
             self.wheel_speed,

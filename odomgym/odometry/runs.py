@@ -120,14 +120,20 @@ def wheel_travels(
 
 
 def require_differential(calibration: Calibration | None, what: str) -> None:
-    """Raise ValueError unless ``calibration`` is a differential-drive one (no ICR offsets):
-    ``what`` (a model of the differential-drive odometry, e.g. Chong & Kleeman's covariance)
-    would otherwise drop the offsets' sideways and forward steps silently."""
-    if calibration is not None and calibration.has_icr:
+    """Raise ValueError unless ``calibration`` is a differential-drive one (no ICR offsets, a
+    constant track): ``what`` (a model of the differential-drive odometry, e.g. Chong &
+    Kleeman's covariance) would otherwise drop the skid-steer terms silently."""
+    if calibration is not None and calibration.is_skid_steer:
+        terms = []
+        if calibration.has_icr:
+            terms.append(
+                f"ICR offsets (icr_x = {calibration.icr_x:g} m, icr_y = {calibration.icr_y:g} m)"
+            )
+        if calibration.has_track_curve:
+            terms.append(f"track curve (track_alpha = {calibration.track_alpha:g})")
         raise ValueError(
-            f"{what} models a differential-drive odometry; the calibration's ICR offsets "
-            f"(icr_x = {calibration.icr_x:g} m, icr_y = {calibration.icr_y:g} m) are a "
-            "skid-steer robot's"
+            f"{what} models a differential-drive odometry; the calibration's "
+            f"{' and '.join(terms)} are a skid-steer robot's"
         )
 
 
@@ -198,13 +204,17 @@ def replay_odometry(
 
     The odometry starts at the first ground-truth pose (the OptiOdom convention), so the
     result is directly comparable with ``run.true_pose``. Same equations as
-    :class:`odomgym.odometry.calibration.Odometry`, vectorised over the samples, the ICR terms of
-    a skid-steer calibration included.
+    :class:`odomgym.odometry.calibration.Odometry`, vectorised over the samples, the skid-steer
+    terms of a calibration included (ICR offsets, a track that moves with the turn).
     """
-    if calibration is not None and calibration.has_icr:
-        travels, wheelbase = wheel_travels(run, robot, calibration)
+    if calibration is not None and calibration.is_skid_steer:
+        travels, _ = wheel_travels(run, robot, calibration)
         ds = 0.5 * (travels[:, 0] + travels[:, 1])
-        dtheta = (travels[:, 1] - travels[:, 0]) / wheelbase
+        difference = travels[:, 1] - travels[:, 0]
+        lam = (travels[:, 1] + travels[:, 0]) / np.where(
+            np.abs(difference) > 1e-12, difference, 1e-12
+        )
+        dtheta = difference / (calibration.track_factor(lam) * robot.wheelbase)
         forward = ds + calibration.icr_y * dtheta
         poses, _ = integrate_steps(
             run.true_pose[0], forward, dtheta, lateral=-calibration.icr_x * dtheta

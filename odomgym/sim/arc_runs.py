@@ -79,6 +79,20 @@ def free_plan(rng: np.random.Generator, length: float) -> tuple[Arc, ...]:
     )
 
 
+def _curved_half_track(cal: Calibration, track: float, mean: float, omega: float) -> float:
+    """Half the track [m] a calibration whose track moves with the turn believes for the rims'
+    mean speed ``mean`` [m/s] and yaw rate ``omega`` [rad/s]: b_eff(λ)/2 at the λ = mean/(ω·
+    b_eff/2) it makes, found by fixed-point iteration (the factor moves slowly with λ)."""
+    factor = cal.wheelbase_scale
+    for _ in range(50):
+        lam = mean / (omega * 0.5 * factor * track)
+        new = float(cal.track_factor(lam))
+        if abs(new - factor) < 1e-12:
+            break
+        factor = new
+    return 0.5 * factor * track
+
+
 def drive_arcs(
     robots: RobotSpec | Sequence[RobotSpec],
     floor: FloorSpec,
@@ -153,6 +167,7 @@ def drive_arcs(
     # radian turned, so the rims' mean speed is what is left of the cruise speed.
     icr_y = np.array([c.icr_y for c in cals])
     skid_terms = bool(np.any(icr_y != 0.0))
+    curved = [c.has_track_curve for c in cals]
     radius = np.array([[0.5 * b["left_diameter"], 0.5 * b["right_diameter"]] for b in believed])
     max_speed = np.array([s.max_wheel_speed for s in specs])
     max_accel = np.array([s.max_wheel_accel for s in specs])
@@ -190,7 +205,10 @@ def drive_arcs(
             leg = min(int(np.searchsorted(ends[r], travelled[r], side="right")), len(ends[r]) - 1)
             omega = curvature[r][leg] * cruise_speed
             mean = cruise_speed - icr_y[r] * omega if skid_terms else cruise_speed
-            rims = mean + np.array([-omega, omega]) * half_base[r]
+            half = half_base[r]
+            if curved[r] and omega != 0.0:
+                half = _curved_half_track(cals[r], specs[r].wheelbase, mean, omega)
+            rims = mean + np.array([-omega, omega]) * half
             rims *= min(1.0, max_speed[r] / float(np.abs(rims).max()))
             command[r] = rims / radius[r]
         world.step(command)

@@ -133,7 +133,7 @@ class Trial:
             odometry.last_counts,
             odometry.travel_per_tick,
             odometry.effective_wheelbase,
-            odometry.icr_offsets,
+            odometry.skid_terms,
             odometry.pose,
             odometry.wheel_speed,
             self._max_speed,
