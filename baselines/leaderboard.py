@@ -38,6 +38,7 @@ from odomgym.errors import SpecError
 from odomgym.lab.recorded import RecordedLab
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.optiodom_measures import EvaluationMeasures, evaluate
+from odomgym.robot import RobotSpec
 
 __all__ = [
     "Leaderboard",
@@ -176,15 +177,27 @@ def run_leaderboard(
             for target in every:
                 if target.name == source.name:
                     continue
-                transferred = dataclasses.replace(
-                    Calibration.from_parameters(target.robot, *absolute),
-                    icr_x=result.calibration.icr_x,
-                    icr_y=result.calibration.icr_y,
-                )
+                transferred = _transfer(result.calibration, source.robot, target.robot)
                 board.cross[(method, source.name, target.name)] = evaluate(
                     target.runs, target.robot, transferred
                 )
     return board
+
+
+def _transfer(calibration: Calibration, source: RobotSpec, target: RobotSpec) -> Calibration:
+    """``calibration`` (found on ``source``'s nominal robot) as the same absolute odometry on
+    ``target``'s: the same b, D_R, D_L [m], the same ICR offsets [m], and a track curve whose
+    α is rescaled like E_b (both are fractions of the nominal track); β and p are unitless."""
+    params = calibration.parameters(source)
+    absolute = (params["wheelbase"], params["right_diameter"], params["left_diameter"])
+    return dataclasses.replace(
+        Calibration.from_parameters(target, *absolute),
+        icr_x=calibration.icr_x,
+        icr_y=calibration.icr_y,
+        track_alpha=calibration.track_alpha * source.wheelbase / target.wheelbase,
+        track_beta=calibration.track_beta,
+        track_power=calibration.track_power,
+    )
 
 
 def format_leaderboard(board: Leaderboard) -> str:

@@ -40,6 +40,7 @@ from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, perf
 from odomgym.errors import SpecError, require_count
 from odomgym.lab.experiment import Experiment, Lab
 from odomgym.odometry.calibration import Calibration
+from odomgym.odometry.runs import require_differential
 from odomgym.selfcal.episodes import skid_prior
 from odomgym.selfcal.estimators import check_observe
 from odomgym.selfcal.menu import ACTION_MENU, STOP
@@ -296,6 +297,9 @@ class SelfCal(Calibrator):
         (:func:`odomgym.selfcal.episodes.skid_prior`), the estimate centred there; from the
         identity its estimator's prior range would hold E_b far below the track it needs.
         """
+        # Its estimators keep E_b, c_L, c_R, E_s of an initial calibration; ICR offsets or a
+        # track curve would be dropped, so they are refused.
+        require_differential(initial, self.name)
         sensor = getattr(lab, "sensor", None)  # a SimLab's; else the default sonar calibrator
         centred = initial is None and lab.robot.is_skid_steer
         session = SelfCalSession(

@@ -75,8 +75,6 @@ CLASSICAL: dict[str, dict[str, float]] = {
 """The classical calibrators and their options: squares of 2 m (a skid-steer robot with its
 nominal track turns ~52° at a 90° corner, and 4 m squares would take it far off)."""
 SKID_CALIBRATORS: dict[str, dict[str, float]] = {"skid_icr": {}, "skid_curvature": {}}
-SKID_LABELS = {"skid_icr": "ICRs", "skid_curvature": "track curve"}
-"""What each registered skid-steer calibrator fits beside the wheels' factors (table labels)."""
 """The registered skid-steer calibrators and their options: ``skid_icr`` and ``skid_curvature``
 (:mod:`odomgym.baselines.skid_icr`: Mandow et al. 2007's ICRs, or a track that moves with the
 turn in Wang et al. 2015's form, with the wheels' factors, from their own 2 m squares and
@@ -84,6 +82,8 @@ circles of 0.5–4 m). They draw from a stream apart from the classical
 rows', ``default_rng([seed, cell, 1])`` (``cell`` the robot and floor's place in the run, as
 the classical calibrators' streams depend on it too), so that adding them left every other
 row as it was."""
+SKID_LABELS = {"skid_icr": "ICRs", "skid_curvature": "track curve"}
+"""What each registered skid-steer calibrator fits beside the wheels' factors (table labels)."""
 SKID_PRESETS = tuple(name for name, spec in PRESETS.items() if spec.is_skid_steer)
 """The skid-steer presets (:data:`odomgym.robot.PRESETS` with ``axle_spacing > 0``)."""
 
@@ -170,10 +170,15 @@ def _runs(robot: RobotSpec, floor: str, rng: np.random.Generator) -> tuple[list[
 def calibration_model(calibration: Calibration, robot: RobotSpec) -> SkidModel:
     """The skid-steer model a calibrator's ``calibration`` stands for (its wheels' factors
     applied to the counts before it): the curvature model when its track moves with the turn
-    (χ_∞ = E_b; a calibration with both a curve and ICR offsets is not one of these models),
+    (χ_∞ = E_b; a calibration with both a curve and ICR offsets is none of them: ValueError),
     Mandow et al. 2007's ICRs when it moves them (``y_L, y_R = y_ICR ± E_b·b/2``, x_ICR), else
     one constant factor, E_b."""
     b = float(robot.wheelbase)
+    if calibration.has_track_curve and calibration.has_icr:
+        raise ValueError(
+            "a calibration with both a track curve and ICR offsets is none of "
+            "odomgym.odometry.icr's models"
+        )
     if calibration.has_track_curve:
         return SkidModel(
             "curvature",

@@ -212,7 +212,8 @@ def _windows(runs: Sequence[Run], robot: RobotSpec, window: float) -> _Windows:
             steps += b - a
     if not firsts:
         raise SpecError(
-            "the ICR fit needs runs with measured poses at least a window apart; these have none",
+            "the skid-steer fit needs runs with measured poses at least a window apart; these "
+            "have none",
             field="runs",
         )
     return _Windows(
@@ -438,7 +439,7 @@ class SkidIcr(Calibrator):
         free = held.runs(ExperimentKind.FREE)
         if not (squares or circles or free):
             raise LookupError(
-                "skid_icr fits squares or circles driven both ways, or free paths, and the "
+                f"{cls.name} fits squares or circles driven both ways, or free paths, and the "
                 "session holds none"
             )
         out: dict[str, Any] = {

@@ -9,6 +9,7 @@ simulated robots' figures live in ``odomgym bench skid`` (tests/test_skid_bench.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -311,39 +312,43 @@ def test_classical_calibrators_and_clapper_refuse_an_icr_calibration() -> None:
         VehicleTrial(VEHICLES["clapper"], FLOORS["smooth"], straight_path(2.0), calibration=skid)
 
 
-def test_the_leaderboard_carries_a_calibrations_icr_offsets_to_the_other_sessions() -> None:
-    """``leaderboard --methods skid_icr`` on the shipped (differential-drive) square sessions:
-    each calibration is judged on the other sessions with its ICR offsets, not only with the
-    b, D_R, D_L the board tabulates."""
+@pytest.mark.parametrize("method", ["skid_icr", "skid_curvature"])
+def test_the_leaderboard_carries_a_calibrations_skid_terms_to_the_other_sessions(
+    method: str,
+) -> None:
+    """``leaderboard --methods skid_icr`` (or ``skid_curvature``) on the shipped
+    (differential-drive) square sessions: each calibration is judged on the other sessions with
+    its skid-steer terms (ICR offsets, or the track's curve with α rescaled like E_b to the
+    other session's nominal track), not only with the b, D_R, D_L the board tabulates."""
     from odomgym.baselines.leaderboard import evaluate, run_leaderboard
     from odomgym.data import sample_data
     from odomgym.data.optiodom import find_sessions, read_session
 
     root = sample_data()
-    board = run_leaderboard(root, methods=["skid_icr"], path_types=("square",))
+    board = run_leaderboard(root, methods=[method], path_types=("square",))
     sessions = {s.name: s for s in (read_session(p) for p in find_sessions(root))}
     (source, target), *_ = [(s, t) for (_, s, t) in board.cross]
-    own = (
-        SkidIcr(
-            **SkidIcr.session_options(
-                Holdings(sessions[source].side, RecordedLab(sessions[source]).holdings())
-            )
-        )
-        .calibrate(RecordedLab(sessions[source]), sessions[source].initial)
-        .calibration
-    )
-    assert own.has_icr
+    cls = CALIBRATORS[method]
+    held = Holdings(sessions[source].side, RecordedLab(sessions[source]).holdings())
+    lab = RecordedLab(sessions[source])
+    own = cls(**cls.session_options(held)).calibrate(lab, sessions[source].initial).calibration
+    assert own.is_skid_steer
     params = own.parameters(sessions[source].robot)
     moved = Calibration.from_parameters(
         sessions[target].robot, params["wheelbase"], params["right_diameter"],
         params["left_diameter"],
     )  # fmt: skip
-    with_icr = Calibration(
+    ratio = sessions[source].robot.wheelbase / sessions[target].robot.wheelbase
+    whole = Calibration(
         moved.c_left, moved.c_right, moved.wheelbase_scale, moved.distance_scale,
-        icr_x=own.icr_x, icr_y=own.icr_y,
+        icr_x=own.icr_x, icr_y=own.icr_y, track_alpha=own.track_alpha * ratio,
+        track_beta=own.track_beta, track_power=own.track_power,
     )  # fmt: skip
-    got = board.cross[("skid_icr", source, target)]
-    assert got == evaluate(sessions[target].runs, sessions[target].robot, with_icr)
+    if own.has_track_curve:  # the same track in a spin, in metres, on either robot
+        spin = whole.parameters(sessions[target].robot)["spin_wheelbase"]
+        assert spin == pytest.approx(params["spin_wheelbase"], rel=1e-12)
+    got = board.cross[(method, source, target)]
+    assert got == evaluate(sessions[target].runs, sessions[target].robot, whole)
     assert got != evaluate(sessions[target].runs, sessions[target].robot, moved)
 
 
@@ -403,6 +408,12 @@ def test_a_track_curve_in_files_composition_and_refusals(tmp_path: Path) -> None
     run = _truth(SkidModel("constant", B, chi_inf=1.0), _counts([1.0]), (1.0, 1.0))
     with pytest.raises(ValueError, match="track curve"):
         wheel_steps(run, ROBOT, CURVE)
+    with pytest.raises(ValueError, match=r"^selfcal models a differential-drive"):
+        CALIBRATORS["selfcal"]().calibrate(SimLab(ROBOT, FLOORS["smooth"]), CURVE)
+    with pytest.raises(ValueError, match="none of"):
+        calibration_model(dataclasses.replace(CURVE, icr_x=0.01), ROBOT)
+    # Without a curve β and p act on nothing: equal calibrations stay equal through a file.
+    assert Calibration(track_beta=3.0, track_power=2.0) == Calibration()
 
 
 def test_the_arc_driver_turns_by_the_track_its_curve_gives() -> None:

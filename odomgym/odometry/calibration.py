@@ -101,6 +101,11 @@ class Calibration:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             _check_field(f.name, getattr(self, f.name))
+        if self.track_alpha == 0.0:
+            # Without a curve β and p act on nothing; their defaults keep equal calibrations
+            # equal (and a file, which omits them, reads back the same).
+            object.__setattr__(self, "track_beta", 1.0)
+            object.__setattr__(self, "track_power", 1.0)
 
     @property
     def has_icr(self) -> bool:
@@ -164,8 +169,10 @@ class Calibration:
         )
 
     def parameters(self, robot: RobotSpec) -> dict[str, float]:
-        """The effective parameters the calibrated odometry uses: b, D_R, D_L [m], and for a
-        skid-steer calibration (:attr:`has_icr`) Mandow et al. 2007's y_L, y_R and x_ICR [m]."""
+        """The effective parameters the calibrated odometry uses: b, D_R, D_L [m] (b on a
+        straight path), for a calibration that moves the ICRs (:attr:`has_icr`) Mandow et al.
+        2007's y_L, y_R and x_ICR [m], and for a track that moves with the turn
+        (:attr:`has_track_curve`) the track in a spin, ``spin_wheelbase`` [m]."""
         out = {
             "wheelbase": self.wheelbase_scale * robot.wheelbase,
             "right_diameter": self.c_right * self.distance_scale * robot.wheel_diameter,
@@ -190,8 +197,9 @@ class Calibration:
         Used by iterated calibration (Borenstein & Feng 1994, §6.3 "second compensation";
         solderspot 2014): every factor multiplies. The ICR offsets [m] add: ``other``'s are
         what the robot still showed beyond ``self``'s (exact when ``other``'s factors are 1,
-        to first order in them otherwise). A track curve's α scales with the other's E_b; two
-        curves do not compose (ValueError).
+        to first order in them otherwise). A track curve's α scales with the other's E_b (to
+        first order: the inner curve sees λ of the outer-corrected travels); two curves do
+        not compose (ValueError).
         """
         if self.has_track_curve and other.has_track_curve:
             raise ValueError("two calibrations whose tracks both move with the turn do not compose")

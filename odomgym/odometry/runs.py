@@ -141,11 +141,11 @@ def wheel_steps(run: Run, robot: RobotSpec, calibration: Calibration | None = No
     """``run``'s encoder counts as wheel travel and motion per step (:func:`wheel_travels`).
 
     Raises:
-        ValueError: ``calibration`` moves the ICRs (a skid-steer calibration): its steps also
-            move sideways, which these differential-drive steps (and the Jacobians built on
+        ValueError: ``calibration`` holds skid-steer terms (ICR offsets, a track that moves
+            with the turn), which these differential-drive steps (and the Jacobians built on
             them) do not hold; :func:`replay_odometry` replays such a calibration.
     """
-    require_differential(calibration, "this replay (replay_odometry takes ICR offsets)")
+    require_differential(calibration, "this replay (replay_odometry takes skid-steer terms)")
     travels, wheelbase = wheel_travels(run, robot, calibration)
     left, right = travels[:, 0], travels[:, 1]
     return WheelSteps(left, right, wheelbase, 0.5 * (left + right), (right - left) / wheelbase)
