@@ -262,7 +262,7 @@ def test_bench_calibrators_on_a_skid_steer_population(
     icr = next(r for r in rows if r["method"] == "skid_icr")
     assert icr["est_E_b"] > 1.3  # the apparent track, not the wheels' spacing
     # A skid-steer population's rows carry the ICR offsets (0 for a classical method).
-    assert icr["est_icr_x"] != 0.0
+    assert icr["est_icr_x"] != 0.0 and icr["est_track_alpha"] == 0.0
     assert next(r for r in rows if r["method"] == "umbmark")["est_icr_x"] == 0.0
 
 
@@ -438,3 +438,14 @@ def test_skid_curvature_is_registered_and_calibrates_the_worlds_scout() -> None:
     assert 1.6 < result.estimates["factor_spin"] < 1.75
     assert result.estimates["factor_5m"] < result.estimates["factor_1m"] - 0.1
     assert not result.calibration.has_icr and result.calibration.has_track_curve
+
+
+def test_a_recorded_sessions_report_gives_the_skid_steer_terms(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``calibrate skid_icr --data`` on a shipped square session: the parameter line gives
+    y_L, y_R and x_ICR beside b, D_R, D_L (``skid_curvature``: the track in a spin)."""
+    assert main(["calibrate", "skid_icr", "--data", "optiodom:square/230620202042"]) == 0
+    assert "x_ICR = " in capsys.readouterr().out
+    assert main(["calibrate", "skid_curvature", "--data", "optiodom:square/230620202042"]) == 0
+    assert "b in a spin = " in capsys.readouterr().out

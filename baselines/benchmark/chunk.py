@@ -127,12 +127,14 @@ def _row(
         estimate = (math.nan, math.nan, math.nan)
     else:
         estimate = (calibration.e_d, calibration.wheelbase_scale, calibration.distance_scale)
-    # A skid-steer population's rows also hold the ICR offsets [m] a calibration carries
-    # (0 for the differential-drive methods); a differential-drive one's rows are as before.
+    # A skid-steer population's rows also hold the skid-steer terms a calibration carries (ICR
+    # offsets [m], the track curve's α, β, p; 0, 1, 1 for the differential-drive methods); a
+    # differential-drive population's rows are as before.
+    skid = ("icr_x", "icr_y", "track_alpha", "track_beta", "track_power")
     icr = (
         {
-            "est_icr_x": math.nan if calibration is None else calibration.icr_x,
-            "est_icr_y": math.nan if calibration is None else calibration.icr_y,
+            f"est_{name}": math.nan if calibration is None else getattr(calibration, name)
+            for name in skid
         }
         if robot.is_skid_steer
         else {}

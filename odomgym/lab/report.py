@@ -210,6 +210,20 @@ def format_simulation_report(report: Any, floor_name: str) -> str:
     return "\n".join(lines)
 
 
+def _skid_parameters(params: dict[str, float]) -> str:
+    """A skid-steer calibration's terms for the session report's parameter line, from
+    :meth:`odomgym.odometry.calibration.Calibration.parameters` [m] ("" for none)."""
+    parts = []
+    if "icr_x" in params:
+        parts.append(
+            f"y_L = {params['icr_y_left']:.6f} m, y_R = {params['icr_y_right']:.6f} m, "
+            f"x_ICR = {params['icr_x']:.6f} m"
+        )
+    if "spin_wheelbase" in params:
+        parts.append(f"b in a spin = {params['spin_wheelbase']:.6f} m")
+    return "".join(f", {part}" for part in parts)
+
+
 def format_session_report(report: Any) -> str:
     """Calibrated parameters and the OptiOdom evaluation measures before/after.
 
@@ -220,7 +234,7 @@ def format_session_report(report: Any) -> str:
     lines = [
         f"{report.method} on session {report.session}",
         f"b = {params['wheelbase']:.6f} m, D_R = {params['right_diameter']:.6f} m, "
-        f"D_L = {params['left_diameter']:.6f} m",
+        f"D_L = {params['left_diameter']:.6f} m" + _skid_parameters(params),
         "",
         f"{'measure':<22}{'before':>12}{'after':>12}",
         f"{'max position [mm]':<22}{1e3 * before['max_pos']:>12.2f}{1e3 * after['max_pos']:>12.2f}",
