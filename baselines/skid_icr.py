@@ -250,14 +250,7 @@ def _window_ends(cal: Calibration, w: _Windows, track: float) -> FloatArray:
     (the equations of :class:`odomgym.odometry.calibration.Odometry`, every skid-steer term)."""
     left = w.travels[:, 0] * (cal.c_left * cal.distance_scale)
     right = w.travels[:, 1] * (cal.c_right * cal.distance_scale)
-    difference = right - left
-    if cal.has_track_curve:
-        lam = (right + left) / np.where(np.abs(difference) > 1e-12, difference, 1e-12)
-        dtheta = difference / (cal.track_factor(lam) * track)
-    else:
-        dtheta = difference / (cal.wheelbase_scale * track)
-    forward = 0.5 * (left + right) + cal.icr_y * dtheta
-    leftward = -cal.icr_x * dtheta
+    forward, leftward, dtheta = cal.body_steps(left, right, track)
     # Each step's heading before it, within its window: a running sum restarted per window.
     total = np.concatenate(([0.0], np.cumsum(dtheta)))
     owner = np.repeat(np.arange(len(w.first)), np.diff(np.append(w.first, len(dtheta))))

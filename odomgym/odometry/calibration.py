@@ -59,7 +59,14 @@ from odomgym.errors import (
 from odomgym.io import atomic_write_text
 from odomgym.robot import RobotSpec
 
-__all__ = ["SKID_TERMS", "Calibration", "Odometry", "load_calibration", "skid_terms"]
+__all__ = [
+    "SKID_TERMS",
+    "Calibration",
+    "Odometry",
+    "load_calibration",
+    "path_parameter",
+    "skid_terms",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -123,6 +130,21 @@ class Calibration:
         """Whether the calibration holds a skid-steer term (ICR offsets or a track that moves
         with the turn), which the models of a differential-drive odometry cannot apply."""
         return self.has_icr or self.has_track_curve
+
+    def body_steps(
+        self, left: FloatArray, right: FloatArray, track: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Each step's motion in the body frame — forward [m], leftward [m], turn [rad] — for
+        the wheels' travel ``left``, ``right`` [m] (already corrected by the wheels' factors)
+        and the nominal track b_n ``track`` [m]: the module docstring's equations, every
+        skid-steer term included. The one numpy form of them (the compiled odometry has its
+        own, :func:`odomgym._kernels.integrate_odometry`)."""
+        difference = right - left
+        if self.has_track_curve:
+            dtheta = difference / (self.track_factor(path_parameter(left, right)) * track)
+        else:
+            dtheta = difference / (self.wheelbase_scale * track)
+        return 0.5 * (left + right) + self.icr_y * dtheta, -self.icr_x * dtheta, dtheta
 
     def track_factor(self, lam: Any) -> FloatArray:
         """b_eff(λ)/b_n at path parameters ``lam`` [-] (a float or an array): E_b, plus the
@@ -316,6 +338,14 @@ def load_calibration(path: str | Path) -> Calibration:
     """Load a calibration TOML written by ``odomgym calibrate --save`` (or by hand)."""
     file = Path(path)
     return Calibration.from_dict(read_spec_toml(file, "calibration"), path=file)
+
+
+def path_parameter(left: FloatArray, right: FloatArray) -> FloatArray:
+    """Each step's path parameter λ = (L + R)/(R − L) [-] of the wheels' travel (0 in a spin);
+    a step that does not turn (|R − L| ≤ 10⁻¹² m) gets a finite, huge λ: the straight-path
+    track."""
+    difference = right - left
+    return np.asarray((right + left) / np.where(np.abs(difference) > 1e-12, difference, 1e-12))
 
 
 SKID_TERMS = 5

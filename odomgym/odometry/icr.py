@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from odomgym.odometry.calibration import path_parameter
 from odomgym.odometry.runs import Run, wheel_travels
 from odomgym.robot import RobotSpec
 
@@ -95,12 +96,9 @@ class SkidModel:
             turn = (right - left) / span
             forward = (right * self.y_left - left * self.y_right) / span
             return np.column_stack((forward, -self.x_icr * turn, turn))
-        difference = right - left
-        total = right + left
         # λ of a step that does not turn is infinite: χ_∞ (the 1e-12 m floor keeps it finite).
-        lam = total / np.where(np.abs(difference) > 1e-12, difference, 1e-12)
-        turn = difference / (self.factor(lam) * self.track)
-        return np.column_stack((0.5 * total, np.zeros_like(turn), turn))
+        turn = (right - left) / (self.factor(path_parameter(left, right)) * self.track)
+        return np.column_stack((0.5 * (right + left), np.zeros_like(turn), turn))
 
     def to_dict(self) -> dict[str, float | str]:
         """The parameters, for JSON."""

@@ -209,16 +209,10 @@ def replay_odometry(
     """
     if calibration is not None and calibration.is_skid_steer:
         travels, _ = wheel_travels(run, robot, calibration)
-        ds = 0.5 * (travels[:, 0] + travels[:, 1])
-        difference = travels[:, 1] - travels[:, 0]
-        lam = (travels[:, 1] + travels[:, 0]) / np.where(
-            np.abs(difference) > 1e-12, difference, 1e-12
+        forward, leftward, dtheta = calibration.body_steps(
+            travels[:, 0], travels[:, 1], robot.wheelbase
         )
-        dtheta = difference / (calibration.track_factor(lam) * robot.wheelbase)
-        forward = ds + calibration.icr_y * dtheta
-        poses, _ = integrate_steps(
-            run.true_pose[0], forward, dtheta, lateral=-calibration.icr_x * dtheta
-        )
+        poses, _ = integrate_steps(run.true_pose[0], forward, dtheta, lateral=leftward)
         return poses
     _, _, _, ds, dtheta = wheel_steps(run, robot, calibration)
     poses, _ = integrate_steps(run.true_pose[0], ds, dtheta)
