@@ -149,15 +149,20 @@ def write_outputs(
     return written
 
 
-def _improvement_axis(ax: Any) -> None:
-    """A log axis for improvement factors (dimensionless) labelled 1-2-5 per decade in plain
-    numbers, without minor-tick labels: matplotlib's default labels every minor tick of a
-    log axis spanning less than a decade ("4×10⁰ 6×10⁰ 2×10¹ 3×10¹…"), which overlapped on a
-    narrow panel such as the `rough` floor's."""
+def _improvement_axis(ax: Any, values: Sequence[float]) -> None:
+    """A log axis for improvement factors (dimensionless) in plain numbers, without
+    minor-tick labels: matplotlib's default labels every minor tick of a log axis spanning
+    less than a decade ("4×10⁰ 6×10⁰ 2×10¹ 3×10¹…"), which overlapped on a narrow panel such
+    as the `rough` floor's. Labels run 1-2-5 per decade while the factors span at most two
+    decades, one per decade beyond: a skid-steer population's factors run from 1× to over
+    1000×, where 1-2-5 labels ran together ("5001000")."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
+    positive = [v for v in values if np.isfinite(v) and v > 0]
+    decades = np.log10(max(positive) / min(positive)) if positive else 0.0
     ax.set_xscale("log")
-    ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    subs = (1.0, 2.0, 5.0) if decades <= 2.0 else (1.0,)
+    ax.xaxis.set_major_locator(LogLocator(base=10, subs=subs))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: f"{x:g}"))
     ax.xaxis.set_minor_formatter(NullFormatter())
 
@@ -185,7 +190,7 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
         ax.boxplot(data, showfliers=True, orientation="horizontal")
         ax.set_yticks(range(1, len(labels) + 1), labels, fontsize=8)
         ax.invert_yaxis()  # the first method on top, as in the tables
-        _improvement_axis(ax)
+        _improvement_axis(ax, [v for d in data for v in d])
         ax.axvspan(
             10,
             22,

@@ -282,3 +282,26 @@ def test_a_calibrator_of_arcs_runs_through_the_lockstep_batch(options: dict[str,
         assert outcome.value is not None
         assert outcome.value.runs_used == 2  # one circle each way, or two free paths
         assert abs(outcome.value.calibration.wheelbase_scale - robot.e_b) < 0.005
+
+
+@pytest.mark.parametrize(
+    ("values", "labelled"),
+    [
+        # a skid-steer population: 1x to over 1000x; 1-2-5 labels ran together ("5001000")
+        ([1.3, 8.0, 74.0, 1079.0], [1.0, 10.0, 100.0, 1000.0]),
+        # a differential-drive floor: within two decades, labelled 1-2-5
+        ([3.1, 9.5, 22.0, 41.0], [5.0, 10.0, 20.0]),
+    ],
+)
+def test_improvement_axis_labels_stay_apart(values: list[float], labelled: list[float]) -> None:
+    """The improvement figure's log axis labels one tick per decade beyond two decades."""
+    from matplotlib.figure import Figure
+
+    from odomgym.baselines.bench_report import _improvement_axis
+
+    ax = Figure().subplots()
+    ax.boxplot([values], orientation="horizontal")
+    _improvement_axis(ax, values)
+    lo, hi = ax.get_xlim()
+    ticks = [t for t in ax.xaxis.get_major_locator()() if lo <= t <= hi]
+    assert ticks == pytest.approx(labelled)
