@@ -100,8 +100,8 @@ drawing.
 
 ## Skid-steer robots
 
-With a skid-steer ``population.base`` (``scout2``, ``husky``, ``pioneer3at``) each session
-starts from the apparent track of rigid contacts in a slow spin, E_b = 1 + (a/b)² from the
+With a skid-steer ``population.base`` (``scout2``, ``husky``, ``pioneer3at``, ``jackal``) each
+session starts from the apparent track of rigid contacts in a slow spin, E_b = 1 + (a/b)² from the
 nominal geometry (:func:`~odomgym.selfcal.episodes.skid_prior`): the estimator's prior is
 centred there and kept within its range of it, the observed E_b is relative to it, and the
 validation's "before" is the robot with it, so stopping at once still gives r_T = 0. Its runs

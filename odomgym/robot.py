@@ -740,4 +740,29 @@ PRESETS: dict[str, RobotSpec] = {
         source="amr-ros-config pioneer3at.urdf.xacro (geometry), Webots Pioneer 3-AT guide "
         "(mass, size, speed), Wang et al. 2015; encoder and acceleration limit assumed",
     ),
+    "jackal": RobotSpec(
+        name="jackal",
+        # Clearpath Jackal. Wheel radius 0.098 m, track 0.37559 m, wheelbase 0.262 m, wheels
+        # 0.040 m wide: jackal/jackal jackal_description/urdf/jackal.urdf.xacro @15d5403
+        wheel_diameter=0.196,
+        wheelbase=0.37559,
+        axle_spacing=0.262,
+        ticks_per_rev=4096.0,  # assumed: no published encoder resolution
+        # The URDF's masses: chassis 16.523 kg + 4 wheels × 0.477 kg
+        mass=18.431,
+        # The wheels' extent, from the same URDF: the chassis box is 0.420 × 0.310 m and the
+        # wheels stand outside it (0.262 + 2 × 0.098 m long, 0.37559 + 0.040 m wide)
+        chassis_length=0.458,
+        chassis_width=0.41559,
+        # 2.0 m/s: jackal_control/config/control.yaml @0aef021 (its 20 m/s² acceleration cap is
+        # a software limit, far above what the tyres transmit)
+        max_wheel_speed=2.0,
+        max_wheel_accel=1.0,  # assumed controller limit
+        # Tyres (docs/skid-steer.md, "Tyres"): cornering 0.12 of the load per degree, Gillespie's
+        # bias-ply figure; longitudinal slip stiffness assumed (no published value).
+        tyre_slip_stiffness=TYRE_SLIP_STIFFNESS,
+        tyre_cornering_stiffness=TYRE_CORNERING_STIFFNESS,
+        source="jackal_description jackal.urdf.xacro (geometry, masses), jackal_control "
+        "control.yaml (speed); encoder resolution and acceleration limit assumed",
+    ),
 }

@@ -35,7 +35,7 @@ from odomgym.sim.world import GRAVITY, World
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
-SKID = ("scout2", "husky", "pioneer3at")
+SKID = ("scout2", "husky", "pioneer3at", "jackal")
 
 
 def _robot(**changes: float) -> RobotSpec:
@@ -135,7 +135,8 @@ def _rigid(robot: RobotSpec) -> RobotSpec:
 
 @pytest.mark.parametrize("name", SKID)
 def test_a_slow_spin_on_rigid_contacts_has_the_analytic_apparent_track(name: str) -> None:
-    """b·(1 + (a/b)²): Husky 1.851, Pioneer 3-AT 1.466, Scout 2.0 1.730 (module docstring)."""
+    """b·(1 + (a/b)²): Husky 1.851, Pioneer 3-AT 1.466, Scout 2.0 1.730, Jackal 1.487 (module
+    docstring; Clearpath's own odometry multiplies the Jackal's track by 1.5)."""
     robot = _rigid(PRESETS[name])
     factor, _ = apparent_track_factor(robot, 0.1, 0.0)
     assert factor == pytest.approx(1.0 + (robot.axle_spacing / robot.true_wheelbase) ** 2, rel=2e-3)
@@ -202,7 +203,7 @@ def test_wide_turns_on_elastic_tyres_have_the_linear_tyre_factor(name: str) -> N
     """The analytic limit of a wide slow turn: every contact stays in its elastic range, the
     forces are the stiffnesses times the slips, and the yaw balance of the linear tyre model
     gives χ = 1 + (C_α/C_κ)·(a/b)² (docs/skid-steer.md, "Tyres"): Scout 2.0 1.251, Husky
-    1.293, Pioneer 3-AT 1.160 — against the spin's 1 + (a/b)² on rigid contacts."""
+    1.293, Pioneer 3-AT 1.160, Jackal 1.167 — against the spin's 1 + (a/b)² on rigid contacts."""
     robot = PRESETS[name]
     factor, driven = apparent_track_factor(robot, 0.2, 12.0)
     ratio = robot.tyre_cornering_stiffness / robot.tyre_slip_stiffness

@@ -72,7 +72,7 @@ def test_options_of_the_other_benchmark_are_one_line_errors(
 
 
 def test_the_config_names_the_field() -> None:
-    assert set(SKID_PRESETS) == {"scout2", "husky", "pioneer3at"}
+    assert set(SKID_PRESETS) == {"scout2", "husky", "pioneer3at", "jackal"}
     with pytest.raises(SpecError, match="labmate") as info:
         SkidBenchConfig(robots=("labmate",))
     assert info.value.field == "robots"
