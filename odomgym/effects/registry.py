@@ -177,6 +177,11 @@ class Effect:
     during steady driving): it competes with the systematic effects from the first round of
     ``diagnose`` where that signature is in the data, so that a systematic effect named before
     it cannot stand in for its realised jumps (:func:`odomgym.diagnose.rounds.run_round`)."""
+    measurement: ClassVar[bool] = False
+    """True for an error of the measurement, not of the robot (the ground-truth system's
+    tracked point): ``diagnose`` fits it like any effect, and reports it after the robot's
+    own effects, since a report is read for what is wrong with the robot
+    (:func:`odomgym.diagnose.workflow._in_order_added`)."""
     confounded: ClassVar[str] = ""
     """What else, outside the catalogue, produces exactly the same logs (the report repeats it
     whenever the effect is named, so a reader does not take the name for more than the data

@@ -44,6 +44,7 @@ class GroundTruthOffset(Effect):
         Parameter("dy", "m", 0.0, -1.0, 1.0, 2e-3, "tracked point left of the axle midpoint"),
     )
     summary = "the ground-truth system tracks a point offset from the axle midpoint"
+    measurement = True
     reveals = "in-place turns (the tracked point circles the axle; 180° spins show 2·offset)"
     confounded = (
         "on a skid-steer robot, instantaneous centres of rotation of both sides sitting a constant "
