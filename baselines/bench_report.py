@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -204,10 +205,13 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
     handles, names = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, names, fontsize=8, loc="outside lower center")  # clear of the boxes
     budgets = " / ".join(str(b) for b in config.budgets)
-    fig.suptitle(
+    title = (
         f"How much each calibrator reduces the UMBmark error E_max,syst (fresh validation "
         f"squares): {config.robots} robots per floor, budget {budgets} runs"
     )
+    # Wrapped to the figure's width (about ten characters of the title's 12-pt type per inch):
+    # with one or two floors the figure is narrower than the title's single line.
+    fig.suptitle(textwrap.fill(title, width=int(10 * fig.get_figwidth())))
 
     def write(tmp: Path) -> None:
         fig.savefig(tmp, dpi=110, format="png")
