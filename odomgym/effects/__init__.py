@@ -13,11 +13,16 @@ name                      parameters             what it is
 ``wheel_toe``             ``angle`` [rad]        crab at a constant angle while translating
 ``turn_skid``             ``gain`` [s²/m]        yaw under-rotation growing with |v·ω|
 ``backlash``              ``angle`` [rad]        dead band lost at every wheel reversal
+``skid_track``            ``excess``,            skid-steer scrub: an apparent track wider in
+                          ``lambda_half``        tight turns than on wide arcs
+``skid_speed``            ``gain`` [s²/m]        skid-steer scrub relieved by speed: the track
+                                                 narrows as v·ω grows
 ``floor_bumps``           ``rate`` [1/m],        sparse heading jumps from bumps
                           ``heading_jump`` [rad]
 ``floor_roughness``       ``k_left``,            Chong & Kleeman wheel noise
                           ``k_right`` [m^½]
-``gt_sensor_offset``      ``dx``, ``dy`` [m]     tracked point offset from the axle midpoint
+``gt_sensor_offset``      ``dx``, ``dy`` [m]     tracked point offset from the axle midpoint (an
+                                                 error of the measurement, not of the robot)
 ``discovered``            ``CHANNEL_MODULATOR``  terms of the error grammar found by sparse
                                                  regression (:mod:`odomgym.effects.discovered`)
 ========================  =====================  ============================================
