@@ -228,22 +228,23 @@ def run_skid_bench(
         fits: list[tuple[str, SkidModel, Calibration | None]] = [
             (kind, fit_skid_model(kind, calibration, robot), None) for kind in SKID_MODELS
         ]
-        for method, options in CLASSICAL.items():
-            lab = SimLab(robot, FLOORS[floor], rng=rng.spawn(1)[0], cruise_speed=SPEED)
-            found = CALIBRATORS[method](**options).calibrate(lab).calibration
-            fits.append((method, calibration_model(found, robot), found))
-        for method, options in SKID_CALIBRATORS.items():
-            stream = np.random.default_rng([config.seed, done, 1])
+        # The classical calibrators draw their labs' streams from the run's generator, in
+        # order; the registered skid-steer ones from a stream of their own per cell, so that
+        # adding them left every classical row as it was.
+        labs = [(m, o, rng.spawn(1)[0]) for m, o in CLASSICAL.items()] + [
+            (m, o, np.random.default_rng([config.seed, done, 1]))
+            for m, o in SKID_CALIBRATORS.items()
+        ]
+        for method, options, stream in labs:
             lab = SimLab(robot, FLOORS[floor], rng=stream, cruise_speed=SPEED)
             found = CALIBRATORS[method](**options).calibrate(lab).calibration
             fits.append((method, calibration_model(found, robot), found))
         for kind, model, wheels in fits:
-            errors = np.array([_errors(model, run, robot, wheels) for run in validation])
+            each = [_errors(model, run, robot, wheels) for run in validation]
+            errors = np.array(each)
             per_circle = {
-                f"{run.meta['radius']}-{run.meta['direction']}": _errors(model, run, robot, wheels)[
-                    1
-                ]
-                for run in validation
+                f"{run.meta['radius']}-{run.meta['direction']}": error[1]
+                for run, error in zip(validation, each, strict=True)
                 if run.kind == "circular"
             }
             rows.append(
