@@ -229,8 +229,8 @@ def run_skid_bench(
             (kind, fit_skid_model(kind, calibration, robot), None) for kind in SKID_MODELS
         ]
         # The classical calibrators draw their labs' streams from the run's generator, in
-        # order; the registered skid-steer ones from a stream of their own per cell, so that
-        # adding them left every classical row as it was.
+        # order; the registered skid-steer ones each start one stream seeded by the cell
+        # (``[seed, cell, 1]``), so that adding them left every classical row as it was.
         labs = [(m, o, rng.spawn(1)[0]) for m, o in CLASSICAL.items()] + [
             (m, o, np.random.default_rng([config.seed, done, 1]))
             for m, o in SKID_CALIBRATORS.items()

@@ -28,9 +28,10 @@ World's bumps the size is the heading jump of one crossing, e/b with e the over-
 
 Scored per trial (``score``):
 
-* **named first** — the first effect the report names (in the order the rounds added them) is
-  the hidden one, or the hidden one is named too and the report states a confound in which
-  both stand (the table counts these apart: "by a confound");
+* **named first** — the first effect the report names (in its order: the rounds', an extension
+  before its partner, the tracker's offset after the robot's effects) is the hidden one, or
+  the hidden one is named too and the report states a confound in which both stand (the table
+  counts these apart: "by a confound");
 * **its gap shrank** — by the yardstick of its kind: a systematic effect's held-out open-loop
   error below the model as given's (``held_out_open_loop.better_than_as_given``); a noise
   effect's spread check confirmed it (held-out log score better than the model without it by a

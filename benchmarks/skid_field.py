@@ -1,6 +1,6 @@
 """The diagnosis on skid-steer logs as a user brings them: named first, held-out error, gaps.
 
-    python benchmarks/skid_field.py [--robots husky scout2] [--lost 0 0.45] [--seeds 0 1]
+    python benchmarks/skid_field.py [--robots NAME ...] [--lost 0 0.45] [--seeds 0 1]
                                     [--jobs 2] [--results field.jsonl] [--table FILE.md]
                                     [--table-only]
 
@@ -92,7 +92,9 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", nargs="+", default=["husky", "scout2"])
+    parser.add_argument(
+        "--robots", nargs="+", default=None, help="skid-steer presets (default: every one)"
+    )
     parser.add_argument("--lost", nargs="+", type=float, default=[0.0, 0.45])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
@@ -102,6 +104,8 @@ def main() -> None:
     args = parser.parse_args()
     from odomgym.robot import PRESETS
 
+    if args.robots is None:
+        args.robots = [name for name, spec in PRESETS.items() if spec.is_skid_steer]
     for name in args.robots:
         if name not in PRESETS or not PRESETS[name].is_skid_steer:
             parser.error(f"--robots: {name!r} is not a skid-steer preset")

@@ -272,8 +272,8 @@ def _parameter_lines(d: Diagnosis) -> list[str]:
         lines += [
             f"## {title}",
             "",
-            "| effect (in the order named; an extension before its partner) | parameter | value "
-            "| standard error "
+            "| effect (in the order named; an extension before its partner, the tracker's offset "
+            "last) | parameter | value | standard error "
             "| run-clustered | session-clustered |",
             "|---|---|---|---|---|---|",
         ]

@@ -124,7 +124,8 @@ class Diagnosis:
 
     @property
     def systematic_effects(self) -> list[str]:
-        """The named catalogue effects that move the mean (in the order named)."""
+        """The named catalogue effects that move the mean, in the order reported
+        (:func:`odomgym.diagnose.workflow._in_order_added`)."""
         return [n for n in self.named_effects if not EFFECTS[n].noise]
 
     @property
