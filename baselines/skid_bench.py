@@ -42,7 +42,7 @@ from odomgym.lab.simulated import SimLab, measure
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.icr import SKID_MODELS, SkidModel, fit_skid_model, skid_dead_reckon
 from odomgym.odometry.runs import Direction, Run, wheel_travels
-from odomgym.robot import PRESETS, RobotSpec
+from odomgym.robot import PRESETS, SKID_STEER_PRESETS, RobotSpec
 
 __all__ = [
     "CAL_RADII",
@@ -84,8 +84,8 @@ the classical calibrators' streams depend on it too), so that adding them left e
 row as it was."""
 SKID_LABELS = {"skid_icr": "ICRs", "skid_curvature": "track curve"}
 """What each registered skid-steer calibrator fits beside the wheels' factors (table labels)."""
-SKID_PRESETS = tuple(name for name, spec in PRESETS.items() if spec.is_skid_steer)
-"""The skid-steer presets (:data:`odomgym.robot.PRESETS` with ``axle_spacing > 0``)."""
+SKID_PRESETS = SKID_STEER_PRESETS
+"""The skid-steer presets (:data:`odomgym.robot.SKID_STEER_PRESETS`)."""
 
 
 @dataclass(frozen=True)

@@ -102,10 +102,10 @@ def main() -> None:
     parser.add_argument("--table", type=Path, help="write the markdown table here")
     parser.add_argument("--table-only", action="store_true", help="only print the table")
     args = parser.parse_args()
-    from odomgym.robot import PRESETS
+    from odomgym.robot import PRESETS, SKID_STEER_PRESETS
 
     if args.robots is None:
-        args.robots = [name for name, spec in PRESETS.items() if spec.is_skid_steer]
+        args.robots = list(SKID_STEER_PRESETS)
     for name in args.robots:
         if name not in PRESETS or not PRESETS[name].is_skid_steer:
             parser.error(f"--robots: {name!r} is not a skid-steer preset")

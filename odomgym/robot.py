@@ -28,7 +28,7 @@ from odomgym.effects import get_effect
 from odomgym.errors import SpecError, load_named, locate_key, require_positive, require_range
 from odomgym.io import atomic_write_text
 
-__all__ = ["PRESETS", "EffectTable", "RobotSpec", "load_robot"]
+__all__ = ["PRESETS", "SKID_STEER_PRESETS", "EffectTable", "RobotSpec", "load_robot"]
 
 EffectTable = tuple[tuple[str, tuple[tuple[str, float], ...]], ...]
 """Effects of a spec: ((name, ((parameter, value), ...)), ...), sorted by name."""
@@ -766,3 +766,7 @@ PRESETS: dict[str, RobotSpec] = {
         "control.yaml (speed); encoder resolution and acceleration limit assumed",
     ),
 }
+
+SKID_STEER_PRESETS: tuple[str, ...] = tuple(n for n, s in PRESETS.items() if s.is_skid_steer)
+"""The skid-steer presets (:data:`PRESETS` with ``axle_spacing > 0``), in their order there:
+the one list ``bench skid``, the command line's help and the benchmarks read."""

@@ -38,10 +38,9 @@ JOURNAL_NAME = "journal.jsonl"
 def register(commands: Commands) -> None:
     """Add ``bench``."""
     from odomgym.lab.population import BENCH_FLOORS
-    from odomgym.robot import PRESETS
+    from odomgym.robot import PRESETS, SKID_STEER_PRESETS
 
-    # odomgym.baselines.skid_bench.SKID_PRESETS, without importing the calibrators here.
-    skid_presets = [name for name, spec in PRESETS.items() if spec.is_skid_steer]
+    skid_presets = list(SKID_STEER_PRESETS)
     parser = commands.add_parser(
         "bench",
         help="benchmark calibrators on a simulated robot population",
