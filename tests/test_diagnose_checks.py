@@ -608,11 +608,14 @@ def test_an_unidentified_effect_must_beat_one_standard_error_by_a_real_size() ->
     assert step.kept and step.rule == gate_module.UNIDENTIFIED
 
 
-def test_an_unidentified_extension_is_exchanged_only_for_a_term_it_blocked() -> None:
+def test_an_extension_is_exchanged_only_for_a_term_it_blocked() -> None:
     """Without a term refused as not identifiable, a kept skid track stays whatever its
     inflation (it predicts better and nothing competes; the report's confounds say its values
-    are not determined): the gate is not run again. The exchange itself is tested end to end
-    on the alien yaw-rate scrub (tests/test_discover.py)."""
+    are not determined): the gate is not run again. With one, the gate runs again without it,
+    and the other model is kept if it predicts the folds better — by anything for a skid track
+    the fit cannot identify, by more than a standard error of the folds' differences for one
+    it can (the rule a term passes). The exchange itself is tested end to end on the alien
+    yaw-rate scrub (tests/test_discover.py)."""
 
     def step(kind: str, name: str, kept: bool, rule: str, inflation: float) -> Any:
         return gate_module.GateStep(
@@ -620,12 +623,12 @@ def test_an_unidentified_extension_is_exchanged_only_for_a_term_it_blocked() -> 
         )
 
     class NoGate:
-        folds = ((0,),)
+        folds = ((0,), (1,), (2,))
 
         def eliminate(self, *args: object) -> None:
             raise AssertionError("the gate must not run again")
 
-    kept = (None, np.zeros(3), "open loop")
+    kept = (None, np.full(3, 4e-6), "open loop")
     steps = [
         step("effect", "skid_track", True, "lower", 4e7),
         step("effect", "wheelbase", True, "held by skid_track", math.nan),
@@ -635,9 +638,44 @@ def test_an_unidentified_extension_is_exchanged_only_for_a_term_it_blocked() -> 
     terms = [("term", "yaw_rate")]
     args: Any = (NoGate(), kept, steps, effects, terms, kept)
     assert gate_module._exchange(*args) is None
-    steps[0] = step("effect", "skid_track", True, "lower", 50.0)
+
+    class Again:
+        """The gate without the skid track: the wheelbase kept, the term refused, and the
+        folds' errors ``cv`` [m²]."""
+
+        folds = ((0,), (1,), (2,))
+
+        def __init__(self, cv: list[float]) -> None:
+            self.cv = np.array(cv) * 1e-6
+
+        def eliminate(self, model: list[Any], fixed: list[Any], base: Any) -> Any:
+            scored = (None, self.cv, "open loop")
+            if not fixed:
+                return scored, [step("effect", "wheelbase", True, "lower", 1.0)], []
+            model.clear()
+            return scored, [], [step("term", "yaw_rate", False, "one standard error", 3.0)]
+
     steps[2] = step("term", "yaw_rate", False, "not identifiable", math.inf)
-    assert gate_module._exchange(*args) is None  # identified: nothing to exchange
+    # Better in two folds of three, by less than its standard error (0.17 ± 0.60 mm²).
+    close = Again([3.0, 5.0, 3.5])
+    better = Again([3.0, 3.1, 2.9])  # better in every fold: 1.0 ± 0.06 mm²
+    for inflation, gate, exchanged in [
+        (4e7, close, True),  # unidentified: any better model
+        (50.0, close, False),  # identified: better by a standard error
+        (50.0, better, True),
+    ]:
+        steps[0] = step("effect", "skid_track", True, "lower", inflation)
+        args = (gate, kept, steps, effects, terms, kept)
+        done = gate_module._exchange(*args)
+        assert (done is not None) == exchanged, (inflation, gate.cv)
+        if done is None:
+            continue
+        refused = done[1][-1]
+        assert refused.name == "skid_track" and not refused.kept
+        unidentified = inflation > gate_module.MAX_INFLATION
+        start = "not identifiable beside" if unidentified else gate_module.BLOCKING
+        assert refused.rule == f"{start} wheelbase"
+        assert done[2] == [("effect", "wheelbase")]
 
 
 def test_the_size_half_of_the_bump_check_needs_no_replay() -> None:

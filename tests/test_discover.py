@@ -16,9 +16,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from alien_robot import EXPECTED_TERMS, generate_session
+from alien_robot import EXPECTED_TERMS, draw_effect, generate_session
 from independent_robot import IndependentRobot, generate, rich_protocol
 
+from odomgym.diagnose import gate as gate_module
 from odomgym.diagnose.discover import best_threshold, library_jacobian, structure_test
 from odomgym.diagnose.fit import Dataset, fit_noise
 from odomgym.diagnose.generate import NOMINAL_ROBOT, simulate_protocol
@@ -261,6 +262,40 @@ def test_effect_outside_the_catalogue_is_discovered(name: str, value: float, che
         entry = terms[check]
         truth = value if check == "crab_lateral_signed" else -value
         assert abs(entry["coefficient"] - truth) < max(5 * entry["stderr"], 0.15 * value), entry
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "seed", "kept"),
+    [
+        ("spin_scrub", 8302, {"yaw_rate"}),
+        ("speed_shrink", 7800, {"left_speed", "right_speed"}),
+        ("speed_shrink", 7802, {"left_speed2", "right_speed2"}),
+    ],
+)
+def test_no_skid_steer_effect_stands_in_on_a_differential_drive_robot(
+    name: str, seed: int, kept: set[str]
+) -> None:
+    """``benchmarks/bench_discover.py``'s trials (seed = 7000 + 100 × class + trial) where a
+    skid-steer effect had been named on a differential-drive robot beside, or instead of, the
+    terms that describe its mechanism: no candidate is filtered by the robot's class, and the
+    gate refuses them by its own rules. ``skid_speed`` (8302, 7800) predicted nothing more once
+    the terms were in, and leaves when the effects are judged again beside the kept terms
+    (``gate._beside_terms``); ``skid_track`` (7802), kept beside the wheelbase along the ridge
+    its excess shares with E_b, had blocked the terms (VIF ∞) and is exchanged for them
+    (``gate._exchange``): the model without it predicts the folds better by more than a
+    standard error."""
+    rng = np.random.default_rng(seed)
+    effects = {name: draw_effect(name, rng)}
+    runs = generate_session(effects, rng)
+    result = diagnose(runs, MODEL, DiagnoseConfig(seed=seed))
+    named = set(result.named_effects)
+    assert not named & {"skid_track", "skid_speed"}, (result.verdict, result.named_effects)
+    assert {e["term"] for e in result.discovered} >= kept, result.discovered
+    refused = {s.name: s.rule for s in result.gate if not s.kept and s.kind == "effect"}
+    skid = "skid_track" if seed == 7802 else "skid_speed"
+    rule = gate_module.BLOCKING if seed == 7802 else gate_module.BESIDE_TERMS
+    assert rule in refused.get(skid, ""), refused
 
 
 @pytest.mark.slow

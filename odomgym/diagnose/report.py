@@ -585,7 +585,7 @@ def _confound_lines(d: Diagnosis) -> list[str]:
 
 def _rule(step: GateStep) -> str:
     """A gate step's rule, with the variance inflation that made a proposal unidentifiable."""
-    if step.rule.startswith("not identifiable") or step.rule == UNIDENTIFIED:
+    if step.rule.startswith(("not identifiable", UNIDENTIFIED)):
         inflation = "∞" if math.isinf(step.inflation) else f"{step.inflation:.2g}"
         return f"{step.rule} (VIF {inflation})"
     return step.rule
