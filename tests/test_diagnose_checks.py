@@ -504,6 +504,65 @@ def test_a_base_stays_while_its_extension_is_tested_and_a_wrongly_removed_effect
     assert 1e3 * math.sqrt(float(np.mean(cv))) == pytest.approx(4.8)
 
 
+def test_effects_are_judged_again_beside_the_kept_terms_under_their_own_rules() -> None:
+    """Once the gate keeps a term (Y, a yaw-rate term), the catalogue effects it kept before
+    (W, the wheelbase; K, a speed-dependent skid track, both named by the rounds) are eliminated
+    again beside it, each under the rule it had among the effects: K, which predicts nothing
+    more beside Y (1.82 mm with it, 1.80 without), goes; W, which still lowers the error, stays
+    — though beside the term the robot's variance inflation counts the term's parameter and
+    reads W as unidentified (10⁹), it keeps its rule ``lower``. Where both still lower the
+    error nothing changes (None: the catalogue stage's steps stand)."""
+    names = {"wheelbase": "W", "skid_speed": "K", "yaw_rate": "Y"}
+    table = {"": 12.0, "Y": 1.81, "WY": 1.80, "KY": 1.83, "WKY": 1.82}  # held out [mm]
+    e_b = f"wheelbase.{EFFECTS['wheelbase'].parameters[0].name}"
+
+    class Scripted(gate_module._Elimination):
+        def fitted(self, members: Any, begin: RobotSpec, nuisances: Any, base: Any) -> Any:
+            key = "".join(sorted((names[n] for _, n in members), key="WKY".index))
+            mm = table[key]
+            cv = np.full(4, (mm / 1e3) ** 2)
+            fit = SimpleNamespace(
+                spec=ROBOT,
+                nuisances={},
+                inflation={},
+                robot_inflation={e_b: 1e9} if "Y" in key else {},
+                cv=cv,
+                error=float(cv[0]),
+            )
+            return fit, cv, "open loop"
+
+        def held_out(self, fit: Any, keys: Any) -> tuple[Any, str]:
+            return fit.cv, "open loop"
+
+    judged = [
+        gate_module.GateStep("effect", "wheelbase", True, 12.0, 11.49, -5.0, 1.0, "lower"),
+        gate_module.GateStep("effect", "skid_speed", True, 11.6, 11.49, -2.0, 1.0, "lower"),
+    ]
+    gate = _four_fold_gate(Scripted, {"wheelbase", "skid_speed"})
+    effects = [("effect", "wheelbase"), ("effect", "skid_speed")]
+    terms = [("term", "yaw_rate")]
+    as_given = gate.fitted([], ROBOT, None, None)
+    current = gate.fitted([*effects, *terms], ROBOT, None, None)
+    done = gate_module._beside_terms(gate, effects, terms, current, as_given, judged)
+    assert done is not None
+    (_, cv, _), kept, removed = done
+    assert effects == [("effect", "wheelbase")]
+    assert 1e3 * math.sqrt(float(np.mean(cv))) == pytest.approx(1.80)
+    assert [(s.name, s.kept, s.rule) for s in kept] == [
+        ("wheelbase", True, f"lower {gate_module.BESIDE_TERMS}")
+    ]
+    assert [(s.name, s.kept, s.rule) for s in removed] == [
+        ("skid_speed", False, f"lower {gate_module.BESIDE_TERMS}")
+    ]
+    assert kept[0].inflation == 1e9  # reported as measured, judged as in the catalogue stage
+    # Both still needed beside the term: nothing moves.
+    table["WKY"] = 1.79
+    effects = [("effect", "wheelbase"), ("effect", "skid_speed")]
+    current = gate.fitted([*effects, *terms], ROBOT, None, None)
+    assert gate_module._beside_terms(gate, effects, terms, current, as_given, judged) is None
+    assert effects == [("effect", "wheelbase"), ("effect", "skid_speed")]
+
+
 def test_a_failing_base_beside_its_extension_is_held_and_says_so() -> None:
     """A wheelbase that fails its rule while the skid track that extends it stays is kept,
     and its rule says which effect held it; terms and effects nothing extends are as they
@@ -608,14 +667,18 @@ def test_an_unidentified_effect_must_beat_one_standard_error_by_a_real_size() ->
     assert step.kept and step.rule == gate_module.UNIDENTIFIED
 
 
-def test_an_extension_is_exchanged_only_for_a_term_it_blocked() -> None:
+def test_an_extension_is_exchanged_only_for_a_term_it_blocked(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """Without a term refused as not identifiable, a kept skid track stays whatever its
     inflation (it predicts better and nothing competes; the report's confounds say its values
     are not determined): the gate is not run again. With one, the gate runs again without it,
     and the other model is kept if it predicts the folds better — by anything for a skid track
     the fit cannot identify, by more than a standard error of the folds' differences for one
-    it can (the rule a term passes). The exchange itself is tested end to end on the alien
-    yaw-rate scrub (tests/test_discover.py)."""
+    it can (the rule a term passes), and only where that model keeps a term it had blocked.
+    The exchange itself is tested end to end on the alien yaw-rate scrub and speed shrink
+    (tests/test_discover.py); the effects' second judgement beside the kept terms has its own
+    test above."""
 
     def step(kind: str, name: str, kept: bool, rule: str, inflation: float) -> Any:
         return gate_module.GateStep(
@@ -640,29 +703,36 @@ def test_an_extension_is_exchanged_only_for_a_term_it_blocked() -> None:
     assert gate_module._exchange(*args) is None
 
     class Again:
-        """The gate without the skid track: the wheelbase kept, the term refused, and the
-        folds' errors ``cv`` [m²]."""
+        """The gate without the skid track: the wheelbase kept, the term kept (``keeps``) or
+        refused, and the folds' errors ``cv`` [m²]."""
 
         folds = ((0,), (1,), (2,))
 
-        def __init__(self, cv: list[float]) -> None:
+        def __init__(self, cv: list[float], keeps: bool = True) -> None:
             self.cv = np.array(cv) * 1e-6
+            self.keeps = keeps
 
         def eliminate(self, model: list[Any], fixed: list[Any], base: Any) -> Any:
             scored = (None, self.cv, "open loop")
             if not fixed:
                 return scored, [step("effect", "wheelbase", True, "lower", 1.0)], []
+            if self.keeps:
+                return scored, [step("term", "yaw_rate", True, "one standard error", 3.0)], []
             model.clear()
             return scored, [], [step("term", "yaw_rate", False, "one standard error", 3.0)]
+
+    monkeypatch.setattr(gate_module, "_beside_terms", lambda *args: None)
 
     steps[2] = step("term", "yaw_rate", False, "not identifiable", math.inf)
     # Better in two folds of three, by less than its standard error (0.17 ± 0.60 mm²).
     close = Again([3.0, 5.0, 3.5])
     better = Again([3.0, 3.1, 2.9])  # better in every fold: 1.0 ± 0.06 mm²
+    unblocked = Again([3.0, 3.1, 2.9], keeps=False)  # as much better, the term still out
     for inflation, gate, exchanged in [
         (4e7, close, True),  # unidentified: any better model
         (50.0, close, False),  # identified: better by a standard error
         (50.0, better, True),
+        (50.0, unblocked, False),  # and keeping a term it blocked
     ]:
         steps[0] = step("effect", "skid_track", True, "lower", inflation)
         args = (gate, kept, steps, effects, terms, kept)
@@ -675,7 +745,7 @@ def test_an_extension_is_exchanged_only_for_a_term_it_blocked() -> None:
         unidentified = inflation > gate_module.MAX_INFLATION
         start = "not identifiable beside" if unidentified else gate_module.BLOCKING
         assert refused.rule == f"{start} wheelbase"
-        assert done[2] == [("effect", "wheelbase")]
+        assert done[2][0] == ("effect", "wheelbase")
 
 
 def test_the_size_half_of_the_bump_check_needs_no_replay() -> None:

@@ -40,7 +40,15 @@ order). The rules:
   such an effect stays and a term was refused as not identifiable beside it, the gate runs
   again without it, and the model that predicts the folds better is kept (rule ``"not
   identifiable beside wheelbase"``, :func:`_exchange`): a skid track whose half-point lies
-  beyond the logged turns, one more constant track factor, had blocked a yaw-rate term.
+  beyond the logged turns, one more constant track factor, had blocked a yaw-rate term. An
+  extension the fit can identify, kept beside its base, is exchanged the same way for the
+  terms it blocked, but only for a model better by more than one standard error (rule
+  ``"blocked the terms beside wheelbase"``);
+* once the terms are kept, the catalogue effects are judged again beside them, each under the
+  rule it had among the effects (:func:`_beside_terms`; rules ending ``"beside the kept
+  terms"``): an effect the rounds named before discovery proposed the terms must still lower
+  the error in the final model (a speed-dependent skid track had stayed beside the speed terms
+  that describe a shrinking wheel, predicting nothing more).
 
 Two rules make the elimination stepwise rather than one-way. A base an extension builds on
 (``wheelbase``, which a ``skid_track`` widens in tight turns: its :attr:`~odomgym.effects.Effect.
@@ -125,14 +133,14 @@ FloatArray = NDArray[np.float64]
 DISCOVERED = "discovered"
 MAX_INFLATION = 1e6
 """The largest variance inflation factor a discovered term may have in the open-loop fit, and
-the one above which an extension beside its base is exchanged for a term it blocked (module
-docstring). VIF = 1 / (1 − R²) with R² of the term's column regressed on the others
-(Kutner, Nachtsheim, Neter & Li 2005, §10.5), so 10⁶ is a column within 10⁻³ (relative norm)
-of the others' span: the bound :func:`odomgym.diagnose.discover.library_jacobian` drops a
-term at. Not the textbook 10 for
-*harmful* collinearity: the geometry is itself that collinear (on the June OptiOdom sessions
-E_d's VIF is ≈ 700 beside a turn skid) and still well determined; this bound refuses only
-what the data cannot determine at all."""
+the one above which an extension beside its base is exchanged for a term it blocked for any
+better model (below it, for one better by a standard error: module docstring). VIF =
+1 / (1 − R²) with R² of the term's column regressed on the others (Kutner, Nachtsheim, Neter
+& Li 2005, §10.5), so 10⁶ is a column within 10⁻³ (relative norm) of the others' span: the
+bound :func:`odomgym.diagnose.discover.library_jacobian` drops a term at. Not the textbook 10
+for *harmful* collinearity: the geometry is itself that collinear (on the June OptiOdom
+sessions E_d's VIF is ≈ 700 beside a turn skid) and still well determined; this bound refuses
+only what the data cannot determine at all."""
 
 
 UNIDENTIFIED = "one standard error and a real size, not identifiable beside the other effects"
@@ -175,9 +183,11 @@ class GateStep:
             effect the fit cannot tell from the other robot effects, :data:`UNIDENTIFIED`),
             or ``"not identifiable"``: a term whose variance inflation exceeded
             :data:`MAX_INFLATION`; or ``"not identifiable beside BASE"``: an effect as
-            inflated, exchanged for the terms it blocked (:func:`_exchange`); or ``"held by
-            EFFECT"``: a base that failed its rule while an effect that extends it stayed
-            (module docstring).
+            inflated, exchanged for the terms it blocked (:func:`_exchange`), or
+            ``"blocked the terms beside BASE"``: an identified extension exchanged for them
+            (:data:`BLOCKING`); or ``"held by EFFECT"``: a base that failed its rule while an
+            effect that extends it stayed (module docstring); an effect's rule judged again
+            beside the kept terms ends ``" beside the kept terms"`` (:data:`BESIDE_TERMS`).
         estimator: whose fold refits predicted the folds better, and so were compared:
             ``"open loop"`` or ``"filter"`` (:class:`FilterLinearisation`).
         inflation: the largest variance inflation factor of its parameters in the open-loop
@@ -420,6 +430,11 @@ class _Elimination:
     filtered: FilterLinearisation | None
     corrected: OpenLoopData | None
     jobs: int = 1
+    unidentified: frozenset[str] | None = None
+    """The effects judged as not identifiable beside the other robot effects, where given;
+    else those whose variance inflation exceeds :data:`MAX_INFLATION` in the model tried
+    (:func:`_beside_terms` keeps each effect's rule of the catalogue stage: beside the terms
+    the robot's inflation counts their parameters too)."""
 
     def each(
         self, members: Sequence[Member], call: Callable[[Member], Any], stage: str
@@ -542,7 +557,9 @@ class _Elimination:
         mean, spread = _fold_difference(cv, smaller_cv, self.folds)
         inflation = _inflation(member, fit)
         confounded = kind == "term" and inflation > MAX_INFLATION
-        unidentified = kind == "effect" and inflation > MAX_INFLATION
+        unidentified = kind == "effect" and (
+            inflation > MAX_INFLATION if self.unidentified is None else name in self.unidentified
+        )
         lenient = kind == "effect" and name in self.lenient and not unidentified
         if confounded:
             rule = "not identifiable"
@@ -844,7 +861,9 @@ def _catalogue_first(
             term_members, effect_members, kept_model
         )
     if term_members and effect_members:
-        rechecked = _beside_terms(gate, effect_members, term_members, kept_model, as_given)
+        rechecked = _beside_terms(
+            gate, effect_members, term_members, kept_model, as_given, kept_effects
+        )
         if rechecked is not None:
             kept_model, kept_effects, absorbed = rechecked
             removed_effects = removed_effects + absorbed
@@ -863,12 +882,13 @@ def _beside_terms(
     terms: Sequence[Member],
     current: Scored,
     as_given: Scored,
+    judged: Sequence[GateStep],
 ) -> tuple[Scored, list[GateStep], list[GateStep]] | None:
-    """The kept catalogue ``effects`` eliminated again, each under its own rule, beside the
-    kept discovered ``terms`` (``current``: the model of both): the final model's fit, the
-    kept effects' steps and the removed ones (their rules ending :data:`BESIDE_TERMS`), or
-    None where every effect stays (the steps of the catalogue stage then stand). ``effects``
-    is left holding the kept ones.
+    """The kept catalogue ``effects`` eliminated again beside the kept discovered ``terms``
+    (``current``: the model of both), each under the rule it had in the catalogue stage
+    (``judged``, their steps there): the final model's fit, the kept effects' steps and the
+    removed ones (their rules ending :data:`BESIDE_TERMS`), or None where every effect stays
+    (the steps of the catalogue stage then stand). ``effects`` is left holding the kept ones.
 
     Why: in the ``"catalogue first"`` order the effects are judged before any term is in the
     model, and the terms then join with them fixed, so nothing asked whether an effect still
@@ -879,9 +899,13 @@ def _beside_terms(
     (``skid_speed``) was named beside the terms that describe the mechanism and predicted
     nothing more: beside ``left_speed`` and ``right_speed`` (a wheel radius that shrinks with
     speed; 1.74 → 1.72 mm held out without it) and beside ``yaw_rate`` (a spin that scrubs;
-    1.82 → 1.80 mm). Each effect keeps its own rule — ``"lower"`` for one the rounds named —
-    so a term that resembles a mechanism still cannot displace it unless the mechanism makes
-    the predictions worse."""
+    1.82 → 1.80 mm). Each effect keeps its rule of the catalogue stage — ``"lower"`` for one
+    the rounds named, and identified or not as it was among the effects (beside the terms the
+    robot's variance inflation counts their parameters too) — so a term that resembles a
+    mechanism cannot displace it unless the mechanism makes the predictions worse.
+
+    Not done: the kept terms are not judged again once an effect leaves; their rows describe
+    the model with it, and a term refused beside it stays refused."""
     if not terms or not effects:
         return None
     fit = current[0]
@@ -889,8 +913,13 @@ def _beside_terms(
     for name in _parts(effects)[0]:
         alone = EFFECTS[name].write(alone, EFFECTS[name].read(gate.robot))
     base = gate.fitted(list(terms), alone, fit.nuisances, as_given[0])
+    if fit.error > base[0].error:
+        # Fitted from the effects alone, the model of both may have stopped above the terms
+        # alone, a point of it: fitted again, never worse than the smaller model (fit_nested).
+        current = gate.fitted([*effects, *terms], fit.spec, fit.nuisances, base[0])
     model = list(effects)
-    final, kept, removed = gate.eliminate(model, list(terms), base, current)
+    rules = replace(gate, unidentified=frozenset(s.name for s in judged if s.rule == UNIDENTIFIED))
+    final, kept, removed = rules.eliminate(model, list(terms), base, current)
     if not removed:
         return None
     effects[:] = model
@@ -912,8 +941,10 @@ def _exchange(
 ) -> tuple[Scored, list[GateStep], list[Member]] | None:
     """The gate run again on the proposed ``effects`` and ``terms`` without a kept effect the
     open-loop fit cannot tell from the other robot effects (:func:`_inflation`, the most
-    inflated), where a discovered term was refused as not identifiable beside it; that model,
-    its steps and its members if it predicts the folds better than ``kept_model``, else None.
+    inflated) or, failing one, without an extension kept beside its base, where a discovered
+    term was refused as not identifiable beside it; that model, its steps and its members if
+    it predicts the folds better than ``kept_model`` (for an identified extension: by more
+    than one standard error of the folds' differences), else None.
 
     Why: a skid track whose half-point lies beyond the logged turns is one more constant track
     factor beside E_b (variance inflation above :data:`MAX_INFLATION`), and once it is in the
@@ -927,8 +958,20 @@ def _exchange(
     (a skid track at 5 × its detection limit, whose shape the rich protocol does not
     resolve). The exchange of one
     member for another is the replacement step of stepwise selection (Miller 2002, *Subset
-    Selection in Regression*, 2nd ed., chapter 3: sequential replacement)."""
-    blocked = any(s.kind == "term" and not s.kept and s.rule == "not identifiable" for s in steps)
+    Selection in Regression*, 2nd ed., chapter 3: sequential replacement).
+
+    An identified extension is tried too (since stop 74): on a differential-drive robot whose
+    wheels shrink with speed (``benchmarks/bench_discover.py``, seed 7802) the skid track was
+    kept beside the wheelbase at ε 0.025 ± 0.41 (variance inflation 2·10⁵, below the bound),
+    and every speed term was then refused as not identifiable (VIF ∞). Without it the gate
+    keeps the wheelbase with the two wheels' speed² terms: 21.2 mm held out against 30.9 mm
+    (the gate run after a tie), better by more than a standard error. The stricter margin is
+    the rule a term passes: an effect the fit identifies is replaced only by clearly better
+    terms, and only by a model that keeps a term it had blocked (else it blocked nothing)."""
+    blocked_terms = {
+        s.name for s in steps if s.kind == "term" and not s.kept and s.rule == "not identifiable"
+    }
+    blocked = bool(blocked_terms)
     weak = [
         s
         for s in steps
@@ -961,6 +1004,10 @@ def _exchange(
     # An effect the fit cannot identify goes for any better model; one it can identify only
     # for a model better by a standard error of the folds, the rule every term passes.
     if not (mean > 0.0 if weak else mean - spread > 0.0):
+        return None
+    if not weak and not any(
+        s.kept and s.name in blocked_terms for s in alt_steps if s.kind == "term"
+    ):
         return None
     rule = "not identifiable beside" if weak else BLOCKING
     refused = replace(
