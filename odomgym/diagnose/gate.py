@@ -514,12 +514,13 @@ class _Elimination:
         cv, estimator = self.held_out(fit, _keys_of(members))
         return fit, cv, estimator
 
-    def without(self, member: Member, current: OpenLoopFit) -> RobotSpec:
-        """Where the model without ``member`` starts: the larger model's fit with the proposal
-        back at the robot's given value (absent for a robot that carries none) — "without" is
-        the robot as given in that respect, as the empty model is the robot as given, so the
-        fit of the fixed proposals alone is a point of every model tested (:func:`fit_nested`)."""
-        effect_names, term_names = _parts([member])
+    def without(self, members: Sequence[Member], current: OpenLoopFit) -> RobotSpec:
+        """Where the model without ``members`` starts: the larger model's fit with those
+        proposals back at the robot's given values (absent for a robot that carries none) —
+        "without" is the robot as given in that respect, as the empty model is the robot as
+        given, so the fit of the fixed proposals alone is a point of every model tested
+        (:func:`fit_nested`)."""
+        effect_names, term_names = _parts(members)
         begin = current.spec
         for e in effect_names:
             begin = EFFECTS[e].write(begin, EFFECTS[e].read(self.robot))
@@ -542,7 +543,7 @@ class _Elimination:
         rest = [*fixed, *(m for m in model if m != member)]
         if len(rest) > len(fixed):
             smaller, smaller_cv, _ = self.fitted(
-                rest, self.without(member, fit), fit.nuisances, base[0]
+                rest, self.without([member], fit), fit.nuisances, base[0]
             )
         else:
             smaller, smaller_cv, _ = base  # the model without it is ``fixed`` alone: known
@@ -860,13 +861,12 @@ def _catalogue_first(
         kept_model, kept_terms, removed_terms = gate.eliminate(
             term_members, effect_members, kept_model
         )
-    if term_members and effect_members:
-        rechecked = _beside_terms(
-            gate, effect_members, term_members, kept_model, as_given, kept_effects
-        )
-        if rechecked is not None:
-            kept_model, kept_effects, absorbed = rechecked
-            removed_effects = removed_effects + absorbed
+    rechecked = _beside_terms(
+        gate, effect_members, term_members, kept_model, as_given, kept_effects
+    )
+    if rechecked is not None:
+        kept_model, kept_effects, absorbed = rechecked
+        removed_effects = removed_effects + absorbed
     steps = kept_effects + kept_terms + removed_effects + removed_terms
     return kept_model, steps, effect_members + term_members
 
@@ -909,10 +909,7 @@ def _beside_terms(
     if not terms or not effects:
         return None
     fit = current[0]
-    alone = fit.spec
-    for name in _parts(effects)[0]:
-        alone = EFFECTS[name].write(alone, EFFECTS[name].read(gate.robot))
-    base = gate.fitted(list(terms), alone, fit.nuisances, as_given[0])
+    base = gate.fitted(list(terms), gate.without(effects, fit), fit.nuisances, as_given[0])
     if fit.error > base[0].error:
         # Fitted from the effects alone, the model of both may have stopped above the terms
         # alone, a point of it: fitted again, never worse than the smaller model (fit_nested).
@@ -971,23 +968,13 @@ def _exchange(
     blocked_terms = {
         s.name for s in steps if s.kind == "term" and not s.kept and s.rule == "not identifiable"
     }
-    blocked = bool(blocked_terms)
-    weak = [
-        s
-        for s in steps
-        if s.kind == "effect" and s.kept and not s.rule.startswith("held by")
-        and s.inflation > MAX_INFLATION
-    ]  # fmt: skip
     kept = {s.name for s in steps if s.kind == "effect" and s.kept}
+    own = [s for s in steps if s.kind == "effect" and s.kept and not s.rule.startswith("held by")]
+    weak = [s for s in own if s.inflation > MAX_INFLATION]
     # An extension kept beside its base, identified or not: its excess trades with the base's
     # value along a ridge (a skid track's ε against E_b), which a term then cannot join.
-    ridge = [
-        s
-        for s in steps
-        if s.kind == "effect" and s.kept and not s.rule.startswith("held by")
-        and set(EFFECTS[s.name].partners) & kept
-    ]  # fmt: skip
-    if not blocked or not (weak or ridge):
+    ridge = [s for s in own if set(EFFECTS[s.name].partners) & kept]
+    if not blocked_terms or not (weak or ridge):
         return None
 
     def order(step: GateStep) -> tuple[bool, float]:
