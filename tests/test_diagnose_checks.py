@@ -610,6 +610,25 @@ def test_the_report_says_why_a_held_base_was_kept() -> None:
     assert "**skid_track** (effect): it lowered the error" in lines
 
 
+def test_the_report_says_an_exchanged_effect_gave_way_to_the_terms_it_blocked() -> None:
+    """A skid track exchanged for the terms it blocked lowered the error on its own: the
+    report's decisions say that the model without it, with those terms, predicted better, not
+    that it failed to lower the error (the row of bench_discover's seed 7802)."""
+    from odomgym.diagnose.report import _decision_lines
+
+    for rule in (f"{gate_module.BLOCKING} wheelbase", "not identifiable beside wheelbase"):
+        exchanged = gate_module.GateStep(
+            "effect", "skid_track", False, 21.22, 30.90, 343.0, 316.0, rule
+        )
+        d = SimpleNamespace(
+            final_test={}, gate=[exchanged], named_effects=[], noise_checks={},
+            noise_model=[], refused_terms=[],
+        )  # fmt: skip
+        line = next(x for x in _decision_lines(d) if "**skid_track**" in x)  # type: ignore[arg-type]
+        assert "the model without it, with the terms it had blocked" in line, line
+        assert "did not lower" not in line and rule in line
+
+
 def test_an_effect_is_judged_among_the_robot_effects_and_a_term_with_the_nuisances() -> None:
     """The identification rule reads a catalogue effect's variance inflation among the robot's
     parameters alone (a tracked-point offset that is exactly a measurement nuisance is a

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from odomgym.diagnose.gate import MAX_INFLATION, REAL_SIZE, UNIDENTIFIED, GateStep
+from odomgym.diagnose.gate import BLOCKING, MAX_INFLATION, REAL_SIZE, UNIDENTIFIED, GateStep
 from odomgym.diagnose.plots import plot_all
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
@@ -176,6 +176,15 @@ def _decision_lines(d: Diagnosis) -> list[str]:
             + ("" if confirmed.get(name, True) else " — **not confirmed** by its spread")
         )
     for step in (step for step in d.gate if not step.kept):
+        if step.rule.startswith(("not identifiable beside ", BLOCKING)):
+            # Exchanged (gate._exchange): it lowered the error, but the model without it,
+            # with the terms it had blocked, predicted better.
+            lines.append(
+                f"- refused **{step.name}** ({step.kind}): the model without it, with the "
+                "terms it had blocked, predicted left-out folds open loop better "
+                f"(rule: {_rule(step)})"
+            )
+            continue
         lines.append(
             f"- refused **{step.name}** ({step.kind}): it did not lower the error of "
             f"predicting left-out folds open loop enough (rule: {_rule(step)})"
