@@ -852,21 +852,62 @@ def _catalogue_first(
 ) -> tuple[Scored, list[GateStep], list[Member]]:
     """The ``"catalogue first"`` order: ``effects`` eliminated on their own from ``as_given``,
     then ``terms`` on the model they kept, those effects fixed; the final model's fit, every
-    step, and the members kept."""
+    step, and the members kept.
+
+    The kept effects are then judged again beside the kept terms (:func:`_beside_terms`). Where
+    that removes one, every proposed term is judged again beside the effects left, from the
+    model of those effects alone, and the effects once more beside the terms kept then, until
+    no effect leaves (each pass removes one at least, so there are at most as many passes as
+    effects). Why: a term refused beside an effect that has since left was judged on a model
+    that is not the final one (refused as not identifiable beside it, or as adding nothing to
+    what it described), and the kept terms' rows would describe a model with it. Every row
+    then describes the final model, as in a backward elimination."""
     effect_members, term_members = list(effects), list(terms)
     kept_model, kept_effects, removed_effects = gate.eliminate(effect_members, [], as_given)
+    judged = list(kept_effects)
     kept_terms: list[GateStep] = []
     removed_terms: list[GateStep] = []
     if term_members:
         kept_model, kept_terms, removed_terms = gate.eliminate(
             term_members, effect_members, kept_model
         )
-    rechecked = _beside_terms(
-        gate, effect_members, term_members, kept_model, as_given, kept_effects
-    )
-    if rechecked is not None:
+    before = (kept_model, list(effect_members), list(term_members))
+    steps_before = (kept_effects, kept_terms, removed_effects, removed_terms)
+    rechecked = _beside_terms(gate, effect_members, term_members, kept_model, as_given, judged)
+    while rechecked is not None:
         kept_model, kept_effects, absorbed = rechecked
         removed_effects = removed_effects + absorbed
+        left: list[Member] = [("effect", s.name) for s in absorbed]
+        effects_alone = (
+            gate.fitted(
+                effect_members,
+                gate.without([*left, *term_members], kept_model[0]),
+                kept_model[0].nuisances,
+                as_given[0],
+            )
+            if effect_members
+            else as_given
+        )
+        term_members = list(terms)
+        kept_model, kept_terms, removed_terms = gate.eliminate(
+            term_members, effect_members, effects_alone
+        )
+        if not term_members:
+            # No term stands beside the effects left: nothing describes the error of the one
+            # that left, so the model before it left stands (the effects judged without terms,
+            # the terms beside them), as before the check beside the terms.
+            kept_model, effect_members, term_members = before
+            kept_effects, kept_terms, removed_effects, removed_terms = steps_before
+            break
+        before = (kept_model, list(effect_members), list(term_members))
+        steps_before = (kept_effects, kept_terms, removed_effects, removed_terms)
+        rechecked = _beside_terms(
+            gate, effect_members, term_members, kept_model, as_given, judged, settled=True
+        )
+        if rechecked is not None and not rechecked[2]:
+            # every effect stays beside the terms judged again: their rows, beside those terms
+            kept_model, kept_effects, _ = rechecked
+            break
     steps = kept_effects + kept_terms + removed_effects + removed_terms
     return kept_model, steps, effect_members + term_members
 
@@ -883,12 +924,16 @@ def _beside_terms(
     current: Scored,
     as_given: Scored,
     judged: Sequence[GateStep],
+    settled: bool = False,
 ) -> tuple[Scored, list[GateStep], list[GateStep]] | None:
     """The kept catalogue ``effects`` eliminated again beside the kept discovered ``terms``
     (``current``: the model of both), each under the rule it had in the catalogue stage
     (``judged``, their steps there): the final model's fit, the kept effects' steps and the
     removed ones (their rules ending :data:`BESIDE_TERMS`), or None where every effect stays
-    (the steps of the catalogue stage then stand). ``effects`` is left holding the kept ones.
+    (the steps of the catalogue stage then stand) and ``settled`` is false; None too without
+    terms or effects. ``effects`` is left holding the kept ones. ``settled``: the terms were
+    already judged again after an effect left (:func:`_catalogue_first`), so the steps are
+    returned even where every effect stays, as the rows of the final model.
 
     Why: in the ``"catalogue first"`` order the effects are judged before any term is in the
     model, and the terms then join with them fixed, so nothing asked whether an effect still
@@ -904,8 +949,8 @@ def _beside_terms(
     robot's variance inflation counts their parameters too) — so a term that resembles a
     mechanism cannot displace it unless the mechanism makes the predictions worse.
 
-    Not done: the kept terms are not judged again once an effect leaves; their rows describe
-    the model with it, and a term refused beside it stays refused."""
+    Once an effect leaves, :func:`_catalogue_first` judges the terms again beside the effects
+    left."""
     if not terms or not effects:
         return None
     fit = current[0]
@@ -917,7 +962,7 @@ def _beside_terms(
     model = list(effects)
     rules = replace(gate, unidentified=frozenset(s.name for s in judged if s.rule == UNIDENTIFIED))
     final, kept, removed = rules.eliminate(model, list(terms), base, current)
-    if not removed:
+    if not removed and not settled:
         return None
     effects[:] = model
 
