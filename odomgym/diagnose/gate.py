@@ -889,7 +889,7 @@ def _catalogue_first(
         )
         if not term_members:
             # No term stands beside the effects left: nothing describes the error of those
-            # that left, so the model before the check beside the terms stands, with its rows
+            # that left, so the model before the first check beside the terms stands, with its rows
             # (the effects judged without terms, the terms beside them).
             kept_model, effect_members, term_members = before
             kept_effects, kept_terms, removed_effects, removed_terms = steps_before
@@ -1002,11 +1002,12 @@ def _exchange(
     as_given: Scored,
 ) -> tuple[Scored, list[GateStep], list[Member]] | None:
     """The gate run again on the proposed ``effects`` and ``terms`` without a kept effect the
-    open-loop fit cannot tell from the other robot effects (:func:`_inflation`, the most
-    inflated) or, failing one, without an extension kept beside its base, where a discovered
-    term was refused as not identifiable beside it; that model, its steps and its members if
-    it predicts the folds better than ``kept_model`` (for an identified extension: by more
-    than one standard error of the folds' differences), else None.
+    open-loop fit cannot tell from the other robot effects (its rule :data:`UNIDENTIFIED`, as
+    judged among the effects; the most inflated by :func:`_inflation`) or, failing one,
+    without an extension kept beside its base, where a discovered term was refused as not
+    identifiable beside it; that model, its steps and its members if it predicts the folds
+    better than ``kept_model`` (for an identified extension: by more than one standard error
+    of the folds' differences), else None.
 
     Why: a skid track whose half-point lies beyond the logged turns is one more constant track
     factor beside E_b (variance inflation above :data:`MAX_INFLATION`), and once it is in the
