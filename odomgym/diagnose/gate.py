@@ -861,11 +861,13 @@ def _catalogue_first(
     effects). Why: a term refused beside an effect that has since left was judged on a model
     that is not the final one (refused as not identifiable beside it, or as adding nothing to
     what it described), and the kept terms' rows would describe a model with it. Where an
-    effect left and terms stand, every row then describes the final model, as in a backward
-    elimination. Where no term stands beside the effects left (in any pass), nothing
-    describes the error of those that left: the model before the first check beside the terms
-    stands, with its rows (the effects judged without terms, the terms beside them). Where no
-    effect leaves, the effects' rows are those of the catalogue stage."""
+    effect left and terms stand, the rows of the effects and terms kept then describe the
+    final model, as in a backward elimination; an effect removed in an earlier pass keeps the
+    row of its removal and is not offered again. Where no term stands beside the effects left
+    (in any pass), nothing describes the error of those that left: the model before the first
+    check beside the terms stands, with its rows (the effects judged without terms, the terms
+    beside them). Where no effect leaves, the effects' rows are those of the catalogue
+    stage."""
     effect_members, term_members = list(effects), list(terms)
     kept_model, kept_effects, removed_effects = gate.eliminate(effect_members, [], as_given)
     judged = list(kept_effects)
