@@ -881,10 +881,9 @@ def _catalogue_first(
     steps_before = (kept_effects, kept_terms, removed_effects, removed_terms)
     rechecked = _beside_terms(gate, effect_members, term_members, kept_model, as_given, judged)
     while rechecked is not None:
-        larger = rechecked[0]
         kept_model, kept_effects, absorbed = rechecked
         removed_effects = removed_effects + absorbed
-        effects_alone = _effects_alone(gate, effect_members, larger, term_members, as_given)
+        effects_alone = _effects_alone(gate, effect_members, kept_model, term_members, as_given)
         term_members = list(terms)
         kept_model, kept_terms, removed_terms = gate.eliminate(
             term_members, effect_members, effects_alone
