@@ -1,6 +1,7 @@
 """The June OptiOdom diagnosis timed, side by side with another revision (issue 44's ≤ 60 s).
 
     python benchmarks/june_speed.py [--against REV] [--runs 3] [--jobs 2] [--json] [--keep DIR]
+    python benchmarks/june_speed.py --stages [--jobs 2] [--json]
 
 Runs the command of docs/diagnose.md on the 14 June sessions of the OptiOdom robot (gathered by
 ``diagnose_loso.gather_june``)::
@@ -28,6 +29,13 @@ Before the timed runs, a machine probe in this tree (:data:`_PROBE`, one thread)
 filter of every June run, against its 2.50 ms on the machine of stop 69, where this command took
 52–66 s that day. It says how far this machine is from the one the 60 s target was measured on
 (a rough guide: on stop 71 the probe read 1.6–2.1× and the command took about 2×).
+
+``--stages`` times where one diagnosis of this tree spends its wall time instead (after an
+untimed run that compiles the kernels): the same diagnosis through the API in a fresh process,
+its progress callback's stages timed (:func:`stage_times`; a round's candidate fits as one
+stage, its structure test and discovery as two). Why: "profile before optimising" — docs/speed.md
+gives this table for stop 76, and a change meant to speed the diagnosis up should say which
+stage it shortened.
 
 Prints every run's wall time [s], the medians, their ratio (this / REV), the probe and whether
 the two trees' ``report.json`` are byte for byte the same; ``--json`` prints the same as one JSON
@@ -111,6 +119,65 @@ finder (``odomgym/_source_tree.py`` imports nothing of odomgym) mapping ``odomgy
 ``odomgym.baselines`` to the tree's folders, first on ``sys.meta_path``."""
 
 
+_STAGES = """
+import json, time
+from pathlib import Path
+from odomgym.baselines.trajectory import TrajectoryBaseline
+from odomgym.data.logs import read_log
+from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
+from odomgym.robot import load_robot
+robot = load_robot({robot!r})
+runs, _ = read_log(Path({data!r}), robot=robot, format="optiodom")
+events = []
+def progress(stage, fraction):
+    events.append((time.perf_counter(), stage))
+start = time.perf_counter()
+diagnose(runs, robot, DiagnoseConfig(jobs={jobs}), baseline=TrajectoryBaseline(), progress=progress)
+print(json.dumps({{"start": start, "end": time.perf_counter(), "events": events}}))
+"""
+"""One diagnosis of the June sessions through the API (the command's defaults: the trajectory
+baseline, ``jobs``), every progress report timed; printed as JSON for :func:`stage_times`."""
+
+
+def stage_of(label: str) -> str:
+    """The stage a progress report belongs to: ``round 4: wheelbase`` (one candidate's fit) is
+    ``round 4: candidate fits``, ``round 5: structure`` and ``round 5: discovery`` stay as they
+    are, and so does every report without a colon; ``open-loop check 1: wheelbase`` is
+    ``open-loop check 1``."""
+    head, colon, tail = label.partition(":")
+    if not colon:
+        return label
+    tail = tail.strip()
+    if head.startswith("round "):
+        return (
+            f"{head}: {tail}" if tail in ("structure", "discovery") else f"{head}: candidate fits"
+        )
+    return head
+
+
+def stage_times(start: float, end: float, events: list[tuple[float, str]]) -> dict[str, float]:
+    """Wall time [s] per stage (:func:`stage_of`), in the order the stages first came: each
+    report's stage lasts until the next report of another stage (or ``end``); the time before
+    the first report is ``reading and screening the runs``."""
+    out: dict[str, float] = {}
+    current, since = "reading and screening the runs", start
+    for at, label in events:
+        stage = stage_of(label)
+        if stage != current:
+            out[current] = out.get(current, 0.0) + at - since
+            current, since = stage, at
+    out[current] = out.get(current, 0.0) + end - since
+    return out
+
+
+def stage_table(times: dict[str, float]) -> str:
+    """:func:`stage_times` as Markdown, with the total."""
+    lines = ["| stage | wall [s] |", "|---|---|"]
+    lines += [f"| {stage} | {seconds:.1f} |" for stage, seconds in times.items()]
+    lines.append(f"| **total** | **{sum(times.values()):.1f}** |")
+    return "\n".join(lines)
+
+
 @dataclass
 class Tree:
     """One checkout under test: its label, its root folder, its timed runs' wall times [s] and
@@ -153,6 +220,21 @@ class Tree:
             raise RuntimeError(
                 f"{self.label}: the machine probe printed no time: {done.stdout.strip()!r}"
             ) from None
+
+    def stages(self, data: Path, jobs: int) -> dict[str, float]:
+        """One diagnosis of ``data`` through the API in this tree's process, timed stage by
+        stage (:func:`stage_times`) [s]."""
+        done = self.call(_STAGES.format(robot=str(NOMINAL), data=str(data), jobs=jobs))
+        if done.returncode != 0:
+            raise RuntimeError(f"{self.label}: the timed diagnosis failed: {_last(done.stderr)}")
+        try:
+            timed = json.loads(done.stdout.splitlines()[-1])
+        except (IndexError, ValueError):
+            raise RuntimeError(
+                f"{self.label}: the timed diagnosis printed no stages: {done.stdout[-200:]!r}"
+            ) from None
+        events = [(float(at), str(label)) for at, label in timed["events"]]
+        return stage_times(float(timed["start"]), float(timed["end"]), events)
 
     def commit(self) -> str:
         """The tree's commit, with ``+changes`` when its files differ from it."""
@@ -322,15 +404,23 @@ def main(argv: list[str] | None = None) -> int:
         type=lambda text: Path(text).resolve(),
         help="keep each tree's last report in DIR/report-this-tree and DIR/report-against",
     )
+    parser.add_argument(
+        "--stages",
+        action="store_true",
+        help="time one diagnosis of this tree stage by stage instead (no --against, --runs)",
+    )
     args = parser.parse_args(argv)
     if args.runs < 1:
         parser.error("--runs must be at least 1")
+    if args.stages and (args.against or args.keep):
+        parser.error("--stages times this tree alone: without --against and --keep")
     # A SIGTERM unwinds like Ctrl-C, so the temporary worktree is removed (``finally`` below).
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGINT))
     with tempfile.TemporaryDirectory(prefix="june-speed-") as tmp:
         work = Path(tmp)
         trees = [Tree("this tree", ROOT)]
         folders = {"this tree": "report-this-tree"}
+        times: dict[str, float] = {}
         try:
             data = _gather_june(work / "june")
             if args.against:
@@ -342,7 +432,9 @@ def main(argv: list[str] | None = None) -> int:
                 tree.run(data, work / "warm", args.jobs)
             probe_ms = trees[0].probe(data)
             print(f"machine probe: {probe_ms:.2f} ms", file=sys.stderr)
-            for k in range(args.runs):
+            if args.stages:
+                times = trees[0].stages(data, args.jobs)
+            for k in range(0 if args.stages else args.runs):
                 # Each round in the other order, so neither tree always runs after the other.
                 for tree in trees if k % 2 == 0 else trees[::-1]:
                     out = (args.keep or work) / folders[tree.label]
@@ -363,6 +455,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.against:
                 _remove(work / "against")
             signal.signal(signal.SIGINT, signal.default_int_handler)
+    if args.stages:
+        staged = {"probe_ms": probe_ms, "stages_s": times, "total_s": sum(times.values())}
+        print(json.dumps(staged, indent=2) if args.json else stage_table(times))
+        return 0
     result = summary(trees, probe_ms)
     print(json.dumps(result, indent=2) if args.json else table(trees, result))
     return 0

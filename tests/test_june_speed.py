@@ -44,3 +44,41 @@ def test_the_machine_probe_is_set_beside_the_reference_machine() -> None:
     assert "1.60× as slow" in bench.table([tree], result)
     # The probe's script is valid Python once its paths are filled in.
     compile(bench._PROBE.format(robot="robot.toml", data="june"), "probe", "exec")
+
+
+def test_a_diagnosis_is_timed_stage_by_stage() -> None:
+    """``--stages``: each progress report's stage lasts until a report of another stage; a
+    round's candidates are one stage, its structure test and discovery two more; time before
+    the first report is the runs' reading and screening; a stage that comes back adds up."""
+    bench = load_benchmark("june_speed")
+    assert bench.stage_of("round 4: wheelbase") == "round 4: candidate fits"
+    assert bench.stage_of("round 5: structure") == "round 5: structure"
+    assert bench.stage_of("round 5: discovery") == "round 5: discovery"
+    assert bench.stage_of("open-loop check 1: backlash") == "open-loop check 1"
+    assert bench.stage_of("held-out test") == "held-out test"
+    events = [
+        (1.0, "measurement nuisances"),
+        (3.0, "round 1: wheelbase"),
+        (4.5, "round 1: backlash"),
+        (6.0, "round 1: structure"),
+        (7.0, "round 2: wheelbase"),
+        (9.0, "measurement nuisances"),
+        (9.5, "shrink"),
+    ]
+    times = bench.stage_times(0.0, 10.0, events)
+    assert list(times) == [
+        "reading and screening the runs",
+        "measurement nuisances",
+        "round 1: candidate fits",
+        "round 1: structure",
+        "round 2: candidate fits",
+        "shrink",
+    ]
+    assert times["reading and screening the runs"] == 1.0
+    assert times["measurement nuisances"] == 2.0 + 0.5
+    assert times["round 1: candidate fits"] == 3.0
+    assert times["shrink"] == 0.5
+    assert sum(times.values()) == 10.0
+    text = bench.stage_table(times)
+    assert "| round 1: candidate fits | 3.0 |" in text
+    assert text.endswith("| **total** | **10.0** |")
