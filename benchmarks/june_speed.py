@@ -158,9 +158,9 @@ def stage_of(label: str) -> str:
 def stage_times(start: float, end: float, events: list[tuple[float, str]]) -> dict[str, float]:
     """Wall time [s] per stage (:func:`stage_of`), in the order the stages first came: each
     report's stage lasts until the next report of another stage (or ``end``); the time before
-    the first report is ``reading and screening the runs``."""
+    the first report is ``before the first report`` (the runs screened and split)."""
     out: dict[str, float] = {}
-    current, since = "reading and screening the runs", start
+    current, since = "before the first report", start
     for at, label in events:
         stage = stage_of(label)
         if stage != current:

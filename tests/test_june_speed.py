@@ -49,7 +49,7 @@ def test_the_machine_probe_is_set_beside_the_reference_machine() -> None:
 def test_a_diagnosis_is_timed_stage_by_stage() -> None:
     """``--stages``: each progress report's stage lasts until a report of another stage; a
     round's candidates are one stage, its structure test and discovery two more; time before
-    the first report is the runs' reading and screening; a stage that comes back adds up."""
+    the first report is its own stage; a stage that comes back adds up."""
     bench = load_benchmark("june_speed")
     assert bench.stage_of("round 4: wheelbase") == "round 4: candidate fits"
     assert bench.stage_of("round 5: structure") == "round 5: structure"
@@ -67,14 +67,14 @@ def test_a_diagnosis_is_timed_stage_by_stage() -> None:
     ]
     times = bench.stage_times(0.0, 10.0, events)
     assert list(times) == [
-        "reading and screening the runs",
+        "before the first report",
         "measurement nuisances",
         "round 1: candidate fits",
         "round 1: structure",
         "round 2: candidate fits",
         "shrink",
     ]
-    assert times["reading and screening the runs"] == 1.0
+    assert times["before the first report"] == 1.0
     assert times["measurement nuisances"] == 2.0 + 0.5
     assert times["round 1: candidate fits"] == 3.0
     assert times["shrink"] == 0.5
