@@ -38,9 +38,10 @@ gives this table for stop 76, and a change meant to speed the diagnosis up shoul
 stage it shortened.
 
 Prints every run's wall time [s], the medians, their ratio (this / REV), the probe and whether
-the two trees' ``report.json`` are byte for byte the same; ``--json`` prints the same as one JSON
-object. A benchmark, not a test: it exits 0 whatever the times, 2 with one line when the data,
-the revision or a run fails, and 130 on Ctrl-C or SIGTERM (the worktree removed either way).
+the two trees' ``report.json`` are byte for byte the same; with ``--stages``, each stage's wall
+time [s], the total and the probe; ``--json`` prints the same as one JSON object. A benchmark,
+not a test: it exits 0 whatever the times, 2 with one line when the data, the revision or a run
+fails or the options conflict, and 130 on Ctrl-C or SIGTERM (the worktree removed either way).
 """
 
 from __future__ import annotations
@@ -140,10 +141,11 @@ baseline, ``jobs``), every progress report timed; printed as JSON for :func:`sta
 
 
 def stage_of(label: str) -> str:
-    """The stage a progress report belongs to: ``round 4: wheelbase`` (one candidate's fit) is
+    """The stage a progress report belongs to: ``round 4: mean candidates`` (the round's stage
+    starting) and ``round 4: wheelbase`` (one candidate's fit ending) are
     ``round 4: candidate fits``, ``round 5: structure`` and ``round 5: discovery`` stay as they
     are, and so does every report without a colon; ``open-loop check 1: wheelbase`` is
-    ``open-loop check 1``."""
+    ``open-loop check 1``. Only the text up to the second colon counts."""
     head, colon, tail = label.partition(":")
     if not colon:
         return label
@@ -158,7 +160,12 @@ def stage_of(label: str) -> str:
 def stage_times(start: float, end: float, events: list[tuple[float, str]]) -> dict[str, float]:
     """Wall time [s] per stage (:func:`stage_of`), in the order the stages first came: each
     report's stage lasts until the next report of another stage (or ``end``); the time before
-    the first report is ``before the first report`` (the runs screened and split)."""
+    the first report is ``before the first report`` (the runs screened and split).
+
+    A stage is timed from its first report. The diagnosis reports a round's candidate stage,
+    the open-loop gate's passes and the backward check when they start (since stop 76); a step
+    that reports only as its parts end would have its first part credited to the stage
+    before it."""
     out: dict[str, float] = {}
     current, since = "before the first report", start
     for at, label in events:
@@ -229,12 +236,12 @@ class Tree:
             raise RuntimeError(f"{self.label}: the timed diagnosis failed: {_last(done.stderr)}")
         try:
             timed = json.loads(done.stdout.splitlines()[-1])
-        except (IndexError, ValueError):
+            events = [(float(at), str(label)) for at, label in timed["events"]]
+            return stage_times(float(timed["start"]), float(timed["end"]), events)
+        except (IndexError, KeyError, TypeError, ValueError):
             raise RuntimeError(
                 f"{self.label}: the timed diagnosis printed no stages: {done.stdout[-200:]!r}"
             ) from None
-        events = [(float(at), str(label)) for at, label in timed["events"]]
-        return stage_times(float(timed["start"]), float(timed["end"]), events)
 
     def commit(self) -> str:
         """The tree's commit, with ``+changes`` when its files differ from it."""
@@ -396,7 +403,7 @@ def _remove(worktree: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--against", metavar="REV", help="a git revision to time beside this tree")
-    parser.add_argument("--runs", type=int, default=3, help="timed runs per tree (default 3)")
+    parser.add_argument("--runs", type=int, help="timed runs per tree (default 3)")
     parser.add_argument("--jobs", type=int, default=2, help="diagnose --jobs (default 2)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument(
@@ -407,13 +414,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--stages",
         action="store_true",
-        help="time one diagnosis of this tree stage by stage instead (no --against, --runs)",
+        help="time one diagnosis of this tree stage by stage instead (not with --against, "
+        "--runs, --keep)",
     )
     args = parser.parse_args(argv)
+    if args.stages and (args.against or args.keep or args.runs is not None):
+        parser.error(
+            "--stages times one diagnosis of this tree: not with --against, --runs, --keep"
+        )
+    if args.runs is None:
+        args.runs = 3
     if args.runs < 1:
         parser.error("--runs must be at least 1")
-    if args.stages and (args.against or args.keep):
-        parser.error("--stages times this tree alone: without --against and --keep")
     # A SIGTERM unwinds like Ctrl-C, so the temporary worktree is removed (``finally`` below).
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGINT))
     with tempfile.TemporaryDirectory(prefix="june-speed-") as tmp:
@@ -457,7 +469,8 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGINT, signal.default_int_handler)
     if args.stages:
         staged = {"probe_ms": probe_ms, "stages_s": times, "total_s": sum(times.values())}
-        print(json.dumps(staged, indent=2) if args.json else stage_table(times))
+        text = f"{stage_table(times)}\n\n- machine probe: {probe_ms:.2f} ms"
+        print(json.dumps(staged, indent=2) if args.json else text)
         return 0
     result = summary(trees, probe_ms)
     print(json.dumps(result, indent=2) if args.json else table(trees, result))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from benchmark_module import load_benchmark
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -51,7 +52,9 @@ def test_a_diagnosis_is_timed_stage_by_stage() -> None:
     round's candidates are one stage, its structure test and discovery two more; time before
     the first report is its own stage; a stage that comes back adds up."""
     bench = load_benchmark("june_speed")
+    compile(bench._STAGES.format(robot="robot.toml", data="june", jobs=2), "stages", "exec")
     assert bench.stage_of("round 4: wheelbase") == "round 4: candidate fits"
+    assert bench.stage_of("round 4: mean candidates") == "round 4: candidate fits"
     assert bench.stage_of("round 5: structure") == "round 5: structure"
     assert bench.stage_of("round 5: discovery") == "round 5: discovery"
     assert bench.stage_of("open-loop check 1: backlash") == "open-loop check 1"
@@ -82,3 +85,14 @@ def test_a_diagnosis_is_timed_stage_by_stage() -> None:
     text = bench.stage_table(times)
     assert "| round 1: candidate fits | 3.0 |" in text
     assert text.endswith("| **total** | **10.0** |")
+
+
+def test_stages_are_timed_alone(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--stages`` times one diagnosis of this tree: with ``--against``, ``--runs`` or
+    ``--keep`` it stops at once with one line (before gathering any data)."""
+    bench = load_benchmark("june_speed")
+    for extra in (["--against", "HEAD"], ["--runs", "2"], ["--keep", "out"]):
+        with pytest.raises(SystemExit) as stopped:
+            bench.main(["--stages", *extra])
+        assert stopped.value.code == 2
+        assert "--stages times one diagnosis of this tree" in capsys.readouterr().err

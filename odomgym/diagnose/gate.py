@@ -468,6 +468,8 @@ class _Elimination:
 
         if not forks(self.jobs, count):
             return serial()
+        if self.report is not None:  # the stage starts (the reports below come as trials end)
+            self.report(f"{stage}: {count} trials", 0.0)
         done: dict[int, Any] = {}
 
         def finished(k: int, blob: bytes) -> None:

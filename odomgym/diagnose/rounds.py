@@ -568,6 +568,9 @@ def run_round(number: int, ctx: RoundContext, state: DiagnosisState) -> Round:
         effects = [EFFECTS[n] for n in stage_names]
         if not effects:
             continue
+        # Reported when the stage starts, not only as each fit ends (a progress bar, or
+        # benchmarks/june_speed.py --stages, then credits this stage with its own time).
+        report(f"round {number}: {stage} candidates", 0.0)
         base = fit_noise_model(data, model, helper)
         candidates, fits, screened = _score_candidates(
             ctx, effects, base, helper, (number, stage), refused[stage]

@@ -312,6 +312,7 @@ def _diagnose(
     rec = _measurement_nuisances(split, robot, cfg, report)  # 2
     as_given, findings = _where(split, rec, robot, cfg, report)  # 3
     state = _rounds(rec, robot, cfg, rng, report, journal)  # 4
+    report("backward check, noise effects, term sizes", 0.0)
     backward = _backward(rec, state, cfg)  # 5
     noise = keep.noise_effects(rec, state, cfg)  # 6
     sizes = keep.term_sizes(rec, state)  # 7
