@@ -145,7 +145,7 @@ def stage_of(label: str) -> str:
     starting) and ``round 4: wheelbase`` (one candidate's fit ending) are
     ``round 4: candidate fits``, ``round 5: structure`` and ``round 5: discovery`` stay as they
     are, and so does every report without a colon; ``open-loop check 1: wheelbase`` is
-    ``open-loop check 1``. Only the text up to the second colon counts."""
+    ``open-loop check 1``."""
     head, colon, tail = label.partition(":")
     if not colon:
         return label
