@@ -362,6 +362,57 @@ def test_diagnose_refuses_to_replace_the_working_folder(
     _one_line_error(capsys, "error: --out ", "holds the working folder")
 
 
+def test_diagnose_refuses_an_out_folder_holding_anything_but_a_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--out`` is replaced whole. A user gave the folder holding the logs, the robot file
+    and notes as ``--out`` and was left with the report alone (exit 0). Now one line naming
+    what the folder holds, exit 2, before any work, and every file untouched; an earlier
+    report's folder (``report.json`` and figures only) is still taken."""
+    import odomgym.diagnose.workflow as workflow
+    from odomgym.diagnose.report import REPORT_FILES, foreign_entries
+
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    session = "optiodom:square/230620202042"
+    folder = tmp_path / "mine"
+    (folder / "sub").mkdir(parents=True)
+    for name in ("notes.txt", "robot.toml", "report.md", "sub/thesis.tex"):
+        (folder / name).write_text(name, encoding="utf-8")
+    before = {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+    assert main(["diagnose", session, "--robot", "optiodom", "--out", str(folder)]) == 2
+    _one_line_error(capsys, "error: --out ", "notes.txt, report.md, robot.toml, sub, which")
+    assert {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()} == before
+    # With a report.json beside them, the report's own files pass and the rest do not.
+    (folder / "report.json").write_text("{}", encoding="utf-8")
+    assert foreign_entries(folder) == ["notes.txt", "robot.toml", "sub"]
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    for name in (*REPORT_FILES, "discovered-yaw_rate.png"):
+        (earlier / name).write_text(name, encoding="utf-8")
+    assert foreign_entries(earlier) == [] and foreign_entries(tmp_path / "new") == []
+
+    def stop(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt  # past the checks: the earlier report was taken
+
+    monkeypatch.setattr(workflow, "diagnose", stop)
+    assert main(["diagnose", session, "--robot", "optiodom", "--out", str(earlier)]) == 130
+
+
+def test_writing_a_report_over_a_folder_of_other_files_is_refused(tmp_path: Path) -> None:
+    """The library's writer refuses the same folders as the command (``odomgym fleet`` writes
+    each robot's report through the same check), and writes nothing."""
+    from odomgym.diagnose.fleet import _write_folder
+    from odomgym.diagnose.report import write_outputs
+    from odomgym.errors import SpecError
+
+    (tmp_path / "logs.csv").write_text("t\n", encoding="utf-8")
+    with pytest.raises(SpecError, match=r"^out .*: holds logs\.csv, which diagnose did not"):
+        write_outputs(None, tmp_path, "data")  # type: ignore[arg-type]
+    with pytest.raises(SpecError, match=r"holds logs\.csv"):
+        _write_folder(tmp_path, {"report.json": b"{}"})
+    assert [p.name for p in tmp_path.iterdir()] == ["logs.csv"]
+
+
 def test_diagnose_gate_order_reaches_the_workflow(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

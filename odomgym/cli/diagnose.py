@@ -189,7 +189,12 @@ def run(args: argparse.Namespace) -> int:
     ``--loso``, the leave-one-session-out folds instead (:func:`run_loso_command`)."""
     from odomgym.baselines.trajectory import TrajectoryBaseline
     from odomgym.data.samples import resolve_data
-    from odomgym.diagnose.report import format_markdown, report_json, write_outputs
+    from odomgym.diagnose.report import (
+        check_replaceable,
+        format_markdown,
+        report_json,
+        write_outputs,
+    )
     from odomgym.diagnose.workflow import FitJournal, diagnose
     from odomgym.distributed import on_ray
 
@@ -210,6 +215,7 @@ def run(args: argparse.Namespace) -> int:
         return run_loso_command(args, report, data, robot, config)
     out = Path(args.out) if args.out else Path(f"{data.stem or 'data'}-diagnose")
     check_output(out, option="--out", folder=True, swap=True)
+    check_replaceable(out, option="--out")  # it is replaced whole: nothing else may be lost
     runs, model = read_runs(args, data, robot)
     say_set_aside(runs, model, report)
     baseline = None if args.no_baseline else TrajectoryBaseline()

@@ -220,8 +220,12 @@ def _diagnose_files(
 
 def _write_folder(folder: Path, files: dict[str, bytes]) -> None:
     """Replace ``folder`` by one holding ``files`` (name → bytes), atomically
-    (:func:`odomgym.io.atomic_folder`)."""
+    (:func:`odomgym.io.atomic_folder`), unless it holds anything a report does not
+    (:func:`odomgym.diagnose.report.check_replaceable`)."""
+    from odomgym.diagnose.report import check_replaceable
     from odomgym.io import atomic_folder
+
+    check_replaceable(folder)
 
     def fill(tmp: Path) -> None:
         for name, data in files.items():

@@ -18,9 +18,76 @@ from odomgym.diagnose.gate import BLOCKING, MAX_INFLATION, REAL_SIZE, UNIDENTIFI
 from odomgym.diagnose.plots import plot_all
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
+from odomgym.errors import SpecError
 from odomgym.io import atomic_folder
 
-__all__ = ["format_markdown", "write_outputs"]
+__all__ = [
+    "REPORT_FILES",
+    "check_replaceable",
+    "foreign_entries",
+    "format_markdown",
+    "write_outputs",
+]
+
+REPORT_FILES = (
+    "report.json",
+    "report.md",
+    "model.toml",
+    "gap_before_after.png",
+    "held_out_paths.png",
+    "where.png",
+)
+"""The files a diagnose report folder may hold, besides one figure per discovered term
+(``discovered-<term>.png``): what :func:`write_outputs` writes."""
+
+
+def _report_file(path: Path) -> bool:
+    """Whether ``path`` is a regular file a report folder holds (:data:`REPORT_FILES`)."""
+    name = path.name
+    named = name in REPORT_FILES or (name.startswith("discovered-") and name.endswith(".png"))
+    return named and path.is_file() and not path.is_symlink()
+
+
+def foreign_entries(folder: Path) -> list[str]:
+    """The entries of ``folder`` (sorted names) that no diagnose report holds: all of them if
+    it holds no ``report.json``, else those not among :data:`REPORT_FILES` (sub-folders,
+    links and other files included). Empty for a missing or empty folder.
+
+    Why: the report folder is replaced whole (:func:`odomgym.io.atomic_folder`), so whatever
+    else it holds would be deleted with it. A user who gave the folder holding the logs and the
+    robot file as ``--out`` lost them (exit 0, only the report left)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    names = sorted(entry.name for entry in folder.iterdir())
+    if "report.json" not in names:
+        return names
+    return [name for name in names if not _report_file(folder / name)]
+
+
+def check_replaceable(folder: Path, *, option: str = "out") -> None:
+    """Refuse, in one line naming ``option``, to replace ``folder`` if it holds anything a
+    diagnose report does not (:func:`foreign_entries`): a new, empty or earlier report folder
+    passes.
+
+    Raises:
+        SpecError: naming the first few foreign entries (field ``option`` without dashes).
+    """
+    foreign = foreign_entries(folder)
+    if not foreign:
+        return
+    shown = ", ".join(foreign[:_SHOWN])
+    if len(foreign) > _SHOWN:
+        shown += f" and {len(foreign) - _SHOWN} more"
+    raise SpecError(
+        f"{option} {folder}: holds {shown}, which diagnose did not write; the report folder is "
+        "replaced whole, so they would be deleted: give a new or empty folder, or an earlier "
+        "diagnose report's",
+        field=option.lstrip("-").replace("-", "_"),
+    )
+
+
+_SHOWN = 5  # foreign entries a refusal names; the rest are counted
 
 
 def _clean(value: Any) -> Any:
@@ -655,8 +722,13 @@ def _check_lines(d: Diagnosis) -> list[str]:
 
 def write_outputs(diagnosis: Diagnosis, out: Path, data: str) -> list[Path]:
     """Write everything into ``out`` (replacing an earlier diagnose output there) atomically
-    (:func:`odomgym.io.atomic_folder`)."""
+    (:func:`odomgym.io.atomic_folder`).
+
+    Raises:
+        SpecError: ``out`` holds anything else (:func:`check_replaceable`); nothing written.
+    """
     out = Path(out)
+    check_replaceable(out)
 
     def fill(tmp: Path) -> list[str]:
         (tmp / "report.json").write_text(report_json(diagnosis) + "\n", encoding="utf-8")
