@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent_robot import IndependentRobot, Manoeuvre, generate
+from independent_robot import IndependentRobot, Manoeuvre, generate, rich_protocol
 
 from odomgym.baselines.trajectory import TrajectoryBaseline, fit_trajectories
 from odomgym.data import sample_session
@@ -22,7 +22,14 @@ from odomgym.data.gaps import mark_held_poses, measured_end
 from odomgym.data.logs import read_log
 from odomgym.data.native import write_native
 from odomgym.diagnose.openloop import NuisanceOptions, evaluate_open_loop
-from odomgym.diagnose.screen import MIN_COVERAGE, screen_runs, usable_runs
+from odomgym.diagnose.screen import (
+    HOLE_FACTOR,
+    MIN_COVERAGE,
+    holes,
+    screen_runs,
+    split_at_holes,
+    usable_runs,
+)
 from odomgym.diagnose.where import localise, run_residuals
 from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
@@ -173,6 +180,98 @@ def test_too_few_usable_runs_stop_in_one_line_naming_them() -> None:
     assert "run b4 (sim)" in message and "b5" not in message and message.endswith("and 2 more")
 
 
+# ------------------------------------------------------------------- holes: dropped rows
+def _clocked(times: list[float], counts: list[list[int]], **meta: object) -> Run:
+    """A run logged at ``times`` [s], its wheels at ``counts``, every pose a fresh full one."""
+    pose = [[0.01 * k, 0.001 * k, 0.002 * k] for k in range(len(times))]
+    return dataclasses.replace(
+        _run(pose, counts, **meta), time=np.array(times, dtype=np.float64), kind="square"
+    )
+
+
+def test_a_hole_is_a_long_interval_over_which_a_wheel_turned() -> None:
+    """Rows dropped while the wheels turn: an interval over ten times the run's median. A pause
+    (the wheels at rest, 2 counts of jitter), a clock's jitter and one dropped row are none."""
+    assert HOLE_FACTOR == 10.0
+    tick = [0.1 * k for k in range(6)]
+    moving = [[10 * k, 12 * k] for k in range(7)]
+    (hole,) = holes(_clocked([*tick, 6.0], moving))
+    assert (hole.row, hole.start, hole.end, hole.turned) == (6, 0.5, 6.0, (10, 12))
+    assert hole.median == pytest.approx(0.1)
+    assert "t jumps from 0.5 s to 6 s (rows 6–7, 55× the run's median interval of 0.1 s)" in str(
+        hole
+    )
+    paused = [[10 * k, 12 * k] for k in range(6)] + [[52, 58]]  # 2 counts in the pause
+    assert holes(_clocked([*tick, 6.0], paused)) == []
+    assert holes(_clocked([*tick, 0.7], moving)) == []  # one row dropped: 2 intervals
+    assert holes(_clocked([*tick, 1.4], moving)) == []  # nine intervals: not over ten
+    assert holes(_clocked([0.0, 0.1, 5.0], moving[:3])) == []  # two intervals: no clock to tell
+
+
+def test_a_run_with_holes_is_diagnosed_in_parts_and_a_lone_row_is_set_aside() -> None:
+    """Each part a run of its own: named ``<run>#i``, of kind "free", counts from zero at its
+    start, its clock moved with it; a single row between two holes is set aside, named."""
+    tick = [0.1 * k for k in range(5)]
+    times = [*tick, 5.0, 10.0, 10.1, 10.2, 10.3]
+    counts = [[10 * k, 12 * k] for k in range(10)]
+    run = _clocked(times, counts, run="r7", session_time=100.0)
+    parts = split_at_holes(run, "r7", MODEL)
+    assert [name for name, _ in parts] == ["r7#1", "r7#2", "r7#3"]
+    assert parts[1][1] == "one row (row 6) between holes where rows were dropped"
+    usable, skipped = screen_runs([run], MODEL)
+    assert [r.meta["run"] for r in usable] == ["r7#1", "r7#3"]
+    assert [s.as_dict() for s in skipped] == [
+        {"run": "r7#2", "source": "sim", "reason": parts[1][1]}
+    ]
+    first, last = usable
+    assert first.kind == last.kind == "free" and first.direction is None
+    np.testing.assert_array_equal(first.counts, counts[:5])
+    np.testing.assert_array_equal(last.counts, [[0, 0], [10, 12], [20, 24], [30, 36]])
+    np.testing.assert_allclose(last.time, [10.0, 10.1, 10.2, 10.3])
+    assert last.meta["session_time"] == pytest.approx(110.0)
+    assert last.meta["split_from"] == "r7"
+    whole = _clocked(tick, counts[:5], run="r8")
+    assert split_at_holes(whole, "r8") == [("r8", whole)]  # no hole: the run itself
+
+
+@pytest.mark.slow
+def test_rows_dropped_over_a_corner_no_longer_mislead_the_diagnosis() -> None:
+    """A user's log lost 5 s of rows — encoders and ground truth alike — over a square's
+    corner, and ``diagnose`` took the hole as one step: it named a diameter ratio and a distance
+    scale on a robot carrying a wheelbase error and a diameter ratio. Split at the holes, the
+    four squares' parts give both effects back, wheelbase first; the same logs without the
+    split (the factor set to infinity) still mislead it."""
+    from odomgym.diagnose import screen
+    from odomgym.diagnose.workflow import DiagnoseConfig, diagnose
+
+    robot = IndependentRobot(
+        effects={"wheel_diameter_ratio": {"e_d": 1.005}, "wheelbase": {"e_b": 1.02}}
+    )
+    runs = generate(robot, rich_protocol(), np.random.default_rng(21))
+    holey = list(runs)
+    for j in range(4):  # the squares, 5 s dropped from t = 7 s
+        assert runs[j].kind == "square"
+        keep = (runs[j].time < 7.0) | (runs[j].time > 12.0)
+        holey[j] = dataclasses.replace(
+            runs[j],
+            time=runs[j].time[keep],
+            counts=runs[j].counts[keep],
+            true_pose=runs[j].true_pose[keep],
+        )
+        assert len(holes(holey[j])) == 1
+    config = DiagnoseConfig(jobs=2, max_rounds=3)
+    split = diagnose(holey, MODEL, config)
+    assert split.named_effects == ["wheelbase", "wheel_diameter_ratio"], split.named_effects
+    assert split.verdict == "explained"
+    monkeypatch = pytest.MonkeyPatch()
+    try:
+        monkeypatch.setattr(screen, "HOLE_FACTOR", math.inf)
+        whole = diagnose(holey, MODEL, config)
+    finally:
+        monkeypatch.undo()
+    assert whole.named_effects[:1] != ["wheelbase"], whole.named_effects
+
+
 # ------------------------------------------------------------------ the steps, with gaps
 def _protocol() -> list[Manoeuvre]:
     return [
@@ -262,8 +361,6 @@ def test_the_issue_case_a_tracker_that_lost_the_marker_45_percent_of_the_time(
     it finishes, names the run it set aside, finds the effect, and reports finite held-out
     figures for the model as given, the diagnosed model and the baseline."""
     import json
-
-    from independent_robot import rich_protocol
 
     from odomgym.cli import main
 

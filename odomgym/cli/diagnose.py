@@ -286,10 +286,21 @@ def read_runs(
 
 
 def say_set_aside(runs: list[Run], model: RobotSpec, report: Reporter) -> None:
-    """Notices of the runs the diagnosis will set aside and of the held poses made gaps."""
+    """Notices of the runs the diagnosis will cut at a hole or set aside, and of the held poses
+    made gaps."""
     from odomgym.data.gaps import held_poses
-    from odomgym.diagnose.screen import usable_runs
+    from odomgym.diagnose.screen import holes, usable_runs
 
+    for index, run in enumerate(runs):
+        found = holes(run)
+        if found:
+            name = str(run.meta.get("run", index + 1))
+            parts = ", ".join(f"{name}#{i}" for i in range(1, len(found) + 2))
+            said = "; ".join(str(hole) for hole in found)
+            report.notice(
+                f"run {name} ({run.source}): {said}: rows were dropped, and the path in between "
+                f"is unknown, so it is diagnosed as {len(found) + 1} runs ({parts})"
+            )
     # What the diagnosis will set aside, said before its minutes of work (it screens the runs
     # again and records the same in report.json); too few usable runs stop here in one line.
     _, skipped = usable_runs(runs, model)

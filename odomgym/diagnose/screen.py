@@ -33,11 +33,25 @@ run or sets it aside:
 
 A diagnosis needs :data:`MIN_RUNS` usable runs (:func:`usable_runs`): fewer stop it with one
 line naming the runs set aside and why.
+
+Before these rules, a run is **split at a hole** (:func:`holes`): an interval between two logged
+rows longer than :data:`HOLE_FACTOR` times the run's median interval, over which a wheel turned
+(more than :data:`odomgym.data.gaps.END_SLACK_COUNTS` counts). Rows were dropped there — the
+encoders and the ground truth alike — and the path in between is unknown: a replay would take
+the whole hole as one step along one arc, whatever the robot did. A user's log with a 5 s hole
+over a 90° spin and two straights was diagnosed that way without a word, as a distance scale
+of 0.993 instead of the wheelbase and diameter ratio it carried (held-out error 69 mm against
+0.9 mm without the hole). Each part is then a run of its own, named ``<run>#1``, ``<run>#2``, …,
+of kind ``"free"`` (a part of a square is no square), screened by the rules above like any
+other run. Logs on a regular clock (every format this project reads, the OptiOdom sessions
+resampled onto their tracker's clock) have no such interval; a logger's jitter or a dropped row
+or two stay far below ten intervals.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,12 +59,23 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.data.gaps import first_full_pose, mark_held_poses
+from odomgym.data.gaps import END_SLACK_COUNTS, first_full_pose, mark_held_poses
 from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["MIN_COVERAGE", "MIN_MEASURED", "MIN_RUNS", "SkippedRun", "screen_runs", "usable_runs"]
+__all__ = [
+    "HOLE_FACTOR",
+    "MIN_COVERAGE",
+    "MIN_MEASURED",
+    "MIN_RUNS",
+    "Hole",
+    "SkippedRun",
+    "holes",
+    "screen_runs",
+    "split_at_holes",
+    "usable_runs",
+]
 
 MIN_MEASURED = 1
 """Fewest measured positions after a run's start pose (module docstring, rule 3)."""
@@ -60,6 +85,36 @@ MIN_RUNS = 3
 """Fewest usable runs a diagnosis needs: at least two to fit and one to hold out, and a
 cross-validation over two or more fit runs."""
 _LISTED = 5  # skipped runs named in the error when too few are left; the others are counted
+HOLE_FACTOR = 10.0
+"""How many times a run's median interval between rows an interval must last, with a wheel
+turning over it, to be a hole where rows were dropped (module docstring)."""
+_MIN_INTERVALS = 3  # a median of fewer intervals says nothing about the log's clock
+
+
+@dataclass(frozen=True)
+class Hole:
+    """An interval of a run where rows were dropped (:func:`holes`).
+
+    Attributes:
+        row: the 1-based row of the run before the hole (the row after it is ``row + 1``).
+        start, end: the times of those two rows [s].
+        median: the run's median interval between rows [s].
+        turned: each wheel's counts over the hole (left, right).
+    """
+
+    row: int
+    start: float
+    end: float
+    median: float
+    turned: tuple[int, int]
+
+    def __str__(self) -> str:
+        ratio = (self.end - self.start) / self.median
+        return (
+            f"t jumps from {self.start:.6g} s to {self.end:.6g} s (rows {self.row}–{self.row + 1}, "
+            f"{ratio:.0f}× the run's median interval of {self.median:.3g} s) while the wheels "
+            f"turned {self.turned[0]:+d} and {self.turned[1]:+d} counts"
+        )
 
 
 @dataclass(frozen=True)
@@ -101,9 +156,16 @@ def screen_runs(
     """
     usable: list[Run] = []
     skipped: list[SkippedRun] = []
-    for index, given in enumerate(runs):
-        run, _ = mark_held_poses(given)
-        name = str(run.meta.get("run", index + 1))
+    parts = [
+        (name, part, given.source)
+        for index, given in enumerate(runs)
+        for name, part in split_at_holes(given, str(given.meta.get("run", index + 1)), robot)
+    ]
+    for name, part, source in parts:
+        if isinstance(part, str):  # a part of one row beside a hole
+            skipped.append(SkippedRun(name, source, part))
+            continue
+        run, _ = mark_held_poses(part)
         reason = _too_little(run)
         if reason is not None:
             skipped.append(SkippedRun(name, run.source, reason))
@@ -139,6 +201,65 @@ def usable_runs(
         f"only {len(usable)} of {len(runs)} have it; set aside: {named}{more}",
         field="x",
     )
+
+
+def holes(run: Run) -> list[Hole]:
+    """The intervals of ``run`` where rows were dropped (module docstring): longer than
+    :data:`HOLE_FACTOR` times its median interval, with a wheel turning more than
+    :data:`~odomgym.data.gaps.END_SLACK_COUNTS` counts over them; none for a run of fewer than
+    three intervals."""
+    time = np.asarray(run.time, dtype=np.float64)
+    dt = np.diff(time)
+    if len(dt) < _MIN_INTERVALS:
+        return []
+    median = float(np.median(dt))
+    if not median > 0.0:
+        return []
+    turned = np.diff(np.asarray(run.counts), axis=0)
+    long = dt > HOLE_FACTOR * median
+    moved = np.abs(turned).max(axis=1) > END_SLACK_COUNTS
+    return [
+        Hole(
+            int(k) + 1,
+            float(time[k]),
+            float(time[k + 1]),
+            median,
+            (round(float(turned[k, 0])), round(float(turned[k, 1]))),
+        )
+        for k in np.flatnonzero(long & moved)
+    ]
+
+
+def split_at_holes(
+    run: Run, name: str, robot: RobotSpec | None = None
+) -> list[tuple[str, Run | str]]:
+    """``run`` (named ``name``) cut at its :func:`holes`: [(name, run)] without one, else each
+    part as ``("<name>#i", part)`` — of kind ``"free"``, its counts from zero, its clock and
+    wheel angles moved to its start as for a trimmed run, ``meta["split_from"]`` the run's name
+    — or ``("<name>#i", reason)`` for a part of a single row, which is no run."""
+    found = holes(run)
+    if not found:
+        return [(name, run)]
+    bounds = [0, *(hole.row for hole in found), len(run.time)]
+    out: list[tuple[str, Run | str]] = []
+    for i, (a, b) in enumerate(itertools.pairwise(bounds), start=1):
+        label = f"{name}#{i}"
+        if b - a < 2:
+            out.append((label, f"one row (row {a + 1}) between holes where rows were dropped"))
+            continue
+        part = _start_at(run, a, robot) if a else run
+        part = dataclasses.replace(
+            part,
+            kind="free",
+            direction=None,
+            side=0.0,
+            time=part.time[: b - a],
+            counts=part.counts[: b - a],
+            true_pose=part.true_pose[: b - a],
+            meta={**part.meta, "run": label, "split_from": name},
+        )
+        out.append((label, part))
+    return out
 
 
 def _too_little(run: Run) -> str | None:
