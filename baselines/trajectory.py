@@ -313,9 +313,19 @@ class TrajectoryBaseline:
                 e_s=0.5 * (right + left) / robot.wheel_diameter,
             )
         except SpecError as exc:
+            # A geometry a factor of two or more from the robot file is seldom the robot's: the
+            # usual causes are the logs' units and wiring (a user's logs with theta in degrees,
+            # mm, swapped wheels or a flipped encoder all ended here).
+            hint = (
+                "; a factor of 2 or more from the robot file: check the logs' units (x, y in "
+                "m, theta in rad, t in s), the wiring (left and right columns, each encoder's "
+                "sign) and the robot file"
+                if "must lie within" in str(exc)
+                else ""
+            )
             raise SpecError(
-                f"the baseline calibration cannot be fitted to these runs: {exc} (--no-baseline "
-                "leaves it out)",
+                f"the baseline calibration cannot be fitted to these runs: {exc}{hint} "
+                "(--no-baseline leaves it out)",
                 field=exc.field,
             ) from None
 

@@ -248,6 +248,21 @@ BAD: dict[str, tuple[list[str], str, int, str | None]] = {
         4,
         "run",
     ),
+    # A header nearly right gets the usual slip named (a user's logs: each listed every column
+    # as missing or an unknown column '' without a word on why).
+    "semicolons": (
+        [HEADER.replace(",", ";"), _row().replace(",", ";")],
+        "the header holds no comma: columns are separated by commas",
+        1,
+        "run",
+    ),
+    "upper case": ([HEADER.upper(), _row()], r"\(column names are lower case\)", 1, "run"),
+    "trailing comma": (
+        [HEADER + ",", _row() + ","],
+        r"unknown column\(s\) ''.*a trailing or doubled comma\?",
+        1,
+        "",
+    ),
 }
 
 
@@ -305,6 +320,9 @@ def test_count_jumps_are_checked_against_the_robot(tmp_path: Path) -> None:
     ) as info:
         read_native(jump, robot=ROBOT)
     assert "jump.csv:4:" in str(info.value) and info.value.field == "ticks_right"
+    assert str(info.value).endswith(
+        "(a robot that drives faster needs its max_wheel_speed in the robot file)"
+    )
 
 
 # ---------------------------------------------------------------------------------- writing

@@ -169,6 +169,24 @@ def test_runs_with_too_little_ground_truth_are_set_aside_with_the_reason(
         assert skipped[0].as_dict() == {"run": "1", "source": "sim", "reason": skipped[0].reason}
 
 
+def test_runs_that_never_move_or_too_few_runs_are_refused_naming_the_file() -> None:
+    """Three runs of a robot at rest were diagnosed "nothing missing": the data could tell
+    nothing. Now one line naming their file; so is a log with too few runs."""
+    still = [
+        dataclasses.replace(_moving("fff"), counts=np.array([[0, 0], [1, 2], [2, 1]]), source=f)
+        for f in ("a.csv:2", "a.csv:9", "a.csv:17")
+    ]
+    with pytest.raises(SpecError) as caught:
+        usable_runs(still, MODEL)
+    assert str(caught.value).startswith("a.csv: none of the 3 runs moves (no wheel turns by more")
+    assert caught.value.field == "ticks_left"
+    usable_runs([*still[:2], _moving("fff")], MODEL)  # one that moves is enough
+    with pytest.raises(SpecError, match=r"^a\.csv: diagnose needs at least 3 runs, got 2$"):
+        usable_runs(still[:2], MODEL)
+    with pytest.raises(SpecError, match=r"^diagnose needs at least 3 runs, got 2$"):
+        usable_runs([_moving("fff")] * 2, MODEL)  # simulated: no file to name
+
+
 def test_too_few_usable_runs_stop_in_one_line_naming_them() -> None:
     good, blind = _moving("fff"), _moving("---")
     runs = [good, good, *(dataclasses.replace(blind, meta={"run": f"b{k}"}) for k in range(7))]

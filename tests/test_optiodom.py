@@ -487,6 +487,11 @@ def test_bad_session_names_file_and_line(tmp_path: Path, case: str) -> None:
 def test_missing_folder_and_metadata(tmp_path: Path) -> None:
     with pytest.raises(SpecError, match="does not exist"):
         read_session(tmp_path / "square" / "nothing")
+    log = tmp_path / "log.csv"  # a user's own log given to --data: said to be a file
+    log.write_text("t\n", encoding="utf-8")
+    with pytest.raises(SpecError, match=r"log\.csv: is a file: an OptiOdom session is a folder"):
+        read_session(log)
+    log.unlink()
     empty = tmp_path / "square" / "empty"
     empty.mkdir(parents=True)
     with pytest.raises(SpecError, match=r"no <session>_metadata\.csv") as info:

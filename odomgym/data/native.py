@@ -224,7 +224,7 @@ def _header(cells: list[str], where: str) -> dict[str, int]:
     if missing:
         raise SpecError(
             f"missing column(s) {', '.join(repr(c) for c in missing)}; a native log has the "
-            f"columns {','.join(COLUMNS)}",
+            f"columns {','.join(COLUMNS)}{_header_hint(names)}",
             field=missing[0],
             source=where,
         )
@@ -232,11 +232,22 @@ def _header(cells: list[str], where: str) -> dict[str, int]:
     if extra:
         raise SpecError(
             f"unknown column(s) {', '.join(repr(c) for c in extra)}; a native log has exactly "
-            f"the columns {','.join(COLUMNS)}",
+            f"the columns {','.join(COLUMNS)}{_header_hint(names)}",
             field=extra[0],
             source=where,
         )
     return {name: position for position, name in enumerate(names)}
+
+
+def _header_hint(names: list[str]) -> str:
+    """A hint for a header that is nearly right: the usual slips behind a refused header."""
+    if len(names) == 1 and any(mark in names[0] for mark in (";", "\t")):
+        return " (the header holds no comma: columns are separated by commas)"
+    if "" in names:
+        return " (an empty column name: a trailing or doubled comma?)"
+    if {n.lower() for n in names} >= set(COLUMNS) and not set(names) >= set(COLUMNS):
+        return " (column names are lower case)"
+    return ""
 
 
 def _parse_row(cells: list[str], index: dict[str, int], number: int, where: str) -> _Row:
@@ -345,7 +356,8 @@ def _check_step(group: _Group, row: _Row, label: str, robot: RobotSpec | None, w
                 f"{column} jumps by {jump:+d} counts in {dt:.6g} s (from line {previous.line}), "
                 f"more than the {limit:.1f} counts a wheel can turn (1.5 × max_wheel_speed "
                 f"{robot.max_wheel_speed:g} m/s · dt / {robot.metres_per_tick:.6g} m per count "
-                "+ 2): dropped rows or a counter overflow?",
+                "+ 2): dropped rows or a counter overflow? (a robot that drives faster needs "
+                "its max_wheel_speed in the robot file)",
                 field=column,
                 source=where,
             )

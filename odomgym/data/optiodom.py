@@ -194,6 +194,12 @@ def read_session(
             runs; a run whose turning direction contradicts its position in the session.
     """
     folder = Path(directory)
+    if folder.is_file():
+        raise SpecError(
+            "is a file: an OptiOdom session is a folder (its *_metadata.csv and run files); "
+            "`odomgym diagnose` reads logs of other formats",
+            source=str(folder),
+        )
     if not folder.is_dir():
         raise SpecError("session folder does not exist", source=str(folder))
     metas = sorted(folder.glob("*_metadata.csv"))

@@ -190,10 +190,23 @@ def usable_runs(
             first column), or, with none set aside, how many runs there are (field ``runs``).
     """
     usable, skipped = screen_runs(runs, robot)
+    source = _common_file(runs)
     if len(usable) >= minimum:
+        if not any(_moves(run) for run in usable):
+            # Runs that never move match every model within noise: the verdict would be
+            # "nothing missing", though the data can tell nothing.
+            raise SpecError(
+                f"none of the {len(usable)} runs moves (no wheel turns by more than "
+                f"{END_SLACK_COUNTS} counts from its start): a diagnosis needs runs that drive "
+                "(squares, straights, turns)",
+                field="ticks_left",
+                source=source,
+            )
         return usable, skipped
     if not skipped:
-        raise SpecError(f"diagnose needs at least {minimum} runs, got {len(runs)}", field="runs")
+        raise SpecError(
+            f"diagnose needs at least {minimum} runs, got {len(runs)}", field="runs", source=source
+        )
     named = "; ".join(f"run {s.run} ({s.source}): {s.reason}" for s in skipped[:_LISTED])
     more = f"; and {len(skipped) - _LISTED} more" if len(skipped) > _LISTED else ""
     raise SpecError(
@@ -201,6 +214,25 @@ def usable_runs(
         f"only {len(usable)} of {len(runs)} have it; set aside: {named}{more}",
         field="x",
     )
+
+
+def _moves(run: Run) -> bool:
+    """Whether a wheel of ``run`` turns by more than the counts of a wheel at rest."""
+    counts = np.asarray(run.counts)
+    return bool(np.abs(counts - counts[0]).max() > END_SLACK_COUNTS)
+
+
+def _common_file(runs: Sequence[Run]) -> str | None:
+    """The file every run of ``runs`` was read from (their ``source`` without a line), or
+    None: for the errors about the runs as a whole."""
+    files = {
+        run.source.rsplit(":", 1)[0] if run.source.rsplit(":", 1)[-1].isdigit() else run.source
+        for run in runs
+    }
+    if len(files) == 1:
+        (file,) = files
+        return None if file == "sim" else file
+    return None
 
 
 def holes(run: Run) -> list[Hole]:
