@@ -5,6 +5,7 @@ magnitude, and the open-loop gate's rules.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import pickle
@@ -184,6 +185,22 @@ def test_bumps_need_their_signature_and_a_size_the_floor_can_make() -> None:
         alpha=0.025,
     )
     assert not frequent.plausible and "per metre" in frequent.reason
+    short = check_bumps(  # one run's first seconds: too few steady intervals to test
+        [
+            dataclasses.replace(
+                r, time=r.time[:40], counts=r.counts[:40], true_pose=r.true_pose[:40]
+            )
+            for r in with_bumps[:1]
+        ],
+        NOMINAL_ROBOT,
+        values,
+        max_obstacle=0.02,
+        max_rate=1.0,
+        interval=0.25,
+        alpha=0.025,
+    )
+    assert short.steady_intervals < 20 and not short.accepted
+    assert "too little steady driving" in short.reason and "nan" not in short.reason, short
 
 
 @pytest.fixture(scope="module")

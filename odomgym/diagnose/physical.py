@@ -260,6 +260,11 @@ def bump_size_reasons(
     return reasons
 
 
+_MIN_STEADY = 20
+"""Fewest steady intervals on which :func:`check_bumps` tests the kurtosis (its normal
+approximation, standard error √(24/n), is poor below)."""
+
+
 def check_bumps(
     runs: Sequence[Run],
     spec: RobotSpec,
@@ -276,7 +281,7 @@ def check_bumps(
     loss, largest = _bump_losses(spec, jump, max_obstacle)
     increments = _steady_increments(runs, spec, interval)
     n = len(increments)
-    if n >= 20:
+    if n >= _MIN_STEADY:
         excess = float(stats.kurtosis(increments, fisher=True, bias=False))
         p = float(stats.norm.sf(excess / math.sqrt(24.0 / n)))
     else:
@@ -285,7 +290,12 @@ def check_bumps(
     size = bump_size_reasons(spec, values, max_obstacle=max_obstacle, max_rate=max_rate)
     plausible = not size
     reasons = []
-    if not signature:
+    if not signature and n < _MIN_STEADY:
+        reasons.append(
+            f"too little steady driving to look for heavy-tailed heading jumps ({n} steady "
+            f"intervals, {_MIN_STEADY} needed)"
+        )
+    elif not signature:
         reasons.append(
             "no heavy-tailed heading jumps during steady driving "
             f"(excess kurtosis {excess:.3g} over {n} steady intervals, p = {p:.3g})"
