@@ -30,7 +30,9 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import os
+import re
 import signal
+import socket
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from enum import StrEnum
@@ -40,7 +42,16 @@ from typing import Any, TypeVar
 from odomgym import interrupt
 from odomgym.errors import SpecError
 
-__all__ = ["RAY_MISSING", "Backend", "on_ray", "ray_session", "ray_started", "run_ray_tasks"]
+__all__ = [
+    "RAY_MISSING",
+    "REACH_TIMEOUT",
+    "Backend",
+    "check_reachable",
+    "on_ray",
+    "ray_session",
+    "ray_started",
+    "run_ray_tasks",
+]
 
 K = TypeVar("K")
 
@@ -121,6 +132,46 @@ def _user_paths() -> str:
     return os.pathsep.join(dict.fromkeys(found))
 
 
+REACH_TIMEOUT = 5.0
+"""Seconds a cluster's address has to accept a connection before ``ray.init`` is called on it
+(:func:`check_reachable`)."""
+
+_HOST_PORT = re.compile(r"^(?:ray://)?(\[[^\]]+\]|[^:/\[\]]+):(\d+)$")
+
+
+def check_reachable(target: str, timeout: float = REACH_TIMEOUT) -> None:
+    """Refuse, in one line, a cluster address (``host:port`` or ``ray://host:port``) where
+    nothing accepts a connection within ``timeout`` seconds; other forms (``auto``) are left to
+    Ray.
+
+    Why: ``ray.init`` on an address where nothing answers retried for minutes, printing Ray's
+    multi-line connection errors (a user's ``--ray-address 127.0.0.1:1`` still hung after
+    300 s).
+
+    Raises:
+        SpecError: naming the address and what the connection said (field ``ray-address``).
+    """
+    found = _HOST_PORT.match(target.strip())
+    if found is None:
+        return
+    host, port = found.group(1).strip("[]"), int(found.group(2))
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except OSError as exc:
+        reason = (
+            f"no answer within {timeout:g} s"
+            if isinstance(exc, TimeoutError)
+            else (exc.strerror or str(exc))
+        )
+        raise SpecError(
+            f"cannot join Ray at {target}: nothing accepts a connection at {host}:{port} "
+            f"({reason}); is the cluster up, and is that its address "
+            "(host:6379 from one of its nodes, ray://host:10001 through Ray Client)?",
+            field="ray-address",
+        ) from None
+
+
 def _init(ray: Any, target: str | None, cpus: int) -> None:
     """``ray.init``: a new local Ray with ``cpus`` CPUs (``target`` None), else the cluster at
     ``target``; the workers' ``PYTHONPATH`` is :func:`_user_paths`'s."""
@@ -152,6 +203,8 @@ def ray_session(address: str | None = None, cpus: int = 1) -> Iterator[bool]:
         yield False
         return
     target = _address(address)
+    if target is not None:
+        check_reachable(target)
     # ray.init replaces the SIGTERM handler with one that calls sys.exit, and Ray's C++ core
     # installs absl's failure-signal handler, which prints a stack dump for a plain SIGTERM.
     # Keep the caller's handler (the command line's: stop cleanly, exit 143) and no dump.

@@ -215,6 +215,30 @@ def test_ray_address_without_backend_ray_is_one_line(
     one_line_error(capsys, "--ray-address needs --backend ray")
 
 
+def test_an_address_where_nothing_answers_is_one_line_at_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--ray-address 127.0.0.1:1`` retried for minutes, printing Ray's multi-line errors (a
+    user stopped it after 300 s): the address is now tried first, and refused in one line."""
+    pytest.importorskip("ray")
+    import time
+
+    from odomgym.distributed import check_reachable
+    from odomgym.errors import SpecError
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    started = time.monotonic()
+    argv = ["bench", "calibrators", "--robots", "1", "--backend", "ray"]
+    assert main([*argv, "--ray-address", "127.0.0.1:1"]) == 2
+    one_line_error(capsys, "cannot join Ray at 127.0.0.1:1: nothing accepts a connection")
+    assert time.monotonic() - started < 30.0
+    with pytest.raises(SpecError, match=r"at ray://\[::1\]:1: .* at ::1:1 \(") as caught:
+        check_reachable("ray://[::1]:1")
+    assert caught.value.field == "ray-address"
+    check_reachable("auto")  # left to Ray
+
+
 # --------------------------------------------------------------------- periods from dates
 @pytest.mark.parametrize(
     ("name", "when"),
