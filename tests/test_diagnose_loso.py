@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 import re
 import shutil
 from pathlib import Path
@@ -220,3 +221,54 @@ def test_folds_on_ray_are_the_local_folds(
         name = f"fold-{session}.json"
         assert _untimed_text(out / name) == _untimed_text(source / name)
     assert _untimed_table(on_ray) == _untimed_table(printed)
+
+
+def _fold(session: str, e_b: float, se: float) -> dict[str, Any]:
+    """A fold's entries as :func:`odomgym.diagnose.loso.fold` writes them, with E_b's value and
+    session-clustered standard error given (E_d and E_s exact)."""
+    geometry = {"e_d": (1.0, 1e-4), "e_b": (e_b, se), "e_s": (1.0, 1e-4)}
+    models = {"as given": 10.0, "diagnosed": 4.0}
+    return {
+        "left_out": session,
+        "gate_order": "catalogue first",
+        "runs": 6,
+        "seconds": 1.0,
+        "verdict": "explained",
+        "systematic_effects": ["wheelbase"],
+        "noise_model": [],
+        "terms_kept": [],
+        "terms_tried": 0,
+        "sessions_fitted": 1,
+        "geometry": {k: {"value": v, "stderr_sessions": e} for k, (v, e) in geometry.items()},
+        "left_out_open_loop": {
+            m: {"position_rms_mm": r, "heading_rms_deg": 0.5, "combined_rms_mm": r}
+            for m, r in models.items()
+        },
+        "gate": [],
+    }
+
+
+def test_fold_files_are_strict_json_and_a_missing_interval_is_not_a_no(tmp_path: Path) -> None:
+    """A fold fitted on one session has no standard error: its file held Python's ``NaN``
+    literal (refused by strict parsers), and the check of the folds' intervals read "no" for
+    E_b values that agree to four digits. The file now holds ``null``, read back as NaN, and
+    the check says it cannot tell (None; "n/a" in the table)."""
+    from odomgym.diagnose.loso import _read_fold, _write_fold, summarise, table
+
+    def refuse(name: str) -> float:
+        raise ValueError(f"not strict JSON: {name}")
+
+    written = [
+        _write_fold(tmp_path / f"fold-{s}.json", _fold(s, 1.0033 + k * 1e-4, math.nan))
+        for k, s in enumerate(SESSIONS[:2])
+    ]
+    for session in SESSIONS[:2]:
+        text = (tmp_path / f"fold-{session}.json").read_text(encoding="utf-8")
+        json.loads(text, parse_constant=refuse)
+        assert '"stderr_sessions": null' in text
+        again = _read_fold(tmp_path / f"fold-{session}.json", "catalogue first")
+        assert math.isnan(again["geometry"]["e_b"]["stderr_sessions"])
+    assert math.isnan(written[0]["geometry"]["e_b"]["stderr_sessions"])
+    checks = summarise(written)
+    assert [checks["intervals"][k]["overlap"] for k in ("e_d", "e_b", "e_s")] == [True, None, True]
+    assert "95 % intervals overlap: e_d yes, e_b n/a, e_s yes;" in table(written, checks)

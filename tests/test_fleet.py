@@ -60,6 +60,41 @@ def test_a_bad_fleet_folder_is_named_in_one_line(tmp_path: Path, make, field: st
     assert caught.value.field == field and "\n" not in str(caught.value)
 
 
+def test_logs_both_loose_and_in_period_folders_are_refused(tmp_path: Path) -> None:
+    """Loose logs beside period sub-folders made a period named "" whose report folder held
+    the others' (on Ray one overwrote the other): one line instead."""
+    _robot_folder(tmp_path, "a1", ["s1.csv", "2026-11/s2.csv"])
+    with pytest.raises(SpecError) as caught:
+        find_fleet(tmp_path)
+    assert caught.value.field == "logs" and str(caught.value).startswith(f"{tmp_path / 'a1'}: ")
+    assert "both directly (s1.csv) and in period sub-folders (2026-11/)" in str(caught.value)
+
+
+def test_the_command_refuses_an_out_inside_robots_and_an_example_over_files(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``fleet .`` from inside the fleet wrote ./fleet-fleet, which every later call took for a
+    robot without its robot.toml; ``--example`` over an earlier fleet mixed old robots with the
+    new and listed only the new in truth.json. Both are one line now, nothing written; the
+    default output of ``fleet .`` lies beside the fleet's folder."""
+    from cli_errors import one_line_error
+
+    from odomgym.cli.fleet import _beside
+
+    fleet = tmp_path / "fleet"
+    _robot_folder(fleet, "r1", ["s1.csv"])
+    monkeypatch.chdir(fleet)
+    before = sorted(tmp_path.rglob("*"))
+    assert main(["fleet", ".", "--out", "reports"]) == 2
+    one_line_error(capsys, "--out reports lies inside ROBOTS (.)")
+    assert main(["fleet", "--example", "2", "."]) == 2
+    one_line_error(capsys, "ROBOTS . is not empty: --example writes a fleet into a new or empty")
+    assert sorted(tmp_path.rglob("*")) == before
+    assert _beside(Path(".")) == tmp_path / "fleet-fleet"
+    assert _beside(Path("..")) == tmp_path.parent / f"{tmp_path.name}-fleet"
+    assert _beside(Path("a/fleet")) == Path("a/fleet-fleet")
+
+
 def _write_report(folder: Path, named: dict[str, dict[str, tuple[float, float]]]) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     report = {
@@ -166,3 +201,15 @@ def test_loso_gives_each_robot_its_folds_and_the_report_their_stability(tmp_path
     stamps = {p: p.stat().st_mtime_ns for p in (out / "loso").rglob("fold-*.json")}
     diagnose_fleet(robots, out, config=config, loso=True, resume=True, status=lines.append)
     assert {p: p.stat().st_mtime_ns for p in (out / "loso").rglob("fold-*.json")} == stamps
+
+
+def test_fold_stability_is_read_only_when_asked(tmp_path: Path) -> None:
+    """A fresh report without ``--loso`` showed the stability of folds an earlier call had
+    left in OUT/loso/: ``odomgym fleet`` now reads them only with ``--loso``."""
+    _write_report(tmp_path / "robots" / "r0", {"wheelbase": {"e_b": (1.01, 1e-3)}})
+    fold = tmp_path / "loso" / "r0" / "fold-s1.json"
+    fold.parent.mkdir(parents=True)
+    fold.write_text("{}")
+    robots = [FleetRobot("r0", tmp_path, PRESETS["labmate"], (("", tmp_path / "s1.csv"),))]
+    assert summarise_fleet(tmp_path, robots, loso=False).stability == {}
+    assert "Stability" not in format_fleet(summarise_fleet(tmp_path, robots, loso=False), "f")

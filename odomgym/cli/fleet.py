@@ -20,6 +20,7 @@ from odomgym.cli._common import (
     processes,
     seed,
 )
+from odomgym.errors import SpecError
 
 if TYPE_CHECKING:
     from odomgym.cli._common import Commands
@@ -94,17 +95,34 @@ def run(args: argparse.Namespace) -> int:
     root = Path(args.robots)
     if args.example is not None:
         check_output(root, option="ROBOTS", folder=True)
+        if root.is_dir() and any(root.iterdir()):
+            # Written over an earlier fleet, the old robots and sessions stayed beside the
+            # new ones, and truth.json listed only the new.
+            raise SpecError(
+                f"ROBOTS {root} is not empty: --example writes a fleet into a new or empty folder",
+                field="ROBOTS",
+            )
         truth = write_example_fleet(root, args.example, seed=args.seed, sessions=args.sessions)
+        robots_said = f"{args.example} robot" + ("s" if args.example != 1 else "")
+        sessions_said = f"{args.sessions} session" + ("s" if args.sessions != 1 else "")
         report.status(
-            f"wrote {args.example} robots ({args.sessions} sessions each) into {root}; the "
+            f"wrote {robots_said} ({sessions_said} each) into {root}; the "
             f"truth, which the fleet command never reads: {root / 'truth.json'}"
         )
         if report.json:
             report.document(truth)
         return 0
     check_backend(args)
+    out = Path(args.out) if args.out else _beside(root)
+    if out.resolve().is_relative_to(root.resolve()):
+        # Its folder would be taken for a robot's on the next call (a user's `fleet .` wrote
+        # ./fleet-fleet, and every later call stopped on it).
+        raise SpecError(
+            f"--out {out} lies inside ROBOTS ({root}), where its folders would be taken for "
+            "robots: give a folder outside it",
+            field="out",
+        )
     robots = find_fleet(root)
-    out = Path(args.out) if args.out else Path(f"{root.name or 'fleet'}-fleet")
     check_output(out, option="--out", folder=True)
     config = DiagnoseConfig(seed=args.seed, jobs=args.jobs or os.cpu_count() or 1)
     bars: list[Progress] = []
@@ -144,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for bar in bars:
             bar.__exit__(None, None, None)
-    summary = summarise_fleet(out, robots)
+    summary = summarise_fleet(out, robots, loso=args.loso)
     text = format_fleet(summary, str(root))
     document = json.dumps(summary.to_json(), indent=1)
     atomic_write_text(out / "fleet.md", text)
@@ -156,3 +174,12 @@ def run(args: argparse.Namespace) -> int:
         report.text(text)
     report.wrote([out / "fleet.md", out / "fleet.json", *figures])
     return 0
+
+
+def _beside(root: Path) -> Path:
+    """The default ``--out``: ``<ROBOTS>-fleet`` beside ROBOTS (for ``.`` or ``..`` named
+    after the folder they stand for, so never inside it)."""
+    if root.name and root.name not in (".", ".."):
+        return root.parent / f"{root.name}-fleet"
+    resolved = root.resolve()
+    return resolved.parent / f"{resolved.name or 'fleet'}-fleet"

@@ -146,6 +146,18 @@ def find_fleet(root: str | Path) -> list[FleetRobot]:
         months = [_log_month(path) for _, path in logs]
         if logs and all(months):  # the logs carry their dates: periods are months
             logs = [(str(month), path) for month, (_, path) in zip(months, logs, strict=True)]
+        loose = [path.name for period, path in logs if not period]
+        grouped = sorted({period for period, _ in logs if period})
+        if loose and grouped:
+            # Their period would be "" beside named ones, and its report folder the robot's
+            # periods folder itself, holding the others' (a user's fleet broke that way).
+            raise SpecError(
+                f"holds logs both directly ({loose[0]}) and in period sub-folders "
+                f"({grouped[0]}/): put every log in a period sub-folder, or all of them "
+                "directly in the robot folder",
+                field="logs",
+                source=str(folder),
+            )
         if not logs:
             raise SpecError(
                 "no log in this robot folder (native .csv files, OptiOdom session folders or "
@@ -348,7 +360,7 @@ def _diagnose_fleet(
             )
     if loso:
         backend = "local" if ray_started is None else "ray"
-        _fleet_loso(robots, out, config, baseline, backend, status, runs_of)
+        _fleet_loso(robots, out, config, baseline, backend, status, runs_of, resume)
     return folders
 
 
@@ -360,13 +372,18 @@ def _fleet_loso(
     backend: str,
     status: Callable[[str], None] | None,
     runs_of: Callable[[FleetRobot, str], list[Run]],
+    resume: bool = True,
 ) -> None:
     """Every robot's leave-one-session-out folds into ``out/loso/<name>/`` (those of two or
-    more sessions; the fold files already there are kept)."""
+    more sessions). With ``resume`` the fold files already there are kept; without, they are
+    made again, as every report is (a user's changed logs had kept their old folds)."""
     from odomgym.diagnose.loso import run_loso
     from odomgym.diagnose.nuisances import sessions_of
 
     for robot in robots:
+        if not resume:
+            for stale in sorted((out / "loso" / robot.name).glob("fold-*.json")):
+                stale.unlink()
         runs = runs_of(robot, "")
         if len(set(sessions_of(runs))) < 2:
             if status is not None:
@@ -482,8 +499,11 @@ def _stability(out: Path, names: Sequence[str]) -> dict[str, dict[str, Any]]:
     return stability
 
 
-def summarise_fleet(out: Path, robots: Sequence[FleetRobot]) -> FleetSummary:
-    """Read the reports :func:`diagnose_fleet` wrote under ``out`` and compare the robots."""
+def summarise_fleet(out: Path, robots: Sequence[FleetRobot], *, loso: bool = True) -> FleetSummary:
+    """Read the reports :func:`diagnose_fleet` wrote under ``out`` and compare the robots;
+    with ``loso``, also the stability of the leave-one-session-out folds found there (``odomgym
+    fleet`` reads them only with ``--loso``: a fresh report without it showed folds of an
+    earlier call)."""
     names = [robot.name for robot in robots]
     summary = FleetSummary(robots=names, verdicts={})
     for robot in robots:
@@ -519,7 +539,7 @@ def summarise_fleet(out: Path, robots: Sequence[FleetRobot]) -> FleetSummary:
             z = (value - median) / robust
             if abs(z) > ODD_Z:
                 summary.odd.append((name, *key, value, z))
-    summary.stability = _stability(out, names)
+    summary.stability = _stability(out, names) if loso else {}
     summary.named = dict(sorted(summary.named.items(), key=lambda kv: (-len(kv[1]), kv[0])))
     summary.terms = dict(sorted(summary.terms.items(), key=lambda kv: (-len(kv[1]), kv[0])))
     return summary
@@ -579,7 +599,8 @@ def format_fleet(summary: FleetSummary, source: str) -> str:
         ]
         for robot, st in summary.stability.items():
             overlap = ", ".join(
-                "yes" if ok else "**no**" for ok in st["intervals_overlap"].values()
+                "—" if ok is None else ("yes" if ok else "**no**")
+                for ok in st["intervals_overlap"].values()
             )
             lines.append(
                 f"| {robot} | {st['folds']} | {st['folds_with_modal_set']} | "

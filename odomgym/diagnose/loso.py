@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
+import numpy as np
 from scipy import stats
 
 from odomgym.diagnose.config import DiagnoseConfig
@@ -180,17 +181,21 @@ def summarise(folds: Sequence[Fold]) -> dict[str, Any]:
     overlap: dict[str, Any] = {}
     for _, key in GEOMETRY:
         low, high = [], []
+        every = True  # every fold has an interval (a fold fitted on one session has none)
         for f in folds:
             entry = f["geometry"][key]
             se = entry["stderr_sessions"]
+            every = every and se is not None and math.isfinite(se)
             dof = max(f["sessions_fitted"] - 1, 1)
-            half = float(stats.t.ppf(0.975, dof)) * se if math.isfinite(se) else 0.0
+            half = float(stats.t.ppf(0.975, dof)) * se if every else 0.0
             low.append(entry["value"] - half)
             high.append(entry["value"] + half)
         common = [max(low), min(high)] if folds else [math.nan, math.nan]
         overlap[key] = {
             "common_interval": common,
-            "overlap": bool(folds) and common[0] <= common[1],
+            # None: no interval to compare (no fold, or one without a standard error); a
+            # point "interval" said "no" for values that agreed to four digits.
+            "overlap": (common[0] <= common[1]) if folds and every else None,
         }
     better = [
         f["left_out_open_loop"][DIAGNOSED]["combined_rms_mm"]
@@ -247,7 +252,7 @@ def table(folds: Sequence[Fold], summary: dict[str, Any]) -> str:
         f"Same systematic effects in every fold: {summary['same_systematic_effects']} "
         f"({summary['systematic_effect_sets']}; the most frequent set in "
         f"{summary['folds_with_modal_set']} folds); 95 % intervals overlap: "
-        + ", ".join(f"{k} {v['overlap']}" for k, v in summary["intervals"].items())
+        + ", ".join(f"{k} {_said(v['overlap'])}" for k, v in summary["intervals"].items())
         + f"; left-out session better than as given: {summary['better_than_as_given']}; "
         f"at least as good as the baseline: {summary['as_good_as_baseline']}; "
         f"{summary['seconds']:.0f} s of diagnosis.",
@@ -345,16 +350,51 @@ def _read_fold(path: Path, gate_order: str) -> Fold:
             "remove it to diagnose the fold again",
             source=str(path),
         )
-    return done
+    return _numbers(done)
 
 
 def _write_fold(path: Path, result: Fold) -> Fold:
     """Write ``result`` to ``path`` atomically; returns it as read back from the file's text,
-    so a fold diagnosed now and one resumed from its file are the same values."""
-    text = json.dumps(result, indent=1, default=float)
+    so a fold diagnosed now and one resumed from its file are the same values.
+
+    The file is strict JSON: a number that is not finite (the standard error of a fold
+    fitted on one session) is written ``null``, as in ``report.json`` — Python's ``NaN``
+    literal, which ``json.dumps`` writes by default, is refused by strict parsers
+    (JavaScript's ``JSON.parse``, ``jq``); it is read back as NaN (:func:`_numbers`)."""
+    text = json.dumps(_strict(result), indent=1, default=float, allow_nan=False)
     atomic_write_text(path, text)
     written: Fold = json.loads(text)
-    return written
+    return _numbers(written)
+
+
+def _strict(value: Any) -> Any:
+    """``value`` with every float that is not finite replaced by None (strict JSON)."""
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict(v) for v in value]
+    if isinstance(value, float | np.floating) and not math.isfinite(float(value)):
+        return None
+    return value
+
+
+_NUMERIC = ("geometry", "left_out_open_loop", "gate")
+"""A fold's parts that hold only numbers (and names, flags, rules): a ``null`` there is a
+number that was not finite."""
+
+
+def _numbers(fold: Fold) -> Fold:
+    """``fold`` as read from its file, each ``null`` of its numeric parts (:data:`_NUMERIC`)
+    NaN again, so the checks and the table treat it as the number it was."""
+
+    def nan(value: Any) -> Any:
+        if isinstance(value, dict):
+            return {k: nan(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [nan(v) for v in value]
+        return math.nan if value is None else value
+
+    return {key: nan(value) if key in _NUMERIC else value for key, value in fold.items()}
 
 
 def run_loso(
@@ -432,3 +472,8 @@ def run_loso(
     summary = summarise(folds)
     summary["missing_folds"] = [s for s in mine if s not in done]
     return folds, summary
+
+
+def _said(overlap: bool | None) -> str:
+    """An interval check in the table's words: yes, no, or n/a (no interval to compare)."""
+    return "n/a" if overlap is None else ("yes" if overlap else "no")
