@@ -233,6 +233,12 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
     ) -> None:
         self._set_render_mode(render_mode)
         self.observe = check_observe(observe)
+        if population is not None and not isinstance(population, Population):
+            raise SpecError(
+                "population must be an odomgym.lab.population.Population (e.g. "
+                f"Population(base='scout2')), got {type(population).__name__} {population!r}",
+                field="population",
+            )
         self.population = population or Population()
         skid = PRESETS[self.population.base].is_skid_steer
         if floors is None:  # the bench floors (skid-steer: cables only when asked, see below)

@@ -90,8 +90,9 @@ class StraightLineEnv(RouteEnv):
     * v0: initial version.
     * v0, compatible addition (issue 43): ``robot`` may be a skid-steer robot (the presets
       ``"scout2"``, ``"husky"``, ``"pioneer3at"``, ``"jackal"`` or a spec with
-      ``axle_spacing > 0``), on floors
-      without cables or friction patches; the rendering draws the robot's wheels (two, or four).
+      ``axle_spacing > 0``), on every floor (cables and friction patches act under each of its
+      four wheels, ``docs/skid-steer.md``); the rendering draws the robot's wheels (two, or
+      four).
     """
 
     def __init__(

@@ -33,13 +33,13 @@ class SquareRoute:
 class UMBmarkSquareEnv(RouteEnv):
     """## Description
 
-    A differential-drive robot drives the UMBmark square (Borenstein & Feng 1994,
-    §3.2 and §6.3): four legs of ``side`` metres, a complete stop and a 90° turn in place at the
-    end of each leg (the fourth turn restores the starting heading), clockwise or
-    counter-clockwise. The robot steers by its *own odometry*; its true motion comes from a
-    pymunk rigid-body simulation with friction-limited wheels, so systematic errors (E_d, E_b,
-    E_s of the robot spec) and floor effects (slip, cable bumps, roughness) make the true path
-    drift from the odometry path — which is what UMBmark measures. Run it with
+    A robot (differential-drive, or skid-steer: Version History) drives the UMBmark square
+    (Borenstein & Feng 1994, §3.2 and §6.3): four legs of ``side`` metres, a complete stop and
+    a 90° turn in place at the end of each leg (the fourth turn restores the starting heading),
+    clockwise or counter-clockwise. The robot steers by its *own odometry*; its true motion comes
+    from a pymunk rigid-body simulation with friction-limited wheels, so systematic errors (E_d,
+    E_b, E_s of the robot spec) and floor effects (slip, cable bumps, roughness) make the true
+    path drift from the odometry path — which is what UMBmark measures. Run it with
     :class:`odomgym.sim.driver.ReferenceDriver` to perform the benchmark, or learn a policy.
 
     ## Action Space
@@ -104,8 +104,9 @@ class UMBmarkSquareEnv(RouteEnv):
     * v0: initial version.
     * v0, compatible addition (issue 43): ``robot`` may be a skid-steer robot (the presets
       ``"scout2"``, ``"husky"``, ``"pioneer3at"``, ``"jackal"`` or a spec with
-      ``axle_spacing > 0``), on floors
-      without cables or friction patches; the rendering draws the robot's wheels (two, or four).
+      ``axle_spacing > 0``), on every floor (cables and friction patches act under each of its
+      four wheels, ``docs/skid-steer.md``); the rendering draws the robot's wheels (two, or
+      four).
     """
 
     def __init__(

@@ -43,6 +43,7 @@ from odomgym.envs.base import (
 from odomgym.envs.info import LazyInfo
 from odomgym.envs.straight import StraightRoute
 from odomgym.envs.umbmark import SquareRoute
+from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration
 from odomgym.robot import RobotSpec
@@ -298,7 +299,7 @@ def make_square_vector_env(
     **kwargs: Any,
 ) -> OdometryVectorEnv:
     """Vector entry point of ``UMBmarkSquare-v0`` (``gymnasium.make_vec``)."""
-    kwargs.pop("render_mode", None)
+    _no_render(kwargs)
     return OdometryVectorEnv(num_envs, SquareRoute(side, direction), **kwargs)
 
 
@@ -310,5 +311,18 @@ def make_straight_vector_env(
     **kwargs: Any,
 ) -> OdometryVectorEnv:
     """Vector entry point of ``StraightLine-v0`` (``gymnasium.make_vec``)."""
-    kwargs.pop("render_mode", None)
+    _no_render(kwargs)
     return OdometryVectorEnv(num_envs, StraightRoute(distance, return_trip), **kwargs)
+
+
+def _no_render(kwargs: dict[str, Any]) -> None:
+    """Take ``render_mode`` out of ``gymnasium.make_vec``'s keywords, refusing any but None in
+    one line: the native vector env draws nothing (its ``render_modes`` are empty), and a
+    ``render_mode="rgb_array"`` it accepted failed only at the first ``render()``."""
+    mode = kwargs.pop("render_mode", None)
+    if mode is not None:
+        raise SpecError(
+            f"render_mode {mode!r}: the native vector env does not render; "
+            "gymnasium.make_vec(..., vectorization_mode='sync') makes one that renders each env",
+            field="render_mode",
+        )

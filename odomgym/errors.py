@@ -80,6 +80,27 @@ def load_named(
     return build(read_spec_toml(path, kind), path=path)
 
 
+def refuse_stray_keys(data: Mapping[str, object], table: str, path: Path | None) -> None:
+    """Refuse keys that sit outside the spec file's top-level ``[table]`` when it has one (a
+    key above the header): they would be ignored. A skid-steer robot's ``axle_spacing``
+    written there gave a differential-drive robot without a word. Other tables of the file
+    (``[x]`` beside ``[robot]``) are left alone.
+
+    Raises:
+        SpecError: naming the keys, the first as the field, with its ``file:line``.
+    """
+    if table not in data:
+        return
+    stray = [k for k, v in data.items() if k != table and not isinstance(v, Mapping)]
+    if stray:
+        raise SpecError(
+            f"key(s) {', '.join(repr(k) for k in stray)} sit outside the [{table}] table, where "
+            f"they would be ignored: move them under [{table}]",
+            field=stray[0],
+            source=locate_key(path, stray[0]) if path else None,
+        )
+
+
 def locate_key(path: Path, key: str, *, table: str | None = None, index: int = 0) -> str:
     """Return ``"file:line"`` for the line of ``path`` that assigns ``key``.
 

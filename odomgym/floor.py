@@ -31,6 +31,7 @@ from odomgym.errors import (
     SpecError,
     load_named,
     locate_key,
+    refuse_stray_keys,
     require_finite,
     require_positive,
     require_range,
@@ -171,6 +172,7 @@ class FloorSpec:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, path: Path | None = None) -> FloorSpec:
         """Build from a mapping (parsed TOML); errors name the field, file and line."""
+        refuse_stray_keys(data, "floor", path)
         table = dict(data.get("floor", data))
 
         def where(key: str) -> str | None:

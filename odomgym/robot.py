@@ -25,7 +25,14 @@ from pathlib import Path
 from typing import Any
 
 from odomgym.effects import get_effect
-from odomgym.errors import SpecError, load_named, locate_key, require_positive, require_range
+from odomgym.errors import (
+    SpecError,
+    load_named,
+    locate_key,
+    refuse_stray_keys,
+    require_positive,
+    require_range,
+)
 from odomgym.io import atomic_write_text
 
 __all__ = ["PRESETS", "SKID_STEER_PRESETS", "EffectTable", "RobotSpec", "load_robot"]
@@ -496,6 +503,7 @@ class RobotSpec:
         Accepts either a flat table or one under ``[robot]``; ``e_d``/``e_b``/``e_s`` may be
         given instead of the true diameters and wheelbase.
         """
+        refuse_stray_keys(data, "robot", path)
         table = dict(data.get("robot", data))
         errors = {k: table.pop(k) for k in ("e_d", "e_b", "e_s") if k in table}
         effect_tables = table.pop("effects", {})

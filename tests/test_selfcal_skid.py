@@ -144,3 +144,24 @@ def test_the_selfcal_calibrator_starts_a_skid_steer_robot_from_its_prior() -> No
         SimLab(PRESETS["scout2"], FLOORS["concrete"], rng=np.random.default_rng(2)), start
     )
     assert again.calibration.wheelbase_scale < 1.6
+
+
+@pytest.mark.parametrize(
+    ("make", "field", "words"),
+    [
+        (lambda: Population(base="scout3"), "base", "unknown robot preset 'scout3'; presets: "),
+        (lambda: Population(base="scout2", e_b=(1.1, 0.9)), "e_b", "low <= high, got (1.1, 0.9)"),
+        (lambda: Population(e_s=(float("nan"), 1.0)), "e_s", "finite positive factors"),
+        (lambda: Population(e_d=(1.0,)), "e_d", "a (low, high) pair of factors"),
+        (lambda: gym.make("SelfCalibration-v1", population="scout2"), "population", "got str"),
+    ],
+)
+def test_a_bad_population_is_one_line_naming_its_field(make: Any, field: str, words: str) -> None:
+    """A misspelled base raised a KeyError when the env was made, a population given as the
+    preset's name an AttributeError, and reversed or NaN bounds numpy's errors at reset."""
+    from odomgym.errors import SpecError
+
+    with pytest.raises(SpecError) as caught:
+        make()
+    assert caught.value.field == field and words in str(caught.value)
+    assert "\n" not in str(caught.value)

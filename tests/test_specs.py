@@ -23,6 +23,31 @@ def test_minimal_robot_toml_loads(tmp_path: Path) -> None:
     assert robot.e_d == 1.0 and robot.e_b == 1.0 and robot.e_s == 1.0
 
 
+@pytest.mark.parametrize(
+    ("kind", "load", "inside"),
+    [
+        ("robot", load_robot, "wheel_diameter = 0.33\nwheelbase = 0.583\nticks_per_rev = 4096\n"),
+        ("floor", load_floor, "friction = 0.8\n"),
+        ("calibration", load_calibration, "c_left = 1.0\nc_right = 1.0\n"),
+    ],
+)
+def test_keys_above_the_table_header_are_refused_not_ignored(
+    kind: str, load: typing.Any, inside: str, tmp_path: Path
+) -> None:
+    """A skid-steer robot's ``axle_spacing`` written above ``[robot]`` was ignored (the page
+    said so), and the robot became a differential-drive one without a word: keys outside the
+    table are now an error naming the first and its line; other tables stay allowed."""
+    path = tmp_path / f"{kind}.toml"
+    path.write_text(f"# a {kind}\naxle_spacing = 0.498\nlabel = 'x'\n[{kind}]\n{inside}")
+    with pytest.raises(SpecError) as caught:
+        load(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}:2: key(s) 'axle_spacing', 'label' sit outside the [{kind}]")
+    assert caught.value.field == "axle_spacing"
+    path.write_text(f"[notes]\nlabel = 'x'\n[{kind}]\n{inside}")
+    load(path)  # another table beside it is the file's own business
+
+
 def test_robot_toml_round_trip(tmp_path: Path) -> None:
     robot = PRESETS["labmate"].with_errors(1.003, 0.98, 1.01)
     path = tmp_path / "lm.toml"

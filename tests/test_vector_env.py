@@ -21,6 +21,18 @@ def test_make_vec_uses_the_native_vector_env() -> None:
     assert envs.single_observation_space.contains(obs[0])
 
 
+@pytest.mark.parametrize("env_id", ["UMBmarkSquare-v0", "StraightLine-v0"])
+def test_a_render_mode_the_native_vector_env_cannot_serve_is_refused(env_id: str) -> None:
+    """``render_mode="rgb_array"`` was accepted and failed only at ``render()`` with
+    NotImplementedError: now one line when the env is made, naming the mode that renders."""
+    from odomgym.errors import SpecError
+
+    with pytest.raises(SpecError, match=r"vectorization_mode='sync'") as caught:
+        gym.make_vec(env_id, num_envs=2, render_mode="rgb_array")
+    assert caught.value.field == "render_mode"
+    gym.make_vec(env_id, num_envs=2, render_mode=None).close()
+
+
 def test_vector_env_matches_single_env() -> None:
     robot = odomgym.PRESETS["labmate"]
     single = gym.make("UMBmarkSquare-v0", robot=robot, side=1.0)

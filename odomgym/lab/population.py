@@ -137,6 +137,29 @@ class Population:
     e_b: tuple[float, float] = (0.95, 1.05)
     e_s: tuple[float, float] = (0.98, 1.02)
 
+    def __post_init__(self) -> None:
+        """Refuse, in one line naming the field, an unknown base or a range that is not two
+        finite, positive factors in order — which surfaced as a ``KeyError`` when an env was
+        made, or as numpy's ``high - low < 0`` at its first reset."""
+        if not isinstance(self.base, str) or self.base not in PRESETS:
+            raise SpecError(
+                f"unknown robot preset {self.base!r}; presets: {', '.join(PRESETS)}",
+                field="base",
+            )
+        for field in ("e_d", "e_b", "e_s"):
+            bounds = getattr(self, field)
+            try:
+                low, high = (float(v) for v in bounds)
+            except (TypeError, ValueError):
+                raise SpecError(
+                    f"{field} must be a (low, high) pair of factors, got {bounds!r}", field=field
+                ) from None
+            if not (np.isfinite(low) and np.isfinite(high) and 0.0 < low <= high):
+                raise SpecError(
+                    f"{field} must be finite positive factors with low <= high, got {bounds!r}",
+                    field=field,
+                )
+
     def sample(self, rng: np.random.Generator, name: str) -> RobotSpec:
         """One robot with errors drawn from ``rng``."""
         robot = PRESETS[self.base].ideal()

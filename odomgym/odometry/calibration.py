@@ -53,6 +53,7 @@ from odomgym.errors import (
     SpecError,
     locate_key,
     read_spec_toml,
+    refuse_stray_keys,
     require_finite,
     require_positive,
 )
@@ -304,6 +305,7 @@ class Calibration:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, path: Path | None = None) -> Calibration:
         """Build from a mapping; errors name the field, file and line."""
+        refuse_stray_keys(data, "calibration", path)
         table = dict(data.get("calibration", data))
         names = {f.name for f in dataclasses.fields(cls)}
         for key, value in table.items():

@@ -35,6 +35,7 @@ from odomgym.errors import (
     SpecError,
     load_named,
     locate_key,
+    refuse_stray_keys,
     require_finite,
     require_positive,
     require_range,
@@ -193,6 +194,7 @@ class VehicleSpec:
         """Build from a mapping (e.g. parsed TOML, flat or under ``[vehicle]``); a truck is a
         robot preset name, a robot ``.toml`` path (relative to the vehicle file) or a table.
         Errors name the field and, for a file, the file and line."""
+        refuse_stray_keys(data, "vehicle", path)
         raw = data.get("vehicle", data)
         if not isinstance(raw, Mapping):
             raise SpecError(
