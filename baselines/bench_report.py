@@ -26,6 +26,7 @@ from odomgym.baselines.benchmark import BenchConfig, config_record, summarize
 from odomgym.io import atomic_write_text, atomic_writer
 from odomgym.lab.population import BENCH_FLOORS
 from odomgym.lab.report import plot_return_errors
+from odomgym.robot import PRESETS
 
 __all__ = ["markdown_summary", "write_outputs"]
 
@@ -62,6 +63,15 @@ def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str
             "same way: the ceiling the validation's own noise allows; *of oracle* is, per robot, "
             "the oracle's E_max,syst after / the method's (median)."
             if config.oracle
+            else ""
+        )
+        + (
+            " On a skid-steer base, abs(ΔE_b) is the fitted E_b — the apparent track the "
+            "odometry needs, wider than the wheels' spacing by the scrub — against the spacing's "
+            "true error, so it is large for every method that works (about the apparent track's "
+            "factor − 1): read the improvement. There is no oracle row (the true geometry is "
+            "not the odometry such a robot needs), so *of oracle* is –."
+            if PRESETS[config.population.base].is_skid_steer
             else ""
         ),
         "",

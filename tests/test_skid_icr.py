@@ -264,6 +264,8 @@ def test_bench_calibrators_on_a_skid_steer_population(
     # A skid-steer population's rows carry the ICR offsets (0 for a classical method).
     assert icr["est_icr_x"] != 0.0 and icr["est_track_alpha"] == 0.0
     assert next(r for r in rows if r["method"] == "umbmark")["est_icr_x"] == 0.0
+    # The report says why abs(ΔE_b) is large and the oracle column empty on such a robot.
+    assert "On a skid-steer base, abs(ΔE_b) is the fitted E_b" in (out / "summary.md").read_text()
 
 
 @pytest.mark.parametrize(
