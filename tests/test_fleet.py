@@ -19,6 +19,7 @@ from odomgym.diagnose.fleet import (
     FleetRobot,
     find_fleet,
     format_fleet,
+    plot_fleet,
     summarise_fleet,
 )
 from odomgym.errors import SpecError
@@ -93,6 +94,18 @@ def test_the_command_refuses_an_out_inside_robots_and_an_example_over_files(
     assert _beside(Path(".")) == tmp_path / "fleet-fleet"
     assert _beside(Path("..")) == tmp_path.parent / f"{tmp_path.name}-fleet"
     assert _beside(Path("a/fleet")) == Path("a/fleet-fleet")
+    # Every robot's logs are read before the first diagnosis: a bad log stops the command at
+    # once (it came only when its robot's turn did, after the robots before it).
+    import odomgym.diagnose.fleet as fleet_module
+
+    def never(*_: object, **__: object) -> None:
+        raise AssertionError("a diagnosis started before every log was read")
+
+    monkeypatch.setattr(fleet_module, "diagnose_fleet", never)
+    monkeypatch.chdir(tmp_path)
+    assert main(["fleet", "fleet", "--out", "out"]) == 2
+    one_line_error(capsys, "fleet/r1/s1.csv:1: no data rows after the header")
+    assert not (tmp_path / "out").exists()
 
 
 def _write_report(folder: Path, named: dict[str, dict[str, tuple[float, float]]]) -> None:
@@ -131,6 +144,11 @@ def test_odd_robots_are_those_beyond_three_robust_standard_deviations(tmp_path: 
     assert len(summary.named["backlash"]) == MIN_NAMING - 1
     text = format_fleet(summary, "here")
     assert "| r7 | `wheelbase.e_b` |" in text
+    stale = tmp_path / "fleet_floor_roughness.png"  # an earlier call's effect, named no more
+    stale.write_bytes(b"png")
+    written = plot_fleet(summary, tmp_path)
+    assert sorted(p.name for p in written) == ["fleet_backlash.png", "fleet_wheelbase.png"]
+    assert sorted(p.name for p in tmp_path.glob("fleet_*.png")) == sorted(p.name for p in written)
 
 
 def test_what_moved_between_a_robots_periods(tmp_path: Path) -> None:

@@ -36,7 +36,10 @@ def register(commands: Commands) -> None:
         "compare the robots: which effects and terms recur in how many robots, each "
         "parameter's values across the fleet, the robots more than 3 robust standard "
         "deviations from it, and what moved between a robot's periods. Writes fleet.md, "
-        "fleet.json, a figure per effect and every robot's own report folder.",
+        "fleet.json, a figure per effect and every robot's own report folder. An effect gets a "
+        "fleet distribution, and odd robots, once at least 5 robots name it; below that its "
+        "recurrence count is the finding. Every robot's logs are read before the first "
+        "diagnosis, so a bad log stops the command at once.",
     )
     parser.add_argument(
         "robots",
@@ -85,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         find_fleet,
         format_fleet,
         plot_fleet,
+        read_robot_runs,
         summarise_fleet,
         write_example_fleet,
     )
@@ -124,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
         )
     robots = find_fleet(root)
     check_output(out, option="--out", folder=True)
+    for robot in robots:  # a bad log stops here, not after the robots before it (minutes)
+        read_robot_runs(robot)
     config = DiagnoseConfig(seed=args.seed, jobs=args.jobs or os.cpu_count() or 1)
     bars: list[Progress] = []
 

@@ -615,7 +615,8 @@ def format_fleet(summary: FleetSummary, source: str) -> str:
 def plot_fleet(summary: FleetSummary, out: Path) -> list[Path]:
     """One figure per effect named by any robot (``fleet_<effect>.png``): each parameter's
     value per robot with its standard error, the fleet median and its ±3 robust s.d. band,
-    the odd robots in red."""
+    the odd robots in red. Figures of this name left by an earlier call for an effect no robot
+    names now are removed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -654,6 +655,11 @@ def plot_fleet(summary: FleetSummary, out: Path) -> list[Path]:
         atomic_writer(path, _saver(fig))
         plt.close(fig)
         written.append(path)
+    # A figure of an effect no robot names any longer (an earlier call's) would sit beside
+    # this report as if it were one of its figures.
+    for stale in sorted(out.glob("fleet_*.png")):
+        if stale not in written:
+            stale.unlink()
     return written
 
 
