@@ -390,3 +390,37 @@ def test_failed_write_leaves_nothing_behind(
         write_native(path, _runs())
     assert path.read_text(encoding="utf-8") == "previous content"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["log.csv", "not-a-folder"]
+
+
+def test_a_folder_of_native_logs_is_one_robots_sessions(tmp_path: Path) -> None:
+    """A folder of native CSV files — directly, or one sub-folder per period, as a robot's
+    folder of ``odomgym fleet`` — reads as that robot's sessions (a file alone has no session
+    column, so ``diagnose --loso`` could not run on such a robot), with the folder's
+    ``robot.toml`` as its nominal robot."""
+    from odomgym.data.logs import detect_format, native_sessions, read_log
+
+    runs = _runs()
+    write_native(tmp_path / "s1.csv", runs[:2])
+    (tmp_path / "2026-11").mkdir()
+    write_native(tmp_path / "2026-11" / "s2.csv", runs[2:])
+    (tmp_path / ".hidden.csv").write_text("junk", encoding="utf-8")
+    (tmp_path / "notes.txt").write_text("not a log", encoding="utf-8")
+    assert [s for s, _ in native_sessions(tmp_path)] == ["2026-11/s2", "s1"]
+    assert detect_format(tmp_path) == "native"
+    read, nominal = read_log(tmp_path)
+    assert nominal is None  # no robot.toml
+    assert [(r.meta["session"], r.meta["period"]) for r in read] == [
+        ("2026-11/s2", "2026-11"),
+        ("s1", ""),
+        ("s1", ""),
+    ]
+    fast = RobotSpec(wheel_diameter=0.1, wheelbase=0.3, ticks_per_rev=1000, max_wheel_speed=5.0)
+    fast.save(tmp_path / "robot.toml")  # its count-jump check passes the random runs above
+    _, nominal = read_log(tmp_path)
+    assert nominal == fast
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(SpecError, match="cannot tell the log format"):
+        read_log(empty)
+    with pytest.raises(SpecError, match=r"no native log \(\.csv\) in this folder"):
+        read_log(empty, format="native")

@@ -45,7 +45,11 @@ def register(commands: Commands) -> None:
         "data",
         help="a native CSV, an OptiOdom folder, shipped data (optiodom:square) or a ROS 2 bag",
     )
-    parser.add_argument("--robot", help="robot .toml (or preset) of the model to test")
+    parser.add_argument(
+        "--robot",
+        help="robot .toml (or preset) of the model to test (default: an OptiOdom session's "
+        "own, or the robot.toml of a folder of native logs)",
+    )
     parser.add_argument(
         "--format",
         choices=["native", "optiodom", "rosbag"],

@@ -4,7 +4,10 @@ Formats: ``native`` (odomgym's CSV, :mod:`odomgym.data.native`), ``optiodom`` (a
 or a folder of sessions, :mod:`odomgym.data.optiodom`) and ``rosbag`` (ROS 2 bags,
 :mod:`odomgym.data.rosbag2`). Without ``format`` the layout decides: a ``.csv`` file is native,
 a folder holding ``*_metadata.csv`` files is OptiOdom, a bag folder (``metadata.yaml``) or an
-``.mcap``/``.db3`` file is a ROS 2 bag.
+``.mcap``/``.db3`` file is a ROS 2 bag, and any other folder holding ``.csv`` files is a folder
+of native logs (:func:`native_sessions`): each file one session, directly in the folder or in
+one sub-folder per period — the layout of one robot's folder of ``odomgym fleet``, whose
+``robot.toml``, when there, is the folder's nominal robot.
 
 Every format's runs come out the same way: poses a tracker held while the wheels turned are made
 gaps (:func:`odomgym.data.gaps.mark_held_poses`; how many, per run, in ``meta["held_poses"]``),
@@ -22,7 +25,7 @@ from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["FORMATS", "LogFormat", "detect_format", "read_log"]
+__all__ = ["FORMATS", "LogFormat", "detect_format", "native_sessions", "read_log"]
 
 LogFormat = Literal["native", "optiodom", "rosbag"]
 FORMATS: tuple[LogFormat, ...] = ("native", "optiodom", "rosbag")
@@ -41,6 +44,8 @@ def detect_format(path: Path) -> LogFormat:
         return "optiodom"
     elif any(path.rglob("metadata.yaml")) or any(path.rglob("*.mcap")) or any(path.rglob("*.db3")):
         return "rosbag"
+    elif native_sessions(path):
+        return "native"
     raise SpecError(
         "cannot tell the log format (a .csv file, an OptiOdom folder or a ROS 2 bag); "
         "give --format native|optiodom|rosbag",
@@ -93,7 +98,9 @@ def _read(
     if kind == "native":
         from odomgym.data.native import read_native
 
-        return read_native(where, robot=robot), None
+        if not where.is_dir():
+            return read_native(where, robot=robot), None
+        return _read_native_folder(where, robot)
     if kind == "rosbag":
         from odomgym.data.rosbag2 import read_rosbag
 
@@ -128,5 +135,49 @@ def _read(
             run.meta.update(
                 run=f"{session.name}-{run.meta['index']:02d}", experiment=label, format="optiodom"
             )
+            runs.append(run)
+    return runs, nominal
+
+
+def native_sessions(folder: Path) -> list[tuple[str, Path]]:
+    """The native logs of ``folder`` as (session, file): each ``.csv`` file directly in it, or
+    in a sub-folder of it (a period), sorted by path; the session is the file's path from
+    ``folder`` without its suffix (``s1``, ``2026-11/s2``): what ``odomgym fleet`` calls a
+    robot's sessions. Hidden files and folders are left out."""
+    found = []
+    for path in sorted(folder.iterdir()):
+        if path.name.startswith("."):
+            continue
+        if path.is_file() and path.suffix.lower() == ".csv":
+            found.append((path.stem, path))
+        elif path.is_dir():
+            found += [
+                (f"{path.name}/{p.stem}", p)
+                for p in sorted(path.iterdir())
+                if p.is_file() and p.suffix.lower() == ".csv" and not p.name.startswith(".")
+            ]
+    return found
+
+
+def _read_native_folder(
+    folder: Path, robot: RobotSpec | None
+) -> tuple[list[Run], RobotSpec | None]:
+    """Every native log of ``folder`` (:func:`native_sessions`), each run's ``meta["session"]``
+    its file's session and ``meta["period"]`` its sub-folder (``""`` for none); the nominal
+    robot is the folder's ``robot.toml`` when there. Why: a fleet's robot folder, or any folder
+    of one robot's logs, is diagnosed (and ``--loso``'s sessions told apart) as ``odomgym
+    fleet`` diagnoses it; a native file alone has no session column."""
+    from odomgym.data.native import read_native
+    from odomgym.robot import load_robot
+
+    sessions = native_sessions(folder)
+    if not sessions:
+        raise SpecError("no native log (.csv) in this folder", field="DATA", source=str(folder))
+    nominal = load_robot(folder / "robot.toml") if (folder / "robot.toml").is_file() else None
+    runs: list[Run] = []
+    for session, path in sessions:
+        for run in read_native(path, robot=robot or nominal):
+            run.meta["session"] = session
+            run.meta["period"] = session.rpartition("/")[0]
             runs.append(run)
     return runs, nominal
