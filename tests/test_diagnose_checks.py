@@ -142,63 +142,34 @@ def test_bumps_need_their_signature_and_a_size_the_floor_can_make() -> None:
     with_bumps = simulate_protocol(bumpy, "rich", rng)
     without = simulate_protocol(NOMINAL_ROBOT, "rich", rng)
     values = {"rate": 0.5, "heading_jump": math.radians(1.5)}
-    found = check_bumps(
-        with_bumps,
-        NOMINAL_ROBOT,
-        values,
-        max_obstacle=0.02,
-        max_rate=1.0,
-        interval=0.25,
-        alpha=0.025,
-    )
+
+    def check(runs: list[Run], values: dict[str, float]) -> Any:
+        return check_bumps(
+            runs,
+            NOMINAL_ROBOT,
+            values,
+            max_obstacle=0.02,
+            max_rate=1.0,
+            interval=0.25,
+            alpha=0.025,
+        )
+
+    found = check(with_bumps, values)
     assert found.signature and found.plausible and found.accepted, found
-    absent = check_bumps(
-        without,
-        NOMINAL_ROBOT,
-        values,
-        max_obstacle=0.02,
-        max_rate=1.0,
-        interval=0.25,
-        alpha=0.025,
-    )
+    absent = check(without, values)
     assert not absent.signature and not absent.accepted, absent
     ten_degrees = {"rate": 0.75, "heading_jump": math.radians(10.0)}
-    huge = check_bumps(
-        with_bumps,
-        NOMINAL_ROBOT,
-        ten_degrees,
-        max_obstacle=0.02,
-        max_rate=1.0,
-        interval=0.25,
-        alpha=0.025,
-    )
+    huge = check(with_bumps, ten_degrees)
     radius = 0.5 * NOMINAL_ROBOT.wheel_diameter
     assert huge.largest_loss == pytest.approx(bump_extra_rotation(radius, 0.02))
     assert not huge.plausible and "obstacle" in huge.reason
-    frequent = check_bumps(
-        with_bumps,
-        NOMINAL_ROBOT,
-        {"rate": 3.5, "heading_jump": math.radians(0.57)},
-        max_obstacle=0.02,
-        max_rate=1.0,
-        interval=0.25,
-        alpha=0.025,
-    )
+    frequent = check(with_bumps, {"rate": 3.5, "heading_jump": math.radians(0.57)})
     assert not frequent.plausible and "per metre" in frequent.reason
-    short = check_bumps(  # one run's first seconds: too few steady intervals to test
-        [
-            dataclasses.replace(
-                r, time=r.time[:40], counts=r.counts[:40], true_pose=r.true_pose[:40]
-            )
-            for r in with_bumps[:1]
-        ],
-        NOMINAL_ROBOT,
-        values,
-        max_obstacle=0.02,
-        max_rate=1.0,
-        interval=0.25,
-        alpha=0.025,
+    first = with_bumps[0]  # its first seconds: too few steady intervals to test
+    cut = dataclasses.replace(
+        first, time=first.time[:40], counts=first.counts[:40], true_pose=first.true_pose[:40]
     )
+    short = check([cut], values)
     assert short.steady_intervals < 20 and not short.accepted
     assert "too little steady driving" in short.reason and "nan" not in short.reason, short
 
