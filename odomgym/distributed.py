@@ -164,8 +164,9 @@ def check_reachable(target: str, timeout: float = REACH_TIMEOUT) -> None:
             if isinstance(exc, TimeoutError)
             else (exc.strerror or str(exc))
         )
+        shown = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
         raise SpecError(
-            f"cannot join Ray at {target}: nothing accepts a connection at {host}:{port} "
+            f"cannot join Ray at {target}: nothing accepts a connection at {shown} "
             f"({reason}); is the cluster up, and is that its address "
             "(host:6379 from one of its nodes, ray://host:10001 through Ray Client)?",
             field="ray-address",

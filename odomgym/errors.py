@@ -91,7 +91,7 @@ def refuse_stray_keys(data: Mapping[str, object], table: str, path: Path | None)
     """
     if table not in data:
         return
-    stray = [k for k, v in data.items() if k != table and not isinstance(v, Mapping)]
+    stray = [k for k, v in data.items() if k != table and not _is_table(v)]
     if stray:
         raise SpecError(
             f"key(s) {', '.join(repr(k) for k in stray)} sit outside the [{table}] table, where "
@@ -99,6 +99,13 @@ def refuse_stray_keys(data: Mapping[str, object], table: str, path: Path | None)
             field=stray[0],
             source=locate_key(path, stray[0]) if path else None,
         )
+
+
+def _is_table(value: object) -> bool:
+    """Whether a parsed TOML value is a table (``[x]``) or an array of tables (``[[x]]``)."""
+    if isinstance(value, Mapping):
+        return True
+    return isinstance(value, list) and bool(value) and all(isinstance(v, Mapping) for v in value)
 
 
 def locate_key(path: Path, key: str, *, table: str | None = None, index: int = 0) -> str:

@@ -250,9 +250,9 @@ def _fold(session: str, e_b: float, se: float) -> dict[str, Any]:
 
 def test_fold_files_are_strict_json_and_a_missing_interval_is_not_a_no(tmp_path: Path) -> None:
     """A fold fitted on one session has no standard error: its file held Python's ``NaN``
-    literal (refused by strict parsers), and the check of the folds' intervals read "no" for
-    E_b values that agree to four digits. The file now holds ``null``, read back as NaN, and
-    the check says it cannot tell (None; "n/a" in the table)."""
+    literal (refused by strict parsers), and when no fold had an interval the check read "no"
+    for E_b values that agree to four digits. The file now holds ``null``, read back as NaN,
+    and the check says it cannot tell (None; "n/a" in the table)."""
     from odomgym.diagnose.loso import _read_fold, _write_fold, summarise, table
 
     def refuse(name: str) -> float:
@@ -271,4 +271,20 @@ def test_fold_files_are_strict_json_and_a_missing_interval_is_not_a_no(tmp_path:
     assert math.isnan(written[0]["geometry"]["e_b"]["stderr_sessions"])
     checks = summarise(written)
     assert [checks["intervals"][k]["overlap"] for k in ("e_d", "e_b", "e_s")] == [True, None, True]
-    assert "95 % intervals overlap: e_d yes, e_b n/a, e_s yes;" in table(written, checks)
+    assert "95 % intervals overlap: e_d True, e_b n/a, e_s True;" in table(written, checks)
+    # Beside folds with intervals, a fold without one is its value alone, in any order: inside
+    # their common part it agrees, outside it does not (the June table's E_b fold at 1.0000).
+    inside, outside = _fold("a", 1.0005, math.nan), _fold("b", 1.01, math.nan)
+    sized = _fold("c", 1.0, 1e-3)
+    sized["sessions_fitted"] = 13
+    for folds, agree in (
+        ([inside, sized], True),
+        ([sized, inside], True),
+        ([outside, sized], False),
+    ):
+        e_b = summarise(folds)["intervals"]["e_b"]
+        assert e_b["overlap"] is agree
+    assert (
+        summarise([inside, sized])["intervals"]["e_b"]["common_interval"]
+        == summarise([sized, inside])["intervals"]["e_b"]["common_interval"]
+    )

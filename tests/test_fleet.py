@@ -94,6 +94,14 @@ def test_the_command_refuses_an_out_inside_robots_and_an_example_over_files(
     assert _beside(Path(".")) == tmp_path / "fleet-fleet"
     assert _beside(Path("..")) == tmp_path.parent / f"{tmp_path.name}-fleet"
     assert _beside(Path("a/fleet")) == Path("a/fleet-fleet")
+    # A robot's report folder that holds anything but a report (here the robot's own folder:
+    # ROBOTS named "robots", --out its parent) is refused before any work, not after its
+    # robot's diagnosis.
+    robots = tmp_path / "robots"
+    _robot_folder(robots, "r1", ["s1.csv"])
+    monkeypatch.chdir(tmp_path)
+    assert main(["fleet", "robots", "--out", "."]) == 2
+    one_line_error(capsys, "--out robots/r1: holds robot.toml, s1.csv, which diagnose did not")
     # Every robot's logs are read before the first diagnosis: a bad log stops the command at
     # once (it came only when its robot's turn did, after the robots before it).
     import odomgym.diagnose.fleet as fleet_module

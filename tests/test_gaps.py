@@ -250,6 +250,9 @@ def test_a_run_with_holes_is_diagnosed_in_parts_and_a_lone_row_is_set_aside() ->
     assert last.meta["split_from"] == "r7"
     whole = _clocked(tick, counts[:5], run="r8")
     assert split_at_holes(whole, "r8") == [("r8", whole)]  # no hole: the run itself
+    cut = _clocked([*tick, 5.0, 5.1, 5.2], counts[:8], run="r9")  # two usable parts, alone
+    with pytest.raises(SpecError, match=r"needs at least 3 runs, got 2 \(the runs cut at holes"):
+        usable_runs([cut], MODEL)
 
 
 @pytest.mark.slow

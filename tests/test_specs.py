@@ -44,8 +44,8 @@ def test_keys_above_the_table_header_are_refused_not_ignored(
     message = str(caught.value)
     assert message.startswith(f"{path}:2: key(s) 'axle_spacing', 'label' sit outside the [{kind}]")
     assert caught.value.field == "axle_spacing"
-    path.write_text(f"[notes]\nlabel = 'x'\n[{kind}]\n{inside}")
-    load(path)  # another table beside it is the file's own business
+    path.write_text(f"[notes]\nlabel = 'x'\n[[runs]]\nn = 1\n[{kind}]\n{inside}")
+    load(path)  # other tables (and arrays of tables) beside it are the file's own business
 
 
 def test_robot_toml_round_trip(tmp_path: Path) -> None:

@@ -89,9 +89,11 @@ def run(args: argparse.Namespace) -> int:
         format_fleet,
         plot_fleet,
         read_robot_runs,
+        report_folders,
         summarise_fleet,
         write_example_fleet,
     )
+    from odomgym.diagnose.report import check_replaceable
     from odomgym.diagnose.workflow import DiagnoseConfig
     from odomgym.io import atomic_write_text
 
@@ -128,6 +130,8 @@ def run(args: argparse.Namespace) -> int:
         )
     robots = find_fleet(root)
     check_output(out, option="--out", folder=True)
+    for folder in report_folders(robots, out):  # replaced whole: only earlier reports
+        check_replaceable(folder, option="--out")
     for robot in robots:  # a bad log stops here, not after the robots before it (minutes)
         read_robot_runs(robot)
     config = DiagnoseConfig(seed=args.seed, jobs=args.jobs or os.cpu_count() or 1)

@@ -47,7 +47,8 @@ def detect_format(path: Path) -> LogFormat:
     elif native_sessions(path):
         return "native"
     raise SpecError(
-        "cannot tell the log format (a .csv file, an OptiOdom folder or a ROS 2 bag); "
+        "cannot tell the log format (a .csv file or a folder of them, an OptiOdom folder or a "
+        "ROS 2 bag); "
         "give --format native|optiodom|rosbag",
         field="format",
         source=str(path),
@@ -66,8 +67,9 @@ def read_log(
     right_joint: str = "right_wheel_joint",
 ) -> tuple[list[Run], RobotSpec | None]:
     """Read every run of ``path``; returns the runs, their held poses made gaps (module
-    docstring), and, for OptiOdom data, the nominal robot of its (first) session's metadata
-    (``None`` for other formats)."""
+    docstring), and the nominal robot: for OptiOdom data its (first) session's metadata's, for
+    a folder of native logs its ``robot.toml`` when there and ``robot`` is not given, else
+    ``None``."""
     runs, nominal = _read(
         Path(path),
         robot,
@@ -164,16 +166,19 @@ def _read_native_folder(
 ) -> tuple[list[Run], RobotSpec | None]:
     """Every native log of ``folder`` (:func:`native_sessions`), each run's ``meta["session"]``
     its file's session and ``meta["period"]`` its sub-folder (``""`` for none); the nominal
-    robot is the folder's ``robot.toml`` when there. Why: a fleet's robot folder, or any folder
-    of one robot's logs, is diagnosed (and ``--loso``'s sessions told apart) as ``odomgym
-    fleet`` diagnoses it; a native file alone has no session column."""
+    robot is the folder's ``robot.toml`` when there and ``robot`` is None. Why: a fleet's
+    robot folder, or any folder of one robot's logs, is diagnosed (and ``--loso``'s sessions
+    told apart) as ``odomgym fleet`` diagnoses it; a native file alone has no session
+    column."""
     from odomgym.data.native import read_native
     from odomgym.robot import load_robot
 
     sessions = native_sessions(folder)
     if not sessions:
         raise SpecError("no native log (.csv) in this folder", field="DATA", source=str(folder))
-    nominal = load_robot(folder / "robot.toml") if (folder / "robot.toml").is_file() else None
+    # The folder's robot only when none is given: a broken one must not block --robot.
+    toml = folder / "robot.toml"
+    nominal = load_robot(toml) if robot is None and toml.is_file() else None
     runs: list[Run] = []
     for session, path in sessions:
         for run in read_native(path, robot=robot or nominal):

@@ -191,6 +191,12 @@ def read_robot_runs(robot: FleetRobot) -> list[Run]:
     return runs
 
 
+def report_folders(robots: Sequence[FleetRobot], out: Path) -> list[Path]:
+    """The report folders :func:`diagnose_fleet` writes under ``out``: each robot's, and each
+    period's of a robot with two or more (``odomgym fleet`` checks them before any work)."""
+    return [folder for *_, folder in _units(robots, out)]
+
+
 def _units(robots: Sequence[FleetRobot], out: Path) -> list[tuple[FleetRobot, str, str, Path]]:
     """The diagnoses a fleet needs, as (robot, period, label, report folder): each robot on all
     its sessions, and each period of a robot with two or more on its own (period ``""``: all)."""
@@ -276,8 +282,9 @@ def diagnose_fleet(
 
     ``loso``: then, for every robot of two or more sessions, its leave-one-session-out folds
     (:func:`odomgym.diagnose.loso.run_loso`) into ``out/loso/<name>/``, one fold file per
-    session, kept across interruptions (a fold file there is not made again) and run on the
-    same backend; :func:`summarise_fleet` reports their stability."""
+    session, run on the same backend; with ``resume`` a fold file already there is kept (not
+    made again), without it every fold is made again. :func:`summarise_fleet` reports their
+    stability."""
     from odomgym.distributed import Backend, ray_session
 
     chosen_backend = Backend(backend)
@@ -413,7 +420,8 @@ class FleetSummary:
         robots: the robots' names, in order.
         stability: robot → its leave-one-session-out folds' checks (``fleet --loso``):
             ``folds``, ``folds_with_modal_set`` ("k/n"), ``modal_effect_set``,
-            ``intervals_overlap`` (E_d, E_b, E_s: do the folds' 95 % intervals share a part)
+            ``intervals_overlap`` (E_d, E_b, E_s: do the folds' 95 % intervals share a part;
+            None when no fold has one)
             and ``better_than_as_given`` ("k/n"); timing left out, so the summary is the same
             wherever the folds ran.
         verdicts: each robot's verdict.
@@ -480,14 +488,14 @@ def _parameters(report: dict[str, Any]) -> dict[tuple[str, str], tuple[float, fl
 
 def _stability(out: Path, names: Sequence[str]) -> dict[str, dict[str, Any]]:
     """The leave-one-session-out checks of every robot with fold files under ``out/loso/``."""
-    from odomgym.diagnose.loso import summarise
+    from odomgym.diagnose.loso import fold_numbers, summarise
 
     stability = {}
     for name in names:
         files = sorted((out / "loso" / name).glob("fold-*.json"))
         if not files:
             continue
-        folds = [json.loads(path.read_text(encoding="utf-8")) for path in files]
+        folds = [fold_numbers(json.loads(path.read_text(encoding="utf-8"))) for path in files]
         checks = summarise(folds)
         stability[name] = {
             "folds": checks["folds"],

@@ -66,6 +66,7 @@ __all__ = [
     "GEOMETRY",
     "TIMING_FIELDS",
     "fold",
+    "fold_numbers",
     "fold_path",
     "fold_sessions",
     "parse_shard",
@@ -181,21 +182,23 @@ def summarise(folds: Sequence[Fold]) -> dict[str, Any]:
     overlap: dict[str, Any] = {}
     for _, key in GEOMETRY:
         low, high = [], []
-        every = True  # every fold has an interval (a fold fitted on one session has none)
+        intervals = 0  # folds with a standard error (a fold fitted on one session has none)
         for f in folds:
             entry = f["geometry"][key]
             se = entry["stderr_sessions"]
-            every = every and se is not None and math.isfinite(se)
+            finite = se is not None and math.isfinite(se)
+            intervals += finite
             dof = max(f["sessions_fitted"] - 1, 1)
-            half = float(stats.t.ppf(0.975, dof)) * se if every else 0.0
+            # A fold without one is its value alone: it must lie inside the others' common part.
+            half = float(stats.t.ppf(0.975, dof)) * se if finite else 0.0
             low.append(entry["value"] - half)
             high.append(entry["value"] + half)
         common = [max(low), min(high)] if folds else [math.nan, math.nan]
         overlap[key] = {
             "common_interval": common,
-            # None: no interval to compare (no fold, or one without a standard error); a
-            # point "interval" said "no" for values that agreed to four digits.
-            "overlap": (common[0] <= common[1]) if folds and every else None,
+            # None when no fold has an interval: points alone agree only to the last digit,
+            # and said "no" for values that agreed to four (folds fitted on one session each).
+            "overlap": (common[0] <= common[1]) if intervals else None,
         }
     better = [
         f["left_out_open_loop"][DIAGNOSED]["combined_rms_mm"]
@@ -350,7 +353,7 @@ def _read_fold(path: Path, gate_order: str) -> Fold:
             "remove it to diagnose the fold again",
             source=str(path),
         )
-    return _numbers(done)
+    return fold_numbers(done)
 
 
 def _write_fold(path: Path, result: Fold) -> Fold:
@@ -360,11 +363,11 @@ def _write_fold(path: Path, result: Fold) -> Fold:
     The file is strict JSON: a number that is not finite (the standard error of a fold
     fitted on one session) is written ``null``, as in ``report.json`` — Python's ``NaN``
     literal, which ``json.dumps`` writes by default, is refused by strict parsers
-    (JavaScript's ``JSON.parse``, ``jq``); it is read back as NaN (:func:`_numbers`)."""
+    (JavaScript's ``JSON.parse``, ``jq``); it is read back as NaN (:func:`fold_numbers`)."""
     text = json.dumps(_strict(result), indent=1, default=float, allow_nan=False)
     atomic_write_text(path, text)
     written: Fold = json.loads(text)
-    return _numbers(written)
+    return fold_numbers(written)
 
 
 def _strict(value: Any) -> Any:
@@ -383,9 +386,11 @@ _NUMERIC = ("geometry", "left_out_open_loop", "gate")
 number that was not finite."""
 
 
-def _numbers(fold: Fold) -> Fold:
+def fold_numbers(fold: Fold) -> Fold:
     """``fold`` as read from its file, each ``null`` of its numeric parts (:data:`_NUMERIC`)
-    NaN again, so the checks and the table treat it as the number it was."""
+    NaN again, so the checks and the table treat it as the number it was (an infinite one,
+    written ``null`` too, comes back NaN: only a gate step's variance inflation can be one, and
+    no check reads it)."""
 
     def nan(value: Any) -> Any:
         if isinstance(value, dict):
@@ -475,5 +480,5 @@ def run_loso(
 
 
 def _said(overlap: bool | None) -> str:
-    """An interval check in the table's words: yes, no, or n/a (no interval to compare)."""
-    return "n/a" if overlap is None else ("yes" if overlap else "no")
+    """An interval check in the table's words: True, False, or n/a (no interval to compare)."""
+    return "n/a" if overlap is None else str(bool(overlap))

@@ -203,15 +203,21 @@ def usable_runs(
                 source=source,
             )
         return usable, skipped
+    # Counted as screened: a run cut at a hole counts as its parts (it is said in the message).
+    cut = len(usable) + len(skipped) - len(runs)
+    parts = " (the runs cut at holes where rows were dropped count as their parts)" if cut else ""
     if not skipped:
         raise SpecError(
-            f"diagnose needs at least {minimum} runs, got {len(runs)}", field="runs", source=source
+            f"diagnose needs at least {minimum} runs, got {len(usable)}{parts}",
+            field="runs",
+            source=source,
         )
     named = "; ".join(f"run {s.run} ({s.source}): {s.reason}" for s in skipped[:_LISTED])
     more = f"; and {len(skipped) - _LISTED} more" if len(skipped) > _LISTED else ""
     raise SpecError(
         f"diagnose needs at least {minimum} runs with enough ground truth (x, y, theta), but "
-        f"only {len(usable)} of {len(runs)} have it; set aside: {named}{more}",
+        f"only {len(usable)} of {len(usable) + len(skipped)} have it{parts}; set aside: "
+        f"{named}{more}",
         field="x",
     )
 
