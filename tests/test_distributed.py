@@ -233,7 +233,7 @@ def test_an_address_where_nothing_answers_is_one_line_at_once(
     assert main([*argv, "--ray-address", "127.0.0.1:1"]) == 2
     one_line_error(capsys, "cannot join Ray at 127.0.0.1:1: nothing accepts a connection")
     assert time.monotonic() - started < 30.0
-    with pytest.raises(SpecError, match=r"at ray://\[::1\]:1: .* at ::1:1 \(") as caught:
+    with pytest.raises(SpecError, match=r"at ray://\[::1\]:1: .* at \[::1\]:1 \(") as caught:
         check_reachable("ray://[::1]:1")
     assert caught.value.field == "ray-address"
     check_reachable("auto")  # left to Ray
