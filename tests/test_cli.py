@@ -390,6 +390,14 @@ def test_diagnose_refuses_an_out_folder_holding_anything_but_a_report(
     for name in (*REPORT_FILES, "discovered-yaw_rate.png"):
         (earlier / name).write_text(name, encoding="utf-8")
     assert foreign_entries(earlier) == [] and foreign_entries(tmp_path / "new") == []
+    # A desktop's own files (a user opened the report in Finder) are no one's data.
+    (earlier / ".DS_Store").write_bytes(b"\x00\x00\x00\x01Bud1")
+    finder = tmp_path / "finder"
+    finder.mkdir()
+    (finder / "Thumbs.db").write_bytes(b"")
+    assert foreign_entries(earlier) == [] and foreign_entries(finder) == []
+    (finder / "desktop.ini").mkdir()  # a folder of that name is not the desktop's file
+    assert foreign_entries(finder) == ["desktop.ini"]
 
     def stop(*_: object, **__: object) -> None:
         raise KeyboardInterrupt  # past the checks: the earlier report was taken

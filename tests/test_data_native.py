@@ -424,3 +424,30 @@ def test_a_folder_of_native_logs_is_one_robots_sessions(tmp_path: Path) -> None:
         read_log(empty)
     with pytest.raises(SpecError, match=r"no native log \(\.csv\) in this folder"):
         read_log(empty, format="native")
+
+
+def test_fleet_and_diagnose_name_a_robots_sessions_alike(tmp_path: Path) -> None:
+    """One robot's folder of native logs in period sub-folders reads with the same sessions
+    and periods whether ``odomgym fleet`` reads it as a robot of its fleet or ``diagnose``
+    as a folder of logs (one walk, :func:`odomgym.data.logs.period_logs`); a hidden folder's
+    files are no session of either."""
+    from odomgym.data.logs import read_log
+    from odomgym.diagnose.fleet import find_fleet, read_robot_runs
+
+    runs = _runs()
+    folder = tmp_path / "fleet" / "r1"
+    for period, name, part in (("2026-10", "a", runs[:1]), ("2026-11", "b", runs[1:])):
+        (folder / period).mkdir(parents=True)
+        write_native(folder / period / f"{name}.csv", part)
+    (folder / ".trash").mkdir()
+    write_native(folder / ".trash" / "old.csv", runs)
+    fast = RobotSpec(wheel_diameter=0.1, wheelbase=0.3, ticks_per_rev=1000, max_wheel_speed=5.0)
+    fast.save(folder / "robot.toml")
+    [robot] = find_fleet(tmp_path / "fleet")
+    by_fleet = [(r.meta["session"], r.meta["period"]) for r in read_robot_runs(robot)]
+    by_diagnose = [(r.meta["session"], r.meta["period"]) for r in read_log(folder)[0]]
+    assert by_fleet == by_diagnose == [
+        ("2026-10/a", "2026-10"),
+        ("2026-11/b", "2026-11"),
+        ("2026-11/b", "2026-11"),
+    ]

@@ -26,6 +26,7 @@ from odomgym.diagnose.screen import (
     HOLE_FACTOR,
     MIN_COVERAGE,
     holes,
+    part_names,
     screen_runs,
     split_at_holes,
     usable_runs,
@@ -235,6 +236,7 @@ def test_a_run_with_holes_is_diagnosed_in_parts_and_a_lone_row_is_set_aside() ->
     run = _clocked(times, counts, run="r7", session_time=100.0)
     parts = split_at_holes(run, "r7", MODEL)
     assert [name for name, _ in parts] == ["r7#1", "r7#2", "r7#3"]
+    assert part_names("r7", holes(run)) == ["r7#1", "r7#2", "r7#3"]  # the notice's names
     assert parts[1][1] == "one row (row 6) between holes where rows were dropped"
     usable, skipped = screen_runs([run], MODEL)
     assert [r.meta["run"] for r in usable] == ["r7#1", "r7#3"]
@@ -250,6 +252,7 @@ def test_a_run_with_holes_is_diagnosed_in_parts_and_a_lone_row_is_set_aside() ->
     assert last.meta["split_from"] == "r7"
     whole = _clocked(tick, counts[:5], run="r8")
     assert split_at_holes(whole, "r8") == [("r8", whole)]  # no hole: the run itself
+    assert part_names("r8", holes(whole)) == ["r8"]
     cut = _clocked([*tick, 5.0, 5.1, 5.2], counts[:8], run="r9")  # two usable parts, alone
     with pytest.raises(SpecError, match=r"needs at least 3 runs, got 2 \(the runs cut at holes"):
         usable_runs([cut], MODEL)

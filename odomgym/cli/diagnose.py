@@ -293,13 +293,13 @@ def say_set_aside(runs: list[Run], model: RobotSpec, report: Reporter) -> None:
     """Notices of the runs the diagnosis will cut at a hole or set aside, and of the held poses
     made gaps."""
     from odomgym.data.gaps import held_poses
-    from odomgym.diagnose.screen import holes, usable_runs
+    from odomgym.diagnose.screen import holes, part_names, usable_runs
 
     for index, run in enumerate(runs):
         found = holes(run)
         if found:
             name = str(run.meta.get("run", index + 1))
-            parts = ", ".join(f"{name}#{i}" for i in range(1, len(found) + 2))
+            parts = ", ".join(part_names(name, found))
             said = "; ".join(str(hole) for hole in found)
             report.notice(
                 f"run {name} ({run.source}): {said}: rows were dropped, and the path in between "

@@ -17,6 +17,7 @@ without one, included (:func:`odomgym.diagnose.screen.screen_runs` decides what 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
@@ -25,7 +26,15 @@ from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec
 
-__all__ = ["FORMATS", "LogFormat", "detect_format", "native_sessions", "read_log"]
+__all__ = [
+    "FORMATS",
+    "LogFormat",
+    "detect_format",
+    "native_sessions",
+    "period_logs",
+    "read_log",
+    "session_name",
+]
 
 LogFormat = Literal["native", "optiodom", "rosbag"]
 FORMATS: tuple[LogFormat, ...] = ("native", "optiodom", "rosbag")
@@ -141,24 +150,38 @@ def _read(
     return runs, nominal
 
 
+def period_logs(folder: Path, is_log: Callable[[Path], bool]) -> list[tuple[str, Path]]:
+    """The logs of one robot's ``folder`` as (period, path), sorted by path: each entry that
+    ``is_log`` accepts directly in it (period ``""``), or in a sub-folder of it (the period,
+    that sub-folder's name). Hidden folders are passed over (``is_log`` judges the files). One
+    walk for ``odomgym fleet``'s robot folders and ``diagnose``'s folder of native logs, so
+    both name a robot's sessions alike (:func:`session_name`)."""
+    found: list[tuple[str, Path]] = []
+    for child in sorted(folder.iterdir()):
+        if is_log(child):
+            found.append(("", child))
+        elif child.is_dir() and not child.name.startswith("."):
+            found += [(child.name, p) for p in sorted(child.iterdir()) if is_log(p)]
+    return found
+
+
+def session_name(period: str, path: Path) -> str:
+    """A log's session: its path from the robot's folder without its suffix (``s1``,
+    ``2026-11/s2``)."""
+    return f"{period}/{path.stem}" if period else path.stem
+
+
+def _is_native(path: Path) -> bool:
+    """A native log: a visible ``.csv`` file."""
+    return path.is_file() and path.suffix.lower() == ".csv" and not path.name.startswith(".")
+
+
 def native_sessions(folder: Path) -> list[tuple[str, Path]]:
     """The native logs of ``folder`` as (session, file): each ``.csv`` file directly in it, or
-    in a sub-folder of it (a period), sorted by path; the session is the file's path from
-    ``folder`` without its suffix (``s1``, ``2026-11/s2``): what ``odomgym fleet`` calls a
-    robot's sessions. Hidden files and folders are left out."""
-    found = []
-    for path in sorted(folder.iterdir()):
-        if path.name.startswith("."):
-            continue
-        if path.is_file() and path.suffix.lower() == ".csv":
-            found.append((path.stem, path))
-        elif path.is_dir():
-            found += [
-                (f"{path.name}/{p.stem}", p)
-                for p in sorted(path.iterdir())
-                if p.is_file() and p.suffix.lower() == ".csv" and not p.name.startswith(".")
-            ]
-    return found
+    in a sub-folder of it (a period), sorted by path (:func:`period_logs`); the session is
+    :func:`session_name`'s (``s1``, ``2026-11/s2``), what ``odomgym fleet`` calls a robot's
+    sessions. Hidden files and folders are left out."""
+    return [(session_name(period, path), path) for period, path in period_logs(folder, _is_native)]
 
 
 def _read_native_folder(

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from odomgym.data.logs import period_logs, session_name
 from odomgym.errors import SpecError
 from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec, load_robot
@@ -137,12 +138,7 @@ def find_fleet(root: str | Path) -> list[FleetRobot]:
                 source=str(folder),
             )
         robot = load_robot(toml)
-        logs: list[tuple[str, Path]] = []
-        for child in sorted(folder.iterdir()):
-            if _is_log(child):
-                logs.append(("", child))
-            elif child.is_dir() and not child.name.startswith("."):
-                logs += [(child.name, p) for p in sorted(child.iterdir()) if _is_log(p)]
+        logs = period_logs(folder, _is_log)
         months = [_log_month(path) for _, path in logs]
         if logs and all(months):  # the logs carry their dates: periods are months
             logs = [(str(month), path) for month, (_, path) in zip(months, logs, strict=True)]
@@ -183,7 +179,7 @@ def read_robot_runs(robot: FleetRobot) -> list[Run]:
     runs: list[Run] = []
     for period, path in robot.logs:
         log_runs, _ = read_log(path, robot=robot.robot)
-        session = f"{period}/{path.stem}" if period else path.stem
+        session = session_name(period, path)
         for run in log_runs:
             run.meta["session"] = str(run.meta.get("session") or session)
             run.meta["period"] = period
@@ -379,7 +375,7 @@ def _fleet_loso(
     backend: str,
     status: Callable[[str], None] | None,
     runs_of: Callable[[FleetRobot, str], list[Run]],
-    resume: bool = True,
+    resume: bool,
 ) -> None:
     """Every robot's leave-one-session-out folds into ``out/loso/<name>/`` (those of two or
     more sessions). With ``resume`` the fold files already there are kept; without, they are

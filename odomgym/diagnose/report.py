@@ -22,6 +22,7 @@ from odomgym.errors import SpecError
 from odomgym.io import atomic_folder
 
 __all__ = [
+    "OS_FILES",
     "REPORT_FILES",
     "check_replaceable",
     "foreign_entries",
@@ -48,10 +49,16 @@ def _report_file(path: Path) -> bool:
     return named and path.is_file() and not path.is_symlink()
 
 
+OS_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
+"""Files a desktop writes into any folder a person opens (macOS Finder, Windows Explorer):
+no user's data, so a report folder holding them may still be replaced."""
+
+
 def foreign_entries(folder: Path) -> list[str]:
     """The entries of ``folder`` (sorted names) that no diagnose report holds: all of them if
     it holds no ``report.json``, else those not among :data:`REPORT_FILES` (sub-folders,
-    links and other files included). Empty for a missing or empty folder.
+    links and other files included). Empty for a missing or empty folder. A desktop's own
+    files (:data:`OS_FILES`) are never foreign.
 
     Why: the report folder is replaced whole (:func:`odomgym.io.atomic_folder`), so whatever
     else it holds would be deleted with it. A user who gave the folder holding the logs and the
@@ -59,7 +66,11 @@ def foreign_entries(folder: Path) -> list[str]:
     folder = Path(folder)
     if not folder.is_dir():
         return []
-    names = sorted(entry.name for entry in folder.iterdir())
+    names = sorted(
+        entry.name
+        for entry in folder.iterdir()
+        if not (entry.name in OS_FILES and entry.is_file() and not entry.is_symlink())
+    )
     if "report.json" not in names:
         return names
     return [name for name in names if not _report_file(folder / name)]

@@ -268,6 +268,15 @@ def holes(run: Run) -> list[Hole]:
     ]
 
 
+def part_names(name: str, found: Sequence[Hole]) -> list[str]:
+    """The names of the parts a run named ``name`` is cut into at the holes ``found``:
+    ``["<name>#1", ..., "<name>#k"]`` for k - 1 holes, ``[name]`` for none. One rule for the
+    runs :func:`split_at_holes` makes and for the notices that name them beforehand."""
+    if not found:
+        return [name]
+    return [f"{name}#{i}" for i in range(1, len(found) + 2)]
+
+
 def split_at_holes(
     run: Run, name: str, robot: RobotSpec | None = None
 ) -> list[tuple[str, Run | str]]:
@@ -280,8 +289,7 @@ def split_at_holes(
         return [(name, run)]
     bounds = [0, *(hole.row for hole in found), len(run.time)]
     out: list[tuple[str, Run | str]] = []
-    for i, (a, b) in enumerate(itertools.pairwise(bounds), start=1):
-        label = f"{name}#{i}"
+    for label, (a, b) in zip(part_names(name, found), itertools.pairwise(bounds), strict=True):
         if b - a < 2:
             out.append((label, f"one row (row {a + 1}) between holes where rows were dropped"))
             continue
