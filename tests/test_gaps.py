@@ -25,9 +25,11 @@ from odomgym.diagnose.openloop import NuisanceOptions, evaluate_open_loop
 from odomgym.diagnose.screen import (
     HOLE_FACTOR,
     MIN_COVERAGE,
+    SLOW_CLOCK,
     holes,
     part_names,
     screen_runs,
+    slow_clock,
     split_at_holes,
     usable_runs,
 )
@@ -225,6 +227,28 @@ def test_a_hole_is_a_long_interval_over_which_a_wheel_turned() -> None:
     assert holes(_clocked([*tick, 0.7], moving)) == []  # one row dropped: 2 intervals
     assert holes(_clocked([*tick, 1.4], moving)) == []  # nine intervals: not over ten
     assert holes(_clocked([0.0, 0.1, 5.0], moving[:3])) == []  # two intervals: no clock to tell
+
+
+def test_a_clock_in_milliseconds_is_said_before_the_diagnosis(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A user's native log had ``t`` in milliseconds: every speed a thousandth of the true one,
+    and no word. The diagnose command now says it (one notice, the median interval in it),
+    and diagnoses the runs as given; a log in seconds gets no notice."""
+    from odomgym.cli._common import Reporter
+    from odomgym.cli.diagnose import say_set_aside
+
+    counts = [[10 * k, 12 * k] for k in range(8)]
+    seconds = [_clocked([0.02 * k for k in range(8)], counts, run=f"r{i}") for i in range(3)]
+    millis = [dataclasses.replace(run, time=run.time * 1000.0) for run in seconds]
+    assert slow_clock(seconds) is None
+    assert slow_clock(millis) == pytest.approx(20.0) and SLOW_CLOCK == 1.0
+    say_set_aside(seconds, MODEL, Reporter(json=False))
+    assert "apart" not in capsys.readouterr().err
+    say_set_aside(millis, MODEL, Reporter(json=False))
+    err = capsys.readouterr().err
+    assert err.count("odomgym: the samples are 20 s apart (median over all runs)") == 1
+    assert "milliseconds needs dividing by 1000" in err
 
 
 def test_a_run_with_holes_is_diagnosed_in_parts_and_a_lone_row_is_set_aside() -> None:

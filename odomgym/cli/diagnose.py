@@ -293,8 +293,15 @@ def say_set_aside(runs: list[Run], model: RobotSpec, report: Reporter) -> None:
     """Notices of the runs the diagnosis will cut at a hole or set aside, and of the held poses
     made gaps."""
     from odomgym.data.gaps import held_poses
-    from odomgym.diagnose.screen import holes, part_names, usable_runs
+    from odomgym.diagnose.screen import holes, part_names, slow_clock, usable_runs
 
+    interval = slow_clock(runs)
+    if interval is not None:
+        report.notice(
+            f"the samples are {interval:.4g} s apart (median over all runs), where wheel "
+            "odometry is logged at 10-1000 Hz: the logs' time must be in seconds (a time in "
+            "milliseconds needs dividing by 1000); diagnosed as given"
+        )
     for index, run in enumerate(runs):
         found = holes(run)
         if found:

@@ -268,6 +268,25 @@ def holes(run: Run) -> list[Hole]:
     ]
 
 
+SLOW_CLOCK = 1.0
+"""The median interval between a run's samples [s] beyond which its clock is suspect.
+Wheel odometry is logged at 10–1000 Hz; a median of a second or more is more likely a clock
+in milliseconds read as seconds (a user's logs were), which makes every speed a thousandth of
+the true one and the diagnosis silently wrong."""
+
+
+def slow_clock(runs: Sequence[Run]) -> float | None:
+    """The median interval between samples over ``runs`` [s] when it is at least
+    :data:`SLOW_CLOCK` (a hint that ``t`` is not in seconds), else None. The runs are not
+    changed: a log really sampled that slowly is diagnosed as it is."""
+    steps = [np.diff(np.asarray(run.time, dtype=np.float64)) for run in runs]
+    steps = [step for step in steps if step.size]
+    if not steps:
+        return None
+    median = float(np.median(np.concatenate(steps)))
+    return median if median >= SLOW_CLOCK else None
+
+
 def part_names(name: str, found: Sequence[Hole]) -> list[str]:
     """The names of the parts a run named ``name`` is cut into at the holes ``found``:
     ``["<name>#1", ..., "<name>#k"]`` for k - 1 holes, ``[name]`` for none. One rule for the
