@@ -45,11 +45,16 @@ def _fraction(summary: dict[str, Any]) -> str:
     return f"{100 * value:.0f} %" if np.isfinite(value) else "–"
 
 
+def _robots(count: int) -> str:
+    """``"1 robot"``, ``"20 robots"``: a header's count in words a reader expects."""
+    return f"{count} robot" + ("" if count == 1 else "s")
+
+
 def markdown_summary(config: BenchConfig, rows: Sequence[dict[str, Any]]) -> str:
     """The Markdown report (see the module docstring)."""
     summary = summarize(rows)
     lines = [
-        f"# Calibrator benchmark: {config.robots} robots, budget "
+        f"# Calibrator benchmark: {_robots(config.robots)}, budget "
         f"{' / '.join(str(b) for b in config.budgets)} runs, "
         f"seed {config.seed}",
         "",
@@ -217,7 +222,7 @@ def _plot_improvements(config: BenchConfig, rows: Sequence[dict[str, Any]], path
     budgets = " / ".join(str(b) for b in config.budgets)
     title = (
         f"How much each calibrator reduces the UMBmark error E_max,syst (fresh validation "
-        f"squares): {config.robots} robots per floor, budget {budgets} runs"
+        f"squares): {_robots(config.robots)} per floor, budget {budgets} runs"
     )
     # Wrapped to the figure's width (about ten characters of the title's 12-pt type per inch):
     # with one or two floors the figure is narrower than the title's single line.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -120,7 +121,15 @@ def test_benchmark_rows_do_not_depend_on_chunking(tmp_path: Path) -> None:
     names = {p.name for p in paths}
     assert {"summary.md", "results.csv", "results.json", "improvement.png"} <= names
     assert "scatter_umbmark.png" in names
-    assert "| umbmark |" in (tmp_path / "out" / "summary.md").read_text()
+    text = (tmp_path / "out" / "summary.md").read_text()
+    assert "| umbmark |" in text and text.startswith("# Calibrator benchmark: 3 robots,")
+    one = dataclasses.replace(config, robots=1)
+    write_outputs(one, [r for r in whole if r["robot"] == 0], tmp_path / "one", elapsed=1.0)
+    assert (
+        (tmp_path / "one" / "summary.md")
+        .read_text()
+        .startswith("# Calibrator benchmark: 1 robot, budget 6 runs")
+    )
 
 
 @pytest.mark.slow

@@ -446,8 +446,12 @@ def test_fleet_and_diagnose_name_a_robots_sessions_alike(tmp_path: Path) -> None
     [robot] = find_fleet(tmp_path / "fleet")
     by_fleet = [(r.meta["session"], r.meta["period"]) for r in read_robot_runs(robot)]
     by_diagnose = [(r.meta["session"], r.meta["period"]) for r in read_log(folder)[0]]
-    assert by_fleet == by_diagnose == [
-        ("2026-10/a", "2026-10"),
-        ("2026-11/b", "2026-11"),
-        ("2026-11/b", "2026-11"),
-    ]
+    assert (
+        by_fleet
+        == by_diagnose
+        == [
+            ("2026-10/a", "2026-10"),
+            ("2026-11/b", "2026-11"),
+            ("2026-11/b", "2026-11"),
+        ]
+    )
