@@ -219,6 +219,26 @@ def test_version_and_python_dash_m() -> None:
     assert out.stdout.strip() == f"odomgym {__version__}"
 
 
+def test_a_reader_that_left_the_pipe_stops_the_command_quietly() -> None:
+    """``odomgym … | head``: the reader closes the pipe before the results are written. A
+    user got ``odomgym: error: Broken pipe`` (exit 1), as if the command had failed; now no
+    word and exit 141 (128 + SIGPIPE), as a shell's own tools stop. The pipe is closed before
+    the command writes, so the test does not depend on timing."""
+    import subprocess
+    import sys
+
+    from odomgym.cli import BROKEN_PIPE
+
+    command = [sys.executable, "-m", "odomgym", "run", "square", "--json"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert process.stdout is not None and process.stderr is not None
+    process.stdout.close()
+    err = process.stderr.read().decode()
+    process.stderr.close()
+    assert process.wait(timeout=120) == BROKEN_PIPE == 141
+    assert err == ""
+
+
 def test_envs_and_baselines_import_from_the_repository_root() -> None:
     """Python started in the checkout's root sees the source folder ``odomgym/`` first; the
     package-dir folders envs/ and baselines/ must still be found as odomgym.envs/.baselines."""

@@ -25,7 +25,9 @@ Exit codes, the same for every command:
   input, and is said to be one in one line (``odomgym: internal error: <type>: <message> — a
   bug in odomgym …``); ``odomgym --debug COMMAND …`` shows its full traceback instead, for the
   report;
-* **130** / **143** — stopped by Ctrl-C / SIGTERM (workers stopped, nothing half-written).
+* **130** / **143** — stopped by Ctrl-C / SIGTERM (workers stopped, nothing half-written);
+* **141** — stdout closed by its reader (``odomgym … | head``): the command stops quietly, as
+  a program killed by SIGPIPE does (128 + 13), files already written kept.
 
 No command leaves a half-written output file. After its results a command says what it wrote
 (``wrote: …``) and, where odometry is driven, which calibration it applied.
@@ -127,6 +129,9 @@ def _on_signal(signum: int, frame: object) -> None:
 
 INTERNAL_ERROR = 3
 """The exit code of an internal error (module docstring)."""
+BROKEN_PIPE = 141
+"""The exit code when stdout's reader is gone (128 + SIGPIPE, what a shell reports for a
+program killed by its pipe; module docstring)."""
 
 
 def internal_error(exc: Exception, command: str) -> str:
@@ -141,7 +146,9 @@ def internal_error(exc: Exception, command: str) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``odomgym`` command (exit codes: module docstring)."""
+    import os
     import signal
+    import sys
     import threading
     import traceback
 
@@ -155,6 +162,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             previous[number] = signal.signal(number, _on_signal)
     try:
         code = handler(args)
+        sys.stdout.flush()  # a closed pipe is found here, not in the interpreter's exit
         late = interrupt.pending()
         if late is None:
             return code
@@ -168,6 +176,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SpecError as exc:
         notice(f"error: {exc}")
         return 2
+    except BrokenPipeError:
+        # The reader is gone (`| head`): no message (it would say nothing the user does not
+        # know), and stdout pointed at /dev/null so that the interpreter's own flush at exit
+        # does not print "Exception ignored ... BrokenPipeError" (Python's signal module docs,
+        # "Note on SIGPIPE").
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return BROKEN_PIPE
     except OSError as exc:
         # Checked up front (check_output); what is left is the machine's (a full disk).
         where = f"{exc.filename}: " if exc.filename else ""
