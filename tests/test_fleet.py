@@ -229,6 +229,65 @@ def test_loso_gives_each_robot_its_folds_and_the_report_their_stability(tmp_path
     assert {p: p.stat().st_mtime_ns for p in (out / "loso").rglob("fold-*.json")} == stamps
 
 
+def test_resume_keeps_only_reports_made_from_the_same_inputs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``resume`` kept a robot's report after its logs were replaced, and the fleet reported
+    its old values without a word. Now a report is kept only when ``inputs.json`` records it
+    as made from the same logs, robot.toml and options; the diagnosis itself is stubbed here
+    (its reports are tested above), so the test is about the bookkeeping alone."""
+    import odomgym.diagnose.fleet as fleet_module
+    from odomgym.diagnose.config import DiagnoseConfig
+    from odomgym.diagnose.fleet import INPUTS_FILE, diagnose_fleet, inputs_digest
+
+    root = tmp_path / "fleet"
+    for name in ("r0", "r1"):
+        _robot_folder(root, name, ["s1.csv", "s2.csv"])
+    robots = find_fleet(root)
+    made: list[str] = []
+
+    def diagnosed(runs: object, robot: object, config: object, *rest: object) -> object:
+        made.append(str(rest[1]))  # the robot's folder
+        return "verdict", {"report.json": b"{}\n"}
+
+    monkeypatch.setattr(fleet_module, "_diagnose_files", diagnosed)
+    monkeypatch.setattr(fleet_module, "read_robot_runs", lambda robot: [])
+    out = tmp_path / "out"
+    config = DiagnoseConfig(jobs=1)
+    lines: list[str] = []
+
+    def again(**options: object) -> list[str]:
+        made.clear()
+        lines.clear()
+        diagnose_fleet(robots, out, status=lines.append, **{"config": config, **options})
+        return sorted(Path(folder).name for folder in made)
+
+    assert again() == ["r0", "r1"]
+    record = json.loads((out / INPUTS_FILE).read_text())["units"]
+    assert record == {r.name: inputs_digest(r, "", config, None) for r in robots}
+    assert again(resume=True) == [] and "r0: done before, kept" in lines
+    # jobs changes no result; a log's bytes, robot.toml, a result-moving option or the
+    # baseline do, each for the robots it touches.
+    assert again(resume=True, config=DiagnoseConfig(jobs=2)) == []
+    (root / "r1" / "s2.csv").write_text("run,experiment,t,ticks_left,ticks_right,x,y\n")
+    assert again(resume=True) == ["r1"]
+    assert any(line.startswith("r1: its logs, robot.toml or the options changed") for line in lines)
+    assert again(resume=True) == []
+    (root / "r0" / "robot.toml").write_text(
+        (root / "r0" / "robot.toml").read_text() + "# recalibrated\n"
+    )
+    assert again(resume=True) == ["r0"]
+    assert again(resume=True, config=DiagnoseConfig(jobs=1, seed=1)) == ["r0", "r1"]
+    assert again(resume=True, config=DiagnoseConfig(jobs=1, seed=1), baseline=dict) == [
+        "r0",
+        "r1",
+    ]
+    # An output without the record (an older odomgym's, or a damaged one) is made again.
+    (out / INPUTS_FILE).write_text("not json")
+    assert again(resume=True) == ["r0", "r1"]
+    assert again() == ["r0", "r1"]  # without resume, always
+
+
 def test_fold_stability_is_read_only_when_asked(tmp_path: Path) -> None:
     """A fresh report without ``--loso`` showed the stability of folds an earlier call had
     left in OUT/loso/: ``odomgym fleet`` now reads them only with ``--loso``."""

@@ -45,6 +45,7 @@ from odomgym.odometry.runs import Run
 from odomgym.robot import RobotSpec, load_robot
 
 __all__ = [
+    "INPUTS_FILE",
     "MIN_NAMING",
     "ODD_Z",
     "ROBUST_SD",
@@ -54,6 +55,7 @@ __all__ = [
     "diagnose_fleet",
     "find_fleet",
     "format_fleet",
+    "inputs_digest",
     "plot_fleet",
     "read_robot_runs",
     "summarise_fleet",
@@ -207,6 +209,56 @@ def _units(robots: Sequence[FleetRobot], out: Path) -> list[tuple[FleetRobot, st
     return units
 
 
+INPUTS_FILE = "inputs.json"
+"""The fleet output's record of what each report was made from (:func:`inputs_digest` per
+diagnosis label), which ``resume`` compares before it keeps a report."""
+
+
+def inputs_digest(robot: FleetRobot, period: str, config: Any, baseline: Any) -> str:
+    """A SHA-256 over everything a diagnosis' report depends on: the odomgym version, the
+    options (``config``'s fields but ``jobs``, which changes no result, and the baseline's
+    name), the robot's ``robot.toml`` and every file of its logs of ``period`` (all logs for
+    ``""``), names and bytes. Why: ``resume`` kept a robot's report after its logs were
+    replaced (a user's fleet reported last month's values for it, without a word)."""
+    import dataclasses
+    import hashlib
+
+    from odomgym import __version__
+
+    options: dict[str, Any] = {"odomgym": __version__}
+    if config is not None:
+        options.update(
+            (f.name, repr(getattr(config, f.name)))
+            for f in dataclasses.fields(config)
+            if f.name != "jobs"
+        )
+    named = None if baseline is None else getattr(baseline, "__qualname__", repr(baseline))
+    options["baseline"] = named
+    digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode())
+    files = [robot.folder / "robot.toml"]
+    for log_period, path in robot.logs:
+        if not period or log_period == period:
+            files += [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    for path in files:
+        digest.update(path.relative_to(robot.folder).as_posix().encode() + b"\0")
+        with path.open("rb") as handle:
+            digest.update(hashlib.file_digest(handle, "sha256").digest())
+    return digest.hexdigest()
+
+
+def _read_inputs(path: Path) -> dict[str, str]:
+    """The record :data:`INPUTS_FILE` (label → digest); empty when missing or unreadable (its
+    reports are then made again, never kept on trust)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    units = data.get("units") if isinstance(data, dict) else None
+    if not isinstance(units, dict):
+        return {}
+    return {str(k): str(v) for k, v in units.items()}
+
+
 def _diagnose_files(
     runs: list[Run],
     robot: RobotSpec,
@@ -264,7 +316,10 @@ def diagnose_fleet(
 ) -> list[Path]:
     """Diagnose every robot into ``out/robots/<name>/`` and, for a robot of two or more
     periods, each period into ``out/periods/<name>/<period>/``; returns the report folders.
-    With ``resume``, a report already there is not made again. ``baseline()`` makes the
+    With ``resume``, a report already there is not made again when :data:`INPUTS_FILE`
+    records it as made from the same logs, ``robot.toml`` and options
+    (:func:`inputs_digest`); one whose inputs changed, or are not recorded, is made again and
+    ``status`` says so. ``baseline()`` makes the
     trusted calibration each diagnosis compares with (:class:`odomgym.diagnose.heldout.
     Baseline`; ``odomgym fleet`` passes the trajectory calibration's), none if omitted;
     ``status`` receives one line per diagnosis as it ends, ``done(finished, total)`` the count.
@@ -313,16 +368,32 @@ def _diagnose_fleet(
     import dataclasses
 
     from odomgym.distributed import run_ray_tasks
+    from odomgym.io import atomic_write_text
 
     units = _units(robots, out)
     folders = [folder for *_, folder in units]
+    digests = {
+        label: inputs_digest(robot, period, config, baseline) for robot, period, label, _ in units
+    }
+    recorded = _read_inputs(out / INPUTS_FILE) if resume else {}
+    # What is recorded stays only for reports kept: a label diagnosed again gets its new digest.
+    made = {label: digest for label, digest in recorded.items() if digests.get(label) == digest}
     todo = []
     for unit in units:
-        if resume and (unit[3] / "report.json").exists():
+        robot, _, label, folder = unit
+        if resume and (folder / "report.json").exists():
+            if made.get(label) == digests[label]:
+                if status is not None:
+                    status(f"{label}: done before, kept")
+                continue
             if status is not None:
-                status(f"{unit[2]}: done before, kept")
-        else:
-            todo.append(unit)
+                status(
+                    f"{label}: its logs, robot.toml or the options changed since its report "
+                    f"(or {INPUTS_FILE} does not record them): diagnosed again"
+                )
+        todo.append(unit)
+    # A robot diagnosed again has its leave-one-session-out folds made again too.
+    again = {robot.name for robot, period, _, _ in todo if not period}
     finished = len(units) - len(todo)
     if done is not None:
         done(finished, len(units))
@@ -339,6 +410,10 @@ def _diagnose_fleet(
         nonlocal finished
         verdict, files = result
         _write_folder(todo[key][3], files)
+        made[todo[key][2]] = digests[todo[key][2]]
+        atomic_write_text(
+            out / INPUTS_FILE, json.dumps({"units": dict(sorted(made.items()))}, indent=1) + "\n"
+        )
         finished += 1
         if status is not None:
             status(f"{todo[key][2]}: {verdict}")
@@ -363,7 +438,7 @@ def _diagnose_fleet(
             )
     if loso:
         backend = "local" if ray_started is None else "ray"
-        _fleet_loso(robots, out, config, baseline, backend, status, runs_of, resume)
+        _fleet_loso(robots, out, config, baseline, backend, status, runs_of, resume, again)
     return folders
 
 
@@ -376,15 +451,17 @@ def _fleet_loso(
     status: Callable[[str], None] | None,
     runs_of: Callable[[FleetRobot, str], list[Run]],
     resume: bool,
+    again: set[str],
 ) -> None:
     """Every robot's leave-one-session-out folds into ``out/loso/<name>/`` (those of two or
-    more sessions). With ``resume`` the fold files already there are kept; without, they are
-    made again, as every report is (a user's changed logs had kept their old folds)."""
+    more sessions). With ``resume`` the fold files already there are kept, but for the robots
+    in ``again`` (diagnosed again by this call: new, or their inputs changed); without, they
+    are made again, as every report is (a user's changed logs had kept their old folds)."""
     from odomgym.diagnose.loso import run_loso
     from odomgym.diagnose.nuisances import sessions_of
 
     for robot in robots:
-        if not resume:
+        if not resume or robot.name in again:
             for stale in sorted((out / "loso" / robot.name).glob("fold-*.json")):
                 stale.unlink()
         runs = runs_of(robot, "")
