@@ -321,7 +321,8 @@ def test_count_jumps_are_checked_against_the_robot(tmp_path: Path) -> None:
         read_native(jump, robot=ROBOT)
     assert "jump.csv:4:" in str(info.value) and info.value.field == "ticks_right"
     assert str(info.value).endswith(
-        "(a robot that drives faster needs its max_wheel_speed in the robot file)"
+        "(a robot that drives faster needs its max_wheel_speed in the robot file; a "
+        "ticks_per_rev too small or a wheel_diameter too large gives the same)"
     )
 
 

@@ -251,6 +251,59 @@ def test_a_clock_in_milliseconds_is_said_before_the_diagnosis(
     assert "milliseconds needs dividing by 1000" in err
 
 
+def test_a_robot_file_a_unit_off_its_logs_is_refused_naming_the_field() -> None:
+    """Counts per motor turn given as ticks_per_rev (2× the wheel's): the diagnosis fitted the
+    distance scale to its limit and stopped on "true_right_diameter must lie within 0.5–2.0 ×
+    wheel_diameter", a field the user never gave. Now one line naming the field at fault
+    before any fit, for the distance (a radius as the diameter, quadrature), the track (a
+    wheelbase ten times too wide) and a robot turning the other way (counters swapped); the right
+    model, and a skid-steer robot's apparent track of 1.6, pass."""
+    from odomgym.diagnose.screen import check_scale, scale_ratios
+    from odomgym.floor import FloorSpec
+    from odomgym.robot import PRESETS
+    from odomgym.sim.route_runs import simulate_runs
+    from odomgym.sim.routes import square_route
+
+    robot = PRESETS["labmate"]
+    runs = [
+        run
+        for direction in ("cw", "ccw")
+        for run in simulate_runs(robot, FloorSpec(), square_route(1.0, direction))[0]
+    ] * 2
+    distance, turn = scale_ratios(runs, robot)
+    assert distance == pytest.approx(robot.e_s, abs=0.01)  # E_s: the true scale, 1.0
+    assert turn == pytest.approx(robot.e_s / robot.e_b, abs=0.01)  # 1 / 0.9887
+    usable, _ = usable_runs(runs, robot)  # the right model passes
+    assert len(usable) == len(runs)
+
+    def refused(model: RobotSpec, runs: list[Run] = runs) -> str:
+        with pytest.raises(SpecError) as caught:
+            usable_runs(runs, model)
+        assert "true_" not in str(caught.value)
+        return f"{caught.value.field}: {caught.value}"
+
+    nominal = RobotSpec(wheel_diameter=0.15, wheelbase=0.34, ticks_per_rev=2048.0)
+    assert refused(dataclasses.replace(nominal, ticks_per_rev=4096.0)).startswith(
+        "wheel_diameter: the ground truth moves 2 × the distance"
+    )
+    assert "not the radius" in refused(dataclasses.replace(nominal, wheel_diameter=0.075))
+    slip = dataclasses.replace(nominal, wheelbase=3.4, true_wheelbase=3.4, chassis_width=2.0)
+    assert refused(slip).startswith("wheelbase: the robot turns as if its track were 0.0989 ×")
+    swapped = [dataclasses.replace(run, counts=run.counts[:, ::-1].copy()) for run in runs]
+    assert refused(nominal, swapped).startswith("ticks_left: the robot turns the other way")
+    check_scale(runs, dataclasses.replace(nominal, wheel_diameter=0.15 * 1.1))  # 10 %: a fit's
+    # A skid-steer robot: its apparent track, 1.6 × the real one, is no unit.
+    scout = PRESETS["scout2"]
+    spins = [
+        run
+        for direction in ("cw", "ccw")
+        for run in simulate_runs(scout, FloorSpec(), square_route(1.0, direction))[0]
+    ]
+    distance, turn = scale_ratios(spins, scout)
+    assert distance is not None and turn is not None and 1.3 < distance / turn < 2.0
+    check_scale(spins, scout)
+
+
 def test_a_run_with_holes_is_diagnosed_in_parts_and_a_lone_row_is_set_aside() -> None:
     """Each part a run of its own: named ``<run>#i``, of kind "free", counts from zero at its
     start, its clock moved with it; a single row between two holes is set aside, named."""

@@ -357,7 +357,8 @@ def _check_step(group: _Group, row: _Row, label: str, robot: RobotSpec | None, w
                 f"more than the {limit:.1f} counts a wheel can turn (1.5 × max_wheel_speed "
                 f"{robot.max_wheel_speed:g} m/s · dt / {robot.metres_per_tick:.6g} m per count "
                 "+ 2): dropped rows or a counter overflow? (a robot that drives faster needs "
-                "its max_wheel_speed in the robot file)",
+                "its max_wheel_speed in the robot file; a ticks_per_rev too small or a "
+                "wheel_diameter too large gives the same)",
                 field=column,
                 source=where,
             )

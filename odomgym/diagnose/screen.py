@@ -183,11 +183,13 @@ def screen_runs(
 def usable_runs(
     runs: Sequence[Run], robot: RobotSpec | None = None, minimum: int = MIN_RUNS
 ) -> tuple[list[Run], list[SkippedRun]]:
-    """:func:`screen_runs`, refusing fewer than ``minimum`` usable runs.
+    """:func:`screen_runs`, refusing fewer than ``minimum`` usable runs, runs that never move,
+    and (with ``robot``) logs a unit away from its odometry (:func:`check_scale`).
 
     Raises:
         SpecError: one line naming the runs set aside and why (field ``x``, the ground truth's
-            first column), or, with none set aside, how many runs there are (field ``runs``).
+            first column), or, with none set aside, how many runs there are (field ``runs``);
+            :func:`check_scale`'s.
     """
     usable, skipped = screen_runs(runs, robot)
     source = _common_file(runs)
@@ -202,6 +204,8 @@ def usable_runs(
                 field="ticks_left",
                 source=source,
             )
+        if robot is not None:
+            check_scale(usable, robot, source)
         return usable, skipped
     # Counted as screened: a run cut at a hole counts as its parts (it is said in the message).
     cut = len(usable) + len(skipped) - len(runs)
@@ -220,6 +224,113 @@ def usable_runs(
         f"{named}{more}",
         field="x",
     )
+
+
+DISTANCE_LIMITS = (0.6, 1.6)
+"""The ground truth's distance over the nominal odometry's (the median of straight stretches,
+:func:`scale_ratios`) outside which a diagnosis is refused [-]. A real wheel's diameter is
+off by a few per cent; a factor of 2 or 4 is a unit: a radius given as the diameter, counts
+per wheel turn before quadrature decoding or gearing. The fit's distance scale ends at the
+robot model's limits (0.5–2.0 × the nominal diameters, :data:`odomgym.robot.TRUE_TO_NOMINAL`),
+where a user got an error about ``true_right_diameter``, a field they had never given."""
+
+TRACK_LIMITS = (0.3, 3.0)
+"""The apparent track over the nominal one (E_b ≈ distance ratio / turn ratio,
+:func:`scale_ratios`) outside which a diagnosis is refused [-]. Wide: a skid-steer robot's
+apparent track is 1.2–1.9 × its real one (docs/skid-steer.md); a wheelbase in millimetres or
+centimetres is 1000 or 100 ×."""
+
+_STRETCH = 0.3  # m of nominal wheel travel that closes a stretch
+_STRAIGHT = 0.05  # rad: a stretch turning less than this is straight
+_TURN = 0.5  # rad of nominal turn that closes a turning stretch
+_MIN_STRETCHES = 3  # fewest stretches of a kind whose median is judged
+
+
+def scale_ratios(runs: Sequence[Run], robot: RobotSpec) -> tuple[float | None, float | None]:
+    """How far the logs' ground truth is from ``robot``'s nominal odometry, before any fit:
+    (distance ratio, turn ratio), each None with fewer than three stretches to judge it by.
+
+    Each run's measured poses are cut into stretches, each closed once the nominal odometry
+    (``wheel_diameter``, ``ticks_per_rev``, ``wheelbase``; Borenstein & Feng 1994, Eqs.
+    6.1–6.5) has travelled 0.3 m or turned 0.5 rad, or the true heading has turned 0.5 rad.
+    The distance ratio is the median over the straight ones (both headings turning less than
+    0.05 rad) of the true displacement over the odometry's travel, ≈ E_s; the turn ratio the
+    median over the turning ones of the true heading change over the odometry's, ≈ E_s / E_b
+    (negative when the robot turns the other way). Medians,
+    so a bump or a tracker's glitch does not move them; straight stretches and heading
+    changes, so a tracked point off the axle does not either."""
+    per_tick = robot.metres_per_tick
+    straight: list[float] = []
+    turning: list[float] = []
+    for run in runs:
+        travel = np.asarray(run.counts, dtype=np.float64) * per_tick
+        along = 0.5 * (travel[:, 0] + travel[:, 1])
+        heading = (travel[:, 1] - travel[:, 0]) / robot.wheelbase
+        pose = np.asarray(run.true_pose, dtype=np.float64)
+        measured = np.flatnonzero(np.isfinite(pose).all(axis=1))
+        if measured.size < 2:
+            continue
+        start = int(measured[0])
+        for end in measured[1:].tolist():
+            moved = along[end] - along[start]
+            turned = heading[end] - heading[start]
+            truly = pose[end, 2] - pose[start, 2]
+            if abs(moved) < _STRETCH and abs(turned) < _TURN and abs(truly) < _TURN:
+                continue
+            if abs(turned) < _STRAIGHT and abs(truly) < _STRAIGHT:
+                shift = pose[end, :2] - pose[start, :2]
+                straight.append(math.hypot(shift[0], shift[1]) / abs(moved))
+            elif abs(turned) >= _TURN or abs(truly) >= _TURN:
+                # A robot that turns while its wheels say it does not: an infinite ratio.
+                turning.append(truly / turned if turned else math.copysign(math.inf, truly))
+            start = end
+    distance = float(np.median(straight)) if len(straight) >= _MIN_STRETCHES else None
+    turn = float(np.median(turning)) if len(turning) >= _MIN_STRETCHES else None
+    return distance, turn
+
+
+def check_scale(runs: Sequence[Run], robot: RobotSpec, source: str | None = None) -> None:
+    """Refuse, in one line naming the robot file's fields, logs whose ground truth is a unit
+    away from ``robot``'s nominal odometry (:func:`scale_ratios` outside
+    :data:`DISTANCE_LIMITS` or :data:`TRACK_LIMITS`, or turning the other way): no fit of a
+    few per cent bridges that, and it ended in an error about a field the user never gave.
+
+    Raises:
+        SpecError: field ``wheel_diameter`` (distance), ``wheelbase`` (track) or
+            ``ticks_left`` (the other way), ``source`` the logs' file.
+    """
+    distance, turn = scale_ratios(runs, robot)
+    if distance is not None and not DISTANCE_LIMITS[0] <= distance <= DISTANCE_LIMITS[1]:
+        raise SpecError(
+            f"the ground truth moves {distance:.3g} × the distance the robot model's odometry "
+            f"gives (median of the straight stretches; wheel_diameter {robot.wheel_diameter:g} "
+            f"m, ticks_per_rev {robot.ticks_per_rev:g}): one of them is off by that factor, not "
+            "a few per cent a diagnosis fits. wheel_diameter is the diameter in metres (not "
+            "the radius); ticks_per_rev the counts per wheel turn after quadrature decoding "
+            "and gearing",
+            field="wheel_diameter",
+            source=source,
+        )
+    if turn is not None and turn <= 0.0:
+        raise SpecError(
+            f"the robot turns the other way than its wheels say (true heading change over the "
+            f"odometry's: {turn:.3g}, median of the turning stretches): are ticks_left and "
+            "ticks_right swapped, a counter's sign reversed, or theta measured clockwise? "
+            "(theta is counter-clockwise from x, the counts grow when a wheel drives forward)",
+            field="ticks_left",
+            source=source,
+        )
+    if turn is not None:
+        track = (distance if distance is not None else 1.0) / turn
+        if not TRACK_LIMITS[0] <= track <= TRACK_LIMITS[1]:
+            raise SpecError(
+                f"the robot turns as if its track were {track:.3g} × the robot model's "
+                f"wheelbase ({robot.wheelbase:g} m; median of the turning stretches): beyond "
+                "what any error of a real robot, skid-steer included, gives. wheelbase is the "
+                "distance between the left and right wheels' contact lines, in metres",
+                field="wheelbase",
+                source=source,
+            )
 
 
 def _moves(run: Run) -> bool:
