@@ -204,7 +204,7 @@ class Holdings:
     Attributes:
         side: square side L [m] (0 when the session states none).
         counts: runs per (experiment kind, direction), see
-            :meth:`odomgym.data.RecordedLab.holdings`.
+            :meth:`odomgym.lab.recorded.RecordedLab.holdings`.
     """
 
     side: float

@@ -6,8 +6,9 @@ the
   driven with the uncalibrated and with the calibrated odometry, and E_max,syst (Borenstein &
   Feng 1994, Eq. 3.3) is computed from the *true* return errors.
 * :func:`calibrate_on_session` — a recorded session of a real robot in a
-  :class:`~odomgym.data.RecordedLab`; the result is judged by the OptiOdom evaluation measures
-  (:mod:`odomgym.odometry.optiodom_measures`) on the session's runs, or on other sessions' runs.
+  :class:`~odomgym.lab.recorded.RecordedLab`; the result is judged by the OptiOdom evaluation
+  measures (:mod:`odomgym.odometry.optiodom_measures`) on the session's runs, or on other
+  sessions' runs.
 
 And the configuration of methods by callers that configure all of them alike:
 :func:`make_calibrator` (options by name, each checked against the method's options dataclass),
@@ -19,6 +20,7 @@ which settings apply to it (:meth:`~odomgym.baselines.base.Calibrator.square_opt
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -30,7 +32,7 @@ from numpy.typing import NDArray
 from odomgym.baselines.base import CalibrationResult, Calibrator, Holdings, option_names
 from odomgym.data import Session
 from odomgym.errors import SpecError
-from odomgym.floor import FloorSpec
+from odomgym.floor import FloorSpec, load_floor
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.recorded import RecordedLab
 from odomgym.lab.simulated import SimLab, random_start_poses
@@ -38,7 +40,7 @@ from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.optiodom_measures import EvaluationMeasures, evaluate
 from odomgym.odometry.runs import Direction, Run, end_error
 from odomgym.odometry.umbmark_measures import e_max_syst
-from odomgym.robot import RobotSpec
+from odomgym.robot import RobotSpec, load_robot
 from odomgym.sim.route_runs import RunRequests
 from odomgym.sim.routes import square_route
 
@@ -151,8 +153,11 @@ class SimulationReport:
 
     @property
     def improvement(self) -> float:
-        """E_max,syst before / after (the "improvement" of Borenstein & Feng 1994, Table III)."""
-        return self.e_max_before / self.e_max_after if self.e_max_after > 0 else float("inf")
+        """E_max,syst before / after (the "improvement" of Borenstein & Feng 1994, Table III):
+        NaN without a validation (both NaN), ∞ only for a calibration that left no error."""
+        if math.isnan(self.e_max_before) or math.isnan(self.e_max_after):
+            return math.nan
+        return self.e_max_before / self.e_max_after if self.e_max_after > 0 else math.inf
 
     def parameter_errors(self) -> dict[str, float]:
         """Estimated − true E_d, E_b, E_s (dimensionless)."""
@@ -301,8 +306,8 @@ def validation_errors(
 
 def calibrate_in_simulation(
     calibrator: Calibrator,
-    robot: RobotSpec,
-    floor: FloorSpec | None = None,
+    robot: RobotSpec | str,
+    floor: FloorSpec | str | None = None,
     *,
     seed: int = 0,
     sensor: SensorAccuracy | None = None,
@@ -310,13 +315,25 @@ def calibrate_in_simulation(
     validation_runs: int = 5,
     start_region: float | None = None,
 ) -> SimulationReport:
-    """Calibrate the hidden ``robot`` in simulation and validate on fresh squares
-    (``validation_runs = 0`` skips the validation: E_max,syst are then NaN).
+    """Calibrate the hidden ``robot`` (a spec, preset name or robot file) in simulation and
+    validate on fresh squares (``validation_runs = 0`` skips the validation: E_max,syst and the
+    improvement are then NaN).
 
     Randomness (floor roughness, sensor noise) flows from ``numpy.random.default_rng(seed)``:
     one stream for the calibration experiments, an independent one for validation.
     """
-    floor = floor if floor is not None else FloorSpec()
+    robot = load_robot(robot)  # a spec as it is; a preset name or file loaded
+    floor = load_floor(floor) if floor is not None else FloorSpec()
+    if isinstance(validation_runs, bool) or not isinstance(validation_runs, int | np.integer):
+        raise SpecError(
+            f"validation_runs must be a whole number of runs, got {validation_runs!r}",
+            field="validation_runs",
+        )
+    if validation_runs < 0:
+        raise SpecError(
+            f"validation_runs must be >= 0 (0 skips the validation), got {validation_runs}",
+            field="validation_runs",
+        )
     calibration_rng, validation_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2)
     )

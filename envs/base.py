@@ -21,11 +21,13 @@ the truth is reported in ``info`` for evaluation, never rewarded.
 
 from __future__ import annotations
 
+import dataclasses
 import decimal
 import functools
 import math
 import numbers
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from typing import Any
@@ -37,7 +39,7 @@ from numpy.typing import NDArray
 from odomgym._jit import kernel
 from odomgym._kernels import REPORT_COLUMNS, REPORT_WIDTH, episode_report
 from odomgym.envs.info import LazyInfo
-from odomgym.errors import SpecError
+from odomgym.errors import SpecError, require_finite
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.odometry.calibration import Calibration, load_calibration
 from odomgym.odometry.runs import require_differential
@@ -143,6 +145,18 @@ def _clip_unit(values: FloatArray) -> bool:
     return True
 
 
+def reset_options(options: Any) -> dict[str, Any]:
+    """``reset``'s ``options`` as a dict (None: empty); anything but a mapping is refused in
+    one line, where a list had ended in ``ValueError: dictionary update sequence``."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise SpecError(
+            f"reset options must be a dict, got {type(options).__name__}", field="options"
+        )
+    return dict(options)
+
+
 def resolve_specs(
     robot: RobotSpec | str | PathLike[str],
     floor: FloorSpec | str | PathLike[str],
@@ -150,15 +164,52 @@ def resolve_specs(
 ) -> tuple[RobotSpec, FloorSpec, Calibration]:
     """Accept specs or their names/paths (presets, ``.toml`` files as ``str`` or
     :class:`pathlib.Path`)."""
-    robot_spec = robot if isinstance(robot, RobotSpec) else load_robot(os.fspath(robot))
-    floor_spec = floor if isinstance(floor, FloorSpec) else load_floor(os.fspath(floor))
+    robot_spec = load_robot(_named(robot))  # a spec passes; a non-name is refused, named
+    floor_spec = load_floor(_named(floor))
     if calibration is None:
         cal = Calibration()
     elif isinstance(calibration, Calibration):
         cal = calibration
-    else:
+    elif isinstance(calibration, str | os.PathLike):
         cal = load_calibration(os.fspath(calibration))
+    else:
+        raise SpecError(
+            "calibration must be a Calibration, a .toml file or None, got "
+            f"{type(calibration).__name__}",
+            field="calibration",
+        )
     return robot_spec, floor_spec, cal
+
+
+def _named(spec: Any) -> Any:
+    """``spec`` with an ``os.PathLike`` made its path string (the loaders take names, paths and
+    specs, and refuse anything else in one line)."""
+    return os.fspath(spec) if isinstance(spec, os.PathLike) else spec
+
+
+def resolve_weights(weights: Any) -> RewardWeights:
+    """The reward weights from a :class:`RewardWeights`, a mapping of some of its fields, or
+    None (the defaults); anything else is refused, naming the field. A dict had ended in
+    ``AttributeError: 'dict' object has no attribute 'progress'`` at the first step."""
+    if weights is None:
+        return RewardWeights()
+    if isinstance(weights, RewardWeights):
+        return weights
+    if isinstance(weights, Mapping):
+        known = [f.name for f in dataclasses.fields(RewardWeights)]
+        for key, value in weights.items():
+            if key not in known:
+                raise SpecError(
+                    f"unknown reward weight {key!r}; weights: {', '.join(known)}",
+                    field=f"reward_weights.{key}",
+                )
+            require_finite(f"reward_weights.{key}", value)
+        return RewardWeights(**{k: float(v) for k, v in weights.items()})
+    raise SpecError(
+        f"reward_weights must be a RewardWeights or a dict of its fields, got "
+        f"{type(weights).__name__}",
+        field="reward_weights",
+    )
 
 
 @dataclass(frozen=True)
@@ -339,6 +390,12 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
     ) -> None:
         self.robot, self.floor, self.calibration = resolve_specs(robot, floor, calibration)
         if covariance_k is not None:
+            if isinstance(covariance_k, str) or not (
+                isinstance(covariance_k, Sequence | np.ndarray) and len(covariance_k) == 2
+            ):
+                raise ValueError(
+                    f"covariance_k must be two k (k_L, k_R) >= 0 [m^0.5], got {covariance_k!r}"
+                )
             kl, kr = (float(k) for k in covariance_k)
             if not (math.isfinite(kl) and math.isfinite(kr) and kl >= 0 and kr >= 0):
                 raise ValueError(
@@ -353,7 +410,7 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
         self.dt = float(dt)
         # Frames are one control period apart: played back at 1/dt they run in real time.
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.dt}
-        self.weights = reward_weights or RewardWeights()
+        self.weights = resolve_weights(reward_weights)
         self._episodes = RouteEpisodes(self.weights, 1)
         self.observation_space = observation_space()
         self.action_space = action_space()
@@ -370,7 +427,7 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         super().reset(seed=seed)
-        route = self._route(dict(options or {}))
+        route = self._route(reset_options(options))
         # A fresh World each episode: the same seed then gives the same trajectory whatever
         # ran before (Chipmunk keeps solver warm-start state inside its joints).
         self._trial = Trial(

@@ -105,6 +105,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym.envs.base import DrawsLazily, describe_action, real_array
+from odomgym.errors import require_bool
 from odomgym.floor import CableBump, FloorSpec, load_floor
 from odomgym.vehicle.cable_layout import CableLayer, evenly, rectangle_cable_positions
 from odomgym.vehicle.ipec import ipec_estimator
@@ -150,11 +151,11 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
         self.floor = floor if isinstance(floor, FloorSpec) else load_floor(str(floor))
         if estimator is not None and not callable(estimator):
             raise ValueError("estimator must build an InternalEstimator from wheelbases (N, 2)")
-        if estimator is not None and not ipec:
+        if estimator is not None and not require_bool("ipec", ipec):
             raise ValueError(
                 "give ipec=False or an estimator, not both (an estimator replaces IPEC)"
             )
-        self.ipec = bool(ipec) and estimator is None
+        self.ipec = require_bool("ipec", ipec) and estimator is None
         self._estimator: EstimatorFactory | None = estimator or (
             ipec_estimator(rotary_resolution=self.vehicle.rotary_resolution) if self.ipec else None
         )

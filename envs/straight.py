@@ -7,6 +7,7 @@ from os import PathLike
 from typing import Any
 
 from odomgym.envs.base import RewardWeights, RouteEnv
+from odomgym.errors import require_bool, require_known_options
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration
 from odomgym.robot import RobotSpec
@@ -27,7 +28,9 @@ class StraightRoute:
         straight_route(self.distance, self.return_trip)  # validate now
 
     def __call__(self, options: dict[str, Any]) -> Route:
-        return straight_route(self.distance, bool(options.get("return_trip", self.return_trip)))
+        require_known_options(options, ("return_trip",), "StraightLine-v0")
+        back = require_bool("options['return_trip']", options.get("return_trip", self.return_trip))
+        return straight_route(self.distance, back)
 
 
 class StraightLineEnv(RouteEnv):
@@ -117,7 +120,7 @@ class StraightLineEnv(RouteEnv):
             render_mode=render_mode,
             covariance_k=covariance_k,
         )
-        self.route_rule = StraightRoute(float(distance), bool(return_trip))
+        self.route_rule = StraightRoute(float(distance), require_bool("return_trip", return_trip))
         self.distance = float(distance)
         self.return_trip = bool(return_trip)
 

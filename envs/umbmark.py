@@ -7,6 +7,7 @@ from os import PathLike
 from typing import Any, Literal
 
 from odomgym.envs.base import RewardWeights, RouteEnv
+from odomgym.errors import require_known_options
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration
 from odomgym.robot import RobotSpec
@@ -27,6 +28,7 @@ class SquareRoute:
         square_route(self.side, self.direction)  # validate now, not at the first reset
 
     def __call__(self, options: dict[str, Any]) -> Route:
+        require_known_options(options, ("direction",), "UMBmarkSquare-v0")
         return square_route(self.side, options.get("direction", self.direction))
 
 

@@ -37,7 +37,9 @@ from odomgym.envs.base import (
     RouteEpisodes,
     action_space,
     observation_space,
+    reset_options,
     resolve_specs,
+    resolve_weights,
     validate_actions,
 )
 from odomgym.envs.info import LazyInfo
@@ -108,7 +110,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         self._route: RouteFactory = FixedRoute(route) if isinstance(route, Route) else route
         self.dt = float(dt)
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.dt}
-        self.weights = reward_weights or RewardWeights()
+        self.weights = resolve_weights(reward_weights)
         self.max_episode_steps = int(max_episode_steps)
         self.single_observation_space = observation_space()
         self.single_action_space = action_space()
@@ -138,7 +140,7 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
         seed: int | Sequence[int | None] | None = None,
         options: dict[str, Any] | None = None,
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
-        options = dict(options or {})
+        options = reset_options(options)
         mask = options.pop("reset_mask", None)
         seeds = self._seeds(seed)
         if mask is None or self._trial is None:

@@ -14,6 +14,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TypeVar
 
+import numpy as np
+
 T = TypeVar("T")
 
 
@@ -62,7 +64,7 @@ def read_spec_toml(path: Path, kind: str) -> dict[str, object]:
 
 
 def load_named(
-    spec: str | Path,
+    spec: object,
     presets: Mapping[str, T],
     kind: str,
     unknown: Callable[[str], str],
@@ -70,7 +72,19 @@ def load_named(
 ) -> T:
     """The preset called ``spec``, or ``build(data, path=path)`` of the ``kind`` TOML file at
     ``spec``; a name that is neither is a :class:`SpecError` with the message ``unknown(name)``
-    (which lists the presets), field ``kind``."""
+    (which lists the presets), field ``kind``. A spec object of the presets' own type is
+    returned as it is (the envs take one as readily as a name); anything else is refused in
+    one line, where a spec passed in had become a file name too long for the system."""
+    kinds = tuple({type(value) for value in presets.values()})
+    if kinds and isinstance(spec, kinds):
+        return spec
+    if not isinstance(spec, str | Path):
+        what = " or ".join(kind_.__name__ for kind_ in kinds) or kind
+        raise SpecError(
+            f"{kind} must be a preset name, a .toml file or a {what}, got "
+            f"{type(spec).__name__} {spec!r:.60}",
+            field=kind,
+        )
     text = str(spec)
     if text in presets:
         return presets[text]
@@ -148,8 +162,20 @@ def require_positive(name: str, value: object, *, source: str | None = None) -> 
     return number
 
 
+def plain_number(value: object) -> object:
+    """``value`` as a Python ``float`` (``int`` for an integer) when it is a NumPy number
+    scalar, else unchanged. Why: values computed with NumPy arrive as ``np.float32`` or
+    ``np.int64``, which are numbers (:class:`numbers.Real`), and a spec stores what it is given
+    (a NumPy scalar would not save as TOML)."""
+    if isinstance(value, bool | int | float) or not isinstance(value, numbers.Real):
+        return value  # NumPy's bool_ is no numbers.Real: refused as a bool is
+    return int(value) if isinstance(value, numbers.Integral) else float(value)
+
+
 def require_finite(name: str, value: object, *, source: str | None = None) -> float:
-    """Return ``value`` as a finite float, or raise :class:`SpecError` naming ``name``."""
+    """Return ``value`` as a finite float, or raise :class:`SpecError` naming ``name``. A
+    NumPy number scalar is a number (:func:`plain_number`); a bool is not."""
+    value = plain_number(value)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise SpecError(
             f"{name} must be a number, got {type(value).__name__} {value!r}",
@@ -160,6 +186,31 @@ def require_finite(name: str, value: object, *, source: str | None = None) -> fl
     if not math.isfinite(number):
         raise SpecError(f"{name} must be finite, got {number!r}", field=name, source=source)
     return number
+
+
+def require_bool(name: str, value: object, *, source: str | None = None) -> bool:
+    """Return ``value`` as a ``bool`` if it is one (NumPy's included), else raise
+    :class:`SpecError` naming ``name``. Why: ``bool("no")`` is True, so an option given as a
+    string (``ipec="no"``) silently meant yes."""
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    raise SpecError(
+        f"{name} must be True or False, got {type(value).__name__} {value!r:.40}",
+        field=name,
+        source=source,
+    )
+
+
+def require_known_options(options: Mapping[str, object], known: tuple[str, ...], env: str) -> None:
+    """Refuse ``reset`` options ``env`` does not read, naming the first and the known ones: a
+    misspelt ``{"drection": "ccw"}`` was ignored, and the episode drove the default way."""
+    unknown = [key for key in options if key not in known]
+    if unknown:
+        said = ", ".join(known) if known else "none"
+        raise SpecError(
+            f"unknown reset option {unknown[0]!r} of {env}; its options: {said}",
+            field=f"options.{unknown[0]}",
+        )
 
 
 def require_range(

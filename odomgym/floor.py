@@ -282,8 +282,9 @@ def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path
         raise SpecError(f"{label}.{exc}", field=f"{label}.{key}", source=where(key)) from None
 
 
-def load_floor(spec: str | Path) -> FloorSpec:
-    """Return a named floor (``smooth``, ``bumpy``, ``slippery``) or load a floor TOML file."""
+def load_floor(spec: str | Path | FloorSpec) -> FloorSpec:
+    """Return a named floor (``smooth``, ``bumpy``, ``slippery``) or load a floor TOML file (a
+    spec is returned as it is)."""
     return load_named(
         spec,
         FLOORS,

@@ -18,6 +18,7 @@ All lengths are metres, masses kilograms, speeds m/s, accelerations m/s².
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -29,6 +30,7 @@ from odomgym.errors import (
     SpecError,
     load_named,
     locate_key,
+    plain_number,
     refuse_stray_keys,
     require_positive,
     require_range,
@@ -55,6 +57,77 @@ def _normalise_effects(effects: Any) -> EffectTable:
         pairs = values.items() if isinstance(values, Mapping) else values
         table[str(name)] = tuple(sorted((str(k), float(v)) for k, v in pairs))
     return tuple(sorted(table.items()))
+
+
+def _effects_form(got: str) -> str:
+    """The refusal of an ``effects`` argument of the wrong shape."""
+    return (
+        "effects must be a mapping {name: {parameter: value}} of the catalogue's effects "
+        f"(odomgym.effects.EFFECTS), got {got}"
+    )
+
+
+def _effects_argument(effects: Any) -> tuple[EffectTable, list[tuple[str, dict[str, float]]]]:
+    """The constructor's ``effects``, checked: (the table of the effects kept in
+    :attr:`RobotSpec.effects`, the geometric ones given in a mapping, to be written into the
+    true geometry). Every name must be registered and every value in its range; a geometric
+    effect in the stored tuple form is refused (that form holds the table only).
+
+    Why: the constructor stored whatever it was given. A backlash of NaN stopped the World's
+    robot without a word, a wheel toe of 3 rad (the range is ±0.2) drove it backwards, a
+    misspelt name was ignored, and a geometric effect was stored but not applied, so the spec
+    saved and loaded back was another robot."""
+    if isinstance(effects, tuple):
+        try:
+            return _stored_table(effects), []
+        except TypeError:  # unhashable inside: checked below, refused with its reason
+            pass
+    return _check_effects(effects)
+
+
+@functools.lru_cache(maxsize=256)
+def _stored_table(effects: tuple[Any, ...]) -> EffectTable:
+    """:func:`_check_effects` of a table in the stored tuple form, remembered: every
+    ``dataclasses.replace`` of a spec passes its table again (a fit builds thousands of specs
+    from a few tables), and checking it each time cost a third of a spec's construction."""
+    table, _ = _check_effects(effects)
+    return table
+
+
+def _check_effects(effects: Any) -> tuple[EffectTable, list[tuple[str, dict[str, float]]]]:
+    """:func:`_effects_argument`'s checks, uncached."""
+    if isinstance(effects, str | bytes) or not isinstance(effects, Mapping | tuple | list):
+        raise SpecError(_effects_form(type(effects).__name__), field="effects")
+    given = isinstance(effects, Mapping)
+    try:
+        items = (
+            list(effects.items())
+            if isinstance(effects, Mapping)
+            else [tuple(item) for item in effects]
+        )
+        if not all(len(item) == 2 for item in items):
+            raise TypeError
+        entries = [(str(name), dict(values)) for name, values in items]
+    except (TypeError, ValueError):
+        raise SpecError(_effects_form(repr(effects)[:60]), field="effects") from None
+    table: dict[str, dict[str, float]] = {}
+    geometric: list[tuple[str, dict[str, float]]] = []
+    for name, values in entries:
+        effect = get_effect(name)
+        clean = effect.validate(values)
+        if effect.in_table:
+            table[name] = {str(k): float(v) for k, v in values.items()}
+            del clean
+        elif given:
+            geometric.append((name, clean))
+        else:
+            raise SpecError(
+                f"effects.{name} lives in the true diameters and wheelbase, not in the effects "
+                "table: give effects as a mapping (it is then written there) or use "
+                "RobotSpec.apply_effect",
+                field=f"effects.{name}",
+            )
+    return _normalise_effects(table), geometric
 
 
 ROBOT_RANGES: dict[str, tuple[float, float]] = {
@@ -152,7 +225,9 @@ class RobotSpec:
             their parameters, as ``{name: {parameter: value}}`` (stored as sorted tuples so
             the spec stays hashable); the geometric ones (``wheel_diameter_ratio``,
             ``wheelbase``, ``distance_scale``) live in the true diameters and wheelbase
-            instead. TOML: ``[robot.effects.NAME]`` tables.
+            instead: given in the mapping, they are written there, after the true fields
+            given. Every name and value is checked (a :class:`SpecError` names
+            ``effects.NAME.PARAM``). TOML: ``[robot.effects.NAME]`` tables.
     """
 
     wheel_diameter: float
@@ -204,6 +279,7 @@ class RobotSpec:
         # defaults need the nominal wheelbase, which a field default cannot see.
         # A non-number or out-of-range wheelbase gives NaN defaults here (no overflow in the
         # default mass of a 1e154 m robot) and is named by validate().
+        wheelbase, axle_spacing = plain_number(wheelbase), plain_number(axle_spacing)  # type: ignore[assignment]
         low, high = ROBOT_RANGES["wheelbase"]
         sensible = isinstance(wheelbase, int | float) and low <= wheelbase <= high
         chassis = 1.3 * wheelbase if sensible else math.nan
@@ -231,11 +307,20 @@ class RobotSpec:
             "tyre_cornering_stiffness": tyre_cornering_stiffness,
             "name": name,
             "source": source,
-            "effects": _normalise_effects(effects),
         }
+        values = {key: plain_number(value) for key, value in values.items()}
+        table, geometric = _effects_argument(effects)
+        values["effects"] = table
         for key, value in values.items():
             object.__setattr__(self, key, value)
         self.validate()
+        if geometric:
+            # Written into the true geometry, after the fields given (as from_dict does).
+            spec = dataclasses.replace(self)
+            for name, given in geometric:
+                spec = spec.apply_effect(name, given)
+            for key in ("true_left_diameter", "true_right_diameter", "true_wheelbase"):
+                object.__setattr__(self, key, getattr(spec, key))
 
     # ------------------------------------------------------------------ validation
     def validate(self, source: str | None = None) -> None:
@@ -591,8 +676,9 @@ def _locate_table(path: Path, table: str, key: str | None = None) -> str:
     return str(path)
 
 
-def load_robot(spec: str | Path) -> RobotSpec:
-    """Return the preset called ``spec``, or load a robot TOML file.
+def load_robot(spec: str | Path | RobotSpec) -> RobotSpec:
+    """Return the preset called ``spec``, or load a robot TOML file (a spec is returned as it
+    is).
 
     Raises :class:`SpecError` for an unknown preset, an unreadable file, malformed TOML (with
     its line) or an invalid field (with its line).

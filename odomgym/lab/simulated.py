@@ -19,11 +19,11 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.floor import FloorSpec
+from odomgym.floor import FloorSpec, load_floor
 from odomgym.lab.experiment import BookkeepingLab, Experiment, ExperimentKind, SensorAccuracy
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Direction, Run
-from odomgym.robot import RobotSpec
+from odomgym.robot import RobotSpec, load_robot
 from odomgym.sim.arc_runs import Arc, circle_plan, drive_arcs, free_plan
 from odomgym.sim.route_runs import RunRequests, simulate_runs
 from odomgym.sim.routes import Route, spin_route, square_route, straight_route
@@ -247,17 +247,18 @@ class SimLab(BookkeepingLab):
 
     def __init__(
         self,
-        robot: RobotSpec,
-        floor: FloorSpec | None = None,
+        robot: RobotSpec | str,
+        floor: FloorSpec | str | None = None,
         *,
         sensor: SensorAccuracy | None = None,
         rng: np.random.Generator | None = None,
         cruise_speed: float = 0.2,
         start_region: float | None = None,
     ) -> None:
-        super().__init__(robot)
+        # A preset name or file as readily as a spec; anything else refused in one line.
+        super().__init__(load_robot(robot))
         self.start_region = start_region
-        self.floor = floor if floor is not None else FloorSpec()
+        self.floor = load_floor(floor) if floor is not None else FloorSpec()
         self.sensor = sensor if sensor is not None else SensorAccuracy()
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.cruise_speed = cruise_speed

@@ -79,6 +79,18 @@ def _check_motion(
     _nonnegative("kr", kr)
 
 
+def _pose(name: str, value: ArrayLike) -> tuple[float, float, float]:
+    """A finite pose (x [m], y [m], θ [rad]); else ValueError naming ``name``."""
+    try:
+        pose = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pose (x, y, theta), got {value!r}") from None
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise ValueError(f"{name} must be a finite pose (x, y, theta), got {value!r}")
+    x, y, theta = pose.tolist()
+    return x, y, theta
+
+
 def _covariance(name: str, value: ArrayLike | None) -> FloatArray:
     """A finite, symmetric, positive semi-definite 3×3 matrix (zeros for None)."""
     cov = np.zeros((3, 3)) if value is None else np.array(value, dtype=float)
@@ -124,7 +136,10 @@ def end_pose(start: ArrayLike, left: float, right: float, wheelbase: float) -> F
     Written as chord length D·sinc(Δθ/2) along the mid heading θ₀ + Δθ/2, which equals Eq. 14's
     r·[sin θ₀ − sin θ_k, cos θ_k − cos θ₀] but stays exact for straight lines (r → ∞).
     """
-    x0, y0, th0 = (float(v) for v in np.asarray(start, dtype=float))
+    x0, y0, th0 = _pose("start", start)
+    for name, value in (("left", left), ("right", right)):
+        require_finite(name, value)
+    require_positive("wheelbase", wheelbase)
     dtheta = (right - left) / wheelbase
     half = 0.5 * dtheta
     chord = 0.5 * (left + right) * (math.sin(half) / half if half != 0.0 else 1.0)
@@ -247,7 +262,8 @@ def quadrature_motion_covariance(
     heading: float = 0.0,
     nodes: int = 16,
 ) -> FloatArray:
-    """Cov(U_k) as the integral that Eq. 25 solves, by Gauss–Legendre quadrature on ``nodes``.
+    """Cov(U_k) as the integral that Eq. 25 solves, by Gauss–Legendre quadrature on ``nodes``
+    (a whole number ≥ 1).
 
     Eq. 23's sum tends to ∫₀¹ J(s) diag(k_L²|L|, k_R²|R|) J(s)ᵀ ds with J from Eq. 24: wheel noise
     at arc fraction s moves the pose by half its length along θ(s) (``a``) and turns the rest of
@@ -256,6 +272,8 @@ def quadrature_motion_covariance(
     cancels) and 16 for |Δθ| ≲ 1 rad; the tests use many nodes as a reference for Eqs. 25–28.
     """
     _check_motion(left, right, wheelbase, kl, kr)
+    if isinstance(nodes, bool) or not isinstance(nodes, int) or nodes < 1:
+        raise ValueError(f"nodes must be a whole number >= 1, got {nodes!r}")
     dtheta, reach, qt = (right - left) / wheelbase, 0.5 * (left + right) / wheelbase, -1 / wheelbase
     # ∫aaᵀ + qqᵀ ("e") and ∫aqᵀ + qaᵀ ("o"), element by element; plain floats are 3× faster here
     e11 = e22 = e12 = e13 = e23 = o11 = o22 = o12 = o13 = o23 = 0.0
@@ -312,7 +330,14 @@ def propagate_path(
     leaves the result unchanged — the consistency the classic model lacks.
     """
     estimate = origin() if start is None else start
-    for left, right in segments:
+    for index, segment in enumerate(segments):
+        try:
+            left, right = segment
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"segments[{index}] must be a pair (left, right) of wheel travels [m], got "
+                f"{segment!r}"
+            ) from None
         estimate = propagate_segment(estimate, left, right, wheelbase, kl, kr)
     return estimate
 

@@ -52,6 +52,7 @@ from odomgym._kernels import integrate_odometry
 from odomgym.errors import (
     SpecError,
     locate_key,
+    plain_number,
     read_spec_toml,
     refuse_stray_keys,
     require_finite,
@@ -108,7 +109,9 @@ class Calibration:
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            _check_field(f.name, getattr(self, f.name))
+            value = plain_number(getattr(self, f.name))  # a NumPy scalar stored as a float
+            object.__setattr__(self, f.name, value)
+            _check_field(f.name, value)
         if self.track_alpha == 0.0:
             # Without a curve β and p act on nothing; their defaults keep equal calibrations
             # equal (and a file, which omits them, reads back the same).

@@ -1,0 +1,154 @@
+"""The Python API's answers to what a researcher passes in a notebook: effects given to a
+robot's constructor, NumPy scalars, specs passed where names are expected, options as strings.
+Each case is one a new user's review hit (a silent wrong simulation, a false message, or a
+traceback from deep inside), and each test fails on the code before the fix."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import odomgym
+from odomgym.errors import SpecError
+from odomgym.noise import covariance
+from odomgym.odometry.calibration import Calibration
+from odomgym.robot import PRESETS, RobotSpec, load_robot
+
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+BASE = {"wheel_diameter": 0.15, "wheelbase": 0.34, "ticks_per_rev": 2048}
+
+
+@pytest.mark.parametrize(
+    ("effects", "field", "message"),
+    [
+        ({"backlash": {"angle": float("nan")}}, "effects.backlash.angle", "must be finite"),
+        ({"wheel_toe": {"angle": 3.0}}, "effects.wheel_toe.angle", r"\[-0.2, 0.2\] rad"),
+        ({"backlash": {"angle": -0.3}}, "effects.backlash.angle", r"\[0, 0.5\] rad"),
+        ({"backlsh": {"angle": 0.1}}, "effects.backlsh", "unknown effect 'backlsh'"),
+        ({"backlash": {"angel": 0.1}}, "effects.backlash.angel", "unknown parameter"),
+        ([1], "effects", r"must be a mapping \{name: \{parameter: value\}\}"),
+        ("backlash", "effects", "got str"),
+        ({"backlash": 3}, "effects", "must be a mapping"),
+    ],
+)
+def test_the_constructor_checks_the_effects_it_is_given(
+    effects: object, field: str, message: str
+) -> None:
+    """A backlash of NaN stopped the World's robot without a word, a toe of 3 rad drove it
+    backwards, a misspelt name was ignored: each is now refused, naming the field."""
+    with pytest.raises(SpecError, match=message) as caught:
+        RobotSpec(**BASE, effects=effects)  # type: ignore[arg-type]
+    assert caught.value.field == field
+
+
+def test_a_geometric_effect_given_to_the_constructor_is_the_robot_it_saves(
+    tmp_path: Path,
+) -> None:
+    """``effects={"wheel_diameter_ratio": {"e_d": 1.05}}`` was stored and not applied: the
+    robot drove with E_d = 1, and the file it saved loaded back as E_d = 1.05, another robot.
+    It is now written into the true diameters, as a robot file's table is."""
+    robot = RobotSpec(**BASE, effects={"wheel_diameter_ratio": {"e_d": 1.05}})
+    assert robot.e_d == pytest.approx(1.05) and robot.effects == ()
+    robot.save(tmp_path / "r.toml")
+    assert load_robot(tmp_path / "r.toml") == robot
+    kept = RobotSpec(**BASE, effects={"backlash": {"angle": 0.01}})
+    assert kept.effect_dict() == {"backlash": {"angle": 0.01}}
+    assert RobotSpec(**BASE, effects=kept.effects) == kept  # the stored form, as replace() passes
+    with pytest.raises(SpecError, match="lives in the true diameters") as caught:
+        RobotSpec(**BASE, effects=(("wheelbase", (("e_b", 1.1),)),))
+    assert caught.value.field == "effects.wheelbase"
+
+
+def test_numpy_scalars_are_numbers_and_are_stored_as_floats(tmp_path: Path) -> None:
+    """Values computed with NumPy were refused as "must be a number, got float32"; now taken
+    and stored as Python numbers (so the spec saves as TOML). NumPy's bool is still no number."""
+    robot = RobotSpec(
+        wheel_diameter=np.float32(0.15), wheelbase=np.float64(0.34), ticks_per_rev=np.int64(2048)
+    )
+    assert type(robot.wheel_diameter) is float and type(robot.ticks_per_rev) is int
+    assert robot.chassis_width == pytest.approx(1.3 * 0.34)  # the derived defaults too
+    robot.save(tmp_path / "r.toml")
+    assert load_robot(tmp_path / "r.toml") == robot
+    calibration = Calibration(c_left=np.float32(1.0), wheelbase_scale=np.float64(1.01))
+    assert type(calibration.c_left) is float and calibration.wheelbase_scale == 1.01
+    with pytest.raises(SpecError, match="wheel_diameter must be a number, got bool"):
+        RobotSpec(wheel_diameter=np.bool_(True), wheelbase=0.3, ticks_per_rev=100)
+
+
+def test_a_spec_is_taken_where_a_name_is_and_anything_else_is_refused_in_one_line() -> None:
+    """``load_robot(spec)`` made the spec's repr a file name ("File name too long");
+    ``gym.make(..., robot=5)`` ended in ``TypeError: expected str, bytes or os.PathLike``."""
+    labmate = PRESETS["labmate"]
+    assert load_robot(labmate) is labmate
+    refusal = r"robot must be a preset name, a \.toml file or a RobotSpec"
+    with pytest.raises(SpecError, match=refusal):
+        load_robot(5)  # type: ignore[arg-type]
+    with pytest.raises(SpecError, match="got int 5"):
+        gym.make("UMBmarkSquare-v0", robot=5)
+    with pytest.raises(SpecError, match="floor must be a preset name"):
+        gym.make("UMBmarkSquare-v0", floor=0.5)
+    with pytest.raises(SpecError, match="calibration must be a Calibration"):
+        gym.make("UMBmarkSquare-v0", calibration=1.0)
+
+
+def test_options_are_checked_by_type_and_name() -> None:
+    """``ipec="no"`` meant IPEC on and ``return_trip="no"`` drove back (``bool("no")`` is
+    True); a misspelt reset option was ignored; ``reward_weights`` as a dict and
+    ``covariance_k`` as one number ended in an AttributeError and a TypeError."""
+    for make in (
+        lambda: gym.make("ClapperRectangle-v0", ipec="no"),
+        lambda: gym.make("StraightLine-v0", return_trip="yes"),
+        lambda: gym.make("StraightLine-v0").reset(options={"return_trip": "no"}),
+    ):
+        with pytest.raises(SpecError, match="must be True or False, got str"):
+            make()
+    env = gym.make("StraightLine-v0", distance=1.0, return_trip=np.bool_(True))
+    assert env.unwrapped.return_trip is True
+    with pytest.raises(SpecError, match="unknown reset option 'drection' of UMBmarkSquare-v0"):
+        gym.make("UMBmarkSquare-v0").reset(options={"drection": "ccw"})
+    with pytest.raises(SpecError, match="reset options must be a dict, got list"):
+        gym.make("UMBmarkSquare-v0").reset(options=["ccw"])
+    vector = gym.make_vec("StraightLine-v0", num_envs=2, distance=1.0)
+    vector.reset(seed=0)
+    with pytest.raises(SpecError, match="unknown reset option 'return_trp' of StraightLine-v0"):
+        vector.reset(options={"return_trp": True})
+    weighted = gym.make("UMBmarkSquare-v0", reward_weights={"progress": 2.0})
+    assert weighted.unwrapped.weights.progress == 2.0 and weighted.unwrapped.weights.time == 0.001
+    with pytest.raises(SpecError, match="unknown reward weight 'progres'"):
+        gym.make("UMBmarkSquare-v0", reward_weights={"progres": 1.0})
+    with pytest.raises(ValueError, match=r"covariance_k must be two k \(k_L, k_R\)"):
+        gym.make("UMBmarkSquare-v0", covariance_k=0.001)
+
+
+def test_no_validation_gives_no_improvement() -> None:
+    """``validation_runs=0`` skips the validation (E_max,syst NaN), and the improvement was
+    reported as infinite; now NaN. A negative count was taken as 0; now refused."""
+    from odomgym.baselines import UMBmark
+    from odomgym.baselines.validation import calibrate_in_simulation
+
+    method = UMBmark(side=1.0, runs_per_direction=1, scale_phases=0)
+    report = calibrate_in_simulation(method, "labmate", validation_runs=0)
+    assert np.isnan(report.e_max_after) and np.isnan(report.improvement)
+    with pytest.raises(SpecError, match="validation_runs must be >= 0"):
+        calibrate_in_simulation(method, odomgym.PRESETS["labmate"], validation_runs=-1)
+
+
+def test_the_covariance_model_names_a_bad_argument() -> None:
+    """A zero wheelbase gave ``ZeroDivisionError`` in ``end_pose`` and ``propagate_path``
+    (``motion_covariance`` checked it); a two-value pose or a one-value segment a bare
+    unpacking error; ``nodes=0`` NumPy's own message."""
+    with pytest.raises(SpecError, match="wheelbase must be > 0"):
+        covariance.propagate_path([(1.0, 1.0)], 0.0, 1e-3, 1e-3)
+    with pytest.raises(SpecError, match="wheelbase must be > 0"):
+        covariance.end_pose([0.0, 0.0, 0.0], 1.0, 2.0, 0.0)
+    with pytest.raises(ValueError, match=r"start must be a finite pose \(x, y, theta\)"):
+        covariance.end_pose([0.0, 0.0], 1.0, 1.0, 0.4)
+    with pytest.raises(ValueError, match=r"segments\[1\] must be a pair \(left, right\)"):
+        covariance.propagate_path([(1.0, 1.0), (1.0,)], 0.4, 1e-3, 1e-3)  # type: ignore[list-item]
+    with pytest.raises(ValueError, match="nodes must be a whole number >= 1, got 0"):
+        covariance.quadrature_motion_covariance(3.0, 1.0, 0.4, 1e-3, 1e-3, nodes=0)
