@@ -4,11 +4,11 @@ A calibration is only worth what it does on runs it has not seen. For every meth
 recorded session it can use, the method calibrates on that session; its parameters (b, D_R, D_L,
 absolute, in metres) are then applied to every *other* session — squares, straight-and-spin
 and circular paths alike, each with its own nominal robot — and judged by the OptiOdom
-evaluation measures
-(:mod:`odomgym.odometry.optiodom_measures`). The leaderboard ranks methods by the mean cross-session
-final and maximum position errors. Beside it, the in-session results are compared with the authors'
-own numbers in ``published_results.csv`` (Sousa et al. 2022, whose "optiodom" rows are compared with
-our ``trajectory`` method).
+evaluation measures (:mod:`odomgym.odometry.optiodom_measures`). The leaderboard ranks methods
+by the mean cross-session final and maximum position errors on the evaluation sessions all of
+them were judged on. Beside it, the in-session results are compared with the authors' own
+numbers in ``published_results.csv`` (Sousa et al. 2022, whose "optiodom" rows are compared
+with our ``trajectory`` method).
 
 ``conventions="optiodom"`` runs the methods that have the authors' conventions (UMBmark and
 Jung & Chung: their frames, their heading centre of gravity, no E_s phase) with them, so that
@@ -77,20 +77,43 @@ class Leaderboard:
     published: dict[tuple[str, str], dict[str, float]] = field(default_factory=dict)
     conventions: str | None = None
 
+    def evaluation_sessions(self) -> list[str]:
+        """The sessions every ranked method was evaluated on (sorted): those the ranking judges
+        each method on."""
+        methods = {m for m, _, _ in self.cross}
+        targets = [{t for (m, _, t) in self.cross if m == method} for method in methods]
+        return sorted(set.intersection(*targets)) if targets else []
+
     def ranking(self) -> list[dict[str, Any]]:
-        """Methods by mean cross-session final position error (then max position error)."""
+        """Methods by mean cross-session final position error (then max position error), each
+        judged on the same runs: per evaluation session of :meth:`evaluation_sessions`, the mean
+        over the method's calibration sessions, then the mean over those evaluation sessions.
+
+        Why not the mean over each method's own pairs: a method that cannot calibrate on some
+        sessions (least squares needs squares) was then judged on fewer and other runs, and on
+        the shipped sessions ranked first on 10 pairs against the others' 15."""
+        common = self.evaluation_sessions()
         methods = sorted({m for m, _, _ in self.cross})
         table = []
         for method in methods:
-            values = [v for (m, _, _), v in self.cross.items() if m == method]
+            mine = {(s, t): v for (m, s, t), v in self.cross.items() if m == method}
+            per_target = [[v for (_, t), v in mine.items() if t == target] for target in common]
+
+            def mean(name: str, groups: list[list[EvaluationMeasures]] = per_target) -> float:
+                return float(
+                    np.mean([np.mean([getattr(v, name) for v in group]) for group in groups])
+                )
+
             table.append(
                 {
                     "method": method,
-                    "pairs": len(values),
-                    "final_pos_mm": 1e3 * float(np.mean([v.final_position for v in values])),
-                    "max_pos_mm": 1e3 * float(np.mean([v.max_position for v in values])),
-                    "final_th_deg": math.degrees(float(np.mean([v.final_heading for v in values]))),
-                    "max_th_deg": math.degrees(float(np.mean([v.max_heading for v in values]))),
+                    "calibrated_on": len({s for s, _ in mine}),
+                    "pairs": len(mine),
+                    "evaluated_on": len(common),
+                    "final_pos_mm": 1e3 * mean("final_position"),
+                    "max_pos_mm": 1e3 * mean("max_position"),
+                    "final_th_deg": math.degrees(mean("final_heading")),
+                    "max_th_deg": math.degrees(mean("max_heading")),
                 }
             )
         table.sort(key=lambda row: (row["final_pos_mm"], row["max_pos_mm"]))
@@ -141,8 +164,9 @@ def run_leaderboard(
     conventions: str | None = None,
 ) -> Leaderboard:
     """Calibrate every method on every session of ``path_types`` below ``root`` that holds
-    the runs it needs; evaluate each result on *all* other sessions (every path type, so that
-    methods calibrating on different experiments are judged on the same runs).
+    the runs it needs; evaluate each result on *all* other sessions (every path type), and rank
+    the methods on the evaluation sessions they all have (:meth:`Leaderboard.ranking`), so that
+    methods calibrating on different experiments are judged on the same runs.
 
     ``conventions`` (e.g. ``"optiodom"``) applies to the methods that take a ``conventions``
     option (:func:`takes_conventions`); the others run with their own.
@@ -205,13 +229,19 @@ def format_leaderboard(board: Leaderboard) -> str:
     lines = [
         "## Cross-session leaderboard (calibrate on one session, evaluate on the others)",
         "",
-        "| rank | method | pairs | final pos [mm] | max pos [mm] | final θ [deg] | max θ [deg] |",
-        "|---|---|---|---|---|---|---|",
+        f"Every method is judged on the same {len(board.evaluation_sessions())} evaluation "
+        "sessions (those all of them were evaluated on): per session, the mean over the "
+        "method's calibration sessions; then the mean over the sessions.",
+        "",
+        "| rank | method | calibrated on | pairs | final pos [mm] | max pos [mm] | final θ [deg] "
+        "| max θ [deg] |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for rank, row in enumerate(board.ranking(), start=1):
         lines.append(
-            f"| {rank} | {row['method']} | {row['pairs']} | {row['final_pos_mm']:.2f} | "
-            f"{row['max_pos_mm']:.2f} | {row['final_th_deg']:.3f} | {row['max_th_deg']:.3f} |"
+            f"| {rank} | {row['method']} | {row['calibrated_on']} | {row['pairs']} | "
+            f"{row['final_pos_mm']:.2f} | {row['max_pos_mm']:.2f} | {row['final_th_deg']:.3f} | "
+            f"{row['max_th_deg']:.3f} |"
         )
     followed = (
         f"methods with {board.conventions} conventions follow them"
@@ -225,6 +255,19 @@ def format_leaderboard(board: Leaderboard) -> str:
         "| method | session | final pos ours / published [mm] | max pos ours / published [mm] |",
         "|---|---|---|---|",
     ]
+    if not board.published:  # a user's own sessions: no published numbers to set beside
+        lines[-4:] = [
+            "## In-session results (no published_results.csv beside the sessions)",
+            "",
+            "| method | session | final pos [mm] | max pos [mm] |",
+            "|---|---|---|---|",
+        ]
+        for (method, session), ours in sorted(board.in_session.items()):
+            mine = ours.as_published()
+            lines.append(
+                f"| {method} | {session} | {1e3 * mine['final_pos']:.2f} | "
+                f"{1e3 * mine['max_pos']:.2f} |"
+            )
     for (method, session), ours in sorted(board.in_session.items()):
         theirs = board.published.get((method, session))
         if theirs is None:

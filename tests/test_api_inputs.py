@@ -152,3 +152,30 @@ def test_the_covariance_model_names_a_bad_argument() -> None:
         covariance.propagate_path([(1.0, 1.0), (1.0,)], 0.4, 1e-3, 1e-3)  # type: ignore[list-item]
     with pytest.raises(ValueError, match="nodes must be a whole number >= 1, got 0"):
         covariance.quadrature_motion_covariance(3.0, 1.0, 0.4, 1e-3, 1e-3, nodes=0)
+
+
+def test_the_leaderboard_judges_every_method_on_the_same_sessions() -> None:
+    """A method that cannot calibrate on some sessions was judged on its own, fewer pairs: on
+    the shipped sessions least squares ranked first on 10 pairs against the others' 15. The
+    ranking now takes, per evaluation session all methods have, the mean over each method's
+    calibration sessions, then the mean over those sessions."""
+    from odomgym.baselines.leaderboard import Leaderboard, format_leaderboard
+    from odomgym.odometry.optiodom_measures import EvaluationMeasures
+
+    def measures(final: float) -> EvaluationMeasures:
+        return EvaluationMeasures(2 * final, 0.01, final, 0.01)
+
+    board = Leaderboard()
+    # "wide" calibrates on s1 and s2; "narrow" only on s1, and is never evaluated on s1.
+    for source, target, final in (("s1", "s2", 0.010), ("s1", "s3", 0.030), ("s2", "s1", 0.5)):
+        board.cross[("wide", source, target)] = measures(final)
+    for target, final in (("s2", 0.020), ("s3", 0.020)):
+        board.cross[("narrow", "s1", target)] = measures(final)
+    assert board.evaluation_sessions() == ["s2", "s3"]
+    rows = {row["method"]: row for row in board.ranking()}
+    assert rows["wide"]["final_pos_mm"] == pytest.approx(20.0)  # s2: 10, s3: 30 (s1 not judged)
+    assert rows["narrow"]["final_pos_mm"] == pytest.approx(20.0)
+    assert (rows["wide"]["pairs"], rows["wide"]["calibrated_on"]) == (3, 2)
+    text = format_leaderboard(board)
+    assert "judged on the same 2 evaluation sessions" in text
+    assert "## In-session results (no published_results.csv" in text  # a user's own data
