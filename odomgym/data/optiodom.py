@@ -61,7 +61,8 @@ from numpy.typing import NDArray
 from odomgym.errors import SpecError, require_positive
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import Direction, Run
-from odomgym.robot import RobotSpec
+from odomgym.robot import ROBOT_RANGES, RobotSpec
+from odomgym.sim.routes import MAX_RUN_LENGTH, MIN_RUN_LENGTH
 
 __all__ = [
     "PATH_TYPES",
@@ -189,7 +190,11 @@ def read_session(
     Raises:
         SpecError: for anything malformed, naming the file and, where there is one, the line:
             a missing folder, metadata file or run file; a missing or non-numeric metadata
-            field; an empty session; missing or extra columns, non-numeric or non-finite values,
+            field; a robot value in other units (``Li`` or ``Di`` outside the wheelbase or
+            wheel-diameter range of :data:`~odomgym.robot.ROBOT_RANGES`, in millimetres say;
+            ``ngear × encRes`` outside its ``ticks_per_rev``) or a side ``L`` whose run is
+            longer than a lab drives, each at its metadata line and under its metadata key;
+            an empty session; missing or extra columns, non-numeric or non-finite values,
             non-integer counts or non-increasing time in a run file; an odd number of square
             runs; a run whose turning direction contradicts its position in the session.
     """
@@ -222,14 +227,20 @@ def read_session(
         )
     ngear = meta.positive("ngear")
     enc_res = meta.positive("encRes")
-    wheelbase = meta.positive("Li")
-    right_diameter, left_diameter = meta.positives("Di", 2)
+    meta.check_ticks(ngear, enc_res)
+    wheelbase = meta.within("Li", meta.positive("Li"), "wheelbase", "the wheelbase in metres")
+    right_diameter, left_diameter = (
+        meta.within("Di", d, "wheel_diameter", "the wheel diameters D_R, D_L in metres")
+        for d in meta.positives("Di", 2)
+    )
     n_runs = meta.count("N")
     side = meta.optional_positive("L")
     if kind == "square" and side is None:
         raise SpecError(
             "a square session needs the square side L", field="L", source=meta.where("L")
         )
+    if side is not None:
+        meta.check_side(side, legs=4 if kind == "square" else 1)
     windows = meta.windows(n_runs)
     markers = tuple(int(v) for v in meta.optional_numbers("imarkers"))
 
@@ -364,6 +375,57 @@ class _Metadata:
             require_positive(key, self._number(key, v), source=self.where(key))
             for v in values[:count]
         ]
+
+    def within(self, key: str, value: float, robot_field: str, meaning: str) -> float:
+        """``value`` of ``key`` if it lies in the range :data:`~odomgym.robot.ROBOT_RANGES`
+        allows the robot field it becomes, else a :class:`SpecError` at the key's line.
+
+        Why here and not left to :class:`~odomgym.robot.RobotSpec`: the robot would refuse the
+        value too, but under its own field name (``wheelbase``) and without the file, so a
+        session written in millimetres (``Li,200``) told the user nothing about where to look.
+        """
+        low, high = ROBOT_RANGES[robot_field]
+        if not low <= value <= high:
+            raise SpecError(
+                f"{key} must lie in [{low}, {high}] m ({meaning}), got {value!r}",
+                field=key,
+                source=self.where(key),
+            )
+        return value
+
+    def check_ticks(self, ngear: float, enc_res: float) -> None:
+        """Refuse counts per wheel revolution (``ngear`` · ``encRes``) the robot cannot have
+        (:data:`~odomgym.robot.ROBOT_RANGES` ``ticks_per_rev``), at the line of the factor
+        that is the likelier culprit: the larger one when the product is too large, the
+        smaller one when it is too small (a gear ratio and an encoder resolution are both
+        usually > 1, so the odd one out is the one that broke the product)."""
+        low, high = ROBOT_RANGES["ticks_per_rev"]
+        ticks = ngear * enc_res
+        if low <= ticks <= high:
+            return
+        blamed = "encRes" if (enc_res >= ngear) == (ticks > high) else "ngear"
+        other = "ngear" if blamed == "encRes" else "encRes"
+        raise SpecError(
+            f"ngear × encRes (counts per wheel revolution) must lie in [{low:g}, {high:g}], "
+            f"got {ngear:g} × {enc_res:g} = {ticks:g}: is {blamed} (or {other}, line "
+            f"{self.rows[other][0]}) in other units?",
+            field=blamed,
+            source=self.where(blamed),
+        )
+
+    def check_side(self, side: float, *, legs: int) -> None:
+        """Refuse a side ``L`` [m] whose run (``legs`` sides: 4 on a square, 1 on a straight
+        line) a lab may not drive (:data:`~odomgym.sim.routes.MIN_RUN_LENGTH` ..
+        :data:`~odomgym.sim.routes.MAX_RUN_LENGTH`): the calibrator would otherwise refuse it
+        later as a bare ``size``, without the metadata file (``L,750``: millimetres)."""
+        low, high = MIN_RUN_LENGTH / legs, MAX_RUN_LENGTH / legs
+        if not low <= side <= high:
+            raise SpecError(
+                f"L must lie in [{low:g}, {high:g}] m (the side in metres; a run drives "
+                f"{legs} × L, at most {MAX_RUN_LENGTH:g} m), got {side!r}",
+                field="L",
+                source=self.where("L"),
+            )
 
     def optional_positive(self, key: str) -> float | None:
         return self.positive(key) if self.values(key) else None
