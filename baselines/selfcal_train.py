@@ -13,6 +13,7 @@ plots the learning curve and exports the policy network to the ``.npz`` file tha
 
 from __future__ import annotations
 
+import difflib
 import importlib.util
 import inspect
 import json
@@ -46,7 +47,9 @@ __all__ = [
     "CHECKPOINT_EVERY",
     "ENV_ID",
     "EVAL_SEEDS",
+    "HYPERPARAM_CHECKS",
     "TrainResult",
+    "check_hyperparams",
     "evaluate",
     "export_policy",
     "load_hyperparams",
@@ -71,7 +74,13 @@ which seeds sub-env i with seed + i for small seeds)."""
 def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any]:
     """The hyperparameters of ``algo`` for ``SelfCalibration-v1``: the ``SelfCalibration-v1``
     key of ``path``, a YAML file in rl-baselines3-zoo's format (default: the shipped
-    ``odomgym/data/hyperparams/<algo>.yml``, which the zoo reads too)."""
+    ``odomgym/data/hyperparams/<algo>.yml``, which the zoo reads too).
+
+    Every value is checked here (:func:`check_hyperparams`), so that a wrong one is refused
+    in one line naming the file, its line and the key *before* training starts: SB3 checks
+    some of them only in its constructor (``Invalid learning rate``, with no file) and others
+    not at all until a rollout has been written (``n_epochs: ten``).
+    """
     import yaml
 
     if algo not in ALGORITHMS:
@@ -97,7 +106,320 @@ def load_hyperparams(algo: str, path: str | Path | None = None) -> dict[str, Any
     table = data.get(ENV_ID) if isinstance(data, dict) else None
     if not isinstance(table, dict):
         raise SpecError(f"{source}: no key {ENV_ID!r} (rl-zoo3 format)", field="hyperparams")
-    return dict(table)
+    params = dict(table)
+    check_hyperparams(algo, params, source=source, lines=_key_lines(yaml.compose(text)))
+    return params
+
+
+def _key_lines(document: Any) -> dict[str, int]:
+    """The 1-based line of each key of the ``SelfCalibration-v1`` table, and of the keys of its
+    ``env_kwargs`` and ``policy_kwargs`` tables as ``"env_kwargs.floors"``: PyYAML's plain
+    load keeps no positions, its node graph (``yaml.compose``) does."""
+    import yaml
+
+    lines: dict[str, int] = {}
+
+    def pairs(node: Any) -> list[tuple[Any, Any]]:
+        if not isinstance(node, yaml.MappingNode):
+            return []
+        return [(k, v) for k, v in node.value if isinstance(k, yaml.ScalarNode)]
+
+    for key, table in pairs(document):
+        if key.value != ENV_ID:
+            continue
+        for name, value in pairs(table):
+            lines[name.value] = name.start_mark.line + 1
+            for inner, _ in pairs(value):
+                lines[f"{name.value}.{inner.value}"] = inner.start_mark.line + 1
+    return lines
+
+
+_Check = Callable[[object], str | None]
+"""A hyperparameter's check: what is wrong with a value (``"must be …, got …"``) or ``None``."""
+
+
+def _shown(value: object) -> str:
+    """``value`` as the message shows it, with a hint where YAML read a number as text."""
+    if isinstance(value, str):
+        try:
+            float(value)
+        except ValueError:
+            if value.startswith(("lin_", "linear_")):
+                return f"{value!r} (rl-zoo3's schedule; odomgym train takes a constant number)"
+            return f"the text {value!r}"
+        # YAML 1.1, which PyYAML and rl-zoo3 read, takes 3e-4 for text: it wants 3.0e-4.
+        return (
+            f"the text {value!r} (YAML reads an exponent without a dot as text: write it "
+            "with one, e.g. 3.0e-4, or as 0.0003)"
+        )
+    return repr(value)
+
+
+def _is_number(value: object) -> bool:
+    return (
+        isinstance(value, int | float)
+        and not isinstance(value, bool)
+        and math.isfinite(float(value))
+    )
+
+
+def _whole(minimum: int, *, also: int | None = None) -> _Check:
+    """A whole number >= ``minimum`` (or equal to ``also``, SB3's ``-1`` for "all")."""
+    wanted = f"a whole number >= {minimum}" + (f" or {also}" if also is not None else "")
+
+    def check(value: object) -> str | None:
+        if isinstance(value, int) and not isinstance(value, bool):
+            if value >= minimum or value == also:
+                return None
+        return f"must be {wanted}, got {_shown(value)}"
+
+    return check
+
+
+def _number(low: float, high: float = math.inf, *, open_low: bool = False) -> _Check:
+    """A finite number in [low, high] (in (low, high] with ``open_low``)."""
+    lower = "(" if open_low else "["
+    wanted = (
+        f"a number {'>' if open_low else '>='} {low:g}"
+        if high == math.inf
+        else f"a number in {lower}{low:g}, {high:g}]"
+    )
+
+    def check(value: object) -> str | None:
+        if _is_number(value):
+            number = float(value)  # type: ignore[arg-type]
+            if (number > low if open_low else number >= low) and number <= high:
+                return None
+        return f"must be {wanted}, got {_shown(value)}"
+
+    return check
+
+
+def _optional(check: _Check) -> _Check:
+    """``check``, or null (YAML ``null`` / ``~``: SB3's "off")."""
+
+    def optional(value: object) -> str | None:
+        problem = check(value)
+        return None if value is None or problem is None else f"{problem} (or null)"
+
+    return optional
+
+
+def _flag(value: object) -> str | None:
+    return None if isinstance(value, bool) else f"must be true or false, got {_shown(value)}"
+
+
+def _null(what: str) -> _Check:
+    """Only null: a Python class (a replay buffer, say) cannot be written in YAML."""
+
+    def check(value: object) -> str | None:
+        return None if value is None else f"must be null ({what}), got {_shown(value)}"
+
+    return check
+
+
+def _table(value: object) -> str | None:
+    if value is None or isinstance(value, dict):
+        return None
+    return f"must be a table of keyword arguments (key: value lines), got {_shown(value)}"
+
+
+def _train_freq(value: object) -> str | None:
+    """DQN's ``train_freq``: a whole number of steps, or ``[n, step|episode]``."""
+    if _whole(1)(value) is None:
+        return None
+    if (
+        isinstance(value, list)
+        and len(value) == 2
+        and _whole(1)(value[0]) is None
+        and value[1] in ("step", "episode")
+    ):
+        return None
+    return f"must be a whole number >= 1 or [n, step] / [n, episode], got {_shown(value)}"
+
+
+def _no_sde(value: object) -> str | None:
+    if value is False:
+        return None
+    return f"must be false (gSDE needs a continuous action space; {ENV_ID}'s is Discrete), " + (
+        f"got {_shown(value)}"
+    )
+
+
+_SET_BY_TRAIN = {
+    "seed": "--seed sets it",
+    "verbose": "odomgym train shows its own progress",
+    "device": "odomgym train runs the small network on the CPU",
+    "_init_setup_model": "odomgym train builds the model",
+    "env": f"odomgym train makes the {ENV_ID} sessions",
+}
+"""Constructor arguments ``odomgym train`` passes itself: in the file they would clash."""
+
+HYPERPARAM_CHECKS: dict[str, _Check] = {
+    # odomgym's own keys (rl-zoo3's): the rest go to the SB3 algorithm's constructor.
+    "n_timesteps": _whole(1),
+    "n_envs": _whole(1),
+    "env_kwargs": _table,
+    "policy_kwargs": _table,
+    # SB3 2.x (PPO, A2C, DQN), the constraints their documentation and asserts state.
+    "learning_rate": _number(0.0, open_low=True),
+    "n_steps": _whole(1),
+    "batch_size": _whole(1),
+    "n_epochs": _whole(1),
+    "gamma": _number(0.0, 1.0),
+    "gae_lambda": _number(0.0, 1.0),
+    "clip_range": _number(0.0, open_low=True),
+    "clip_range_vf": _optional(_number(0.0, open_low=True)),
+    "normalize_advantage": _flag,
+    "ent_coef": _number(0.0),
+    "vf_coef": _number(0.0),
+    "max_grad_norm": _number(0.0, open_low=True),
+    "use_sde": _no_sde,
+    "sde_sample_freq": _whole(1, also=-1),
+    "rollout_buffer_class": _null("a Python class cannot be written in YAML"),
+    "rollout_buffer_kwargs": _table,
+    "target_kl": _optional(_number(0.0, open_low=True)),
+    "stats_window_size": _whole(1),
+    "tensorboard_log": _optional(lambda v: None if isinstance(v, str) else "must be a folder"),
+    "rms_prop_eps": _number(0.0, open_low=True),
+    "use_rms_prop": _flag,
+    "buffer_size": _whole(1),
+    "learning_starts": _whole(0),
+    "tau": _number(0.0, 1.0, open_low=True),
+    "train_freq": _train_freq,
+    "gradient_steps": _whole(1, also=-1),
+    "replay_buffer_class": _null("a Python class cannot be written in YAML"),
+    "replay_buffer_kwargs": _table,
+    "optimize_memory_usage": _flag,
+    "target_update_interval": _whole(1),
+    "exploration_fraction": _number(0.0, 1.0),
+    "exploration_initial_eps": _number(0.0, 1.0),
+    "exploration_final_eps": _number(0.0, 1.0),
+}
+"""The check of each hyperparameter a file may set (keys an algorithm does not take are
+refused before these run; keys a newer SB3 adds pass unchecked)."""
+
+_PER_ALGO: dict[str, dict[str, _Check]] = {
+    # PPO asserts batch_size > 1 (SB3 issue 440: the advantage of one sample normalises to NaN).
+    "ppo": {"batch_size": _whole(2)},
+}
+
+
+def check_hyperparams(
+    algo: str, params: dict[str, Any], *, source: str, lines: dict[str, int] | None = None
+) -> None:
+    """Refuse a hyperparameter ``algo`` does not take or a value of the wrong type or range,
+    in one line naming ``source``, the key's line (from ``lines``, see :func:`_key_lines`) and
+    the key; ``env_kwargs`` are checked by :class:`~odomgym.envs.selfcal.SelfCalibrationEnv`
+    itself, one key at a time so that the line is the key's.
+
+    Raises:
+        SpecError: with ``field`` the key (``env_kwargs.floors`` for an env setting).
+    """
+    lines = lines or {}
+
+    def where(key: str) -> str:
+        line = lines.get(key)
+        return f"{source}:{line}" if line else source
+
+    def refuse(key: str, message: str) -> None:
+        raise SpecError(message, field=key, source=where(key))
+
+    takes = _algorithm_keys(algo)
+    for key, value in params.items():
+        if not isinstance(key, str):
+            refuse(str(key), f"key {key!r} is not a name")
+        if key in _SET_BY_TRAIN:
+            refuse(key, f"{key} cannot be set in the hyperparameter file: {_SET_BY_TRAIN[key]}")
+        if takes is not None and key not in takes:
+            allowed = sorted(takes - set(_SET_BY_TRAIN))
+            close = difflib.get_close_matches(key, allowed, n=1)
+            hint = f"did you mean {close[0]}? " if close else ""
+            refuse(
+                key,
+                f"{key} is not a hyperparameter of {algo}; {hint}it takes {', '.join(allowed)}",
+            )
+        if key == "policy":
+            if value != "MlpPolicy":
+                refuse(
+                    key,
+                    "policy must be MlpPolicy (the observation is a flat vector, and "
+                    f"odomgym exports an MLP), got {_shown(value)}",
+                )
+            continue
+        check = _PER_ALGO.get(algo, {}).get(key) or HYPERPARAM_CHECKS.get(key)
+        problem = check(value) if check else None
+        if problem:
+            refuse(key, f"{key} {problem}")
+    _check_policy_kwargs(algo, params.get("policy_kwargs") or {}, refuse)
+    _check_env_kwargs(params.get("env_kwargs") or {}, refuse)
+
+
+def _algorithm_keys(algo: str) -> set[str] | None:
+    """The keys a file may give ``algo``: rl-zoo3's own and the SB3 constructor's arguments
+    (``None`` without SB3, whose absence the caller reports)."""
+    try:
+        import stable_baselines3 as sb3
+    except ImportError:
+        return None
+    algorithm = getattr(sb3, algo.upper())
+    constructor = set(inspect.signature(algorithm).parameters) - {"self", "policy"}
+    return constructor | {"n_timesteps", "n_envs", "policy", "env_kwargs"}
+
+
+def _check_policy_kwargs(
+    algo: str, kwargs: dict[str, Any], refuse: Callable[[str, str], None]
+) -> None:
+    """``net_arch`` as whole layer widths (PPO/A2C: or ``{pi: […], vf: […]}``), and no key
+    whose value would be a Python object (``activation_fn``, ``*_class``): YAML cannot give
+    one, and rl-zoo3's ``"dict(…)"`` strings are Python, which odomgym does not run."""
+    for key, value in kwargs.items():
+        field = f"policy_kwargs.{key}"
+        if key == "net_arch":
+            widths = [value] if algo == "dqn" or isinstance(value, list) else None
+            if algo != "dqn" and isinstance(value, dict):
+                unknown = sorted(set(value) - {"pi", "vf"})
+                if unknown:
+                    refuse(field, f"{field} takes the keys pi and vf, got {', '.join(unknown)}")
+                widths = list(value.values())
+            good = widths is not None and all(
+                isinstance(w, list) and all(_whole(1)(n) is None for n in w) for w in widths
+            )
+            if not good:
+                refuse(
+                    field,
+                    f"{field} must be a list of layer widths (whole numbers >= 1), e.g. "
+                    f"[64, 64]"
+                    + ("" if algo == "dqn" else ", or {pi: [64, 64], vf: [64, 64]}")
+                    + f", got {_shown(value)}",
+                )
+        elif key == "activation_fn" or key.endswith("_class"):
+            refuse(
+                field,
+                f"{field} names a Python object, which a YAML file cannot give (the exported "
+                "policy runs tanh for ppo/a2c and ReLU for dqn, SB3's defaults): leave it out",
+            )
+
+
+def _check_env_kwargs(kwargs: dict[str, Any], refuse: Callable[[str, str], None]) -> None:
+    """Each ``env_kwargs`` key as :class:`~odomgym.envs.selfcal.SelfCalibrationEnv` checks it
+    (alone, so that an error is at its own line), then all of them together."""
+    from odomgym.envs.selfcal import SelfCalibrationEnv
+
+    known = set(inspect.signature(SelfCalibrationEnv).parameters)
+    for key, value in kwargs.items():
+        field = f"env_kwargs.{key}"
+        if key not in known:
+            takes = ", ".join(sorted(known))
+            refuse(field, f"{field}: {ENV_ID} takes no setting {key}; it takes {takes}")
+        try:
+            SelfCalibrationEnv(**{key: value})
+        except SpecError as exc:
+            refuse(field, f"{field}: {exc}")
+    try:
+        SelfCalibrationEnv(**kwargs)
+    except SpecError as exc:
+        refuse("env_kwargs", f"env_kwargs: {exc}")
 
 
 def export_policy(model: Any, meta: dict[str, Any]) -> MlpPolicy:
@@ -231,13 +553,15 @@ def train(
     policy_name = params.pop("policy", "MlpPolicy")
     if total < 1:
         raise SpecError(f"steps must be >= 1, got {total}", field="steps")
-    algorithm = getattr(sb3, algo.upper())
-    takes = set(inspect.signature(algorithm).parameters) - {"self", "policy", "env"}
-    unknown = sorted(set(params) - takes)
-    if unknown:
+    algorithm = getattr(sb3, algo.upper())  # load_hyperparams refused what it does not take
+    rollout_steps = int(params.get("n_steps", 2048))
+    if algo == "ppo" and rollout_steps * n_envs < 2 and params.get("normalize_advantage", True):
+        # PPO asserts this in its constructor: one transition's advantage normalises to NaN.
         raise SpecError(
-            f"{hyperparams or f'{algo}.yml'}: {algo} takes no hyperparameter {', '.join(unknown)}",
-            field="hyperparams",
+            f"n_steps × sessions = {rollout_steps} × {n_envs} must be >= 2 for ppo (one "
+            "transition per rollout cannot have its advantage normalised): raise n_steps in "
+            f"{hyperparams or f'{algo}.yml'} or --envs",
+            field="n_steps",
         )
     if checkpoint_every < 1:
         raise SpecError(
