@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -126,8 +126,8 @@ class FloorSpec:
     def __post_init__(self) -> None:
         require_positive("friction", self.friction)
         require_range("roughness", self.roughness, 0.0, MAX_ROUGHNESS)
-        object.__setattr__(self, "bumps", tuple(self.bumps))
-        object.__setattr__(self, "patches", tuple(self.patches))
+        object.__setattr__(self, "bumps", _items(CableBump, "bumps", self.bumps))
+        object.__setattr__(self, "patches", _items(FrictionPatch, "patches", self.patches))
 
     # ------------------------------------------------------------------ vectorised queries
     def friction_at(self, x: FloatArray, y: FloatArray) -> FloatArray:
@@ -254,6 +254,32 @@ def _list_of_tables(value: object, name: str, path: Path | None) -> Sequence[Map
             source=locate_key(path, name) if path else None,
         )
     return value
+
+
+def _items(kind: type[Any], name: str, given: Any) -> tuple[Any, ...]:
+    """``bumps`` or ``patches`` as a tuple of ``kind``: each entry one already, or a mapping
+    of its fields (as in a floor file); anything else refused, naming the entry. A dict had
+    been stored as it was and ended in ``AttributeError: 'dict' object has no attribute 'x'``
+    at the first step on the floor, and a single patch in ``TypeError: not iterable``."""
+    if isinstance(given, str | bytes | Mapping | kind) or not isinstance(given, Iterable):
+        raise SpecError(
+            f"{name} must be a list of {kind.__name__} (or of tables of its fields), got "
+            f"{type(given).__name__}",
+            field=name,
+        )
+    out = []
+    for index, item in enumerate(given):
+        if isinstance(item, kind):
+            out.append(item)
+        elif isinstance(item, Mapping):
+            out.append(_build_item(kind, f"{name}[{index}]", item, None))
+        else:
+            raise SpecError(
+                f"{name}[{index}] must be a {kind.__name__} or a table of its fields, got "
+                f"{type(item).__name__}",
+                field=f"{name}[{index}]",
+            )
+    return tuple(out)
 
 
 def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path | None) -> Any:

@@ -325,6 +325,13 @@ class RobotSpec:
     # ------------------------------------------------------------------ validation
     def validate(self, source: str | None = None) -> None:
         """Raise :class:`SpecError` naming the first invalid field."""
+        for key in ("name", "source"):
+            if not isinstance(getattr(self, key), str):
+                raise SpecError(
+                    f"{key} must be a string, got {type(getattr(self, key)).__name__}",
+                    field=key,
+                    source=source,
+                )
         for name, (low, high) in ROBOT_RANGES.items():
             require_range(name, getattr(self, name), low, high, source=source)
         for true, nominal in (
@@ -588,6 +595,12 @@ class RobotSpec:
         Accepts either a flat table or one under ``[robot]``; ``e_d``/``e_b``/``e_s`` may be
         given instead of the true diameters and wheelbase.
         """
+        if not isinstance(data, Mapping):
+            raise SpecError(
+                f"a robot spec is a table of fields, got {type(data).__name__}",
+                field="robot",
+                source=str(path) if path else None,
+            )
         refuse_stray_keys(data, "robot", path)
         table = dict(data.get("robot", data))
         errors = {k: table.pop(k) for k in ("e_d", "e_b", "e_s") if k in table}

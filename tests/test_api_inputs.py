@@ -179,3 +179,32 @@ def test_the_leaderboard_judges_every_method_on_the_same_sessions() -> None:
     text = format_leaderboard(board)
     assert "judged on the same 2 evaluation sessions" in text
     assert "## In-session results (no published_results.csv" in text  # a user's own data
+
+
+def test_a_floor_takes_its_cables_and_patches_as_objects_or_tables() -> None:
+    """``FloorSpec(bumps=[{"x": 1, "y": 0}])`` was stored as given and ended in
+    ``AttributeError: 'dict' object has no attribute 'x'`` at the first step on it; a single
+    patch in ``TypeError: not iterable``. Tables are now built (as a floor file's are) and
+    anything else refused, naming the entry."""
+    from odomgym.floor import CableBump, FloorSpec, FrictionPatch
+
+    floor = FloorSpec(bumps=[{"x": 1.0, "y": 0.0}], patches=[FrictionPatch(0, 0, 1, 1, 0.5)])
+    assert floor.bumps == (CableBump(x=1.0, y=0.0),)
+    assert floor.bump_arrays()[0].tolist() == [1.0]
+    with pytest.raises(SpecError, match="patches must be a list of FrictionPatch") as caught:
+        FloorSpec(patches=FrictionPatch(0, 0, 1, 1, 0.5))  # type: ignore[arg-type]
+    assert caught.value.field == "patches"
+    with pytest.raises(SpecError, match=r"bumps\[1\] must be a CableBump") as caught:
+        FloorSpec(bumps=[CableBump(x=0.0, y=0.0), 3])  # type: ignore[list-item]
+    with pytest.raises(SpecError, match=r"unknown field 'z' in bumps\[0\]"):
+        FloorSpec(bumps=[{"x": 1.0, "z": 0.0}])  # type: ignore[list-item]
+
+
+def test_a_robot_names_a_name_that_is_no_string_and_a_spec_that_is_no_table() -> None:
+    """``name=5`` was taken (the docs quote "name must be a string", which only a file got);
+    ``RobotSpec.from_dict([1])`` ended in ``AttributeError: 'list' object has no attribute
+    'get'``."""
+    with pytest.raises(SpecError, match="name must be a string, got int"):
+        RobotSpec(**BASE, name=5)  # type: ignore[arg-type]
+    with pytest.raises(SpecError, match="a robot spec is a table of fields, got list"):
+        RobotSpec.from_dict([1])  # type: ignore[arg-type]
