@@ -70,10 +70,12 @@ Both envs: ``vehicle`` (a preset — ``clapper``, ``clapper-uncalibrated``, ``tr
 configuration; False: each truck's plain dead reckoning), ``estimator`` (any
 :class:`~odomgym.vehicle.estimator.InternalEstimator` factory, instead of IPEC),
 ``render_mode``; ``ClapperStraight-v0`` also ``length`` (of each leg [m], default 18);
-``ClapperRectangle-v0`` also ``direction`` (``"cw"``/``"ccw"``) and ``side`` (which wheels
-cross the cables, ``"left"``/``"right"``). Defaults: the ``clapper`` vehicle (two calibrated
-LabMates), the ``concrete`` floor (:data:`odomgym.vehicle.trial.CLAPPER_FLOOR`, the same as
-the CLI's and the tests') and the ``recommended`` IPEC configuration.
+``ClapperRectangle-v0`` also ``direction`` (``"cw"``/``"ccw"``; a ``reset`` option
+``{"direction": …}`` too, for that episode) and ``side`` (which wheels cross the cables,
+``"left"``/``"right"``); ``ClapperStraight-v0`` reads no ``reset`` option (any is
+refused). Defaults: the ``clapper`` vehicle (two calibrated LabMates), the ``concrete``
+floor (:data:`odomgym.vehicle.trial.CLAPPER_FLOOR`, the same as the CLI's and the tests') and
+the ``recommended`` IPEC configuration.
 
 ## Rendering
 
@@ -104,8 +106,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.envs.base import DrawsLazily, describe_action, real_array
-from odomgym.errors import require_bool
+from odomgym.envs.base import DrawsLazily, describe_action, real_array, reset_options
+from odomgym.errors import SpecError, require_bool, require_known_options
 from odomgym.floor import CableBump, FloorSpec, load_floor
 from odomgym.vehicle.cable_layout import CableLayer, evenly, rectangle_cable_positions
 from odomgym.vehicle.ipec import ipec_estimator
@@ -172,7 +174,9 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
         self._trace: Any = None
 
     # ------------------------------------------------------------------ to implement
-    def _path(self) -> VehiclePath:
+    def _path(self, options: dict[str, Any]) -> VehiclePath:
+        """The episode's path from the ``reset`` options (each env names the ones it reads and
+        refuses any other)."""
         raise NotImplementedError
 
     def _cables(self, path: VehiclePath) -> CableLayer | None:
@@ -183,8 +187,7 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         super().reset(seed=seed)
-        del options
-        path = self._path()
+        path = self._path(reset_options(options))
         self._trial = VehicleTrial(
             self.vehicle,
             self.floor,
@@ -354,7 +357,8 @@ class ClapperStraightEnv(ClapperEnv):
         self.bumps, self.length = int(bumps), float(length)
         super().__init__(vehicle, floor, ipec=ipec, estimator=estimator, render_mode=render_mode)
 
-    def _path(self) -> VehiclePath:
+    def _path(self, options: dict[str, Any]) -> VehiclePath:
+        require_known_options(options, (), "ClapperStraight-v0")
         return straight_path(self.length)
 
     def _cables(self, path: VehiclePath) -> CableLayer | None:
@@ -387,8 +391,15 @@ class ClapperRectangleEnv(ClapperEnv):
         self.direction, self.bumps, self.side = direction, bumps, side
         super().__init__(vehicle, floor, ipec=ipec, estimator=estimator, render_mode=render_mode)
 
-    def _path(self) -> VehiclePath:
-        return rectangle_path(direction=self.direction)
+    def _path(self, options: dict[str, Any]) -> VehiclePath:
+        require_known_options(options, ("direction",), "ClapperRectangle-v0")
+        direction = options.get("direction", self.direction)
+        if direction not in ("cw", "ccw"):
+            raise SpecError(
+                f"options['direction'] must be 'cw' or 'ccw', got {direction!r}",
+                field="options.direction",
+            )
+        return rectangle_path(direction=direction)
 
     def _cables(self, path: VehiclePath) -> CableLayer | None:
         if not self.bumps:

@@ -208,3 +208,27 @@ def test_a_robot_names_a_name_that_is_no_string_and_a_spec_that_is_no_table() ->
         RobotSpec(**BASE, name=5)  # type: ignore[arg-type]
     with pytest.raises(SpecError, match="a robot spec is a table of fields, got list"):
         RobotSpec.from_dict([1])  # type: ignore[arg-type]
+
+
+def test_the_clapper_envs_read_their_reset_options_and_refuse_others() -> None:
+    """``ClapperRectangle-v0`` ignored ``reset(options={"direction": "ccw"})`` and drove cw;
+    now the option sets the episode's direction, and an option no CLAPPER env reads is
+    refused."""
+    from odomgym.vehicle.paths import rectangle_path
+
+    def driven(env: gym.Env, direction: str) -> bool:
+        legs = env.unwrapped._trial.path.legs
+        expected = rectangle_path(direction=direction).legs
+        return len(legs) == len(expected) and all(
+            np.array_equal(a.points, b.points) for a, b in zip(legs, expected, strict=True)
+        )
+
+    env = gym.make("ClapperRectangle-v0")
+    env.reset(seed=0, options={"direction": "ccw"})
+    assert driven(env, "ccw") and not driven(env, "cw")
+    env.reset(seed=0)
+    assert driven(env, "cw")
+    with pytest.raises(SpecError, match=r"options\['direction'\] must be 'cw' or 'ccw'"):
+        env.reset(options={"direction": "left"})
+    with pytest.raises(SpecError, match="unknown reset option 'direction' of ClapperStraight-v0"):
+        gym.make("ClapperStraight-v0").reset(options={"direction": "ccw"})
