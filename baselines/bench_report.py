@@ -28,7 +28,21 @@ from odomgym.lab.population import BENCH_FLOORS
 from odomgym.lab.report import plot_return_errors
 from odomgym.robot import PRESETS
 
-__all__ = ["markdown_summary", "write_outputs"]
+__all__ = ["OUTPUT_FILES", "is_output_name", "markdown_summary", "write_outputs"]
+
+OUTPUT_FILES = ("summary.md", "summary.csv", "results.csv", "results.json", "improvement.png")
+"""The files :func:`write_outputs` writes into the output folder, besides one
+``scatter_<method>.png`` per method: what ``odomgym bench`` may replace there."""
+
+SCATTER_PREFIX, SCATTER_SUFFIX = "scatter_", ".png"
+
+
+def is_output_name(name: str) -> bool:
+    """Whether a file called ``name`` is one :func:`write_outputs` writes (:data:`OUTPUT_FILES`
+    or a ``scatter_<method>.png``)."""
+    scatter = name.startswith(SCATTER_PREFIX) and name.endswith(SCATTER_SUFFIX)
+    return name in OUTPUT_FILES or scatter
+
 
 LARGE_EB = 0.025  # |E_b − 1| above this counts as a "large" wheelbase error
 
@@ -132,7 +146,11 @@ def _csv(records: Sequence[dict[str, Any]]) -> str:
 def write_outputs(
     config: BenchConfig, rows: Sequence[dict[str, Any]], out: Path, elapsed: float
 ) -> list[Path]:
-    """Write every output file into ``out``; returns their paths."""
+    """Write every output file into ``out``; returns their paths.
+
+    A ``scatter_<method>.png`` of an earlier run whose method is not in this one is removed
+    (after everything else is written): beside this run's summary it would read as one of its
+    results."""
     out.mkdir(parents=True, exist_ok=True)
     plain = [{k: v for k, v in r.items() if k != "scatter"} for r in rows]
     summary = summarize(rows)
@@ -150,7 +168,7 @@ def write_outputs(
     written.append(_plot_improvements(config, rows, out / "improvement.png"))
     for row in rows:
         if "scatter" in row:
-            path = out / f"scatter_{row['method']}.png"
+            path = out / f"{SCATTER_PREFIX}{row['method']}{SCATTER_SUFFIX}"
             before, after = row["scatter"]["before"], row["scatter"]["after"]
             plot_return_errors(
                 path,
@@ -162,6 +180,9 @@ def write_outputs(
                 f"(robot {row['robot']}, {row['floor']} floor)",
             )
             written.append(path)
+    for stale in out.glob(f"{SCATTER_PREFIX}*{SCATTER_SUFFIX}"):
+        if stale not in written and stale.is_file() and not stale.is_symlink():
+            stale.unlink()
     return written
 
 

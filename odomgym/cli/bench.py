@@ -34,6 +34,12 @@ if TYPE_CHECKING:
 JOURNAL_NAME = "journal.jsonl"
 """The file in ``--out`` recording every finished chunk of robots while the benchmark runs."""
 
+SKID_FILES = ("skid_models.md", "skid_models.json", "skid_models.png")
+"""What ``bench skid`` writes into ``--out``
+(:func:`odomgym.baselines.skid_bench.write_skid_outputs`)."""
+
+_SHOWN = 5  # foreign entries a refusal names; the rest are counted
+
 
 def register(commands: Commands) -> None:
     """Add ``bench``."""
@@ -69,9 +75,12 @@ def register(commands: Commands) -> None:
         "skid-steer robots (skid_icr) to the default methods and leaves the oracle row out: "
         "its apparent track emerges from the contacts, so no true geometry is its odometry's",
     )
+    # The list options accumulate when repeated (--floor concrete --floor rough runs both), as
+    # a user expects; argparse's default "store" kept only the last silently.
     parser.add_argument(
         "--presets",
         nargs="+",
+        action="extend",
         metavar="PRESET",
         choices=skid_presets,
         help=f"skid: the skid-steer presets (default: all: {', '.join(skid_presets)})",
@@ -79,6 +88,7 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "--floor",
         nargs="+",
+        action="extend",
         metavar="FLOOR",
         help="calibrators: benchmark floors (default: all): "
         + "; ".join(f"{name}: {floor.description}" for name, floor in BENCH_FLOORS.items())
@@ -87,6 +97,7 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "--methods",
         nargs="+",
+        action="extend",
         help="calibrators (default: every method made for differential-drive robots, selfcal "
         "included: its shipped policy runs in numpy; skid_icr too with a skid-steer --base)",
     )
@@ -94,7 +105,7 @@ def register(commands: Commands) -> None:
         "--budget",
         type=count,
         nargs="+",
-        default=[16],
+        action="extend",  # no default list: "extend" would add the values given to it
         help="runs per calibration (16); several values compare budgets, e.g. --budget 16 4",
     )
     parser.add_argument("--jobs", type=processes, help="worker processes (default: all cores)")
@@ -144,6 +155,8 @@ def run(args: argparse.Namespace) -> int:
         raise SpecError("--presets is an option of `odomgym bench skid`", field="--presets")
     if args.robots is None:
         args.robots = 100
+    if args.budget is None:
+        args.budget = [16]
     if args.floor is None:
         from odomgym.lab.population import BENCH_FLOORS
 
@@ -171,6 +184,7 @@ def run_skid(args: argparse.Namespace) -> int:
             raise SpecError(f"{option} is an option of `odomgym bench calibrators`", field=option)
     report = Reporter.of(args)
     check_output(args.out, option="--out", folder=True)
+    check_out_folder(Path(args.out))
     config = SkidBenchConfig(
         robots=tuple(args.presets) if args.presets else SkidBenchConfig.robots,
         floors=tuple(args.floor) if args.floor else SkidBenchConfig.floors,
@@ -208,6 +222,7 @@ def run_calibrators(args: argparse.Namespace) -> int:
     check_backend(args)
     backend = Backend(args.backend)
     check_output(args.out, option="--out", folder=True)
+    check_out_folder(Path(args.out))
     check_methods(args.methods)
     population = Population(base=args.base or "labmate")
     skid = PRESETS[population.base].is_skid_steer
@@ -255,3 +270,92 @@ def run_calibrators(args: argparse.Namespace) -> int:
         report.text(f"{len(rows)} results in {elapsed:.1f} s on {jobs} job(s) ({backend}).")
     report.wrote(written)
     return 0
+
+
+# ----------------------------------------------------------------------- the output folder
+def _plain_file(path: Path) -> bool:
+    """A regular file, not a link (a link named like an output may point at a user's file)."""
+    return path.is_file() and not path.is_symlink()
+
+
+def _json_with(path: Path, *keys: str) -> bool:
+    """Whether ``path`` is a plain file holding a JSON object with every one of ``keys``: how
+    an earlier benchmark's ``results.json`` or ``skid_models.json`` is told from a user's."""
+    import json
+
+    if not _plain_file(path):
+        return False
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(document, dict) and all(key in document for key in keys)
+
+
+def _is_journal(path: Path) -> bool:
+    """Whether ``path`` is a benchmark's journal: a plain file whose first line is a journal
+    header, or empty (a journal cut short before its header was synced)."""
+    import json
+
+    if not _plain_file(path):
+        return False
+    try:
+        with path.open(encoding="utf-8") as f:
+            first = f.readline()
+        if not first:
+            return True
+        header = json.loads(first)
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(header, dict) and "journal" in header
+
+
+def foreign_entries(out: Path) -> list[str]:
+    """The entries of ``out`` (sorted names) that no earlier benchmark wrote: empty for a
+    missing or empty folder, or one holding only an earlier ``bench calibrators`` or ``bench
+    skid`` run's files (both write to ``bench-out`` by default). A desktop's own files
+    (:data:`odomgym.diagnose.report.OS_FILES`) are never foreign.
+
+    Why: the benchmark writes its files over those of the same names and removes an earlier
+    run's scatter plots, so a user's ``summary.md`` in ``--out`` was overwritten silently. A
+    file counts as the benchmark's only beside the record that says so — a ``results.json``
+    or ``skid_models.json`` of the benchmark's layout, or a benchmark journal — and only as a
+    plain file (a folder or link named like an output is the user's)."""
+    from odomgym.baselines.bench_report import is_output_name
+    from odomgym.diagnose.report import OS_FILES
+
+    if not out.is_dir():
+        return []
+    calibrators = _json_with(out / "results.json", "config", "rows") or _is_journal(
+        out / JOURNAL_NAME
+    )
+    skid = _json_with(out / "skid_models.json", "results", "seconds")
+
+    def own(entry: Path) -> bool:
+        name = entry.name
+        if name in OS_FILES:
+            return _plain_file(entry)
+        if name == JOURNAL_NAME:
+            return _is_journal(entry)
+        mine = (calibrators and is_output_name(name)) or (skid and name in SKID_FILES)
+        return mine and _plain_file(entry)
+
+    return sorted(entry.name for entry in out.iterdir() if not own(entry))
+
+
+def check_out_folder(out: Path) -> None:
+    """Refuse, before any work and in one line naming ``--out``, an output folder holding
+    anything an earlier benchmark did not write (:func:`foreign_entries`): the first few are
+    named. A new, empty or earlier benchmark's folder passes (``--resume`` reads its journal).
+    """
+    foreign = foreign_entries(out)
+    if not foreign:
+        return
+    shown = ", ".join(foreign[:_SHOWN])
+    if len(foreign) > _SHOWN:
+        shown += f" and {len(foreign) - _SHOWN} more"
+    raise SpecError(
+        f"--out {out}: holds {shown}, which the benchmark did not write; its files would be "
+        "written over and beside them: give a new or empty folder, or an earlier benchmark's",
+        field="out",
+    )
