@@ -66,6 +66,7 @@ from odomgym.baselines.base import (
     require_choice,
 )
 from odomgym.baselines.umbmark import e_b_from_alpha, perform_squares
+from odomgym.errors import SpecError
 from odomgym.lab.experiment import Lab
 from odomgym.odometry.calibration import Calibration
 from odomgym.odometry.runs import require_differential, return_error
@@ -276,13 +277,23 @@ class Lee(SquareCalibrator):
             ) from exc
         cw_err = np.array([return_error(r, robot, calibration) for r in cw])
         ccw_err = np.array([return_error(r, robot, calibration) for r in ccw])
-        found = lee_estimates(
-            cw_err,
-            ccw_err,
-            self.side,
-            calibration.wheelbase_scale * robot.wheelbase,
-            diameter_error=self.diameter_error,
-        )
+        try:
+            found = lee_estimates(
+                cw_err,
+                ccw_err,
+                self.side,
+                calibration.wheelbase_scale * robot.wheelbase,
+                diameter_error=self.diameter_error,
+            )
+        except ValueError as exc:
+            # The only way measured return errors break the model: a leg bent tighter than
+            # the wheelbase allows, which squares far too small for the robot's errors (the
+            # user's side) produce. An option's error, so a SpecError naming it, not a bug.
+            raise SpecError(
+                f"side {self.side:g} m is too short for Lee et al.'s model on this robot: {exc}; "
+                "drive larger squares (the paper's are 4 m)",
+                field="side",
+            ) from None
         summary = summarize_umbmark(cw_err, ccw_err)
         estimates = found.as_dict()
         estimates.update(

@@ -73,7 +73,43 @@ def register(commands: Commands) -> None:
     parser.add_argument(
         "--plot", help="write the before/after return-error scatter here (.png, .pdf, .svg)"
     )
-    parser.set_defaults(handler=run)
+    # The simulation's options default to None here and take their defaults in `run`, so that
+    # one given with --data (which they do not apply to) can be told from one left out.
+    parser.set_defaults(handler=run, **dict.fromkeys(SIMULATION_DEFAULTS))
+
+
+SIMULATION_DEFAULTS: dict[str, object] = {
+    "robot": "labmate",
+    "ed": None,
+    "eb": None,
+    "es": None,
+    "floor": "smooth",
+    "seed": 0,
+    "side": 4.0,
+    "runs": 5,
+    "policy": None,
+    "schedule": None,
+    "plot": None,
+}
+"""The options that apply to a simulated calibration only, with their defaults (the help
+texts say the same): with ``--data`` the session's own robot, floor and runs are used."""
+
+
+def _check_simulation_options(args: argparse.Namespace) -> None:
+    """Refuse, before any work, simulation options given with ``--data``, naming them — they
+    were silently ignored (a --plot never written, an --ed never applied); without --data,
+    fill in their defaults."""
+    given = [name for name in SIMULATION_DEFAULTS if getattr(args, name) is not None]
+    if args.data and given:
+        options = ", ".join("--" + name for name in given)
+        raise SpecError(
+            f"{options} apply to a simulated calibration, not to --data (the session's own "
+            "robot, floor and runs are used): leave them out, or leave out --data",
+            field=given[0],
+        )
+    for name, default in SIMULATION_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
 
 
 def _export_path(args: argparse.Namespace) -> str:
@@ -82,14 +118,31 @@ def _export_path(args: argparse.Namespace) -> str:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    """Fail before any calibration if an output cannot be written (or is named uselessly)."""
+    """Fail before any calibration if an output cannot be written (or is named uselessly), or
+    two outputs are one file: the later write would replace the earlier (--save and
+    --export-path at the same file lost the calibration to the ROS 2 YAML)."""
     if args.export_path is not None and args.export is None:
         raise SpecError("--export-path needs --export ros2", field="export_path")
+    outputs: list[tuple[str, str]] = []
     if args.save:
         check_output(args.save, option="--save")
+        outputs.append(("--save", args.save))
     if args.export:
         check_output(_export_path(args), option="--export-path")
+        outputs.append(("--export-path", _export_path(args)))
     check_plot_path(args.plot)
+    if args.plot:
+        outputs.append(("--plot", args.plot))
+    seen: dict[Path, str] = {}
+    for option, path in outputs:
+        target = Path(path).resolve()
+        if target in seen:
+            raise SpecError(
+                f"{seen[target]} and {option} name the same file {path}; the second would "
+                "replace the first: give each its own file",
+                field=option.lstrip("-").replace("-", "_"),
+            )
+        seen[target] = option
 
 
 def _write_outputs(args: argparse.Namespace, calibration: Calibration) -> list[str]:
@@ -122,6 +175,7 @@ def run(args: argparse.Namespace) -> int:
             field="method",
         )
     cls = CALIBRATORS[args.method]
+    _check_simulation_options(args)
     _check_outputs(args)
     if args.data:
         from odomgym.data import read_session, resolve_data
@@ -153,14 +207,25 @@ def run(args: argparse.Namespace) -> int:
     if args.schedule is not None:
         extra["schedule"] = args.schedule
     calibrator = calibrator_for_squares(cls, side=args.side, runs_per_direction=args.runs, **extra)
-    simulated = calibrate_in_simulation(
-        calibrator,
-        robot,
-        floor,
-        seed=args.seed,
-        validation_side=args.side,
-        validation_runs=args.runs,
-    )
+    try:
+        simulated = calibrate_in_simulation(
+            calibrator,
+            robot,
+            floor,
+            seed=args.seed,
+            validation_side=args.side,
+            validation_runs=args.runs,
+        )
+    except SpecError as exc:
+        # A method's model that the squares of --side break (Lee et al.'s on squares far too
+        # small): the library names its option `side`; here it is the user's --side.
+        if exc.field != "side":
+            raise
+        message = str(exc)
+        if not message.startswith("side "):
+            message = f"side {args.side:g}: {message}"
+        message = "--" + message
+        raise SpecError(message, field="side") from None
     written = _write_outputs(args, simulated.result.calibration)
     if args.plot:
         plot_return_errors(
