@@ -27,6 +27,7 @@ ablation that shows what the estimator does without learning.
 from __future__ import annotations
 
 import json
+import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -136,6 +137,13 @@ class MlpPolicy:
         def refuse(why: str) -> SpecError:
             return SpecError(f"{source}: not a selfcal policy file ({why})", field="policy")
 
+        if not zipfile.is_zipfile(source):
+            # np.load would try the file as a pickle and refuse with its "allow_pickle" text,
+            # which names numpy's switch rather than what the user gave.
+            raise SpecError(
+                f"{source}: not a selfcal policy file (an .npz written by odomgym train selfcal)",
+                field="policy",
+            )
         try:
             data = np.load(source, allow_pickle=False)
             if not isinstance(data, np.lib.npyio.NpzFile):
@@ -184,13 +192,29 @@ def load_policy(name: str) -> MlpPolicy:
         ref = resources.files("odomgym.data.policies") / SHIPPED_POLICY
         with resources.as_file(ref) as path:
             return MlpPolicy.load(path)
+    _check_policy_name(name)
+    return MlpPolicy.load(Path(name))
+
+
+def _check_policy_name(name: str) -> None:
+    """Refuse a ``policy`` that is neither a name nor an existing file, saying which it is —
+    a folder, or no such file — rather than "'adir' is none", which told a user nothing."""
+    if name in ("learned", "scripted"):
+        return
     path = Path(name)
-    if not path.is_file():
-        raise SpecError(
-            f"policy must be 'learned', 'scripted' or a policy .npz file; {name!r} is none",
-            field="policy",
-        )
-    return MlpPolicy.load(path)
+    if path.is_dir():
+        why = "is a folder"
+    elif not path.exists():
+        why = "no such file"
+    elif not path.is_file():
+        why = "is not a regular file"
+    else:
+        return
+    raise SpecError(
+        f"policy {name}: {why}; give 'learned', 'scripted' or a policy .npz file (written by "
+        "odomgym train selfcal)",
+        field="policy",
+    )
 
 
 # ---------------------------------------------------------------------------------- calibrator
@@ -222,12 +246,7 @@ class SelfCalOptions:
             )
         if not isinstance(self.policy, str) or not self.policy:
             raise SpecError(f"policy must be a name or a path, got {self.policy!r}", field="policy")
-        if self.policy not in ("learned", "scripted") and not Path(self.policy).is_file():
-            raise SpecError(
-                f"policy must be 'learned', 'scripted' or a policy .npz file; {self.policy!r} "
-                "is none",
-                field="policy",
-            )
+        _check_policy_name(self.policy)
 
 
 class SelfCal(Calibrator):
