@@ -15,6 +15,7 @@ from odomgym.cli._common import (
     seed,
 )
 from odomgym.errors import SpecError
+from odomgym.floor import MAX_ROUGHNESS
 from odomgym.robot import PRESETS
 
 if TYPE_CHECKING:
@@ -36,7 +37,10 @@ def register(commands: Commands) -> None:
         help=f"robot preset for the simulation ({', '.join(PRESETS)}; default labmate)",
     )
     parser.add_argument(
-        "--k", type=nonnegative, default=0.0005, help="true k [m^0.5] to simulate (0.0005)"
+        "--k",
+        type=roughness,
+        default=0.0005,
+        help=f"true k [m^0.5] to simulate, 0 to {MAX_ROUGHNESS:g} (0.0005)",
     )
     parser.add_argument("--runs", type=count, default=60, help="simulated runs (default 60)")
     parser.add_argument(
@@ -69,14 +73,34 @@ def register(commands: Commands) -> None:
     parser.set_defaults(handler=run)
 
 
+def roughness(text: str) -> float:
+    """An argparse type: a floor roughness k [m^½] the simulation accepts, 0 to
+    :data:`~odomgym.floor.MAX_ROUGHNESS` — checked here so that the refusal names ``--k``
+    (the floor's own check said "roughness must lie in …", an option the command has not)."""
+    value = nonnegative(text)
+    if value > MAX_ROUGHNESS:
+        raise argparse.ArgumentTypeError(
+            f"must lie in [0, {MAX_ROUGHNESS:g}] m^0.5 (a floor's roughness), got {text!r}"
+        )
+    return value
+
+
 def run(args: argparse.Namespace) -> int:
     """Fit (simulating the runs first without ``--data``), then print the fits (a table, or
     one JSON object) and the plots the report says it wrote."""
     from odomgym.data import resolve_data
     from odomgym.noise.experiment import fit_noise_report, format_noise_report
+    from odomgym.noise.fit import MIN_RUNS
 
     report = Reporter.of(args)
     check_plot_path(args.plot)
+    if not args.data and args.runs < MIN_RUNS:
+        # The simulated runs form one group whose mean is removed: fewer than MIN_RUNS leave
+        # nothing the fit accepts, and it had ended in an empty table with exit 0.
+        raise SpecError(
+            f"--runs {args.runs}: the noise fit needs at least {MIN_RUNS} runs",
+            field="runs",
+        )
     data = tuple(resolve_data(folder) for folder in args.data or ())
     try:
         fits = fit_noise_report(
@@ -89,7 +113,10 @@ def run(args: argparse.Namespace) -> int:
             pool=args.pool,
             interval=args.interval,
             plot=args.plot,
+            check_plot=lambda path: check_plot_path(str(path)),
         )
+    except SpecError:
+        raise
     except ValueError as exc:
         raise SpecError(str(exc)) from None
     report.result(lambda: fits, lambda: format_noise_report(fits))

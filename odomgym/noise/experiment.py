@@ -13,7 +13,7 @@ from __future__ import annotations
 import csv
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -173,6 +173,7 @@ def fit_noise_report(
     confidence: float = 0.95,
     n_bootstrap: int = 200,
     plot: str | Path | None = None,
+    check_plot: Callable[[Path], None] | None = None,
 ) -> dict[str, Any]:
     """Fit k_L, k_R on a simulated §6.3 experiment or on recorded sessions; a JSON-safe dict.
 
@@ -188,6 +189,9 @@ def fit_noise_report(
     that cannot be fitted (too few runs) is listed under ``"skipped"`` with the reason.
     ``seed`` drives the simulation and the bootstrap (independent streams). ``plot``: write
     the Fig. 4 scatters there (one file per fit, named after the fit when there are several).
+    ``check_plot``: called with every file ``plot`` may write, once the runs are read and
+    before any fit — the names depend on the pools the data holds, and a command checks them
+    all before the work (a bad one had stopped it after writing the others).
     """
     if pool not in ("all", "path-type", "kind", "session"):
         raise ValueError(f"pool must be 'all', 'path-type', 'kind' or 'session', got {pool!r}")
@@ -231,6 +235,10 @@ def fit_noise_report(
                              "runs": session.n_runs, "calibration": used})  # fmt: skip
         report["source"] = "data"
         report["inputs"] = {"sessions": sessions, "pool": pool, "seed": seed}
+    targets = {n: _plot_target(plot, n, len(pools)) for n in pools} if plot is not None else {}
+    if check_plot is not None:
+        for target in targets.values():
+            check_plot(target)
     report["fits"], report["skipped"], report["plots"] = [], [], []
     for name, samples in pools.items():
         dropped: list[str] = []
@@ -250,14 +258,20 @@ def fit_noise_report(
                 "k_right": fit.k_right_interval[0] <= k <= fit.k_right_interval[1],
             }
         report["fits"].append(entry)
-        if plot is not None:
-            target = Path(plot)
-            if len(pools) > 1:
-                slug = re.sub(r"[^A-Za-z0-9_-]+", "-", name)
-                target = target.with_name(f"{target.stem}-{slug}{target.suffix}")
-            plot_noise_fit(target, fit, title=f"{name}: {fit.n_runs} runs")
-            report["plots"].append(str(target))
+        if name in targets:
+            plot_noise_fit(targets[name], fit, title=f"{name}: {fit.n_runs} runs")
+            report["plots"].append(str(targets[name]))
     return report
+
+
+def _plot_target(plot: str | Path, name: str, pools: int) -> Path:
+    """The file the fit of pool ``name`` is plotted to: ``plot`` itself for the only pool,
+    else ``plot`` with the pool's name after its stem (``noise-ivanjko-spin.png``)."""
+    target = Path(plot)
+    if pools > 1:
+        slug = re.sub(r"[^A-Za-z0-9_-]+", "-", name)
+        target = target.with_name(f"{target.stem}-{slug}{target.suffix}")
+    return target
 
 
 def format_noise_report(report: dict[str, Any]) -> str:
@@ -294,10 +308,12 @@ def format_noise_report(report: dict[str, Any]) -> str:
             scale, unit = (1e3, "mm") if c["unit"] == "m" else (180.0 / math.pi, "deg")
             spread = [f"{scale * math.sqrt(c[key]):.3f} {unit}" for key in
                       ("measured_var", "predicted_var")]  # fmt: skip
-            lines.append(
-                f"{fit['name']:<18}{c['name']:<7}{spread[0]:>12}{spread[1]:>12}"
-                f"{c['ratio']:>11.2f}{c['chi2']:>9.1f}/{c['dof']:<4}{c['p_value']:>8.3f}"
-            )
+            if _defined(c["chi2"]):
+                check = (f"{c['ratio']:>11.2f}{c['chi2']:>9.1f}/{c['dof']:<4}"
+                         f"{c['p_value']:>8.3f}")  # fmt: skip
+            else:  # the runs did not differ: nothing to test (odomgym.noise.fit.ComponentFit)
+                check = f"{'n/a':>11}{'n/a':>14}{'n/a':>8}"
+            lines.append(f"{fit['name']:<18}{c['name']:<7}{spread[0]:>12}{spread[1]:>12}{check}")
         corr = ", ".join(
             f"{key} {_signed(fit['measured_corr'][key])}/{_signed(fit['predicted_corr'][key])}"
             for key in ("x_y", "x_theta", "y_theta")
@@ -309,6 +325,11 @@ def format_noise_report(report: dict[str, Any]) -> str:
             lines.append(f"{fit['name']}: dropped groups of a single run: {groups}")
     lines += [f"skipped {s['name']}: {s['reason']}" for s in report["skipped"]]
     return "\n".join(lines)
+
+
+def _defined(value: float | None) -> bool:
+    """Whether a check's value exists: not None (JSON null) and not NaN."""
+    return value is not None and math.isfinite(value)
 
 
 def _signed(value: float | None) -> str:

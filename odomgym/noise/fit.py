@@ -75,6 +75,11 @@ MIN_RUNS = 5
 """Fewest runs (after removing group means: contrasts + 1) a fit accepts; below this the
 covariance of three components cannot even be estimated."""
 
+ROUND_OFF = 1e-9
+"""Residuals (errors less their group means) no larger than this fraction of the largest error
+are round-off: the runs did not differ (a floor without noise), so the fit's checks against
+the model are undefined (:class:`ComponentFit`)."""
+
 COMPONENTS = (("x", "m"), ("y", "m"), ("theta", "rad"))
 _QUAD_NODES = 16  # exact to round-off for |Δθ| ≲ 1 rad per sample (covariance.py)
 _MAX_SAMPLE_TURN = 1.0  # [rad]; samples turning more go through propagate_path instead
@@ -343,9 +348,16 @@ def _mle(design: _Design) -> tuple[float, float, float]:
     if not math.isfinite(values[best]):
         raise ValueError("the errors are degenerate under every k_L/k_R split (all zero?)")
     low, high = float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])
-    res = optimize.minimize_scalar(
-        lambda u: -profile(u)[0], bounds=(low, high), method="bounded", options={"xatol": 1e-10}
-    )
+    # Where the likelihood is degenerate beside the best split (errors at round-off, as with
+    # no noise at all) the objective is +inf there, and Brent's parabolic step computes inf −
+    # inf: it then takes a golden-section step, as wanted, but numpy warned on the terminal.
+    with np.errstate(invalid="ignore", over="ignore"):
+        res = optimize.minimize_scalar(
+            lambda u: -profile(u)[0],
+            bounds=(low, high),
+            method="bounded",
+            options={"xatol": 1e-10},
+        )
     u = float(res.x) if -float(res.fun) >= values[best] else float(grid[best])
     ell, lam = profile(u)
     return lam * u, lam * (1.0 - u), ell
@@ -401,6 +413,10 @@ class ComponentFit:
             degrees of freedom if the model is right (ignoring that k was fitted).
         p_value: two-sided p of ``chi2``: 2·min(P(χ²_dof ≥ chi2), P(χ²_dof ≤ chi2)); small
             values flag a component the model over- (ratio < 1) or under-predicts (> 1).
+
+    ``ratio``, ``chi2`` and ``p_value`` are NaN (``null`` in JSON, n/a in the table) when the
+    runs did not differ (:data:`ROUND_OFF`): with no noise the fitted k is round-off, and
+    they compared round-off with round-off — negative χ² and p = 0, a false misfit.
     """
 
     name: str
@@ -520,13 +536,18 @@ def _diagnostics(
             dof += len(members)
     measured = residuals.T @ residuals / dof
     predicted /= dof
+    silent = not np.abs(residuals).max() > ROUND_OFF * np.abs(samples.errors).max()
     components = []
     for j, (name, unit) in enumerate(COMPONENTS):
-        upper = float(stats.chi2.sf(chi2[j], dof))
+        if silent:  # no spread to test: the checks are undefined (ComponentFit)
+            ratio = chi2_j = p_value = math.nan
+        else:
+            upper = float(stats.chi2.sf(chi2[j], dof))
+            ratio, chi2_j = float(measured[j, j] / predicted[j, j]), float(chi2[j])
+            p_value = min(1.0, 2.0 * min(upper, 1.0 - upper))
         components.append(
-            ComponentFit(name, unit, float(measured[j, j]), float(predicted[j, j]),
-                         float(measured[j, j] / predicted[j, j]), float(chi2[j]), dof,
-                         min(1.0, 2.0 * min(upper, 1.0 - upper)))
+            ComponentFit(name, unit, float(measured[j, j]), float(predicted[j, j]), ratio,
+                         chi2_j, dof, p_value)
         )  # fmt: skip
     return tuple(components), measured, predicted, residuals, dof
 
