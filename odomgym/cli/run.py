@@ -81,7 +81,8 @@ def register(commands: Commands) -> None:
     straight.add_argument(
         "--return-trip",
         action="store_true",
-        help="turn on the spot at the end and drive back to the start",
+        help="stop at the end and drive back to the start in reverse, without turning (as "
+        "the CLAPPER did: Borenstein 1995, 18 m out and back)",
     )
     _add_outputs(straight)
     straight.set_defaults(handler=run)
