@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import numbers
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TypeVar
 
@@ -30,6 +30,14 @@ class SpecError(ValueError):
         self.source = source
         prefix = f"{source}: " if source else ""
         super().__init__(prefix + message)
+
+
+def first_few(names: Sequence[str], shown: int = 5) -> str:
+    """``names`` for a one-line message: the first ``shown`` joined by commas, the rest
+    counted (``"a, b, c, d, e and 3 more"``); the refusals of an output folder name what it
+    holds this way."""
+    text = ", ".join(names[:shown])
+    return text + (f" and {len(names) - shown} more" if len(names) > shown else "")
 
 
 def raw_line(path: Path, offset: int) -> int:

@@ -25,7 +25,7 @@ from odomgym.cli._common import (
     processes,
     seed,
 )
-from odomgym.errors import SpecError
+from odomgym.errors import SpecError, first_few
 from odomgym.interrupt import Interrupted
 
 if TYPE_CHECKING:
@@ -37,8 +37,6 @@ JOURNAL_NAME = "journal.jsonl"
 SKID_FILES = ("skid_models.md", "skid_models.json", "skid_models.png")
 """What ``bench skid`` writes into ``--out``
 (:func:`odomgym.baselines.skid_bench.write_skid_outputs`)."""
-
-_SHOWN = 5  # foreign entries a refusal names; the rest are counted
 
 
 def register(commands: Commands) -> None:
@@ -351,11 +349,9 @@ def check_out_folder(out: Path) -> None:
     foreign = foreign_entries(out)
     if not foreign:
         return
-    shown = ", ".join(foreign[:_SHOWN])
-    if len(foreign) > _SHOWN:
-        shown += f" and {len(foreign) - _SHOWN} more"
     raise SpecError(
-        f"--out {out}: holds {shown}, which the benchmark did not write; its files would be "
-        "written over and beside them: give a new or empty folder, or an earlier benchmark's",
+        f"--out {out}: holds {first_few(foreign)}, which the benchmark did not write; its "
+        "files would be written over and beside them: give a new or empty folder, or an "
+        "earlier benchmark's",
         field="out",
     )

@@ -18,7 +18,7 @@ from odomgym.diagnose.gate import BLOCKING, MAX_INFLATION, REAL_SIZE, UNIDENTIFI
 from odomgym.diagnose.plots import plot_all
 from odomgym.diagnose.results import GAP_METRIC, Diagnosis, Round
 from odomgym.effects import EFFECTS
-from odomgym.errors import SpecError
+from odomgym.errors import SpecError, first_few
 from odomgym.io import atomic_folder
 
 __all__ = [
@@ -87,18 +87,12 @@ def check_replaceable(folder: Path, *, option: str = "out") -> None:
     foreign = foreign_entries(folder)
     if not foreign:
         return
-    shown = ", ".join(foreign[:_SHOWN])
-    if len(foreign) > _SHOWN:
-        shown += f" and {len(foreign) - _SHOWN} more"
     raise SpecError(
-        f"{option} {folder}: holds {shown}, which diagnose did not write; the report folder is "
-        "replaced whole, so they would be deleted: give a new or empty folder, or an earlier "
-        "diagnose report's",
+        f"{option} {folder}: holds {first_few(foreign)}, which diagnose did not write; the "
+        "report folder is replaced whole, so they would be deleted: give a new or empty "
+        "folder, or an earlier diagnose report's",
         field=option.lstrip("-").replace("-", "_"),
     )
-
-
-_SHOWN = 5  # foreign entries a refusal names; the rest are counted
 
 
 def _clean(value: Any) -> Any:
