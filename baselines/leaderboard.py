@@ -108,7 +108,7 @@ class Leaderboard:
                 {
                     "method": method,
                     "calibrated_on": len({s for s, _ in mine}),
-                    "pairs": len(mine),
+                    "pairs": sum(len(group) for group in per_target),  # the pairs averaged
                     "evaluated_on": len(common),
                     "final_pos_mm": 1e3 * mean("final_position"),
                     "max_pos_mm": 1e3 * mean("max_position"),

@@ -163,11 +163,15 @@ def _is_number(value: object) -> bool:
     )
 
 
-def _whole(minimum: int, *, also: int | None = None) -> _Check:
-    """A whole number >= ``minimum`` (or equal to ``also``, SB3's ``-1`` for "all")."""
+def _whole(minimum: int, *, also: int | None = None, written_as_float: bool = False) -> _Check:
+    """A whole number >= ``minimum`` (or equal to ``also``, SB3's ``-1`` for "all"); with
+    ``written_as_float`` also a float with no fraction (rl-zoo3's files write
+    ``n_timesteps: !!float 1e6``, and it and ``train`` take ``int()`` of it)."""
     wanted = f"a whole number >= {minimum}" + (f" or {also}" if also is not None else "")
 
     def check(value: object) -> str | None:
+        if written_as_float and isinstance(value, float) and value.is_integer():
+            value = int(value)
         if isinstance(value, int) and not isinstance(value, bool):
             if value >= minimum or value == also:
                 return None
@@ -257,8 +261,8 @@ _SET_BY_TRAIN = {
 
 HYPERPARAM_CHECKS: dict[str, _Check] = {
     # odomgym's own keys (rl-zoo3's): the rest go to the SB3 algorithm's constructor.
-    "n_timesteps": _whole(1),
-    "n_envs": _whole(1),
+    "n_timesteps": _whole(1, written_as_float=True),
+    "n_envs": _whole(1, written_as_float=True),
     "env_kwargs": _table,
     "policy_kwargs": _table,
     # SB3 2.x (PPO, A2C, DQN), the constraints their documentation and asserts state.
@@ -512,6 +516,16 @@ def _git_commit() -> str:
         return "unknown"
 
 
+def sb3_arguments(params: dict[str, Any]) -> dict[str, Any]:
+    """``params`` as SB3's constructors take them: a ``train_freq`` written as a YAML list
+    ``[n, step|episode]`` made the tuple SB3 needs (YAML has no tuple; SB3 refuses the list,
+    "frequency … must be an integer"; rl-zoo3 converts it too)."""
+    out = dict(params)
+    if isinstance(out.get("train_freq"), list):
+        out["train_freq"] = tuple(out["train_freq"])
+    return out
+
+
 def train(
     *,
     algo: str = "ppo",
@@ -551,6 +565,7 @@ def train(
     params.pop("n_envs", None)
     env_kwargs = dict(params.pop("env_kwargs", {}))
     policy_name = params.pop("policy", "MlpPolicy")
+    params = sb3_arguments(params)
     if total < 1:
         raise SpecError(f"steps must be >= 1, got {total}", field="steps")
     algorithm = getattr(sb3, algo.upper())  # load_hyperparams refused what it does not take

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 import re
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -86,6 +87,8 @@ def load_named(
     kinds = tuple({type(value) for value in presets.values()})
     if kinds and isinstance(spec, kinds):
         return spec
+    if isinstance(spec, os.PathLike):
+        spec = os.fspath(spec)
     if not isinstance(spec, str | Path):
         what = " or ".join(kind_.__name__ for kind_ in kinds) or kind
         raise SpecError(
@@ -181,12 +184,21 @@ def plain_number(value: object) -> object:
 
 
 def require_finite(name: str, value: object, *, source: str | None = None) -> float:
-    """Return ``value`` as a finite float, or raise :class:`SpecError` naming ``name``. A
-    NumPy number scalar is a number (:func:`plain_number`); a bool is not."""
-    value = plain_number(value)
+    """Return ``value`` as a finite float, or raise :class:`SpecError` naming ``name``.
+
+    A NumPy number scalar is refused here, saying how to pass it: a spec that stores what it is
+    given would keep it, and it would not save as TOML. The specs people build from computed
+    values, :class:`~odomgym.robot.RobotSpec` and
+    :class:`~odomgym.odometry.calibration.Calibration`, convert theirs first
+    (:func:`plain_number`)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
+        hint = (
+            " (a NumPy value: give float(value))"
+            if isinstance(value, numbers.Real) and not isinstance(value, bool)
+            else ""
+        )
         raise SpecError(
-            f"{name} must be a number, got {type(value).__name__} {value!r}",
+            f"{name} must be a number{hint}, got {type(value).__name__} {value!r}",
             field=name,
             source=source,
         )

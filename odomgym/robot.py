@@ -18,7 +18,6 @@ All lengths are metres, masses kilograms, speeds m/s, accelerations m/s².
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -78,19 +77,29 @@ def _effects_argument(effects: Any) -> tuple[EffectTable, list[tuple[str, dict[s
     misspelt name was ignored, and a geometric effect was stored but not applied, so the spec
     saved and loaded back was another robot."""
     if isinstance(effects, tuple):
-        try:
-            return _stored_table(effects), []
-        except TypeError:  # unhashable inside: checked below, refused with its reason
-            pass
+        return _stored_table(effects), []
     return _check_effects(effects)
 
 
-@functools.lru_cache(maxsize=256)
+_STORED: dict[str, EffectTable] = {}
+_STORED_MAX = 256
+
+
 def _stored_table(effects: tuple[Any, ...]) -> EffectTable:
     """:func:`_check_effects` of a table in the stored tuple form, remembered: every
     ``dataclasses.replace`` of a spec passes its table again (a fit builds thousands of specs
-    from a few tables), and checking it each time cost a third of a spec's construction."""
-    table, _ = _check_effects(effects)
+    from a few tables), and checking it each time cost a third of a spec's construction.
+
+    Keyed by the table's ``repr``, not the tuple: tuples compare ``-0.0 == 0.0`` and
+    ``True == 1``, so a tuple key would hand a spec the table another call built, and what it
+    stores would depend on the process's history."""
+    key = repr(effects)
+    table = _STORED.get(key)
+    if table is None:
+        table, _ = _check_effects(effects)
+        if len(_STORED) >= _STORED_MAX:
+            _STORED.clear()
+        _STORED[key] = table
     return table
 
 
@@ -107,17 +116,19 @@ def _check_effects(effects: Any) -> tuple[EffectTable, list[tuple[str, dict[str,
         )
         if not all(len(item) == 2 for item in items):
             raise TypeError
-        entries = [(str(name), dict(values)) for name, values in items]
+        entries = [
+            (str(name), {key: plain_number(value) for key, value in dict(values).items()})
+            for name, values in items
+        ]
     except (TypeError, ValueError):
         raise SpecError(_effects_form(repr(effects)[:60]), field="effects") from None
     table: dict[str, dict[str, float]] = {}
     geometric: list[tuple[str, dict[str, float]]] = []
     for name, values in entries:
         effect = get_effect(name)
-        clean = effect.validate(values)
+        clean = effect.validate(values)  # every value a finite number in its range
         if effect.in_table:
-            table[name] = {str(k): float(v) for k, v in values.items()}
-            del clean
+            table[name] = {str(k): clean[str(k)] for k in values}  # the given keys only
         elif given:
             geometric.append((name, clean))
         else:

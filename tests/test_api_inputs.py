@@ -175,7 +175,7 @@ def test_the_leaderboard_judges_every_method_on_the_same_sessions() -> None:
     rows = {row["method"]: row for row in board.ranking()}
     assert rows["wide"]["final_pos_mm"] == pytest.approx(20.0)  # s2: 10, s3: 30 (s1 not judged)
     assert rows["narrow"]["final_pos_mm"] == pytest.approx(20.0)
-    assert (rows["wide"]["pairs"], rows["wide"]["calibrated_on"]) == (3, 2)
+    assert (rows["wide"]["pairs"], rows["wide"]["calibrated_on"]) == (2, 2)  # s2→s1 not judged
     text = format_leaderboard(board)
     assert "judged on the same 2 evaluation sessions" in text
     assert "## In-session results (no published_results.csv" in text  # a user's own data

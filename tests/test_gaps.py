@@ -251,7 +251,7 @@ def test_a_clock_in_milliseconds_is_said_before_the_diagnosis(
     assert "milliseconds needs dividing by 1000" in err
 
 
-def test_a_robot_file_a_unit_off_its_logs_is_refused_naming_the_field() -> None:
+def test_a_robot_file_a_unit_off_its_logs_is_refused_naming_the_field(tmp_path: Path) -> None:
     """Counts per motor turn given as ticks_per_rev (2× the wheel's): the diagnosis fitted the
     distance scale to its limit and stopped on "true_right_diameter must lie within 0.5–2.0 ×
     wheel_diameter", a field the user never gave. Now one line naming the field at fault
@@ -292,6 +292,24 @@ def test_a_robot_file_a_unit_off_its_logs_is_refused_naming_the_field() -> None:
     swapped = [dataclasses.replace(run, counts=run.counts[:, ::-1].copy()) for run in runs]
     assert refused(nominal, swapped).startswith("ticks_left: the robot turns the other way")
     check_scale(runs, dataclasses.replace(nominal, wheel_diameter=0.15 * 1.1))  # 10 %: a fit's
+    # UMBmark-style logs, measured at each square's ends only: written and read back, a
+    # heading reads ~0 for the 2π turned (modulo 2π), which the check takes as the turn
+    # nearest the odometry's, as the diagnosis does; it had refused them as counters swapped.
+    from odomgym.data.native import read_native
+    from odomgym.diagnose.generate import NOMINAL_ROBOT
+
+    squares = [m for m in rich_protocol() if m.kind == "square"] * 3
+    sparse = generate(
+        IndependentRobot(effects={"wheelbase": {"e_b": 1.01}}),
+        squares,
+        np.random.default_rng(9),
+        endpoints_only=True,
+    )
+    write_native(tmp_path / "umbmark.csv", sparse)
+    back = read_native(tmp_path / "umbmark.csv", robot=NOMINAL_ROBOT)
+    assert abs(float(back[0].true_pose[-1, 2])) < math.pi  # the 2π is gone from the file
+    assert scale_ratios(back, NOMINAL_ROBOT)[1] == pytest.approx(1 / 1.01, abs=2e-3)
+    assert len(usable_runs(back, NOMINAL_ROBOT)[0]) == len(sparse)
     # A skid-steer robot: its apparent track, 1.6 × the real one, is no unit.
     scout = PRESETS["scout2"]
     spins = [

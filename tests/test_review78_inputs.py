@@ -176,7 +176,7 @@ def test_valid_hyperparameter_files_load_as_before(tmp_path: Path) -> None:
     """The shipped files, review 78's own layout, a DQN train_freq pair and nulls still load,
     to the same values."""
     pytest.importorskip("stable_baselines3")
-    from odomgym.baselines.selfcal_train import load_hyperparams
+    from odomgym.baselines.selfcal_train import load_hyperparams, sb3_arguments
 
     for algo in ("ppo", "a2c", "dqn"):
         assert load_hyperparams(algo)["policy"] == "MlpPolicy"
@@ -191,7 +191,15 @@ def test_valid_hyperparameter_files_load_as_before(tmp_path: Path) -> None:
         "  gradient_steps: -1\n  policy_kwargs:\n    net_arch: [32]\n"
     )
     (tmp_path / "dqn.yml").write_text(dqn)
-    assert load_hyperparams("dqn", tmp_path / "dqn.yml")["train_freq"] == [1, "episode"]
+    loaded = load_hyperparams("dqn", tmp_path / "dqn.yml")
+    assert loaded["train_freq"] == [1, "episode"]  # as YAML wrote it; train hands SB3 a tuple:
+    assert sb3_arguments(loaded)["train_freq"] == (1, "episode")  # SB3 refuses the list
+    # rl-zoo3 writes step counts as floats (`!!float 1.5e5`); train takes int() of them.
+    zoo = _hyperparams(tmp_path, "n_timesteps: 150000", "n_timesteps: !!float 1.5e5", "zoo.yml")
+    assert load_hyperparams("ppo", zoo[0])["n_timesteps"] == 150000.0
+    half = _hyperparams(tmp_path, "n_timesteps: 150000", "n_timesteps: 1.5", "half.yml")
+    with pytest.raises(SpecError, match=r"n_timesteps must be a whole number >= 1, got 1\.5"):
+        load_hyperparams("ppo", half[0])
 
 
 def test_ppo_with_a_one_transition_rollout_is_refused_before_any_work(tmp_path: Path) -> None:

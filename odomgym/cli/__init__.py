@@ -57,7 +57,7 @@ from odomgym.cli import (
     run,
     train,
 )
-from odomgym.cli._common import Command, notice
+from odomgym.cli._common import Command, StdoutClosed, notice, to_stdout
 
 # The argument types and the output check under the names they had in the single-module
 # command line, which tests and benchmarks/fuzz_cli.py import from here.
@@ -162,7 +162,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             previous[number] = signal.signal(number, _on_signal)
     try:
         code = handler(args)
-        sys.stdout.flush()  # a closed pipe is found here, not in the interpreter's exit
+        to_stdout("", flush=True)  # a closed pipe is found here, not at the interpreter's exit
         late = interrupt.pending()
         if late is None:
             return code
@@ -176,7 +176,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SpecError as exc:
         notice(f"error: {exc}")
         return 2
-    except BrokenPipeError:
+    except StdoutClosed:
         # The reader is gone (`| head`): no message (it would say nothing the user does not
         # know), and stdout pointed at /dev/null so that the interpreter's own flush at exit
         # does not print "Exception ignored ... BrokenPipeError" (Python's signal module docs,

@@ -306,6 +306,24 @@ def check_plot_path(path: str | None) -> None:
 
 
 # ---------------------------------------------------------------------------------- reporting
+class StdoutClosed(Exception):
+    """stdout's reader is gone (``odomgym … | head``): raised where stdout is written, so that
+    :func:`odomgym.cli.main` stops quietly for this, and only this, broken pipe (another one,
+    a worker's or a socket's, stays an error)."""
+
+
+def to_stdout(text: str, *, flush: bool = False) -> None:
+    """``print(text)`` to stdout (or only a flush, for ``text`` ``""`` with ``flush``), with a
+    closed pipe raised as :class:`StdoutClosed`."""
+    try:
+        if text or not flush:
+            print(text)
+        if flush:
+            sys.stdout.flush()
+    except BrokenPipeError:
+        raise StdoutClosed from None
+
+
 def notice(text: str) -> None:
     """A message from the program itself (an error, an interruption, a retried worker) on
     stderr, prefixed ``odomgym:`` so that it is told apart from a library's output."""
@@ -334,11 +352,11 @@ class Reporter:
 
     def document(self, value: object) -> None:
         """One JSON document on its own line of stdout (a run's record, a summary)."""
-        print(to_json(value))
+        to_stdout(to_json(value))
 
     def text(self, text: str) -> None:
         """Text for a reader (a table, a report) on stdout."""
-        print(text)
+        to_stdout(text)
 
     def result(self, json: Callable[[], object], text: Callable[[], str]) -> None:
         """The command's result: the JSON document with ``--json``, the text otherwise.
@@ -353,7 +371,10 @@ class Reporter:
     def status(self, text: str) -> None:
         """A status line (files written, calibration applied): on stdout beside a table, on
         stderr with ``--json`` so that stdout stays machine-readable."""
-        print(text, file=sys.stderr if self.json else sys.stdout)
+        if self.json:
+            print(text, file=sys.stderr)
+        else:
+            to_stdout(text)
 
     def notice(self, text: str) -> None:
         """A notice about the input that the command works around (a run set aside): one line

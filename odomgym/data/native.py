@@ -29,7 +29,10 @@ The file has a header row with exactly these columns, in any order::
 
 Headings are unwrapped over a run's measured rows (``np.unwrap`` on the non-empty thetas
 only): rows more than π apart in heading with nothing measured between them are taken to be
-the nearer way round, so a sparse log should write unwrapped headings if it turned further.
+the nearer way round, whatever the file wrote (an unwrapped heading is wrapped again). A log
+measured sparsely thus tells a heading only modulo 2π between its measured rows; what reads
+it takes the turn between them as the one nearest the odometry's (the diagnosis' residuals
+wrap a heading difference, and :func:`odomgym.diagnose.screen.scale_ratios` does the same).
 
 Every defect raises :class:`odomgym.errors.SpecError` naming the file, the line and the column.
 """

@@ -256,7 +256,8 @@ def scale_ratios(runs: Sequence[Run], robot: RobotSpec) -> tuple[float | None, f
     The distance ratio is the median over the straight ones (both headings turning less than
     0.05 rad) of the true displacement over the odometry's travel, ≈ E_s; the turn ratio the
     median over the turning ones of the true heading change over the odometry's, ≈ E_s / E_b
-    (negative when the robot turns the other way). Medians,
+    (negative when the robot turns the other way; the true change taken, modulo 2π, nearest the
+    odometry's, as the measured headings tell it no better). Medians,
     so a bump or a tracker's glitch does not move them; straight stretches and heading
     changes, so a tracked point off the axle does not either."""
     per_tick = robot.metres_per_tick
@@ -274,7 +275,11 @@ def scale_ratios(runs: Sequence[Run], robot: RobotSpec) -> tuple[float | None, f
         for end in measured[1:].tolist():
             moved = along[end] - along[start]
             turned = heading[end] - heading[start]
-            truly = pose[end, 2] - pose[start, 2]
+            # The true turn is known only modulo 2π between measured headings (a log measured
+            # at a square's ends reads back ~0 for its 2π): taken as the one nearest the
+            # odometry's, as the diagnosis' residuals wrap a heading difference.
+            gap = pose[end, 2] - pose[start, 2] - turned
+            truly = turned + math.remainder(gap, math.tau)
             if abs(moved) < _STRETCH and abs(turned) < _TURN and abs(truly) < _TURN:
                 continue
             if abs(turned) < _STRAIGHT and abs(truly) < _STRAIGHT:
