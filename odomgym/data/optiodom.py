@@ -60,9 +60,8 @@ from numpy.typing import NDArray
 
 from odomgym.errors import SpecError, require_positive
 from odomgym.odometry.calibration import Calibration
-from odomgym.odometry.runs import Direction, Run
+from odomgym.odometry.runs import MAX_RUN_LENGTH, MIN_RUN_LENGTH, Direction, Run
 from odomgym.robot import ROBOT_RANGES, RobotSpec
-from odomgym.sim.routes import MAX_RUN_LENGTH, MIN_RUN_LENGTH
 
 __all__ = [
     "PATH_TYPES",
@@ -415,8 +414,8 @@ class _Metadata:
 
     def check_side(self, side: float, *, legs: int) -> None:
         """Refuse a side ``L`` [m] whose run (``legs`` sides: 4 on a square, 1 on a straight
-        line) a lab may not drive (:data:`~odomgym.sim.routes.MIN_RUN_LENGTH` ..
-        :data:`~odomgym.sim.routes.MAX_RUN_LENGTH`): the calibrator would otherwise refuse it
+        line) a lab may not drive (:data:`~odomgym.odometry.runs.MIN_RUN_LENGTH` ..
+        :data:`~odomgym.odometry.runs.MAX_RUN_LENGTH`): the calibrator would otherwise refuse it
         later as a bare ``size``, without the metadata file (``L,750``: millimetres)."""
         low, high = MIN_RUN_LENGTH / legs, MAX_RUN_LENGTH / legs
         if not low <= side <= high:

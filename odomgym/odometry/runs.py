@@ -47,6 +47,17 @@ FloatArray = NDArray[np.float64]
 Direction = Literal["cw", "ccw"]
 
 
+MAX_RUN_LENGTH = 1000.0
+"""The longest path one run may drive [m]. A run's poses and counts are recorded at every step,
+so memory grows with its length (1 km at 0.3 m/s is ~67 000 steps of 50 ms per robot); UMBmark's
+square is 16 m, the CLAPPER's longest run 36 m. Longer asks are refused in one line rather than
+failing deep inside numpy's allocator (:mod:`odomgym.sim.routes`), and a measured session's
+side that asks for more is refused at its metadata line (:mod:`odomgym.data.optiodom`)."""
+MIN_RUN_LENGTH = 1e-3
+"""The shortest path one run may drive [m]: below a millimetre a route's direction is lost to
+rounding (a side of 1e-308 m divided by zero)."""
+
+
 @dataclass
 class Run:
     """A run: samples of time, cumulative encoder counts and ground-truth pose.

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from odomgym._kernels import route_update
 from odomgym.errors import SpecError
+from odomgym.odometry.runs import MAX_RUN_LENGTH, MIN_RUN_LENGTH
 
 __all__ = [
     "Route",
@@ -81,16 +82,8 @@ class Route:
         )
 
 
-MAX_RUN_LENGTH = 1000.0
-"""The longest path one run may drive [m]. A run's poses and counts are recorded at every step,
-so memory grows with its length (1 km at 0.3 m/s is ~67 000 steps of 50 ms per robot); UMBmark's
-square is 16 m, the CLAPPER's longest run 36 m. Longer asks are refused in one line rather than
-failing deep inside numpy's allocator."""
 MAX_RUN_TURN = 20.0 * math.pi
 """The largest turn in place of one run [rad]: ten revolutions."""
-MIN_RUN_LENGTH = 1e-3
-"""The shortest path one run may drive [m]: below a millimetre a route's direction is lost to
-rounding (a side of 1e-308 m divided by zero)."""
 MIN_RUN_TURN = 1e-3
 """The smallest turn in place of one run [rad] (0.057°)."""
 
