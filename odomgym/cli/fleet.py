@@ -135,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
     # A bad log stops here, not after the robots before it (minutes). The runs are not kept:
     # diagnose_fleet reads each robot's again when its turn comes, holding one robot's at a
     # time. Reading is about 0.5 s a robot against tens of seconds of diagnosis (a 3-session
-    # example robot, stop 78), and a fleet's runs held together would grow with the fleet.
+    # example robot, measured on 2026-12-02), and a fleet's runs held together would grow
+    # with the fleet.
     for robot in robots:
         read_robot_runs(robot)
     config = DiagnoseConfig(seed=args.seed, jobs=args.jobs or os.cpu_count() or 1)

@@ -1,4 +1,4 @@
-"""The command line after new-user review 78: outputs that would overwrite a user's files or
+"""The command line after a new user's review: outputs that would overwrite a user's files or
 each other are refused before any work, options that would be ignored are refused, user input
 that ended in an internal error or a numpy message is one line naming the option, repeated
 list options accumulate, and help and docs say what the code does."""

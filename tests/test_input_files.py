@@ -1,5 +1,5 @@
-"""Review 78's bad inputs: a ``train selfcal --hyperparams`` file whose values SB3 would refuse
-(or choke on after a rollout), and OptiOdom session metadata written in other units. Each is
+"""A new user's bad input files: a ``train selfcal --hyperparams`` file whose values SB3 would
+refuse (or choke on after a rollout), and OptiOdom session metadata written in other units. Each is
 refused before any work in one line naming the file, the line and the key the user wrote (not
 an odomgym-internal field), and valid inputs read as before."""
 
@@ -61,9 +61,9 @@ def test_train_refuses_a_bad_hyperparameter_at_its_line_before_any_work(
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    """Review 78's hp_neg/hp_str/hp_floor: exit 2, ``file:line: key …``, and no output folder
-    (SB3 had said 'internal error: ValueError' or failed after a rollout, leaving
-    progress.csv behind)."""
+    """A user's negative learning rate, text epochs and misspelt floor: exit 2,
+    ``file:line: key …``, and no output folder (SB3 had said 'internal error: ValueError' or
+    failed after a rollout, leaving progress.csv behind)."""
     pytest.importorskip("stable_baselines3")
     import odomgym.baselines.selfcal_train as selfcal_train
 
@@ -173,7 +173,7 @@ def test_dqn_hyperparameters_are_checked(line: str, key: str, says: str, tmp_pat
 
 
 def test_valid_hyperparameter_files_load_as_before(tmp_path: Path) -> None:
-    """The shipped files, review 78's own layout, a DQN train_freq pair and nulls still load,
+    """The shipped files, a user's own layout, a DQN train_freq pair and nulls still load,
     to the same values."""
     pytest.importorskip("stable_baselines3")
     from odomgym.baselines.selfcal_train import load_hyperparams, sb3_arguments
