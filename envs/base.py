@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from odomgym._jit import kernel
 from odomgym._kernels import REPORT_COLUMNS, REPORT_WIDTH, episode_report
 from odomgym.envs.info import LazyInfo
-from odomgym.errors import SpecError, require_finite
+from odomgym.errors import SpecError, plain_number, require_finite
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.odometry.calibration import Calibration, load_calibration
 from odomgym.odometry.runs import require_differential
@@ -143,6 +143,38 @@ def _clip_unit(values: FloatArray) -> bool:
     for k in range(flat.shape[0]):
         flat[k] = min(max(flat[k], -1.0), 1.0)
     return True
+
+
+MAX_DT = 1.0
+"""The longest control period an env takes [s]. The reference driver and a policy steer once a
+period; at 10 s a 1 m straight was overshot to 2 m in three steps and called done."""
+
+
+def control_period(dt: object) -> float:
+    """``dt`` [s] as a float in (0, :data:`MAX_DT`], else a one-line error naming it (a string
+    had ended in numpy's ``isfinite`` TypeError)."""
+    number = plain_number(dt)
+    if (
+        isinstance(number, bool)
+        or not isinstance(number, int | float)
+        or not 0.0 < number <= MAX_DT
+    ):
+        raise SpecError(
+            f"dt must be a number of seconds in (0, {MAX_DT:g}] (the control period; default "
+            f"0.05), got {dt!r}",
+            field="dt",
+        )
+    return float(number)
+
+
+def route_size(name: str, value: object) -> float:
+    """A route's ``side``/``distance`` [m] as a float, refusing a non-number in one line (a
+    string such as ``"4"`` was taken by ``float``, where the robot's own fields refuse one);
+    its range is the route's to check."""
+    number = plain_number(value)
+    if isinstance(number, bool) or not isinstance(number, int | float):
+        raise SpecError(f"{name} must be a number of metres, got {value!r}", field=name)
+    return float(number)
 
 
 def reset_options(options: Any) -> dict[str, Any]:
@@ -405,9 +437,7 @@ class RouteEnv(DrawsLazily, gym.Env[NDArray[Any], NDArray[Any]]):
             require_differential(self.calibration, "covariance_k (Chong & Kleeman's covariance)")
         self.covariance_k = covariance_k
         self._set_render_mode(render_mode)
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-        self.dt = float(dt)
+        self.dt = control_period(dt)
         # Frames are one control period apart: played back at 1/dt they run in real time.
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.dt}
         self.weights = resolve_weights(reward_weights)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from os import PathLike
 from typing import Any
 
-from odomgym.envs.base import RewardWeights, RouteEnv
+from odomgym.envs.base import RewardWeights, RouteEnv, route_size
 from odomgym.errors import require_bool, require_known_options
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration
@@ -120,8 +120,8 @@ class StraightLineEnv(RouteEnv):
             render_mode=render_mode,
             covariance_k=covariance_k,
         )
-        self.route_rule = StraightRoute(float(distance), require_bool("return_trip", return_trip))
-        self.distance = float(distance)
+        self.distance = route_size("distance", distance)
+        self.route_rule = StraightRoute(self.distance, require_bool("return_trip", return_trip))
         self.return_trip = bool(return_trip)
 
     def _route(self, options: dict[str, Any]) -> Route:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from os import PathLike
 from typing import Any, Literal
 
-from odomgym.envs.base import RewardWeights, RouteEnv
+from odomgym.envs.base import RewardWeights, RouteEnv, route_size
 from odomgym.errors import require_known_options
 from odomgym.floor import FloorSpec
 from odomgym.odometry.calibration import Calibration
@@ -98,8 +98,9 @@ class UMBmarkSquareEnv(RouteEnv):
     path or :class:`~odomgym.floor.FloorSpec`), ``calibration`` (a
     :class:`~odomgym.odometry.calibration.Calibration` or its ``.toml`` path), ``side`` [m] (default
     4.0), ``direction`` (``"cw"``/``"ccw"``; also a ``reset`` option ``{"direction": ...}``), ``dt``
-    [s] (control period, default 0.05), ``reward_weights``, ``render_mode``, ``covariance_k``
-    (k_L, k_R [m^½] of the wheel-noise model, or None).
+    [s] (control period in (0, 1], default 0.05), ``reward_weights`` (a
+    :class:`~odomgym.envs.base.RewardWeights` or a dict of its fields), ``render_mode``,
+    ``covariance_k`` (k_L, k_R [m^½] of the wheel-noise model, or None).
 
     ## Version History
 
@@ -133,8 +134,8 @@ class UMBmarkSquareEnv(RouteEnv):
             render_mode=render_mode,
             covariance_k=covariance_k,
         )
-        self.route_rule = SquareRoute(float(side), direction)
-        self.side = float(side)
+        self.side = route_size("side", side)
+        self.route_rule = SquareRoute(self.side, direction)
         self.direction: Literal["cw", "ccw"] = direction
 
     def _route(self, options: dict[str, Any]) -> Route:

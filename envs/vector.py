@@ -36,6 +36,7 @@ from odomgym.envs.base import (
     RewardWeights,
     RouteEpisodes,
     action_space,
+    control_period,
     observation_space,
     reset_options,
     resolve_specs,
@@ -104,11 +105,9 @@ class OdometryVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDAr
             if len(self.robots) != num_envs:
                 raise ValueError(f"need {num_envs} robot specs, got {len(self.robots)}")
             _, self.floor, self.calibration = resolve_specs(self.robots[0], floor, calibration)
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
         self.num_envs = num_envs
         self._route: RouteFactory = FixedRoute(route) if isinstance(route, Route) else route
-        self.dt = float(dt)
+        self.dt = control_period(dt)
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.dt}
         self.weights = resolve_weights(reward_weights)
         self.max_episode_steps = int(max_episode_steps)

@@ -232,3 +232,22 @@ def test_the_clapper_envs_read_their_reset_options_and_refuse_others() -> None:
         env.reset(options={"direction": "left"})
     with pytest.raises(SpecError, match="unknown reset option 'direction' of ClapperStraight-v0"):
         gym.make("ClapperStraight-v0").reset(options={"direction": "ccw"})
+
+
+def test_an_env_refuses_a_route_size_or_control_period_that_is_no_number() -> None:
+    """``side="4"`` was taken by ``float``, where the robot's own fields refuse a string; a
+    control period of 10 s was taken and a 1 m straight ended at 2 m after three steps, called
+    done; ``dt="0.05"`` ended in numpy's ``isfinite`` TypeError. NumPy numbers still pass."""
+    from odomgym.envs.base import MAX_DT
+
+    with pytest.raises(SpecError, match="side must be a number of metres, got '4'"):
+        gym.make("UMBmarkSquare-v0", side="4")
+    with pytest.raises(SpecError, match="distance must be a number of metres"):
+        gym.make("StraightLine-v0", distance=None)
+    for dt in (10.0, 0.0, "0.05", True):
+        with pytest.raises(SpecError, match=r"dt must be a number of seconds in \(0, 1\]"):
+            gym.make("StraightLine-v0", dt=dt)
+        with pytest.raises(SpecError, match=r"dt must be a number of seconds in \(0, 1\]"):
+            gym.make_vec("StraightLine-v0", num_envs=2, dt=dt)
+    env = gym.make("UMBmarkSquare-v0", side=np.float32(2.0), dt=np.float64(MAX_DT))
+    assert env.unwrapped.side == 2.0 and env.unwrapped.dt == 1.0
