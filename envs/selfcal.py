@@ -136,14 +136,14 @@ radius (docs/skid-steer.md). The shipped policy was trained on LabMates.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.envs.base import DrawsLazily, describe_action
+from odomgym.envs.base import DrawsLazily, describe_action, reset_options
 from odomgym.errors import SpecError
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.population import Population, check_bench_floor
@@ -276,9 +276,7 @@ class SelfCalibrationEnv(DrawsLazily, gym.Env[NDArray[np.float32], np.int64]):
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         """Start a session; ``options`` may fix ``floor`` and ``budget``."""
         super().reset(seed=seed)
-        if options is not None and not isinstance(options, Mapping):
-            raise SpecError(f"reset options must be a dict, got {options!r}", field="options")
-        opts = dict(options or {})
+        opts = reset_options(options)
         if "budget" in opts:
             if not isinstance(opts["budget"], (int, np.integer)):
                 raise SpecError(

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odomgym.errors import SpecError
+from odomgym.errors import require_known_options
 from odomgym.floor import FloorSpec
 from odomgym.lab.experiment import SensorAccuracy
 from odomgym.lab.population import (
@@ -171,12 +171,7 @@ def new_episode(
     ``options`` may fix ``floor`` (a benchmark floor name) and ``budget`` (runs).
     """
     opts = dict(options or {})
-    unknown = set(opts) - {"floor", "budget"}
-    if unknown:
-        raise SpecError(
-            f"unknown reset option(s) {', '.join(sorted(unknown))}; options: floor, budget",
-            field="options",
-        )
+    require_known_options(opts, ("floor", "budget"), "SelfCalibration-v1")
     robot_rng, run_rng = rng.spawn(2)
     floor_name = str(opts.get("floor", floors[int(rng.integers(len(floors)))]))
     check_bench_floor(floor_name)
