@@ -19,6 +19,7 @@ take is an error, never silently dropped.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from abc import ABC, abstractmethod
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
@@ -195,6 +196,46 @@ class Calibrator(ABC):
     @abstractmethod
     def calibrate(self, lab: Lab, initial: Calibration | None = None) -> CalibrationResult:
         """Run the method in ``lab``, starting from ``initial`` (default: uncalibrated)."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Wrap a subclass's own :meth:`calibrate` in :func:`check_calibrate_arguments`, so that
+        every method, a user's too, refuses a wrong ``lab`` or ``initial`` in one line before
+        any experiment (an ``initial="x"`` was an ``AttributeError`` from deep inside a
+        method, after its first runs)."""
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__.get("calibrate")
+        if own is None or getattr(own, "__isabstractmethod__", False):
+            return
+
+        @functools.wraps(own)
+        def calibrate(
+            self: Calibrator, lab: Lab, initial: Calibration | None = None
+        ) -> CalibrationResult:
+            check_calibrate_arguments(self.name, lab, initial)
+            return own(self, lab, initial)  # type: ignore[no-any-return]
+
+        cls.calibrate = calibrate  # type: ignore[method-assign]
+
+
+_LAB_MEMBERS = ("robot", "perform", "runs_used", "distance_used")
+
+
+def check_calibrate_arguments(name: str, lab: object, initial: object) -> None:
+    """Raise :class:`~odomgym.errors.SpecError` unless ``lab`` has the members of a
+    :class:`~odomgym.lab.experiment.Lab` and ``initial`` is a
+    :class:`~odomgym.odometry.calibration.Calibration` or ``None``; the message names the
+    method and the argument."""
+    if initial is not None and not isinstance(initial, Calibration):
+        raise SpecError(
+            f"{name}.calibrate: initial must be a Calibration or None, "
+            f"got {type(initial).__name__} {initial!r:.60}"
+        )
+    missing = [member for member in _LAB_MEMBERS if not hasattr(lab, member)]
+    if missing:
+        raise SpecError(
+            f"{name}.calibrate: lab must be a Lab (a SimLab, a RecordedLab or an object with "
+            f"{', '.join(_LAB_MEMBERS)}), got {type(lab).__name__} without {', '.join(missing)}"
+        )
 
 
 @dataclass(frozen=True)

@@ -173,6 +173,25 @@ def check_reachable(target: str, timeout: float = REACH_TIMEOUT) -> None:
         ) from None
 
 
+def check_client(target: str) -> None:
+    """Refuse, in one line, a ``ray://`` address when Ray Client's dependency (grpcio, Ray's
+    ``client`` extra) is not installed: the ``[distributed]`` extra installs Ray's core only,
+    and ``ray.init("ray://…")`` then failed after the connection check with Ray's own message.
+
+    Raises:
+        SpecError: naming the address and the install command (field ``ray-address``).
+    """
+    import importlib.util
+
+    if target.strip().startswith("ray://") and importlib.util.find_spec("grpc") is None:
+        raise SpecError(
+            f"cannot join Ray at {target}: a ray:// address goes through Ray Client, which "
+            "needs grpcio (pip install 'ray[client]'); or, from one of the cluster's nodes, "
+            "give the head's host:6379",
+            field="ray-address",
+        )
+
+
 def _init(ray: Any, target: str | None, cpus: int) -> None:
     """``ray.init``: a new local Ray with ``cpus`` CPUs (``target`` None), else the cluster at
     ``target``; the workers' ``PYTHONPATH`` is :func:`_user_paths`'s."""
@@ -205,6 +224,7 @@ def ray_session(address: str | None = None, cpus: int = 1) -> Iterator[bool]:
         return
     target = _address(address)
     if target is not None:
+        check_client(target)
         check_reachable(target)
     # ray.init replaces the SIGTERM handler with one that calls sys.exit, and Ray's C++ core
     # installs absl's failure-signal handler, which prints a stack dump for a plain SIGTERM.

@@ -154,6 +154,49 @@ def test_the_covariance_model_names_a_bad_argument() -> None:
         covariance.quadrature_motion_covariance(3.0, 1.0, 0.4, 1e-3, 1e-3, nodes=0)
 
 
+def test_a_segment_whose_covariance_overflows_is_named_in_one_line() -> None:
+    """A travel of 1e200 m was Python's bare ``OverflowError`` from inside Eq. 25's powers,
+    and a k of 1e160 m^½ the same; now one ``ValueError`` giving the segment and the units."""
+    for segment in ((1e200, 0.5, 0.5, 1e-3, 1e-3), (1.0, -1.0, 0.5, 1e160, 1e-3)):
+        with pytest.raises(ValueError, match=r"overflows a float: travels are metres"):
+            covariance.motion_covariance(*segment)
+    with pytest.raises(ValueError, match=r"left = 1e\+200 m"):
+        covariance.propagate_path([(1e200, 1e200)], 0.5, 1e-3, 1e-3)
+    ordinary = covariance.motion_covariance(1.0, 0.9, 0.5, 1e-3, 1e-3)
+    assert np.all(np.isfinite(ordinary)) and ordinary[0, 0] > 0.0
+
+
+def test_every_calibrator_refuses_a_wrong_lab_or_initial_before_driving() -> None:
+    """``calibrate(lab, initial="x")`` was an ``AttributeError`` from inside the method after
+    its first experiments; a number as the lab the same. Every registered method (and a
+    user's subclass) now refuses both in one line naming the method and the argument."""
+    from odomgym.baselines import CALIBRATORS, Calibrator
+    from odomgym.lab.simulated import SimLab
+
+    lab = SimLab("labmate")
+    for name, cls in CALIBRATORS.items():
+        method = cls()
+        with pytest.raises(SpecError, match=rf"^{name}\.calibrate: initial must be a Calibration"):
+            method.calibrate(lab, initial="x")  # type: ignore[arg-type]
+        with pytest.raises(SpecError, match=rf"^{name}\.calibrate: lab must be a Lab.*got int"):
+            method.calibrate(5)  # type: ignore[arg-type]
+    assert lab.runs_used == 0
+
+    class Mine(Calibrator):
+        name = "mine"
+        reference = "none"
+        options_type = type(CALIBRATORS["umbmark"]().options)
+
+        def experiments(self) -> list:  # type: ignore[type-arg]
+            return []
+
+        def calibrate(self, lab, initial=None):  # type: ignore[no-untyped-def]
+            raise AssertionError("reached the method")
+
+    with pytest.raises(SpecError, match=r"^mine\.calibrate: initial must be"):
+        Mine.__new__(Mine).calibrate(lab, Calibration)  # the class, not an instance
+
+
 def test_the_leaderboard_judges_every_method_on_the_same_sessions() -> None:
     """A method that cannot calibrate on some sessions was judged on its own, fewer pairs: on
     the shipped sessions least squares ranked first on 10 pairs against the others' 15. The

@@ -239,6 +239,33 @@ def test_an_address_where_nothing_answers_is_one_line_at_once(
     check_reachable("auto")  # left to Ray
 
 
+def test_a_ray_client_address_without_grpcio_names_the_extra(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A ``ray://`` address needs Ray Client (grpcio, ``ray[client]``), which the
+    ``[distributed]`` extra does not install: refused in one line saying what to install,
+    before any connection; a ``host:port`` address does not need it."""
+    pytest.importorskip("ray")
+    import importlib.util
+
+    from odomgym.distributed import check_client
+    from odomgym.errors import SpecError
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "grpc" else real(name, *a)
+    )
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    argv = ["bench", "calibrators", "--robots", "1", "--backend", "ray"]
+    assert main([*argv, "--ray-address", "ray://127.0.0.1:1"]) == 2
+    one_line_error(capsys, "a ray:// address goes through Ray Client, which needs grpcio")
+    with pytest.raises(SpecError, match=r"pip install 'ray\[client\]'") as caught:
+        check_client("ray://head:10001")
+    assert caught.value.field == "ray-address"
+    check_client("head:6379")  # the core's own protocol
+
+
 # --------------------------------------------------------------------- periods from dates
 @pytest.mark.parametrize(
     ("name", "when"),

@@ -297,14 +297,27 @@ def motion_covariance(
 ) -> FloatArray:
     """Cov(U_k) of one constant-curvature segment: Eq. 26, 28, 25 or (near straight) quadrature."""
     _check_motion(left, right, wheelbase, kl, kr)
-    dtheta = (right - left) / wheelbase
-    if left == right:
-        return straight_motion_covariance(left, wheelbase, kl, kr, heading)
-    if left == -right:
-        return turn_motion_covariance(dtheta, wheelbase, kl, kr, heading)
-    if abs(dtheta) < NEAR_STRAIGHT_RAD:
-        return quadrature_motion_covariance(left, right, wheelbase, kl, kr, heading, nodes=8)
-    return arc_motion_covariance(left, right, wheelbase, kl, kr, heading)
+    try:
+        dtheta = (right - left) / wheelbase
+        if left == right:
+            cov = straight_motion_covariance(left, wheelbase, kl, kr, heading)
+        elif left == -right:
+            cov = turn_motion_covariance(dtheta, wheelbase, kl, kr, heading)
+        elif abs(dtheta) < NEAR_STRAIGHT_RAD:
+            cov = quadrature_motion_covariance(left, right, wheelbase, kl, kr, heading, nodes=8)
+        else:
+            cov = arc_motion_covariance(left, right, wheelbase, kl, kr, heading)
+    except OverflowError:
+        cov = np.full((3, 3), np.inf)
+    if not np.all(np.isfinite(cov)):
+        # Why a check here: Python's float powers raise OverflowError and numpy's give inf or
+        # NaN, far from the argument that caused it (a travel of 1e200 m, k of 1e160 m^½).
+        raise ValueError(
+            f"the covariance of a segment with left = {left:g} m, right = {right:g} m, "
+            f"wheelbase = {wheelbase:g} m, kl = {kl:g} and kr = {kr:g} m^½ overflows a float: "
+            "travels are metres and k is m^½ (Chong & Kleeman 1997's k_L, k_R, about 1e-3)"
+        )
+    return cov
 
 
 def propagate_segment(
