@@ -313,9 +313,10 @@ def motion_covariance(
         # Why a check here: Python's float powers raise OverflowError and numpy's give inf or
         # NaN, far from the argument that caused it (a travel of 1e200 m, k of 1e160 m^½).
         raise ValueError(
-            f"the covariance of a segment with left = {left:g} m, right = {right:g} m, "
-            f"wheelbase = {wheelbase:g} m, kl = {kl:g} and kr = {kr:g} m^½ overflows a float: "
-            "travels are metres and k is m^½ (Chong & Kleeman 1997's k_L, k_R, about 1e-3)"
+            f"a segment with left = {left:g} m, right = {right:g} m, wheelbase = "
+            f"{wheelbase:g} m, kl = {kl:g} and kr = {kr:g} m^½ is too large for the closed "
+            "forms (its covariance overflows a float): travels are metres and k is m^½ "
+            "(Chong & Kleeman 1997's k_L, k_R, about 1e-3)"
         )
     return cov
 
