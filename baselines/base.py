@@ -38,6 +38,7 @@ __all__ = [
     "SquareCalibrator",
     "SquareOptions",
     "SquaresSizing",
+    "check_calibrate_arguments",
     "check_square_settings",
     "default_methods",
     "option_names",
@@ -199,20 +200,23 @@ class Calibrator(ABC):
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Wrap a subclass's own :meth:`calibrate` in :func:`check_calibrate_arguments`, so that
-        every method, a user's too, refuses a wrong ``lab`` or ``initial`` in one line before
-        any experiment (an ``initial="x"`` was an ``AttributeError`` from deep inside a
-        method, after its first runs)."""
+        every method, a user's too, refuses a wrong ``lab`` or ``initial`` in one line naming
+        the method before any experiment (``initial="x"`` was a bare ``AttributeError``, "'str'
+        object has no attribute 'is_skid_steer'"). The wrapper hands every argument on as it
+        came, so a method with more parameters, a keyword-only or renamed ``initial`` or its
+        own default keeps them; ``initial`` is checked where it is given by that name or as
+        the second argument."""
         super().__init_subclass__(**kwargs)
         own = cls.__dict__.get("calibrate")
         if own is None or getattr(own, "__isabstractmethod__", False):
             return
 
         @functools.wraps(own)
-        def calibrate(
-            self: Calibrator, lab: Lab, initial: Calibration | None = None
-        ) -> CalibrationResult:
-            check_calibrate_arguments(self.name, lab, initial)
-            return own(self, lab, initial)  # type: ignore[no-any-return]
+        def calibrate(self: Calibrator, lab: Lab, *args: Any, **kwargs: Any) -> CalibrationResult:
+            initial = args[0] if args else kwargs.get("initial")
+            name = getattr(self, "name", type(self).__name__)
+            check_calibrate_arguments(name, lab, initial)
+            return own(self, lab, *args, **kwargs)  # type: ignore[no-any-return]
 
         cls.calibrate = calibrate  # type: ignore[method-assign]
 

@@ -46,6 +46,7 @@ __all__ = [
     "RAY_MISSING",
     "REACH_TIMEOUT",
     "Backend",
+    "check_client",
     "check_reachable",
     "on_ray",
     "ray_session",

@@ -158,7 +158,7 @@ def test_a_segment_whose_covariance_overflows_is_named_in_one_line() -> None:
     """A travel of 1e200 m was Python's bare ``OverflowError`` from inside Eq. 25's powers,
     and a k of 1e160 m^½ the same; now one ``ValueError`` giving the segment and the units."""
     for segment in ((1e200, 0.5, 0.5, 1e-3, 1e-3), (1.0, -1.0, 0.5, 1e160, 1e-3)):
-        overflow = r"too large for the closed forms \(its covariance overflows a float\): travels"
+        overflow = r"too large for the closed forms \(a power in its covariance overflows a float\)"
         with pytest.raises(ValueError, match=overflow):
             covariance.motion_covariance(*segment)
     with pytest.raises(ValueError, match=r"left = 1e\+200 m"):
@@ -168,10 +168,10 @@ def test_a_segment_whose_covariance_overflows_is_named_in_one_line() -> None:
 
 
 def test_every_calibrator_refuses_a_wrong_lab_or_initial_before_driving() -> None:
-    """``calibrate(lab, initial="x")`` was an ``AttributeError`` from inside the method after
-    its first experiments; a number as the lab the same. Every registered method (and a
-    user's subclass) now refuses both in one line naming the method and the argument."""
-    from odomgym.baselines import CALIBRATORS, Calibrator
+    """``calibrate(lab, initial="x")`` was a bare ``AttributeError`` ("'str' object has no
+    attribute 'is_skid_steer'"), a number as the lab another. Every registered method now
+    refuses both in one line naming the method and the argument, and books no run."""
+    from odomgym.baselines import CALIBRATORS
     from odomgym.lab.simulated import SimLab
 
     lab = SimLab("labmate")
@@ -179,9 +179,21 @@ def test_every_calibrator_refuses_a_wrong_lab_or_initial_before_driving() -> Non
         method = cls()
         with pytest.raises(SpecError, match=rf"^{name}\.calibrate: initial must be a Calibration"):
             method.calibrate(lab, initial="x")  # type: ignore[arg-type]
+        with pytest.raises(SpecError, match=rf"^{name}\.calibrate: initial must be a Calibration"):
+            method.calibrate(lab, "x")  # type: ignore[arg-type]
         with pytest.raises(SpecError, match=rf"^{name}\.calibrate: lab must be a Lab.*got int"):
             method.calibrate(5)  # type: ignore[arg-type]
     assert lab.runs_used == 0
+
+
+def test_a_users_calibrator_keeps_its_own_signature_under_the_check() -> None:
+    """The check wraps a user's subclass too (``Calibrator.__init_subclass__``), handing every
+    argument on as it came: extra parameters, a keyword-only ``initial`` and the method's own
+    default survive; a class without ``name`` is named by its class."""
+    from odomgym.baselines import CALIBRATORS, Calibrator
+    from odomgym.lab.simulated import SimLab
+
+    default = Calibration.from_errors(e_d=1.01)
 
     class Mine(Calibrator):
         name = "mine"
@@ -191,11 +203,33 @@ def test_every_calibrator_refuses_a_wrong_lab_or_initial_before_driving() -> Non
         def experiments(self) -> list:  # type: ignore[type-arg]
             return []
 
-        def calibrate(self, lab, initial=None):  # type: ignore[no-untyped-def]
-            raise AssertionError("reached the method")
+        def calibrate(self, lab, initial=default, verbose=False):  # type: ignore[no-untyped-def]
+            return (initial, verbose)
 
+    class KeywordOnly(Mine):
+        def calibrate(self, lab, *, initial=None):  # type: ignore[no-untyped-def]
+            return initial
+
+    class Nameless(Calibrator):
+        reference = "none"
+        options_type = Mine.options_type
+
+        def experiments(self) -> list:  # type: ignore[type-arg]
+            return []
+
+        def calibrate(self, lab, initial=None):  # type: ignore[no-untyped-def]
+            return initial
+
+    lab = SimLab("labmate")
+    mine = Mine.__new__(Mine)
+    assert mine.calibrate(lab) == (default, False)
+    assert mine.calibrate(lab, None, True) == (None, True)
+    assert mine.calibrate(lab, verbose=True) == (default, True)
+    assert KeywordOnly.__new__(KeywordOnly).calibrate(lab, initial=default) is default
     with pytest.raises(SpecError, match=r"^mine\.calibrate: initial must be"):
-        Mine.__new__(Mine).calibrate(lab, Calibration)  # the class, not an instance
+        mine.calibrate(lab, Calibration)  # the class, not an instance
+    with pytest.raises(SpecError, match=r"^Nameless\.calibrate: initial must be"):
+        Nameless.__new__(Nameless).calibrate(lab, "x")
 
 
 def test_the_leaderboard_judges_every_method_on_the_same_sessions() -> None:

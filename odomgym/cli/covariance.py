@@ -90,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
             )
     except (ArithmeticError, FloatingPointError):
         raise too_large from None
+    except SpecError:
+        raise
     except ValueError as exc:
         raise SpecError(str(exc)) from None
     if not _all_finite(report):

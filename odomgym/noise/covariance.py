@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odomgym.errors import require_finite, require_positive
+from odomgym.errors import SpecError, require_finite, require_positive
 
 __all__ = [
     "ClassicInconsistency",
@@ -309,14 +309,16 @@ def motion_covariance(
             cov = arc_motion_covariance(left, right, wheelbase, kl, kr, heading)
     except OverflowError:
         cov = np.full((3, 3), np.inf)
-    if not np.all(np.isfinite(cov)):
+    if not math.isfinite(float(cov.sum())):
         # Why a check here: Python's float powers raise OverflowError and numpy's give inf or
         # NaN, far from the argument that caused it (a travel of 1e200 m, k of 1e160 m^½).
-        raise ValueError(
+        # One sum is the cheapest test of nine entries (NaN and inf carry through it).
+        raise SpecError(
             f"a segment with left = {left:g} m, right = {right:g} m, wheelbase = "
             f"{wheelbase:g} m, kl = {kl:g} and kr = {kr:g} m^½ is too large for the closed "
-            "forms (its covariance overflows a float): travels are metres and k is m^½ "
-            "(Chong & Kleeman 1997's k_L, k_R, about 1e-3)"
+            "forms (a power in its covariance overflows a float): travels are metres and k "
+            "is m^½ (Chong & Kleeman 1997's k_L, k_R, about 1e-3)",
+            field="covariance",
         )
     return cov
 
