@@ -248,9 +248,6 @@ def test_a_ray_client_address_without_grpcio_names_the_extra(
     pytest.importorskip("ray")
     import importlib.util
 
-    from odomgym.distributed import check_client
-    from odomgym.errors import SpecError
-
     real = importlib.util.find_spec
     monkeypatch.setattr(
         importlib.util, "find_spec", lambda name, *a: None if name == "grpc" else real(name, *a)
@@ -260,6 +257,19 @@ def test_a_ray_client_address_without_grpcio_names_the_extra(
     argv = ["bench", "calibrators", "--robots", "1", "--backend", "ray"]
     assert main([*argv, "--ray-address", "ray://127.0.0.1:1"]) == 2
     one_line_error(capsys, "a ray:// address goes through Ray Client, which needs grpcio")
+
+
+def test_the_client_check_needs_no_ray(monkeypatch: pytest.MonkeyPatch) -> None:
+    """:func:`check_client` itself imports nothing of Ray: it runs without the extra."""
+    import importlib.util
+
+    from odomgym.distributed import check_client
+    from odomgym.errors import SpecError
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "grpc" else real(name, *a)
+    )
     with pytest.raises(SpecError, match=r"pip install 'ray\[client\]'") as caught:
         check_client("ray://head:10001")
     assert caught.value.field == "ray-address"
