@@ -150,31 +150,36 @@ MAX_DT = 1.0
 period; at 10 s a 1 m straight was overshot to 2 m in three steps and called done."""
 
 
+def _plain_real(value: object) -> float | None:
+    """``value`` as a float when it is a real number (a NumPy scalar included, a bool not),
+    else None: the number test :func:`control_period` and :func:`route_size` share."""
+    number = plain_number(value)
+    if isinstance(number, bool) or not isinstance(number, int | float):
+        return None
+    return float(number)
+
+
 def control_period(dt: object) -> float:
     """``dt`` [s] as a float in (0, :data:`MAX_DT`], else a one-line error naming it (a string
     had ended in numpy's ``isfinite`` TypeError)."""
-    number = plain_number(dt)
-    if (
-        isinstance(number, bool)
-        or not isinstance(number, int | float)
-        or not 0.0 < number <= MAX_DT
-    ):
+    number = _plain_real(dt)
+    if number is None or not 0.0 < number <= MAX_DT:
         raise SpecError(
             f"dt must be a number of seconds in (0, {MAX_DT:g}] (the control period; default "
             f"0.05), got {dt!r}",
             field="dt",
         )
-    return float(number)
+    return number
 
 
 def route_size(name: str, value: object) -> float:
     """A route's ``side``/``distance`` [m] as a float, refusing a non-number in one line (a
     string such as ``"4"`` was taken by ``float``, where the robot's own fields refuse one);
     its range is the route's to check."""
-    number = plain_number(value)
-    if isinstance(number, bool) or not isinstance(number, int | float):
+    number = _plain_real(value)
+    if number is None:
         raise SpecError(f"{name} must be a number of metres, got {value!r}", field=name)
-    return float(number)
+    return number
 
 
 def reset_options(options: Any) -> dict[str, Any]:

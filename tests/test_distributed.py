@@ -239,6 +239,16 @@ def test_an_address_where_nothing_answers_is_one_line_at_once(
     check_reachable("auto")  # left to Ray
 
 
+def _without_grpcio(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make grpcio (Ray Client's dependency) look uninstalled, whether or not it is."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "grpc" else real(name, *a)
+    )
+
+
 def test_a_ray_client_address_without_grpcio_names_the_extra(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -246,12 +256,7 @@ def test_a_ray_client_address_without_grpcio_names_the_extra(
     ``[distributed]`` extra does not install: refused in one line saying what to install,
     before any connection; a ``host:port`` address does not need it."""
     pytest.importorskip("ray")
-    import importlib.util
-
-    real = importlib.util.find_spec
-    monkeypatch.setattr(
-        importlib.util, "find_spec", lambda name, *a: None if name == "grpc" else real(name, *a)
-    )
+    _without_grpcio(monkeypatch)
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     argv = ["bench", "calibrators", "--robots", "1", "--backend", "ray"]
@@ -261,15 +266,10 @@ def test_a_ray_client_address_without_grpcio_names_the_extra(
 
 def test_the_client_check_needs_no_ray(monkeypatch: pytest.MonkeyPatch) -> None:
     """:func:`check_client` itself imports nothing of Ray: it runs without the extra."""
-    import importlib.util
-
     from odomgym.distributed import check_client
     from odomgym.errors import SpecError
 
-    real = importlib.util.find_spec
-    monkeypatch.setattr(
-        importlib.util, "find_spec", lambda name, *a: None if name == "grpc" else real(name, *a)
-    )
+    _without_grpcio(monkeypatch)
     with pytest.raises(SpecError, match=r"pip install 'ray\[client\]'") as caught:
         check_client("ray://head:10001")
     assert caught.value.field == "ray-address"
