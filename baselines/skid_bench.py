@@ -19,13 +19,16 @@ the registered skid-steer calibrator ``skid_icr`` (:mod:`odomgym.baselines.skid_
 model with the wheels' factors from its own squares and circles.
 
 Each row is the median over the validation runs of the end-position error per metre driven
-[%] and of the end-heading error per metre [°/m]. All randomness flows from one seed
-(``numpy.random.default_rng(seed)``): the same seed gives the same table.
+[%] and of the end-heading error per metre [°/m]. All randomness flows from the seed: each
+robot and floor (a *cell*) draws from its own generator, seeded by the seed and the two names
+(:func:`cell_seed`), so a cell's rows are the same whichever other cells run beside it and in
+whatever order; the same seed gives the same table.
 """
 
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +56,7 @@ __all__ = [
     "VAL_RADII",
     "SkidBenchConfig",
     "calibration_model",
+    "cell_seed",
     "run_skid_bench",
     "skid_table",
     "write_skid_outputs",
@@ -78,10 +82,9 @@ SKID_CALIBRATORS: dict[str, dict[str, float]] = {"skid_icr": {}, "skid_curvature
 """The registered skid-steer calibrators and their options: ``skid_icr`` and ``skid_curvature``
 (:mod:`odomgym.baselines.skid_icr`: Mandow et al. 2007's ICRs, or a track that moves with the
 turn in Wang et al. 2015's form, with the wheels' factors, from their own 2 m squares and
-circles of 0.5–4 m). They draw from a stream apart from the classical
-rows', ``default_rng([seed, cell, 1])`` (``cell`` the robot and floor's place in the run, as
-the classical calibrators' streams depend on it too), so that adding them left every other
-row as it was."""
+circles of 0.5–4 m). Each draws from a stream of its own, ``default_rng([*cell_seed(...), 1])``,
+apart from the classical rows' (spawned from the cell's generator), so that adding them left
+every other row as it was."""
 SKID_LABELS = {"skid_icr": "ICRs", "skid_curvature": "track curve"}
 """What each registered skid-steer calibrator fits beside the wheels' factors (table labels)."""
 SKID_PRESETS = SKID_STEER_PRESETS
@@ -105,6 +108,10 @@ class SkidBenchConfig:
     def __post_init__(self) -> None:
         if not self.robots:
             raise SpecError("no robot to benchmark", field="robots")
+        for names, what in ((self.robots, "robots"), (self.floors, "floors")):
+            twice = sorted({n for n in names if names.count(n) > 1})
+            if twice:
+                raise SpecError(f"{', '.join(map(repr, twice))} given twice", field=what)
         for name in self.robots:
             if name not in SKID_PRESETS:
                 raise SpecError(
@@ -136,13 +143,29 @@ class SkidBenchRow:
         return dict(vars(self))
 
 
-def _circles(robot: RobotSpec, floor: str, radii: tuple[float, ...]) -> list[Run]:
+def cell_seed(seed: int, robot: str, floor: str) -> list[int]:
+    """The seed sequence of one robot and floor's generator: the master ``seed`` and a CRC-32
+    of each name (stable across processes and Python versions, unlike ``hash``).
+
+    Why by name and not by the cell's place in the run: ``bench skid --presets jackal scout2``
+    must give ``scout2`` the rows ``--presets scout2`` gives it (until 0.3.x a cell's place
+    seeded it, so its rows moved with the cells run before it)."""
+    return [seed, zlib.crc32(robot.encode()), zlib.crc32(floor.encode())]
+
+
+def _circles(
+    robot: RobotSpec, floor: str, radii: tuple[float, ...], rng: np.random.Generator
+) -> list[Run]:
+    """Circles of ``radii`` each way; a rough floor's texture drawn from ``rng``."""
     from odomgym.sim.arc_runs import circle_plan, drive_arcs
 
     directions: tuple[Direction, ...] = ("cw", "ccw")
     senses = [(r, d) for r in radii for d in directions]
     plans = [circle_plan(r, d) for r, d in senses]
-    runs = drive_arcs(robot, FLOORS[floor], plans, cruise_speed=SPEED, kind="circular")
+    runs = drive_arcs(
+        robot, FLOORS[floor], plans, rng=rng.spawn(len(plans)), cruise_speed=SPEED,
+        kind="circular",
+    )  # fmt: skip
     for run, (r, d) in zip(runs, senses, strict=True):
         run.meta.update(radius=r, direction=d)
     return runs
@@ -154,16 +177,18 @@ def _runs(robot: RobotSpec, floor: str, rng: np.random.Generator) -> tuple[list[
     from odomgym.sim.route_runs import simulate_runs
     from odomgym.sim.routes import square_route
 
-    calibration = _circles(robot, floor, CAL_RADII)
+    calibration = _circles(robot, floor, CAL_RADII, rng)
     for direction in ("cw", "ccw"):
         squares, _ = simulate_runs(
-            robot, FLOORS[floor], square_route(2.0, direction), cruise_speed=SPEED,
-            kind="square", direction=direction,
+            robot, FLOORS[floor], square_route(2.0, direction), rng=rng.spawn(1),
+            cruise_speed=SPEED, kind="square", direction=direction,
         )  # fmt: skip
         calibration += squares
-    validation = _circles(robot, floor, VAL_RADII)
+    validation = _circles(robot, floor, VAL_RADII, rng)
     plans: list[tuple[Arc, ...]] = [free_plan(rng, 20.0) for _ in range(4)]
-    validation += drive_arcs(robot, FLOORS[floor], plans, cruise_speed=SPEED, kind="free")
+    validation += drive_arcs(
+        robot, FLOORS[floor], plans, rng=rng.spawn(len(plans)), cruise_speed=SPEED, kind="free"
+    )
     return measure(calibration, SensorAccuracy(), rng), validation
 
 
@@ -219,21 +244,21 @@ def run_skid_bench(
 ) -> list[SkidBenchRow]:
     """Every model and classical calibrator on every robot and floor of ``config`` (module
     docstring); ``progress(done, total)`` after each robot and floor."""
-    rng = np.random.default_rng(config.seed)
     rows: list[SkidBenchRow] = []
     cells = [(r, f) for r in config.robots for f in config.floors]
     for done, (name, floor) in enumerate(cells, start=1):
         robot = PRESETS[name]
+        key = cell_seed(config.seed, name, floor)
+        rng = np.random.default_rng(key)
         calibration, validation = _runs(robot, floor, rng)
         fits: list[tuple[str, SkidModel, Calibration | None]] = [
             (kind, fit_skid_model(kind, calibration, robot), None) for kind in SKID_MODELS
         ]
-        # The classical calibrators draw their labs' streams from the run's generator, in
+        # The classical calibrators draw their labs' streams from the cell's generator, in
         # order; the registered skid-steer ones each start one stream seeded by the cell
-        # (``[seed, cell, 1]``), so that adding them left every classical row as it was.
+        # (``[*key, 1]``), so that adding them left every classical row as it was.
         labs = [(m, o, rng.spawn(1)[0]) for m, o in CLASSICAL.items()] + [
-            (m, o, np.random.default_rng([config.seed, done, 1]))
-            for m, o in SKID_CALIBRATORS.items()
+            (m, o, np.random.default_rng([*key, 1])) for m, o in SKID_CALIBRATORS.items()
         ]
         for method, options, stream in labs:
             lab = SimLab(robot, FLOORS[floor], rng=stream, cruise_speed=SPEED)
@@ -289,10 +314,11 @@ def skid_table(rows: Sequence[SkidBenchRow], robots: Sequence[str], floors: Sequ
     return "\n".join(lines)
 
 
-def _figure(name: str, floor: str, rows: Sequence[SkidBenchRow], path: Path) -> None:
+def _figure(name: str, floor: str, rows: Sequence[SkidBenchRow], path: Path, seed: int) -> None:
     """The fitted factors of the first robot and floor against the World's steady turns (left)
     and each model's heading error per validation circle (right): where one constant factor
-    fails."""
+    fails. A rough floor's texture under the steady turns is drawn from a stream of the cell's
+    own (``[*cell_seed(...), 2]``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -317,9 +343,10 @@ def _figure(name: str, floor: str, rows: Sequence[SkidBenchRow], path: Path) -> 
     styles = {"nominal": ":", "constant": "-", "icr": "--", "curvature": "-"}
     for kind, (model, _) in models.items():
         left.plot(lam, model.factor(lam), styles[kind], color=colours[kind], label=kind)
+    rng = np.random.default_rng([*cell_seed(seed, name, floor), 2])
     turns = []
     for radius in (0.0, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0):
-        turn = steady_turn(robot, SPEED, radius, FLOORS[floor])
+        turn = steady_turn(robot, SPEED, radius, FLOORS[floor], rng=rng.spawn(1)[0])
         # λ of the commanded rims: (v_L + v_R)/(v_R − v_L) = 2R/b (0 for a spin).
         turns.append((2.0 * radius / robot.true_wheelbase, turn.factor))
     lam_t = np.array([max(t[0], 0.05) for t in turns])
@@ -366,5 +393,5 @@ def write_skid_outputs(
         "results": [row.as_dict() for row in rows],
     }
     atomic_write_text(paths[1], json.dumps(payload, indent=1) + "\n")
-    _figure(config.robots[0], config.floors[0], rows, paths[2])
+    _figure(config.robots[0], config.floors[0], rows, paths[2], config.seed)
     return paths

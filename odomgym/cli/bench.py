@@ -70,8 +70,9 @@ def register(commands: Commands) -> None:
         choices=list(PRESETS),
         help="calibrators: the preset the population's robots are drawn around (default "
         f"labmate; one of {', '.join(PRESETS)}). A skid-steer preset adds the methods made for "
-        "skid-steer robots (skid_icr) to the default methods and leaves the oracle row out: "
-        "its apparent track emerges from the contacts, so no true geometry is its odometry's",
+        "skid-steer robots (skid_icr, skid_curvature) to the default methods and leaves the "
+        "oracle row out: its apparent track emerges from the contacts, so no true geometry is "
+        "its odometry's",
     )
     # The list options accumulate when repeated (--floor concrete --floor rough runs both), as
     # a user expects; argparse's default "store" kept only the last silently.
@@ -97,7 +98,8 @@ def register(commands: Commands) -> None:
         nargs="+",
         action="extend",
         help="calibrators (default: every method made for differential-drive robots, selfcal "
-        "included: its shipped policy runs in numpy; skid_icr too with a skid-steer --base)",
+        "included: its shipped policy runs in numpy; skid_icr and skid_curvature too with a "
+        "skid-steer --base)",
     )
     parser.add_argument(
         "--budget",

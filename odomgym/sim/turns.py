@@ -56,16 +56,18 @@ def steady_turn(
     *,
     seconds: float = 12.0,
     dt: float = 0.05,
+    rng: np.random.Generator | None = None,
 ) -> SteadyTurn:
     """Drive ``robot`` from rest with the wheel rates of a turn of ``radius`` [m] at ``speed``
     [m/s] (``radius = 0``: a spin, the rims at ∓``speed``) on ``floor`` (default ``smooth``)
     for ``seconds``, and measure the turn over its second half (the first half lets the wheel
-    controllers and the chassis settle)."""
+    controllers and the chassis settle). ``rng``: the texture of a rough floor (and a noisy
+    robot's noise) is drawn from it; required there, as by :class:`~odomgym.sim.world.World`."""
     if not (math.isfinite(speed) and speed > 0.0):
         raise ValueError(f"speed must be a positive number of m/s, got {speed!r}")
     if not (math.isfinite(radius) and radius >= 0.0):
         raise ValueError(f"radius must be >= 0 m (0: a spin), got {radius!r}")
-    world = World(robot, floor if floor is not None else FLOORS["smooth"], dt=dt)
+    world = World(robot, floor if floor is not None else FLOORS["smooth"], dt=dt, rng=rng)
     b = float(robot.true_wheelbase)
     left, right = _rims(robot, speed, radius)
     # Wheel rates from the *true* radii, so that the rims turn at exactly these speeds; the
