@@ -55,6 +55,30 @@ def test_bad_inputs_exit_2_with_a_message(
     assert main(["run", "square", "--robot", str(bad), "--plot", str(plot)]) == 2
     assert f"{bad}:3" in capsys.readouterr().err
     assert not plot.exists()
+    # Valid alone, but slower than the experiments drive: the robot file's line, before any
+    # work (until 0.3.x an internal error from deep in the driver).
+    slow = tmp_path / "slow.toml"
+    slow.write_text("[robot]\nwheel_diameter = 0.1\nwheelbase = 0.3\nticks_per_rev = 500\n"
+                    "max_wheel_speed = 0.1\n")  # fmt: skip
+    for command in (["run", "square"], ["calibrate", "umbmark"]):
+        assert main([*command, "--robot", str(slow), "--plot", str(plot)]) == 2
+        _one_line_error(capsys, f"{slow}:5: ", "max_wheel_speed of 0.1 m/s")
+    assert not plot.exists()
+    # A calibration the file allows but far from this robot (x_ICR in mm read as m) sends the
+    # driver in circles: the file named, not an internal error; one beyond reach is refused
+    # at its line.
+    far = tmp_path / "far.toml"
+    far.write_text("[calibration]\nicr_x = 3.6\n")
+    assert main(["run", "square", "--robot", "scout2", "--calibration", str(far)]) == 2
+    _one_line_error(capsys, f"{far}: driving by this calibration", "x_ICR = 3.600000 m")
+    far.write_text("[calibration]\nicr_x = 1e300\n")
+    assert main(["run", "square", "--robot", "scout2", "--calibration", str(far)]) == 2
+    _one_line_error(capsys, f"{far}:2: icr_x must be within ±100 m")
+    # Named as the options typed, not as the derived field or the experiments' `size`.
+    assert main(["calibrate", "umbmark", "--robot", "scout2", "--eb", "3"]) == 2
+    _one_line_error(capsys, "--eb: true_wheelbase must lie within")
+    assert main(["calibrate", "umbmark", "--side", "0.0001"]) == 2
+    _one_line_error(capsys, "--side 0.0001 makes a run's path 0.0004 m")
     with pytest.raises(SystemExit):
         main(["run", "square", "--ed", "nan"])
     with pytest.raises(SystemExit):

@@ -153,12 +153,15 @@ def test_the_selfcal_calibrator_starts_a_skid_steer_robot_from_its_prior() -> No
         (lambda: Population(base="scout2", e_b=(1.1, 0.9)), "e_b", "low <= high, got (1.1, 0.9)"),
         (lambda: Population(e_s=(float("nan"), 1.0)), "e_s", "finite positive factors"),
         (lambda: Population(e_d=(1.0,)), "e_d", "a (low, high) pair of factors"),
+        (lambda: Population(base="scout2", e_b=(3, 3)), "e_b", "no valid scout2: true_wheelbase"),
+        (lambda: Population(e_d=(0.1, 1.0)), "e_d, e_s", "a robot drawn at e_d = 0.1"),
         (lambda: gym.make("SelfCalibration-v1", population="scout2"), "population", "got str"),
     ],
 )
 def test_a_bad_population_is_one_line_naming_its_field(make: Any, field: str, words: str) -> None:
     """A misspelled base raised a KeyError when the env was made, a population given as the
-    preset's name an AttributeError, and reversed or NaN bounds numpy's errors at reset."""
+    preset's name an AttributeError, and reversed or NaN bounds numpy's errors at reset; a
+    range that draws invalid robots named the derived field (true_wheelbase) at reset."""
     from odomgym.errors import SpecError
 
     with pytest.raises(SpecError) as caught:

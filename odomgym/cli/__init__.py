@@ -144,6 +144,28 @@ def internal_error(exc: Exception, command: str) -> str:
     )
 
 
+def _located(exc: SpecError, args: argparse.Namespace) -> str:
+    """``exc``'s message, led by the robot file's line that sets its field when the refusal
+    came after the file was read: a value valid alone that the command cannot use (a
+    ``max_wheel_speed`` below the experiments' speed). Only for the robot spec's own fields,
+    from a ``--robot`` file that sets them; any other message is as raised."""
+    import dataclasses
+    from pathlib import Path
+
+    from odomgym.errors import locate_key
+    from odomgym.robot import RobotSpec
+
+    robot = getattr(args, "robot", None)
+    fields = {f.name for f in dataclasses.fields(RobotSpec)}
+    if exc.source is None and exc.field in fields and isinstance(robot, str):
+        path = Path(robot)
+        if path.suffix == ".toml" and path.is_file():
+            where = locate_key(path, exc.field)
+            if where != str(path):
+                return f"{where}: {exc}"
+    return str(exc)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``odomgym`` command (exit codes: module docstring)."""
     import os
@@ -174,7 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         notice("interrupted")
         return 130
     except SpecError as exc:
-        notice(f"error: {exc}")
+        notice(f"error: {_located(exc, args)}")
         return 2
     except StdoutClosed:
         # The reader is gone (`| head`): no message (it would say nothing the user does not

@@ -204,7 +204,12 @@ def robot_from(args: argparse.Namespace) -> RobotSpec:
     """The robot of :func:`add_robot_arguments`' options, with the injected errors."""
     robot = load_robot(args.robot)
     if args.ed is not None or args.eb is not None or args.es is not None:
-        robot = robot.with_errors(args.ed, args.eb, args.es)
+        try:
+            robot = robot.with_errors(args.ed, args.eb, args.es)
+        except SpecError as exc:
+            # Said as the option the user typed, not the derived field (true_wheelbase).
+            option = "--eb" if exc.field == "true_wheelbase" else "--ed/--es"
+            raise SpecError(f"{option}: {exc}", field=option) from None
     return robot
 
 

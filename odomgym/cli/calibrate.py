@@ -110,6 +110,11 @@ def _check_simulation_options(args: argparse.Namespace) -> None:
     for name, default in SIMULATION_DEFAULTS.items():
         if getattr(args, name) is None:
             setattr(args, name, default)
+    if not args.data:
+        from odomgym.sim.routes import check_extent
+
+        # Said as the option typed; the calibrators' experiments would call it their `size`.
+        check_extent("--side", args.side, 4.0 * args.side)
 
 
 def _export_path(args: argparse.Namespace) -> str:

@@ -25,6 +25,7 @@ from odomgym.cli._common import (
     positive,
     robot_from,
 )
+from odomgym.errors import SpecError
 from odomgym.floor import FloorSpec, load_floor
 from odomgym.lab.plans import drive_plans, square_plans, straight_plans
 from odomgym.lab.report import format_return_errors, plot_return_errors
@@ -115,14 +116,28 @@ def run(args: argparse.Namespace) -> int:
     else:
         plans = straight_plans(args.distance, args.return_trip, args.runs)
     with Progress.percent(report) as bar:
-        batch = drive_plans(
-            robot,
-            floor,
-            plans,
-            calibration=calibration,
-            rng=np.random.default_rng(args.seed),
-            progress=bar.fraction,
-        )
+        try:
+            batch = drive_plans(
+                robot,
+                floor,
+                plans,
+                calibration=calibration,
+                rng=np.random.default_rng(args.seed),
+                progress=bar.fraction,
+            )
+        except (RuntimeError, ValueError) as exc:
+            if calibration is None or isinstance(exc, SpecError):
+                raise
+            # The driver steers by the calibrated odometry, so a calibration the file allows
+            # (any finite x_ICR, any positive factor) but far from this robot (x_ICR in mm
+            # read as m, a factor of 1000) sends it in circles or asks the wheels for
+            # infinite rates: the user's input, said as such rather than as a bug.
+            raise SpecError(
+                f"{args.calibration}: driving by this calibration "
+                f"({describe_calibration(calibration)}), {exc}; are its values this robot's "
+                "(metres, factors near 1)?",
+                field="calibration",
+            ) from exc
     written: list[str] = []
     if args.log:
         from odomgym.data.native import write_native

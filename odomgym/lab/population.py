@@ -23,6 +23,7 @@ Floors (:data:`BENCH_FLOORS`; their names never mean another floor elsewhere in 
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -159,6 +160,22 @@ class Population:
                     f"{field} must be finite positive factors with low <= high, got {bounds!r}",
                     field=field,
                 )
+        # Every robot the ranges can draw must be a valid spec (a true track within 0.5–2 ×
+        # the nominal, …): checked at the ranges' corners, the extremes of each true value,
+        # so that a bad range is refused here, naming its field, not at a later reset
+        # naming a derived one (``true_wheelbase``).
+        ideal = PRESETS[self.base].ideal()
+        names = ("e_d", "e_b", "e_s")
+        for corner in itertools.product(*(getattr(self, n) for n in names)):
+            try:
+                ideal.with_errors(*(float(v) for v in corner))
+            except SpecError as exc:
+                field = "e_b" if exc.field == "true_wheelbase" else "e_d, e_s"
+                drawn = ", ".join(f"{n} = {v:g}" for n, v in zip(names, corner, strict=True))
+                raise SpecError(
+                    f"{field}: a robot drawn at {drawn} is no valid {self.base}: {exc}",
+                    field=field,
+                ) from None
 
     def sample(self, rng: np.random.Generator, name: str) -> RobotSpec:
         """One robot with errors drawn from ``rng``."""

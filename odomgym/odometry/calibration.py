@@ -62,6 +62,7 @@ from odomgym.io import atomic_write_text
 from odomgym.robot import RobotSpec
 
 __all__ = [
+    "ICR_REACH",
     "SKID_TERMS",
     "Calibration",
     "Odometry",
@@ -328,15 +329,30 @@ _OFFSETS = ("icr_x", "icr_y")
 
 
 def _check_field(name: str, value: object, *, source: str | None = None) -> None:
-    """A factor must be a positive number, an ICR offset a finite one, α a finite one ≥ 0
-    (:class:`SpecError` naming the field, and the file and line when ``source`` says them)."""
+    """A factor must be a positive number, an ICR offset a finite one within
+    :data:`ICR_REACH`, α a finite one ≥ 0 (:class:`SpecError` naming the field, and the file
+    and line when ``source`` says them)."""
     if name in _OFFSETS:
-        require_finite(name, value, source=source)
+        if abs(require_finite(name, value, source=source)) > ICR_REACH:
+            raise SpecError(
+                f"{name} must be within ±{ICR_REACH:g} m of the tracked point, got {value!r} "
+                "(a value in millimetres?)",
+                field=name,
+                source=source,
+            )
     elif name == "track_alpha":
         if require_finite(name, value, source=source) < 0.0:
             raise SpecError(f"{name} must be >= 0, got {value!r}", field=name, source=source)
     else:
         require_positive(name, value, source=source)
+
+
+ICR_REACH = 100.0
+"""The farthest an ICR offset (x_ICR, y_ICR) may lie from the tracked point [m]. Why: the
+offsets sit within a wheeled robot's body, or a marker's lever arm beyond it, a few metres at
+most (``skid_icr`` fits them within ten tracks); a larger one is a unit slip (the command
+line prints them in mm), and an offset of 1e300 m made the reference driver's wheel rates
+overflow."""
 
 
 def load_calibration(path: str | Path) -> Calibration:

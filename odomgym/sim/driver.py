@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odomgym._jit import kernel
+from odomgym.errors import SpecError
 from odomgym.robot import RobotSpec
 
 __all__ = ["ReferenceDriver"]
@@ -52,10 +53,18 @@ class ReferenceDriver:
         heading_gain: float = 2.0,
         cross_gain: float = 5.0,
     ) -> None:
-        if not 0 < cruise_speed <= robot.max_wheel_speed:
-            raise ValueError(
-                f"cruise_speed must be in (0, max_wheel_speed={robot.max_wheel_speed}], "
-                f"got {cruise_speed!r}"
+        if not 0 < cruise_speed:
+            raise SpecError(
+                f"cruise_speed must be > 0 m/s, got {cruise_speed!r}", field="cruise_speed"
+            )
+        if cruise_speed > robot.max_wheel_speed:
+            # A robot spec may allow less than the experiments' speed (max_wheel_speed from
+            # 1 mm/s): said as the robot's limit, the field a user set, not as a bug.
+            raise SpecError(
+                f"the experiments drive at {cruise_speed:g} m/s, above this robot's "
+                f"max_wheel_speed of {robot.max_wheel_speed:g} m/s: raise max_wheel_speed in "
+                "its spec if the motors allow it, or drive slower (cruise_speed)",
+                field="max_wheel_speed",
             )
         self.robot = robot
         self.cruise_speed = cruise_speed
