@@ -116,12 +116,17 @@ def test_the_command_refuses_an_out_inside_robots_and_an_example_over_files(
     assert not (tmp_path / "out").exists()
 
 
-def _write_report(folder: Path, named: dict[str, dict[str, tuple[float, float]]]) -> None:
+def _write_report(
+    folder: Path, named: dict[str, dict[str, tuple[float, float]]], terms: tuple[str, ...] = ()
+) -> None:
+    """A report.json with the keys the fleet reads, as ``DiagnoseResult.as_dict`` writes them
+    (the kept terms under ``discovered``, their count as ``terms_kept``)."""
     folder.mkdir(parents=True, exist_ok=True)
     report = {
         "verdict": "explained",
         "named_effects": list(named),
-        "terms_kept": [],
+        "discovered": [{"term": term, "value": 0.01, "stderr": 0.001} for term in terms],
+        "terms_kept": len(terms),
         "parameters": {
             effect: {p: {"value": v, "stderr": s} for p, (v, s) in values.items()}
             for effect, values in named.items()
@@ -138,7 +143,7 @@ def test_odd_robots_are_those_beyond_three_robust_standard_deviations(tmp_path: 
         named = {"wheelbase": {"e_b": (value, 1e-4)}}
         if k < MIN_NAMING - 1:  # backlash in too few robots for a distribution
             named["backlash"] = {"angle": (0.01 * (k + 1), 1e-3)}
-        _write_report(tmp_path / "robots" / name, named)
+        _write_report(tmp_path / "robots" / name, named, ("yaw_rate",) if k in (2, 5) else ())
         robots.append(FleetRobot(name, tmp_path, PRESETS["labmate"], ((("", tmp_path / "x.csv")),)))
     summary = summarise_fleet(tmp_path, robots)
     median = float(np.median(e_b))
@@ -150,7 +155,11 @@ def test_odd_robots_are_those_beyond_three_robust_standard_deviations(tmp_path: 
     assert ("backlash", "angle") not in summary.fleet  # named by 4 < MIN_NAMING robots
     assert summary.named["wheelbase"] == [f"r{k}" for k in range(8)]
     assert len(summary.named["backlash"]) == MIN_NAMING - 1
+    # A kept term is counted like an effect (until 0.3.x the fleet read the report's count
+    # of terms as their list and stopped with an internal error).
+    assert summary.terms == {"yaw_rate": ["r2", "r5"]}
     text = format_fleet(summary, "here")
+    assert "yaw_rate" in text
     assert "| r7 | `wheelbase.e_b` |" in text
     stale = tmp_path / "fleet_floor_roughness.png"  # an earlier call's effect, named no more
     stale.write_bytes(b"png")

@@ -592,8 +592,9 @@ def summarise_fleet(out: Path, robots: Sequence[FleetRobot], *, loso: bool = Tru
         summary.verdicts[robot.name] = str(report.get("verdict", ""))
         for effect in report.get("named_effects", []):
             summary.named.setdefault(str(effect), []).append(robot.name)
-        for term in report.get("terms_kept", []) or []:
-            summary.terms.setdefault(str(term), []).append(robot.name)
+        # report.json lists the kept terms under "discovered" ("terms_kept" is their count).
+        for entry in report.get("discovered", []):
+            summary.terms.setdefault(str(entry["term"]), []).append(robot.name)
         for key, estimate in _parameters(report).items():
             if key[0] in report.get("named_effects", []):
                 summary.values.setdefault(key, {})[robot.name] = estimate
