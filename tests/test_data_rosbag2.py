@@ -319,6 +319,28 @@ def test_wheel_samples_before_the_first_pose_are_gaps(tmp_path: Path) -> None:
     assert np.isfinite(run.true_pose[~before & (stamps <= late[-1])]).all()
 
 
+def test_a_tracker_gap_is_a_gap_not_a_straight_line(tmp_path: Path) -> None:
+    """A tracker that lost the marker from 1 s to 2 s (125 Hz: 124 messages missing) and
+    dropped one message at 3 s: the wheel samples inside the lost second get no pose (NaN, as
+    an empty CSV cell), those beside the one dropped message are interpolated as ever
+    (rosbag2.BRIDGE_PERIODS). Until 0.3.x the second was bridged by a straight line, which a
+    diagnosis read as the robot's path."""
+    from odomgym.data.rosbag2 import BRIDGE_PERIODS
+
+    lost_from, lost_to, dropped = EPOCH + 1000 * MS, EPOCH + 2000 * MS, EPOCH + 3000 * MS
+    kept = [ns for ns in mocap_times() if not (lost_from < ns < lost_to) and ns != dropped]
+    bag = write_bag(
+        tmp_path / "gap", {"/joint_states": joint_stream(), "/mocap/pose": pose_stream(times=kept)}
+    )
+    (run,) = read_rosbag(bag, robot=ROBOT, pose_topic="/mocap/pose", joint_topic="/joint_states")
+    stamps = np.array(joint_times())
+    inside = (stamps > lost_from) & (stamps < lost_to)
+    assert inside.sum() == 50 and np.isnan(run.true_pose[inside]).all()
+    seen = stamps <= kept[-1]
+    assert np.isfinite(run.true_pose[~inside & seen]).all()  # 2.99-3.01 s bridged
+    assert 2 * 8 < BRIDGE_PERIODS * 8 < 1000  # one dropped message bridged, a second not
+
+
 def test_read_log_takes_poses_the_tracker_held_as_gaps(tmp_path: Path) -> None:
     """A motion-capture stream that repeats the pose of t = 1 s until t = 2 s while the robot
     drives on: the wheel samples whose interpolated pose is that held one are gaps

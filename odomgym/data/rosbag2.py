@@ -16,7 +16,10 @@ What is read:
   linearly interpolated (x, y and unwrapped yaw) onto each wheel sample's time; wheel samples
   outside the pose stream's time span get a NaN pose (a tracker started late or stopped early:
   a replay starts from the first measured pose, :func:`odomgym.diagnose.screen.screen_runs`).
-  Interpolation bridges gaps in the pose stream.
+  Interpolation bridges the pose stream's ordinary spacing and a dropped message or two, not a
+  gap: a wheel sample between two poses more than :data:`BRIDGE_PERIODS` of the stream's median
+  spacing apart gets a NaN pose too (the tracker lost the marker there, and a straight line
+  across the gap would be a path nobody measured), as an empty cell of a CSV log does.
 * Times are header stamps [ns], or the bag's receive time where a message has no header or a
   zero stamp. Both streams must share a clock.
 
@@ -431,8 +434,17 @@ def _seconds(ns: int) -> str:
     return f"{sign}{whole}.{fraction:09d}"
 
 
+BRIDGE_PERIODS = 5.0
+"""The widest space between two pose messages that interpolation bridges, in the pose
+stream's median spacing [-]: 50 ms for a 100 Hz tracker. Why 5: a dropped message or two and
+ordinary jitter are bridged; a tracker that lost the marker for longer leaves a gap (NaN), which
+every step of ``odomgym diagnose`` takes as it comes. Until 0.3.x every gap was bridged: 4 s of
+a lost marker became a straight line, and a diagnosis of such bags found nothing."""
+
+
 def _interpolate(poses: _Stream, times: NDArray[np.int64], source: str) -> FloatArray:
-    """Pose (x, y, unwrapped yaw) at each of ``times`` [ns], NaN outside the pose stream."""
+    """Pose (x, y, unwrapped yaw) at each of ``times`` [ns], NaN outside the pose stream and
+    inside its gaps (:data:`BRIDGE_PERIODS`)."""
     start = int(times[0])
     first, last = int(poses.times[0]), int(poses.times[-1])
     at = (times - start).astype(np.float64) * 1e-9
@@ -444,6 +456,18 @@ def _interpolate(poses: _Stream, times: NDArray[np.int64], source: str) -> Float
         for column, series in enumerate((values[:, 0], values[:, 1], yaw)):
             result[:, column] = np.interp(at, pose_at, series, left=np.nan, right=np.nan)
     inside = (times >= first) & (times <= last)
+    if len(poses.times) > 2:
+        spacing = np.diff(poses.times)
+        widest = BRIDGE_PERIODS * float(np.median(spacing))
+        # The pose message at or after each time, and the one before it: a time that falls
+        # strictly inside a wider space than ``widest`` is in a gap.
+        after = np.searchsorted(poses.times, times, side="left")
+        between = inside & (after > 0) & (after < len(poses.times))
+        between &= poses.times[np.minimum(after, len(poses.times) - 1)] != times
+        gap = np.zeros(len(times), dtype=bool)
+        gap[between] = spacing[after[between] - 1] > widest
+        result[gap] = np.nan
+        inside &= ~gap
     overflowed = np.flatnonzero(inside & ~np.isfinite(result).all(axis=1))
     if overflowed.size:
         stamp = int(times[overflowed[0]])
