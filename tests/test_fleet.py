@@ -19,6 +19,7 @@ from odomgym.diagnose.fleet import (
     FleetRobot,
     find_fleet,
     format_fleet,
+    inputs_digest,
     plot_fleet,
     summarise_fleet,
 )
@@ -44,6 +45,31 @@ def test_the_layout_gives_robots_sessions_and_periods(tmp_path: Path) -> None:
     assert [r.name for r in robots] == ["a-robot", "b-robot"]
     assert robots[0].periods == ("2026-10", "2026-11") and len(robots[0].logs) == 3
     assert robots[1].periods == ("",) and len(robots[1].logs) == 2
+
+
+def test_a_fleet_of_bags_is_read_with_the_bag_options(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """ROS 2 bags need their topics: ``fleet --pose-topic …`` hands them to every robot's
+    reading (until 0.3.x the command had no such option, and a fleet of bags stopped with
+    "reading ROS 2 bags needs --pose-topic"). They enter the inputs' digest only when given,
+    so that the digests of a fleet of CSV logs stay as they were."""
+    import odomgym.data.logs as logs
+
+    _robot_folder(tmp_path, "r1", ["s1.csv"])
+    (plain,) = find_fleet(tmp_path)
+    (bags,) = find_fleet(tmp_path, {"pose_topic": "/mocap/pose", "joint_topic": "/js"})
+    assert plain.reading == ()
+    assert bags.reading == (("joint_topic", "/js"), ("pose_topic", "/mocap/pose"))
+    assert inputs_digest(plain, "", None, None) != inputs_digest(bags, "", None, None)
+    seen: list[dict[str, object]] = []
+    monkeypatch.setattr(
+        logs, "read_log", lambda path, **options: seen.append(options) or ([], None)
+    )
+    from odomgym.diagnose.fleet import read_robot_runs
+
+    read_robot_runs(bags)
+    assert seen[0]["pose_topic"] == "/mocap/pose" and seen[0]["joint_topic"] == "/js"
 
 
 @pytest.mark.parametrize(
@@ -90,6 +116,8 @@ def test_the_command_refuses_an_out_inside_robots_and_an_example_over_files(
     one_line_error(capsys, "--out reports lies inside ROBOTS (.)")
     assert main(["fleet", "--example", "2", "."]) == 2
     one_line_error(capsys, "ROBOTS . is not empty: --example writes a fleet into a new or empty")
+    assert main(["fleet", "--example", "2", "new", "--resume"]) == 2  # silently dropped before
+    one_line_error(capsys, "--resume is an option of the fleet's diagnosis; --example only")
     assert sorted(tmp_path.rglob("*")) == before
     assert _beside(Path(".")) == tmp_path / "fleet-fleet"
     assert _beside(Path("..")) == tmp_path.parent / f"{tmp_path.name}-fleet"
@@ -113,6 +141,15 @@ def test_the_command_refuses_an_out_inside_robots_and_an_example_over_files(
     monkeypatch.chdir(tmp_path)
     assert main(["fleet", "fleet", "--out", "out"]) == 2
     one_line_error(capsys, "fleet/r1/s1.csv:1: no data rows after the header")
+    assert not (tmp_path / "out").exists()
+    # ... and screened as `diagnose` screens them: a robot whose logs read but hold no heading
+    # (too few usable runs) stops the command before any diagnosis, naming the robot.
+    blind = _robot_folder(tmp_path / "blind", "r2", ["s1.csv"]) / "s1.csv"
+    rows = [f"{run},square,{0.1 * k:.1f},{10 * k},{10 * k},{0.01 * k},0.0," for run in (1, 2, 3)
+            for k in range(5)]  # fmt: skip
+    blind.write_text(blind.read_text() + "\n".join(rows) + "\n")
+    assert main(["fleet", "blind", "--out", "out"]) == 2
+    one_line_error(capsys, "robot r2: diagnose needs at least 3 runs with enough ground truth")
     assert not (tmp_path / "out").exists()
 
 

@@ -25,6 +25,8 @@ from odomgym.errors import SpecError
 from odomgym.robot import RobotSpec, load_robot
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from odomgym.cli._common import Commands
     from odomgym.diagnose.config import DiagnoseConfig
     from odomgym.odometry.runs import Run
@@ -129,19 +131,7 @@ def register(commands: Commands) -> None:
         "result is the same as an uninterrupted run's); without it the journal starts afresh "
         "(--loso always keeps the fold files in OUT)",
     )
-    parser.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
-    parser.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
-    parser.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")
-    parser.add_argument(
-        "--left-joint",
-        default="left_wheel_joint",
-        help="ROS 2 bags: the left wheel's joint name (default left_wheel_joint)",
-    )
-    parser.add_argument(
-        "--right-joint",
-        default="right_wheel_joint",
-        help="ROS 2 bags: the right wheel's joint name (default right_wheel_joint)",
-    )
+    add_bag_arguments(parser)
     parser.add_argument(
         "--loso",
         action="store_true",
@@ -266,6 +256,31 @@ def diagnose_config(args: argparse.Namespace) -> DiagnoseConfig:
     )
 
 
+def add_bag_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options a ROS 2 bag is read with (``diagnose`` and ``fleet``): its topics and the
+    wheels' joint names (:func:`bag_options`)."""
+    parser.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
+    parser.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
+    parser.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")
+    parser.add_argument(
+        "--left-joint",
+        default="left_wheel_joint",
+        help="ROS 2 bags: the left wheel's joint name (default left_wheel_joint)",
+    )
+    parser.add_argument(
+        "--right-joint",
+        default="right_wheel_joint",
+        help="ROS 2 bags: the right wheel's joint name (default right_wheel_joint)",
+    )
+
+
+def bag_options(args: argparse.Namespace) -> dict[str, str]:
+    """:func:`add_bag_arguments`' options as :func:`odomgym.data.logs.read_log`'s keywords:
+    the topics given, and the joint names (which have defaults)."""
+    names = ("pose_topic", "joint_topic", "encoder_topic", "left_joint", "right_joint")
+    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
+
+
 def read_runs(
     args: argparse.Namespace, data: Path, robot: RobotSpec | None
 ) -> tuple[list[Run], RobotSpec]:
@@ -273,31 +288,38 @@ def read_runs(
     robot)."""
     from odomgym.data.logs import read_log
 
-    runs, nominal = read_log(
-        data,
-        robot=robot,
-        format=args.format,
-        pose_topic=args.pose_topic,
-        joint_topic=args.joint_topic,
-        encoder_topic=args.encoder_topic,
-        left_joint=args.left_joint,
-        right_joint=args.right_joint,
-    )
+    runs, nominal = read_log(data, robot=robot, format=args.format, **bag_options(args))
     model = robot if robot is not None else nominal
     if model is None:
         raise SpecError("give the robot model with --robot robot.toml", field="robot")
     return runs, model
 
 
-def say_set_aside(runs: list[Run], model: RobotSpec, report: Reporter) -> None:
+def say_set_aside(
+    runs: list[Run], model: RobotSpec, report: Reporter, *, robot: str | None = None
+) -> None:
     """Notices of the runs the diagnosis will cut at a hole or set aside, and of the held poses
-    made gaps."""
+    made gaps; too few usable runs, or logs a unit away from the model, are a
+    :class:`SpecError` here, before any work. ``robot``: a fleet's robot the runs are, named in
+    every notice and in the refusal (``odomgym fleet`` screens every robot before the first
+    diagnosis)."""
+    if robot is None:
+        _say_set_aside(runs, model, report.notice)
+        return
+    try:
+        _say_set_aside(runs, model, lambda text: report.notice(f"robot {robot}: {text}"))
+    except SpecError as exc:
+        raise SpecError(f"robot {robot}: {exc}", field=exc.field) from None
+
+
+def _say_set_aside(runs: list[Run], model: RobotSpec, notice: Callable[[str], None]) -> None:
+    """:func:`say_set_aside`, each notice handed to ``notice``."""
     from odomgym.data.gaps import held_poses
     from odomgym.diagnose.screen import holes, part_names, slow_clock, usable_runs
 
     interval = slow_clock(runs)
     if interval is not None:
-        report.notice(
+        notice(
             f"the samples are {interval:.4g} s apart (median over all runs), where wheel "
             "odometry is logged at 10-1000 Hz: the logs' time must be in seconds (a time in "
             "milliseconds needs dividing by 1000); diagnosed as given"
@@ -308,7 +330,7 @@ def say_set_aside(runs: list[Run], model: RobotSpec, report: Reporter) -> None:
             name = str(run.meta.get("run", index + 1))
             parts = ", ".join(part_names(name, found))
             said = "; ".join(str(hole) for hole in found)
-            report.notice(
+            notice(
                 f"run {name} ({run.source}): {said}: rows were dropped, and the path in between "
                 f"is unknown, so it is diagnosed as {len(found) + 1} runs ({parts})"
             )
@@ -316,11 +338,11 @@ def say_set_aside(runs: list[Run], model: RobotSpec, report: Reporter) -> None:
     # again and records the same in report.json); too few usable runs stop here in one line.
     _, skipped = usable_runs(runs, model)
     for one in skipped:
-        report.notice(str(one))
+        notice(str(one))
     held = [held_poses(run) for run in runs]
     if any(held):
         poses = f"{sum(held)} held pose" + ("s" if sum(held) > 1 else "")
-        report.notice(
+        notice(
             f"{poses} (the tracker repeated its last pose while the wheels turned) taken as "
             f"gaps in {sum(1 for n in held if n)} of {len(runs)} runs"
         )

@@ -20,6 +20,7 @@ from odomgym.cli._common import (
     processes,
     seed,
 )
+from odomgym.cli.diagnose import add_bag_arguments, bag_options
 from odomgym.errors import SpecError
 
 if TYPE_CHECKING:
@@ -51,7 +52,7 @@ def register(commands: Commands) -> None:
         "--example",
         type=count,
         metavar="N",
-        help="only write an example fleet of N simulated robots into ROBOTS and stop",
+        help="only write an example fleet of N >= 2 simulated robots into ROBOTS and stop",
     )
     parser.add_argument(
         "--sessions", type=count, default=3, help="sessions per example robot (default 3)"
@@ -77,6 +78,7 @@ def register(commands: Commands) -> None:
         "effects and E_d, E_b, E_s across the folds",
     )
     parser.add_argument("--json", action="store_true", help="print fleet.json instead of fleet.md")
+    add_bag_arguments(parser)  # every robot's bags are read with the same topics
     parser.set_defaults(handler=run)
 
 
@@ -100,6 +102,18 @@ def run(args: argparse.Namespace) -> int:
     report = Reporter.of(args)
     root = Path(args.robots)
     if args.example is not None:
+        # Options of the diagnosis, which --example does not run: said, not silently dropped.
+        for given, option in (
+            (args.out is not None, "--out"),
+            (args.loso, "--loso"),
+            (args.resume, "--resume"),
+        ):
+            if given:
+                raise SpecError(
+                    f"{option} is an option of the fleet's diagnosis; --example only writes "
+                    "the logs (run `odomgym fleet ROBOTS` on them next)",
+                    field=option[2:],
+                )
         check_output(root, option="ROBOTS", folder=True)
         if root.is_dir() and any(root.iterdir()):
             # Written over an earlier fleet, the old robots and sessions stayed beside the
@@ -128,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
             "robots: give a folder outside it",
             field="out",
         )
-    robots = find_fleet(root)
+    robots = find_fleet(root, bag_options(args))
     check_output(out, option="--out", folder=True)
     for folder in report_folders(robots, out):  # replaced whole: only earlier reports
         check_replaceable(folder, option="--out")
@@ -137,8 +151,13 @@ def run(args: argparse.Namespace) -> int:
     # time. Reading is about 0.5 s a robot against tens of seconds of diagnosis (a 3-session
     # example robot, measured on 2026-12-02), and a fleet's runs held together would grow
     # with the fleet.
+    # Each robot's runs are screened as `odomgym diagnose` screens them (too few usable runs,
+    # a unit away from the model, holes and held poses said), here, before the first
+    # diagnosis: a robot that cannot be diagnosed stopped the command only when its turn came.
+    from odomgym.cli.diagnose import say_set_aside
+
     for robot in robots:
-        read_robot_runs(robot)
+        say_set_aside(read_robot_runs(robot), robot.robot, report, robot=robot.name)
     config = DiagnoseConfig(seed=args.seed, jobs=args.jobs or os.cpu_count() or 1)
     bars: list[Progress] = []
 

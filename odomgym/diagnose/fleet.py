@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -85,12 +85,16 @@ class FleetRobot:
         folder: the folder.
         robot: the nominal model from its ``robot.toml``.
         logs: (period, path) per log; period ``""`` for logs directly in the folder.
+        reading: options of :func:`odomgym.data.logs.read_log` its logs need, as (name, value)
+            pairs: a ROS 2 bag's topics and joint names (``odomgym fleet --pose-topic`` …);
+            empty for formats that need none.
     """
 
     name: str
     folder: Path
     robot: RobotSpec
     logs: tuple[tuple[str, Path], ...]
+    reading: tuple[tuple[str, str], ...] = ()
 
     @property
     def periods(self) -> tuple[str, ...]:
@@ -118,8 +122,10 @@ def _log_month(path: Path) -> str | None:
     return f"{when:%Y-%m}" if when is not None else None
 
 
-def find_fleet(root: str | Path) -> list[FleetRobot]:
-    """The robots under ``root`` (one sub-folder each, sorted by name).
+def find_fleet(root: str | Path, reading: Mapping[str, str] | None = None) -> list[FleetRobot]:
+    """The robots under ``root`` (one sub-folder each, sorted by name); ``reading``: the
+    options of :func:`odomgym.data.logs.read_log` every robot's logs are read with
+    (:attr:`FleetRobot.reading`; a fleet's robots are of one kind, logged alike).
 
     Raises:
         SpecError: ``root`` is not a folder or holds no robot folder; a robot folder has no
@@ -163,7 +169,8 @@ def find_fleet(root: str | Path) -> list[FleetRobot]:
                 field="logs",
                 source=str(folder),
             )
-        robots.append(FleetRobot(folder.name, folder, robot, tuple(logs)))
+        options = tuple(sorted((reading or {}).items()))
+        robots.append(FleetRobot(folder.name, folder, robot, tuple(logs), options))
     if not robots:
         raise SpecError(
             "no robot folder (each sub-folder holds one robot's robot.toml and logs)",
@@ -180,7 +187,7 @@ def read_robot_runs(robot: FleetRobot) -> list[Run]:
 
     runs: list[Run] = []
     for period, path in robot.logs:
-        log_runs, _ = read_log(path, robot=robot.robot)
+        log_runs, _ = read_log(path, robot=robot.robot, format=None, **dict(robot.reading))
         session = session_name(period, path)
         for run in log_runs:
             run.meta["session"] = str(run.meta.get("session") or session)
@@ -234,6 +241,8 @@ def inputs_digest(robot: FleetRobot, period: str, config: Any, baseline: Any) ->
         )
     named = None if baseline is None else getattr(baseline, "__qualname__", repr(baseline))
     options["baseline"] = named
+    if robot.reading:  # only when given, so that the digests of other fleets stay as they were
+        options["reading"] = [list(pair) for pair in robot.reading]
     digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode())
     files = [robot.folder / "robot.toml"]
     for log_period, path in robot.logs:
