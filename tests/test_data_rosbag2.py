@@ -275,8 +275,8 @@ def _read(bag: Path, **kwargs: Any) -> None:
 @pytest.mark.parametrize(
     ("options", "pattern"),
     [
-        ({"joint_topic": None}, "exactly one of joint_topic"),
-        ({"encoder_topic": "/ticks"}, "exactly one of joint_topic"),
+        ({"joint_topic": None}, "exactly one of the wheel topics: --joint-topic"),
+        ({"encoder_topic": "/ticks"}, "exactly one of the wheel topics: --joint-topic"),
         (
             {"pose_topic": "/tf"},
             r"topic /tf is not in the bag; its topics: /joint_states "

@@ -481,6 +481,11 @@ def test_regression_covariance_with_huge_numbers_is_one_line(
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "too large for the closed forms" in err[0]
+    # A turn that overflows (1e300 m over a 1e-10 m wheelbase) was "math domain error".
+    argv = ["covariance", "--left=1e300", "--right=-1e300", "--wheelbase=1e-10", "--kl=0"]
+    assert main([*argv, "--kr=0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "overflows a float: too large for the closed forms" in err[0], err
 
 
 # ------------------------------------------------------------------------------- ROS 2 bags

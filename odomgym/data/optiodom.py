@@ -287,7 +287,9 @@ def _path_type(folder: Path, override: PathType | None) -> PathType:
             return known
     raise SpecError(
         f"cannot tell the path type from the parent folder {parent!r} (expected one of "
-        f"{', '.join(PATH_TYPES)}); pass path_type=",
+        f"{', '.join(PATH_TYPES)}): put the session folder in a folder named after its path "
+        "type, as the OptiOdom data set lays them out (square/230620202042/); in Python "
+        "path_type=",
         source=str(folder),
     )
 

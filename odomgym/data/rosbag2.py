@@ -109,8 +109,9 @@ def read_rosbag(
     """
     if (joint_topic is None) == (encoder_topic is None):
         raise SpecError(
-            "give exactly one of joint_topic= (sensor_msgs/msg/JointState) and encoder_topic= "
-            "(std_msgs/msg/Int32MultiArray or Int64MultiArray)",
+            "give exactly one of the wheel topics: --joint-topic (sensor_msgs/msg/JointState) "
+            "or --encoder-topic (std_msgs/msg/Int32MultiArray or Int64MultiArray); in Python "
+            "joint_topic= or encoder_topic=",
             field="joint_topic" if joint_topic is None else "encoder_topic",
         )
     if joint_topic is not None and left == right:
@@ -218,7 +219,8 @@ def _read_bag(
             seen = ", ".join(_joint_names_seen(raw[wheel_topic], api)) or "none"
             raise SpecError(
                 f"no message on {wheel_topic} names the wheel joints {left!r} and {right!r}; "
-                f"joints present: {seen} (pass left= and right=)",
+                f"joints present: {seen} (name them with --left-joint and --right-joint; in "
+                "Python left= and right=)",
                 field="left",
                 source=f"{source} {wheel_topic}",
             )

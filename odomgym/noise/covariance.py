@@ -141,6 +141,15 @@ def end_pose(start: ArrayLike, left: float, right: float, wheelbase: float) -> F
         require_finite(name, value)
     require_positive("wheelbase", wheelbase)
     dtheta = (right - left) / wheelbase
+    if not math.isfinite(dtheta):
+        # A finite difference over a tiny wheelbase (1e300 m over 1e-10 m) overflows to inf,
+        # whose sine was Python's bare "math domain error".
+        raise SpecError(
+            f"the turn (right − left)/wheelbase = ({right:g} − {left:g})/{wheelbase:g} "
+            "overflows a float: too large for the closed forms (travels and wheelbase are "
+            "metres)",
+            field="wheelbase",
+        )
     half = 0.5 * dtheta
     chord = 0.5 * (left + right) * (math.sin(half) / half if half != 0.0 else 1.0)
     mid = th0 + half
