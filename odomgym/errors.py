@@ -56,7 +56,9 @@ def read_spec_toml(path: Path, kind: str) -> dict[str, object]:
     import tomllib
 
     try:
-        raw = path.read_text(encoding="utf-8")
+        # utf-8-sig: a byte-order mark (Windows editors write one) is read past, as the CSV
+        # readers do; TOML itself forbids it, and tomllib called it an "invalid statement".
+        raw = path.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise SpecError(f"cannot read {kind} file: {exc.strerror}", source=str(path)) from None
     except UnicodeDecodeError as exc:
@@ -105,17 +107,29 @@ def load_named(
     return build(read_spec_toml(path, kind), path=path)
 
 
-def refuse_stray_keys(data: Mapping[str, object], table: str, path: Path | None) -> None:
+def refuse_stray_keys(
+    data: Mapping[str, object], table: str, path: Path | None, nested: tuple[str, ...] = ()
+) -> None:
     """Refuse keys that sit outside the spec file's top-level ``[table]`` when it has one (a
     key above the header): they would be ignored. A skid-steer robot's ``axle_spacing``
     written there gave a differential-drive robot without a word. Other tables of the file
-    (``[x]`` beside ``[robot]``) are left alone.
+    (``[x]`` beside ``[robot]``) are left alone, except one named like a sub-table of
+    ``[table]`` (``nested``: ``[effects.backlash]`` beside ``[robot]``, meant as
+    ``[robot.effects.backlash]``), which was ignored as silently.
 
     Raises:
         SpecError: naming the keys, the first as the field, with its ``file:line``.
     """
     if table not in data:
         return
+    for name in nested:
+        if _is_table(data.get(name)):
+            raise SpecError(
+                f"the table [{name}…] sits outside [{table}], where it would be ignored: write "
+                f"it as [{table}.{name}…]",
+                field=name,
+                source=_locate_table(path, name) if path else None,
+            )
     stray = [k for k, v in data.items() if k != table and not _is_table(v)]
     if stray:
         raise SpecError(
@@ -124,6 +138,20 @@ def refuse_stray_keys(data: Mapping[str, object], table: str, path: Path | None)
             field=stray[0],
             source=locate_key(path, stray[0]) if path else None,
         )
+
+
+def _locate_table(path: Path, name: str) -> str:
+    """``"file:line"`` of the first header of a table ``[name…]`` in ``path`` (the file alone
+    when the text does not show it)."""
+    try:
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return str(path)
+    header = re.compile(rf"^\s*\[+\s*{re.escape(name)}\s*[.\]]")
+    for number, line in enumerate(lines):
+        if header.match(line):
+            return f"{path}:{number + 1}"
+    return str(path)
 
 
 def _is_table(value: object) -> bool:

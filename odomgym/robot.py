@@ -612,7 +612,7 @@ class RobotSpec:
                 field="robot",
                 source=str(path) if path else None,
             )
-        refuse_stray_keys(data, "robot", path)
+        refuse_stray_keys(data, "robot", path, nested=("effects",))
         table = dict(data.get("robot", data))
         errors = {k: table.pop(k) for k in ("e_d", "e_b", "e_s") if k in table}
         effect_tables = table.pop("effects", {})

@@ -48,6 +48,23 @@ def test_keys_above_the_table_header_are_refused_not_ignored(
     load(path)  # other tables (and arrays of tables) beside it are the file's own business
 
 
+def test_a_robots_effects_table_outside_robot_is_refused_and_a_bom_is_read(
+    tmp_path: Path,
+) -> None:
+    """``[effects.backlash]`` beside ``[robot]`` (meant as ``[robot.effects.backlash]``) was
+    ignored without a word, even with a negative angle; a byte-order mark, which Windows
+    editors write and the CSV readers accept, was "malformed TOML: Invalid statement"."""
+    robot = "[robot]\nwheel_diameter = 0.1\nwheelbase = 0.3\nticks_per_rev = 500\n"
+    path = tmp_path / "robot.toml"
+    path.write_text(robot + "\n[effects.backlash]\nangle = -1.0\n")
+    with pytest.raises(SpecError) as caught:
+        load_robot(path)
+    assert str(caught.value).startswith(f"{path}:6: the table [effects…] sits outside [robot]")
+    assert caught.value.field == "effects"
+    path.write_bytes(b"\xef\xbb\xbf" + robot.encode())
+    assert load_robot(path).wheelbase == 0.3
+
+
 def test_robot_toml_round_trip(tmp_path: Path) -> None:
     robot = PRESETS["labmate"].with_errors(1.003, 0.98, 1.01)
     path = tmp_path / "lm.toml"
