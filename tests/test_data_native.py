@@ -393,6 +393,26 @@ def test_failed_write_leaves_nothing_behind(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["log.csv", "not-a-folder"]
 
 
+def test_a_folder_of_two_formats_is_refused_not_read_as_one(tmp_path: Path) -> None:
+    """Native logs beside an OptiOdom session: read as OptiOdom, the CSV logs and the folder's
+    robot.toml were dropped without a word; now one line naming both, with --format as the
+    way out. A CSV file that is no native log (an OptiOdom folder's results table) is no
+    second format."""
+    from odomgym.data.logs import detect_format
+
+    session = tmp_path / "square" / "230620202042"
+    session.mkdir(parents=True)
+    (session / "230620202042_metadata.csv").write_text("a,b\n1,2\n", encoding="utf-8")
+    (tmp_path / "published_results.csv").write_text("method,e_b\numbmark,1.0\n")
+    assert detect_format(tmp_path) == "optiodom"
+    write_native(tmp_path / "a.csv", _runs()[:1])
+    with pytest.raises(SpecError) as caught:
+        detect_format(tmp_path)
+    assert caught.value.field == "format"
+    assert "holds logs of 2 formats: OptiOdom sessions (square/230620202042/) and native CSV " \
+        "logs (a.csv)" in str(caught.value)  # fmt: skip
+
+
 def test_a_folder_of_native_logs_is_one_robots_sessions(tmp_path: Path) -> None:
     """A folder of native CSV files — directly, or one sub-folder per period, as a robot's
     folder of ``odomgym fleet`` — reads as that robot's sessions (a file alone has no session

@@ -7,7 +7,9 @@ a folder holding ``*_metadata.csv`` files is OptiOdom, a bag folder (``metadata.
 ``.mcap``/``.db3`` file is a ROS 2 bag, and any other folder holding ``.csv`` files is a folder
 of native logs (:func:`native_sessions`): each file one session, directly in the folder or in
 one sub-folder per period — the layout of one robot's folder of ``odomgym fleet``, whose
-``robot.toml``, when there, is the folder's nominal robot.
+``robot.toml``, when there, is the folder's nominal robot. A folder holding logs of two formats
+(native logs, whose header names the native columns, beside OptiOdom sessions or bags) is
+refused in one line: read as one, the other's logs were dropped without a word.
 
 Every format's runs come out the same way: poses a tracker held while the wheels turned are made
 gaps (:func:`odomgym.data.gaps.mark_held_poses`; how many, per run, in ``meta["held_poses"]``),
@@ -49,12 +51,34 @@ def detect_format(path: Path) -> LogFormat:
             return "native"
         if path.suffix.lower() in (".mcap", ".db3"):
             return "rosbag"
-    elif any(path.rglob("*_metadata.csv")):
-        return "optiodom"
-    elif any(path.rglob("metadata.yaml")) or any(path.rglob("*.mcap")) or any(path.rglob("*.db3")):
-        return "rosbag"
-    elif native_sessions(path):
-        return "native"
+    else:
+        found: dict[LogFormat, str] = {}
+        optiodom = next(path.rglob("*_metadata.csv"), None)
+        if optiodom is not None:
+            found["optiodom"] = f"OptiOdom sessions ({optiodom.parent.relative_to(path)}/)"
+        bag = next(
+            (p for pattern in ("metadata.yaml", "*.mcap", "*.db3") for p in path.rglob(pattern)),
+            None,
+        )
+        if bag is not None:
+            found["rosbag"] = f"ROS 2 bags ({bag.relative_to(path)})"
+        native = [log for _, log in native_sessions(path) if _looks_native(log)]
+        if native:
+            found["native"] = f"native CSV logs ({native[0].relative_to(path)})"
+        elif native_sessions(path) and not found:
+            return "native"  # CSV files that are no native logs: the reader says why
+        if len(found) > 1:
+            # Read as the first format found, the others were dropped without a word (a
+            # folder's CSV logs and its robot.toml beside an OptiOdom session).
+            raise SpecError(
+                f"holds logs of {len(found)} formats: {' and '.join(found.values())}; "
+                "diagnose reads one at a time: move the others apart, or name the one to "
+                "read with --format",
+                field="format",
+                source=str(path),
+            )
+        if found:
+            return next(iter(found))
     raise SpecError(
         "cannot tell the log format (a .csv file or a folder of them, an OptiOdom folder or a "
         "ROS 2 bag); "
@@ -169,6 +193,21 @@ def session_name(period: str, path: Path) -> str:
     """A log's session: its path from the robot's folder without its suffix (``s1``,
     ``2026-11/s2``)."""
     return f"{period}/{path.stem}" if period else path.stem
+
+
+def _looks_native(path: Path) -> bool:
+    """Whether the first line of the CSV file ``path`` names every native column
+    (:data:`odomgym.data.native.COLUMNS`, any case, quoted or not): a native log, not another
+    table that lies beside logs of another format (an OptiOdom folder's results table)."""
+    from odomgym.data.native import COLUMNS
+
+    try:
+        with path.open(encoding="utf-8-sig", errors="replace") as handle:
+            first = handle.readline(4096)
+    except OSError:
+        return False
+    names = {cell.strip().strip('"').strip().lower() for cell in first.split(",")}
+    return all(column in names for column in COLUMNS)
 
 
 def _is_native(path: Path) -> bool:
