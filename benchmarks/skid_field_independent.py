@@ -91,7 +91,7 @@ from independent_robot import (  # noqa: E402
     run_streams,
     time_grid,
 )
-from independent_skid import ElasticSkidRobot  # noqa: E402
+from independent_skid import ElasticSkidRobot, integrate_steps  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 
@@ -244,16 +244,7 @@ def simulate(
     # the rims travel on the true diameter; the encoders count the motor angle
     true_d = DIAMETER_SCALE * nominal_d
     rims = np.diff(motor, axis=0) * (0.5 * true_d)
-    step = robot.twist(rims)
-    dtheta = step[:, 2]
-    theta = start[2] + np.concatenate([[0.0], np.cumsum(dtheta)])
-    chord = np.sinc(dtheta / (2.0 * math.pi))  # sin(dθ/2)/(dθ/2): exact constant-twist steps
-    mid = theta[:-1] + 0.5 * dtheta
-    c, s = np.cos(mid), np.sin(mid)
-    dx = chord * (c * step[:, 0] - s * step[:, 1])
-    dy = chord * (s * step[:, 0] + c * step[:, 1])
-    x = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
-    y = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
+    x, y, theta = integrate_steps(start, robot.twist(rims))
     th = theta[log_index]
     cth, sth = np.cos(th), np.sin(th)
     pose = np.stack(

@@ -353,11 +353,23 @@ def _simulate_run(
     rims = np.diff(motor, axis=0) * (0.5 * robot.wheel_diameter)  # rim travel per step [m]
     # The step's displacement (dx, dy, dθ) in the body frame at its start: the twist per unit
     # of rim travel, times the travel (the balance is homogeneous, so time drops out).
-    step = robot.twist(rims)
+    x, y, theta = integrate_steps(start, robot.twist(rims))
+    pose = np.stack([x[log_index], y[log_index], theta[log_index]], axis=1)
+    pose[:, :2] += robot.sensor_position_std * sensor_rng.standard_normal((len(log_times), 2))
+    pose[:, 2] += robot.sensor_heading_std * sensor_rng.standard_normal(len(log_times))
+    return logged_run(
+        m, index, "independent-skid", log_times, pose, motor[log_index], phase, robot.ticks_per_rev
+    )
+
+
+def integrate_steps(start: FloatArray, step: FloatArray) -> tuple[FloatArray, ...]:
+    """The path x, y [m], θ [rad] at every integration step from ``start`` (x, y, θ) and each
+    step's body-frame displacement ``step`` (n, 3) [m, m, rad], each step an exact
+    constant-twist one: the displacement rotated by the step's mean heading and scaled by the
+    chord factor sinc(dθ/2) (``benchmarks/skid_field_independent.py`` drives its robot so
+    too)."""
     dtheta = step[:, 2]
     theta = start[2] + np.concatenate([[0.0], np.cumsum(dtheta)])
-    # Exact constant-twist step: the body-frame displacement rotated by the step's mean heading
-    # and scaled by the chord factor sinc(dθ/2).
     chord = np.sinc(dtheta / (2.0 * math.pi))
     mid = theta[:-1] + 0.5 * dtheta
     c, s = np.cos(mid), np.sin(mid)
@@ -365,12 +377,7 @@ def _simulate_run(
     dy = chord * (s * step[:, 0] + c * step[:, 1])
     x = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
     y = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
-    pose = np.stack([x[log_index], y[log_index], theta[log_index]], axis=1)
-    pose[:, :2] += robot.sensor_position_std * sensor_rng.standard_normal((len(log_times), 2))
-    pose[:, 2] += robot.sensor_heading_std * sensor_rng.standard_normal(len(log_times))
-    return logged_run(
-        m, index, "independent-skid", log_times, pose, motor[log_index], phase, robot.ticks_per_rev
-    )
+    return x, y, theta
 
 
 def generate_skid(
