@@ -149,6 +149,9 @@ class Calibrator(ABC):
     min_budget: ClassVar[int] = 2
     """Fewest runs the method can calibrate with (default: one square each way); the benchmark
     refuses smaller budgets."""
+    max_budget: ClassVar[int | None] = None
+    """Most runs the method can calibrate with (``None``: no limit; the learned self-calibration
+    sessions stop at 64); the benchmark refuses larger budgets before any robot runs."""
     skid_steer: ClassVar[bool] = False
     """Whether the method is made for skid-steer robots (its calibration moves the ICRs):
     such a method runs on any robot, but the commands that compare every method on
@@ -301,6 +304,9 @@ def register_calibrator(cls: C, *, replace: bool = False) -> C:
         raise ValueError(f"calibrator {name!r}: options_type must be a dataclass")
     if isinstance(cls.min_budget, bool) or not isinstance(cls.min_budget, int):
         raise ValueError(f"calibrator {name!r}: min_budget must be a whole number")
+    most = cls.max_budget
+    if most is not None and (isinstance(most, bool) or not isinstance(most, int) or most < 1):
+        raise ValueError(f"calibrator {name!r}: max_budget must be None or a whole number >= 1")
     CALIBRATORS[name] = cls
     return cls
 

@@ -266,6 +266,7 @@ class SelfCal(Calibrator):
         self._policy: MlpPolicy | None = None
 
     min_budget: ClassVar[int] = 1
+    max_budget: ClassVar[int | None] = MAX_BUDGET
 
     @classmethod
     def budget_options(cls, runs: int) -> dict[str, Any]:

@@ -189,8 +189,11 @@ def test_a_dead_worker_is_retried_once_then_its_robots_are_marked_failed(
 def test_a_journal_of_another_configuration_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "journal.jsonl"
     Journal(path, CONFIG).start()
-    other = BenchConfig(robots=5, floors=("concrete",), methods=("umbmark",), budget=4)
-    with pytest.raises(SpecError, match="another benchmark configuration"):
+    other = BenchConfig(robots=5, floors=("concrete",), methods=("umbmark",), budget=8)
+    # Named setting by setting (a dump of the whole configuration before).
+    with pytest.raises(
+        SpecError, match=r"configuration \(budget 4 then, 8 now; robots 4 then, 5 now\)"
+    ):
         Journal(path, other).read()
     with path.open("a") as f:
         f.write('{"robots": [0], "rows": [')  # cut short by an interruption: ignored
@@ -199,6 +202,26 @@ def test_a_journal_of_another_configuration_is_refused(tmp_path: Path) -> None:
         f.write("\n{}\n")
     with pytest.raises(SpecError, match=r"journal.jsonl:2: damaged entry"):
         Journal(path, CONFIG).read()
+
+
+def test_bench_refuses_what_it_would_run_wrongly_before_any_robot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Three inputs that ran: ``--resume`` without a journal started over (a finished
+    benchmark's ran every robot again), a method named twice ran twice and counted as twice
+    the robots, and a budget beyond selfcal's 64 runs failed robot by robot after the other
+    methods had driven it. Each is one line now, before any robot."""
+    from cli_errors import one_line_error
+
+    out = tmp_path / "out"
+    base = ["bench", "calibrators", "--robots", "1", "--floor", "concrete", "--out", str(out)]
+    assert main([*base, "--resume"]) == 2
+    one_line_error(capsys, "journal.jsonl: no journal to resume from")
+    assert main([*base, "--methods", "umbmark", "lee", "umbmark"]) == 2
+    one_line_error(capsys, "'umbmark' given twice")
+    assert main([*base, "--budget", "4", "1000"]) == 2
+    one_line_error(capsys, "selfcal takes a budget of at most 64 runs, got 1000")
+    assert not out.exists()
 
 
 def test_a_journal_of_another_format_is_refused_in_one_line(tmp_path: Path) -> None:

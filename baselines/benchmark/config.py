@@ -94,11 +94,24 @@ class BenchConfig:
                 f"validation_runs must be >= 1, got {self.validation_runs}",
                 field="validation_runs",
             )
+        for names, what in ((self.methods, "methods"), (self.floors, "floors")):
+            twice = sorted({n for n in names if names.count(n) > 1})
+            if twice:
+                # Run twice, a method's rows were counted as twice the robots.
+                raise SpecError(f"{', '.join(map(repr, twice))} given twice", field=what)
         for method in self.methods:
             least = CALIBRATORS[method].min_budget if method in CALIBRATORS else 2
             if min(self.budgets) < least:
                 raise SpecError(
                     f"{method} needs a budget of at least {least} runs, got {min(self.budgets)}",
+                    field="budget",
+                )
+            most = CALIBRATORS[method].max_budget if method in CALIBRATORS else None
+            if most is not None and max(self.budgets) > most:
+                # Each robot's calibration failed alone, after the other methods had driven
+                # the budget's runs.
+                raise SpecError(
+                    f"{method} takes a budget of at most {most} runs, got {max(self.budgets)}",
                     field="budget",
                 )
 

@@ -64,10 +64,21 @@ class Journal:
                 field="resume",
             )
         if header != self._header():
+            then, now = header.get("config"), self._header()["config"]
+            if isinstance(then, dict):
+                # Named setting by setting, as `train --resume` does: a dump of the whole
+                # configuration left the user to find the one that differs.
+                keys = sorted(set(then) | set(now), key=str)
+                said = "; ".join(
+                    f"{k} {then.get(k)!r} then, {now.get(k)!r} now"
+                    for k in keys
+                    if then.get(k) != now.get(k)
+                )
+            else:
+                said = repr(then)
             raise SpecError(
-                f"{self.path}:1: recorded for another benchmark configuration "
-                f"({header.get('config') if isinstance(header, dict) else header}); run "
-                "without --resume to start over",
+                f"{self.path}:1: recorded for another benchmark configuration ({said}); run "
+                "without --resume to start over, or with the settings it was started with",
                 field="resume",
             )
         done: dict[int, list[dict[str, Any]]] = {}

@@ -240,6 +240,14 @@ def run_calibrators(args: argparse.Namespace) -> int:
     )
     jobs = args.jobs or os.cpu_count() or 1
     journal = Path(args.out) / JOURNAL_NAME
+    if args.resume and not journal.exists():
+        # Said, as `train --resume` says it: started over without a word, a finished
+        # benchmark's --resume ran every robot again.
+        raise SpecError(
+            f"{journal}: no journal to resume from (an interrupted benchmark leaves one; a "
+            "finished one removes it, its results are in the folder): start without --resume",
+            field="resume",
+        )
     with Progress(report, "benchmark", total=config.robots, unit="robot") as bar:
         start = time.perf_counter()
         try:
