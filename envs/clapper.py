@@ -149,8 +149,10 @@ class ClapperEnv(DrawsLazily, gym.Env[NDArray[np.float32], NDArray[np.float32]])
         render_mode: str | None = None,
     ) -> None:
         self._set_render_mode(render_mode)
-        self.vehicle = vehicle if isinstance(vehicle, VehicleSpec) else load_vehicle(str(vehicle))
-        self.floor = floor if isinstance(floor, FloorSpec) else load_floor(str(floor))
+        # Not str() first: a number (floor=123) became the name "123" ("unknown floor '123'")
+        # where the route envs say what type they take.
+        self.vehicle = load_vehicle(vehicle)
+        self.floor = load_floor(floor)
         if estimator is not None and not callable(estimator):
             raise ValueError("estimator must build an InternalEstimator from wheelbases (N, 2)")
         if estimator is not None and not require_bool("ipec", ipec):

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -308,9 +309,9 @@ def _build_item(kind: type[Any], label: str, item: Mapping[str, Any], path: Path
         raise SpecError(f"{label}.{exc}", field=f"{label}.{key}", source=where(key)) from None
 
 
-def load_floor(spec: str | Path | FloorSpec) -> FloorSpec:
+def load_floor(spec: str | os.PathLike[str] | FloorSpec) -> FloorSpec:
     """Return a named floor (``smooth``, ``bumpy``, ``slippery``) or load a floor TOML file (a
-    spec is returned as it is)."""
+    spec is returned as it is; anything else is refused in one line naming its type)."""
     return load_named(
         spec,
         FLOORS,

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -296,8 +297,9 @@ def _locate_in_table(path: Path, table: str, key: str | None) -> str:
     return f"{path}:{start + 1}"
 
 
-def load_vehicle(spec: str | Path) -> VehicleSpec:
-    """Return the preset called ``spec`` (``clapper``) or load a vehicle TOML file."""
+def load_vehicle(spec: str | os.PathLike[str] | VehicleSpec) -> VehicleSpec:
+    """Return the preset called ``spec`` (``clapper``) or load a vehicle TOML file (a spec is
+    returned as it is; anything else is refused in one line naming its type)."""
     return load_named(
         spec,
         VEHICLES,
