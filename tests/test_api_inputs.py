@@ -95,9 +95,9 @@ def test_a_spec_is_taken_where_a_name_is_and_anything_else_is_refused_in_one_lin
     with pytest.raises(SpecError, match="calibration must be a Calibration"):
         gym.make("UMBmarkSquare-v0", calibration=1.0)
     # The CLAPPER envs said "unknown floor '123'" (the number made a name).
-    with pytest.raises(SpecError, match="floor must be a preset name.* got int 123"):
+    with pytest.raises(SpecError, match=r"floor must be a preset name.* got int 123"):
         gym.make("ClapperStraight-v0", floor=123)
-    with pytest.raises(SpecError, match="vehicle must be a preset name.* got float 1.5"):
+    with pytest.raises(SpecError, match=r"vehicle must be a preset name.* got float 1\.5"):
         gym.make("ClapperRectangle-v0", vehicle=1.5)
 
 
