@@ -70,6 +70,13 @@ def test_a_fleet_of_bags_is_read_with_the_bag_options(
 
     read_robot_runs(bags)
     assert seen[0]["pose_topic"] == "/mocap/pose" and seen[0]["joint_topic"] == "/js"
+    # The command hands on only what was given: a fleet of CSV logs keeps its digest.
+    from odomgym.cli import build_parser
+    from odomgym.cli.diagnose import bag_options
+
+    assert bag_options(build_parser().parse_args(["fleet", str(tmp_path)])) == {}
+    given = build_parser().parse_args(["fleet", str(tmp_path), "--left-joint", "wl"])
+    assert bag_options(given) == {"left_joint": "wl"}
 
 
 @pytest.mark.parametrize(

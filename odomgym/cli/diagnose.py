@@ -256,29 +256,34 @@ def diagnose_config(args: argparse.Namespace) -> DiagnoseConfig:
     )
 
 
+_JOINTS = {"left_joint": "left_wheel_joint", "right_joint": "right_wheel_joint"}
+"""The wheels' joint names a bag is read with unless named (``read_log``'s own defaults)."""
+
+
 def add_bag_arguments(parser: argparse.ArgumentParser) -> None:
     """The options a ROS 2 bag is read with (``diagnose`` and ``fleet``): its topics and the
     wheels' joint names (:func:`bag_options`)."""
     parser.add_argument("--pose-topic", help="ROS 2 bags: ground-truth pose topic")
     parser.add_argument("--joint-topic", help="ROS 2 bags: sensor_msgs/JointState topic")
     parser.add_argument("--encoder-topic", help="ROS 2 bags: [left, right] counts topic")
-    parser.add_argument(
-        "--left-joint",
-        default="left_wheel_joint",
-        help="ROS 2 bags: the left wheel's joint name (default left_wheel_joint)",
-    )
-    parser.add_argument(
-        "--right-joint",
-        default="right_wheel_joint",
-        help="ROS 2 bags: the right wheel's joint name (default right_wheel_joint)",
-    )
+    for name, default in _JOINTS.items():
+        side = name.split("_")[0]
+        parser.add_argument(
+            f"--{side}-joint",
+            default=default,
+            help=f"ROS 2 bags: the {side} wheel's joint name (default {default})",
+        )
 
 
 def bag_options(args: argparse.Namespace) -> dict[str, str]:
     """:func:`add_bag_arguments`' options as :func:`odomgym.data.logs.read_log`'s keywords:
-    the topics given, and the joint names (which have defaults)."""
-    names = ("pose_topic", "joint_topic", "encoder_topic", "left_joint", "right_joint")
-    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
+    the topics given, and the joint names where they are not the defaults. Why only those: a
+    fleet's resume digest holds them (:attr:`odomgym.diagnose.fleet.FleetRobot.reading`), and
+    a fleet of CSV logs must keep the digest it had before the options existed."""
+    topics = ("pose_topic", "joint_topic", "encoder_topic")
+    given = {name: getattr(args, name) for name in topics if getattr(args, name) is not None}
+    given.update({n: getattr(args, n) for n, d in _JOINTS.items() if getattr(args, n) != d})
+    return given
 
 
 def read_runs(
