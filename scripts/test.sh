@@ -46,14 +46,14 @@ PYTHON="${PYTHON:-python3}"
 rm -rf "$VENV"
 "$PYTHON" -m venv "$VENV"
 "$VENV/bin/python" -m pip install -q --upgrade pip
-# --no-compile: pip byte-compiles every .py file it installs (15 800 with every extra, torch and
-# Ray the most: 50 s of CPU on one core, 2026-12-02, timed with compileall on a copy of the
-# packages), before any gate can start; the tests import a fraction of them, and Python compiles
-# what it imports on first import (and caches it), so nothing is lost but the waiting.
-"$VENV/bin/python" -m pip install -q --no-compile torch==2.13.0
+# pip byte-compiles what it installs (about 50 s of CPU for torch, Ray and the rest). Kept: with
+# PYTHONDONTWRITEBYTECODE set (this machine's shells set it) Python writes no cache of its own,
+# so without pip's every process the tests start compiled torch and SB3 from source again; a
+# `--no-compile` run (2026-12-02) was minutes slower, not faster.
+"$VENV/bin/python" -m pip install -q torch==2.13.0
 # A regular (non-editable) install: envs/ and baselines/ become odomgym/envs and
 # odomgym/baselines on disk, which is what mypy and the tests then check.
-"$VENV/bin/python" -m pip install -q --no-compile ".[all]"
+"$VENV/bin/python" -m pip install -q ".[all]"
 rm -rf build
 
 DIST_LOG="$(mktemp)"
