@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from odomgym.baselines.base import CALIBRATORS
-from odomgym.errors import SpecError
+from odomgym.errors import SpecError, refuse_repeats
 from odomgym.floor import FLOORS
 from odomgym.io import atomic_write_text, atomic_writer
 from odomgym.lab.experiment import SensorAccuracy
@@ -108,10 +108,8 @@ class SkidBenchConfig:
     def __post_init__(self) -> None:
         if not self.robots:
             raise SpecError("no robot to benchmark", field="robots")
-        for names, what in ((self.robots, "robots"), (self.floors, "floors")):
-            twice = sorted({n for n in names if names.count(n) > 1})
-            if twice:
-                raise SpecError(f"{', '.join(map(repr, twice))} given twice", field=what)
+        refuse_repeats(self.robots, "robots")
+        refuse_repeats(self.floors, "floors")
         for name in self.robots:
             if name not in SKID_PRESETS:
                 raise SpecError(

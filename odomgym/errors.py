@@ -41,6 +41,15 @@ def first_few(names: Sequence[str], shown: int = 5) -> str:
     return text + (f" and {len(names) - shown} more" if len(names) > shown else "")
 
 
+def refuse_repeats(names: Sequence[str], field: str) -> None:
+    """Refuse, naming ``field``, a list of names that holds one twice: a benchmark would run
+    its cell or method twice and count it as two (``bench skid --presets``, ``bench
+    calibrators --methods``, their floors)."""
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise SpecError(f"{', '.join(map(repr, twice))} given twice", field=field)
+
+
 def raw_line(path: Path, offset: int) -> int:
     """The 1-based line of byte ``offset`` in ``path`` (for errors about raw bytes)."""
     try:

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from odomgym.baselines.base import CALIBRATORS, Calibrator
-from odomgym.errors import SpecError
+from odomgym.errors import SpecError, refuse_repeats
 from odomgym.floor import FloorSpec
 from odomgym.lab.population import BENCH_FLOORS, Population, check_bench_floor
 from odomgym.odometry.calibration import Calibration
@@ -94,11 +94,8 @@ class BenchConfig:
                 f"validation_runs must be >= 1, got {self.validation_runs}",
                 field="validation_runs",
             )
-        for names, what in ((self.methods, "methods"), (self.floors, "floors")):
-            twice = sorted({n for n in names if names.count(n) > 1})
-            if twice:
-                # Run twice, a method's rows were counted as twice the robots.
-                raise SpecError(f"{', '.join(map(repr, twice))} given twice", field=what)
+        refuse_repeats(self.methods, "methods")
+        refuse_repeats(self.floors, "floors")
         for method in self.methods:
             least = CALIBRATORS[method].min_budget if method in CALIBRATORS else 2
             if min(self.budgets) < least:
