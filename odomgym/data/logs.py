@@ -62,10 +62,11 @@ def detect_format(path: Path) -> LogFormat:
         )
         if bag is not None:
             found["rosbag"] = f"ROS 2 bags ({bag.relative_to(path)})"
-        native = [log for _, log in native_sessions(path) if _looks_native(log)]
+        csv_logs = [log for _, log in native_sessions(path)]
+        native = [log for log in csv_logs if _looks_native(log)]
         if native:
             found["native"] = f"native CSV logs ({native[0].relative_to(path)})"
-        elif native_sessions(path) and not found:
+        elif csv_logs and not found:
             return "native"  # CSV files that are no native logs: the reader says why
         if len(found) > 1:
             # Read as the first format found, the others were dropped without a word (a
